@@ -1,0 +1,53 @@
+# Two commands from a fresh clone: `make demo` and `make test`.
+PYTHON ?= python3.11
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.deps-stamp
+SO_STAMP := $(VENV)/.core-stamp
+RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
+
+.PHONY: venv develop demo test test-rust test-py lint fmt bench clean
+
+venv: $(SO_STAMP)
+
+# Dependencies in one resolver pass from the lock (numpy < 2 for bpy; DESIGN §1).
+$(STAMP): requirements.lock
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -r requirements.lock
+	touch $@
+
+# The native module and the package, editable, with the `blurset` entry point.
+$(SO_STAMP): $(STAMP) $(RUST_SRC)
+	VIRTUAL_ENV=$(abspath $(VENV)) $(VENV)/bin/maturin develop --release -q
+	touch $@
+
+develop: $(SO_STAMP)
+
+demo: venv
+	$(VENV)/bin/blurset build --demo --out demo_out
+
+test: test-rust test-py
+
+test-rust:
+	cargo test -p blurset-core --quiet
+
+test-py: venv
+	$(PY) -m pytest -q tests
+
+lint: venv
+	cargo fmt --all -- --check
+	cargo clippy --workspace --all-targets -- -D warnings
+	$(VENV)/bin/ruff check python tests blender_scripts bench
+	$(VENV)/bin/ruff format --check python tests blender_scripts bench
+
+fmt:
+	cargo fmt --all
+	$(VENV)/bin/ruff format python tests blender_scripts bench
+	$(VENV)/bin/ruff check --fix python tests blender_scripts bench
+
+bench: venv
+	$(PY) bench/run.py
+
+clean:
+	rm -rf target $(VENV) demo_out

@@ -1,0 +1,15 @@
+//! blurset-core: every number blurset samples or computes.
+//!
+//! Pure Rust (glam, rayon, image); the Python bindings in `rust/py` only convert.
+pub mod accumulate;
+pub mod atomic;
+pub mod camera;
+pub mod error;
+pub mod llff;
+pub mod noise;
+pub mod rng;
+pub mod sampling;
+pub mod splits;
+pub mod weights;
+
+pub use error::{Error, Result};

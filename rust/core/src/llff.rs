@@ -1,0 +1,239 @@
+//! LLFF scene I/O: `poses_bounds.npy` and `transforms.json`.
+//!
+//! `poses_bounds.npy` is N × 17 float64: the 3 × 5 matrix [R | t | hwf] of a
+//! camera-to-world pose with columns [down, right, backwards], flattened row-major,
+//! then near and far. This is what IBRNet / NAN / GeoNeRF loaders read; they turn the
+//! columns into OpenGL [right, up, backwards] themselves.
+use crate::atomic::write_atomic;
+use crate::error::{Error, Result};
+use glam::{DMat4, DVec3, DVec4};
+use std::path::Path;
+
+/// One row of `poses_bounds.npy`.
+pub type PoseRow = [f64; 17];
+
+/// The LLFF row of an OpenGL camera-to-world matrix (columns right, up, backwards).
+pub fn row_from_c2w_gl(c2w: &DMat4, hwf: [f64; 3], near: f64, far: f64) -> PoseRow {
+    let (right, up, back, t) = (
+        c2w.x_axis.truncate(),
+        c2w.y_axis.truncate(),
+        c2w.z_axis.truncate(),
+        c2w.w_axis.truncate(),
+    );
+    let cols = [-up, right, back, t];
+    let mut row = [0.0; 17];
+    for i in 0..3 {
+        for (j, c) in cols.iter().enumerate() {
+            row[i * 5 + j] = c[i];
+        }
+        row[i * 5 + 4] = hwf[i];
+    }
+    row[15] = near;
+    row[16] = far;
+    row
+}
+
+/// The OpenGL camera-to-world matrix, hwf and bounds of an LLFF row.
+pub fn c2w_gl_from_row(row: &PoseRow) -> (DMat4, [f64; 3], f64, f64) {
+    let col = |j: usize| DVec3::new(row[j], row[5 + j], row[10 + j]);
+    let (down, right, back, t) = (col(0), col(1), col(2), col(3));
+    let c2w = DMat4::from_cols(
+        right.extend(0.0),
+        (-down).extend(0.0),
+        back.extend(0.0),
+        DVec4::new(t.x, t.y, t.z, 1.0),
+    );
+    (c2w, [row[4], row[9], row[14]], row[15], row[16])
+}
+
+/// Replace hwf of every row (e.g. after downsampling by a factor).
+pub fn with_hwf(rows: &[PoseRow], h: f64, w: f64, focal: f64) -> Vec<PoseRow> {
+    rows.iter()
+        .map(|r| {
+            let mut r = *r;
+            r[4] = h;
+            r[9] = w;
+            r[14] = focal;
+            r
+        })
+        .collect()
+}
+
+fn npy_bytes(rows: &[PoseRow]) -> Vec<u8> {
+    let dict = format!(
+        "{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, 17), }}",
+        rows.len()
+    );
+    // magic(6) + version(2) + len(2) + dict + padding + '\n' is a multiple of 64.
+    let unpadded = 10 + dict.len() + 1;
+    let pad = (64 - unpadded % 64) % 64;
+    let header = format!("{dict}{}\n", " ".repeat(pad));
+    let mut out = Vec::with_capacity(10 + header.len() + rows.len() * 17 * 8);
+    out.extend_from_slice(b"\x93NUMPY\x01\x00");
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    for r in rows {
+        for v in r {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    out
+}
+
+/// Write `poses_bounds.npy` atomically. Non-finite values are refused: a NaN in a
+/// pose file silently poisons training.
+pub fn write_poses_bounds(path: &Path, rows: &[PoseRow]) -> Result<()> {
+    for (i, r) in rows.iter().enumerate() {
+        if let Some(j) = r.iter().position(|v| !v.is_finite()) {
+            return Err(Error::PoseFormat {
+                reason: format!("row {i} column {j} is not finite"),
+                path: path.into(),
+            });
+        }
+    }
+    write_atomic(path, &npy_bytes(rows))
+}
+
+fn header_field<'a>(header: &'a str, key: &str) -> Option<&'a str> {
+    let start = header.find(&format!("'{key}'"))? + key.len() + 2;
+    let rest = header[start..].trim_start().strip_prefix(':')?.trim_start();
+    if let Some(r) = rest.strip_prefix('(') {
+        return r.find(')').map(|e| &r[..e]);
+    }
+    if let Some(r) = rest.strip_prefix('\'') {
+        return r.find('\'').map(|e| &r[..e]);
+    }
+    let end = rest.find([',', '}']).unwrap_or(rest.len());
+    Some(rest[..end].trim())
+}
+
+/// Read `poses_bounds.npy` (float64 or float32, N × 17, C order).
+pub fn read_poses_bounds(path: &Path) -> Result<Vec<PoseRow>> {
+    let bad = |reason: String| Error::PoseFormat {
+        reason,
+        path: path.into(),
+    };
+    let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read pose file", path, e))?;
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        return Err(bad("not a .npy file".into()));
+    }
+    let (hlen, hstart) = match bytes[6] {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        2 | 3 if bytes.len() >= 12 => (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        ),
+        v => return Err(bad(format!("unsupported .npy version {v}"))),
+    };
+    let header = bytes
+        .get(hstart..hstart + hlen)
+        .and_then(|h| std::str::from_utf8(h).ok())
+        .ok_or_else(|| bad("truncated header".into()))?;
+    let descr = header_field(header, "descr").ok_or_else(|| bad("no descr".into()))?;
+    if header_field(header, "fortran_order") == Some("True") {
+        return Err(bad("Fortran order is not supported".into()));
+    }
+    let shape: Vec<usize> = header_field(header, "shape")
+        .ok_or_else(|| bad("no shape".into()))?
+        .split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| s.trim().parse::<usize>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| bad("unreadable shape".into()))?;
+    if shape.len() != 2 || shape[1] != 17 {
+        return Err(bad(format!("shape {shape:?}, expected (N, 17)")));
+    }
+    let n = shape[0];
+    let data = &bytes[hstart + hlen..];
+    let width = match descr {
+        "<f8" => 8,
+        "<f4" => 4,
+        d => return Err(bad(format!("dtype {d:?}, expected float64 or float32"))),
+    };
+    if data.len() < n * 17 * width {
+        return Err(bad(format!(
+            "{} bytes of data for {n} rows, expected {}",
+            data.len(),
+            n * 17 * width
+        )));
+    }
+    let mut rows = Vec::with_capacity(n);
+    for i in 0..n {
+        let mut row = [0.0; 17];
+        for (j, v) in row.iter_mut().enumerate() {
+            let o = (i * 17 + j) * width;
+            *v = if width == 8 {
+                f64::from_le_bytes(data[o..o + 8].try_into().map_err(|_| bad("short".into()))?)
+            } else {
+                f32::from_le_bytes(data[o..o + 4].try_into().map_err(|_| bad("short".into()))?)
+                    as f64
+            };
+        }
+        if let Some(j) = row.iter().position(|v| !v.is_finite()) {
+            return Err(bad(format!("row {i} column {j} is not finite")));
+        }
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        std::env::temp_dir().join(format!("blurset-llff-{}-{name}", std::process::id()))
+    }
+
+    #[test]
+    fn npy_roundtrip() -> Result<()> {
+        let rows: Vec<PoseRow> = (0..5)
+            .map(|i| {
+                let mut r = [0.0; 17];
+                for (j, v) in r.iter_mut().enumerate() {
+                    *v = (i * 17 + j) as f64 * 0.5 - 3.0;
+                }
+                r
+            })
+            .collect();
+        let p = tmp("rt.npy");
+        write_poses_bounds(&p, &rows)?;
+        let bytes = std::fs::read(&p).map_err(|e| Error::io("read", &p, e))?;
+        let hlen = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+        assert_eq!((10 + hlen) % 64, 0);
+        assert_eq!(read_poses_bounds(&p)?, rows);
+        let _ = std::fs::remove_file(&p);
+        Ok(())
+    }
+
+    #[test]
+    fn refuses_nan_and_bad_shape() {
+        let mut r = [1.0; 17];
+        r[3] = f64::NAN;
+        assert!(write_poses_bounds(&tmp("nan.npy"), &[r]).is_err());
+        let p = tmp("shape.npy");
+        let mut b = npy_bytes(&[[0.0; 17]]);
+        if let Some(i) = b.windows(7).position(|w| w == b"(1, 17)") {
+            b[i + 5] = b'5';
+        }
+        let _ = std::fs::write(&p, &b);
+        let err = read_poses_bounds(&p)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("expected (N, 17)"), "{err}");
+        let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn gl_llff_roundtrip() {
+        let c2w = DMat4::from_rotation_z(0.3) * DMat4::from_rotation_x(1.1);
+        let c2w = DMat4::from_translation(DVec3::new(1.0, 2.0, 3.0)) * c2w;
+        let row = row_from_c2w_gl(&c2w, [10.0, 20.0, 30.0], 0.5, 4.0);
+        let (back, hwf, n, f) = c2w_gl_from_row(&row);
+        assert!(back.abs_diff_eq(c2w, 1e-12));
+        assert_eq!((hwf, n, f), ([10.0, 20.0, 30.0], 0.5, 4.0));
+        // First LLFF column is "down" = -up.
+        assert!((row[0] + c2w.y_axis.x).abs() < 1e-12);
+    }
+}

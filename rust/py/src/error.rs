@@ -1,0 +1,30 @@
+//! Core errors → Python exceptions. Guide: a new core variant gets one arm here.
+use blurset_core::Error;
+use pyo3::exceptions::{PyFileNotFoundError, PyPermissionError, PyValueError};
+use pyo3::prelude::*;
+
+pyo3::create_exception!(_core, BlursetError, pyo3::exceptions::PyException);
+pyo3::create_exception!(_core, PoseFormatError, BlursetError);
+pyo3::create_exception!(_core, ImageError, BlursetError);
+
+pub(crate) fn to_pyerr(e: Error) -> PyErr {
+    let msg = e.to_string();
+    match e {
+        Error::Io { source, .. } => match source.kind() {
+            std::io::ErrorKind::NotFound => PyFileNotFoundError::new_err(msg),
+            std::io::ErrorKind::PermissionDenied => PyPermissionError::new_err(msg),
+            _ => BlursetError::new_err(msg),
+        },
+        Error::PoseFormat { .. } => PoseFormatError::new_err(msg),
+        Error::Image { .. } => ImageError::new_err(msg),
+        Error::Shape(_) | Error::Value(_) => PyValueError::new_err(msg),
+    }
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("BlursetError", py.get_type::<BlursetError>())?;
+    m.add("PoseFormatError", py.get_type::<PoseFormatError>())?;
+    m.add("ImageError", py.get_type::<ImageError>())?;
+    Ok(())
+}

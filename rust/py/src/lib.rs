@@ -1,0 +1,29 @@
+//! pyo3 bindings of blurset-core: argument conversion and one core call each.
+//! If a loop over pixels or poses appears here, it belongs in blurset-core.
+use pyo3::prelude::*;
+
+mod accumulate;
+mod error;
+mod llff;
+mod noise;
+mod sampling;
+
+/// Run long core work without the GIL, so Python threads (progress bars, Ray) go on.
+pub(crate) fn run_detached<T, F>(py: Python<'_>, f: F) -> PyResult<T>
+where
+    T: Send,
+    F: Send + FnOnce() -> blurset_core::Result<T>,
+{
+    py.detach(f).map_err(error::to_pyerr)
+}
+
+#[pymodule(gil_used = false)]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    error::register(m)?;
+    llff::register(m)?;
+    sampling::register(m)?;
+    accumulate::register(m)?;
+    noise::register(m)?;
+    Ok(())
+}
