@@ -1,0 +1,36 @@
+"""Shared fixtures. Tests that need third-party data read it from ../shared/data and skip
+with a reason when it is absent (a user's clone); CI always has it."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = ROOT.parent / "shared" / "data"
+HAS_BPY = importlib.util.find_spec("bpy") is not None
+
+
+def shared(*parts: str) -> Path:
+    """A path under ../shared/data, or skip the test when it is absent."""
+    p = SHARED_DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"real data {p} is absent (it ships with CI, not with a clone)")
+    return p
+
+
+def pytest_collection_modifyitems(config, items):
+    if HAS_BPY:
+        return
+    skip = pytest.mark.skip(reason="bpy cannot be imported")
+    for item in items:
+        if "blender" in item.keywords:
+            item.add_marker(skip)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(0)
