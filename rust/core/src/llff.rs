@@ -6,6 +6,7 @@
 //! columns into OpenGL [right, up, backwards] themselves.
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
+use crate::sampling::SettingPlan;
 use glam::{DMat4, DVec3, DVec4};
 use std::path::Path;
 
@@ -177,6 +178,82 @@ pub fn read_poses_bounds(path: &Path) -> Result<Vec<PoseRow>> {
     Ok(rows)
 }
 
+/// Image file name of view `index` among `n`: zero-padded so sorted order is view order.
+pub fn image_name(index: usize, n: usize) -> String {
+    let width = n.saturating_sub(1).to_string().len().max(3);
+    format!("{index:0width$}.png")
+}
+
+fn c2w_from_rows(rows: &[[f64; 4]; 4]) -> DMat4 {
+    DMat4::from_cols_array_2d(rows).transpose()
+}
+
+/// The `poses_bounds.npy` rows of a setting: the pose at p for every view.
+pub fn setting_rows(plan: &SettingPlan) -> Vec<PoseRow> {
+    let [w, h] = plan.resolution;
+    plan.views
+        .iter()
+        .map(|v| {
+            row_from_c2w_gl(
+                &c2w_from_rows(&v.c2w),
+                [h as f64, w as f64, plan.focal_px],
+                v.near,
+                v.far,
+            )
+        })
+        .collect()
+}
+
+/// Write `<level>/poses_bounds.npy` for every level directory of a setting and the
+/// setting's `transforms.json` (OpenGL camera-to-world, intrinsics, per-level paths).
+pub fn write_setting_poses(
+    plan: &SettingPlan,
+    setting_dir: &Path,
+    level_dirs: &[String],
+) -> Result<()> {
+    let rows = setting_rows(plan);
+    for level in level_dirs {
+        write_poses_bounds(&setting_dir.join(level).join("poses_bounds.npy"), &rows)?;
+    }
+    let [w, h] = plan.resolution;
+    let n = plan.views.len();
+    let frames: Vec<serde_json::Value> = plan
+        .views
+        .iter()
+        .map(|v| {
+            let name = image_name(v.index, n);
+            let paths: serde_json::Map<String, serde_json::Value> = level_dirs
+                .iter()
+                .map(|l| (l.clone(), format!("{l}/images/{name}").into()))
+                .collect();
+            serde_json::json!({
+                "index": v.index,
+                "file_path": format!("sharp/images/{name}"),
+                "file_paths": paths,
+                "transform_matrix": v.c2w,
+                "near": v.near,
+                "far": v.far,
+            })
+        })
+        .collect();
+    let fov = plan.fov_deg.to_radians();
+    let doc = serde_json::json!({
+        "convention": "OpenGL camera-to-world (x right, y up, z backwards); world +Z up; object centred at the origin, largest side 1",
+        "camera_angle_x": fov,
+        "camera_angle_y": fov,
+        "fl_x": plan.focal_px,
+        "fl_y": plan.focal_px,
+        "cx": w as f64 / 2.0,
+        "cy": h as f64 / 2.0,
+        "w": w,
+        "h": h,
+        "levels": level_dirs.iter().map(|l| (l.clone(), serde_json::Value::from(format!("{l}/images")))).collect::<serde_json::Map<_, _>>(),
+        "frames": frames,
+    });
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::Value(e.to_string()))?;
+    write_atomic(&setting_dir.join("transforms.json"), text.as_bytes())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -223,6 +300,33 @@ mod tests {
             .unwrap_or_default();
         assert!(err.contains("expected (N, 17)"), "{err}");
         let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn image_names_sort_in_view_order() {
+        assert_eq!(image_name(7, 34), "007.png");
+        assert_eq!(image_name(7, 1500), "0007.png");
+    }
+
+    #[test]
+    fn setting_rows_point_at_the_object() -> Result<()> {
+        let cfg = crate::sampling::SamplingConfig {
+            views: 5,
+            latents: 2,
+            ..Default::default()
+        };
+        let verts: Vec<[f32; 3]> = vec![[-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]];
+        let plan = crate::sampling::plan_setting(&cfg, "u", 180.0, 4, [1.0, 1.0, 1.0], &verts)?;
+        for (row, v) in setting_rows(&plan).iter().zip(&plan.views) {
+            let (c2w, hwf, near, far) = c2w_gl_from_row(row);
+            let eye = c2w.w_axis.truncate();
+            let fwd = -c2w.z_axis.truncate();
+            assert!(fwd.dot(-eye.normalize()) > 1.0 - 1e-12);
+            assert!(near < eye.length() && eye.length() < far);
+            assert_eq!(hwf, [512.0, 512.0, plan.focal_px]);
+            assert!((eye.length() - v.r).abs() < 1e-9);
+        }
+        Ok(())
     }
 
     #[test]

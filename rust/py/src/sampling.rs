@@ -1,5 +1,114 @@
+//! Sampling, setting poses and splits. Structured values cross the boundary as JSON
+//! text (serde on this side, `json` on the other): one schema, defined in blurset-core.
+use blurset_core::{llff, rng, sampling, splits};
+use numpy::PyReadonlyArray2;
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use std::path::PathBuf;
 
-pub(crate) fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+fn from_json<T: serde::de::DeserializeOwned>(what: &str, text: &str) -> PyResult<T> {
+    serde_json::from_str(text).map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
+}
+
+fn to_json<T: serde::Serialize>(value: &T) -> PyResult<String> {
+    serde_json::to_string(value).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+/// The default sampling configuration (the paper's settings) as JSON.
+#[pyfunction]
+fn default_sampling_config() -> PyResult<String> {
+    to_json(&sampling::SamplingConfig::default())
+}
+
+/// Check a sampling configuration; raises ValueError naming the bad option.
+#[pyfunction]
+fn validate_sampling_config(config_json: &str) -> PyResult<()> {
+    let cfg: sampling::SamplingConfig = from_json("sampling config", config_json)?;
+    cfg.validate().map_err(crate::error::to_pyerr)
+}
+
+/// The seed of setting `index` of object `uid` under the build seed.
+#[pyfunction]
+fn seed_for(seed: u64, uid: &str, index: u64) -> u64 {
+    rng::seed_for(seed, uid, index)
+}
+
+/// Plan one setting (views, near/far from the vertices, weights, latent frames, seeds) → JSON.
+#[pyfunction]
+#[pyo3(signature = (config_json, *, uid, theta0_deg, seed, bbox_dims, vertices))]
+fn plan_setting(
+    py: Python<'_>,
+    config_json: &str,
+    uid: &str,
+    theta0_deg: f64,
+    seed: u64,
+    bbox_dims: [f64; 3],
+    vertices: PyReadonlyArray2<'_, f32>,
+) -> PyResult<String> {
+    let cfg: sampling::SamplingConfig = from_json("sampling config", config_json)?;
+    let v = vertices.as_array();
+    if v.ncols() != 3 {
+        return Err(PyValueError::new_err(format!(
+            "vertices must be (N, 3), got {:?}",
+            v.shape()
+        )));
+    }
+    let pts: Vec<[f32; 3]> = v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
+    let plan = crate::run_detached(py, || {
+        sampling::plan_setting(&cfg, uid, theta0_deg, seed, bbox_dims, &pts)
+    })?;
+    to_json(&plan)
+}
+
+/// Write `<level>/poses_bounds.npy` for each level dir and `transforms.json` of a setting.
+#[pyfunction]
+fn write_setting_poses(
+    py: Python<'_>,
+    plan_json: &str,
+    setting_dir: PathBuf,
+    level_dirs: Vec<String>,
+) -> PyResult<()> {
+    let plan: sampling::SettingPlan = from_json("setting plan", plan_json)?;
+    crate::run_detached(py, || {
+        llff::write_setting_poses(&plan, &setting_dir, &level_dirs)
+    })
+}
+
+/// Image file name of view `index` among `n` views.
+#[pyfunction]
+fn image_name(index: usize, n: usize) -> String {
+    llff::image_name(index, n)
+}
+
+/// Train/test splits by object → JSON (the `splits.json` document).
+#[pyfunction]
+#[pyo3(signature = (entries_json, *, view_stride, test_fraction, test_objects, seed))]
+fn make_splits(
+    entries_json: &str,
+    view_stride: usize,
+    test_fraction: f64,
+    test_objects: Option<Vec<String>>,
+    seed: u64,
+) -> PyResult<String> {
+    let entries: Vec<splits::SettingEntry> = from_json("split entries", entries_json)?;
+    let s = splits::make_splits(
+        &entries,
+        view_stride,
+        test_fraction,
+        test_objects.as_deref(),
+        seed,
+    )
+    .map_err(crate::error::to_pyerr)?;
+    to_json(&s)
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(default_sampling_config, m)?)?;
+    m.add_function(wrap_pyfunction!(validate_sampling_config, m)?)?;
+    m.add_function(wrap_pyfunction!(seed_for, m)?)?;
+    m.add_function(wrap_pyfunction!(plan_setting, m)?)?;
+    m.add_function(wrap_pyfunction!(write_setting_poses, m)?)?;
+    m.add_function(wrap_pyfunction!(image_name, m)?)?;
+    m.add_function(wrap_pyfunction!(make_splits, m)?)?;
     Ok(())
 }
