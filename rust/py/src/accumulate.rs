@@ -1,5 +1,195 @@
+//! Bindings of `blurset_core::accumulate`: numpy/path conversion and one core call each.
+use crate::run_detached;
+use blurset_core::accumulate as core;
+use numpy::{
+    PyArray1, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyReadonlyArray3,
+    PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use std::path::PathBuf;
 
-pub(crate) fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+/// A float32 numpy array, with messages that say what was wrong and how to fix it.
+fn f32_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py, PyUntypedArray>> {
+    let arr = obj.cast::<PyUntypedArray>().map_err(|_| {
+        PyTypeError::new_err(format!(
+            "{what} must be a numpy.ndarray, got {}",
+            obj.get_type()
+                .name()
+                .map(|n| n.to_string())
+                .unwrap_or_else(|_| "?".into())
+        ))
+    })?;
+    let dtype = arr.dtype();
+    if !dtype.is_equiv_to(&numpy::dtype::<f32>(obj.py())) {
+        return Err(PyTypeError::new_err(format!(
+            "{what} must have dtype float32, got {dtype}; use arr.astype(np.float32)"
+        )));
+    }
+    Ok(arr.clone())
+}
+
+/// A C-contiguous float32 (H, W, 4) frame of the given size.
+fn rgba_frame<'py>(
+    obj: &Bound<'py, PyAny>,
+    width: u32,
+    height: u32,
+) -> PyResult<PyReadonlyArray3<'py, f32>> {
+    let arr = f32_array(obj, "frame")?;
+    let shape = arr.shape();
+    if shape.len() != 3 || shape[2] != 4 {
+        return Err(PyValueError::new_err(format!(
+            "frame must have shape (H, W, 4) (premultiplied linear RGBA), got {shape:?}"
+        )));
+    }
+    if (shape[0], shape[1]) != (height as usize, width as usize) {
+        return Err(PyValueError::new_err(format!(
+            "frame is {}x{} (W x H) but the accumulator is {width}x{height}",
+            shape[1], shape[0]
+        )));
+    }
+    if !arr.is_c_contiguous() {
+        return Err(PyValueError::new_err(
+            "frame must be C-contiguous; use np.ascontiguousarray(frame)",
+        ));
+    }
+    Ok(arr.cast::<numpy::PyArray3<f32>>()?.readonly())
+}
+
+fn rgba_to_py(py: Python<'_>, f: core::Frame) -> PyResult<Bound<'_, numpy::PyArray3<f32>>> {
+    PyArray1::from_vec(py, f.rgba).reshape([f.height as usize, f.width as usize, 4])
+}
+
+/// Running mean of linear RGBA frames of one size (memory: one f64 frame).
+#[pyclass(name = "Accumulator", module = "blurset._core")]
+pub struct PyAccumulator {
+    inner: core::Accumulator,
+}
+
+#[pymethods]
+impl PyAccumulator {
+    #[new]
+    fn new(width: u32, height: u32) -> PyResult<Self> {
+        if width == 0 || height == 0 {
+            return Err(PyValueError::new_err(format!(
+                "accumulator size must be positive, got {width}x{height}"
+            )));
+        }
+        Ok(PyAccumulator {
+            inner: core::Accumulator::new(width, height),
+        })
+    }
+
+    #[getter]
+    fn width(&self) -> u32 {
+        self.inner.width()
+    }
+
+    #[getter]
+    fn height(&self) -> u32 {
+        self.inner.height()
+    }
+
+    /// Number of frames added so far.
+    #[getter]
+    fn count(&self) -> u32 {
+        self.inner.count()
+    }
+
+    /// Read a linear RGBA float EXR and add it (alpha 1 when the file has none).
+    fn add_exr(&mut self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let inner = &mut self.inner;
+        run_detached(py, move || inner.add_exr(&path))
+    }
+
+    /// Add a premultiplied linear RGBA frame, float32 (H, W, 4) C-contiguous.
+    fn add(&mut self, py: Python<'_>, frame: &Bound<'_, PyAny>) -> PyResult<()> {
+        let arr = rgba_frame(frame, self.inner.width(), self.inner.height())?;
+        let data = arr.as_slice()?;
+        let inner = &mut self.inner;
+        run_detached(py, move || inner.add_frame(data))
+    }
+
+    /// The mean so far, premultiplied linear RGBA float32 (H, W, 4).
+    fn mean<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        let inner = &self.inner;
+        let rgba = run_detached(py, move || inner.mean())?;
+        rgba_to_py(
+            py,
+            core::Frame {
+                width: inner.width(),
+                height: inner.height(),
+                rgba,
+            },
+        )
+    }
+
+    /// Write the mean as an 8-bit sRGB PNG composited over `background` (linear RGB).
+    #[pyo3(signature = (path, background = (1.0, 1.0, 1.0)))]
+    fn write_png(
+        &self,
+        py: Python<'_>,
+        path: PathBuf,
+        background: (f32, f32, f32),
+    ) -> PyResult<()> {
+        let bg = [background.0, background.1, background.2];
+        if bg.iter().any(|v| !v.is_finite()) {
+            return Err(PyValueError::new_err(format!(
+                "background must be finite linear RGB, got {background:?}"
+            )));
+        }
+        let inner = &self.inner;
+        run_detached(py, move || inner.write_png(&path, bg))
+    }
+
+    /// Write the mean as a linear premultiplied RGBA float32 EXR.
+    fn write_exr(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let inner = &self.inner;
+        run_detached(py, move || inner.write_exr(&path))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Accumulator(width={}, height={}, count={})",
+            self.inner.width(),
+            self.inner.height(),
+            self.inner.count()
+        )
+    }
+}
+
+/// Exact IEC 61966-2-1 encoding of linear float32 values, clamped to [0, 1]; same shape.
+#[pyfunction]
+fn srgb_encode<'py>(
+    py: Python<'py>,
+    linear: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let arr = f32_array(linear, "linear")?;
+    let arr: PyReadonlyArrayDyn<'py, f32> = arr.cast::<PyArrayDyn<f32>>()?.readonly();
+    let shape = arr.shape().to_vec();
+    let owned;
+    let data = match arr.as_slice() {
+        Ok(s) => s,
+        Err(_) => {
+            // A strided view: copy it into logical order first.
+            owned = arr.as_array().iter().copied().collect::<Vec<f32>>();
+            &owned
+        }
+    };
+    let out = run_detached(py, move || Ok(core::srgb_encode_slice(data)))?;
+    PyArray1::from_vec(py, out).reshape(shape)
+}
+
+/// Read an EXR as premultiplied linear RGBA float32 (H, W, 4), values as stored.
+#[pyfunction]
+fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, numpy::PyArray3<f32>>> {
+    let frame = run_detached(py, move || core::read_exr(&path))?;
+    rgba_to_py(py, frame)
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyAccumulator>()?;
+    m.add_function(wrap_pyfunction!(srgb_encode, m)?)?;
+    m.add_function(wrap_pyfunction!(read_exr, m)?)?;
     Ok(())
 }
