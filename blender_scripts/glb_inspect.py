@@ -1,0 +1,174 @@
+"""Read and rewrite the JSON chunk of a GLB before Blender sees it (stdlib only).
+
+Two jobs that are easier on the glTF JSON than on Blender's imported node trees:
+refuse compressions this Blender cannot decode, with a clear reason, before the importer
+fails obscurely; and repair unlit (KHR_materials_unlit) materials whose colour lives in
+the emissive slot, which Blender's importer would render black.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import struct
+
+GLB_MAGIC = b"glTF"
+CHUNK_JSON = 0x4E4F534A
+CHUNK_BIN = 0x004E4942
+
+# Extensions whose data the importer cannot read at all: the mesh or texture would be
+# missing or garbage, so the object must fail rather than render wrong.
+MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
+DRACO = "KHR_draco_mesh_compression"
+BASISU = "KHR_texture_basisu"
+
+BLACK = 1e-6
+
+
+class GlbError(ValueError):
+    """The file is not a GLB this tool can read; the message is one line."""
+
+
+def read_glb(path: str) -> tuple[dict, bytes | None]:
+    """The JSON document and the BIN chunk (or None) of a binary glTF file."""
+    with open(path, "rb") as f:
+        data = f.read()
+    if len(data) < 20 or data[:4] != GLB_MAGIC:
+        raise GlbError(f"not a binary glTF (GLB) file: {path}")
+    version, total = struct.unpack_from("<II", data, 4)
+    if version != 2:
+        raise GlbError(f"glTF version {version} is not supported (need 2): {path}")
+    if total > len(data):
+        raise GlbError(f"truncated GLB ({len(data)} of {total} bytes): {path}")
+    offset = 12
+    doc = None
+    bin_chunk = None
+    while offset + 8 <= total:
+        length, ctype = struct.unpack_from("<II", data, offset)
+        body = data[offset + 8 : offset + 8 + length]
+        if len(body) != length:
+            raise GlbError(f"truncated GLB chunk at byte {offset}: {path}")
+        if ctype == CHUNK_JSON and doc is None:
+            try:
+                doc = json.loads(body.decode("utf-8"))
+            except (UnicodeDecodeError, ValueError) as e:
+                raise GlbError(f"GLB JSON chunk is not valid JSON ({e}): {path}") from None
+        elif ctype == CHUNK_BIN and bin_chunk is None:
+            bin_chunk = body
+        offset += 8 + length
+    if not isinstance(doc, dict):
+        raise GlbError(f"GLB has no JSON chunk: {path}")
+    return doc, bin_chunk
+
+
+def write_glb(path: str, doc: dict, bin_chunk: bytes | None) -> None:
+    """Write a GLB (JSON padded with spaces, BIN with zeros, as the spec requires)."""
+    js = json.dumps(doc, separators=(",", ":")).encode("utf-8")
+    js += b" " * (-len(js) % 4)
+    parts = [struct.pack("<II", len(js), CHUNK_JSON), js]
+    if bin_chunk is not None:
+        b = bin_chunk + b"\0" * (-len(bin_chunk) % 4)
+        parts += [struct.pack("<II", len(b), CHUNK_BIN), b]
+    body = b"".join(parts)
+    tmp = f"{path}.part"
+    with open(tmp, "wb") as f:
+        f.write(GLB_MAGIC + struct.pack("<II", 2, 12 + len(body)) + body)
+    os.replace(tmp, path)
+
+
+def _extensions(doc: dict) -> set[str]:
+    names = set(doc.get("extensionsUsed") or []) | set(doc.get("extensionsRequired") or [])
+    for mesh in doc.get("meshes") or []:
+        for prim in mesh.get("primitives") or []:
+            names |= set((prim.get("extensions") or {}).keys())
+    for view in doc.get("bufferViews") or []:
+        names |= set((view.get("extensions") or {}).keys())
+    return names
+
+
+def compression_problem(doc: dict, *, draco_available: bool) -> str | None:
+    """A one-line reason when the file uses a compression we cannot decode, else None."""
+    used = _extensions(doc)
+    for name in MESHOPT:
+        if name in used:
+            return (
+                f"unsupported compression: {name} (meshopt) buffers cannot be decoded "
+                "by Blender's glTF importer"
+            )
+    if DRACO in used and not draco_available:
+        return (
+            f"unsupported compression: Draco ({DRACO}); this Blender has no Draco decoder "
+            "library (glTF-Blender-IO #2184)"
+        )
+    if BASISU in used:
+        # A texture with a plain `source` next to the basisu one has a PNG/JPEG fallback.
+        for tex in doc.get("textures") or []:
+            if BASISU in (tex.get("extensions") or {}) and tex.get("source") is None:
+                return (
+                    f"unsupported compression: {BASISU} (KTX2/Basis Universal) textures "
+                    "without a PNG/JPEG fallback cannot be decoded by Blender"
+                )
+    return None
+
+
+def uses_draco(doc: dict) -> bool:
+    return DRACO in _extensions(doc)
+
+
+def unlit_materials(doc: dict) -> list[int]:
+    return [
+        i
+        for i, m in enumerate(doc.get("materials") or [])
+        if "KHR_materials_unlit" in (m.get("extensions") or {})
+    ]
+
+
+def fix_unlit(doc: dict, mode: str = "lit") -> tuple[dict, int]:
+    """Rewrite unlit materials so Blender shows the colour the author meant.
+
+    Sketchfab exports unlit materials with a black base colour and the visible colour
+    in emissiveFactor / emissiveTexture; Blender's unlit node tree follows the base
+    colour and renders them black. Such materials get the emissive colour moved into
+    the base colour slot. `mode` "emission" keeps them unlit (Blender builds camera-only
+    emission, so pixels equal the intended colour, as on Sketchfab); "lit" drops the
+    unlit extension from every unlit material so our fixed lights shade them like any
+    other surface. Returns the new document and how many materials were rewritten.
+    """
+    if mode not in ("emission", "lit"):
+        raise ValueError(f"unlit mode must be 'emission' or 'lit', got {mode!r}")
+    doc = copy.deepcopy(doc)
+    fixed = 0
+    for i in unlit_materials(doc):
+        mat = doc["materials"][i]
+        pbr = mat.setdefault("pbrMetallicRoughness", {})
+        base = list(pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0]))
+        emissive = list(mat.get("emissiveFactor", [0.0, 0.0, 0.0]))
+        emissive_tex = mat.get("emissiveTexture")
+        strength = (mat.get("extensions") or {}).get("KHR_materials_emissive_strength", {})
+        if emissive_tex is not None and max(emissive) <= BLACK:
+            # An emissive texture with no factor is black by the spec, but the author
+            # clearly meant the texture; take it at full strength.
+            emissive = [1.0, 1.0, 1.0]
+        scale = float(strength.get("emissiveStrength", 1.0)) if strength else 1.0
+        emissive = [min(1.0, max(0.0, c * scale)) for c in emissive]
+        if max(base[:3]) <= BLACK and max(emissive) > BLACK:
+            pbr["baseColorFactor"] = emissive[:3] + [base[3] if len(base) > 3 else 1.0]
+            if emissive_tex is not None:
+                pbr["baseColorTexture"] = emissive_tex
+            else:
+                pbr.pop("baseColorTexture", None)
+            # The colour now lives in the base slot; leaving it in emissive too would
+            # make the lit variant glow.
+            mat.pop("emissiveTexture", None)
+            mat["emissiveFactor"] = [0.0, 0.0, 0.0]
+            fixed += 1
+        if mode == "lit":
+            mat["extensions"].pop("KHR_materials_unlit", None)
+    if mode == "lit":
+        for key in ("extensionsUsed", "extensionsRequired"):
+            if key in doc:
+                doc[key] = [e for e in doc[key] if e != "KHR_materials_unlit"]
+                if not doc[key]:
+                    del doc[key]
+    return doc, fixed

@@ -1,0 +1,156 @@
+"""blurset Blender worker: one process renders one object at a time, driven over JSON lines.
+
+Start with the venv's bpy:   python blender_scripts/worker.py --threads N
+or a Blender binary:        blender -b --factory-startup --python-exit-code 1 \
+                                -P blender_scripts/worker.py -- --threads N
+
+stdin: one JSON command per line. Replies: one JSON object per line on the process's
+original stdout, which this script takes over privately at start-up; fd 1 then points at
+stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protocol.
+
+  {"cmd":"load","glb":P,"vertices_out":NPY[,"unlit":"lit"|"emission"]}
+      -> {"ok":true,"bbox_dims":[..],"n_vertices":N,"n_triangles":T,"scale":s,
+          "center":[..],"warnings":[..],"unlit_fixed":b, ...} | {"ok":false,"reason":..}
+  {"cmd":"render","resolution":R,"fov_deg":F,"samples":S,
+   "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR}, ...]}
+      -> {"frame":i,"out":EXR,"seconds":t} per frame, then {"ok":true,"done":n}
+  {"cmd":"quit"} -> exit 0
+
+At start-up the worker announces itself with {"ok":true,"ready":true,"blender":version}.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+
+def _take_over_stdout():
+    """A private text stream on the original stdout; fd 1 and sys.stdout go to stderr."""
+    sys.stdout.flush()
+    proto = os.fdopen(os.dup(1), "w", buffering=1, encoding="utf-8")
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
+    return proto
+
+
+PROTO = _take_over_stdout()
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import json  # noqa: E402
+import shutil  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import traceback  # noqa: E402
+
+import blender_scene  # noqa: E402
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def send(msg: dict) -> None:
+    PROTO.write(json.dumps(msg) + "\n")
+    PROTO.flush()
+
+
+def one_line(e: BaseException) -> str:
+    text = " ".join(str(e).split()) or type(e).__name__
+    return f"{type(e).__name__}: {text}"[:500]
+
+
+def parse_threads(argv: list[str]) -> int:
+    args = argv[argv.index("--") + 1 :] if "--" in argv else argv[1:]
+    threads = 0
+    for i, a in enumerate(args):
+        if a == "--threads" and i + 1 < len(args):
+            threads = int(args[i + 1])
+        elif a.startswith("--threads="):
+            threads = int(a.split("=", 1)[1])
+    return threads
+
+
+def save_npy_atomic(path: str, arr: np.ndarray) -> None:
+    os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
+    tmp = f"{path}.part"
+    with open(tmp, "wb") as f:
+        np.save(f, arr)
+    os.replace(tmp, path)
+
+
+class Worker:
+    def __init__(self, threads: int):
+        self.threads = threads
+        self.loaded = False
+        self.workdir = tempfile.mkdtemp(prefix="blurset-worker-")
+
+    def load(self, cmd: dict) -> dict:
+        self.loaded = False
+        glb = str(cmd["glb"])
+        vertices_out = str(cmd["vertices_out"])
+        unlit = str(cmd.get("unlit", "lit"))
+        t0 = time.perf_counter()
+        try:
+            warnings, unlit_fixed = blender_scene.import_glb(glb, self.workdir, unlit)
+            info = blender_scene.normalize(warnings)
+            blender_scene.setup_scene(self.threads)
+            qa = blender_scene.render_qa(info["bbox_dims"], self.workdir)
+        except blender_scene.LoadError as e:
+            return {"ok": False, "reason": str(e)}
+        save_npy_atomic(vertices_out, info.pop("vertices"))
+        self.loaded = True
+        return {
+            "ok": True,
+            **info,
+            "warnings": warnings,
+            "unlit_fixed": unlit_fixed,
+            **qa,
+            "seconds": time.perf_counter() - t0,
+        }
+
+    def render(self, cmd: dict) -> dict:
+        if not self.loaded:
+            return {"ok": False, "reason": "render before a successful load"}
+        frames = cmd["frames"]
+        res, fov, samples = int(cmd["resolution"]), float(cmd["fov_deg"]), int(cmd["samples"])
+        for i, fr in enumerate(frames):
+            blender_scene.set_camera(fr["c2w"], res, fov, samples)
+            secs = blender_scene.render_frame(str(fr["out"]), int(fr["seed"]))
+            send({"frame": i, "out": str(fr["out"]), "seconds": secs})
+        return {"ok": True, "done": len(frames)}
+
+    def close(self) -> None:
+        shutil.rmtree(self.workdir, ignore_errors=True)
+
+
+def main() -> int:
+    worker = Worker(parse_threads(sys.argv))
+    send({"ok": True, "ready": True, "blender": bpy.app.version_string, "pid": os.getpid()})
+    try:
+        for line in sys.stdin:
+            line = line.strip()
+            if not line:
+                continue
+            try:
+                cmd = json.loads(line)
+                name = cmd.get("cmd") if isinstance(cmd, dict) else None
+                if name == "quit":
+                    return 0
+                if name == "load":
+                    reply = worker.load(cmd)
+                elif name == "render":
+                    reply = worker.render(cmd)
+                else:
+                    reply = {"ok": False, "reason": f"unknown command {name!r}"}
+            except Exception as e:
+                traceback.print_exc()
+                reply = {"ok": False, "reason": one_line(e)}
+            send(reply)
+    finally:
+        worker.close()
+    return 0
+
+
+if __name__ == "__main__":
+    code = main()
+    PROTO.close()
+    sys.exit(code)

@@ -1,0 +1,287 @@
+"""Drive a Blender worker process (blender_scripts/worker.py) over its JSON-lines protocol.
+
+Each object renders in its own worker process with a per-reply timeout (DESIGN §10): a
+crash, hang or bad GLB costs that object only. A Worker restarts its process lazily
+after a crash or timeout, so one Worker can serve a whole queue of objects.
+
+    with Worker(threads=2, timeout=300) as w:
+        info = w.load(glb, vertices_out)           # WorkerError: the object failed
+        w.render(frames, resolution=96, fov_deg=40.0, samples=8)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+from blurset.exceptions import BlursetError
+
+WORKER_SCRIPT = Path(__file__).resolve().parents[2] / "blender_scripts" / "worker.py"
+STDERR_TAIL_LINES = 6
+
+
+class WorkerError(BlursetError):
+    """An object-level failure (bad GLB, render QA, crash); the message is one line."""
+
+
+class WorkerTimeout(WorkerError):
+    """The worker sent nothing for `timeout` seconds; its process was killed."""
+
+
+def worker_command(blender: str | None, threads: int) -> list[str]:
+    """The argv that starts a worker: the venv's bpy, or a user's Blender binary."""
+    script = str(WORKER_SCRIPT)
+    if blender is None:
+        return [sys.executable, script, "--threads", str(threads)]
+    return [
+        blender,
+        "-b",
+        "--factory-startup",
+        "--python-exit-code",
+        "1",
+        "-P",
+        script,
+        "--",
+        "--threads",
+        str(threads),
+    ]
+
+
+class Worker:
+    """One Blender worker process. Not thread-safe: one caller at a time."""
+
+    def __init__(
+        self,
+        *,
+        blender: str | None = None,
+        threads: int = 0,
+        timeout: float = 300.0,
+        log_path: Path | None = None,
+    ) -> None:
+        if not WORKER_SCRIPT.is_file():
+            raise WorkerError(f"worker script not found: {WORKER_SCRIPT}")
+        if timeout <= 0:
+            raise ValueError(f"timeout must be > 0 seconds, got {timeout}")
+        self.blender = blender
+        self.threads = int(threads)
+        self.timeout = float(timeout)
+        self._own_log = log_path is None
+        if log_path is None:
+            fd, name = tempfile.mkstemp(prefix="blurset-worker-", suffix=".log")
+            os.close(fd)
+            log_path = Path(name)
+        self.log_path = Path(log_path)
+        self.info: dict[str, Any] = {}
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._log: IO[bytes] | None = None
+        self._lines: queue.Queue[bytes | None] = queue.Queue()
+        self._start()
+
+    # -- process management ---------------------------------------------------------
+
+    def _start(self) -> None:
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        self._log = open(self.log_path, "ab")  # noqa: SIM115 - lives as long as the process
+        try:
+            self._proc = subprocess.Popen(
+                worker_command(self.blender, self.threads),
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=self._log,
+            )
+        except OSError as e:
+            self._log.close()
+            self._log = None
+            raise WorkerError(
+                f"cannot start Blender worker {self.blender or sys.executable}: {e}"
+            ) from None
+        self._lines = queue.Queue()
+        threading.Thread(target=_pump, args=(self._proc.stdout, self._lines), daemon=True).start()
+        self.info = self._receive(startup=True)
+
+    @property
+    def alive(self) -> bool:
+        return self._proc is not None and self._proc.poll() is None
+
+    def _ensure_started(self) -> None:
+        if not self.alive:
+            self._discard()
+            self._start()
+
+    def _discard(self) -> None:
+        """Kill the process (if any) and forget it."""
+        if self._proc is not None:
+            if self._proc.poll() is None:
+                self._proc.kill()
+            self._proc.wait()
+            for f in (self._proc.stdin, self._proc.stdout):
+                if f is not None:
+                    f.close()
+            self._proc = None
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+
+    def stderr_tail(self, n: int = STDERR_TAIL_LINES) -> list[str]:
+        try:
+            with open(self.log_path, "rb") as f:
+                f.seek(0, os.SEEK_END)
+                f.seek(max(0, f.tell() - 16384))
+                text = f.read().decode("utf-8", "replace")
+        except OSError:
+            return []
+        return [ln.strip() for ln in text.splitlines() if ln.strip()][-n:]
+
+    # -- protocol -----------------------------------------------------------------------
+
+    def _send(self, msg: dict[str, Any]) -> None:
+        self._ensure_started()
+        assert self._proc is not None and self._proc.stdin is not None
+        try:
+            self._proc.stdin.write((json.dumps(msg) + "\n").encode("utf-8"))
+            self._proc.stdin.flush()
+        except (BrokenPipeError, OSError):
+            self._crashed()
+
+    def _crashed(self) -> None:
+        code = self._proc.wait() if self._proc is not None else None
+        tail = " | ".join(self.stderr_tail())
+        self._discard()
+        raise WorkerError(f"Blender worker exited with code {code}; last stderr: {tail}")
+
+    def _receive(self, *, startup: bool = False) -> dict[str, Any]:
+        deadline = time.monotonic() + self.timeout
+        while True:
+            left = deadline - time.monotonic()
+            try:
+                raw = self._lines.get(timeout=max(left, 0.0))
+            except queue.Empty:
+                self._discard()
+                what = "start up" if startup else "reply"
+                raise WorkerTimeout(
+                    f"Blender worker did not {what} within {self.timeout:g} s; killed it"
+                ) from None
+            if raw is None:
+                self._crashed()
+            line = raw.decode("utf-8", "replace").strip()
+            # A Blender binary prints its banner on stdout before the worker script takes
+            # the stream over; anything that is not a JSON object is such noise.
+            if not line.startswith("{"):
+                continue
+            try:
+                msg = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(msg, dict):
+                return msg
+
+    # -- commands -----------------------------------------------------------------------
+
+    def load(self, glb: Path, vertices_out: Path, *, unlit: str = "lit") -> dict[str, Any]:
+        """Import, normalize and QA-render one GLB; its reply (see blender_scripts/worker.py).
+
+        Raises WorkerError with the worker's one-line reason when the object cannot be
+        rendered (missing file, unsupported compression, no mesh, renders black, ...).
+        """
+        self._send(
+            {
+                "cmd": "load",
+                "glb": str(Path(glb).resolve()),
+                "vertices_out": str(Path(vertices_out).resolve()),
+                "unlit": unlit,
+            }
+        )
+        reply = self._receive()
+        if not reply.get("ok"):
+            raise WorkerError(f"{reply.get('reason', 'load failed')} ({glb})")
+        return reply
+
+    def render(
+        self,
+        frames: list[dict[str, Any]],
+        *,
+        resolution: int,
+        fov_deg: float,
+        samples: int,
+        on_frame: Callable[[int, str], None] | None = None,
+    ) -> None:
+        """Render frames ({"c2w": 4x4 row-major, "seed": int, "out": EXR path}) in order.
+
+        `on_frame(i, out)` runs as soon as frame i is on disk; the timeout applies per frame.
+        """
+        payload = []
+        for f in frames:
+            c2w = f["c2w"]
+            c2w = c2w.tolist() if hasattr(c2w, "tolist") else [list(map(float, r)) for r in c2w]
+            payload.append(
+                {"c2w": c2w, "seed": int(f["seed"]), "out": str(Path(f["out"]).resolve())}
+            )
+        self._send(
+            {
+                "cmd": "render",
+                "resolution": int(resolution),
+                "fov_deg": float(fov_deg),
+                "samples": int(samples),
+                "frames": payload,
+            }
+        )
+        while True:
+            msg = self._receive()
+            if "frame" in msg:
+                if on_frame is not None:
+                    on_frame(int(msg["frame"]), str(msg["out"]))
+                continue
+            if not msg.get("ok"):
+                raise WorkerError(f"render failed: {msg.get('reason', 'unknown')}")
+            if msg.get("done") != len(frames):
+                raise WorkerError(
+                    f"render: worker reported {msg.get('done')} of {len(frames)} frames"
+                )
+            return
+
+    def close(self) -> None:
+        """Ask the worker to quit; kill it if it does not within a few seconds."""
+        if self._proc is not None and self._proc.poll() is None:
+            try:
+                assert self._proc.stdin is not None
+                self._proc.stdin.write(b'{"cmd":"quit"}\n')
+                self._proc.stdin.flush()
+                self._proc.wait(timeout=10)
+            except (OSError, subprocess.TimeoutExpired):
+                pass
+        self._discard()
+        if self._own_log:
+            try:
+                self.log_path.unlink()
+            except OSError:
+                pass
+
+    def __enter__(self) -> Worker:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        if getattr(self, "_proc", None) is not None:
+            self._discard()
+
+
+def _pump(stream: IO[bytes] | None, out: queue.Queue[bytes | None]) -> None:
+    """Move the worker's protocol lines onto a queue, so reads can time out."""
+    if stream is not None:
+        try:
+            for line in iter(stream.readline, b""):
+                out.put(line)
+        except (OSError, ValueError):
+            pass
+    out.put(None)
