@@ -1,0 +1,225 @@
+//! Reading and writing the images of an LLFF scene: 8- and 16-bit PNG, JPEG,
+//! grayscale or colour, with or without alpha, kept in their own sample depth so a
+//! 16-bit input is not silently truncated.
+use crate::error::{Error, Result};
+use image::{DynamicImage, ImageDecoder, ImageEncoder, ImageReader};
+use std::path::Path;
+
+/// Integer samples, interleaved, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Samples {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+}
+
+impl Samples {
+    pub fn len(&self) -> usize {
+        match self {
+            Samples::U8(v) => v.len(),
+            Samples::U16(v) => v.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The largest code of the sample type (255 or 65535).
+    pub fn max_code(&self) -> u32 {
+        match self {
+            Samples::U8(_) => u8::MAX as u32,
+            Samples::U16(_) => u16::MAX as u32,
+        }
+    }
+}
+
+/// An image with 1 (gray), 2 (gray + alpha), 3 (RGB) or 4 (RGBA) channels.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub channels: usize,
+    pub samples: Samples,
+}
+
+impl Image {
+    pub fn new(width: u32, height: u32, channels: usize, samples: Samples) -> Result<Self> {
+        if !(1..=4).contains(&channels) {
+            return Err(Error::Shape(format!(
+                "{channels} channels, expected 1 to 4"
+            )));
+        }
+        let n = width as usize * height as usize * channels;
+        if samples.len() != n {
+            return Err(Error::Shape(format!(
+                "{} samples for a {width} x {height} x {channels} image, expected {n}",
+                samples.len()
+            )));
+        }
+        Ok(Image {
+            width,
+            height,
+            channels,
+            samples,
+        })
+    }
+
+    /// Colour channels (1 or 3); an alpha channel, if any, is the last one.
+    pub fn color_channels(&self) -> usize {
+        if self.channels >= 3 {
+            3
+        } else {
+            1
+        }
+    }
+
+    pub fn has_alpha(&self) -> bool {
+        self.channels == 2 || self.channels == 4
+    }
+}
+
+/// Width, height, channels and bits per sample from the file header only (cheap:
+/// used to validate a whole scene before any pixel is decoded).
+pub fn image_info(path: &Path) -> Result<(u32, u32, usize, u32)> {
+    let bad = |reason: String| Error::Image {
+        reason,
+        path: path.into(),
+    };
+    let reader = ImageReader::open(path)
+        .map_err(|e| Error::io("cannot open image", path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io("cannot read image", path, e))?;
+    let decoder = reader.into_decoder().map_err(|e| bad(e.to_string()))?;
+    let (w, h) = decoder.dimensions();
+    let ct = decoder.color_type();
+    let channels = ct.channel_count() as usize;
+    let bits = (ct.bytes_per_pixel() as u32 * 8) / channels.max(1) as u32;
+    Ok((w, h, channels, bits))
+}
+
+/// Decode an image file (format guessed from its bytes) into 8- or 16-bit samples.
+pub fn read_image(path: &Path) -> Result<Image> {
+    let bad = |reason: String| Error::Image {
+        reason,
+        path: path.into(),
+    };
+    let reader = ImageReader::open(path)
+        .map_err(|e| Error::io("cannot open image", path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io("cannot read image", path, e))?;
+    let img = reader.decode().map_err(|e| bad(e.to_string()))?;
+    let (w, h) = (img.width(), img.height());
+    let (channels, samples) = match img {
+        DynamicImage::ImageLuma8(b) => (1, Samples::U8(b.into_raw())),
+        DynamicImage::ImageLumaA8(b) => (2, Samples::U8(b.into_raw())),
+        DynamicImage::ImageRgb8(b) => (3, Samples::U8(b.into_raw())),
+        DynamicImage::ImageRgba8(b) => (4, Samples::U8(b.into_raw())),
+        DynamicImage::ImageLuma16(b) => (1, Samples::U16(b.into_raw())),
+        DynamicImage::ImageLumaA16(b) => (2, Samples::U16(b.into_raw())),
+        DynamicImage::ImageRgb16(b) => (3, Samples::U16(b.into_raw())),
+        DynamicImage::ImageRgba16(b) => (4, Samples::U16(b.into_raw())),
+        other => {
+            return Err(bad(format!(
+                "{:?} samples; expected 8- or 16-bit integer PNG or JPEG",
+                other.color()
+            )))
+        }
+    };
+    if w == 0 || h == 0 {
+        return Err(bad("empty image".into()));
+    }
+    Image::new(w, h, channels, samples)
+}
+
+/// Encode as PNG in the image's own sample depth.
+pub fn png_bytes(img: &Image) -> Result<Vec<u8>> {
+    use image::ExtendedColorType as C;
+    let mut out = Vec::new();
+    let enc = image::codecs::png::PngEncoder::new(&mut out);
+    let res = match &img.samples {
+        Samples::U8(v) => {
+            let ct = [C::L8, C::La8, C::Rgb8, C::Rgba8][img.channels - 1];
+            enc.write_image(v, img.width, img.height, ct)
+        }
+        Samples::U16(v) => {
+            let ct = [C::L16, C::La16, C::Rgb16, C::Rgba16][img.channels - 1];
+            // PNG stores 16-bit samples big-endian; the encoder takes native bytes.
+            let bytes: Vec<u8> = v.iter().flat_map(|s| s.to_ne_bytes()).collect();
+            enc.write_image(&bytes, img.width, img.height, ct)
+        }
+    };
+    res.map_err(|e| Error::Value(format!("PNG encoding failed: {e}")))?;
+    Ok(out)
+}
+
+/// Encode float RGB (3 channels) or RGBA (4) as an uncompressed 32-bit float EXR.
+pub fn exr_bytes(width: u32, height: u32, channels: usize, data: &[f32]) -> Result<Vec<u8>> {
+    let ct = match channels {
+        3 => image::ExtendedColorType::Rgb32F,
+        4 => image::ExtendedColorType::Rgba32F,
+        c => return Err(Error::Shape(format!("EXR needs 3 or 4 channels, got {c}"))),
+    };
+    if data.len() != width as usize * height as usize * channels {
+        return Err(Error::Shape(format!(
+            "{} floats for a {width} x {height} x {channels} EXR",
+            data.len()
+        )));
+    }
+    let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_ne_bytes()).collect();
+    let mut cur = std::io::Cursor::new(Vec::new());
+    image::codecs::openexr::OpenExrEncoder::new(&mut cur)
+        .write_image(&bytes, width, height, ct)
+        .map_err(|e| Error::Value(format!("EXR encoding failed: {e}")))?;
+    Ok(cur.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        std::env::temp_dir().join(format!("blurset-imageio-{}-{name}", std::process::id()))
+    }
+
+    #[test]
+    fn png_roundtrip_all_layouts() -> Result<()> {
+        for channels in 1..=4 {
+            for wide in [false, true] {
+                let n = 5 * 3 * channels;
+                let samples = if wide {
+                    Samples::U16((0..n).map(|i| (i * 4099 % 65536) as u16).collect())
+                } else {
+                    Samples::U8((0..n).map(|i| (i * 37 % 256) as u8).collect())
+                };
+                let img = Image::new(5, 3, channels, samples)?;
+                let p = tmp(&format!("rt{channels}{wide}.png"));
+                std::fs::write(&p, png_bytes(&img)?).map_err(|e| Error::io("write", &p, e))?;
+                assert_eq!(read_image(&p)?, img);
+                let bits = if wide { 16 } else { 8 };
+                assert_eq!(image_info(&p)?, (5, 3, channels, bits));
+                let _ = std::fs::remove_file(&p);
+            }
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn garbage_is_an_image_error_naming_the_file() {
+        let p = tmp("garbage.png");
+        let _ = std::fs::write(&p, b"not an image at all");
+        let err = read_image(&p)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("garbage.png"), "{err}");
+        let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn exr_has_the_right_size() -> Result<()> {
+        let b = exr_bytes(4, 2, 3, &[0.5; 24])?;
+        assert!(b.len() > 24 * 4);
+        assert!(exr_bytes(4, 2, 3, &[0.5; 23]).is_err());
+        Ok(())
+    }
+}
