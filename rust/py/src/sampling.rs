@@ -74,6 +74,12 @@ fn write_setting_poses(
     })
 }
 
+/// Every `stride`-th view index below `views` (the held-out views of a setting).
+#[pyfunction]
+fn test_views(views: usize, stride: usize) -> Vec<usize> {
+    splits::test_views(views, stride)
+}
+
 /// Image file name of view `index` among `n` views.
 #[pyfunction]
 fn image_name(index: usize, n: usize) -> String {
@@ -109,6 +115,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(plan_setting, m)?)?;
     m.add_function(wrap_pyfunction!(write_setting_poses, m)?)?;
     m.add_function(wrap_pyfunction!(image_name, m)?)?;
+    m.add_function(wrap_pyfunction!(test_views, m)?)?;
     m.add_function(wrap_pyfunction!(make_splits, m)?)?;
     Ok(())
 }

@@ -1,0 +1,541 @@
+"""`blurset build`: GLB objects → Objaverse-Blur style dataset (DESIGN §1–4, §10).
+
+Per object: one Blender worker process loads and normalizes the GLB once; per setting,
+blurset-core plans every view, trajectory, level and latent frame (seeded); the worker
+renders the frames to linear EXR while this process streams each one into a Rust
+accumulator (memory of one frame per open view/level), deletes it, and writes the sRGB
+PNG when a view/level is complete. A setting is written under `<setting>.partial/`
+and renamed into place after its `.complete` marker: a rerun skips complete settings
+and redoes partial ones. A failing object is logged in `failures.jsonl`; the build
+goes on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import json
+import os
+import platform
+import shutil
+import sys
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from blurset import __version__, _core
+from blurset.config import BuildConfig, load_toml, make_config, parse_levels
+from blurset.exceptions import BlursetError
+from blurset.objects import ObjectSpec, resolve_objects, setting_name
+from blurset.progress import Progress
+
+MARKER = ".complete"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", type=Path, help="TOML file of options (flags override it)")
+    p.add_argument(
+        "--objects", nargs="+", help="GLB files, folders of GLBs, or text files listing them"
+    )
+    p.add_argument("--out", type=Path, help="output directory")
+    p.add_argument("--demo", action="store_true", default=None, help="built-in procedural objects")
+    p.add_argument("--settings-per-object", type=int, help="azimuth settings per object (4)")
+    p.add_argument("--views", type=int, help="views per setting (34)")
+    p.add_argument("--levels", type=str, help="blur levels, e.g. 1,2,3,4 or none (sharp only)")
+    p.add_argument("--latents", type=int, help="latent frames averaged per blurry image (34)")
+    p.add_argument("--samples", type=int, help="Cycles samples per latent frame (32)")
+    p.add_argument("--sharp-samples", type=int, help="Cycles samples of the sharp image")
+    p.add_argument("--resolution", type=int, help="image side in pixels, square (512)")
+    p.add_argument("--seed", type=int, help="build seed (0)")
+    p.add_argument("--fov-deg", type=float, help="field of view in degrees (40)")
+    p.add_argument(
+        "--latent-positions", choices=["random", "stratified"], help="latent positions (random)"
+    )
+    p.add_argument(
+        "--write-linear", action="store_true", default=None, help="also write linear EXR"
+    )
+    p.add_argument("--workers", type=int, help="objects rendered in parallel (1)")
+    p.add_argument("--threads", type=int, help="Cycles threads per worker (0 = all cores)")
+    p.add_argument("--executor", choices=["local", "ray"], help="local process pool or Ray")
+    p.add_argument("--shard", help="i/N: build only every N-th object from the i-th")
+    p.add_argument("--timeout", type=float, help="seconds without worker reply before kill (600)")
+    p.add_argument("--blender", help="a Blender binary instead of the bpy module")
+    p.add_argument(
+        "--check-poses", action="store_true", default=None, help="COLMAP check per setting"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def config_from_args(args: argparse.Namespace) -> BuildConfig:
+    file_values = load_toml(args.config) if args.config else {}
+    flags = {
+        k: getattr(args, k)
+        for k in (
+            "objects out demo settings_per_object views latents samples sharp_samples resolution "
+            "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
+            "blender check_poses"
+        ).split()
+    }
+    if args.levels is not None:
+        flags["levels"] = parse_levels(args.levels)
+    return make_config(file_values, flags)
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = config_from_args(args)
+    summary = build(cfg, progress=not args.quiet)
+    print(
+        f"blurset build: {summary['settings_complete']} settings complete, "
+        f"{summary['objects_failed']} objects failed -> {cfg.out}",
+        file=sys.stderr,
+    )
+    if summary["settings_complete"] == 0 and summary["objects_failed"] > 0:
+        return 1
+    return 0
+
+
+# -- per setting -----------------------------------------------------------------------
+
+
+@dataclass
+class SettingJob:
+    obj: ObjectSpec
+    index: int
+    theta0_deg: float
+
+    @property
+    def name(self) -> str:
+        return setting_name(self.obj.uid, self.theta0_deg)
+
+
+@dataclass
+class ObjectResult:
+    uid: str
+    settings: list[str] = field(default_factory=list)
+    failure: dict[str, Any] | None = None
+
+
+def frames_per_setting(cfg: BuildConfig) -> int:
+    return cfg.views * (1 + len(cfg.levels) * cfg.latents)
+
+
+def _render_frames(plan: dict, exr_dir: Path) -> list[dict[str, Any]]:
+    """The render list of a setting in stream order: per view, sharp then each level."""
+    frames = []
+    for v in plan["views"]:
+        i = v["index"]
+        frames.append(
+            {"c2w": v["c2w"], "seed": v["sharp_seed"], "out": str(exr_dir / f"{i:04d}_s.exr")}
+        )
+        for lvl, lp in v["levels"].items():
+            for k, f in enumerate(lp["latent_frames"]):
+                frames.append(
+                    {
+                        "c2w": f["c2w"],
+                        "seed": f["seed"],
+                        "out": str(exr_dir / f"{i:04d}_{lvl}_{k:04d}.exr"),
+                    }
+                )
+    return frames
+
+
+def _keys(plan: dict) -> list[tuple[int, str]]:
+    """(view, level dir) of each rendered frame, aligned with `_render_frames`."""
+    keys = []
+    for v in plan["views"]:
+        keys.append((v["index"], "sharp"))
+        for lvl, lp in v["levels"].items():
+            keys.extend([(v["index"], f"blur_{lvl}")] * len(lp["latent_frames"]))
+    return keys
+
+
+def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: dict) -> dict:
+    views = []
+    for v in plan["views"]:
+        v = dict(v)
+        v["levels"] = {
+            lvl: {
+                **{k: x for k, x in lp.items() if k != "latent_frames"},
+                "latent_frames": [
+                    {k: x for k, x in f.items() if k != "c2w"} for f in lp["latent_frames"]
+                ],
+            }
+            for lvl, lp in v["levels"].items()
+        }
+        views.append(v)
+    return {
+        "uid": plan["uid"],
+        "theta0_deg": plan["theta0_deg"],
+        "seed": plan["seed"],
+        "resolution": plan["resolution"],
+        "fov_deg": plan["fov_deg"],
+        "focal_px": plan["focal_px"],
+        "bbox_dims": plan["bbox_dims"],
+        "radius": plan["radius"],
+        "views": views,
+        "test_views": _core.test_views(len(views), cfg.view_stride),
+        "levels": cfg.level_dirs,
+        "sampling": plan["config"],
+        "render": {
+            "engine": "CYCLES",
+            "samples_per_latent": cfg.samples,
+            "sharp_samples": cfg.effective_sharp_samples,
+            "background": cfg.background,
+            "alpha": "premultiplied, averaged with colour, composited over background",
+            "encoding": "sRGB (IEC 61966-2-1) of linear radiance, 8-bit PNG",
+        },
+        "object": {
+            "source": str(obj.path),
+            "bbox_dims": info.get("bbox_dims"),
+            "scale": info.get("scale"),
+            "center": info.get("center"),
+            "n_vertices": info.get("n_vertices"),
+            "n_triangles": info.get("n_triangles"),
+            "unlit_fixed": info.get("unlit_fixed"),
+            "warnings": info.get("warnings", []),
+        },
+        "timings": timings,
+        "blurset_version": __version__,
+    }
+
+
+def _write_json(path: Path, data: Any) -> None:
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n")
+    os.replace(tmp, path)
+
+
+def render_setting(
+    job: SettingJob,
+    cfg: BuildConfig,
+    worker: Any,
+    info: dict,
+    verts: np.ndarray,
+    progress: Progress,
+) -> Path:
+    """Plan, render, accumulate and write one setting; returns its final directory."""
+    out = Path(cfg.out)
+    final = out / job.name
+    partial = out / f"{job.name}.partial"
+    shutil.rmtree(partial, ignore_errors=True)
+    exr_dir = partial / ".frames"
+    exr_dir.mkdir(parents=True)
+    t0 = time.time()
+    seed = _core.seed_for(cfg.seed, job.obj.uid, job.index)
+    plan = json.loads(
+        _core.plan_setting(
+            cfg.sampling_json(),
+            uid=job.obj.uid,
+            theta0_deg=job.theta0_deg,
+            seed=seed,
+            bbox_dims=info["bbox_dims"],
+            vertices=verts,
+        )
+    )
+    n_views = len(plan["views"])
+    frames = _render_frames(plan, exr_dir)
+    keys = _keys(plan)
+    need = {(v["index"], "sharp"): 1 for v in plan["views"]}
+    for v in plan["views"]:
+        for lvl, lp in v["levels"].items():
+            need[(v["index"], f"blur_{lvl}")] = len(lp["latent_frames"])
+    for d in cfg.level_dirs:
+        (partial / d / "images").mkdir(parents=True)
+    acc: dict[tuple[int, str], Any] = {}
+    res = cfg.resolution
+    coverage: list[float] = []
+
+    def on_frame(i: int, path: str) -> None:
+        key = keys[i]
+        a = acc.get(key)
+        if a is None:
+            a = acc[key] = _core.Accumulator(res, res)
+        a.add_exr(path)
+        os.unlink(path)
+        if a.count == need[key]:
+            view, level = key
+            name = _core.image_name(view, n_views)
+            a.write_png(partial / level / "images" / name, background=tuple(cfg.background))
+            if cfg.write_linear:
+                a.write_exr(partial / level / "linear" / name.replace(".png", ".exr"))
+            if level == "sharp":
+                coverage.append(float(a.mean()[..., 3].mean()))
+            del acc[key]
+        progress.frame_done()
+
+    t_plan = time.time() - t0
+    # The sharp render gets its own (larger) sample count: render it separately.
+    sharp_idx = [i for i, k in enumerate(keys) if k[1] == "sharp"]
+    blur_idx = [i for i, k in enumerate(keys) if k[1] != "sharp"]
+    t1 = time.time()
+    common = {"resolution": res, "fov_deg": cfg.fov_deg}
+    worker.render(
+        [frames[i] for i in sharp_idx],
+        samples=cfg.effective_sharp_samples,
+        on_frame=lambda j, p: on_frame(sharp_idx[j], p),
+        **common,
+    )
+    if min(coverage, default=0.0) <= 1e-4:
+        bad = int(np.argmin(coverage)) if coverage else 0
+        raise BlursetError(
+            f"render QA: object not visible in view {bad} (alpha coverage {min(coverage, default=0):.2g})"
+        )
+    t_sharp = time.time() - t1
+    if blur_idx:
+        worker.render(
+            [frames[i] for i in blur_idx],
+            samples=cfg.samples,
+            on_frame=lambda j, p: on_frame(blur_idx[j], p),
+            **common,
+        )
+    t_blur = time.time() - t1 - t_sharp
+    if acc:
+        raise BlursetError(f"{len(acc)} view/level images incomplete after rendering")
+    shutil.rmtree(exr_dir)
+    _core.write_setting_poses(json.dumps(plan), partial, cfg.level_dirs)
+    timings = {
+        "plan_s": round(t_plan, 3),
+        "sharp_s": round(t_sharp, 3),
+        "blur_s": round(t_blur, 3),
+        "load_s": info.get("load_s"),
+        "total_s": round(time.time() - t0, 3),
+        "frames": len(frames),
+    }
+    meta = _meta(plan, cfg, job.obj, info, timings)
+    meta["sharp_alpha_coverage"] = coverage
+    _write_json(partial / "meta.json", meta)
+    if cfg.check_poses:
+        meta["pose_check"] = _pose_check(partial)
+        _write_json(partial / "meta.json", meta)
+    (partial / MARKER).write_text(f"{time.strftime('%Y-%m-%dT%H:%M:%S')}\n")
+    if final.exists():
+        shutil.rmtree(final)
+    os.replace(partial, final)
+    return final
+
+
+def _pose_check(setting_dir: Path) -> dict:
+    """The COLMAP verdict of the sharp level (DESIGN §6), compact for meta.json."""
+    from blurset.check_poses import check_setting
+
+    try:
+        rep = check_setting(setting_dir, levels=["sharp"])["sharp"]
+    except Exception as e:  # the check must never cost the setting itself
+        return {"verdict": f"error: {e}", "pass": False}
+    keep = ("verdict", "pass", "registered", "total", "median_rot_err_deg", "median_center_err_rel")
+    return {k: rep.get(k) for k in keep}
+
+
+# -- per object ------------------------------------------------------------------------
+
+
+def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> ObjectResult:
+    """One work unit: every pending setting of one object, in one worker process."""
+    from blurset.worker_client import Worker, WorkerError
+
+    out = Path(cfg.out)
+    result = ObjectResult(uid=obj.uid)
+    jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
+    pending = [j for j in jobs if not (out / j.name / MARKER).exists()]
+    result.settings = [j.name for j in jobs if j not in pending]
+    progress.skip(len(jobs) - len(pending))
+    if not pending:
+        return result
+    stage = "load"
+    work = out / f".work-{obj.uid}"
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    try:
+        t0 = time.time()
+        with Worker(
+            blender=cfg.blender,
+            threads=cfg.threads,
+            timeout=cfg.timeout,
+            log_path=work / "worker.log",
+        ) as w:
+            info = w.load(obj.path, work / "vertices.npy")
+            info["load_s"] = round(time.time() - t0, 3)
+            info["blender_version"] = w.info.get("blender_version")
+            verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
+            stage = "render"
+            for j in pending:
+                render_setting(j, cfg, w, info, verts, progress)
+                result.settings.append(j.name)
+                progress.setting_done()
+        shutil.rmtree(work, ignore_errors=True)
+    except (WorkerError, BlursetError, ValueError, OSError) as e:
+        result.failure = _failure(obj, stage, str(e).splitlines()[0] if str(e) else repr(e))
+    except Exception as e:  # a bug must cost this object only, and be visible
+        tb = traceback.format_exc(limit=3).strip().splitlines()[-1]
+        result.failure = _failure(obj, stage, f"{type(e).__name__}: {e} [{tb}]")
+    if result.failure:
+        for j in pending:
+            shutil.rmtree(out / f"{j.name}.partial", ignore_errors=True)
+        done_now = sum(j.name in result.settings for j in pending)
+        progress.object_failed(len(pending) - done_now)
+    return result
+
+
+def _failure(obj: ObjectSpec, stage: str, reason: str) -> dict:
+    return {
+        "uid": obj.uid,
+        "path": str(obj.path),
+        "stage": stage,
+        "reason": reason,
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+
+
+# -- the whole build -------------------------------------------------------------------
+
+
+def _objects(cfg: BuildConfig) -> list[ObjectSpec]:
+    entries = list(cfg.objects)
+    if cfg.demo:
+        from blurset.demo import make_demo_objects
+
+        demo_dir = Path(cfg.out) / ".demo_objects"
+        entries += [str(p) for p in make_demo_objects(demo_dir, seed=cfg.seed)]
+    objs = resolve_objects(entries)
+    if cfg.shard:
+        i, n = (int(x) for x in cfg.shard.split("/"))
+        objs = objs[i::n]
+    return objs
+
+
+def _run_local(objs, cfg, progress, on_result) -> None:
+    if cfg.workers == 1:
+        for o in objs:
+            on_result(build_object(o, cfg, progress))
+        return
+    with cf.ThreadPoolExecutor(cfg.workers) as pool:
+        for fut in cf.as_completed([pool.submit(build_object, o, cfg, progress) for o in objs]):
+            on_result(fut.result())
+
+
+def _run_ray(objs, cfg, progress, on_result) -> None:
+    try:
+        import ray
+    except ImportError:
+        raise BlursetError("--executor ray: the ray package is not installed") from None
+    if not ray.is_initialized():
+        ray.init(address=os.environ.get("RAY_ADDRESS"), log_to_driver=False)
+    remote = ray.remote(num_cpus=max(1, cfg.threads))(_ray_unit)
+    refs = [remote.remote(o, cfg) for o in objs]
+    pending = list(refs)
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        res = ray.get(done[0])
+        progress.skip(len(res.settings))
+        on_result(res)
+
+
+def _ray_unit(obj: ObjectSpec, cfg: BuildConfig) -> ObjectResult:
+    return build_object(obj, cfg, Progress(0, enabled=False))
+
+
+def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    objs = _objects(cfg)
+    for stale in out.glob("*.partial"):
+        shutil.rmtree(stale, ignore_errors=True)
+    n_settings = len(objs) * len(cfg.theta0s)
+    prog = Progress(
+        n_settings,
+        frames_per_setting=frames_per_setting(cfg),
+        enabled=progress and cfg.executor == "local",
+    )
+    failures: list[dict] = []
+    lock = threading.Lock()
+    t0 = time.time()
+
+    def on_result(res: ObjectResult) -> None:
+        if res.failure:
+            with lock:
+                failures.append(res.failure)
+                with open(out / "failures.jsonl", "a") as f:
+                    f.write(json.dumps(res.failure) + "\n")
+            prog.write(f"failed: {res.uid}: {res.failure['reason']}")
+
+    with prog:
+        if cfg.executor == "ray":
+            _run_ray(objs, cfg, prog, on_result)
+        else:
+            _run_local(objs, cfg, prog, on_result)
+    return finalize(out, cfg, objs, failures, time.time() - t0)
+
+
+def _complete_settings(out: Path) -> list[tuple[str, dict]]:
+    found = []
+    for d in sorted(out.iterdir()):
+        if d.is_dir() and (d / MARKER).exists():
+            found.append((d.name, json.loads((d / "meta.json").read_text())))
+    return found
+
+
+def finalize(out: Path, cfg: BuildConfig, objs, failures: list[dict], seconds: float) -> dict:
+    """splits.json, dataset.json and a deduplicated failures.jsonl over what is on disk."""
+    complete = _complete_settings(out)
+    done_uids = {m["uid"] for _, m in complete}
+    # failures.jsonl keeps the latest entry per object that is still not complete.
+    latest: dict[str, dict] = {}
+    fpath = out / "failures.jsonl"
+    if fpath.exists():
+        for line in fpath.read_text().splitlines():
+            if line.strip():
+                rec = json.loads(line)
+                latest[rec["uid"]] = rec
+    kept = [r for u, r in sorted(latest.items()) if u not in done_uids]
+    tmp = fpath.with_name(".failures.jsonl.tmp")
+    tmp.write_text("".join(json.dumps(r) + "\n" for r in kept))
+    os.replace(tmp, fpath)
+    entries = [{"setting": n, "object": m["uid"], "views": len(m["views"])} for n, m in complete]
+    splits = json.loads(
+        _core.make_splits(
+            json.dumps(entries),
+            view_stride=cfg.view_stride,
+            test_fraction=cfg.test_fraction,
+            test_objects=cfg.test_objects,
+            seed=cfg.seed,
+        )
+    )
+    _write_json(out / "splits.json", splits)
+    checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
+    dataset = {
+        "name": "blurset Objaverse-Blur",
+        "blurset_version": __version__,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "config": cfg.to_json(),
+        "seed": cfg.seed,
+        "levels": cfg.level_dirs,
+        "versions": {
+            "blurset": __version__,
+            "python": platform.python_version(),
+            "blender": next(
+                (m["object"].get("blender_version") for _, m in complete if m.get("object")), None
+            ),
+        },
+        "counts": {
+            "objects": len({m["uid"] for _, m in complete}),
+            "objects_failed": len(kept),
+            "settings": len(complete),
+            "images": sum(len(m["views"]) * len(m["levels"]) for _, m in complete),
+        },
+        "settings": [n for n, _ in complete],
+        "seconds": round(seconds, 1),
+    }
+    if checks:
+        dataset["pose_checks"] = checks
+    _write_json(out / "dataset.json", dataset)
+    return {
+        "settings_complete": len(complete),
+        "objects_failed": len(kept),
+        "failures": kept,
+        "failed_this_run": failures,
+    }

@@ -1,0 +1,230 @@
+"""Build configuration: defaults < `--demo` defaults < TOML file (`--config`) < flags.
+
+The sampling defaults (the paper's numbers) come from blurset-core, so they are defined
+once; this module adds what only orchestration needs and validates everything with a
+message that names the option (and the file, for TOML values).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from blurset import _core
+from blurset.exceptions import ConfigError
+
+SAMPLING_DEFAULTS: dict[str, Any] = json.loads(_core.default_sampling_config())
+
+
+@dataclass
+class BuildConfig:
+    objects: list[str] = field(default_factory=list)
+    out: Path | None = None
+    demo: bool = False
+    settings_per_object: int = 4
+    views: int = SAMPLING_DEFAULTS["views"]
+    levels: list[int] = field(default_factory=lambda: list(SAMPLING_DEFAULTS["levels"]))
+    latents: int = SAMPLING_DEFAULTS["latents"]
+    # Cycles samples per rendered latent frame.
+    samples: int = 32
+    # Samples of the sharp render; None = samples × latents, so ground truth is at least
+    # as clean as the blurry images (m frames at s samples ≈ one frame at m·s).
+    sharp_samples: int | None = None
+    resolution: int = SAMPLING_DEFAULTS["resolution"]
+    seed: int = 0
+    fov_deg: float = SAMPLING_DEFAULTS["fov_deg"]
+    phi0_deg: float = SAMPLING_DEFAULTS["phi0_deg"]
+    window_deg: float = SAMPLING_DEFAULTS["window_deg"]
+    delta0: float = SAMPLING_DEFAULTS["delta0"]
+    radius_margin: float = SAMPLING_DEFAULTS["radius_margin"]
+    level_spread: float = SAMPLING_DEFAULTS["level_spread"]
+    latent_positions: str = SAMPLING_DEFAULTS["latent_positions"]
+    orientation_max: float = SAMPLING_DEFAULTS["guards"]["orientation_max"]
+    near_floor: float = SAMPLING_DEFAULTS["guards"]["near_floor"]
+    background: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
+    write_linear: bool = False
+    view_stride: int = 16
+    test_fraction: float = 0.2
+    test_objects: list[str] | None = None
+    workers: int = 1
+    threads: int = 0
+    executor: str = "local"
+    shard: str | None = None
+    timeout: float = 600.0
+    blender: str | None = None
+    check_poses: bool = False
+
+    def sampling_json(self) -> str:
+        """The blurset-core SamplingConfig of this build."""
+        return json.dumps(
+            {
+                "views": self.views,
+                "phi0_deg": self.phi0_deg,
+                "window_deg": self.window_deg,
+                "fov_deg": self.fov_deg,
+                "radius_margin": self.radius_margin,
+                "delta0": self.delta0,
+                "levels": self.levels,
+                "level_spread": self.level_spread,
+                "latents": self.latents,
+                "latent_positions": self.latent_positions,
+                "resolution": self.resolution,
+                "guards": {"orientation_max": self.orientation_max, "near_floor": self.near_floor},
+            }
+        )
+
+    @property
+    def effective_sharp_samples(self) -> int:
+        return self.sharp_samples or self.samples * self.latents
+
+    @property
+    def theta0s(self) -> list[float]:
+        return [360.0 * k / self.settings_per_object for k in range(self.settings_per_object)]
+
+    @property
+    def level_dirs(self) -> list[str]:
+        return ["sharp"] + [f"blur_{lvl}" for lvl in self.levels]
+
+    def to_json(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["out"] = str(self.out) if self.out else None
+        d["effective_sharp_samples"] = self.effective_sharp_samples
+        return d
+
+
+# Small enough for about two minutes on 2 cores, rich enough for SfM.
+DEMO_DEFAULTS: dict[str, Any] = {
+    "settings_per_object": 1,
+    "views": 17,
+    "latents": 6,
+    "samples": 4,
+    "sharp_samples": 16,
+    "resolution": 96,
+}
+
+FIELDS = {f.name: f for f in dataclasses.fields(BuildConfig)}
+
+
+def parse_levels(value: Any, where: str = "--levels") -> list[int]:
+    """`1,2,3,4`, a list, or `none`/`` for sharp only."""
+    if isinstance(value, list):
+        items = value
+    elif isinstance(value, int):
+        items = [value]
+    else:
+        text = str(value).strip().lower()
+        items = [] if text in ("", "none", "sharp") else [s for s in text.split(",") if s.strip()]
+    try:
+        levels = [int(x) for x in items]
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: expected levels like 1,2,3,4 or none, got {value!r}") from None
+    if any(lvl < 1 or lvl > 64 for lvl in levels) or len(set(levels)) != len(levels):
+        raise ConfigError(f"{where}: levels must be distinct integers in 1..64, got {value!r}")
+    return sorted(levels)
+
+
+def _coerce(name: str, value: Any, where: str) -> Any:
+    if name == "levels":
+        return parse_levels(value, where)
+    default = getattr(BuildConfig(), name)
+    try:
+        if name == "out":
+            return Path(value)
+        if name in ("objects", "test_objects"):
+            if isinstance(value, str):
+                return [value]
+            return [str(v) for v in value]
+        if name == "background":
+            bg = [float(v) for v in value]
+            if len(bg) != 3:
+                raise ValueError
+            return bg
+        if name in ("sharp_samples", "shard", "blender") and value is None:
+            return None
+        if name in ("sharp_samples",):
+            return int(value)
+        if isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise ValueError
+            return value
+        if isinstance(default, int):
+            if isinstance(value, bool) or int(value) != value:
+                raise ValueError
+            return int(value)
+        if isinstance(default, float):
+            return float(value)
+        return str(value) if value is not None else None
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: bad value {value!r} for {name}") from None
+
+
+def load_toml(path: Path) -> dict[str, Any]:
+    """Read a TOML config. Keys are option names (`latents`, `settings-per-object` …),
+    at top level or under a `[build]` table."""
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"--config: no such file {str(path)!r}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"--config: {str(path)!r} is not valid TOML: {e}") from None
+    table = data.get("build", data)
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        name = key.replace("-", "_")
+        if name not in FIELDS or name == "demo" and not isinstance(value, bool):
+            raise ConfigError(f"{path}: unknown option {key!r}")
+        out[name] = _coerce(name, value, f"{path}: {key}")
+    return out
+
+
+def make_config(file_values: dict[str, Any], flag_values: dict[str, Any]) -> BuildConfig:
+    """Combine the layers and validate."""
+    demo = bool(flag_values.get("demo") or file_values.get("demo"))
+    values: dict[str, Any] = dict(DEMO_DEFAULTS) if demo else {}
+    values.update(file_values)
+    values.update({k: v for k, v in flag_values.items() if v is not None})
+    values["demo"] = demo
+    cfg = BuildConfig(**{k: _coerce(k, v, f"--{k.replace('_', '-')}") for k, v in values.items()})
+    validate(cfg)
+    return cfg
+
+
+def validate(cfg: BuildConfig) -> None:
+    def need(ok: bool, option: str, msg: str) -> None:
+        if not ok:
+            raise ConfigError(f"--{option.replace('_', '-')}: {msg}")
+
+    need(cfg.out is not None, "out", "an output directory is required")
+    need(bool(cfg.objects) or cfg.demo, "objects", "give GLB files/folders/lists, or --demo")
+    need(1 <= cfg.settings_per_object <= 360, "settings_per_object", "must be in 1..360")
+    need(1 <= cfg.samples <= 65536, "samples", "must be in 1..65536")
+    need(
+        cfg.sharp_samples is None or 1 <= cfg.sharp_samples <= 65536,
+        "sharp_samples",
+        "must be in 1..65536",
+    )
+    need(cfg.workers >= 1, "workers", "must be at least 1")
+    need(cfg.threads >= 0, "threads", "must be ≥ 0 (0 = all cores)")
+    need(cfg.timeout > 0, "timeout", "must be positive seconds")
+    need(cfg.view_stride >= 1, "view_stride", "must be at least 1")
+    need(0.0 <= cfg.test_fraction <= 1.0, "test_fraction", "must be in [0, 1]")
+    need(cfg.executor in ("local", "ray"), "executor", "must be local or ray")
+    need(
+        cfg.latent_positions in ("random", "stratified"), "latent_positions", "random or stratified"
+    )
+    need(all(0.0 <= c <= 1.0 for c in cfg.background), "background", "RGB values in [0, 1]")
+    if cfg.shard is not None:
+        try:
+            i, n = (int(x) for x in cfg.shard.split("/"))
+            ok = 0 <= i < n
+        except ValueError:
+            ok = False
+        need(ok, "shard", f"expected i/N with 0 ≤ i < N, got {cfg.shard!r}")
+    try:
+        _core.validate_sampling_config(cfg.sampling_json())
+    except ValueError as e:
+        raise ConfigError(str(e).replace("invalid value: ", "")) from None

@@ -1,0 +1,77 @@
+"""A progress bar of frames rendered, with settings done and an ETA (tqdm)."""
+
+from __future__ import annotations
+
+import sys
+import threading
+
+from tqdm import tqdm
+
+
+class Progress:
+    def __init__(self, settings: int, *, frames_per_setting: int = 0, enabled: bool = True) -> None:
+        self.settings_total = settings
+        self.settings_done = 0
+        self.failed = 0
+        self.fps = frames_per_setting
+        self._lock = threading.Lock()
+        self._bar = (
+            tqdm(
+                total=settings * frames_per_setting,
+                unit="frame",
+                dynamic_ncols=True,
+                file=sys.stderr,
+                smoothing=0.05,
+            )
+            if enabled and settings * frames_per_setting > 0
+            else None
+        )
+        self._post()
+
+    def _post(self) -> None:
+        if self._bar is not None:
+            s = f"{self.settings_done}/{self.settings_total} settings"
+            if self.failed:
+                s += f", {self.failed} failed"
+            self._bar.set_postfix_str(s, refresh=False)
+
+    def frame_done(self, n: int = 1) -> None:
+        if self._bar is not None:
+            with self._lock:
+                self._bar.update(n)
+
+    def setting_done(self) -> None:
+        with self._lock:
+            self.settings_done += 1
+            self._post()
+
+    def skip(self, settings: int) -> None:
+        """Settings already complete (resumed) or finished elsewhere (Ray)."""
+        if settings <= 0:
+            return
+        with self._lock:
+            self.settings_done += settings
+            if self._bar is not None:
+                self._bar.total = max(0, self._bar.total - settings * self.fps)
+                self._bar.refresh()
+            self._post()
+
+    def object_failed(self, settings_left: int) -> None:
+        with self._lock:
+            self.failed += 1
+            if self._bar is not None and settings_left > 0:
+                self._bar.total = max(self._bar.n, self._bar.total - settings_left * self.fps)
+            self._post()
+
+    def write(self, msg: str) -> None:
+        if self._bar is not None:
+            self._bar.write(msg, file=sys.stderr)
+        else:
+            print(msg, file=sys.stderr)
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.close()
