@@ -344,3 +344,18 @@ def test_crash_raises_worker_error_with_stderr_tail(demo_glbs, tmp_path):
 def test_missing_blender_binary_is_a_clear_error(tmp_path):
     with pytest.raises(WorkerError, match="cannot start Blender worker .*no-such-blender"):
         Worker(blender=str(tmp_path / "no-such-blender"))
+
+
+def test_failing_on_frame_callback_does_not_desync_the_protocol(worker, demo_glbs, tmp_path):
+    info = worker.load(demo_glbs[0], tmp_path / "v.npy")
+    c2w = look_at(60.0, 30.0, fit_distance(info["bbox_dims"]))
+    frames = [{"c2w": c2w, "seed": k, "out": tmp_path / f"f{k}.exr"} for k in range(3)]
+
+    def boom(i, out):
+        raise RuntimeError("callback failed")
+
+    with pytest.raises(RuntimeError, match="callback failed"):
+        worker.render(frames, resolution=16, fov_deg=FOV, samples=1, on_frame=boom)
+    # The next command gets its own reply, not a stale frame message.
+    again = worker.load(demo_glbs[2], tmp_path / "v2.npy")
+    assert again["ok"] and again["n_triangles"] > 12

@@ -184,6 +184,17 @@ class Worker:
             if isinstance(msg, dict):
                 return msg
 
+    def _receive_in_sync(self) -> dict[str, Any]:
+        """_receive, but an interrupt (Ctrl-C) mid-command kills the worker: replies still
+        on their way would otherwise be read as the answers to the next command."""
+        try:
+            return self._receive()
+        except WorkerError:
+            raise
+        except BaseException:
+            self._discard()
+            raise
+
     # -- commands -----------------------------------------------------------------------
 
     def load(self, glb: Path, vertices_out: Path, *, unlit: str = "lit") -> dict[str, Any]:
@@ -200,7 +211,7 @@ class Worker:
                 "unlit": unlit,
             }
         )
-        reply = self._receive()
+        reply = self._receive_in_sync()
         if not reply.get("ok"):
             raise WorkerError(f"{reply.get('reason', 'load failed')} ({glb})")
         return reply
@@ -235,10 +246,14 @@ class Worker:
             }
         )
         while True:
-            msg = self._receive()
+            msg = self._receive_in_sync()
             if "frame" in msg:
                 if on_frame is not None:
-                    on_frame(int(msg["frame"]), str(msg["out"]))
+                    try:
+                        on_frame(int(msg["frame"]), str(msg["out"]))
+                    except BaseException:
+                        self._discard()  # it is still rendering: its replies would desync
+                        raise
                 continue
             if not msg.get("ok"):
                 raise WorkerError(f"render failed: {msg.get('reason', 'unknown')}")
