@@ -12,10 +12,9 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 import pytest
-from PIL import Image
-
 from blurset import _core  # noqa: TID251  (the bindings are what this file tests)
 from blurset.exceptions import ImageError
+from PIL import Image
 
 W, H = 37, 23  # odd sizes catch row/column mix-ups
 
@@ -124,6 +123,23 @@ def test_read_exr_is_lossless_for_blender_codecs(tmp_path, rng, compression):
     frame = premultiplied_frame(rng)
     path = write_exr(tmp_path / "f.exr", frame, compression)
     np.testing.assert_array_equal(_core.read_exr(path), frame)
+
+
+def test_read_exr_tiled_and_half_float(tmp_path, rng):
+    """Tiled files take the sequential placement path; half floats widen exactly."""
+    frame = premultiplied_frame(rng)
+    tiles = OpenEXR.TileDescription()
+    tiles.xSize, tiles.ySize, tiles.mode = 16, 16, OpenEXR.ONE_LEVEL
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.tiledimage, "tiles": tiles}
+    with OpenEXR.File(header, {"RGBA": frame}) as f:
+        f.write(str(tmp_path / "tiled.exr"))
+    np.testing.assert_array_equal(_core.read_exr(tmp_path / "tiled.exr"), frame)
+
+    half = frame.astype(np.float16)
+    header = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"RGBA": half}) as f:
+        f.write(str(tmp_path / "half.exr"))
+    np.testing.assert_array_equal(_core.read_exr(tmp_path / "half.exr"), half.astype(np.float32))
 
 
 def test_exr_without_alpha_is_opaque(tmp_path, rng):

@@ -8,7 +8,7 @@
 //! sRGB-encode (IEC 61966-2-1), quantize to 8 bits.
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
-use image::{ImageDecoder, ImageEncoder};
+use image::ImageEncoder;
 use rayon::prelude::*;
 use std::io::{BufReader, Cursor};
 use std::path::Path;
@@ -97,41 +97,182 @@ pub struct Frame {
 
 /// Read the first RGB(A) layer of an EXR file as RGBA f32 (alpha 1 when the file has none).
 ///
-/// Values are returned as stored: no check for NaN or inf (see [`Accumulator::add_exr`]).
+/// Channels are matched by name (`R`, `G`, `B`, optional `A`; half, float or uint
+/// samples); blocks are decompressed in parallel on the rayon pool. Values are returned
+/// as stored: no check for NaN or inf (see [`Accumulator::add_exr`]).
 pub fn read_exr(path: &Path) -> Result<Frame> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io("cannot open EXR", path, e))?;
-    let bad = |e: image::ImageError| Error::Image {
-        reason: e.to_string(),
+    let bad = |reason: String| Error::Image {
+        reason,
         path: path.to_path_buf(),
     };
-    let decoder = image::codecs::openexr::OpenExrDecoder::with_alpha_preference(
-        BufReader::new(file),
-        Some(true),
-    )
-    .map_err(bad)?;
-    let (width, height) = decoder.dimensions();
-    let rgba = image::DynamicImage::from_decoder(decoder)
-        .map_err(bad)?
-        .into_rgba32f()
-        .into_raw();
+    let exr_err = |e: exr::error::Error| bad(format!("EXR: {e}"));
+    let file = std::fs::File::open(path).map_err(|e| Error::io("cannot open EXR", path, e))?;
+    let reader = exr::block::read(BufReader::new(file), false).map_err(exr_err)?;
+    let meta = reader.meta_data().clone();
+
+    let slot_of = |name: &str| ["R", "G", "B", "A"].iter().position(|c| *c == name);
+    let has_rgb = |h: &exr::meta::header::Header| {
+        let names: Vec<String> = h.channels.list.iter().map(|c| c.name.to_string()).collect();
+        ["R", "G", "B"].iter().all(|c| names.iter().any(|n| n == c))
+    };
+    let Some(layer) = meta.headers.iter().position(|h| !h.deep && has_rgb(h)) else {
+        let names: Vec<String> = meta
+            .headers
+            .iter()
+            .flat_map(|h| h.channels.list.iter().map(|c| c.name.to_string()))
+            .collect();
+        return Err(bad(format!(
+            "no flat layer with R, G, B channels (channels: {names:?})"
+        )));
+    };
+    let header = &meta.headers[layer];
+    let display = header.shared_attributes.display_window;
+    let (width, height) = (header.layer_size.width(), header.layer_size.height());
+    if header.own_attributes.layer_position != display.position || header.layer_size != display.size
+    {
+        return Err(bad(format!(
+            "data window ({width}x{height} at {:?}) differs from the display window ({}x{} at {:?}); crop renders are not supported",
+            header.own_attributes.layer_position,
+            display.size.width(),
+            display.size.height(),
+            display.position
+        )));
+    }
+    let slots: Vec<Option<usize>> = header
+        .channels
+        .list
+        .iter()
+        .map(|c| slot_of(&c.name.to_string()))
+        .collect();
+    if let Some(c) = header
+        .channels
+        .list
+        .iter()
+        .zip(&slots)
+        .find(|(c, s)| s.is_some() && c.sampling != exr::math::Vec2(1, 1))
+    {
+        return Err(bad(format!("channel {} is subsampled", c.0.name)));
+    }
+    let has_alpha = slots.contains(&Some(3));
+
+    let chunks = reader
+        .filter_chunks(false, |_, tile, block| {
+            block.layer == layer && tile.level_index == exr::math::Vec2(0, 0)
+        })
+        .map_err(exr_err)?
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(exr_err)?;
+    let blocks = chunks
+        .into_par_iter()
+        .map(|chunk| exr::block::UncompressedBlock::decompress_chunk(chunk, &meta, false))
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(exr_err)?;
+
+    let mut blocks = blocks;
+    blocks.sort_by_key(|b| b.index.pixel_position.y());
+    let mut rgba = vec![if has_alpha { 0.0 } else { 1.0 }; width * height * CH];
+    let row = width * CH;
+    // Scan-line blocks span whole rows and tile the image: each gets its own rows and
+    // the conversion runs in parallel. Anything else (tiles) is placed sequentially.
+    let mut y = 0;
+    let full_rows = blocks.iter().all(|b| {
+        let ok = b.index.pixel_position.x() == 0
+            && b.index.pixel_size.width() == width
+            && b.index.pixel_position.y() == y;
+        y += b.index.pixel_size.height();
+        ok
+    }) && y == height;
+    let place = |block: &exr::block::UncompressedBlock, dst: &mut [f32], y0: usize| {
+        scatter_block(block, &header.channels, &slots, dst, y0, width)
+    };
+    if full_rows {
+        let mut parts = Vec::with_capacity(blocks.len());
+        let mut rest = rgba.as_mut_slice();
+        for b in &blocks {
+            let (mine, tail) = rest.split_at_mut(b.index.pixel_size.height() * row);
+            parts.push((b, mine));
+            rest = tail;
+        }
+        parts
+            .into_par_iter()
+            .try_for_each(|(b, dst)| place(b, dst, b.index.pixel_position.y()))
+            .map_err(bad)?;
+    } else {
+        for b in &blocks {
+            place(b, &mut rgba, 0).map_err(bad)?;
+        }
+    }
     Ok(Frame {
-        width,
-        height,
+        width: width as u32,
+        height: height as u32,
         rgba,
     })
 }
 
-/// Encode an RGBA f32 image as an EXR file, written atomically.
+/// Convert the lines of one decompressed block into interleaved RGBA; `dst` holds the
+/// image rows from `y0` on.
+fn scatter_block(
+    block: &exr::block::UncompressedBlock,
+    channels: &exr::meta::attribute::ChannelList,
+    slots: &[Option<usize>],
+    dst: &mut [f32],
+    y0: usize,
+    width: usize,
+) -> std::result::Result<(), String> {
+    use exr::meta::attribute::SampleType;
+    for line in block.lines(channels) {
+        let Some(slot) = slots[line.location.channel] else {
+            continue;
+        };
+        let (x0, y) = (line.location.position.x(), line.location.position.y());
+        let n = line.location.sample_count;
+        let start = y
+            .checked_sub(y0)
+            .map(|dy| (dy * width + x0) * CH)
+            .filter(|&s| x0 + n <= width && s + n * CH <= dst.len())
+            .ok_or_else(|| format!("block line at ({x0}, {y}) lies outside the image"))?;
+        let out = dst[start..start + n * CH].iter_mut().skip(slot).step_by(CH);
+        // Decompressed block data is native-endian (exr::block::UncompressedBlock).
+        match channels.list[line.location.channel].sample_type {
+            SampleType::F32 => {
+                for (d, b) in out.zip(line.value.chunks_exact(4)) {
+                    *d = f32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
+                }
+            }
+            SampleType::F16 => {
+                for (d, b) in out.zip(line.value.chunks_exact(2)) {
+                    *d = exr::prelude::f16::from_bits(u16::from_ne_bytes([b[0], b[1]])).to_f32();
+                }
+            }
+            SampleType::U32 => {
+                for (d, b) in out.zip(line.value.chunks_exact(4)) {
+                    *d = u32::from_ne_bytes([b[0], b[1], b[2], b[3]]) as f32;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Encode an RGBA f32 image as a ZIP-compressed (lossless) EXR file, written atomically.
 pub fn write_exr(path: &Path, width: u32, height: u32, rgba: &[f32]) -> Result<()> {
+    use exr::prelude::{Encoding, Image, Layer, LayerAttributes, SpecificChannels, WritableImage};
     check_len(width, height, rgba.len())?;
+    let (w, h) = (width as usize, height as usize);
+    let channels = SpecificChannels::rgba(|p: exr::math::Vec2<usize>| {
+        let i = (p.y() * w + p.x()) * CH;
+        (rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3])
+    });
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        channels,
+    );
     let mut buf = Cursor::new(Vec::new());
-    image::codecs::openexr::OpenExrEncoder::new(&mut buf)
-        .write_image(
-            as_bytes(rgba).as_slice(),
-            width,
-            height,
-            image::ExtendedColorType::Rgba32F,
-        )
+    Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut buf)
         .map_err(|e| Error::Image {
             reason: format!("cannot encode EXR: {e}"),
             path: path.to_path_buf(),
@@ -179,10 +320,6 @@ fn encode_run(out: &mut [u8], pixels: impl Iterator<Item = [f64; 4]>, bg: [f64; 
         o[1] = srgb_encode_u8(c[1]);
         o[2] = srgb_encode_u8(c[2]);
     }
-}
-
-fn as_bytes(v: &[f32]) -> Vec<u8> {
-    v.iter().flat_map(|x| x.to_ne_bytes()).collect()
 }
 
 fn check_len(width: u32, height: u32, len: usize) -> Result<()> {
@@ -346,6 +483,10 @@ mod tests {
         std::env::temp_dir()
             .join(format!("blurset-accumulate-{}", std::process::id()))
             .join(name)
+    }
+
+    fn as_bytes(v: &[f32]) -> Vec<u8> {
+        v.iter().flat_map(|x| x.to_ne_bytes()).collect()
     }
 
     fn frame(w: u32, h: u32, seed: u64) -> Vec<f32> {

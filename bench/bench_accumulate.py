@@ -1,0 +1,106 @@
+"""Accumulation benchmark (DESIGN §9): m latent EXR frames -> one blurry sRGB PNG.
+
+Baseline: the OpenEXR package reads each frame into NumPy, the mean is taken in float64,
+composited over white, sRGB-encoded and written with Pillow. Contender:
+`blurset._core.Accumulator` (read, accumulate, encode and write in Rust). Both stream
+the frames (one frame in memory at a time) and produce the same image.
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+from blurset import _core  # noqa: TID251  (the benchmark measures the bindings themselves)
+from PIL import Image
+
+FRAMES = 34  # the paper's m
+SIZE = 512
+REPEATS = 5
+
+
+def make_frames(directory: Path, n: int = FRAMES, size: int = SIZE) -> list[Path]:
+    """Random premultiplied RGBA float32 frames, ZIP-compressed like Blender's default."""
+    rng = np.random.default_rng(0)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    paths = []
+    for i in range(n):
+        alpha = rng.random((size, size, 1), dtype=np.float32)
+        rgba = np.concatenate([rng.random((size, size, 3), dtype=np.float32) * alpha, alpha], 2)
+        path = directory / f"{i:03d}.exr"
+        with OpenEXR.File(header, {"RGBA": np.ascontiguousarray(rgba)}) as f:
+            f.write(str(path))
+        paths.append(path)
+    return paths
+
+
+def baseline(paths: list[Path], out: Path, background=(1.0, 1.0, 1.0)) -> None:
+    acc = None
+    for p in paths:
+        with OpenEXR.File(str(p)) as f:
+            rgba = f.channels()["RGBA"].pixels
+        if acc is None:
+            acc = np.zeros(rgba.shape, np.float64)
+        acc += rgba
+    mean = acc / len(paths)
+    rgb = mean[..., :3] + (1.0 - np.clip(mean[..., 3:], 0.0, 1.0)) * np.asarray(background)
+    x = np.clip(rgb, 0.0, 1.0)
+    enc = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    Image.fromarray(np.round(enc * 255.0).astype(np.uint8)).save(out)
+
+
+def contender(paths: list[Path], out: Path, size: int = SIZE) -> None:
+    acc = _core.Accumulator(size, size)
+    for p in paths:
+        acc.add_exr(p)
+    acc.write_png(out)
+
+
+def median_times(a, b, repeats: int = REPEATS) -> tuple[float, float]:
+    """Medians of `repeats` interleaved runs of two thunks, so load from other processes
+    on a shared machine hits both sides alike."""
+    ta, tb = [], []
+    for _ in range(repeats):
+        for fn, times in ((a, ta), (b, tb)):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+    return statistics.median(ta), statistics.median(tb)
+
+
+def run() -> list[dict]:
+    with tempfile.TemporaryDirectory(prefix="blurset-bench-acc-") as tmp:
+        d = Path(tmp)
+        paths = make_frames(d)
+        # Warm the page cache and check both sides agree before timing them.
+        baseline(paths, d / "base.png")
+        contender(paths, d / "rust.png")
+        a = np.asarray(Image.open(d / "base.png"), dtype=int)
+        b = np.asarray(Image.open(d / "rust.png"), dtype=int)
+        max_diff = int(np.abs(a - b).max())
+        t_base, t_rust = median_times(
+            lambda: baseline(paths, d / "base.png"), lambda: contender(paths, d / "rust.png")
+        )
+    return [
+        {
+            "name": "accumulate_vs_numpy",
+            "ratio": t_base / t_rust,
+            "contender": f"blurset Accumulator {t_rust:.3f} s",
+            "baseline": f"OpenEXR+NumPy+Pillow {t_base:.3f} s",
+            "contender_s": t_rust,
+            "baseline_s": t_base,
+            "frames": FRAMES,
+            "size": SIZE,
+            "repeats": REPEATS,
+            "max_png_code_diff": max_diff,
+        }
+    ]
+
+
+if __name__ == "__main__":
+    for r in run():
+        print(r)
