@@ -16,7 +16,8 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
       -> {"frame":i,"out":EXR,"seconds":t} per frame, then {"ok":true,"done":n}
   {"cmd":"quit"} -> exit 0
 
-At start-up the worker announces itself with {"ok":true,"ready":true,"blender":version}.
+At start-up the worker announces itself with
+{"ok":true,"ready":true,"blender":version,"blender_version":version,"pid":pid}.
 """
 
 from __future__ import annotations
@@ -124,7 +125,16 @@ class Worker:
 
 def main() -> int:
     worker = Worker(parse_threads(sys.argv))
-    send({"ok": True, "ready": True, "blender": bpy.app.version_string, "pid": os.getpid()})
+    version = bpy.app.version_string
+    send(
+        {
+            "ok": True,
+            "ready": True,
+            "blender": version,
+            "blender_version": version,
+            "pid": os.getpid(),
+        }
+    )
     try:
         for line in sys.stdin:
             line = line.strip()
