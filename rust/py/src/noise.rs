@@ -1,5 +1,229 @@
+//! Bindings of `blurset_core::noise` and `blurset_core::image_io`: conversion and
+//! one core call each.
+use crate::run_detached;
+use blurset_core::image_io::{self, Image, Samples};
+use blurset_core::noise::{self as core, Gamma, NoiseLevels, NoiseModel, WhiteBalance};
+use numpy::{
+    PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::IntoPyObjectExt;
+use std::path::PathBuf;
 
-pub(crate) fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+type Levels = (f64, f64, f64, f64);
+
+fn levels_to_py(l: NoiseLevels) -> Levels {
+    (l.log10_read, l.read_step, l.log10_shot, l.shot_step)
+}
+
+fn value_err(e: blurset_core::Error) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+fn model(
+    sigma_read: f64,
+    sigma_shot: f64,
+    gamma: &str,
+    white_balance: Option<(f64, f64)>,
+    white_level: f64,
+) -> PyResult<NoiseModel> {
+    let m = NoiseModel {
+        sigma_read,
+        sigma_shot,
+        gamma: Gamma::parse(gamma).map_err(value_err)?,
+        white_balance: white_balance.map(|(red, blue)| WhiteBalance { red, blue }),
+        white_level,
+    };
+    m.validate().map_err(value_err)?;
+    Ok(m)
+}
+
+/// An (H, W) or (H, W, C) uint8 / uint16 array as a core image (copied).
+fn image_from_py(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
+    fn layout(shape: &[usize]) -> PyResult<(u32, u32, usize)> {
+        match shape {
+            [h, w] => Ok((*w as u32, *h as u32, 1)),
+            [h, w, c] if (1..=4).contains(c) => Ok((*w as u32, *h as u32, *c)),
+            s => Err(PyValueError::new_err(format!(
+                "image must have shape (H, W) or (H, W, C) with C in 1..4, got {s:?}"
+            ))),
+        }
+    }
+    let (w, h, c, samples) = if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, u8>>() {
+        let (w, h, c) = layout(a.shape())?;
+        (w, h, c, Samples::U8(a.as_array().iter().copied().collect()))
+    } else if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, u16>>() {
+        let (w, h, c) = layout(a.shape())?;
+        (
+            w,
+            h,
+            c,
+            Samples::U16(a.as_array().iter().copied().collect()),
+        )
+    } else {
+        return Err(PyTypeError::new_err(
+            "image must be a numpy array of dtype uint8 or uint16",
+        ));
+    };
+    Image::new(w, h, c, samples).map_err(value_err)
+}
+
+fn image_to_py(py: Python<'_>, img: Image) -> PyResult<Py<PyAny>> {
+    let shape = [img.height as usize, img.width as usize, img.channels];
+    match img.samples {
+        Samples::U8(v) => PyArray1::from_vec(py, v).reshape(shape)?.into_py_any(py),
+        Samples::U16(v) => PyArray1::from_vec(py, v).reshape(shape)?.into_py_any(py),
+    }
+}
+
+/// (log10 σ_read(1), read step, log10 σ_shot(1), shot step) of blurset's default table.
+#[pyfunction]
+fn noise_default_levels() -> Levels {
+    levels_to_py(NoiseLevels::DEFAULT)
+}
+
+/// NAN's levels from the `sig_read` and `sig_shot` arrays of KPN's test file.
+#[pyfunction]
+fn noise_levels_from_kpn(
+    sig_read: PyReadonlyArray1<'_, f64>,
+    sig_shot: PyReadonlyArray1<'_, f64>,
+) -> PyResult<Levels> {
+    let r: Vec<f64> = sig_read.as_array().to_vec();
+    let s: Vec<f64> = sig_shot.as_array().to_vec();
+    NoiseLevels::from_kpn(&r, &s)
+        .map(levels_to_py)
+        .map_err(value_err)
+}
+
+/// (σ_read, σ_shot) at `gain` under `levels`.
+#[pyfunction]
+fn noise_sigmas(gain: f64, levels: Levels) -> PyResult<(f64, f64)> {
+    let l = NoiseLevels {
+        log10_read: levels.0,
+        read_step: levels.1,
+        log10_shot: levels.2,
+        shot_step: levels.3,
+    };
+    l.sigmas(gain).map_err(value_err)
+}
+
+/// The scene's (red, blue) white-balance gains drawn from `seed`.
+#[pyfunction]
+fn noise_white_balance(seed: u64) -> (f64, f64) {
+    let wb = core::sample_white_balance(seed);
+    (wb.red, wb.blue)
+}
+
+/// The Philox key of one gain of one seed.
+#[pyfunction]
+fn noise_key(seed: u64, gain: f64) -> u64 {
+    core::noise_key(seed, gain)
+}
+
+/// (width, height, channels, bits per sample) from an image file's header.
+#[pyfunction]
+fn image_info(py: Python<'_>, path: PathBuf) -> PyResult<(u32, u32, usize, u32)> {
+    run_detached(py, || image_io::image_info(&path))
+}
+
+/// Decode an image file to an (H, W, C) uint8 or uint16 array.
+#[pyfunction]
+fn read_image(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyAny>> {
+    let img = run_detached(py, || image_io::read_image(&path))?;
+    image_to_py(py, img)
+}
+
+/// One noisy frame of one view: (linear float32 (H, W, 3|4), processed array of the
+/// input's dtype and shape with alpha copied).
+#[pyfunction]
+#[pyo3(signature = (image, *, sigma_read, sigma_shot, key, view=0, frame=0, gamma="2.2", white_balance=None, white_level=1.0))]
+#[allow(clippy::too_many_arguments)]
+fn noise_image(
+    py: Python<'_>,
+    image: &Bound<'_, PyAny>,
+    sigma_read: f64,
+    sigma_shot: f64,
+    key: u64,
+    view: u32,
+    frame: u32,
+    gamma: &str,
+    white_balance: Option<(f64, f64)>,
+    white_level: f64,
+) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
+    let img = image_from_py(image)?;
+    let m = model(sigma_read, sigma_shot, gamma, white_balance, white_level)?;
+    let stream = core::stream_id(view, frame);
+    let noisy = run_detached(py, || core::add_noise(&img, &m, key, stream))?;
+    let (h, w) = (img.height as usize, img.width as usize);
+    let linear = PyArray1::from_vec(py, noisy.linear)
+        .reshape([h, w, noisy.linear_channels])?
+        .into_py_any(py)?;
+    Ok((linear, image_to_py(py, noisy.processed)?))
+}
+
+/// The clean linear values the noise is added to: float32 (H, W, 1|3).
+#[pyfunction]
+#[pyo3(signature = (image, *, gamma="2.2", white_balance=None, white_level=1.0))]
+fn noise_clean_linear(
+    py: Python<'_>,
+    image: &Bound<'_, PyAny>,
+    gamma: &str,
+    white_balance: Option<(f64, f64)>,
+    white_level: f64,
+) -> PyResult<Py<PyAny>> {
+    let img = image_from_py(image)?;
+    let m = model(0.0, 0.0, gamma, white_balance, white_level)?;
+    let y = run_detached(py, || core::clean_linear(&img, &m))?;
+    PyArray1::from_vec(py, y)
+        .reshape([
+            img.height as usize,
+            img.width as usize,
+            img.color_channels(),
+        ])?
+        .into_py_any(py)
+}
+
+/// Write every variant of a scene: `variants` holds (out_dir, sigma_read, sigma_shot,
+/// key) per gain; `names` the `len(sources) * frames` output stems, view-major.
+#[pyfunction]
+#[pyo3(signature = (sources, names, variants, *, frames=1, gamma="2.2", white_balance=None, white_level=1.0))]
+#[allow(clippy::too_many_arguments)]
+fn noise_write_variants(
+    py: Python<'_>,
+    sources: Vec<PathBuf>,
+    names: Vec<String>,
+    variants: Vec<(PathBuf, f64, f64, u64)>,
+    frames: u32,
+    gamma: &str,
+    white_balance: Option<(f64, f64)>,
+    white_level: f64,
+) -> PyResult<()> {
+    let variants = variants
+        .into_iter()
+        .map(|(out_dir, sr, ss, key)| {
+            Ok(core::Variant {
+                out_dir,
+                model: model(sr, ss, gamma, white_balance, white_level)?,
+                key,
+            })
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    run_detached(py, || {
+        core::write_variants(&sources, &names, frames, &variants)
+    })
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(noise_default_levels, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_levels_from_kpn, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_sigmas, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_white_balance, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_key, m)?)?;
+    m.add_function(wrap_pyfunction!(image_info, m)?)?;
+    m.add_function(wrap_pyfunction!(read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_image, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_clean_linear, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_write_variants, m)?)?;
     Ok(())
 }
