@@ -55,3 +55,69 @@ def srgb_encode(linear: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
 
 def read_exr(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
     """The first RGB(A) layer of an EXR as float32 (H, W, 4), values as stored."""
+
+# --- noise (rust/py/src/noise.rs) ---------------------------------------------------
+
+NoiseLevelTable = tuple[float, float, float, float]
+"""(log10 sigma_read(1), read step, log10 sigma_shot(1), shot step) per log2 gain."""
+
+def noise_default_levels() -> NoiseLevelTable:
+    """blurset's default gain table (derived from KPN's training ranges; not NAN's)."""
+
+def noise_levels_from_kpn(
+    sig_read: npt.NDArray[np.float64], sig_shot: npt.NDArray[np.float64]
+) -> NoiseLevelTable:
+    """NAN's mapping: sorted unique values, two lowest dropped, first two used (1-D arrays)."""
+
+def noise_sigmas(gain: float, levels: NoiseLevelTable) -> tuple[float, float]:
+    """(sigma_read, sigma_shot) at `gain`: log10 sigma(g) = log10 sigma(1) + step * log2 g."""
+
+def noise_white_balance(seed: int) -> tuple[float, float]:
+    """The scene's (red, blue) gains, red U[1.9, 2.4], blue U[1.5, 1.9], from `seed`."""
+
+def noise_key(seed: int, gain: float) -> int:
+    """The Philox key of one gain of one seed (what `blurset noise` uses)."""
+
+def image_info(path: str | PathLike[str]) -> tuple[int, int, int, int]:
+    """(width, height, channels, bits per sample) from the header; ImageError names the file."""
+
+def read_image(path: str | PathLike[str]) -> npt.NDArray[np.uint8] | npt.NDArray[np.uint16]:
+    """Decode PNG (8/16-bit) or JPEG to (H, W, C), C in 1..4, in the file's own depth."""
+
+def noise_image(
+    image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16],
+    *,
+    sigma_read: float,
+    sigma_shot: float,
+    key: int,
+    view: int = 0,
+    frame: int = 0,
+    gamma: str = "2.2",
+    white_balance: tuple[float, float] | None = None,
+    white_level: float = 1.0,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8] | npt.NDArray[np.uint16]]:
+    """One noisy frame: (linear float32 (H, W, 3|4), processed image of the input's
+    dtype and shape, alpha copied). Bit-identical to what `blurset noise` writes for
+    view `view`, frame `frame` with key `noise_key(seed, gain)`."""
+
+def noise_clean_linear(
+    image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16],
+    *,
+    gamma: str = "2.2",
+    white_balance: tuple[float, float] | None = None,
+    white_level: float = 1.0,
+) -> npt.NDArray[np.float32]:
+    """The clean linear values y the noise is added to, float32 (H, W, 1|3)."""
+
+def noise_write_variants(
+    sources: list[str | PathLike[str]],
+    names: list[str],
+    variants: list[tuple[str | PathLike[str], float, float, int]],
+    *,
+    frames: int = 1,
+    gamma: str = "2.2",
+    white_balance: tuple[float, float] | None = None,
+    white_level: float = 1.0,
+) -> None:
+    """Write images/<name>.png and linear/<name>.exr of every (out_dir, sigma_read,
+    sigma_shot, key) variant; `names` holds len(sources) * frames stems, view-major."""
