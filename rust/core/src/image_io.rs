@@ -152,24 +152,39 @@ pub fn png_bytes(img: &Image) -> Result<Vec<u8>> {
     Ok(out)
 }
 
-/// Encode float RGB (3 channels) or RGBA (4) as an uncompressed 32-bit float EXR.
+/// Encode float RGB (3 channels) or RGBA (4) as an uncompressed 32-bit float EXR of
+/// increasing scan lines, written sequentially: exr's parallel writer emits blocks
+/// in completion order, which would make the bytes depend on thread timing.
 pub fn exr_bytes(width: u32, height: u32, channels: usize, data: &[f32]) -> Result<Vec<u8>> {
-    let ct = match channels {
-        3 => image::ExtendedColorType::Rgb32F,
-        4 => image::ExtendedColorType::Rgba32F,
-        c => return Err(Error::Shape(format!("EXR needs 3 or 4 channels, got {c}"))),
-    };
-    if data.len() != width as usize * height as usize * channels {
+    use exr::prelude::{Encoding, SpecificChannels, Vec2, WritableImage};
+    let (w, h) = (width as usize, height as usize);
+    if !(channels == 3 || channels == 4) {
+        return Err(Error::Shape(format!(
+            "EXR needs 3 or 4 channels, got {channels}"
+        )));
+    }
+    if data.len() != w * h * channels {
         return Err(Error::Shape(format!(
             "{} floats for a {width} x {height} x {channels} EXR",
             data.len()
         )));
     }
-    let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_ne_bytes()).collect();
+    let at = |p: Vec2<usize>, c: usize| data[(p.y() * w + p.x()) * channels + c];
     let mut cur = std::io::Cursor::new(Vec::new());
-    image::codecs::openexr::OpenExrEncoder::new(&mut cur)
-        .write_image(&bytes, width, height, ct)
-        .map_err(|e| Error::Value(format!("EXR encoding failed: {e}")))?;
+    let res = if channels == 3 {
+        let ch = SpecificChannels::rgb(|p: Vec2<usize>| (at(p, 0), at(p, 1), at(p, 2)));
+        exr::image::Image::from_encoded_channels((w, h), Encoding::UNCOMPRESSED, ch)
+            .write()
+            .non_parallel()
+            .to_buffered(&mut cur)
+    } else {
+        let ch = SpecificChannels::rgba(|p: Vec2<usize>| (at(p, 0), at(p, 1), at(p, 2), at(p, 3)));
+        exr::image::Image::from_encoded_channels((w, h), Encoding::UNCOMPRESSED, ch)
+            .write()
+            .non_parallel()
+            .to_buffered(&mut cur)
+    };
+    res.map_err(|e| Error::Value(format!("EXR encoding failed: {e}")))?;
     Ok(cur.into_inner())
 }
 

@@ -1,0 +1,459 @@
+"""`blurset noise` (issue 3, DESIGN §5): noise statistics on real LLFF data, determinism
+across thread counts, extremes, input formats, bad input, and loader compatibility."""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+from blurset import _core  # noqa: TID251  (the bindings are part of what this file tests)
+from conftest import shared
+from PIL import Image
+
+ALL_GAINS = ("1", "2", "4", "8", "16", "20")
+
+
+def blurset_noise(*args, threads: int | None = None) -> subprocess.CompletedProcess:
+    env = dict(os.environ)
+    if threads is not None:
+        env["RAYON_NUM_THREADS"] = str(threads)
+    return subprocess.run(
+        [sys.executable, "-m", "blurset.cli", "noise", *map(str, args)],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+
+
+def ok(proc: subprocess.CompletedProcess) -> subprocess.CompletedProcess:
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+def read_exr(path: Path) -> np.ndarray:
+    ch = OpenEXR.File(str(path)).channels()
+    key = "RGBA" if "RGBA" in ch else "RGB"
+    return np.asarray(ch[key].pixels, dtype=np.float32)
+
+
+def png16(path: Path, a: np.ndarray) -> None:
+    """A minimal 16-bit PNG writer (so the input does not come from our own encoder)."""
+    h, w = a.shape[:2]
+    c = 1 if a.ndim == 2 else a.shape[2]
+    color = {1: 0, 2: 4, 3: 2, 4: 6}[c]
+    rows = a.reshape(h, w * c).astype(">u2").tobytes()
+    stride = w * c * 2
+    raw = b"".join(b"\x00" + rows[i * stride : (i + 1) * stride] for i in range(h))
+
+    def chunk(tag: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
+
+    ihdr = struct.pack(">IIBBBBB", w, h, 16, color, 0, 0, 0)
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", ihdr)
+        + chunk(b"IDAT", zlib.compress(raw))
+        + chunk(b"IEND", b"")
+    )
+
+
+def pose_rows(n: int, h: int, w: int, focal: float) -> np.ndarray:
+    rows = np.zeros((n, 17))
+    for i in range(n):
+        m = np.zeros((3, 5))
+        m[:, :3] = np.eye(3)
+        m[:, 3] = [0.1 * i, 0.0, 0.0]
+        m[:, 4] = [h, w, focal]
+        rows[i, :15] = m.ravel()
+        rows[i, 15:] = [1.0, 10.0]
+    return rows
+
+
+def make_scene(root: Path, images: list[np.ndarray], ext: str = ".png", sub: str = "images_2"):
+    """An LLFF scene of given arrays; poses describe the full resolution (factor 2)."""
+    d = root / sub
+    d.mkdir(parents=True)
+    for i, a in enumerate(images):
+        p = d / f"img{i:03d}{ext}"
+        if a.dtype == np.uint16:
+            png16(p, a)
+        else:
+            Image.fromarray(a).save(p, quality=95) if ext == ".jpg" else Image.fromarray(a).save(p)
+    h, w = images[0].shape[:2]
+    np.save(root / "poses_bounds.npy", pose_rows(len(images), 2 * h, 2 * w, 100.0))
+    return root
+
+
+def tree_bytes(root: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
+    }
+
+
+@pytest.fixture(scope="module")
+def fern_out(tmp_path_factory):
+    fern = shared("llff", "fern")
+    out = tmp_path_factory.mktemp("fern") / "fernN"
+    ok(blurset_noise(fern, "--factor", 8, "--seed", 11, "--out", out))
+    return fern, out
+
+
+# --- real data ----------------------------------------------------------------------
+
+
+def test_fern_is_an_llff_scene_per_gain(fern_out):
+    fern, out = fern_out
+    src = np.load(fern / "poses_bounds.npy")
+    assert sorted(p.name for p in out.iterdir()) == sorted(f"gain_{g}" for g in ALL_GAINS)
+    for g in ALL_GAINS:
+        d = out / f"gain_{g}"
+        # What an IBRNet / NAN LLFF loader does: sorted png/jpg files, N x 17 poses.
+        files = [f for f in sorted(os.listdir(d / "images")) if f.endswith(("png", "jpg", "JPG"))]
+        pb = np.load(d / "poses_bounds.npy")
+        assert pb.shape == (20, 17) and pb.dtype == np.float64
+        assert len(files) == pb.shape[0]
+        assert files == sorted(os.listdir(fern / "images_8"))
+        hwf = pb[:, :15].reshape(-1, 3, 5)[:, :, 4]
+        np.testing.assert_allclose(
+            hwf, np.tile([378.0, 504.0, 3260.526333 / 8], (20, 1)), rtol=1e-6
+        )
+        np.testing.assert_array_equal(
+            pb[:, :15].reshape(-1, 3, 5)[:, :, :4], src[:, :15].reshape(-1, 3, 5)[:, :, :4]
+        )
+        np.testing.assert_array_equal(pb[:, 15:], src[:, 15:])
+        meta = json.loads((d / "noise.json").read_text())
+        for key in (
+            "gain",
+            "seed",
+            "sigma_read",
+            "sigma_shot",
+            "gamma",
+            "white_balance",
+            "white_level",
+            "frames",
+            "files",
+        ):
+            assert key in meta
+        assert meta["gain"] == int(g) and meta["seed"] == 11 and meta["frames"] == 1
+        assert [f["image"] for f in meta["files"]] == [f"images/{f}" for f in files]
+        assert sorted(os.listdir(d / "linear")) == [f.replace(".png", ".exr") for f in files]
+        assert np.asarray(Image.open(d / "images" / files[0])).shape == (378, 504, 3)
+
+
+def test_fern_noise_statistics_per_gain_and_brightness(fern_out):
+    """Residual mean ~ 0 and variance sigma_r^2 + sigma_s^2 y within 3 % in every
+    brightness bin, computed independently in NumPy from the clean PNG."""
+    fern, out = fern_out
+    edges = np.array([0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.6, 1.01])
+    sigmas = []
+    for g in ALL_GAINS:
+        d = out / f"gain_{g}"
+        meta = json.loads((d / "noise.json").read_text())
+        sr, ss, wb = meta["sigma_read"], meta["sigma_shot"], meta["white_balance"]
+        sigmas.append((sr, ss))
+        scale = np.array([1 / wb["red"], 1.0, 1 / wb["blue"]])
+        n = np.zeros(len(edges) - 1)
+        s1, s2, pred = np.zeros_like(n), np.zeros_like(n), np.zeros_like(n)
+        negative = 0
+        for f in meta["files"]:
+            x = np.asarray(Image.open(fern / "images_8" / f["source"]), dtype=np.float64) / 255
+            y = x**2.2 * scale
+            lin = read_exr(d / f["linear"]).astype(np.float64)
+            assert np.isfinite(lin).all()
+            negative += int((lin < 0).sum())
+            r = (lin - y).ravel()
+            yy = y.ravel()
+            b = np.digitize(yy, edges) - 1
+            n += np.bincount(b, minlength=len(n))
+            s1 += np.bincount(b, r, minlength=len(n))
+            s2 += np.bincount(b, r * r, minlength=len(n))
+            pred += np.bincount(b, sr**2 + ss**2 * yy, minlength=len(n))
+            # The PNG is the forward processing of the same noisy values.
+            png = np.asarray(Image.open(d / f["image"]), dtype=np.float64)
+            want = np.round(255 * np.clip(lin / scale, 0, 1) ** (1 / 2.2))
+            assert np.abs(png - want).max() <= 1
+        assert negative > 0, f"gain {g}: negative linear values were clipped"
+        for i in np.nonzero(n >= 20_000)[0]:
+            mean, var, want = s1[i] / n[i], s2[i] / n[i] - (s1[i] / n[i]) ** 2, pred[i] / n[i]
+            assert abs(mean) < 5 * np.sqrt(want / n[i]), (g, edges[i], mean)
+            assert abs(var / want - 1) < 0.03, (g, edges[i], var, want)
+    assert sigmas == sorted(sigmas), "sigma must grow with gain"
+
+
+def test_api_reproduces_cli_bits(fern_out):
+    fern, out = fern_out
+    meta = json.loads((out / "gain_4" / "noise.json").read_text())
+    wb = meta["white_balance"]
+    view = 5
+    img = _core.read_image(fern / "images_8" / meta["files"][view]["source"])
+    lin, proc = _core.noise_image(
+        img,
+        sigma_read=meta["sigma_read"],
+        sigma_shot=meta["sigma_shot"],
+        key=_core.noise_key(11, 4.0),
+        view=view,
+        white_balance=(wb["red"], wb["blue"]),
+    )
+    np.testing.assert_array_equal(lin, read_exr(out / "gain_4" / meta["files"][view]["linear"]))
+    np.testing.assert_array_equal(
+        proc, np.asarray(Image.open(out / "gain_4" / meta["files"][view]["image"]))
+    )
+
+
+# --- determinism --------------------------------------------------------------------
+
+
+@pytest.fixture
+def small_scene(tmp_path, rng):
+    imgs = [rng.integers(0, 256, (37, 53, 3), dtype=np.uint8) for _ in range(4)]
+    return make_scene(tmp_path / "scene", imgs)
+
+
+def test_same_seed_same_bytes_for_any_thread_count(small_scene, tmp_path):
+    trees = []
+    for threads, seed in [(1, 5), (2, 5), (2, 6)]:
+        out = tmp_path / f"out_{threads}_{seed}"
+        ok(
+            blurset_noise(
+                small_scene,
+                "--factor",
+                2,
+                "--gains",
+                1,
+                20,
+                "--frames",
+                2,
+                "--seed",
+                seed,
+                "--out",
+                out,
+                threads=threads,
+            )
+        )
+        trees.append(tree_bytes(out))
+    assert trees[0] == trees[1]
+    assert trees[0].keys() == trees[2].keys()
+    differs = [k for k in trees[0] if k.endswith((".exr", ".png")) and trees[0][k] != trees[2][k]]
+    assert len(differs) == len([k for k in trees[0] if k.endswith((".exr", ".png"))])
+
+
+def test_fern_same_bytes_with_one_and_two_threads(tmp_path):
+    fern = shared("llff", "fern")
+    a, b = tmp_path / "a", tmp_path / "b"
+    ok(blurset_noise(fern, "--factor", 8, "--gains", 2, 16, "--seed", 3, "--out", a, threads=1))
+    ok(blurset_noise(fern, "--factor", 8, "--gains", 2, 16, "--seed", 3, "--out", b, threads=2))
+    assert tree_bytes(a) == tree_bytes(b)
+
+
+# --- extremes -----------------------------------------------------------------------
+
+
+def test_black_has_std_sigma_read():
+    levels = _core.noise_default_levels()
+    for gain in (1.0, 20.0):
+        sr, ss = _core.noise_sigmas(gain, levels)
+        black = np.zeros((400, 400, 3), np.uint8)
+        lin, proc = _core.noise_image(
+            black, sigma_read=sr, sigma_shot=ss, key=_core.noise_key(1, gain)
+        )
+        assert abs(lin.std() / sr - 1) < 0.01
+        assert abs(lin.mean()) < 5 * sr / np.sqrt(lin.size)
+        assert (lin < 0).mean() == pytest.approx(0.5, abs=0.01)
+        assert proc.min() == 0 and proc.dtype == np.uint8
+
+
+def test_white_gain_20_and_tiny_white_level_stay_finite():
+    sr, ss = _core.noise_sigmas(20.0, _core.noise_default_levels())
+    white = np.full((300, 300, 3), 255, np.uint8)
+    lin, _ = _core.noise_image(white, sigma_read=sr, sigma_shot=ss, key=7)
+    assert np.isfinite(lin).all()
+    assert lin.var() == pytest.approx(sr**2 + ss**2, rel=0.02)
+    for wl in (1e-6, 1e-3):
+        lin, proc = _core.noise_image(
+            white, sigma_read=sr, sigma_shot=ss, key=7, white_level=wl, white_balance=(2.4, 1.9)
+        )
+        assert np.isfinite(lin).all() and proc.dtype == np.uint8
+    with pytest.raises(ValueError, match="white level"):
+        _core.noise_image(white, sigma_read=sr, sigma_shot=ss, key=7, white_level=0.0)
+
+
+def test_tiny_white_level_through_the_cli(small_scene, tmp_path):
+    out = tmp_path / "out"
+    ok(
+        blurset_noise(
+            small_scene, "--factor", 2, "--gains", 20, "--white-level", 1e-6, "--out", out
+        )
+    )
+    lin = read_exr(out / "gain_20" / "linear" / "img000.exr")
+    assert np.isfinite(lin).all()
+
+
+def test_zero_noise_round_trips_every_depth():
+    ramp8 = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    ramp16 = (np.arange(256 * 256, dtype=np.uint32)).astype(np.uint16).reshape(256, 256)
+    for img in (ramp8, np.stack([ramp8] * 3, -1), ramp16):
+        for gamma in ("2.2", "srgb"):
+            _, proc = _core.noise_image(img, sigma_read=0.0, sigma_shot=0.0, key=0, gamma=gamma)
+            np.testing.assert_array_equal(proc.reshape(img.shape), img)
+
+
+# --- input formats --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kind", ["png8", "png16", "jpg", "rgba", "gray", "gray_alpha", "png16_rgba"]
+)
+def test_input_formats(kind, tmp_path, rng):
+    h, w = 24, 32
+    base = (np.linspace(0, 1, h * w).reshape(h, w, 1) * np.array([1.0, 0.7, 0.4])).astype(
+        np.float64
+    )
+    alpha = rng.integers(0, 256, (h, w, 1), dtype=np.uint8)
+    a = {
+        "png8": (base * 255).round().astype(np.uint8),
+        "jpg": (base * 255).round().astype(np.uint8),
+        "png16": (base * 65535).round().astype(np.uint16),
+        "rgba": np.concatenate([(base * 255).round().astype(np.uint8), alpha], -1),
+        "gray": (base[..., 0] * 255).round().astype(np.uint8),
+        "gray_alpha": np.concatenate([(base[..., :1] * 255).round().astype(np.uint8), alpha], -1),
+        "png16_rgba": np.concatenate(
+            [(base * 65535).round(), alpha.astype(np.float64) * 257], -1
+        ).astype(np.uint16),
+    }[kind]
+    ext = ".jpg" if kind == "jpg" else ".png"
+    scene = make_scene(tmp_path / "s", [a, a], ext=ext)
+    out = tmp_path / "out"
+    ok(blurset_noise(scene, "--factor", 2, "--gains", 1, "--out", out))
+    d = out / "gain_1"
+    src = _core.read_image(scene / "images_2" / f"img000{ext}")
+    proc = _core.read_image(d / "images" / "img000.png")
+    assert proc.shape == src.shape and proc.dtype == src.dtype
+    channels = src.shape[2]
+    if channels in (2, 4):
+        np.testing.assert_array_equal(proc[..., -1], src[..., -1])
+    lin = read_exr(d / "linear" / "img000.exr")
+    assert lin.shape == (h, w, 4 if channels in (2, 4) else 3)
+    if channels in (2, 4):
+        np.testing.assert_allclose(lin[..., 3], src[..., -1] / np.iinfo(src.dtype).max, rtol=1e-6)
+    # Gain 1 is mild: the processed image stays close to its source.
+    top = float(np.iinfo(src.dtype).max)
+    color = slice(0, 3 if channels >= 3 else 1)
+    assert np.abs(proc[..., color] / top - src[..., color] / top).mean() < 0.03
+    pb = np.load(d / "poses_bounds.npy")
+    np.testing.assert_allclose(pb[0, [4, 9, 14]], [h, w, 50.0])
+
+
+def test_burst_frames_sort_in_view_order(small_scene, tmp_path):
+    out = tmp_path / "out"
+    ok(blurset_noise(small_scene, "--factor", 2, "--gains", 8, "--frames", 3, "--out", out))
+    d = out / "gain_8"
+    files = sorted(os.listdir(d / "images"))
+    meta = json.loads((d / "noise.json").read_text())
+    assert [f["image"] for f in meta["files"]] == [f"images/{f}" for f in files]
+    assert [(f["view"], f["frame"]) for f in meta["files"]] == [
+        (v, k) for v in range(4) for k in range(3)
+    ]
+    pb = np.load(d / "poses_bounds.npy")
+    src = np.load(small_scene / "poses_bounds.npy")
+    assert pb.shape == (12, 17)
+    np.testing.assert_array_equal(pb[:, 3], np.repeat(src[:, 3], 3))
+    frames = [read_exr(d / f["linear"]) for f in meta["files"][:3]]
+    assert not np.array_equal(frames[0], frames[1]) and not np.array_equal(frames[1], frames[2])
+
+
+def test_kpn_levels_follow_nans_mapping(small_scene, tmp_path):
+    # A file in KPN's layout (our own numbers: KPN's file is not redistributable).
+    levels = 10.0 ** np.array([-3.1, -2.8, -2.4, -2.1, -1.8, -1.5])
+    npz = tmp_path / "kpn.npz"
+    np.savez(npz, sig_read=np.repeat(levels, 73), sig_shot=np.repeat(levels / 3, 73)[::-1])
+    out = tmp_path / "out"
+    ok(
+        blurset_noise(
+            small_scene,
+            "--factor",
+            2,
+            "--gains",
+            1,
+            20,
+            "--kpn-levels",
+            npz,
+            "--profile",
+            "nan",
+            "--out",
+            out,
+        )
+    )
+    for gain in (1, 20):
+        meta = json.loads((out / f"gain_{gain}" / "noise.json").read_text())
+        assert meta["white_balance"] is None
+        for key, name in (("sigma_read", "sig_read"), ("sigma_shot", "sig_shot")):
+            # NAN's code, verbatim in effect.
+            lst = np.unique(np.load(npz)[name])[2:]
+            log = np.log10(lst)
+            want = 10 ** (log[0] + np.diff(log)[0] * np.log2(gain))
+            assert meta[key] == pytest.approx(want, rel=1e-12)
+
+
+# --- bad input --------------------------------------------------------------------------
+
+
+def _bad_cases(scene: Path, tmp: Path) -> dict[str, tuple[list, str]]:
+    return {
+        "missing_poses": (["--factor", 2], "poses_bounds.npy"),
+        "count_mismatch": (["--factor", 2], "pose rows"),
+        "different_sizes": (["--factor", 2], "img003.png"),
+        "unknown_gain": (["--factor", 2, "--gains", 1, 3], "unknown gain '3'"),
+        "not_a_gain": (["--factor", 2, "--gains", "x"], "unknown gain 'x'"),
+        "unreadable_image": (["--factor", 2], "img002.png"),
+        "truncated_image": (["--factor", 2], "img001.png"),
+        "missing_factor_dir": (["--factor", 4], "images_4"),
+        "bad_kpn_file": (["--factor", 2, "--kpn-levels", tmp / "nope.npz"], "nope.npz"),
+    }
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["missing_poses", "count_mismatch", "different_sizes", "unknown_gain", "not_a_gain",
+     "unreadable_image", "truncated_image", "missing_factor_dir", "bad_kpn_file"],
+)  # fmt: skip
+def test_bad_input_one_line_nothing_written(case, small_scene, tmp_path):
+    args, fragment = _bad_cases(small_scene, tmp_path)[case]
+    imgs = small_scene / "images_2"
+    if case == "missing_poses":
+        (small_scene / "poses_bounds.npy").unlink()
+    elif case == "count_mismatch":
+        (imgs / "img003.png").unlink()
+    elif case == "different_sizes":
+        Image.fromarray(np.zeros((10, 10, 3), np.uint8)).save(imgs / "img003.png")
+    elif case == "unreadable_image":
+        (imgs / "img002.png").write_bytes(b"\x89PNG\r\n\x1a\n truncated garbage")
+    elif case == "truncated_image":
+        # A valid header, so only decoding (inside the pixel work) finds the damage.
+        data = (imgs / "img001.png").read_bytes()
+        (imgs / "img001.png").write_bytes(data[: len(data) // 2])
+    (tmp_path / "nope.npz").write_bytes(b"not an npz")
+    parent = tmp_path / "outs"
+    parent.mkdir()
+    proc = blurset_noise(small_scene, *args, "--out", parent / "out")
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("blurset noise: error:"), proc.stderr
+    assert fragment in lines[0], lines[0]
+    assert list(parent.iterdir()) == [], "nothing may be left behind"
+
+
+def test_existing_out_is_refused_unless_overwrite(small_scene, tmp_path):
+    out = tmp_path / "out"
+    ok(blurset_noise(small_scene, "--factor", 2, "--gains", 1, "--out", out))
+    proc = blurset_noise(small_scene, "--factor", 2, "--gains", 2, "--out", out)
+    assert proc.returncode == 2 and "--overwrite" in proc.stderr
+    ok(blurset_noise(small_scene, "--factor", 2, "--gains", 2, "--out", out, "--overwrite"))
+    assert sorted(p.name for p in out.iterdir()) == ["gain_2"]
