@@ -52,14 +52,25 @@ fn image_from_py(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
     }
     let (w, h, c, samples) = if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, u8>>() {
         let (w, h, c) = layout(a.shape())?;
-        (w, h, c, Samples::U8(a.as_array().iter().copied().collect()))
+        (
+            w,
+            h,
+            c,
+            Samples::U8(match a.as_slice() {
+                Ok(s) => s.to_vec(),
+                Err(_) => a.as_array().iter().copied().collect(),
+            }),
+        )
     } else if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, u16>>() {
         let (w, h, c) = layout(a.shape())?;
         (
             w,
             h,
             c,
-            Samples::U16(a.as_array().iter().copied().collect()),
+            Samples::U16(match a.as_slice() {
+                Ok(s) => s.to_vec(),
+                Err(_) => a.as_array().iter().copied().collect(),
+            }),
         )
     } else {
         return Err(PyTypeError::new_err(
