@@ -34,3 +34,39 @@ def pytest_collection_modifyitems(config, items):
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)
+
+
+def run_cli(*args: str, env: dict | None = None, check: bool = True):
+    """Run `blurset ARGS` in a subprocess, as a user would."""
+    import os
+    import subprocess
+    import sys
+
+    full_env = dict(os.environ, **(env or {}))
+    proc = subprocess.run(
+        [sys.executable, "-m", "blurset.cli", *args],
+        capture_output=True,
+        text=True,
+        env=full_env,
+    )
+    if check and proc.returncode != 0:
+        raise AssertionError(
+            f"blurset {' '.join(args)} exited {proc.returncode}\n{proc.stderr[-3000:]}"
+        )
+    return proc
+
+
+# A tiny real demo build shared by the build tests (real Blender renders).
+DEMO_ARGS = (
+    "--demo", "--views", "17", "--latents", "4", "--samples", "4",
+    "--resolution", "64", "--seed", "3", "--quiet",
+)  # fmt: skip
+
+
+@pytest.fixture(scope="session")
+def demo_build(tmp_path_factory):
+    if not HAS_BPY:
+        pytest.skip("bpy cannot be imported")
+    out = tmp_path_factory.mktemp("demo") / "out"
+    run_cli("build", *DEMO_ARGS, "--out", str(out))
+    return out

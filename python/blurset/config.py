@@ -102,7 +102,6 @@ DEMO_DEFAULTS: dict[str, Any] = {
     "views": 17,
     "latents": 6,
     "samples": 4,
-    "sharp_samples": 16,
     "resolution": 96,
 }
 
