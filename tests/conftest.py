@@ -58,7 +58,7 @@ def run_cli(*args: str, env: dict | None = None, check: bool = True):
 
 # A tiny real demo build shared by the build tests (real Blender renders).
 DEMO_ARGS = (
-    "--demo", "--views", "17", "--latents", "4", "--samples", "4",
+    "--demo", "--views", "17", "--latents", "4", "--samples", "4", "--sharp-samples", "4",
     "--resolution", "64", "--seed", "3", "--quiet",
 )  # fmt: skip
 

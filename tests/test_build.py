@@ -1,0 +1,176 @@
+"""`blurset build` end to end on real Blender renders, checked from the files alone."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from tests.conftest import run_cli, shared
+
+pytestmark = pytest.mark.blender
+
+LEVELS = ["sharp", "blur_1", "blur_2", "blur_3", "blur_4"]
+
+
+def settings(out: Path) -> list[Path]:
+    return sorted(d for d in out.iterdir() if (d / ".complete").exists())
+
+
+def c2w_from_llff(row: np.ndarray) -> np.ndarray:
+    """OpenGL camera-to-world from an LLFF row, as IBRNet/NAN loaders do it."""
+    m = row[:15].reshape(3, 5)
+    down, right, back, t = m[:, 0], m[:, 1], m[:, 2], m[:, 3]
+    c2w = np.eye(4)
+    c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = right, -down, back, t
+    return c2w
+
+
+def test_layout_and_names(demo_build):
+    assert (demo_build / "dataset.json").exists()
+    ds = json.loads((demo_build / "dataset.json").read_text())
+    assert ds["counts"]["settings"] == 3 and ds["counts"]["objects_failed"] == 0
+    for s in settings(demo_build):
+        meta = json.loads((s / "meta.json").read_text())
+        for key in ("uid", "theta0_deg", "seed", "resolution", "fov_deg", "bbox_dims", "views"):
+            assert key in meta
+        v = meta["views"][0]
+        for key in ("index", "r", "phi_deg", "theta_deg", "near", "far", "flatness",
+                    "depth_range", "orientation", "w_u", "trajectory", "levels"):  # fmt: skip
+            assert key in v
+        assert set(v["levels"]) == {"1", "2", "3", "4"}
+        for lvl in LEVELS:
+            names = sorted(p.name for p in (s / lvl / "images").iterdir())
+            assert names == [f"{i:03d}.png" for i in range(17)]
+            assert np.load(s / lvl / "poses_bounds.npy").shape == (17, 17)
+
+
+def test_cameras_point_at_object_and_bounds_bracket_it(demo_build):
+    for s in settings(demo_build):
+        pb = np.load(s / "sharp" / "poses_bounds.npy")
+        for row in pb:
+            c2w = c2w_from_llff(row)
+            eye, fwd = c2w[:3, 3], -c2w[:3, 2]
+            cos = fwd @ (-eye / np.linalg.norm(eye))
+            assert cos > 1 - 1e-9
+            near, far = row[15], row[16]
+            assert near < np.linalg.norm(eye) < far
+            assert np.allclose(c2w[:3, :3].T @ c2w[:3, :3], np.eye(3), atol=1e-9)
+
+
+def test_hwf_matches_images_and_fov(demo_build):
+    for s in settings(demo_build):
+        meta = json.loads((s / "meta.json").read_text())
+        pb = np.load(s / "blur_2" / "poses_bounds.npy")
+        h, w, f = pb[0, 4], pb[0, 9], pb[0, 14]
+        img = np.asarray(Image.open(s / "blur_2" / "images" / "000.png"))
+        assert (h, w) == img.shape[:2]
+        assert math.isclose(2 * math.degrees(math.atan(w / 2 / f)), meta["fov_deg"], rel_tol=1e-9)
+
+
+def gradient_energy(path: Path) -> float:
+    a = np.asarray(Image.open(path).convert("L"), np.float64) / 255
+    return float((np.diff(a, axis=0) ** 2).mean() + (np.diff(a, axis=1) ** 2).mean())
+
+
+def test_blur_grows_with_level(demo_build):
+    # Every latent frame and the sharp frame use the same samples here, so the
+    # blur levels share one noise level and the fall between them is blur alone.
+    energy = []
+    for lvl in LEVELS:
+        energy.append(
+            sum(
+                gradient_energy(p)
+                for s in settings(demo_build)
+                for p in sorted((s / lvl / "images").iterdir())
+            )
+        )
+    assert all(a > b for a, b in zip(energy, energy[1:], strict=False)), energy
+
+
+def test_test_views_every_16th(demo_build):
+    sp = json.loads((demo_build / "splits.json").read_text())
+    assert sp["view_stride"] == 16
+    assert all(v == [0, 16] for v in sp["test_views"].values())
+    assert sp["train"] and sp["test"] and not set(sp["train"]) & set(sp["test"])
+
+
+def test_sharp_image_equals_a_render_at_p(demo_build, tmp_path):
+    from blurset import _core  # noqa: TID251
+    from blurset.worker_client import Worker
+
+    s = settings(demo_build)[0]
+    meta = json.loads((s / "meta.json").read_text())
+    view = 5
+    c2w = c2w_from_llff(np.load(s / "sharp" / "poses_bounds.npy")[view])
+    glb = demo_build / ".demo_objects" / f"{meta['uid']}.glb"
+    with Worker(timeout=120) as w:
+        w.load(glb, tmp_path / "v.npy")
+        w.render(
+            [
+                {
+                    "c2w": c2w.tolist(),
+                    "seed": meta["views"][view]["sharp_seed"],
+                    "out": str(tmp_path / "f.exr"),
+                }
+            ],  # fmt: skip
+            resolution=meta["resolution"][0],
+            fov_deg=meta["fov_deg"],
+            samples=meta["render"]["sharp_samples"],
+        )
+    acc = _core.Accumulator(*meta["resolution"])
+    acc.add_exr(tmp_path / "f.exr")
+    acc.write_png(tmp_path / "f.png")
+    ours = np.asarray(Image.open(s / "sharp" / "images" / f"{view:03d}.png"), np.int16)
+    again = np.asarray(Image.open(tmp_path / "f.png"), np.int16)
+    assert np.abs(ours - again).max() <= 1
+
+
+def test_rerun_skips_complete_settings(demo_build):
+    before = {p: p.stat().st_mtime_ns for p in demo_build.glob("*/meta.json")}
+    from tests.conftest import DEMO_ARGS
+
+    run_cli("build", *DEMO_ARGS, "--out", str(demo_build))
+    after = {p: p.stat().st_mtime_ns for p in demo_build.glob("*/meta.json")}
+    assert before == after
+
+
+def test_bad_input_one_line(tmp_path):
+    p = run_cli("build", "--objects", str(tmp_path / "nope.glb"), "--out", str(tmp_path / "o"),
+                check=False)  # fmt: skip
+    assert p.returncode == 2
+    assert "nope.glb" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    p = run_cli("build", "--demo", "--levels", "1,x", "--out", str(tmp_path / "o"), check=False)
+    assert p.returncode == 2 and "--levels" in p.stderr
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("latentz = 3\n")
+    p = run_cli("build", "--demo", "--config", str(cfg), "--out", str(tmp_path / "o"), check=False)
+    assert p.returncode == 2 and "latentz" in p.stderr
+
+
+@pytest.mark.slow
+def test_shared_glbs_build_or_fail_cleanly(tmp_path):
+    glbs = shared("glb")
+    out = tmp_path / "out"
+    run_cli("build", "--objects", str(glbs), "--out", str(out), "--views", "2", "--latents", "2",
+            "--levels", "1", "--resolution", "48", "--samples", "2", "--settings-per-object", "1",
+            "--quiet")  # fmt: skip
+    built = {json.loads((s / "meta.json").read_text())["uid"] for s in settings(out)}
+    failed = {
+        json.loads(line)["uid"]
+        for line in (out / "failures.jsonl").read_text().splitlines()
+        if line.strip()
+    }
+    stems = {p.stem for p in glbs.glob("*.glb")}
+    assert built | failed == stems and not built & failed
+    for line in (out / "failures.jsonl").read_text().splitlines():
+        assert json.loads(line)["reason"]
+    # no silently black object: the sharp images of each built object have colour
+    for s in settings(out):
+        a = np.asarray(Image.open(s / "sharp" / "images" / "000.png").convert("RGB"), float)
+        obj = (a < 250).any(axis=2)
+        assert obj.mean() > 0.01 and a[obj].mean() > 20, s.name
