@@ -25,7 +25,9 @@ def main() -> int:
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
         for r in mod.run():
-            print(f"{r['name']}: {r['ratio']:.2f}x  ({r['contender']} vs {r['baseline']})", flush=True)
+            print(
+                f"{r['name']}: {r['ratio']:.2f}x  ({r['contender']} vs {r['baseline']})", flush=True
+            )
             results.append(r)
     out = HERE / "results.json"
     out.write_text(json.dumps(results, indent=2) + "\n")
