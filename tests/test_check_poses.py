@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from blurset import check_poses
 from blurset.exceptions import ConfigError, InputError
-from conftest import HAS_BPY, ROOT, shared
+from tests.conftest import HAS_BPY, ROOT, shared
 from PIL import Image
 
 BLURSET = ROOT / ".venv" / "bin" / "blurset"

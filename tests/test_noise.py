@@ -15,7 +15,7 @@ import numpy as np
 import OpenEXR
 import pytest
 from blurset import _core  # noqa: TID251  (the bindings are part of what this file tests)
-from conftest import shared
+from tests.conftest import shared
 from PIL import Image
 
 ALL_GAINS = ("1", "2", "4", "8", "16", "20")
