@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 from blurset import check_poses
 from blurset.exceptions import ConfigError, InputError
-from tests.conftest import HAS_BPY, ROOT, shared
 from PIL import Image
+
+from tests.conftest import HAS_BPY, ROOT, shared
 
 BLURSET = ROOT / ".venv" / "bin" / "blurset"
 

@@ -15,8 +15,9 @@ import numpy as np
 import OpenEXR
 import pytest
 from blurset import _core  # noqa: TID251  (the bindings are part of what this file tests)
-from tests.conftest import shared
 from PIL import Image
+
+from tests.conftest import shared
 
 ALL_GAINS = ("1", "2", "4", "8", "16", "20")
 

@@ -21,6 +21,7 @@ import pytest
 from blurset.demo import make_demo_objects
 from blurset.exceptions import BlursetError
 from blurset.worker_client import WORKER_SCRIPT, Worker, WorkerError, WorkerTimeout
+
 from tests.conftest import shared
 
 pytestmark = pytest.mark.blender
