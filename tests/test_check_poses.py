@@ -4,7 +4,6 @@ a blank scene, and real tiny demo builds (DESIGN §6)."""
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import shutil
 import subprocess
@@ -18,8 +17,6 @@ from blurset.exceptions import ConfigError, InputError
 from PIL import Image
 
 from tests.conftest import HAS_BPY, ROOT, shared
-
-BLURSET = ROOT / ".venv" / "bin" / "blurset"
 
 
 def read_poses_bounds(path: Path) -> np.ndarray:
@@ -180,10 +177,6 @@ def test_wrong_factor_is_caught(tmp_path):
         check_poses.check_scene(scene, factor=2)
 
 
-@pytest.mark.skipif(
-    any(importlib.util.find_spec(m) is None for m in ("blurset.build", "blurset.noise")),
-    reason="the blurset CLI dispatches to build and noise, not all present yet",
-)
 def test_cli_entry_point(tmp_path):
     scene = blank_scene(tmp_path)
     p = subprocess.run(
@@ -206,25 +199,15 @@ def test_cli_entry_point(tmp_path):
 # --------------------------------------------------------------------------- real builds
 
 
-def _build_ready() -> bool:
-    if not (HAS_BPY and BLURSET.exists()):
-        return False
-    p = subprocess.run([BLURSET, "build", "--help"], capture_output=True, text=True)
-    return p.returncode == 0 and "--demo" in p.stdout
-
-
-needs_build = pytest.mark.skipif(
-    not _build_ready(), reason="`blurset build --demo` (with bpy) is not available"
-)
-
-
 @pytest.fixture(scope="module")
 def demo_setting(tmp_path_factory):
     """One setting of a tiny real demo build (textured procedural object), sharp and
     one blur level; DESIGN §4 layout."""
     out = tmp_path_factory.mktemp("build")
+    if not HAS_BPY:
+        pytest.skip("bpy cannot be imported")
     cmd = [
-        BLURSET, "build", "--demo", "--out", out, "--views", "16", "--levels", "1",
+        sys.executable, "-m", "blurset.cli", "build", "--demo", "--out", out, "--views", "16", "--levels", "1",
         "--resolution", "160", "--latents", "2", "--samples", "8",
         "--settings-per-object", "1", "--quiet",
     ]  # fmt: skip
@@ -237,7 +220,6 @@ def demo_setting(tmp_path_factory):
 
 @pytest.mark.blender
 @pytest.mark.slow
-@needs_build
 def test_demo_build_passes_and_level_table(demo_setting, tmp_path, capsys):
     assert check_poses.is_setting(demo_setting)
     out = tmp_path / "all.json"
@@ -254,7 +236,6 @@ def test_demo_build_passes_and_level_table(demo_setting, tmp_path, capsys):
 
 @pytest.mark.blender
 @pytest.mark.slow
-@needs_build
 def test_demo_build_perturbed_view_fails_naming_it(demo_setting, tmp_path):
     scene = tmp_path / "sharp"
     shutil.copytree(demo_setting / "sharp", scene)
@@ -263,3 +244,29 @@ def test_demo_build_perturbed_view_fails_naming_it(demo_setting, tmp_path):
     assert r["verdict"] == "fail"
     assert r["failed_views"][0] == r["views"][5]["name"]
     assert not r["views"][5]["ok"]
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_build_check_poses_records_verdicts_untextured_is_not_checkable(tmp_path):
+    """`build --check-poses` on a textured demo object and a real flat-shaded Sketchfab
+    model (the red map pin): the first passes, the second is "not checkable", never a
+    false pass; both verdicts land in meta.json and dataset.json."""
+    pin = shared("glb", "sketchfab_MapPin.glb")
+    out = tmp_path / "out"
+    cmd = [
+        sys.executable, "-m", "blurset.cli", "build", "--demo", "--objects", pin,
+        "--out", out, "--views", "16", "--levels", "none", "--resolution", "160",
+        "--samples", "8", "--settings-per-object", "1", "--check-poses", "--quiet",
+    ]  # fmt: skip
+    p = subprocess.run([str(c) for c in cmd], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr[-2000:]
+    checks = json.loads((out / "dataset.json").read_text())["pose_checks"]
+    assert checks["sketchfab_MapPin_000"]["verdict"].startswith("not checkable")
+    assert checks["sketchfab_MapPin_000"]["pass"] is False
+    textured = [k for k in checks if k.startswith("demo_")]
+    assert len(textured) == 3
+    assert all(checks[k]["verdict"] == "pass" for k in textured), checks
+    for name, verdict in checks.items():
+        meta = json.loads((out / name / "meta.json").read_text())
+        assert meta["pose_check"] == verdict
