@@ -1,8 +1,11 @@
 """blurset Blender worker: one process renders one object at a time, driven over JSON lines.
 
-Start with the venv's bpy:   python blender_scripts/worker.py --threads N
-or a Blender binary:        blender -b --factory-startup --python-exit-code 1 \
-                                -P blender_scripts/worker.py -- --threads N
+Start with the venv's bpy:   python blender_scripts/worker.py --threads N [--workdir D]
+or a Blender binary:        blender -b --factory-startup --disable-autoexec \
+                                --python-exit-code 1 -P blender_scripts/worker.py -- --threads N
+
+--workdir D keeps the worker's scratch files (rewritten GLBs, QA renders) under D, so a
+killed build leaves them where the next run cleans up, not in /tmp.
 
 stdin: one JSON command per line. Replies: one JSON object per line on the process's
 original stdout, which this script takes over privately at start-up; fd 1 then points at
@@ -18,6 +21,12 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
 
 At start-up the worker announces itself with
 {"ok":true,"ready":true,"blender":version,"blender_version":version,"pid":pid}.
+
+Fault injection, for the reliability tests only (a real hang or crash of this process,
+nothing simulated downstream): BLURSET_WORKER_FAULT="hang:S" makes the load of a GLB
+whose path contains S never return; "crash:S" kills the process with SIGKILL there;
+"crash_once:S:FLAG" does so only while the file FLAG does not exist (and creates it),
+a transient failure that a retry survives.
 """
 
 from __future__ import annotations
@@ -40,6 +49,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import json  # noqa: E402
 import shutil  # noqa: E402
+import signal  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 import traceback  # noqa: E402
@@ -59,15 +69,34 @@ def one_line(e: BaseException) -> str:
     return f"{type(e).__name__}: {text}"[:500]
 
 
-def parse_threads(argv: list[str]) -> int:
+def parse_args(argv: list[str]) -> tuple[int, str | None]:
+    """(--threads, --workdir) from our part of argv (after "--" under a Blender binary)."""
     args = argv[argv.index("--") + 1 :] if "--" in argv else argv[1:]
-    threads = 0
+    threads, workdir = 0, None
     for i, a in enumerate(args):
         if a == "--threads" and i + 1 < len(args):
             threads = int(args[i + 1])
         elif a.startswith("--threads="):
             threads = int(a.split("=", 1)[1])
-    return threads
+        elif a == "--workdir" and i + 1 < len(args):
+            workdir = args[i + 1]
+    return threads, workdir
+
+
+def inject_fault(glb: str) -> None:
+    """See the module docstring: a real hang or crash, for the reliability tests."""
+    spec = os.environ.get("BLURSET_WORKER_FAULT", "")
+    kind, _, rest = spec.partition(":")
+    needle, _, flag = rest.partition(":")
+    if not needle or needle not in glb:
+        return
+    if kind == "hang":
+        while True:
+            time.sleep(3600)
+    if kind == "crash" or (kind == "crash_once" and flag and not os.path.exists(flag)):
+        if flag:
+            open(flag, "w").close()
+        os.kill(os.getpid(), signal.SIGKILL)
 
 
 def save_npy_atomic(path: str, arr: np.ndarray) -> None:
@@ -79,10 +108,12 @@ def save_npy_atomic(path: str, arr: np.ndarray) -> None:
 
 
 class Worker:
-    def __init__(self, threads: int):
+    def __init__(self, threads: int, workdir: str | None):
         self.threads = threads
         self.loaded = False
-        self.workdir = tempfile.mkdtemp(prefix="blurset-worker-")
+        if workdir:
+            os.makedirs(workdir, exist_ok=True)
+        self.workdir = tempfile.mkdtemp(prefix="blurset-worker-", dir=workdir)
 
     def load(self, cmd: dict) -> dict:
         self.loaded = False
@@ -90,6 +121,7 @@ class Worker:
         vertices_out = str(cmd["vertices_out"])
         unlit = str(cmd.get("unlit", "lit"))
         t0 = time.perf_counter()
+        inject_fault(glb)
         try:
             warnings, unlit_fixed = blender_scene.import_glb(glb, self.workdir, unlit)
             info = blender_scene.normalize(warnings)
@@ -124,7 +156,7 @@ class Worker:
 
 
 def main() -> int:
-    worker = Worker(parse_threads(sys.argv))
+    worker = Worker(*parse_args(sys.argv))
     version = bpy.app.version_string
     send(
         {

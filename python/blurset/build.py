@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures as cf
+import contextlib
+import fcntl
 import json
 import os
 import platform
@@ -28,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import __version__, _core
+from blurset import __version__, _core, preflight
 from blurset.config import BuildConfig, load_toml, make_config, parse_levels
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec, resolve_objects, setting_name
@@ -63,7 +65,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, help="Cycles threads per worker (0 = all cores)")
     p.add_argument("--executor", choices=["local", "ray"], help="local process pool or Ray")
     p.add_argument("--shard", help="i/N: build only every N-th object from the i-th")
-    p.add_argument("--timeout", type=float, help="seconds without worker reply before kill (600)")
+    p.add_argument(
+        "--timeout", type=float, help="seconds without a worker reply before it is killed (600)"
+    )
+    p.add_argument(
+        "--object-timeout", type=float, help="wall-clock budget of one object, s (0 = none)"
+    )
+    p.add_argument("--retries", type=int, help="extra attempts after a worker crash or hang (1)")
+    p.add_argument(
+        "--max-failure-rate",
+        type=float,
+        help="exit 1 when more than this fraction of objects failed (1.0)",
+    )
+    p.add_argument("--max-triangles", type=int, help="pre-flight triangle budget (5000000)")
+    p.add_argument(
+        "--max-texture-pixels", type=int, help="pre-flight texture budget, pixels (268435456)"
+    )
     p.add_argument("--blender", help="a Blender binary instead of the bpy module")
     p.add_argument(
         "--check-poses", action="store_true", default=None, help="COLMAP check per setting"
@@ -78,6 +95,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
         for k in (
             "objects out demo settings_per_object views latents samples sharp_samples resolution "
             "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
+            "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "blender check_poses"
         ).split()
     }
@@ -89,12 +107,28 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
 def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     summary = build(cfg, progress=not args.quiet)
-    print(
-        f"blurset build: {summary['settings_complete']} settings complete, "
-        f"{summary['objects_failed']} objects failed -> {cfg.out}",
-        file=sys.stderr,
+    n, bad = summary["objects"], summary["objects_failed"]
+    rate = bad / n if n else 0.0
+    line = (
+        f"blurset build: {summary['settings_complete']} settings complete "
+        f"({summary['settings_new']} new), {bad} of {n} objects failed ({100 * rate:.0f}%)"
     )
-    if summary["settings_complete"] == 0 and summary["objects_failed"] > 0:
+    if summary["settings_failed"]:
+        line += f", {summary['settings_failed']} settings failed QA"
+    print(f"{line} -> {cfg.out}", file=sys.stderr)
+    for f in summary["failures"][:5]:
+        where = f.get("setting") or f["uid"]
+        print(f"  {where}: {f['stage']}: {f['reason']}", file=sys.stderr)
+    if len(summary["failures"]) > 5:
+        print(f"  … see {Path(cfg.out) / 'failures.jsonl'}", file=sys.stderr)
+    if n and summary["settings_complete"] == 0:
+        return 1
+    if rate > cfg.max_failure_rate:
+        print(
+            f"blurset build: error: {100 * rate:.0f}% of objects failed, more than "
+            f"--max-failure-rate {cfg.max_failure_rate:g}",
+            file=sys.stderr,
+        )
         return 1
     return 0
 
@@ -117,7 +151,17 @@ class SettingJob:
 class ObjectResult:
     uid: str
     settings: list[str] = field(default_factory=list)
-    failure: dict[str, Any] | None = None
+    # Failure records (failures.jsonl): the object's, or one per setting that failed QA.
+    failures: list[dict[str, Any]] = field(default_factory=list)
+    new_settings: int = 0
+
+
+class SettingFailed(BlursetError):
+    """One setting cannot be made (render QA); the object's other settings go on."""
+
+    def __init__(self, stage: str, reason: str) -> None:
+        super().__init__(reason)
+        self.stage = stage
 
 
 def frames_per_setting(cfg: BuildConfig) -> int:
@@ -248,7 +292,7 @@ def render_setting(
         (partial / d / "images").mkdir(parents=True)
     acc: dict[tuple[int, str], Any] = {}
     res = cfg.resolution
-    coverage: list[float] = []
+    qa: dict[int, dict] = {}
 
     def on_frame(i: int, path: str) -> None:
         key = keys[i]
@@ -264,7 +308,7 @@ def render_setting(
             if cfg.write_linear:
                 a.write_exr(partial / level / "linear" / name.replace(".png", ".exr"))
             if level == "sharp":
-                coverage.append(float(a.mean()[..., 3].mean()))
+                qa[view] = json.loads(_core.frame_qa(a.mean()))
             del acc[key]
         progress.frame_done()
 
@@ -280,11 +324,10 @@ def render_setting(
         on_frame=lambda j, p: on_frame(sharp_idx[j], p),
         **common,
     )
-    if min(coverage, default=0.0) <= 1e-4:
-        bad = int(np.argmin(coverage)) if coverage else 0
-        raise BlursetError(
-            f"render QA: object not visible in view {bad} (alpha coverage {min(coverage, default=0):.2g})"
-        )
+    # QA before the costly blur renders: a bad sharp view fails this setting only.
+    for view in sorted(qa):
+        if qa[view]["failure"]:
+            raise SettingFailed("qa", f"render QA: view {view} is {qa[view]['failure']}")
     t_sharp = time.time() - t1
     if blur_idx:
         worker.render(
@@ -307,7 +350,8 @@ def render_setting(
         "frames": len(frames),
     }
     meta = _meta(plan, cfg, job.obj, info, timings)
-    meta["sharp_alpha_coverage"] = coverage
+    for v in meta["views"]:
+        v["qa"] = {k: x for k, x in qa[v["index"]].items() if k != "failure"}
     _write_json(partial / "meta.json", meta)
     if cfg.check_poses:
         meta["pose_check"] = _pose_check(partial)
@@ -335,58 +379,113 @@ def _pose_check(setting_dir: Path) -> dict:
 
 
 def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> ObjectResult:
-    """One work unit: every pending setting of one object, in one worker process."""
-    from blurset.worker_client import Worker, WorkerError
+    """One work unit: every pending setting of one object, in one worker process.
 
+    Idempotent: complete settings are skipped, partial ones redone from scratch, so a
+    retry (here, by Ray, or a rerun after a kill) is always safe."""
     out = Path(cfg.out)
     result = ObjectResult(uid=obj.uid)
     jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
     pending = [j for j in jobs if not (out / j.name / MARKER).exists()]
     result.settings = [j.name for j in jobs if j not in pending]
     progress.skip(len(jobs) - len(pending))
+    work = out / f".work-{obj.uid}"
+    shutil.rmtree(work, ignore_errors=True)  # a killed run's scratch: worker log, frames
     if not pending:
         return result
-    stage = "load"
-    work = out / f".work-{obj.uid}"
-    shutil.rmtree(work, ignore_errors=True)
-    work.mkdir(parents=True)
+    t0 = time.monotonic()
     try:
-        t0 = time.time()
-        with Worker(
-            blender=cfg.blender,
-            threads=cfg.threads,
-            timeout=cfg.timeout,
-            log_path=work / "worker.log",
-        ) as w:
-            info = w.load(obj.path, work / "vertices.npy")
-            info["load_s"] = round(time.time() - t0, 3)
-            info["blender_version"] = w.info.get("blender_version")
-            verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
-            stage = "render"
+        preflight.check(obj.path, preflight.Budget(cfg.max_triangles, cfg.max_texture_pixels))
+    except preflight.PreflightError as e:
+        result.failures.append(_failure(obj, "preflight", str(e), t0, 1))
+        progress.object_failed(len(pending))
+        return result
+    deadline = t0 + cfg.object_timeout if cfg.object_timeout > 0 else None
+    attempt = 0
+    while pending:
+        attempt += 1
+        stage = ["start"]
+        try:
+            _render_object(obj, cfg, pending, result, progress, work, deadline, stage)
+        except Exception as e:
+            from blurset.worker_client import WorkerError
+
             for j in pending:
-                render_setting(j, cfg, w, info, verts, progress)
-                result.settings.append(j.name)
-                progress.setting_done()
-        shutil.rmtree(work, ignore_errors=True)
-    except (WorkerError, BlursetError, ValueError, OSError) as e:
-        result.failure = _failure(obj, stage, str(e).splitlines()[0] if str(e) else repr(e))
-    except Exception as e:  # a bug must cost this object only, and be visible
-        tb = traceback.format_exc(limit=3).strip().splitlines()[-1]
-        result.failure = _failure(obj, stage, f"{type(e).__name__}: {e} [{tb}]")
-    if result.failure:
-        for j in pending:
-            shutil.rmtree(out / f"{j.name}.partial", ignore_errors=True)
-        done_now = sum(j.name in result.settings for j in pending)
-        progress.object_failed(len(pending) - done_now)
+                shutil.rmtree(out / f"{j.name}.partial", ignore_errors=True)
+            if isinstance(e, WorkerError) and e.transient and attempt <= cfg.retries:
+                progress.write(f"retrying {obj.uid} (attempt {attempt + 1}) after: {e}")
+                continue
+            if isinstance(e, BlursetError | ValueError | OSError):
+                reason = str(e).splitlines()[0] if str(e) else repr(e)
+            else:  # a bug must cost this object only, and be visible
+                tb = traceback.format_exc(limit=3).strip().splitlines()[-1]
+                reason = f"{type(e).__name__}: {e} [{tb}]"
+            result.failures.append(_failure(obj, stage[0], reason, t0, attempt))
+            progress.object_failed(len(pending))
+            break
+    shutil.rmtree(work, ignore_errors=True)
     return result
 
 
-def _failure(obj: ObjectSpec, stage: str, reason: str) -> dict:
+def _render_object(
+    obj: ObjectSpec,
+    cfg: BuildConfig,
+    pending: list[SettingJob],
+    result: ObjectResult,
+    progress: Progress,
+    work: Path,
+    deadline: float | None,
+    stage: list[str],
+) -> None:
+    """Load the object in a fresh worker and render the pending settings in order,
+    taking each off `pending` once it is complete or has failed QA."""
+    from blurset.worker_client import Worker
+
+    out = Path(cfg.out)
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    t0 = time.monotonic()
+    with Worker(
+        blender=cfg.blender,
+        threads=cfg.threads,
+        timeout=cfg.timeout,
+        log_path=work / "worker.log",
+        workdir=work / "scratch",
+        deadline=deadline,
+    ) as w:
+        stage[0] = "load"
+        info = w.load(obj.path, work / "vertices.npy")
+        info["load_s"] = round(time.monotonic() - t0, 3)
+        info["blender_version"] = w.info.get("blender_version")
+        verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
+        stage[0] = "render"
+        while pending:
+            j = pending[0]
+            t1 = time.monotonic()
+            try:
+                render_setting(j, cfg, w, info, verts, progress)
+            except SettingFailed as e:
+                shutil.rmtree(out / f"{j.name}.partial", ignore_errors=True)
+                rec = _failure(obj, e.stage, str(e), t1, 1)
+                rec["setting"] = j.name
+                result.failures.append(rec)
+                progress.object_failed(1)
+            else:
+                result.settings.append(j.name)
+                result.new_settings += 1
+                progress.setting_done()
+            pending.pop(0)
+
+
+def _failure(obj: ObjectSpec, stage: str, reason: str, t0: float, attempts: int) -> dict:
+    """A failures.jsonl record: uid, path, stage, reason, seconds (+ attempts, time)."""
     return {
         "uid": obj.uid,
         "path": str(obj.path),
         "stage": stage,
         "reason": reason,
+        "seconds": round(time.monotonic() - t0, 3),
+        "attempts": attempts,
         "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
     }
 
@@ -439,60 +538,120 @@ def _ray_unit(obj: ObjectSpec, cfg: BuildConfig) -> ObjectResult:
     return build_object(obj, cfg, Progress(0, enabled=False))
 
 
+@contextlib.contextmanager
+def build_lock(out: Path):
+    """Serialize the writes shared by every process building into OUT (failures.jsonl,
+    splits.json, dataset.json): local workers, Ray tasks and Slurm shards alike."""
+    with open(out / ".lock", "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> None:
+    """What a killed run of these objects left behind: partial settings, scratch
+    directories, temp files of the shared writes. Other shards' objects are left alone."""
+    for o in objs:
+        shutil.rmtree(out / f".work-{o.uid}", ignore_errors=True)
+        for t in cfg.theta0s:
+            shutil.rmtree(out / f"{setting_name(o.uid, t)}.partial", ignore_errors=True)
+    for tmp in out.glob(".*.tmp*"):
+        tmp.unlink(missing_ok=True)
+
+
 def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     objs = _objects(cfg)
-    for stale in out.glob("*.partial"):
-        shutil.rmtree(stale, ignore_errors=True)
+    with build_lock(out):
+        _sweep(out, objs, cfg)
     n_settings = len(objs) * len(cfg.theta0s)
     prog = Progress(
         n_settings,
         frames_per_setting=frames_per_setting(cfg),
         enabled=progress and cfg.executor == "local",
     )
-    failures: list[dict] = []
+    new_settings = 0
     lock = threading.Lock()
     t0 = time.time()
 
     def on_result(res: ObjectResult) -> None:
-        if res.failure:
-            with lock:
-                failures.append(res.failure)
-                with open(out / "failures.jsonl", "a") as f:
-                    f.write(json.dumps(res.failure) + "\n")
-            prog.write(f"failed: {res.uid}: {res.failure['reason']}")
+        nonlocal new_settings
+        with lock:
+            new_settings += res.new_settings
+            if res.failures:
+                with build_lock(out), open(out / "failures.jsonl", "a") as f:
+                    f.write("".join(json.dumps(r) + "\n" for r in res.failures))
+                    f.flush()
+                    os.fsync(f.fileno())
+        for r in res.failures:
+            prog.write(f"failed: {r.get('setting') or r['uid']}: {r['stage']}: {r['reason']}")
 
     with prog:
         if cfg.executor == "ray":
             _run_ray(objs, cfg, prog, on_result)
         else:
             _run_local(objs, cfg, prog, on_result)
-    return finalize(out, cfg, objs, failures, time.time() - t0)
+    with build_lock(out):
+        summary = finalize(out, cfg, time.time() - t0)
+    mine = {o.uid for o in objs}
+    failed = [r for r in summary["failures"] if r["uid"] in mine]
+    summary["objects"] = len(objs)
+    summary["objects_failed"] = len({r["uid"] for r in failed})
+    summary["settings_failed"] = sum(1 for r in failed if r.get("setting"))
+    summary["settings_new"] = new_settings
+    summary["failures"] = failed
+    return summary
 
 
 def _complete_settings(out: Path) -> list[tuple[str, dict]]:
     found = []
     for d in sorted(out.iterdir()):
-        if d.is_dir() and (d / MARKER).exists():
+        if d.is_dir() and not d.name.startswith(".") and (d / MARKER).exists():
             found.append((d.name, json.loads((d / "meta.json").read_text())))
     return found
 
 
-def finalize(out: Path, cfg: BuildConfig, objs, failures: list[dict], seconds: float) -> dict:
-    """splits.json, dataset.json and a deduplicated failures.jsonl over what is on disk."""
+def read_failures(path: Path) -> list[dict]:
+    """failures.jsonl, tolerating a torn last line (a kill mid-append)."""
+    if not path.exists():
+        return []
+    records = []
+    for line in path.read_text().splitlines():
+        try:
+            rec = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(rec, dict) and "uid" in rec:
+            records.append(rec)
+    return records
+
+
+def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
+    """splits.json, dataset.json and failures.jsonl over what is on disk (call under
+    build_lock). failures.jsonl keeps the latest record per object (or per setting, for
+    QA failures) whose work is still not complete."""
     complete = _complete_settings(out)
-    done_uids = {m["uid"] for _, m in complete}
-    # failures.jsonl keeps the latest entry per object that is still not complete.
-    latest: dict[str, dict] = {}
+    done = {n for n, _ in complete}
+    latest: dict[tuple[str, str | None], dict] = {}
+    for rec in read_failures(out / "failures.jsonl"):
+        latest[(rec["uid"], rec.get("setting"))] = rec
+
+    def still_failing(key: tuple[str, str | None]) -> bool:
+        uid, setting = key
+        if setting is not None:
+            return setting not in done
+        return not all(setting_name(uid, t) in done for t in cfg.theta0s)
+
+    kept = [
+        r
+        for k, r in sorted(latest.items(), key=lambda kv: (kv[0][0], kv[0][1] or ""))
+        if still_failing(k)
+    ]
     fpath = out / "failures.jsonl"
-    if fpath.exists():
-        for line in fpath.read_text().splitlines():
-            if line.strip():
-                rec = json.loads(line)
-                latest[rec["uid"]] = rec
-    kept = [r for u, r in sorted(latest.items()) if u not in done_uids]
-    tmp = fpath.with_name(".failures.jsonl.tmp")
+    tmp = fpath.with_name(f".failures.jsonl.tmp{os.getpid()}")
     tmp.write_text("".join(json.dumps(r) + "\n" for r in kept))
     os.replace(tmp, fpath)
     entries = [{"setting": n, "object": m["uid"], "views": len(m["views"])} for n, m in complete]
@@ -523,8 +682,9 @@ def finalize(out: Path, cfg: BuildConfig, objs, failures: list[dict], seconds: f
         },
         "counts": {
             "objects": len({m["uid"] for _, m in complete}),
-            "objects_failed": len(kept),
+            "objects_failed": len({r["uid"] for r in kept}),
             "settings": len(complete),
+            "settings_failed": sum(1 for r in kept if r.get("setting")),
             "images": sum(len(m["views"]) * len(m["levels"]) for _, m in complete),
         },
         "settings": [n for n, _ in complete],
@@ -533,9 +693,4 @@ def finalize(out: Path, cfg: BuildConfig, objs, failures: list[dict], seconds: f
     if checks:
         dataset["pose_checks"] = checks
     _write_json(out / "dataset.json", dataset)
-    return {
-        "settings_complete": len(complete),
-        "objects_failed": len(kept),
-        "failures": kept,
-        "failed_this_run": failures,
-    }
+    return {"settings_complete": len(complete), "failures": kept}

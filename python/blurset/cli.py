@@ -22,10 +22,15 @@ def make_parser() -> argparse.ArgumentParser:
     from blurset import __version__
 
     parser.add_argument("--version", action="version", version=f"blurset {__version__}")
+    parser.add_argument(
+        "--debug", action="store_true", help="show the traceback of an error, not one line"
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     for name, (module, help_) in COMMANDS.items():
         p = sub.add_parser(name, help=help_, description=help_)
         p.set_defaults(_module=module)
+        # Also after the subcommand; SUPPRESS keeps it from resetting the top-level flag.
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="traceback")
         importlib.import_module(module).add_arguments(p)
     return parser
 
@@ -34,13 +39,28 @@ def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
     try:
         return int(importlib.import_module(args._module).run(args) or 0)
-    except (BlursetError, FileNotFoundError, PermissionError, ValueError) as e:
+    except (BlursetError, OSError, ValueError) as e:
         # One clear line, naming the file or option; no traceback for bad input.
-        print(f"blurset {args.command}: error: {e}", file=sys.stderr)
+        if args.debug:
+            raise
+        print(f"blurset {args.command}: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"blurset {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Exception as e:  # a bug: still one line, with the way to see more
+        if args.debug:
+            raise
+        print(
+            f"blurset {args.command}: internal error: {type(e).__name__}: {_one_line(e)} "
+            "(rerun with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        return 70
+
+
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
 
 
 if __name__ == "__main__":

@@ -54,7 +54,17 @@ class BuildConfig:
     threads: int = 0
     executor: str = "local"
     shard: str | None = None
+    # Seconds without a reply from the worker before it counts as hung and is killed.
     timeout: float = 600.0
+    # Wall-clock budget of one object (load + all its settings); 0 = no budget.
+    object_timeout: float = 0.0
+    # Extra attempts after a transient failure (worker crash or hang).
+    retries: int = 1
+    # The build fails (exit 1) when more than this fraction of its objects failed.
+    max_failure_rate: float = 1.0
+    # Pre-flight budgets: bigger objects fail before Blender is started.
+    max_triangles: int = 5_000_000
+    max_texture_pixels: int = 256 * 2**20
     blender: str | None = None
     check_poses: bool = False
 
@@ -209,6 +219,11 @@ def validate(cfg: BuildConfig) -> None:
     need(cfg.workers >= 1, "workers", "must be at least 1")
     need(cfg.threads >= 0, "threads", "must be ≥ 0 (0 = all cores)")
     need(cfg.timeout > 0, "timeout", "must be positive seconds")
+    need(cfg.object_timeout >= 0, "object_timeout", "must be ≥ 0 seconds (0 = no budget)")
+    need(0 <= cfg.retries <= 100, "retries", "must be in 0..100")
+    need(0.0 <= cfg.max_failure_rate <= 1.0, "max_failure_rate", "must be in [0, 1]")
+    need(cfg.max_triangles >= 1, "max_triangles", "must be at least 1")
+    need(cfg.max_texture_pixels >= 0, "max_texture_pixels", "must be ≥ 0")
     need(cfg.view_stride >= 1, "view_stride", "must be at least 1")
     need(0.0 <= cfg.test_fraction <= 1.0, "test_fraction", "must be in [0, 1]")
     need(cfg.executor in ("local", "ray"), "executor", "must be local or ray")

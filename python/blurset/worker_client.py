@@ -30,29 +30,52 @@ STDERR_TAIL_LINES = 6
 
 
 class WorkerError(BlursetError):
-    """An object-level failure (bad GLB, render QA, crash); the message is one line."""
+    """An object-level failure (bad GLB, render QA, crash); the message is one line.
+
+    `transient` says whether the same work may succeed when tried again (a crash or a
+    hang may be the machine's fault; a file Blender refuses is refused every time)."""
+
+    transient = False
+
+
+class WorkerCrash(WorkerError):
+    """The worker process died (signal, exit, out of memory)."""
+
+    transient = True
 
 
 class WorkerTimeout(WorkerError):
     """The worker sent nothing for `timeout` seconds; its process was killed."""
 
+    transient = True
 
-def worker_command(blender: str | None, threads: int) -> list[str]:
+
+class ObjectTimeout(WorkerTimeout):
+    """The object used up its whole budget (`--object-timeout`); retrying cannot help."""
+
+    transient = False
+
+
+def worker_command(blender: str | None, threads: int, workdir: Path | None = None) -> list[str]:
     """The argv that starts a worker: the venv's bpy, or a user's Blender binary."""
+    ours = ["--threads", str(threads)]
+    if workdir is not None:
+        ours += ["--workdir", str(workdir)]
     script = str(WORKER_SCRIPT)
     if blender is None:
-        return [sys.executable, script, "--threads", str(threads)]
+        return [sys.executable, script, *ours]
+    # GLBs are untrusted: --disable-autoexec keeps Python in .blend data from running.
     return [
         blender,
         "-b",
         "--factory-startup",
+        "--disable-autoexec",
         "--python-exit-code",
         "1",
         "-P",
         script,
         "--",
-        "--threads",
-        str(threads),
+        *ours,
     ]
 
 
@@ -66,7 +89,12 @@ class Worker:
         threads: int = 0,
         timeout: float = 300.0,
         log_path: Path | None = None,
+        workdir: Path | None = None,
+        deadline: float | None = None,
     ) -> None:
+        """`timeout`: seconds without a reply before the worker counts as hung.
+        `deadline`: a time.monotonic() instant after which the object's budget is spent
+        (ObjectTimeout). `workdir`: where the worker keeps its scratch files."""
         if not WORKER_SCRIPT.is_file():
             raise WorkerError(f"worker script not found: {WORKER_SCRIPT}")
         if timeout <= 0:
@@ -74,6 +102,8 @@ class Worker:
         self.blender = blender
         self.threads = int(threads)
         self.timeout = float(timeout)
+        self.deadline = deadline
+        self.workdir = workdir
         self._own_log = log_path is None
         if log_path is None:
             fd, name = tempfile.mkstemp(prefix="blurset-worker-", suffix=".log")
@@ -93,7 +123,7 @@ class Worker:
         self._log = open(self.log_path, "ab")  # noqa: SIM115 - lives as long as the process
         try:
             self._proc = subprocess.Popen(
-                worker_command(self.blender, self.threads),
+                worker_command(self.blender, self.threads, self.workdir),
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=self._log,
@@ -156,16 +186,21 @@ class Worker:
         code = self._proc.wait() if self._proc is not None else None
         tail = " | ".join(self.stderr_tail())
         self._discard()
-        raise WorkerError(f"Blender worker exited with code {code}; last stderr: {tail}")
+        raise WorkerCrash(f"Blender worker exited with code {code}; last stderr: {tail}")
 
     def _receive(self, *, startup: bool = False) -> dict[str, Any]:
-        deadline = time.monotonic() + self.timeout
+        reply_by = time.monotonic() + self.timeout
+        deadline = min(reply_by, self.deadline) if self.deadline is not None else reply_by
         while True:
             left = deadline - time.monotonic()
             try:
                 raw = self._lines.get(timeout=max(left, 0.0))
             except queue.Empty:
                 self._discard()
+                if deadline < reply_by:
+                    raise ObjectTimeout(
+                        "object exceeded its time budget (--object-timeout); killed its worker"
+                    ) from None
                 what = "start up" if startup else "reply"
                 raise WorkerTimeout(
                     f"Blender worker did not {what} within {self.timeout:g} s; killed it"

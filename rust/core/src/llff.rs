@@ -110,68 +110,76 @@ fn header_field<'a>(header: &'a str, key: &str) -> Option<&'a str> {
 
 /// Read `poses_bounds.npy` (float64 or float32, N × 17, C order).
 pub fn read_poses_bounds(path: &Path) -> Result<Vec<PoseRow>> {
-    let bad = |reason: String| Error::PoseFormat {
+    let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read pose file", path, e))?;
+    parse_poses_bounds(&bytes).map_err(|reason| Error::PoseFormat {
         reason,
         path: path.into(),
-    };
-    let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read pose file", path, e))?;
+    })
+}
+
+/// The rows of a `poses_bounds.npy` held in memory; the error is the reason, for the
+/// caller to pair with its file. Arbitrary bytes give an error, never a panic (fuzzed).
+pub fn parse_poses_bounds(bytes: &[u8]) -> std::result::Result<Vec<PoseRow>, String> {
     if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        return Err(bad("not a .npy file".into()));
+        return Err("not a .npy file".into());
     }
-    let (hlen, hstart) = match bytes[6] {
+    let (hlen, hstart): (usize, usize) = match bytes[6] {
         1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
         2 | 3 if bytes.len() >= 12 => (
             u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
             12,
         ),
-        v => return Err(bad(format!("unsupported .npy version {v}"))),
+        v => return Err(format!("unsupported .npy version {v}")),
     };
-    let header = bytes
-        .get(hstart..hstart + hlen)
+    let header = hstart
+        .checked_add(hlen)
+        .and_then(|end| bytes.get(hstart..end))
         .and_then(|h| std::str::from_utf8(h).ok())
-        .ok_or_else(|| bad("truncated header".into()))?;
-    let descr = header_field(header, "descr").ok_or_else(|| bad("no descr".into()))?;
+        .ok_or("truncated header")?;
+    let descr = header_field(header, "descr").ok_or("no descr")?;
     if header_field(header, "fortran_order") == Some("True") {
-        return Err(bad("Fortran order is not supported".into()));
+        return Err("Fortran order is not supported".into());
     }
     let shape: Vec<usize> = header_field(header, "shape")
-        .ok_or_else(|| bad("no shape".into()))?
+        .ok_or("no shape")?
         .split(',')
         .filter(|s| !s.trim().is_empty())
         .map(|s| s.trim().parse::<usize>())
         .collect::<std::result::Result<_, _>>()
-        .map_err(|_| bad("unreadable shape".into()))?;
+        .map_err(|_| "unreadable shape")?;
     if shape.len() != 2 || shape[1] != 17 {
-        return Err(bad(format!("shape {shape:?}, expected (N, 17)")));
+        return Err(format!("shape {shape:?}, expected (N, 17)"));
     }
     let n = shape[0];
     let data = &bytes[hstart + hlen..];
     let width = match descr {
         "<f8" => 8,
         "<f4" => 4,
-        d => return Err(bad(format!("dtype {d:?}, expected float64 or float32"))),
+        d => return Err(format!("dtype {d:?}, expected float64 or float32")),
     };
-    if data.len() < n * 17 * width {
-        return Err(bad(format!(
-            "{} bytes of data for {n} rows, expected {}",
-            data.len(),
-            n * 17 * width
-        )));
+    let need = n
+        .checked_mul(17 * width)
+        .ok_or_else(|| format!("shape ({n}, 17) is too large"))?;
+    if data.len() < need {
+        return Err(format!(
+            "{} bytes of data for {n} rows, expected {need}",
+            data.len()
+        ));
     }
     let mut rows = Vec::with_capacity(n);
-    for i in 0..n {
+    for (i, chunk) in data[..need].chunks_exact(17 * width).enumerate() {
         let mut row = [0.0; 17];
-        for (j, v) in row.iter_mut().enumerate() {
-            let o = (i * 17 + j) * width;
-            *v = if width == 8 {
-                f64::from_le_bytes(data[o..o + 8].try_into().map_err(|_| bad("short".into()))?)
-            } else {
-                f32::from_le_bytes(data[o..o + 4].try_into().map_err(|_| bad("short".into()))?)
-                    as f64
+        for (v, b) in row.iter_mut().zip(chunk.chunks_exact(width)) {
+            *v = match *b {
+                [a0, a1, a2, a3, a4, a5, a6, a7] => {
+                    f64::from_le_bytes([a0, a1, a2, a3, a4, a5, a6, a7])
+                }
+                [a0, a1, a2, a3] => f64::from(f32::from_le_bytes([a0, a1, a2, a3])),
+                _ => return Err("short value".into()),
             };
         }
         if let Some(j) = row.iter().position(|v| !v.is_finite()) {
-            return Err(bad(format!("row {i} column {j} is not finite")));
+            return Err(format!("row {i} column {j} is not finite"));
         }
         rows.push(row);
     }
@@ -257,6 +265,59 @@ pub fn write_setting_poses(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    fn valid_npy(n: usize) -> Vec<u8> {
+        let rows: Vec<PoseRow> = (0..n).map(|i| [i as f64 + 0.5; 17]).collect();
+        npy_bytes(&rows)
+    }
+
+    #[test]
+    fn absurd_shapes_are_errors_not_panics() {
+        // 135637824071393762 · 17 · 8 wraps to 16 bytes in unchecked arithmetic.
+        for shape in [
+            "(18446744073709551615, 17)",
+            "(135637824071393762, 17)",
+            "(3,17,)",
+        ] {
+            let mut b = valid_npy(1);
+            let text = String::from_utf8_lossy(&b[10..]).replace("(1, 17)", shape);
+            b.truncate(10);
+            b.extend_from_slice(text.as_bytes());
+            assert!(parse_poses_bounds(&b).is_err(), "{shape}");
+        }
+        let mut v2 = valid_npy(2);
+        v2[6] = 2; // version 2 with a header length past the end
+        assert!(parse_poses_bounds(&v2).is_err());
+    }
+
+    // The reader's fuzz harness in `cargo test`: arbitrary bytes and mutations of a
+    // valid file must give rows or an error, never a panic (rust/fuzz runs it longer).
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+        #[test]
+        fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..400)) {
+            let _ = parse_poses_bounds(&bytes);
+        }
+
+        #[test]
+        fn mutated_files_never_panic(
+            n in 0usize..4,
+            edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..8),
+            cut in any::<prop::sample::Index>(),
+        ) {
+            let mut b = valid_npy(n);
+            for (at, v) in edits {
+                let i = at.index(b.len());
+                b[i] = v;
+            }
+            let keep = cut.index(b.len() + 1);
+            b.truncate(keep);
+            if let Ok(rows) = parse_poses_bounds(&b) {
+                prop_assert!(rows.iter().flatten().all(|v| v.is_finite()));
+            }
+        }
+    }
 
     fn tmp(name: &str) -> std::path::PathBuf {
         std::env::temp_dir().join(format!("blurset-llff-{}-{name}", std::process::id()))

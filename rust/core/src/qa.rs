@@ -1,0 +1,190 @@
+//! Render QA of a sharp view (DESIGN §10): an all-black, empty (object out of frame) or
+//! saturated image is a failure of its setting with a reason, never silent bad data.
+//!
+//! The numbers come from the premultiplied linear RGBA mean the accumulator already
+//! holds, so QA costs one pass over one frame and sees exactly what gets encoded.
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+const CH: usize = 4;
+/// Rec. 709 / sRGB luminance weights (linear light).
+const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
+/// A pixel counts as covered by the object from this alpha on.
+const COVERED_ALPHA: f32 = 0.5;
+
+/// What one view looks like, in numbers.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct FrameQa {
+    /// Mean alpha: the fraction of the image the object covers.
+    pub coverage: f64,
+    /// Mean unpremultiplied luminance of the object (Σ premultiplied Y / Σ alpha).
+    pub luminance: f64,
+    /// Fraction of covered pixels with a colour channel at or above 1 (clipped in sRGB).
+    pub saturated: f64,
+    /// Fraction of the image's border pixels the object covers (0 when it is framed).
+    pub border_coverage: f64,
+}
+
+/// When a view fails. Defaults match the worker's load-time QA (blender_scripts).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct QaThresholds {
+    pub min_coverage: f64,
+    pub min_luminance: f64,
+    pub max_saturated: f64,
+}
+
+impl Default for QaThresholds {
+    fn default() -> Self {
+        QaThresholds {
+            min_coverage: 0.002,
+            min_luminance: 0.003,
+            max_saturated: 0.5,
+        }
+    }
+}
+
+impl QaThresholds {
+    /// The reason a view fails, or None when it passes.
+    pub fn verdict(&self, qa: &FrameQa) -> Option<String> {
+        if !(qa.coverage >= self.min_coverage) {
+            return Some(format!(
+                "empty: the object covers {:.4} of the image (object out of frame or invisible; minimum {})",
+                qa.coverage, self.min_coverage
+            ));
+        }
+        if !(qa.luminance >= self.min_luminance) {
+            return Some(format!(
+                "black: mean luminance of the object {:.5} (minimum {})",
+                qa.luminance, self.min_luminance
+            ));
+        }
+        if !(qa.saturated <= self.max_saturated) {
+            return Some(format!(
+                "saturated: {:.0}% of the object's pixels are clipped (maximum {:.0}%)",
+                100.0 * qa.saturated,
+                100.0 * self.max_saturated
+            ));
+        }
+        None
+    }
+}
+
+/// QA numbers of a premultiplied linear RGBA image (row-major, 4 f32 per pixel).
+pub fn frame_qa(width: u32, height: u32, rgba: &[f32]) -> Result<FrameQa> {
+    let (w, h) = (width as usize, height as usize);
+    if w == 0 || h == 0 || rgba.len() != w * h * CH {
+        return Err(Error::Shape(format!(
+            "QA needs a {width}x{height} RGBA image ({} values), got {}",
+            w * h * CH,
+            rgba.len()
+        )));
+    }
+    let (mut alpha, mut luma, mut covered, mut clipped) = (0.0f64, 0.0f64, 0u64, 0u64);
+    for p in rgba.chunks_exact(CH) {
+        let a = f64::from(p[3]);
+        alpha += a;
+        luma += LUMA[0] * f64::from(p[0]) + LUMA[1] * f64::from(p[1]) + LUMA[2] * f64::from(p[2]);
+        if p[3] >= COVERED_ALPHA {
+            covered += 1;
+            // Unpremultiplied colour ≥ 1 ⇔ premultiplied ≥ alpha.
+            if p[..3].iter().any(|&c| c >= p[3]) {
+                clipped += 1;
+            }
+        }
+    }
+    let mut border = 0u64;
+    let mut border_px = 0u64;
+    for y in 0..h {
+        for x in 0..w {
+            if y == 0 || y == h - 1 || x == 0 || x == w - 1 {
+                border_px += 1;
+                if rgba[(y * w + x) * CH + 3] >= COVERED_ALPHA {
+                    border += 1;
+                }
+            }
+        }
+    }
+    let n = (w * h) as f64;
+    Ok(FrameQa {
+        coverage: alpha / n,
+        luminance: if alpha > 0.0 { luma / alpha } else { 0.0 },
+        saturated: if covered > 0 {
+            clipped as f64 / covered as f64
+        } else {
+            0.0
+        },
+        border_coverage: border as f64 / border_px as f64,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> [f32; 4]) -> Vec<f32> {
+        (0..h)
+            .flat_map(|y| (0..w).flat_map(move |x| (0..1).map(move |_| (x, y))))
+            .flat_map(|(x, y)| f(x, y))
+            .collect()
+    }
+
+    /// A grey disc of radius r (pixels) in the middle of a w × w image.
+    fn disc(w: usize, r: f64, grey: f32) -> Vec<f32> {
+        image(w, w, |x, y| {
+            let c = (w as f64 - 1.0) / 2.0;
+            let d = ((x as f64 - c).powi(2) + (y as f64 - c).powi(2)).sqrt();
+            if d <= r {
+                [grey, grey, grey, 1.0]
+            } else {
+                [0.0; 4]
+            }
+        })
+    }
+
+    #[test]
+    fn a_framed_grey_object_passes() -> Result<()> {
+        let qa = frame_qa(64, 64, &disc(64, 20.0, 0.3))?;
+        assert!((qa.coverage - std::f64::consts::PI * 400.0 / 4096.0).abs() < 0.01);
+        assert!((qa.luminance - 0.3).abs() < 1e-6);
+        assert_eq!(qa.saturated, 0.0);
+        assert_eq!(qa.border_coverage, 0.0);
+        assert_eq!(QaThresholds::default().verdict(&qa), None);
+        Ok(())
+    }
+
+    #[test]
+    fn empty_black_and_saturated_fail_with_their_reason() -> Result<()> {
+        let t = QaThresholds::default();
+        let empty = frame_qa(32, 32, &vec![0.0; 32 * 32 * 4])?;
+        assert_eq!((empty.coverage, empty.luminance), (0.0, 0.0));
+        assert!(t.verdict(&empty).is_some_and(|r| r.starts_with("empty")));
+        let black = frame_qa(32, 32, &disc(32, 10.0, 0.0))?;
+        assert!(t.verdict(&black).is_some_and(|r| r.starts_with("black")));
+        let white = frame_qa(32, 32, &disc(32, 10.0, 1.5))?;
+        assert_eq!(white.saturated, 1.0);
+        assert!(t
+            .verdict(&white)
+            .is_some_and(|r| r.starts_with("saturated")));
+        Ok(())
+    }
+
+    #[test]
+    fn an_object_over_the_whole_frame_touches_the_border() -> Result<()> {
+        let qa = frame_qa(16, 8, &image(16, 8, |_, _| [0.2, 0.2, 0.2, 1.0]))?;
+        assert_eq!(qa.border_coverage, 1.0);
+        assert_eq!(qa.coverage, 1.0);
+        Ok(())
+    }
+
+    #[test]
+    fn nan_never_passes_and_bad_shapes_are_errors() -> Result<()> {
+        let mut img = disc(16, 5.0, 0.5);
+        img[3] = f32::NAN;
+        let qa = frame_qa(16, 16, &img)?;
+        assert!(QaThresholds::default().verdict(&qa).is_some());
+        assert!(frame_qa(16, 16, &img[..10]).is_err());
+        assert!(frame_qa(0, 16, &[]).is_err());
+        Ok(())
+    }
+}
