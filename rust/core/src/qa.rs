@@ -47,19 +47,19 @@ impl Default for QaThresholds {
 impl QaThresholds {
     /// The reason a view fails, or None when it passes.
     pub fn verdict(&self, qa: &FrameQa) -> Option<String> {
-        if !(qa.coverage >= self.min_coverage) {
+        if qa.coverage.is_nan() || qa.coverage < self.min_coverage {
             return Some(format!(
                 "empty: the object covers {:.4} of the image (object out of frame or invisible; minimum {})",
                 qa.coverage, self.min_coverage
             ));
         }
-        if !(qa.luminance >= self.min_luminance) {
+        if qa.luminance.is_nan() || qa.luminance < self.min_luminance {
             return Some(format!(
                 "black: mean luminance of the object {:.5} (minimum {})",
                 qa.luminance, self.min_luminance
             ));
         }
-        if !(qa.saturated <= self.max_saturated) {
+        if qa.saturated.is_nan() || qa.saturated > self.max_saturated {
             return Some(format!(
                 "saturated: {:.0}% of the object's pixels are clipped (maximum {:.0}%)",
                 100.0 * qa.saturated,
