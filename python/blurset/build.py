@@ -563,6 +563,7 @@ def _sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> None:
 
 def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     out = Path(cfg.out)
+    resolve_objects(list(cfg.objects))  # bad entries fail before anything is written
     out.mkdir(parents=True, exist_ok=True)
     objs = _objects(cfg)
     with build_lock(out):

@@ -21,6 +21,9 @@ pub enum LatentPositions {
     Stratified,
 }
 
+/// Largest number of views per setting and of latent frames per blurry image.
+pub const MAX_COUNT: usize = 4096;
+
 /// Everything that shapes the sampling of a setting. Units: degrees, Δr in percent of r.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
@@ -64,11 +67,12 @@ impl SamplingConfig {
     /// Refuse values that would make a sample meaningless; the message names the option.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::Value(m));
-        if self.views == 0 {
-            return bad("views must be at least 1".into());
+        // Upper bounds keep a typo from planning billions of renders.
+        if !(1..=MAX_COUNT).contains(&self.views) {
+            return bad(format!("views {} is outside 1..={MAX_COUNT}", self.views));
         }
-        if self.latents == 0 {
-            return bad("latents must be at least 1".into());
+        if !(1..=MAX_COUNT).contains(&self.latents) {
+            return bad(format!("latents {} is outside 1..={MAX_COUNT}", self.latents));
         }
         if !(self.resolution >= 8 && self.resolution <= 16384) {
             return bad(format!(
@@ -289,6 +293,14 @@ fn project(c2w: &DMat4, x: DVec3, focal: f64, size: f64) -> Option<(f64, f64)> {
     })
 }
 
+/// LLFF near/far of a view: near floored at `near_floor`, and far strictly beyond near
+/// (a flat object facing the camera, or a single point, has far = near; loaders sample
+/// rays between the two, so an empty interval would break them).
+fn bounds(near: f64, far: f64, g: &Guards) -> (f64, f64) {
+    let n = near.max(g.near_floor);
+    (n, far.max(n * (1.0 + 1e-6)))
+}
+
 fn corners(d: [f64; 3]) -> [DVec3; 8] {
     std::array::from_fn(|i| {
         DVec3::new(
@@ -326,6 +338,17 @@ pub fn plan_setting(
             "object {uid:?} has a degenerate bounding box {bbox_dims:?}"
         )));
     }
+    // Without vertices (a caller that only knows the box), its corners bracket the depth.
+    let box_corners: Vec<[f32; 3]>;
+    let vertices = if vertices.is_empty() {
+        box_corners = corners(bbox_dims)
+            .iter()
+            .map(|c| [c.x as f32, c.y as f32, c.z as f32])
+            .collect();
+        &box_corners[..]
+    } else {
+        vertices
+    };
     let radius = cfg.radius(bbox_dims);
     let r_min = 1.05 * bounding_radius(bbox_dims);
     let focal = focal_px(cfg.resolution, cfg.fov_deg);
@@ -392,8 +415,8 @@ pub fn plan_setting(
                 r: radius,
                 phi_deg: v.phi_deg,
                 theta_deg: v.theta_deg,
-                near: near.max(cfg.guards.near_floor),
-                far: far.max(near.max(cfg.guards.near_floor)),
+                near: bounds(near, far, &cfg.guards).0,
+                far: bounds(near, far, &cfg.guards).1,
                 flatness: w.flatness,
                 depth_range: w.depth_range,
                 orientation: w.orientation,
@@ -572,6 +595,26 @@ mod tests {
             }
         }
         assert!(plan_setting(&cfg, "x", 0.0, 0, [0.0; 3], &[]).is_err());
+    }
+
+    #[test]
+    fn bounds_bracket_the_object_even_when_it_has_no_depth() {
+        let cfg = SamplingConfig {
+            views: 5,
+            ..Default::default()
+        };
+        // No vertices: the box corners stand in, so near/far still bracket the object.
+        let d = [1.0, 0.6, 0.3];
+        let p = plan_setting(&cfg, "x", 0.0, 4, d, &[]).expect("plan");
+        for v in &p.views {
+            assert!(v.near < v.r && v.r < v.far, "{} {} {}", v.near, v.r, v.far);
+        }
+        // A single point: zero depth extent, yet far > near, both finite and positive.
+        let p = plan_setting(&cfg, "x", 0.0, 4, d, &[[0.0, 0.0, 0.0]]).expect("plan");
+        for v in &p.views {
+            assert!(0.0 < v.near && v.near < v.far && v.far.is_finite());
+            assert!((v.near - v.r).abs() < 1e-9);
+        }
     }
 
     #[test]

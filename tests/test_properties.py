@@ -1,0 +1,113 @@
+"""Property tests over the whole config ranges (issue 7, DESIGN §2 guards): whatever the
+options and the object, a plan and the pose files written from it hold no NaN or inf,
+and a config outside the ranges is refused with a message naming the option."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+from blurset import _core  # noqa: TID251  (properties of the core itself)
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+DEFAULTS = json.loads(_core.default_sampling_config())
+
+
+def _finite(x) -> bool:
+    if isinstance(x, float):
+        return math.isfinite(x)
+    if isinstance(x, dict):
+        return all(_finite(v) for v in x.values())
+    if isinstance(x, list):
+        return all(_finite(v) for v in x)
+    return True
+
+
+def _reject_constants(name: str):
+    raise AssertionError(f"non-finite JSON constant {name}")
+
+
+configs = st.fixed_dictionaries(
+    {
+        "views": st.integers(1, 12),
+        "phi0_deg": st.floats(8.0, 172.0),
+        "window_deg": st.floats(0.0, 7.5),
+        "fov_deg": st.floats(1.5, 149.0),
+        "radius_margin": st.floats(1.0, 100.0),
+        "delta0": st.floats(0.0, 45.0),
+        "levels": st.lists(st.integers(1, 64), min_size=0, max_size=4, unique=True),
+        "level_spread": st.floats(0.0, 0.99),
+        "latents": st.integers(1, 12),
+        "latent_positions": st.sampled_from(["random", "stratified"]),
+        "resolution": st.integers(8, 4096),
+        "guards": st.fixed_dictionaries(
+            {"orientation_max": st.floats(1.0, 1e6), "near_floor": st.floats(1e-9, 1.0)}
+        ),
+    }
+)
+
+# Boxes from degenerate (a point, a plane, a needle) to ordinary; the normalizer scales
+# the largest side to 1, so sides live in [0, 1].
+sides = st.one_of(st.just(0.0), st.floats(1e-12, 1.0))
+boxes = st.tuples(sides, sides, sides).map(lambda d: [1.0, d[1], d[2]] if d[0] < 1 else list(d))
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    cfg=configs,
+    dims=boxes,
+    theta0=st.floats(-720.0, 720.0),
+    seed=st.integers(0, 2**64 - 1),
+    n_vertices=st.sampled_from([0, 1, 8, 50]),
+)
+def test_plans_and_pose_files_are_finite_everywhere(
+    cfg, dims, theta0, seed, n_vertices, tmp_path_factory
+):
+    # Cameras must not pass a pole: that is a refused config, tested below.
+    cfg["window_deg"] = min(cfg["window_deg"], cfg["phi0_deg"] - 0.5, 179.5 - cfg["phi0_deg"])
+    rng = np.random.default_rng(seed % 2**32)
+    half = np.asarray(dims) / 2
+    verts = (rng.uniform(-1, 1, (n_vertices, 3)) * half).astype(np.float32)
+    plan_json = _core.plan_setting(
+        json.dumps(cfg), uid="obj", theta0_deg=theta0, seed=seed, bbox_dims=dims, vertices=verts
+    )
+    plan = json.loads(plan_json, parse_constant=_reject_constants)
+    assert _finite(plan)
+    for v in plan["views"]:
+        assert 0 < v["near"] < v["far"]
+        assert v["w_u"] >= 0 and v["depth_range"] >= 1 and v["orientation"] >= 1
+        for lvl in v["levels"].values():
+            assert lvl["w_l"] >= 0 and len(lvl["latent_frames"]) == cfg["latents"]
+    out = tmp_path_factory.mktemp("poses")
+    levels = ["sharp"] + [f"blur_{lvl}" for lvl in cfg["levels"]]
+    _core.write_setting_poses(plan_json, out, levels)
+    for lvl in levels:
+        pb = _core.read_poses_bounds(out / lvl / "poses_bounds.npy")
+        assert pb.shape == (cfg["views"], 17) and np.isfinite(pb).all()
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    key=st.sampled_from(sorted(k for k in DEFAULTS if k != "guards")),
+    value=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-(2**31), 2**31)),
+)
+def test_any_config_is_finite_or_refused_naming_the_option(key, value):
+    cfg = dict(DEFAULTS, views=3, latents=2)
+    if key == "levels":
+        cfg[key] = [value] if isinstance(value, int) else value
+    elif key == "latent_positions":
+        cfg[key] = str(value)
+    else:
+        cfg[key] = value
+    try:
+        text = json.dumps(cfg)  # NaN/inf become JSON constants the core must refuse
+        plan = _core.plan_setting(
+            text, uid="o", theta0_deg=0.0, seed=1, bbox_dims=[1.0, 0.5, 0.2],
+            vertices=np.zeros((0, 3), np.float32),
+        )  # fmt: skip
+    except ValueError as e:
+        assert key.rstrip("s") in str(e) or "sampling config" in str(e), str(e)
+        return
+    assert _finite(json.loads(plan, parse_constant=_reject_constants))
