@@ -6,6 +6,7 @@ mod accumulate;
 mod error;
 mod llff;
 mod noise;
+mod noise_linear;
 mod sampling;
 
 /// Run long core work without the GIL, so Python threads (progress bars, Ray) go on.
@@ -25,5 +26,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sampling::register(m)?;
     accumulate::register(m)?;
     noise::register(m)?;
+    noise_linear::register(m)?;
     Ok(())
 }
