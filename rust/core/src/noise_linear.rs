@@ -153,7 +153,13 @@ pub fn add_noise_linear(img: &LinearRgb, model: &NoiseModel, key: u64, stream: u
         model.sigma_read * model.sigma_read,
         model.sigma_shot * model.sigma_shot,
     );
-    let gamma = model.gamma;
+    // Forward processing as the kernel rounds it: the code is the number of thresholds
+    // `decode((k + 0.5) / 255) · scale` at or below the noisy value.
+    let thresholds = scale.map(|s| {
+        (0..255)
+            .map(|k| (model.gamma.decode((f64::from(k) + 0.5) / 255.0) * s) as f32)
+            .collect::<Vec<f32>>()
+    });
     // The kernel's arithmetic: clean and std rounded to f32, then clean + std · n in f32.
     let (linear, codes): (Vec<f32>, Vec<u8>) = img
         .rgb
@@ -161,11 +167,11 @@ pub fn add_noise_linear(img: &LinearRgb, model: &NoiseModel, key: u64, stream: u
         .zip(normals.par_iter())
         .enumerate()
         .map(|(i, (&l, &n))| {
-            let s = scale[i % 3];
-            let y = s * f64::from(l).clamp(0.0, 1.0);
+            let c = i % 3;
+            let y = scale[c] * f64::from(l).clamp(0.0, 1.0);
             let std = libm::sqrt(var_read + var_shot * y) as f32;
             let noisy = y as f32 + std * n;
-            let code = (255.0 * gamma.encode(f64::from(noisy) / s)).round() as u8;
+            let code = thresholds[c].partition_point(|t| noisy >= *t) as u8;
             (noisy, code)
         })
         .unzip();
@@ -348,7 +354,9 @@ mod tests {
             let Samples::U8(pb) = &b.processed.samples else {
                 panic!("depth")
             };
-            assert!(pa.iter().zip(pb).all(|(x, y)| x.abs_diff(*y) <= 1));
+            let off = pa.iter().zip(pb).filter(|(x, y)| x != y).count();
+            // Same thresholds; only values within f32 rounding of one may differ.
+            assert!(off * 1000 <= pa.len(), "{off} codes differ");
         }
         Ok(())
     }
