@@ -106,7 +106,9 @@ pub fn read_linear(path: &Path, background: [f64; 3]) -> Result<LinearRgb> {
 
 /// Linear value per unit of processed value of colour channel `c` (of 3).
 fn channel_scale(model: &NoiseModel, c: usize) -> f64 {
-    let wb = model.white_balance.map_or(1.0, |wb| [wb.red, 1.0, wb.blue][c]);
+    let wb = model
+        .white_balance
+        .map_or(1.0, |wb| [wb.red, 1.0, wb.blue][c]);
     model.white_level / wb
 }
 
@@ -145,7 +147,12 @@ pub fn standard_normals(width: u32, height: u32, key: u64, stream: u64) -> Resul
 
 /// One noisy frame from linear light: the unclipped linear noisy RGB and the processed
 /// 8-bit RGB image (forward white balance, `model.gamma` encoding, rounded).
-pub fn add_noise_linear(img: &LinearRgb, model: &NoiseModel, key: u64, stream: u64) -> Result<Noisy> {
+pub fn add_noise_linear(
+    img: &LinearRgb,
+    model: &NoiseModel,
+    key: u64,
+    stream: u64,
+) -> Result<Noisy> {
     model.validate()?;
     let normals = standard_normals(img.width, img.height, key, stream)?;
     let scale = [0, 1, 2].map(|c| channel_scale(model, c));
@@ -262,7 +269,12 @@ pub const QA_TOLERANCE: u8 = 8;
 
 /// Coverage, object brightness and border contact of an RGB8 image whose background is
 /// `background` (linear RGB, encoded to sRGB codes as the build's PNGs are).
-pub fn thumbnail_qa(width: u32, height: u32, rgb: &[u8], background: [f64; 3]) -> Result<ThumbnailQa> {
+pub fn thumbnail_qa(
+    width: u32,
+    height: u32,
+    rgb: &[u8],
+    background: [f64; 3],
+) -> Result<ThumbnailQa> {
     let (w, h) = (width as usize, height as usize);
     if rgb.len() != w * h * 3 || w == 0 || h == 0 {
         return Err(Error::Shape(format!(
@@ -395,7 +407,17 @@ mod tests {
             blue: 1.6,
         };
         let y = clean_from_linear(&img, &model(0.0, 0.0, Some(wb), Gamma::Srgb))?;
-        assert_eq!(y, vec![0.0, 0.5, (1.0 / 1.6) as f32, 0.125, 0.25, (0.25 / 1.6) as f32]);
+        assert_eq!(
+            y,
+            vec![
+                0.0,
+                0.5,
+                (1.0 / 1.6) as f32,
+                0.125,
+                0.25,
+                (0.25 / 1.6) as f32
+            ]
+        );
         assert!(LinearRgb::new(1, 1, vec![0.0, f32::NAN, 0.0]).is_err());
         Ok(())
     }
@@ -406,7 +428,11 @@ mod tests {
         let c = composite(2, 1, &rgba, [1.0, 1.0, 1.0])?;
         assert_eq!(c.rgb, vec![0.7, 0.6, 0.5, 1.0, 1.0, 1.0]);
         let bytes = crate::accumulate::encode_rgb8(&rgba, [1.0; 3]);
-        let again: Vec<u8> = c.rgb.iter().map(|&v| srgb_encode_u8(f64::from(v))).collect();
+        let again: Vec<u8> = c
+            .rgb
+            .iter()
+            .map(|&v| srgb_encode_u8(f64::from(v)))
+            .collect();
         assert_eq!(bytes, again);
         Ok(())
     }
@@ -432,7 +458,11 @@ mod tests {
         let back = read_exr(&dir.join("out/linear/001.exr"))?;
         let img = read_linear(&paths[1], [1.0; 3])?;
         let want = add_noise_linear(&img, &m, 4, noise::stream_id(1, 0))?;
-        let got: Vec<f32> = back.rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+        let got: Vec<f32> = back
+            .rgba
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect();
         assert_eq!(got, want.linear);
         let png = image_io::read_image(&dir.join("out/images/000.png"))?;
         assert_eq!((png.width, png.height, png.channels), (w, h, 3));

@@ -124,7 +124,10 @@ fn noise_image_linear(
     let processed = PyArray1::from_vec(py, codes)
         .reshape([h, w, 3])?
         .into_py_any(py)?;
-    Ok((rgb_to_py(py, img.width, img.height, noisy.linear)?, processed))
+    Ok((
+        rgb_to_py(py, img.width, img.height, noisy.linear)?,
+        processed,
+    ))
 }
 
 /// Write every variant from linear EXRs: `variants` holds (out_dir, sigma_read,
