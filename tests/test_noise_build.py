@@ -84,6 +84,29 @@ def noised(linear_build, tmp_path_factory):
     return linear_build, lin, png
 
 
+def test_keep_linear_stores_every_view_and_level(linear_build, tmp_path):
+    cfg = json.loads((linear_build / "dataset.json").read_text())["config"]
+    assert cfg["write_linear"] is True and cfg["previews"] is True
+    for s in settings(linear_build):
+        meta = json.loads((s / "meta.json").read_text())
+        bg = np.array(meta["render"]["background"])
+        for lvl in levels(linear_build):
+            pngs = sorted((s / lvl / "images").iterdir())
+            exrs = sorted((s / lvl / "linear").iterdir())
+            assert [p.stem for p in exrs] == [p.stem for p in pngs]
+            # The PNG is the EXR composited over the background, sRGB-encoded, rounded.
+            rgba = read_exr(exrs[3])
+            lin = rgba[..., :3] + (1 - np.clip(rgba[..., 3:], 0, 1)) * bg
+            png = np.asarray(Image.open(pngs[3]), np.float64)
+            assert np.abs(np.round(srgb_encode(lin) * 255) - png).max() <= 1
+    # The name in a TOML config too (the old write-linear still works).
+    from blurset.config import load_toml
+
+    for key in ("keep-linear", "keep_linear", "write-linear"):
+        (tmp_path / "c.toml").write_text(f"{key} = true\n")
+        assert load_toml(tmp_path / "c.toml") == {"write_linear": True}
+
+
 def test_layout_mirrored_poses_and_splits_preserved(noised):
     build, lin, png = noised
     for out, kind in ((lin, "linear"), (png, "png")):
