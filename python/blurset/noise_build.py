@@ -217,6 +217,10 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
                 f"--out exists and is not a noise build (pass --overwrite to replace it): {out}"
             )
     out.mkdir(parents=True, exist_ok=True)
+    if not (out / DATASET_FILE).is_file():
+        # Written first (options only) so that a run killed before its end resumes;
+        # rewritten with the seeds and counts at the end.
+        _write_json(out / DATASET_FILE, {"build": str(build.resolve()), "params": params})
     for stale in out.glob("*/*/gain_*.partial"):
         shutil.rmtree(stale, ignore_errors=True)
 
@@ -388,7 +392,7 @@ def run(args) -> int:
     shutil.copyfile(build / "splits.json", out / ".splits.json.tmp")
     os.replace(out / ".splits.json.tmp", out / "splits.json")
 
-    written = skipped = 0
+    written = 0
     todo = [u for u in units if u.pending]
     skipped = sum(len(gains) - len(u.pending) for u in units)
     show = not getattr(args, "quiet", False) and sys.stderr.isatty()
