@@ -70,3 +70,14 @@ def demo_build(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo") / "out"
     run_cli("build", *DEMO_ARGS, "--out", str(out))
     return out
+
+
+@pytest.fixture(scope="session")
+def linear_build(tmp_path_factory):
+    """The demo build of DEMO_ARGS with `--keep-linear --previews` (issue 9): linear EXRs
+    of every view and level, and a preview.png per setting."""
+    if not HAS_BPY:
+        pytest.skip("bpy cannot be imported")
+    out = tmp_path_factory.mktemp("demo_linear") / "out"
+    run_cli("build", *DEMO_ARGS, "--keep-linear", "--previews", "--out", str(out))
+    return out

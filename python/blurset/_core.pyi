@@ -121,3 +121,56 @@ def noise_write_variants(
 ) -> None:
     """Write images/<name>.png and linear/<name>.exr of every (out_dir, sigma_read,
     sigma_shot, key) variant; `names` holds len(sources) * frames stems, view-major."""
+
+# --- noise on a build, from linear light (rust/py/src/noise_linear.rs) ---------------
+
+def noise_scene_seed(seed: int, setting: str, level: str) -> int:
+    """The noise seed of one level of one setting of a build (plays `--seed`'s role)."""
+
+def read_linear_composited(
+    path: str | PathLike[str], *, background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+) -> npt.NDArray[np.float32]:
+    """A build's linear RGBA EXR composited over `background`: float32 (H, W, 3), unclipped;
+    ImageError names the file on NaN/inf."""
+
+def noise_clean_from_linear(
+    image: npt.NDArray[np.float32],
+    *,
+    white_balance: tuple[float, float] | None = None,
+    white_level: float = 1.0,
+) -> npt.NDArray[np.float32]:
+    """The clean values y = white_level * clip(L, 0, 1) / wb of the linear path."""
+
+def noise_image_linear(
+    image: npt.NDArray[np.float32],
+    *,
+    sigma_read: float,
+    sigma_shot: float,
+    key: int,
+    view: int = 0,
+    frame: int = 0,
+    gamma: str = "2.2",
+    white_balance: tuple[float, float] | None = None,
+    white_level: float = 1.0,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+    """One noisy frame from composited linear RGB (H, W, 3): (linear float32, processed
+    uint8), with the same standard normals as `noise_image` for the same key/view/frame."""
+
+def noise_write_variants_linear(
+    sources: list[str | PathLike[str]],
+    names: list[str],
+    variants: list[tuple[str | PathLike[str], float, float, int]],
+    *,
+    frames: int = 1,
+    gamma: str = "2.2",
+    white_balance: tuple[float, float] | None = None,
+    white_level: float = 1.0,
+    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+) -> None:
+    """`noise_write_variants` from a build's linear EXRs (composited over `background`)."""
+
+def thumbnail_qa(
+    image: npt.NDArray[np.uint8], *, background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+) -> tuple[float, float, float]:
+    """(object coverage, mean object luma in [0, 1], fraction of the border touched) of an
+    RGB8 image over `background` (linear RGB)."""

@@ -59,7 +59,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--latent-positions", choices=["random", "stratified"], help="latent positions (random)"
     )
     p.add_argument(
-        "--write-linear", action="store_true", default=None, help="also write linear EXR"
+        "--keep-linear",
+        "--write-linear",
+        dest="write_linear",
+        action="store_true",
+        default=None,
+        help="also store the linear float image (EXR) of every view and level; "
+        "`blurset noise BUILD` then starts from it",
+    )
+    p.add_argument(
+        "--previews", action="store_true", default=None, help="write <setting>/preview.png"
     )
     p.add_argument("--workers", type=int, help="objects rendered in parallel (1)")
     p.add_argument("--threads", type=int, help="Cycles threads per worker (0 = all cores)")
@@ -96,7 +105,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
             "objects out demo settings_per_object views latents samples sharp_samples resolution "
             "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
-            "blender check_poses"
+            "blender check_poses previews"
         ).split()
     }
     if args.levels is not None:
@@ -356,6 +365,10 @@ def render_setting(
     if cfg.check_poses:
         meta["pose_check"] = _pose_check(partial)
         _write_json(partial / "meta.json", meta)
+    if cfg.previews:
+        from blurset.preview import write_build_preview
+
+        write_build_preview(partial, warn=progress.write)
     (partial / MARKER).write_text(f"{time.strftime('%Y-%m-%dT%H:%M:%S')}\n")
     if final.exists():
         shutil.rmtree(final)

@@ -12,8 +12,15 @@ from blurset.exceptions import BlursetError
 # subcommand -> (module, one-line help)
 COMMANDS = {
     "build": ("blurset.build", "render an Objaverse-Blur style dataset from GLB objects"),
-    "noise": ("blurset.noise", "write reproducible noisy copies (LLFF-N style) of an LLFF scene"),
+    "noise": (
+        "blurset.noise",
+        "write reproducible noisy copies (LLFF-N style) of an LLFF scene or of a whole build",
+    ),
     "check-poses": ("blurset.check_poses", "cross-check a scene's poses with COLMAP"),
+    "preview": (
+        "blurset.preview",
+        "figure of a setting at every level, or a build's contact sheet",
+    ),
 }
 
 

@@ -46,7 +46,10 @@ class BuildConfig:
     orientation_max: float = SAMPLING_DEFAULTS["guards"]["orientation_max"]
     near_floor: float = SAMPLING_DEFAULTS["guards"]["near_floor"]
     background: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
+    # `--keep-linear` (alias `--write-linear`): linear/<view>.exr beside images/ per level.
     write_linear: bool = False
+    # `--previews`: <setting>/preview.png (blurset.preview), written before the marker.
+    previews: bool = False
     view_stride: int = 16
     test_fraction: float = 0.2
     test_objects: list[str] | None = None
@@ -116,6 +119,8 @@ DEMO_DEFAULTS: dict[str, Any] = {
 }
 
 FIELDS = {f.name: f for f in dataclasses.fields(BuildConfig)}
+# Other spellings of option names in TOML files (the name → the field).
+ALIASES = {"keep_linear": "write_linear"}
 
 
 def parse_levels(value: Any, where: str = "--levels") -> list[int]:
@@ -183,7 +188,7 @@ def load_toml(path: Path) -> dict[str, Any]:
     table = data.get("build", data)
     out: dict[str, Any] = {}
     for key, value in table.items():
-        name = key.replace("-", "_")
+        name = ALIASES.get(key.replace("-", "_"), key.replace("-", "_"))
         if name not in FIELDS or name == "demo" and not isinstance(value, bool):
             raise ConfigError(f"{path}: unknown option {key!r}")
         out[name] = _coerce(name, value, f"{path}: {key}")

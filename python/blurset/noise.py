@@ -28,7 +28,10 @@ MODEL = "y' = y + sqrt(sigma_read^2 + sigma_shot^2 * y) * N(0, 1), y = white_lev
 
 def add_arguments(parser) -> None:
     parser.add_argument(
-        "scene", type=Path, help="LLFF scene directory (images*/ + poses_bounds.npy)"
+        "scene",
+        type=Path,
+        help="LLFF scene directory (images*/ + poses_bounds.npy), or a build directory "
+        "(dataset.json + settings): then every chosen level of every complete setting",
     )
     parser.add_argument("--out", type=Path, required=True, help="output directory (must not exist)")
     parser.add_argument(
@@ -56,7 +59,11 @@ def add_arguments(parser) -> None:
         help="KPN's synthetic test file (.npz with sig_read, sig_shot) to reproduce NAN's sigmas",
     )
     parser.add_argument(
-        "--gamma", choices=("2.2", "srgb"), default="2.2", help="transfer curve (NAN uses 2.2)"
+        "--gamma",
+        choices=("2.2", "srgb"),
+        default=None,
+        help="transfer curve (default: 2.2 as NAN for a scene; srgb, the build's own curve, "
+        "for a build)",
     )
     parser.add_argument(
         "--white-level", type=float, default=1.0, help="linear value of white (1e-6..1, default 1)"
@@ -65,6 +72,18 @@ def add_arguments(parser) -> None:
         "--any-gain", action="store_true", help="allow gains outside the LLFF-N levels"
     )
     parser.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    build = parser.add_argument_group("build mode (SCENE is a build directory)")
+    build.add_argument(
+        "--levels", default=None, help="levels to noise, e.g. sharp,blur_4 (default: all)"
+    )
+    build.add_argument(
+        "--source",
+        choices=("auto", "linear", "png"),
+        default="auto",
+        help="clean image: the build's linear EXRs (--keep-linear) or its PNGs "
+        "(auto: linear when every chosen level has them)",
+    )
+    build.add_argument("--quiet", action="store_true", help="no progress line")
 
 
 def gain_name(g: float) -> str:
@@ -150,7 +169,16 @@ def run(args) -> int:
     scene: Path = args.scene
     out: Path = args.out
     if not scene.is_dir():
-        raise InputError(f"scene directory not found: {scene}")
+        raise InputError(f"scene or build directory not found: {scene}")
+    from blurset import noise_build
+
+    if noise_build.is_build(scene):
+        return noise_build.run(args)
+    if args.levels is not None:
+        raise ConfigError(f"--levels applies to a build (no dataset.json in {scene})")
+    if args.source != "auto":
+        raise ConfigError(f"--source applies to a build (no dataset.json in {scene})")
+    args.gamma = args.gamma or "2.2"
     if args.factor is not None and args.factor < 1:
         raise ConfigError(f"--factor {args.factor}: must be >= 1")
     if args.frames < 1:

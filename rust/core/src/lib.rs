@@ -8,6 +8,7 @@ pub mod error;
 pub mod image_io;
 pub mod llff;
 pub mod noise;
+pub mod noise_linear;
 pub mod qa;
 pub mod rng;
 pub mod sampling;

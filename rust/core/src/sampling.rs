@@ -72,7 +72,10 @@ impl SamplingConfig {
             return bad(format!("views {} is outside 1..={MAX_COUNT}", self.views));
         }
         if !(1..=MAX_COUNT).contains(&self.latents) {
-            return bad(format!("latents {} is outside 1..={MAX_COUNT}", self.latents));
+            return bad(format!(
+                "latents {} is outside 1..={MAX_COUNT}",
+                self.latents
+            ));
         }
         if !(self.resolution >= 8 && self.resolution <= 16384) {
             return bad(format!(

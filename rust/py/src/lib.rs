@@ -6,6 +6,7 @@ mod accumulate;
 mod error;
 mod llff;
 mod noise;
+mod noise_linear;
 mod qa;
 mod sampling;
 
@@ -26,6 +27,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sampling::register(m)?;
     accumulate::register(m)?;
     noise::register(m)?;
+    noise_linear::register(m)?;
     qa::register(m)?;
     Ok(())
 }

@@ -1,0 +1,413 @@
+"""`blurset noise BUILD_DIR`: blur + noise on a whole build (issue 9).
+
+Every chosen level of every complete setting of a build becomes LLFF-N style noisy
+copies, mirroring the build's layout:
+
+    DIR/noise_dataset.json            seed, options, the seed of every (setting, level)
+    DIR/splits.json                   the build's splits, unchanged (same test views)
+    DIR/<setting>/<level>/gain_<g>/   a complete LLFF scene, as `blurset noise SCENE` writes:
+        images/  linear/  poses_bounds.npy  noise.json  .complete
+
+The unit of work is one gain of one level of one setting. It is written under
+`gain_<g>.partial/` and renamed into place after its `.complete` marker, the last file
+written: a rerun skips complete units and redoes partial ones; an error removes what
+the failing call had started and leaves complete units alone.
+
+The seed of a (setting, level) is derived in blurset-core from the one `--seed`
+(`noise_scene_seed`) and plays the role of the single-scene `--seed`, so the PNG path
+of a unit is byte-identical to `blurset noise <build>/<setting>/<level> --seed <that
+seed> --gamma srgb`.
+
+Source of the clean image: the build's linear EXRs (`blurset build --keep-linear`),
+composited over the build's background exactly as its PNGs were, or the sRGB PNGs
+inverted (`--source png`). Both share the same draws, so they differ only by what the
+8-bit PNG did to the clean image.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from blurset import __version__, _core
+from blurset.exceptions import ConfigError, InputError
+from blurset.noise import (
+    gain_name,
+    list_images,
+    output_names,
+    parse_gains,
+    read_kpn_levels,
+)
+
+MARKER = ".complete"
+DATASET_FILE = "noise_dataset.json"
+SEED_DERIVATION = (
+    "noise_scene_seed(seed, setting, level) = derive_seed(seed, [fnv1a64('build_noise'), "
+    "fnv1a64(setting), fnv1a64(level)]); per gain key noise_key(scene seed, gain) and white "
+    "balance noise_white_balance(scene seed), as `blurset noise SCENE --seed <scene seed>`"
+)
+MODEL = "y' = y + sqrt(sigma_read^2 + sigma_shot^2 * y) * N(0, 1)"
+CLEAN = {
+    "linear": "y = white_level * clip(composite(L, background), 0, 1) / wb, L the build's "
+    "linear premultiplied RGBA (linear/*.exr)",
+    "png": "y = white_level * decode(x) / wb, x the build's 8-bit sRGB PNG (images/*.png)",
+}
+
+
+def is_build(path: Path) -> bool:
+    """A build directory (as `blurset build` writes it) rather than one LLFF scene."""
+    return (path / "dataset.json").is_file()
+
+
+def _read_json(path: Path, what: str) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{what} not found: {path}") from None
+    except (OSError, ValueError) as e:
+        raise InputError(f"{what} is not readable JSON ({e}): {path}") from None
+
+
+def _write_json(path: Path, data) -> None:
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n")
+    os.replace(tmp, path)
+
+
+def complete_settings(build: Path) -> list[Path]:
+    """Setting directories of a build whose `.complete` marker exists, sorted."""
+    return sorted(d for d in build.iterdir() if d.is_dir() and (d / MARKER).is_file())
+
+
+def parse_levels(value: str | None, available: list[str]) -> list[str]:
+    """`sharp,blur_1,…` → level directory names, in the build's order."""
+    if value is None:
+        return list(available)
+    names = [s.strip() for s in value.split(",") if s.strip()]
+    if not names:
+        raise ConfigError(f"--levels {value!r}: give level names like sharp,blur_1")
+    for n in names:
+        if n not in available:
+            raise ConfigError(
+                f"unknown level {n!r} (--levels): the build has {', '.join(available)}"
+            )
+    if len(set(names)) != len(names):
+        raise ConfigError(f"--levels {value!r}: a level is given twice")
+    return [lvl for lvl in available if lvl in names]
+
+
+@dataclass
+class Unit:
+    """One level of one setting and the gains still to write there."""
+
+    setting: str
+    level: str
+    src: Path
+    dst: Path
+    seed: int
+    background: tuple[float, float, float]
+    sources: list[Path]
+    names: list[str]
+    rows: np.ndarray
+    resolution: tuple[int, int]
+    pending: list[float]
+
+
+def _plan_unit(
+    setting_dir: Path, level: str, out: Path, seed: int, gains: list[float], frames: int, kind: str
+) -> Unit:
+    src = setting_dir / level
+    meta = _read_json(setting_dir / "meta.json", "meta.json")
+    bg = meta.get("render", {}).get("background", [1.0, 1.0, 1.0])
+    image_dir = src / "images"
+    if not image_dir.is_dir():
+        raise InputError(f"level {level!r} has no images/ directory: {image_dir}")
+    pngs = list_images(image_dir)
+    if not pngs:
+        raise InputError(f"no .png/.jpg images in {image_dir}")
+    poses = src / "poses_bounds.npy"
+    if not poses.is_file():
+        raise InputError(f"poses_bounds.npy not found: {poses}")
+    rows = np.asarray(_core.read_poses_bounds(poses), dtype=np.float64)
+    if len(rows) != len(pngs):
+        raise InputError(f"{len(pngs)} images in {image_dir} but {len(rows)} pose rows in {poses}")
+    w0, h0, _, _ = _core.image_info(pngs[0])
+    for p in pngs[1:]:
+        w, h, _, _ = _core.image_info(p)
+        if (w, h) != (w0, h0):
+            raise InputError(f"image size {w}x{h} differs from {w0}x{h0} of {pngs[0].name}: {p}")
+    if kind == "linear":
+        sources = [src / "linear" / f"{p.stem}.exr" for p in pngs]
+        missing = next((s for s in sources if not s.is_file()), None)
+        if missing is not None:
+            raise InputError(
+                f"--source linear: missing linear image (build with --keep-linear): {missing}"
+            )
+    else:
+        sources = pngs
+    dst = out / setting_dir.name / level
+    pending = [g for g in gains if not (dst / gain_name(g) / MARKER).is_file()]
+    return Unit(
+        setting=setting_dir.name,
+        level=level,
+        src=src,
+        dst=dst,
+        seed=_core.noise_scene_seed(seed, setting_dir.name, level),
+        background=(float(bg[0]), float(bg[1]), float(bg[2])),
+        sources=sources,
+        names=output_names(pngs, frames),
+        rows=rows,
+        resolution=(w0, h0),
+        pending=pending,
+    )
+
+
+def _has_linear(level_dir: Path) -> bool:
+    lin = level_dir / "linear"
+    images = level_dir / "images"
+    if not (lin.is_dir() and images.is_dir()):
+        return False
+    return all((lin / f"{p.stem}.exr").is_file() for p in list_images(images))
+
+
+def _params(args, kind: str, gamma: str, levels_table) -> dict:
+    """The options a noise build is made with; a rerun into the same DIR must match them."""
+    return {
+        "seed": args.seed,
+        "source": kind,
+        "profile": args.profile,
+        "gamma": gamma,
+        "white_level": args.white_level,
+        "frames": args.frames,
+        "levels_table": {
+            "source": "kpn" if args.kpn_levels else "blurset-default",
+            "log10_sigma_read_1": levels_table[0],
+            "read_step_per_log2_gain": levels_table[1],
+            "log10_sigma_shot_1": levels_table[2],
+            "shot_step_per_log2_gain": levels_table[3],
+        },
+    }
+
+
+def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
+    if out.resolve() == build.resolve() or build.resolve() in out.resolve().parents:
+        raise ConfigError(f"--out must not lie inside the build: {out}")
+    if out.exists():
+        if not out.is_dir():
+            raise ConfigError(f"--out exists and is not a directory: {out}")
+        if overwrite:
+            shutil.rmtree(out)
+        elif (out / DATASET_FILE).is_file():
+            old = _read_json(out / DATASET_FILE, DATASET_FILE).get("params", {})
+            for k, v in params.items():
+                if old.get(k) != v:
+                    raise ConfigError(
+                        f"--out was written with {k} = {old.get(k)!r}, not {v!r}: use another "
+                        f"--out or --overwrite: {out / DATASET_FILE}"
+                    )
+        elif any(out.iterdir()):
+            raise ConfigError(
+                f"--out exists and is not a noise build (pass --overwrite to replace it): {out}"
+            )
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / DATASET_FILE).is_file():
+        # Written first (options only) so that a run killed before its end resumes;
+        # rewritten with the seeds and counts at the end.
+        _write_json(out / DATASET_FILE, {"build": str(build.resolve()), "params": params})
+    for stale in out.glob("*/*/gain_*.partial"):
+        shutil.rmtree(stale, ignore_errors=True)
+
+
+def _noise_json(unit: Unit, g: float, sr: float, ss: float, wb, params: dict, args, build) -> dict:
+    files = [
+        {
+            "view": i,
+            "frame": k,
+            "source": f"{unit.level}/{'linear' if params['source'] == 'linear' else 'images'}/"
+            f"{unit.sources[i].name}",
+            "image": f"images/{unit.names[i * args.frames + k]}.png",
+            "linear": f"linear/{unit.names[i * args.frames + k]}.exr",
+        }
+        for i in range(len(unit.sources))
+        for k in range(args.frames)
+    ]
+    lt = params["levels_table"]
+    return {
+        "gain": int(g) if float(g).is_integer() else g,
+        "seed": unit.seed,
+        "sigma_read": sr,
+        "sigma_shot": ss,
+        "gamma": 2.2 if params["gamma"] == "2.2" else "srgb",
+        "white_balance": None if wb is None else {"red": wb[0], "blue": wb[1]},
+        "white_level": args.white_level,
+        "frames": args.frames,
+        "profile": args.profile,
+        "model": MODEL,
+        "clean": CLEAN[params["source"]],
+        "levels": {**lt, "file": args.kpn_levels.name if args.kpn_levels else None},
+        "source": {
+            "kind": params["source"],
+            "build": str(build.resolve()),
+            "setting": unit.setting,
+            "level": unit.level,
+            "background": list(unit.background),
+            "resolution": list(unit.resolution),
+        },
+        "build_noise": {"seed": args.seed, "seed_derivation": SEED_DERIVATION},
+        "rng": "philox4x32-10, key noise_key(seed, gain), stream view<<32|frame, "
+        "word = pixel*3 + c; ziggurat normals (shared by the png and linear sources)",
+        "blurset_version": __version__,
+        "files": files,
+    }
+
+
+def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -> None:
+    unit.dst.mkdir(parents=True, exist_ok=True)
+    partials = {g: unit.dst / f"{gain_name(g)}.partial" for g in unit.pending}
+    for p in partials.values():
+        shutil.rmtree(p, ignore_errors=True)
+    try:
+        variants = [
+            (partials[g], *gains_sigmas[g], _core.noise_key(unit.seed, g)) for g in unit.pending
+        ]
+        common = {
+            "frames": args.frames,
+            "gamma": params["gamma"],
+            "white_balance": wb,
+            "white_level": args.white_level,
+        }
+        if params["source"] == "linear":
+            _core.noise_write_variants_linear(
+                unit.sources, unit.names, variants, background=unit.background, **common
+            )
+        else:
+            _core.noise_write_variants(unit.sources, unit.names, variants, **common)
+        # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the
+        # build's rows already hold the written resolution and focal length.
+        rows = np.repeat(unit.rows, args.frames, axis=0)
+        for g in unit.pending:
+            part = partials[g]
+            _core.write_poses_bounds(part / "poses_bounds.npy", rows)
+            sr, ss = gains_sigmas[g]
+            _write_json(part / "noise.json", _noise_json(unit, g, sr, ss, wb, params, args, build))
+            (part / MARKER).write_text(f"{time.strftime('%Y-%m-%dT%H:%M:%S')}\n")
+            final = unit.dst / gain_name(g)
+            if final.exists():
+                shutil.rmtree(final)
+            os.replace(part, final)
+    except BaseException:
+        for p in partials.values():
+            shutil.rmtree(p, ignore_errors=True)
+        raise
+
+
+def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
+    """noise_dataset.json over the complete units on disk."""
+    seeds: dict[str, dict[str, int]] = {}
+    gains_on_disk: dict[str, dict] = {}
+    n_units = n_images = 0
+    for marker in sorted(out.glob(f"*/*/gain_*/{MARKER}")):
+        unit = marker.parent
+        meta = _read_json(unit / "noise.json", "noise.json")
+        setting, level = unit.parent.parent.name, unit.parent.name
+        seeds.setdefault(setting, {})[level] = meta["seed"]
+        gains_on_disk[unit.name] = {
+            "gain": meta["gain"],
+            "sigma_read": meta["sigma_read"],
+            "sigma_shot": meta["sigma_shot"],
+        }
+        n_units += 1
+        n_images += len(meta["files"])
+    order = {lvl: i for i, lvl in enumerate(dataset.get("levels", []))}
+    seeds = {
+        s: dict(sorted(d.items(), key=lambda kv: order.get(kv[0], 99))) for s, d in seeds.items()
+    }
+    doc = {
+        "name": "blurset Objaverse-Blur + noise",
+        "blurset_version": __version__,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "build": str(build.resolve()),
+        "build_seed": dataset.get("seed"),
+        "params": params,
+        "seed_derivation": SEED_DERIVATION,
+        "gains": sorted(gains_on_disk.values(), key=lambda d: d["gain"]),
+        "levels": [
+            lvl for lvl in dataset.get("levels", []) if any(lvl in s for s in seeds.values())
+        ],
+        "seeds": seeds,
+        "layout": "<setting>/<level>/gain_<g>/ (images/, linear/, poses_bounds.npy, noise.json)",
+        "splits": "splits.json (copied from the build)",
+        "counts": {"settings": len(seeds), "units": n_units, "images": n_images},
+    }
+    _write_json(out / DATASET_FILE, doc)
+    return doc
+
+
+def run(args) -> int:
+    build: Path = args.scene
+    out: Path = args.out
+    if args.factor is not None:
+        raise ConfigError("--factor: a build has no images_<F>/ directories; omit it")
+    if args.frames < 1:
+        raise ConfigError(f"--frames {args.frames}: must be >= 1")
+    if not (1e-6 <= args.white_level <= 1.0):
+        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
+    if not (0 <= args.seed < 2**64):
+        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+    gains = parse_gains(args.gains, args.any_gain)
+    dataset = _read_json(build / "dataset.json", "dataset.json")
+    available = dataset.get("levels") or ["sharp"]
+    levels = parse_levels(args.levels, available)
+    settings = complete_settings(build)
+    if not settings:
+        raise InputError(f"no complete setting (<setting>/{MARKER}) in build: {build}")
+    if not (build / "splits.json").is_file():
+        raise InputError(f"splits.json not found: {build / 'splits.json'}")
+
+    source = args.source or "auto"
+    with_linear = all(_has_linear(s / lvl) for s in settings for lvl in levels)
+    kind = ("linear" if with_linear else "png") if source == "auto" else source
+    gamma = args.gamma or "srgb"
+    table = read_kpn_levels(args.kpn_levels) if args.kpn_levels else _core.noise_default_levels()
+    gains_sigmas = {g: _core.noise_sigmas(g, table) for g in gains}
+    params = _params(args, kind, gamma, table)
+
+    # Check every unit before writing anything: a bad build fails with nothing written.
+    units = [
+        _plan_unit(s, lvl, out, args.seed, gains, args.frames, kind)
+        for s in settings
+        for lvl in levels
+    ]
+    _prepare_out(out, build, params, args.overwrite)
+    # The next lines re-plan pending gains: --overwrite may just have removed units.
+    for u in units:
+        u.pending = [g for g in gains if not (u.dst / gain_name(g) / MARKER).is_file()]
+    shutil.copyfile(build / "splits.json", out / ".splits.json.tmp")
+    os.replace(out / ".splits.json.tmp", out / "splits.json")
+
+    written = 0
+    todo = [u for u in units if u.pending]
+    skipped = sum(len(gains) - len(u.pending) for u in units)
+    show = not getattr(args, "quiet", False) and sys.stderr.isatty()
+    for n, u in enumerate(todo, 1):
+        wb = _core.noise_white_balance(u.seed) if args.profile == "paper" else None
+        _write_unit(u, gains_sigmas, wb, params, args, build)
+        written += len(u.pending)
+        if show:
+            print(f"\r{n}/{len(todo)} levels noised", end="", file=sys.stderr, flush=True)
+    if show and todo:
+        print(file=sys.stderr)
+    doc = _finalize(out, build, params, dataset)
+    print(
+        f"blurset noise: {written} scene(s) written, {skipped} complete skipped "
+        f"({len(settings)} settings x {len(levels)} levels x {len(gains)} gains, "
+        f"source {kind}) -> {out} [{doc['counts']['units']} scenes in total]"
+    )
+    return 0
