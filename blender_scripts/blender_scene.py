@@ -20,6 +20,8 @@ import numpy as np
 from mathutils import Matrix, Vector
 
 ROOT_NAME = "blurset_root"
+DEFAULT_EXR_CODEC = "NONE"
+EXR_CODECS = ("NONE", "ZIP", "ZIPS", "PIZ", "RLE", "PXR24", "B44", "DWAA")
 CAMERA_NAME = "blurset_camera"
 
 # Render QA (a black or invisible object must not ship): tiny and cheap on purpose.
@@ -275,7 +277,9 @@ def setup_scene(threads: int) -> None:
     img.file_format = "OPEN_EXR"
     img.color_mode = "RGBA"
     img.color_depth = "32"
-    img.exr_codec = "ZIP"
+    # The EXRs are intermediate: read once, accumulated, deleted. Uncompressed costs no
+    # codec time on either side (bench/bench_blur_cost.py measures the codecs).
+    img.exr_codec = DEFAULT_EXR_CODEC
     # EXR keeps scene-linear data; Standard + no look also keeps any preview honest.
     vs = scene.view_settings
     vs.view_transform = "Standard"
@@ -346,6 +350,57 @@ def set_camera(c2w, resolution: int, fov_deg: float, samples: int) -> None:
     scene.cycles.samples = int(samples)
 
 
+def set_exr_codec(codec: str) -> None:
+    if codec not in EXR_CODECS:
+        raise ValueError(f"exr_codec must be one of {', '.join(EXR_CODECS)}, got {codec!r}")
+    bpy.context.scene.render.image_settings.exr_codec = codec
+
+
+def render_motion_blur(keys, motion_steps: int, out: str, seed: int) -> float:
+    """One render whose shutter spans the camera path `keys` (c2w matrices at t_k =
+    k / 2^motion_steps): keys at frames 1 + t_k, a shutter of one frame opening at
+    frame 1, and Cycles motion steps on the camera object, so its 2^steps + 1 motion
+    samples fall on the keys; between them Cycles interpolates (linear position,
+    slerp rotation), and each path sample gets a uniform time over the shutter.
+    Camera, resolution and samples are set with `set_camera` first."""
+    scene = bpy.context.scene
+    cam = scene.camera
+    n = len(keys)
+    if not (1 <= motion_steps <= 7) or n != (1 << motion_steps) + 1:
+        raise ValueError(f"{n} motion keys do not match motion_steps {motion_steps}")
+    prefs = bpy.context.preferences.edit
+    interp = prefs.keyframe_new_interpolation_type
+    prefs.keyframe_new_interpolation_type = "LINEAR"
+    cam.rotation_mode = "QUATERNION"
+    prev = None
+    try:
+        for k, c2w in enumerate(keys):
+            m = np.asarray(c2w, dtype=np.float64)
+            if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+                raise ValueError(f"motion key {k} must be a finite 4x4 matrix")
+            cam.matrix_world = Matrix(m.tolist())
+            q = cam.rotation_quaternion.copy()
+            if prev is not None and q.dot(prev) < 0.0:  # keep the shortest arc
+                q.negate()
+                cam.rotation_quaternion = q
+            prev = q
+            frame = 1.0 + k / (n - 1)
+            cam.keyframe_insert("location", frame=frame)
+            cam.keyframe_insert("rotation_quaternion", frame=frame)
+        cam.cycles.motion_steps = motion_steps
+        r = scene.render
+        r.use_motion_blur = True
+        r.motion_blur_shutter = 1.0
+        r.motion_blur_position = "START"
+        scene.frame_set(1)
+        return render_frame(out, seed)
+    finally:
+        prefs.keyframe_new_interpolation_type = interp
+        cam.animation_data_clear()
+        scene.render.use_motion_blur = False
+        scene.frame_set(1)
+
+
 def render_frame(out: str, seed: int) -> float:
     scene = bpy.context.scene
     # Cycles takes a signed 32-bit seed; fold larger integers into that range.
@@ -411,6 +466,7 @@ def render_qa(bbox_dims: list[float], workdir: str) -> dict:
     """Two tiny views from opposite sides; LoadError if the object is black or invisible."""
     scene = bpy.context.scene
     img = scene.render.image_settings
+    codec = img.exr_codec
     img.exr_codec = "NONE"
     radius = 0.5 * math.sqrt(sum(d * d for d in bbox_dims))
     dist = radius / math.sin(math.radians(QA_FOV_DEG / 2)) * 1.05
@@ -437,7 +493,7 @@ def render_qa(bbox_dims: list[float], workdir: str) -> dict:
             y = 0.2126 * r + 0.7152 * g + 0.0722 * b
             lum.append(float(y.sum()) / alpha if alpha > 0 else 0.0)
     finally:
-        img.exr_codec = "ZIP"
+        img.exr_codec = codec
     if max(cov) < QA_MIN_COVERAGE:
         raise LoadError(
             f"render QA: object is invisible (alpha coverage {max(cov):.4f} of the image)"

@@ -14,9 +14,12 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
   {"cmd":"load","glb":P,"vertices_out":NPY[,"unlit":"lit"|"emission"]}
       -> {"ok":true,"bbox_dims":[..],"n_vertices":N,"n_triangles":T,"scale":s,
           "center":[..],"warnings":[..],"unlit_fixed":b, ...} | {"ok":false,"reason":..}
-  {"cmd":"render","resolution":R,"fov_deg":F,"samples":S,
-   "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR}, ...]}
+  {"cmd":"render","resolution":R,"fov_deg":F,"samples":S[,"exr_codec":"NONE"|"ZIP"|...],
+   "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR[,"samples":S_i]
+              [,"motion":{"steps":n,"keys":[c2w, ...]}]}, ...]}
       -> {"frame":i,"out":EXR,"seconds":t} per frame, then {"ok":true,"done":n}
+      A frame's "samples" overrides S; a frame with "motion" is one Cycles motion blur
+      render along its 2^n + 1 keys (blender_scene.render_motion_blur).
   {"cmd":"quit"} -> exit 0
 
 At start-up the worker announces itself with
@@ -145,9 +148,17 @@ class Worker:
             return {"ok": False, "reason": "render before a successful load"}
         frames = cmd["frames"]
         res, fov, samples = int(cmd["resolution"]), float(cmd["fov_deg"]), int(cmd["samples"])
+        if "exr_codec" in cmd:
+            blender_scene.set_exr_codec(str(cmd["exr_codec"]))
         for i, fr in enumerate(frames):
-            blender_scene.set_camera(fr["c2w"], res, fov, samples)
-            secs = blender_scene.render_frame(str(fr["out"]), int(fr["seed"]))
+            blender_scene.set_camera(fr["c2w"], res, fov, int(fr.get("samples", samples)))
+            motion = fr.get("motion")
+            if motion:
+                secs = blender_scene.render_motion_blur(
+                    motion["keys"], int(motion["steps"]), str(fr["out"]), int(fr["seed"])
+                )
+            else:
+                secs = blender_scene.render_frame(str(fr["out"]), int(fr["seed"]))
             send({"frame": i, "out": str(fr["out"]), "seconds": secs})
         return {"ok": True, "done": len(frames)}
 

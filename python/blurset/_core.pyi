@@ -174,3 +174,19 @@ def thumbnail_qa(
 ) -> tuple[float, float, float]:
     """(object coverage, mean object luma in [0, 1], fraction of the border touched) of an
     RGB8 image over `background` (linear RGB)."""
+
+# --- tradeoff (rust/py/src/tradeoff.rs) ---------------------------------------------
+
+def image_error(
+    image: npt.NDArray[np.float32],
+    reference: npt.NDArray[np.float32],
+    *,
+    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+) -> str:
+    """JSON {psnr, psnr_linear, mse, mse_linear} of `image` against `reference`, both
+    float32 (H, W, 4) premultiplied linear RGBA; `psnr` is of the sRGB image composited
+    over `background` (peak 1), capped at 200 dB for identical images."""
+
+def pareto_front(seconds: list[float], psnr: list[float]) -> list[bool]:
+    """Which (seconds, psnr) points no other point beats in both (ties count as beaten
+    only when the other is strictly better in one)."""

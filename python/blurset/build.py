@@ -49,8 +49,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--settings-per-object", type=int, help="azimuth settings per object (4)")
     p.add_argument("--views", type=int, help="views per setting (34)")
     p.add_argument("--levels", type=str, help="blur levels, e.g. 1,2,3,4 or none (sharp only)")
-    p.add_argument("--latents", type=int, help="latent frames averaged per blurry image (34)")
+    p.add_argument(
+        "--latents",
+        type=str,
+        help="latent frames averaged per blurry image (34), or auto: per view and level, "
+        "the fewest that leave no gap over --max-ghost-px on screen",
+    )
+    p.add_argument("--latents-max", type=int, help="cap of --latents auto (34)")
+    p.add_argument(
+        "--max-ghost-px",
+        type=float,
+        help="--latents auto: largest screen gap between latent frames, px (1)",
+    )
     p.add_argument("--samples", type=int, help="Cycles samples per latent frame (32)")
+    p.add_argument(
+        "--samples-total",
+        type=int,
+        help="sample budget of one blurry image: ceil(S/m) samples per latent frame",
+    )
+    p.add_argument(
+        "--blur-method",
+        choices=["average", "motion_blur"],
+        help="average of latent renders (the paper; default) or one Cycles motion blur render",
+    )
     p.add_argument("--sharp-samples", type=int, help="Cycles samples of the sharp image")
     p.add_argument("--resolution", type=int, help="image side in pixels, square (512)")
     p.add_argument("--seed", type=int, help="build seed (0)")
@@ -102,7 +123,8 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
     flags = {
         k: getattr(args, k)
         for k in (
-            "objects out demo settings_per_object views latents samples sharp_samples resolution "
+            "objects out demo settings_per_object views latents latents_max max_ghost_px "
+            "samples samples_total blur_method sharp_samples resolution "
             "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "blender check_poses previews"
@@ -174,7 +196,30 @@ class SettingFailed(BlursetError):
 
 
 def frames_per_setting(cfg: BuildConfig) -> int:
-    return cfg.views * (1 + len(cfg.levels) * cfg.latents)
+    """Renders of a setting (an upper bound with --latents auto)."""
+    return cfg.views * (1 + len(cfg.levels) * cfg.max_latents)
+
+
+def level_renders(lp: dict, exr_prefix: Path) -> list[dict[str, Any]]:
+    """The renders of one blurry image of a plan: its latent frames (average method)
+    or its single motion blur render, each with its own Cycles samples."""
+    spf = lp["samples_per_frame"]
+    mb = lp.get("motion_blur")
+    if mb:
+        keys = [k["c2w"] for k in mb["keys"]]
+        return [
+            {
+                "c2w": keys[0],
+                "seed": mb["seed"],
+                "samples": spf,
+                "motion": {"steps": mb["motion_steps"], "keys": keys},
+                "out": f"{exr_prefix}_mb.exr",
+            }
+        ]
+    return [
+        {"c2w": f["c2w"], "seed": f["seed"], "samples": spf, "out": f"{exr_prefix}_{k:04d}.exr"}
+        for k, f in enumerate(lp["latent_frames"])
+    ]
 
 
 def _render_frames(plan: dict, exr_dir: Path) -> list[dict[str, Any]]:
@@ -186,14 +231,7 @@ def _render_frames(plan: dict, exr_dir: Path) -> list[dict[str, Any]]:
             {"c2w": v["c2w"], "seed": v["sharp_seed"], "out": str(exr_dir / f"{i:04d}_s.exr")}
         )
         for lvl, lp in v["levels"].items():
-            for k, f in enumerate(lp["latent_frames"]):
-                frames.append(
-                    {
-                        "c2w": f["c2w"],
-                        "seed": f["seed"],
-                        "out": str(exr_dir / f"{i:04d}_{lvl}_{k:04d}.exr"),
-                    }
-                )
+            frames.extend(level_renders(lp, exr_dir / f"{i:04d}_{lvl}"))
     return frames
 
 
@@ -203,7 +241,8 @@ def _keys(plan: dict) -> list[tuple[int, str]]:
     for v in plan["views"]:
         keys.append((v["index"], "sharp"))
         for lvl, lp in v["levels"].items():
-            keys.extend([(v["index"], f"blur_{lvl}")] * len(lp["latent_frames"]))
+            n = 1 if lp.get("motion_blur") else len(lp["latent_frames"])
+            keys.extend([(v["index"], f"blur_{lvl}")] * n)
     return keys
 
 
@@ -217,6 +256,19 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
                 "latent_frames": [
                     {k: x for k, x in f.items() if k != "c2w"} for f in lp["latent_frames"]
                 ],
+                **(
+                    {
+                        "motion_blur": {
+                            **lp["motion_blur"],
+                            "keys": [
+                                {k: x for k, x in key.items() if k != "c2w"}
+                                for key in lp["motion_blur"]["keys"]
+                            ],
+                        }
+                    }
+                    if lp.get("motion_blur")
+                    else {}
+                ),
             }
             for lvl, lp in v["levels"].items()
         }
@@ -236,8 +288,13 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
         "sampling": plan["config"],
         "render": {
             "engine": "CYCLES",
-            "samples_per_latent": cfg.samples,
+            # Per level in views[].levels[].samples_per_frame; null when a budget splits.
+            "samples_per_latent": None if cfg.samples_total else cfg.samples,
+            "samples_total": cfg.samples_total,
+            "blur_method": cfg.blur_method,
+            "latents": "auto" if cfg.latents_auto else cfg.latents,
             "sharp_samples": cfg.effective_sharp_samples,
+            "exr_codec": "NONE (intermediate frames, deleted after accumulation)",
             "background": cfg.background,
             "alpha": "premultiplied, averaged with colour, composited over background",
             "encoding": "sRGB (IEC 61966-2-1) of linear radiance, 8-bit PNG",
@@ -293,10 +350,9 @@ def render_setting(
     n_views = len(plan["views"])
     frames = _render_frames(plan, exr_dir)
     keys = _keys(plan)
-    need = {(v["index"], "sharp"): 1 for v in plan["views"]}
-    for v in plan["views"]:
-        for lvl, lp in v["levels"].items():
-            need[(v["index"], f"blur_{lvl}")] = len(lp["latent_frames"])
+    need: dict[tuple[int, str], int] = {}
+    for k in keys:
+        need[k] = need.get(k, 0) + 1
     for d in cfg.level_dirs:
         (partial / d / "images").mkdir(parents=True)
     acc: dict[tuple[int, str], Any] = {}
@@ -348,6 +404,8 @@ def render_setting(
     t_blur = time.time() - t1 - t_sharp
     if acc:
         raise BlursetError(f"{len(acc)} view/level images incomplete after rendering")
+    # --latents auto / motion blur render fewer frames than the bar's per-setting bound.
+    progress.frame_done(frames_per_setting(cfg) - len(frames))
     shutil.rmtree(exr_dir)
     _core.write_setting_poses(json.dumps(plan), partial, cfg.level_dirs)
     timings = {

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,10 +30,20 @@ class BuildConfig:
     views: int = SAMPLING_DEFAULTS["views"]
     levels: list[int] = field(default_factory=lambda: list(SAMPLING_DEFAULTS["levels"]))
     latents: int = SAMPLING_DEFAULTS["latents"]
+    # `--latents auto`: m per view and level from the screen motion (issue 6, DESIGN §8):
+    # the smallest m leaving no gap > max_ghost_px between latent frames, ≤ latents_max.
+    latents_auto: bool = False
+    latents_max: int = SAMPLING_DEFAULTS["latents_max"]
+    max_ghost_px: float = SAMPLING_DEFAULTS["max_ghost_px"]
+    # `average` (m latent renders, the paper) or `motion_blur` (one Cycles render).
+    blur_method: str = SAMPLING_DEFAULTS["blur_method"]
     # Cycles samples per rendered latent frame.
-    samples: int = 32
-    # Samples of the sharp render; None = samples × latents, so ground truth is at least
-    # as clean as the blurry images (m frames at s samples ≈ one frame at m·s).
+    samples: int = SAMPLING_DEFAULTS["samples"]
+    # Sample budget S of one blurry image: ⌈S / m⌉ samples per latent frame.
+    samples_total: int | None = None
+    # Samples of the sharp render; None = the blurry image's budget (samples_total, or
+    # samples × latents), so ground truth is at least as clean as the blurry images
+    # (m frames at s samples ≈ one frame at m·s).
     sharp_samples: int | None = None
     resolution: int = SAMPLING_DEFAULTS["resolution"]
     seed: int = 0
@@ -87,12 +98,33 @@ class BuildConfig:
                 "latent_positions": self.latent_positions,
                 "resolution": self.resolution,
                 "guards": {"orientation_max": self.orientation_max, "near_floor": self.near_floor},
+                "latents_auto": self.latents_auto,
+                "latents_max": self.latents_max,
+                "max_ghost_px": self.max_ghost_px,
+                "blur_method": self.blur_method,
+                "samples": self.samples,
+                **({"samples_total": self.samples_total} if self.samples_total else {}),
             }
         )
 
     @property
+    def max_latents(self) -> int:
+        """The most renders one blurry image can take under this config."""
+        if self.blur_method == "motion_blur":
+            return 1
+        return self.latents_max if self.latents_auto else self.latents
+
+    @property
+    def blur_samples_total(self) -> int:
+        """Samples one blurry image gets at most (the budget, or samples × its frames)."""
+        if self.samples_total:
+            return self.samples_total
+        m = self.latents if self.blur_method == "motion_blur" else self.max_latents
+        return self.samples * m
+
+    @property
     def effective_sharp_samples(self) -> int:
-        return self.sharp_samples or self.samples * self.latents
+        return self.sharp_samples or self.blur_samples_total
 
     @property
     def theta0s(self) -> list[float]:
@@ -106,6 +138,8 @@ class BuildConfig:
         d = dataclasses.asdict(self)
         d["out"] = str(self.out) if self.out else None
         d["effective_sharp_samples"] = self.effective_sharp_samples
+        if self.latents_auto:
+            d["latents"] = "auto"
         return d
 
 
@@ -144,6 +178,13 @@ def parse_levels(value: Any, where: str = "--levels") -> list[int]:
 def _coerce(name: str, value: Any, where: str) -> Any:
     if name == "levels":
         return parse_levels(value, where)
+    if name == "latents" and isinstance(value, str):
+        if value.strip().lower() == "auto":
+            return "auto"
+        try:
+            return int(value)
+        except ValueError:
+            raise ConfigError(f"{where}: expected a number of frames or auto, got {value!r}") from None
     default = getattr(BuildConfig(), name)
     try:
         if name == "out":
@@ -157,9 +198,11 @@ def _coerce(name: str, value: Any, where: str) -> Any:
             if len(bg) != 3:
                 raise ValueError
             return bg
-        if name in ("sharp_samples", "shard", "blender") and value is None:
+        if name in ("sharp_samples", "samples_total", "shard", "blender") and value is None:
             return None
-        if name in ("sharp_samples",):
+        if name in ("sharp_samples", "samples_total"):
+            if isinstance(value, bool) or int(value) != value:
+                raise ValueError
             return int(value)
         if isinstance(default, bool):
             if not isinstance(value, bool):
@@ -195,14 +238,41 @@ def load_toml(path: Path) -> dict[str, Any]:
     return out
 
 
+def _latents_layer(layer: dict[str, Any], where: str) -> dict[str, Any]:
+    """`latents = auto` in one layer → latents_auto; a number there turns auto off."""
+    layer = {k: v for k, v in layer.items() if v is not None}
+    if "latents" in layer:
+        value = _coerce("latents", layer.pop("latents"), where)
+        if value == "auto":
+            layer["latents_auto"] = True
+        else:
+            layer["latents"], layer["latents_auto"] = value, False
+    return layer
+
+
+# Options that only mean something with `--latents auto` / the average method.
+AUTO_ONLY = ("latents_max", "max_ghost_px")
+
+
 def make_config(file_values: dict[str, Any], flag_values: dict[str, Any]) -> BuildConfig:
     """Combine the layers and validate."""
     demo = bool(flag_values.get("demo") or file_values.get("demo"))
     values: dict[str, Any] = dict(DEMO_DEFAULTS) if demo else {}
-    values.update(file_values)
-    values.update({k: v for k, v in flag_values.items() if v is not None})
+    given = _latents_layer(file_values, "--config: latents")
+    given.update(_latents_layer(flag_values, "--latents"))
+    values.update(given)
     values["demo"] = demo
     cfg = BuildConfig(**{k: _coerce(k, v, f"--{k.replace('_', '-')}") for k, v in values.items()})
+    for name in AUTO_ONLY:
+        if name in given and not cfg.latents_auto:
+            raise ConfigError(f"--{name.replace('_', '-')}: only used with --latents auto")
+    if cfg.blur_method == "motion_blur":
+        for name, what in (("latents_auto", "--latents auto"), ("latent_positions", "--latent-positions")):
+            if given.get(name) not in (None, False):
+                raise ConfigError(
+                    f"{what}: the motion_blur method has no latent frames (one render per "
+                    "blurry image); use --blur-method average"
+                )
     validate(cfg)
     return cfg
 
@@ -234,6 +304,20 @@ def validate(cfg: BuildConfig) -> None:
     need(cfg.executor in ("local", "ray"), "executor", "must be local or ray")
     need(
         cfg.latent_positions in ("random", "stratified"), "latent_positions", "random or stratified"
+    )
+    need(
+        cfg.blur_method in ("average", "motion_blur"), "blur_method", "average or motion_blur"
+    )
+    need(1 <= cfg.latents_max <= 4096, "latents_max", "must be in 1..4096")
+    need(
+        math.isfinite(cfg.max_ghost_px) and cfg.max_ghost_px >= 0.01,
+        "max_ghost_px",
+        "must be a number of pixels ≥ 0.01",
+    )
+    need(
+        cfg.samples_total is None or 1 <= cfg.samples_total <= 2**20,
+        "samples_total",
+        "must be in 1..1048576",
     )
     need(all(0.0 <= c <= 1.0 for c in cfg.background), "background", "RGB values in [0, 1]")
     if cfg.shard is not None:

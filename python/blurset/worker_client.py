@@ -259,27 +259,38 @@ class Worker:
         fov_deg: float,
         samples: int,
         on_frame: Callable[[int, str], None] | None = None,
+        exr_codec: str | None = None,
     ) -> None:
         """Render frames ({"c2w": 4x4 row-major, "seed": int, "out": EXR path}) in order.
 
+        A frame may carry its own "samples", and "motion": {"steps": n, "keys": [c2w …]}
+        to be one Cycles motion blur render along 2^n + 1 camera keys.
         `on_frame(i, out)` runs as soon as frame i is on disk; the timeout applies per frame.
+        `exr_codec` sets the codec of the EXRs the worker writes (its default: NONE).
         """
         payload = []
         for f in frames:
-            c2w = f["c2w"]
-            c2w = c2w.tolist() if hasattr(c2w, "tolist") else [list(map(float, r)) for r in c2w]
-            payload.append(
-                {"c2w": c2w, "seed": int(f["seed"]), "out": str(Path(f["out"]).resolve())}
-            )
-        self._send(
-            {
-                "cmd": "render",
-                "resolution": int(resolution),
-                "fov_deg": float(fov_deg),
-                "samples": int(samples),
-                "frames": payload,
+            item: dict[str, Any] = {
+                "c2w": _matrix(f["c2w"]),
+                "seed": int(f["seed"]),
+                "out": str(Path(f["out"]).resolve()),
             }
-        )
+            if f.get("samples") is not None:
+                item["samples"] = int(f["samples"])
+            if f.get("motion"):
+                m = f["motion"]
+                item["motion"] = {"steps": int(m["steps"]), "keys": [_matrix(k) for k in m["keys"]]}
+            payload.append(item)
+        msg: dict[str, Any] = {
+            "cmd": "render",
+            "resolution": int(resolution),
+            "fov_deg": float(fov_deg),
+            "samples": int(samples),
+            "frames": payload,
+        }
+        if exr_codec is not None:
+            msg["exr_codec"] = str(exr_codec)
+        self._send(msg)
         while True:
             msg = self._receive_in_sync()
             if "frame" in msg:
@@ -324,6 +335,10 @@ class Worker:
     def __del__(self) -> None:
         if getattr(self, "_proc", None) is not None:
             self._discard()
+
+
+def _matrix(m: Any) -> list[list[float]]:
+    return m.tolist() if hasattr(m, "tolist") else [list(map(float, r)) for r in m]
 
 
 def _pump(stream: IO[bytes] | None, out: queue.Queue[bytes | None]) -> None:

@@ -21,8 +21,29 @@ pub enum LatentPositions {
     Stratified,
 }
 
+/// How a blurry image is made from its trajectory segment.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BlurMethod {
+    /// The mean of m latent frames rendered at positions t_1..t_m (the paper).
+    Average,
+    /// One Cycles render with the camera keyframed along the segment over the shutter:
+    /// every path sample gets its own time, so the image integrates the whole segment.
+    MotionBlur,
+}
+
 /// Largest number of views per setting and of latent frames per blurry image.
 pub const MAX_COUNT: usize = 4096;
+
+/// Largest Cycles sample count of one render, and of a `samples_total` budget.
+pub const MAX_SAMPLES: u32 = 1 << 20;
+
+/// Motion blur keys: Cycles interpolates the camera between its motion steps (position
+/// linearly, rotation by slerp); the steps are doubled until that interpolation stays
+/// within this many pixels of the true orbit and look-at everywhere on the segment.
+pub const MOTION_KEY_TOLERANCE_PX: f64 = 0.02;
+/// Cycles' `motion_steps` range (2^steps + 1 camera positions over the shutter).
+pub const MOTION_STEPS_RANGE: (u32, u32) = (1, 7);
 
 /// Everything that shapes the sampling of a setting. Units: degrees, Δr in percent of r.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -38,10 +59,23 @@ pub struct SamplingConfig {
     pub levels: Vec<u32>,
     /// w_l ~ U[(1 − s), (1 + s)] · w_u · l; the paper's s is 0.1.
     pub level_spread: f64,
+    /// m of every blurry image (the paper's 34), unless `latents_auto`.
     pub latents: usize,
     pub latent_positions: LatentPositions,
     pub resolution: u32,
     pub guards: Guards,
+    /// Choose m per view and level: the smallest m whose latent frames leave no gap
+    /// larger than `max_ghost_px` on screen (see `plan_setting`), capped at `latents_max`.
+    pub latents_auto: bool,
+    pub latents_max: usize,
+    pub max_ghost_px: f64,
+    pub blur_method: BlurMethod,
+    /// Cycles samples of each rendered frame, unless `samples_total` splits a budget.
+    pub samples: u32,
+    /// Sample budget of one blurry image: its m frames get ⌈S / m⌉ samples each (the
+    /// motion blur method renders one frame with S).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub samples_total: Option<u32>,
 }
 
 impl Default for SamplingConfig {
@@ -59,6 +93,12 @@ impl Default for SamplingConfig {
             latent_positions: LatentPositions::Random,
             resolution: 512,
             guards: Guards::default(),
+            latents_auto: false,
+            latents_max: 34,
+            max_ghost_px: 1.0,
+            blur_method: BlurMethod::Average,
+            samples: 32,
+            samples_total: None,
         }
     }
 }
@@ -76,6 +116,29 @@ impl SamplingConfig {
                 "latents {} is outside 1..={MAX_COUNT}",
                 self.latents
             ));
+        }
+        if !(1..=MAX_COUNT).contains(&self.latents_max) {
+            return bad(format!(
+                "latents_max {} is outside 1..={MAX_COUNT}",
+                self.latents_max
+            ));
+        }
+        if !(self.max_ghost_px.is_finite() && self.max_ghost_px >= 0.01) {
+            return bad(format!(
+                "max_ghost_px {} must be a number of pixels ≥ 0.01",
+                self.max_ghost_px
+            ));
+        }
+        if !(1..=MAX_SAMPLES).contains(&self.samples) {
+            return bad(format!(
+                "samples {} is outside 1..={MAX_SAMPLES}",
+                self.samples
+            ));
+        }
+        if let Some(t) = self.samples_total {
+            if !(1..=MAX_SAMPLES).contains(&t) {
+                return bad(format!("samples_total {t} is outside 1..={MAX_SAMPLES}"));
+            }
         }
         if !(self.resolution >= 8 && self.resolution <= 16384) {
             return bad(format!(
@@ -124,6 +187,29 @@ impl SamplingConfig {
         Ok(())
     }
 
+    /// The most latent frames one blurry image can have under this config.
+    pub fn max_latents(&self) -> usize {
+        match (self.blur_method, self.latents_auto) {
+            (BlurMethod::MotionBlur, _) => 1,
+            (BlurMethod::Average, true) => self.latents_max,
+            (BlurMethod::Average, false) => self.latents,
+        }
+    }
+
+    /// Cycles samples of each render of a blurry image made of `m` renders.
+    /// With a budget S: ⌈S / m⌉ (averaging m frames averages their noise too);
+    /// without one, `samples` per latent frame, and for the motion blur method one
+    /// render with the budget the average method would spend (`samples · latents`).
+    pub fn samples_per_frame(&self, m: usize) -> u32 {
+        match (self.blur_method, self.samples_total) {
+            (_, Some(total)) => total.div_ceil(m.max(1) as u32),
+            (BlurMethod::Average, None) => self.samples,
+            (BlurMethod::MotionBlur, None) => {
+                (self.samples as u64 * self.latents as u64).min(MAX_SAMPLES as u64) as u32
+            }
+        }
+    }
+
     /// Camera distance for an object of the given box.
     pub fn radius(&self, bbox_dims: [f64; 3]) -> f64 {
         self.radius_margin * bounding_radius(bbox_dims) / (0.5 * self.fov_deg.to_radians()).sin()
@@ -156,16 +242,48 @@ pub struct LatentFrame {
     pub c2w: [[f64; 4]; 4],
 }
 
+/// One camera keyframe of the motion blur method: position t on the segment.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MotionKey {
+    pub t: f64,
+    pub r: f64,
+    pub phi_deg: f64,
+    pub theta_deg: f64,
+    /// OpenGL camera-to-world, row-major.
+    pub c2w: [[f64; 4]; 4],
+}
+
+/// The single render of a blurry image made by Cycles motion blur: the camera is
+/// keyframed at t_k = k / 2^steps (k = 0..=2^steps) over a shutter of one frame that
+/// opens at t = 0, and Cycles gets `motion_steps` = steps on the camera object, so its
+/// motion steps fall exactly on the keys.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MotionBlurPlan {
+    pub seed: u32,
+    pub motion_steps: u32,
+    /// Largest screen error (px) of Cycles' interpolation between keys, estimated at
+    /// the middle of every key interval (≤ MOTION_KEY_TOLERANCE_PX unless capped).
+    pub interpolation_error_px: f64,
+    pub keys: Vec<MotionKey>,
+}
+
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct LevelPlan {
     pub w_l: f64,
-    /// m, the number of latent frames averaged.
+    /// m, the number of latent frames averaged (1 for the motion blur method: one render).
     pub latents: usize,
     /// Largest screen motion (px) of a bounding-box corner from p to p + w_l · δ.
     pub motion_px: f64,
-    /// Largest screen motion (px) between consecutive latent positions (ghosting if > 1).
+    /// Largest screen motion (px) between consecutive latent frames, the ends of the
+    /// segment counted as one gap (0 → t_1 plus t_m → 1), so one frame has the whole
+    /// motion as its gap; ghosting shows when it exceeds ~1 px. 0 for motion blur.
     pub max_gap_px: f64,
+    pub method: BlurMethod,
+    /// Cycles samples of each render of this image.
+    pub samples_per_frame: u32,
     pub latent_frames: Vec<LatentFrame>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion_blur: Option<MotionBlurPlan>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -237,7 +355,8 @@ pub fn sample_view(cfg: &SamplingConfig, seed: u64, theta0_deg: f64, index: usiz
     }
 }
 
-/// w_l and the latent positions t_1..t_m (sorted) of one level (purpose = level).
+/// w_l and the latent positions t_1..t_m (sorted) of one level (purpose = level),
+/// with m = `cfg.latents`.
 pub fn sample_level(
     cfg: &SamplingConfig,
     seed: u64,
@@ -245,10 +364,22 @@ pub fn sample_level(
     level: u32,
     w_u: f64,
 ) -> (f64, Vec<f64>) {
+    sample_level_m(cfg, seed, index, level, w_u, cfg.latents)
+}
+
+/// w_l and m latent positions of one level. w_l is the stream's first draw, so it does
+/// not depend on m, and a given m always gets the same positions.
+pub fn sample_level_m(
+    cfg: &SamplingConfig,
+    seed: u64,
+    index: usize,
+    level: u32,
+    w_u: f64,
+    m: usize,
+) -> (f64, Vec<f64>) {
     let mut s = Stream::new(seed, stream_id(index, level as u64));
     let (lo, hi) = level_interval(w_u, level, cfg.level_spread);
     let w_l = s.uniform_in(lo, hi);
-    let m = cfg.latents;
     let mut t: Vec<f64> = match cfg.latent_positions {
         LatentPositions::Random => (0..m).map(|_| s.uniform()).collect(),
         LatentPositions::Stratified => (0..m)
@@ -285,15 +416,159 @@ fn rows(m: &DMat4) -> [[f64; 4]; 4] {
     m.transpose().to_cols_array_2d()
 }
 
-/// Pixel position of world point `x` seen by `c2w` (None behind the camera).
-fn project(c2w: &DMat4, x: DVec3, focal: f64, size: f64) -> Option<(f64, f64)> {
-    let p = c2w.inverse().transform_point3(x);
-    (p.z < -1e-9).then(|| {
-        (
-            0.5 * size + focal * p.x / -p.z,
-            0.5 * size - focal * p.y / -p.z,
-        )
-    })
+/// The screen positions of the object's bounding-box corners (None behind the camera).
+type CornerPoints = [Option<(f64, f64)>; 8];
+
+/// Projects the bounding-box corners of one object for any camera of a setting.
+struct Screen {
+    corners: [DVec3; 8],
+    focal: f64,
+    size: f64,
+}
+
+impl Screen {
+    fn points(&self, c2w: &DMat4) -> CornerPoints {
+        let w2c = c2w.inverse();
+        self.corners.map(|x| {
+            let p = w2c.transform_point3(x);
+            (p.z < -1e-9).then(|| {
+                (
+                    0.5 * self.size + self.focal * p.x / -p.z,
+                    0.5 * self.size - self.focal * p.y / -p.z,
+                )
+            })
+        })
+    }
+}
+
+/// Largest screen distance any box corner moves between two cameras' projections.
+fn motion(a: &CornerPoints, b: &CornerPoints) -> f64 {
+    a.iter()
+        .zip(b)
+        .filter_map(|(pa, pb)| {
+            let (pa, pb) = ((*pa)?, (*pb)?);
+            Some(((pa.0 - pb.0).powi(2) + (pa.1 - pb.1).powi(2)).sqrt())
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Largest gap (px) between consecutive latent frames `pts` (sorted by t) on the path
+/// from `start` (t = 0) to `end` (t = 1). The two uncovered ends of the segment count
+/// together as one more gap, so the gaps always add up to at least the whole motion:
+/// one frame has the whole motion as its gap, and m frames leave a gap ≥ motion / m.
+fn max_gap(pts: &[CornerPoints], start: &CornerPoints, end: &CornerPoints) -> f64 {
+    let (Some(first), Some(last)) = (pts.first(), pts.last()) else {
+        return motion(start, end);
+    };
+    let ends = motion(start, first) + motion(last, end);
+    pts.windows(2)
+        .map(|w| motion(&w[0], &w[1]))
+        .fold(ends, f64::max)
+}
+
+/// The camera of position t ∈ [0, 1] on one level's segment, p → p + w_l · δ.
+struct Segment<'a> {
+    r: f64,
+    phi_deg: f64,
+    theta_deg: f64,
+    trajectory: &'a Trajectory,
+    w_l: f64,
+    r_min: f64,
+}
+
+impl Segment<'_> {
+    fn at(&self, t: f64) -> ((f64, f64, f64), DMat4) {
+        let (r, phi, theta) = along(
+            self.r,
+            self.phi_deg,
+            self.theta_deg,
+            self.trajectory,
+            t * self.w_l,
+            self.r_min,
+        );
+        ((r, phi, theta), orbit_c2w(r, phi, theta))
+    }
+}
+
+/// The latent positions of one level and their screen gap: `cfg.latents` of them, or
+/// with `latents_auto` the smallest m ≤ `latents_max` whose own seeded draw leaves no
+/// gap above `max_ghost_px` (the search starts at ⌈motion / max_ghost_px⌉, below which
+/// no draw can succeed). Each m has its fixed draw, so the choice is reproducible; with
+/// stratified positions gaps never exceed two strata, so m lands between motion / P and
+/// 2 · motion / P, while uniformly random positions leave gaps of ~ln(m) / m and need
+/// several times more frames. At the cap the gap may exceed the bound (recorded).
+/// `draw(m)` gives the m seeded positions of this view and level.
+fn latent_positions(
+    cfg: &SamplingConfig,
+    draw: impl Fn(usize) -> Vec<f64>,
+    seg: &Segment,
+    screen: &Screen,
+    motion_px: f64,
+) -> (Vec<f64>, f64) {
+    let start = screen.points(&seg.at(0.0).1);
+    let end = screen.points(&seg.at(1.0).1);
+    let gap_of = |ts: &[f64]| {
+        let pts: Vec<CornerPoints> = ts.iter().map(|&t| screen.points(&seg.at(t).1)).collect();
+        max_gap(&pts, &start, &end)
+    };
+    if !cfg.latents_auto {
+        let ts = draw(cfg.latents);
+        let gap = gap_of(&ts);
+        return (ts, gap);
+    }
+    let lower = (motion_px / cfg.max_ghost_px - 1e-9).ceil().max(1.0);
+    let first = (lower as usize).min(cfg.latents_max);
+    let mut best = (Vec::new(), f64::INFINITY);
+    for m in first..=cfg.latents_max {
+        let ts = draw(m);
+        let gap = gap_of(&ts);
+        best = (ts, gap);
+        if gap <= cfg.max_ghost_px {
+            break;
+        }
+    }
+    best
+}
+
+/// Keys of the motion blur method: 2^n + 1 cameras at t_k = k / 2^n, with the smallest
+/// n in MOTION_STEPS_RANGE for which Cycles' interpolation between keys (linear in
+/// position, slerp in rotation) stays within MOTION_KEY_TOLERANCE_PX of the true
+/// camera at the middle of every interval. Returns (n, error px, keys).
+fn motion_keys(seg: &Segment, screen: &Screen) -> (u32, f64, Vec<MotionKey>) {
+    let (lo, hi) = MOTION_STEPS_RANGE;
+    let mut out = (hi, f64::INFINITY, Vec::new());
+    for n in lo..=hi {
+        let intervals = 1usize << n;
+        let cams: Vec<((f64, f64, f64), DMat4)> = (0..=intervals)
+            .map(|k| seg.at(k as f64 / intervals as f64))
+            .collect();
+        let err = (0..intervals)
+            .map(|k| {
+                let (a, b) = (&cams[k].1, &cams[k + 1].1);
+                let (_, qa, ta) = a.to_scale_rotation_translation();
+                let (_, qb, tb) = b.to_scale_rotation_translation();
+                let mid = DMat4::from_rotation_translation(qa.slerp(qb, 0.5), ta.lerp(tb, 0.5));
+                let exact = seg.at((k as f64 + 0.5) / intervals as f64).1;
+                motion(&screen.points(&mid), &screen.points(&exact))
+            })
+            .fold(0.0, f64::max);
+        let keys = cams
+            .iter()
+            .enumerate()
+            .map(|(k, ((r, phi, theta), m))| MotionKey {
+                t: k as f64 / intervals as f64,
+                r: *r,
+                phi_deg: *phi,
+                theta_deg: *theta,
+                c2w: rows(m),
+            })
+            .collect();
+        out = (n, err, keys);
+        if err <= MOTION_KEY_TOLERANCE_PX {
+            break;
+        }
+    }
+    out
 }
 
 /// LLFF near/far of a view: near floored at `near_floor`, and far strictly beyond near
@@ -312,17 +587,6 @@ fn corners(d: [f64; 3]) -> [DVec3; 8] {
             if i & 4 == 0 { -0.5 } else { 0.5 } * d[2],
         )
     })
-}
-
-/// Largest screen distance any box corner moves between two cameras.
-fn corner_motion(a: &DMat4, b: &DMat4, bbox_dims: [f64; 3], focal: f64, size: f64) -> f64 {
-    corners(bbox_dims)
-        .iter()
-        .filter_map(|&x| {
-            let (pa, pb) = (project(a, x, focal, size)?, project(b, x, focal, size)?);
-            Some(((pa.0 - pb.0).powi(2) + (pa.1 - pb.1).powi(2)).sqrt())
-        })
-        .fold(0.0, f64::max)
 }
 
 /// Plan one setting: views, depth ranges from the object's vertices, weights, levels,
@@ -355,7 +619,11 @@ pub fn plan_setting(
     let radius = cfg.radius(bbox_dims);
     let r_min = 1.05 * bounding_radius(bbox_dims);
     let focal = focal_px(cfg.resolution, cfg.fov_deg);
-    let size = cfg.resolution as f64;
+    let screen = Screen {
+        corners: corners(bbox_dims),
+        focal,
+        size: cfg.resolution as f64,
+    };
     let views = (0..cfg.views)
         .map(|index| {
             let v = sample_view(cfg, seed, theta0_deg, index);
@@ -366,51 +634,68 @@ pub fn plan_setting(
                 .levels
                 .iter()
                 .map(|&level| {
-                    let (w_l, ts) = sample_level(cfg, seed, index, level, w.w_u);
-                    let cams: Vec<(f64, (f64, f64, f64), DMat4)> = ts
-                        .iter()
-                        .map(|&t| {
-                            let (r, phi, theta) = along(
-                                radius,
-                                v.phi_deg,
-                                v.theta_deg,
-                                &v.trajectory,
-                                t * w_l,
-                                r_min,
-                            );
-                            (t, (r, phi, theta), orbit_c2w(r, phi, theta))
-                        })
-                        .collect();
-                    let (r1, p1, t1) =
-                        along(radius, v.phi_deg, v.theta_deg, &v.trajectory, w_l, r_min);
-                    let motion_px =
-                        corner_motion(&c2w, &orbit_c2w(r1, p1, t1), bbox_dims, focal, size);
-                    let max_gap_px = cams
-                        .windows(2)
-                        .map(|p| corner_motion(&p[0].2, &p[1].2, bbox_dims, focal, size))
-                        .fold(0.0, f64::max);
-                    let latent_frames = cams
-                        .iter()
-                        .enumerate()
-                        .map(|(k, (t, (r, phi, theta), m))| LatentFrame {
-                            t: *t,
-                            r: *r,
-                            phi_deg: *phi,
-                            theta_deg: *theta,
-                            seed: frame_seed(seed, index, level, k),
-                            c2w: rows(m),
-                        })
-                        .collect();
-                    (
-                        level.to_string(),
-                        LevelPlan {
-                            w_l,
-                            latents: ts.len(),
-                            motion_px,
-                            max_gap_px,
-                            latent_frames,
-                        },
-                    )
+                    let (w_l, _) = sample_level_m(cfg, seed, index, level, w.w_u, 0);
+                    let seg = Segment {
+                        r: radius,
+                        phi_deg: v.phi_deg,
+                        theta_deg: v.theta_deg,
+                        trajectory: &v.trajectory,
+                        w_l,
+                        r_min,
+                    };
+                    let motion_px = motion(&screen.points(&c2w), &screen.points(&seg.at(1.0).1));
+                    let plan = match cfg.blur_method {
+                        BlurMethod::Average => {
+                            let draw = |m| sample_level_m(cfg, seed, index, level, w.w_u, m).1;
+                            let (ts, max_gap_px) =
+                                latent_positions(cfg, draw, &seg, &screen, motion_px);
+                            let latent_frames: Vec<LatentFrame> = ts
+                                .iter()
+                                .enumerate()
+                                .map(|(k, &t)| {
+                                    let ((r, phi, theta), m) = seg.at(t);
+                                    LatentFrame {
+                                        t,
+                                        r,
+                                        phi_deg: phi,
+                                        theta_deg: theta,
+                                        seed: frame_seed(seed, index, level, k),
+                                        c2w: rows(&m),
+                                    }
+                                })
+                                .collect();
+                            LevelPlan {
+                                w_l,
+                                latents: ts.len(),
+                                motion_px,
+                                max_gap_px,
+                                method: BlurMethod::Average,
+                                samples_per_frame: cfg.samples_per_frame(ts.len()),
+                                latent_frames,
+                                motion_blur: None,
+                            }
+                        }
+                        BlurMethod::MotionBlur => {
+                            let (motion_steps, interpolation_error_px, keys) =
+                                motion_keys(&seg, &screen);
+                            LevelPlan {
+                                w_l,
+                                latents: 1,
+                                motion_px,
+                                max_gap_px: 0.0,
+                                method: BlurMethod::MotionBlur,
+                                samples_per_frame: cfg.samples_per_frame(1),
+                                latent_frames: Vec::new(),
+                                motion_blur: Some(MotionBlurPlan {
+                                    seed: frame_seed(seed, index, level, 0),
+                                    motion_steps,
+                                    interpolation_error_px,
+                                    keys,
+                                }),
+                            }
+                        }
+                    };
+                    (level.to_string(), plan)
                 })
                 .collect();
             ViewPlan {
@@ -648,6 +933,202 @@ mod tests {
             ..Default::default()
         })
         .contains("fov_deg"));
+    }
+
+    fn median(mut v: Vec<f64>) -> f64 {
+        v.sort_by(|a, b| a.total_cmp(b));
+        v[v.len() / 2]
+    }
+
+    #[test]
+    fn auto_latents_meet_the_ghost_bound_and_follow_the_motion() {
+        for positions in [LatentPositions::Stratified, LatentPositions::Random] {
+            let cfg = SamplingConfig {
+                latents_auto: true,
+                latents_max: MAX_COUNT,
+                latent_positions: positions,
+                views: 8,
+                ..Default::default()
+            };
+            let p = plan(&cfg, 2, [1.0, 0.7, 0.5]);
+            for v in &p.views {
+                for lp in v.levels.values() {
+                    assert!(
+                        lp.max_gap_px <= cfg.max_ghost_px,
+                        "{positions:?} {}",
+                        lp.max_gap_px
+                    );
+                    // No m below motion / P can meet the bound: the gaps add up to the motion.
+                    assert!(lp.latents as f64 >= lp.motion_px / cfg.max_ghost_px - 1e-9);
+                    assert_eq!(lp.latent_frames.len(), lp.latents);
+                }
+                assert!(v.levels["1"].latents < v.levels["4"].latents);
+            }
+            let m = |l: &str| median(p.views.iter().map(|v| v.levels[l].latents as f64).collect());
+            let motion = |l: &str| median(p.views.iter().map(|v| v.levels[l].motion_px).collect());
+            // Stratified gaps are at most two strata: m within [motion / P, 2 motion / P + 1].
+            if positions == LatentPositions::Stratified {
+                for l in ["1", "4"] {
+                    assert!(
+                        m(l) <= 2.0 * motion(l) + 1.0,
+                        "level {l}: m {} motion {}",
+                        m(l),
+                        motion(l)
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn stratified_auto_needs_fewer_frames_than_random() {
+        let total = |positions| {
+            let cfg = SamplingConfig {
+                latents_auto: true,
+                latents_max: MAX_COUNT,
+                latent_positions: positions,
+                views: 8,
+                ..Default::default()
+            };
+            let p = plan(&cfg, 4, [1.0, 0.6, 0.4]);
+            p.views
+                .iter()
+                .flat_map(|v| v.levels.values().map(|lp| lp.latents))
+                .sum::<usize>()
+        };
+        let (s, r) = (
+            total(LatentPositions::Stratified),
+            total(LatentPositions::Random),
+        );
+        assert!(2 * s < r, "stratified {s} random {r}");
+    }
+
+    #[test]
+    fn auto_is_the_fixed_plan_at_its_m_and_capped() {
+        let auto = SamplingConfig {
+            latents_auto: true,
+            latent_positions: LatentPositions::Stratified,
+            views: 6,
+            ..Default::default()
+        };
+        let p = plan(&auto, 8, [1.0, 0.8, 0.3]);
+        for v in &p.views {
+            for (l, lp) in &v.levels {
+                let fixed = SamplingConfig {
+                    latents_auto: false,
+                    latents: lp.latents,
+                    ..auto.clone()
+                };
+                let q = plan(&fixed, 8, [1.0, 0.8, 0.3]);
+                assert_eq!(&q.views[v.index].levels[l], lp);
+                assert!(lp.latents <= 34);
+                if lp.max_gap_px > auto.max_ghost_px {
+                    assert_eq!(
+                        lp.latents, auto.latents_max,
+                        "over the bound only at the cap"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn gaps_add_up_to_at_least_the_motion() {
+        let cfg = SamplingConfig {
+            latents: 7,
+            ..Default::default()
+        };
+        let p = plan(&cfg, 5, [1.0, 0.5, 0.5]);
+        for v in &p.views {
+            for lp in v.levels.values() {
+                assert!(lp.max_gap_px * 7.0 >= lp.motion_px - 1e-9);
+            }
+        }
+        let one = plan(&SamplingConfig { latents: 1, ..cfg }, 5, [1.0, 0.5, 0.5]);
+        for v in &one.views {
+            for lp in v.levels.values() {
+                // One frame: the two uncovered ends add up to (at least) the whole motion.
+                assert!(lp.max_gap_px >= lp.motion_px - 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn sample_budget_is_split_over_the_frames() {
+        let cfg = SamplingConfig {
+            samples_total: Some(136),
+            latents: 34,
+            ..Default::default()
+        };
+        assert_eq!(cfg.samples_per_frame(34), 4);
+        assert_eq!(cfg.samples_per_frame(5), 28);
+        assert_eq!(cfg.samples_per_frame(1), 136);
+        assert_eq!(SamplingConfig::default().samples_per_frame(10), 32);
+        let mb = SamplingConfig {
+            blur_method: BlurMethod::MotionBlur,
+            samples: 4,
+            ..Default::default()
+        };
+        assert_eq!(mb.samples_per_frame(1), 4 * 34);
+        let auto = SamplingConfig {
+            latents_auto: true,
+            samples_total: Some(100),
+            views: 4,
+            ..Default::default()
+        };
+        for v in &plan(&auto, 1, [1.0, 1.0, 1.0]).views {
+            for lp in v.levels.values() {
+                assert_eq!(lp.samples_per_frame, 100u32.div_ceil(lp.latents as u32));
+            }
+        }
+        assert!(SamplingConfig {
+            samples_total: Some(0),
+            ..Default::default()
+        }
+        .validate()
+        .is_err());
+    }
+
+    #[test]
+    fn motion_blur_keys_follow_the_segment() {
+        let cfg = SamplingConfig {
+            blur_method: BlurMethod::MotionBlur,
+            views: 8,
+            ..Default::default()
+        };
+        let avg = SamplingConfig {
+            latents: 3,
+            views: 8,
+            ..Default::default()
+        };
+        let (p, q) = (
+            plan(&cfg, 6, [1.0, 0.9, 0.2]),
+            plan(&avg, 6, [1.0, 0.9, 0.2]),
+        );
+        for (v, va) in p.views.iter().zip(&q.views) {
+            for (l, lp) in &v.levels {
+                let mb = lp.motion_blur.as_ref().expect("motion blur plan");
+                assert_eq!((lp.latents, lp.latent_frames.len()), (1, 0));
+                assert_eq!(mb.keys.len(), (1 << mb.motion_steps) + 1);
+                assert!(mb.interpolation_error_px <= MOTION_KEY_TOLERANCE_PX);
+                assert_eq!(mb.keys[0].c2w, v.c2w, "the shutter opens at p");
+                assert_eq!(mb.keys.last().map(|k| k.t), Some(1.0));
+                // Same segment as the average method: the same w_l and motion.
+                assert_eq!(lp.w_l, va.levels[l].w_l);
+                assert_eq!(lp.motion_px, va.levels[l].motion_px);
+                // Every latent frame of the average method lies on the keyed path.
+                for f in &va.levels[l].latent_frames {
+                    let k = mb.keys.iter().filter(|k| k.t <= f.t).count() - 1;
+                    let (a, b) = (&mb.keys[k], &mb.keys[k + 1]);
+                    assert!(a.t <= f.t && f.t <= b.t);
+                    let between = |x: f64, y: f64, z: f64| (x - z) * (y - z) <= 1e-12;
+                    assert!(between(a.theta_deg, b.theta_deg, f.theta_deg));
+                }
+            }
+            // Faster levels need at least as many keys.
+            let steps = |l: &str| v.levels[l].motion_blur.as_ref().map(|m| m.motion_steps);
+            assert!(steps("1") <= steps("4"));
+        }
     }
 
     proptest! {

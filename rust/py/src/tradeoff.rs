@@ -1,0 +1,51 @@
+//! Bindings of `blurset_core::tradeoff`: image error against a reference, Pareto front.
+use blurset_core::tradeoff;
+use numpy::{PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+fn rgba<'a>(a: &'a PyReadonlyArray3<'_, f32>, what: &str) -> PyResult<&'a [f32]> {
+    if a.shape()[2] != 4 {
+        return Err(PyValueError::new_err(format!(
+            "{what} must have shape (H, W, 4) premultiplied linear RGBA, got {:?}",
+            a.shape()
+        )));
+    }
+    a.as_slice()
+        .map_err(|_| PyValueError::new_err(format!("{what} must be C-contiguous")))
+}
+
+/// Error of `image` against `reference` (float32 (H, W, 4), premultiplied linear RGBA):
+/// JSON with `psnr` (sRGB over the background), `psnr_linear`, `mse`, `mse_linear`.
+#[pyfunction]
+#[pyo3(signature = (image, reference, *, background = (1.0, 1.0, 1.0)))]
+fn image_error(
+    py: Python<'_>,
+    image: PyReadonlyArray3<'_, f32>,
+    reference: PyReadonlyArray3<'_, f32>,
+    background: (f64, f64, f64),
+) -> PyResult<String> {
+    if image.shape() != reference.shape() {
+        return Err(PyValueError::new_err(format!(
+            "image {:?} and reference {:?} differ in shape",
+            image.shape(),
+            reference.shape()
+        )));
+    }
+    let (a, b) = (rgba(&image, "image")?, rgba(&reference, "reference")?);
+    let bg = [background.0, background.1, background.2];
+    let e = crate::run_detached(py, || tradeoff::image_error(a, b, bg))?;
+    serde_json::to_string(&e).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+/// Which points (seconds, psnr) are Pareto-optimal (faster or better than every other).
+#[pyfunction]
+fn pareto_front(seconds: Vec<f64>, psnr: Vec<f64>) -> PyResult<Vec<bool>> {
+    tradeoff::pareto_front(&seconds, &psnr).map_err(crate::error::to_pyerr)
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(image_error, m)?)?;
+    m.add_function(wrap_pyfunction!(pareto_front, m)?)?;
+    Ok(())
+}
