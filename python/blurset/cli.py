@@ -21,6 +21,10 @@ COMMANDS = {
         "blurset.preview",
         "figure of a setting at every level, or a build's contact sheet",
     ),
+    "tradeoff": (
+        "blurset.tradeoff",
+        "measure render time against PSNR for latent counts, samples and blur methods",
+    ),
 }
 
 

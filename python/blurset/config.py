@@ -184,7 +184,9 @@ def _coerce(name: str, value: Any, where: str) -> Any:
         try:
             return int(value)
         except ValueError:
-            raise ConfigError(f"{where}: expected a number of frames or auto, got {value!r}") from None
+            raise ConfigError(
+                f"{where}: expected a number of frames or auto, got {value!r}"
+            ) from None
     default = getattr(BuildConfig(), name)
     try:
         if name == "out":
@@ -267,7 +269,10 @@ def make_config(file_values: dict[str, Any], flag_values: dict[str, Any]) -> Bui
         if name in given and not cfg.latents_auto:
             raise ConfigError(f"--{name.replace('_', '-')}: only used with --latents auto")
     if cfg.blur_method == "motion_blur":
-        for name, what in (("latents_auto", "--latents auto"), ("latent_positions", "--latent-positions")):
+        for name, what in (
+            ("latents_auto", "--latents auto"),
+            ("latent_positions", "--latent-positions"),
+        ):
             if given.get(name) not in (None, False):
                 raise ConfigError(
                     f"{what}: the motion_blur method has no latent frames (one render per "
@@ -305,9 +310,7 @@ def validate(cfg: BuildConfig) -> None:
     need(
         cfg.latent_positions in ("random", "stratified"), "latent_positions", "random or stratified"
     )
-    need(
-        cfg.blur_method in ("average", "motion_blur"), "blur_method", "average or motion_blur"
-    )
+    need(cfg.blur_method in ("average", "motion_blur"), "blur_method", "average or motion_blur")
     need(1 <= cfg.latents_max <= 4096, "latents_max", "must be in 1..4096")
     need(
         math.isfinite(cfg.max_ghost_px) and cfg.max_ghost_px >= 0.01,

@@ -1,0 +1,495 @@
+"""`blurset tradeoff`: what each speed-up costs in quality, measured on your object.
+
+One view's blurry image (one level) is rendered at several latent counts, samples per
+frame, latent position schemes and with both methods (latent averaging, Cycles motion
+blur), each against a reference: the average of many stratified latent frames with many
+samples each. Every candidate goes through the build's own path (Blender worker → EXR →
+Rust accumulator), on the same trajectory segment p → p + w_l·δ planned by blurset-core.
+
+Writes DIR/tradeoff.csv (one row per candidate and one for the reference),
+DIR/tradeoff.json (the same plus the set-up), DIR/tradeoff.png (seconds vs PSNR, Pareto
+front) and DIR/images/*.png, and prints a short recommendation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from blurset import _core
+from blurset.build import level_renders
+from blurset.config import BuildConfig
+from blurset.exceptions import ConfigError
+
+COLUMNS = (
+    "role",
+    "method",
+    "sampling",
+    "latents",
+    "samples_per_frame",
+    "samples_total",
+    "budget",
+    "seconds",
+    "psnr",
+    "psnr_linear",
+    "cpu_seconds",
+    "max_gap_px",
+    "pareto",
+    "label",
+)
+
+
+@dataclass(frozen=True)
+class Preset:
+    resolution: int
+    level: int
+    reference: tuple[int, int]  # (latent frames, samples per frame), stratified
+    budgets: tuple[int, ...]  # samples per blurry image
+    latents: tuple[int, ...]
+    samplings: tuple[str, ...] = ("random", "stratified")
+
+
+PRESETS = {
+    # About 2-4 minutes on 2 shared cores.
+    "quick": Preset(96, 4, (64, 32), (16, 64), (2, 8, 32)),
+    # Tens of minutes: the paper's m = 34 and budgets up to 512 samples at 256 px.
+    "full": Preset(256, 4, (128, 64), (32, 128, 512), (4, 16, 34, 64)),
+}
+
+
+@dataclass
+class Candidate:
+    method: str  # average | motion_blur
+    sampling: str  # random | stratified | auto-stratified | continuous
+    latents: int | str  # a count, or "auto"
+    samples_total: int  # budget S: ceil(S / m) samples per frame
+    role: str = "candidate"
+
+    @property
+    def label(self) -> str:
+        if self.method == "motion_blur":
+            return f"motion_blur S={self.samples_total}"
+        return f"{self.sampling} m={self.latents} S={self.samples_total}"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--object", required=True, type=Path, help="a GLB file")
+    p.add_argument("--out", required=True, type=Path, help="output directory")
+    p.add_argument("--quick", action="store_true", help="small grid, 96 px: a few minutes")
+    p.add_argument("--level", type=int, help="blur level of the measured image (4)")
+    p.add_argument("--view", type=int, default=0, help="view index in the setting (0)")
+    p.add_argument("--resolution", type=int, help="image side, px (96 quick, 256 full)")
+    p.add_argument(
+        "--budgets", type=str, help="samples per blurry image, e.g. 16,64 (the preset's)"
+    )
+    p.add_argument("--latents", type=str, help="latent counts, e.g. 2,8,32 (the preset's)")
+    p.add_argument(
+        "--reference", type=str, help="reference M,S: M stratified frames of S samples each"
+    )
+    p.add_argument("--max-ghost-px", type=float, default=1.0, help="for the auto rows (1)")
+    p.add_argument("--seed", type=int, default=0, help="setting seed (0)")
+    p.add_argument("--theta0-deg", type=float, default=0.0, help="base azimuth (0)")
+    p.add_argument("--threads", type=int, default=0, help="Cycles threads (0 = all cores)")
+    p.add_argument("--blender", help="a Blender binary instead of the bpy module")
+    p.add_argument("--timeout", type=float, default=1800.0, help="worker reply timeout, s")
+    p.add_argument("--quiet", action="store_true", help="no per-candidate lines")
+
+
+def _ints(text: str | None, option: str, lo: int = 1, hi: int = 4096) -> tuple[int, ...] | None:
+    if text is None:
+        return None
+    try:
+        vals = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise ConfigError(f"{option}: expected integers like 2,8,32, got {text!r}") from None
+    if not vals or any(not lo <= v <= hi for v in vals):
+        raise ConfigError(f"{option}: values must be in {lo}..{hi}, got {text!r}")
+    return vals
+
+
+def preset_from_args(args: argparse.Namespace) -> Preset:
+    base = PRESETS["quick" if args.quick else "full"]
+    ref = _ints(args.reference, "--reference", 1, 65536)
+    if ref is not None and len(ref) != 2:
+        raise ConfigError(f"--reference: expected M,S (frames, samples), got {args.reference!r}")
+    pre = Preset(
+        resolution=args.resolution or base.resolution,
+        level=args.level or base.level,
+        reference=ref or base.reference,  # type: ignore[arg-type]
+        budgets=_ints(args.budgets, "--budgets", 1, 2**20) or base.budgets,
+        latents=_ints(args.latents, "--latents") or base.latents,
+        samplings=base.samplings,
+    )
+    if not 8 <= pre.resolution <= 4096:
+        raise ConfigError(f"--resolution: must be in 8..4096, got {pre.resolution}")
+    if not 1 <= pre.level <= 64:
+        raise ConfigError(f"--level: must be in 1..64, got {pre.level}")
+    if not 0 <= args.view < 4096:
+        raise ConfigError(f"--view: must be in 0..4095, got {args.view}")
+    if not (math.isfinite(args.max_ghost_px) and args.max_ghost_px >= 0.01):
+        raise ConfigError(f"--max-ghost-px: must be ≥ 0.01 px, got {args.max_ghost_px}")
+    return pre
+
+
+def candidates(pre: Preset) -> list[Candidate]:
+    out = []
+    for s in pre.budgets:
+        for sampling in pre.samplings:
+            out.extend(Candidate("average", sampling, m, s) for m in pre.latents)
+        out.append(Candidate("average", "auto-stratified", "auto", s))
+        out.append(Candidate("motion_blur", "continuous", 1, s))
+    return out
+
+
+def _config(pre: Preset, view: int, c: Candidate, max_ghost_px: float) -> BuildConfig:
+    kw: dict[str, Any] = {
+        "views": view + 1,
+        "levels": [pre.level],
+        "resolution": pre.resolution,
+        "samples_total": c.samples_total,
+    }
+    if c.method == "motion_blur":
+        kw["blur_method"] = "motion_blur"
+    elif c.latents == "auto":
+        kw.update(
+            latents_auto=True,
+            latent_positions="stratified",
+            latents_max=max(pre.reference[0], max(pre.latents)),
+            max_ghost_px=max_ghost_px,
+        )
+    else:
+        kw.update(latents=int(c.latents), latent_positions=c.sampling)
+    return BuildConfig(**kw)
+
+
+def _proc_cpu(pid: int | None) -> float:
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+
+
+def _own_cpu() -> float:
+    return time.process_time()
+
+
+# The reference's frames get other Cycles seeds than the candidates' (which share the
+# plan's seeds frame by frame): render noise common to both would flatter the candidates.
+REFERENCE_SEED_SALT = 0x5BD1E995
+
+
+def _render_image(
+    worker, lp: dict, work: Path, res: int, fov: float, salt: int = 0
+) -> tuple[Any, dict]:
+    """Render and accumulate one blurry image as the build does; (mean, timings)."""
+    frames = level_renders(lp, work / "f")
+    for f in frames:
+        f["seed"] = (f["seed"] ^ salt) & 0x7FFFFFFF
+    acc = _core.Accumulator(res, res)
+
+    def on_frame(_i: int, path: str) -> None:
+        acc.add_exr(path)
+        os.unlink(path)
+
+    pid = worker._proc.pid if worker._proc is not None else None
+    c0, o0, t0 = _proc_cpu(pid), _own_cpu(), time.perf_counter()
+    worker.render(
+        frames, resolution=res, fov_deg=fov, samples=lp["samples_per_frame"], on_frame=on_frame
+    )
+    mean = acc.mean()
+    seconds = time.perf_counter() - t0
+    cpu = _proc_cpu(pid) - c0 + _own_cpu() - o0
+    return mean, {"seconds": seconds, "cpu_seconds": cpu, "frames": len(frames)}
+
+
+def _save_png(mean: Any, path: Path, res: int) -> None:
+    acc = _core.Accumulator(res, res)
+    acc.add(np.ascontiguousarray(mean, dtype=np.float32))
+    acc.write_png(path)
+
+
+def run_tradeoff(args: argparse.Namespace) -> dict:
+    from blurset.worker_client import Worker
+
+    pre = preset_from_args(args)
+    glb = Path(args.object)
+    if not glb.is_file():
+        raise ConfigError(f"--object: no such file {str(glb)!r}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    work = out / ".work"
+    shutil.rmtree(work, ignore_errors=True)
+    (out / "images").mkdir(exist_ok=True)
+    say = (lambda *_: None) if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
+    cands = candidates(pre)
+    rows: list[dict[str, Any]] = []
+    t_start = time.time()
+    with Worker(
+        blender=args.blender,
+        threads=args.threads,
+        timeout=args.timeout,
+        log_path=work / "worker.log",
+        workdir=work / "scratch",
+    ) as w:
+        info = w.load(glb, work / "vertices.npy")
+        verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
+        uid = glb.stem
+
+        def plan_level(cfg: BuildConfig) -> dict:
+            plan = _core.plan_setting(
+                cfg.sampling_json(),
+                uid=uid,
+                theta0_deg=args.theta0_deg,
+                seed=args.seed,
+                bbox_dims=info["bbox_dims"],
+                vertices=verts,
+            )
+            return json.loads(plan)["views"][args.view]["levels"][str(pre.level)]
+
+        m_ref, s_ref = pre.reference
+        ref_cfg = BuildConfig(
+            views=args.view + 1,
+            levels=[pre.level],
+            resolution=pre.resolution,
+            latents=m_ref,
+            latent_positions="stratified",
+            samples=s_ref,
+        )
+        ref_lp = plan_level(ref_cfg)
+        say(
+            f"reference: {m_ref} stratified frames x {s_ref} samples, "
+            f"{ref_lp['motion_px']:.1f} px of motion at {pre.resolution} px"
+        )
+        ref, t_ref = _render_image(
+            w, ref_lp, work, pre.resolution, ref_cfg.fov_deg, salt=REFERENCE_SEED_SALT
+        )
+        _save_png(ref, out / "images" / "reference.png", pre.resolution)
+        rows.append(
+            {
+                "role": "reference",
+                "method": "average",
+                "sampling": "stratified",
+                "latents": m_ref,
+                "samples_per_frame": s_ref,
+                "samples_total": m_ref * s_ref,
+                "budget": m_ref * s_ref,
+                "seconds": round(t_ref["seconds"], 3),
+                "psnr": "",
+                "psnr_linear": "",
+                "cpu_seconds": round(t_ref["cpu_seconds"], 3),
+                "max_gap_px": round(ref_lp["max_gap_px"], 4),
+                "pareto": "",
+                "label": f"reference m={m_ref} x {s_ref}",
+            }
+        )
+        for i, c in enumerate(cands):
+            cfg = _config(pre, args.view, c, args.max_ghost_px)
+            lp = plan_level(cfg)
+            mean, t = _render_image(w, lp, work, pre.resolution, cfg.fov_deg)
+            err = json.loads(_core.image_error(mean, ref, background=tuple(cfg.background)))
+            name = c.label.replace(" ", "_").replace("=", "")
+            _save_png(mean, out / "images" / f"{name}.png", pre.resolution)
+            row = {
+                "role": "candidate",
+                "method": c.method,
+                "sampling": c.sampling,
+                "latents": lp["latents"],
+                "samples_per_frame": lp["samples_per_frame"],
+                "samples_total": lp["samples_per_frame"] * lp["latents"],
+                "budget": c.samples_total,
+                "seconds": round(t["seconds"], 3),
+                "psnr": round(err["psnr"], 3),
+                "psnr_linear": round(err["psnr_linear"], 3),
+                "cpu_seconds": round(t["cpu_seconds"], 3),
+                "max_gap_px": round(lp["max_gap_px"], 4),
+                "pareto": "",
+                "label": c.label.replace("m=auto", f"m={lp['latents']}"),
+            }
+            rows.append(row)
+            say(
+                f"[{i + 1}/{len(cands)}] {row['label']:<34} {row['latents']:>4} x "
+                f"{row['samples_per_frame']:<4} {row['seconds']:7.2f} s  {row['psnr']:6.2f} dB"
+            )
+    cand_rows = [r for r in rows if r["role"] == "candidate"]
+    front = _core.pareto_front([r["seconds"] for r in cand_rows], [r["psnr"] for r in cand_rows])
+    for r, on in zip(cand_rows, front, strict=True):
+        r["pareto"] = bool(on)
+    setup = {
+        "object": str(glb),
+        "uid": uid,
+        "view": args.view,
+        "level": pre.level,
+        "resolution": pre.resolution,
+        "seed": args.seed,
+        "theta0_deg": args.theta0_deg,
+        "motion_px": ref_lp["motion_px"],
+        "w_l": ref_lp["w_l"],
+        "reference": {"latents": m_ref, "samples_per_frame": s_ref, "sampling": "stratified"},
+        "max_ghost_px": args.max_ghost_px,
+        "psnr": "sRGB over a white background, peak 1, against the reference",
+        "seconds": "wall clock of rendering + accumulating one blurry image (worker running)",
+        "quick": bool(args.quick),
+        "total_seconds": round(time.time() - t_start, 1),
+        "blurset_version": _core.__version__,
+    }
+    rec = recommend(cand_rows)
+    _write_csv(out / "tradeoff.csv", rows)
+    (out / "tradeoff.json").write_text(
+        json.dumps({"setup": setup, "rows": rows, "recommendation": rec}, indent=1) + "\n"
+    )
+    plot(out / "tradeoff.png", rows, setup)
+    shutil.rmtree(work, ignore_errors=True)
+    return {"setup": setup, "rows": rows, "recommendation": rec}
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "w", newline="") as f:
+        wr = csv.DictWriter(f, fieldnames=list(COLUMNS))
+        wr.writeheader()
+        for r in rows:
+            wr.writerow({k: r[k] for k in COLUMNS})
+    os.replace(tmp, path)
+
+
+def recommend(rows: list[dict], tolerance_db: float = 1.0) -> dict:
+    """The best candidate, the fastest within `tolerance_db` of it, and the fastest
+    average-method candidate within the tolerance (for those who keep the paper's method)."""
+    best = max(rows, key=lambda r: r["psnr"])
+    near = [r for r in rows if r["psnr"] >= best["psnr"] - tolerance_db]
+    fastest = min(near, key=lambda r: r["seconds"])
+    avg = [r for r in near if r["method"] == "average"]
+    return {
+        "tolerance_db": tolerance_db,
+        "best": best["label"],
+        "best_psnr": best["psnr"],
+        "fastest_near_best": fastest["label"],
+        "fastest_near_best_psnr": fastest["psnr"],
+        "fastest_near_best_seconds": fastest["seconds"],
+        "fastest_average_near_best": min(avg, key=lambda r: r["seconds"])["label"] if avg else None,
+    }
+
+
+def plot(path: Path, rows: list[dict], setup: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cands = [r for r in rows if r["role"] == "candidate"]
+    style = {
+        ("average", "random"): ("tab:red", "o", "average, random positions"),
+        ("average", "stratified"): ("tab:blue", "s", "average, stratified positions"),
+        ("average", "auto-stratified"): ("tab:green", "D", "average, --latents auto (stratified)"),
+        ("motion_blur", "continuous"): ("black", "*", "Cycles motion blur"),
+    }
+    fig, ax = plt.subplots(figsize=(9, 6), dpi=130)
+    for key, (color, marker, name) in style.items():
+        pts = [r for r in cands if (r["method"], r["sampling"]) == key]
+        if not pts:
+            continue
+        ax.scatter(
+            [r["seconds"] for r in pts],
+            [r["psnr"] for r in pts],
+            c=color,
+            marker=marker,
+            s=90 if marker == "*" else 45,
+            label=name,
+            zorder=3,
+        )
+        for r in pts:
+            if key[0] == "motion_blur":
+                text = f"S={r['samples_total']}"
+            else:
+                text = f"{r['latents']}x{r['samples_per_frame']}"
+            ax.annotate(
+                text,
+                (r["seconds"], r["psnr"]),
+                textcoords="offset points",
+                xytext=(5, 4),
+                fontsize=8,
+                color=color,
+            )
+    front = sorted((r for r in cands if r["pareto"]), key=lambda r: r["seconds"])
+    if front:
+        ax.plot(
+            [r["seconds"] for r in front],
+            [r["psnr"] for r in front],
+            "--",
+            color="grey",
+            lw=1,
+            label="Pareto front",
+            zorder=2,
+        )
+    ax.set_xscale("log")
+    ax.set_xlabel("seconds per blurry image (render + accumulate, log scale)", fontsize=11)
+    ax.set_ylabel("PSNR against the reference (dB, sRGB)", fontsize=11)
+    ref = setup["reference"]
+    ax.set_title(
+        f"{setup['uid']}: view {setup['view']}, blur level {setup['level']}, "
+        f"{setup['motion_px']:.1f} px of motion at {setup['resolution']} px\n"
+        f"reference: {ref['latents']} stratified frames x {ref['samples_per_frame']} samples; "
+        "labels: frames x samples per frame",
+        fontsize=10,
+    )
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=9, loc="lower right")
+    fig.tight_layout()
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.savefig(tmp)
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+def summary_lines(res: dict) -> list[str]:
+    setup, rec = res["setup"], res["recommendation"]
+    cands = [r for r in res["rows"] if r["role"] == "candidate"]
+    by = {r["label"]: r for r in cands}
+    fast, best = by[rec["fastest_near_best"]], by[rec["best"]]
+    lines = [
+        f"blurset tradeoff: {setup['uid']} view {setup['view']} level {setup['level']}: "
+        f"{setup['motion_px']:.1f} px of motion at {setup['resolution']} px; "
+        f"{len(cands)} candidates in {setup['total_seconds']:.0f} s",
+        f"  best: {best['label']} ({best['latents']} x {best['samples_per_frame']} samples): "
+        f"{best['psnr']:.1f} dB in {best['seconds']:.2f} s",
+        f"  fastest within {rec['tolerance_db']:g} dB of it: {fast['label']}: "
+        f"{fast['psnr']:.1f} dB in {fast['seconds']:.2f} s",
+    ]
+    if rec["fastest_average_near_best"] and rec["fastest_average_near_best"] != fast["label"]:
+        a = by[rec["fastest_average_near_best"]]
+        lines.append(
+            f"  keeping latent averaging: {a['label']} ({a['latents']} x "
+            f"{a['samples_per_frame']}): {a['psnr']:.1f} dB in {a['seconds']:.2f} s"
+        )
+    lines.append(f"  recommendation: {_flags(fast)}")
+    return lines
+
+
+def _flags(r: dict) -> str:
+    if r["method"] == "motion_blur":
+        return f"--blur-method motion_blur --samples-total {r['budget']}"
+    if r["sampling"] == "auto-stratified":
+        return f"--latents auto --latent-positions stratified --samples-total {r['budget']}"
+    return (
+        f"--latents {r['latents']} --latent-positions {r['sampling']} --samples-total {r['budget']}"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    res = run_tradeoff(args)
+    for line in summary_lines(res):
+        print(line)
+    print(f"  wrote {Path(args.out) / 'tradeoff.csv'} and tradeoff.png")
+    return 0
