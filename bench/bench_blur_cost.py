@@ -4,21 +4,18 @@ build's own path (Blender worker process → EXR → Rust accumulator → PNG), 
 a demo object. Issue 6 / DESIGN §9: the limit is 1.0, the goal ≤ 1.2.
 
 Where the extra time of the blurry image goes, measured in the same run:
-- `codec`: the same blurry image with the worker writing ZIP EXRs (blurset's worker wrote
-  ZIP before issue 6; it now writes uncompressed intermediate frames);
-- `render_s` / `outside_render_s`: time inside Blender's render calls (Cycles + EXR
-  write) and the rest of the wall time (process round trips, the last frame's read, the
-  PNG); `accumulate_s` is our Rust accumulator's time (read + add + delete), which
-  overlaps the next frame's render (it runs in this process while the worker renders);
-- `per_render_s` / `per_sample_s`: a fit of the blurry image's time over its own 34
-  latent frames at 1 and at 4 samples each, T(s) = 34 · (a + s · b): `a` is the fixed cost
-  of one render (Cycles session reset, result transfer, EXR write, our read — everything
-  that does not scale with samples), `b` the cost of one sample of one latent frame;
-- `overhead_share` = 34 a / T(4): the part of the blurry image's time that a single
-  render would not pay; `content_factor` = 34 · 4 · b / T_sharp: how much more one
-  sample costs on the moving camera than at p (a blurred object covers more pixels, and
-  object pixels cost more than background) — a cost no method avoids (the motion blur
-  render pays it too), so the ratio's floor is this factor, not 1.0;
+- `split_at_p`: the same budget split over 34 renders that all sit at p (own seeds): the
+  cost of splitting alone, without the camera moving — Cycles' fixed cost per render call
+  (session reset, a cold first 1-sample pass, result transfer), the EXR write and our read;
+- `content_factor` = blur / split_at_p: what the moving camera itself costs (a blurred
+  object covers more pixels, and object pixels cost more than background) — a cost no
+  method avoids: the one-render motion blur pays it too;
+- `codec`: the blurry image with the worker writing ZIP EXRs (as it did before issue 6;
+  it now writes uncompressed intermediate frames);
+- `render_s` / `outside_render_s`: time inside Blender's render calls (Cycles + EXR write)
+  and the rest of the wall time (JSON round trips, the last frame's read, the PNG);
+  `accumulate_s` is our Rust accumulator's time (read + add + delete), which runs in this
+  process while the worker renders the next frame;
 - `worker_start_s`, `load_s`: process start and object load, paid once per object.
 Also `motion_blur_cost_vs_sharp`: the same budget as one Cycles motion blur render.
 
@@ -158,13 +155,16 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
                     "motion": {"steps": mb["motion_blur"]["motion_steps"], "keys": keys},
                 }
             ]
+            at_p = [
+                dict(f, c2w=view["c2w"], out=str(work / f"p{k}.exr")) for k, f in enumerate(latent)
+            ]
             timed = Timed(w, work, res)
             cases = {
                 "sharp": lambda: timed.image(sharp, SAMPLES_TOTAL, "NONE"),
+                "split_at_p": lambda: timed.image(at_p, spf, "NONE"),
                 "blur": lambda: timed.image(latent, spf, "NONE"),
                 "blur_zip": lambda: timed.image(latent, spf, "ZIP"),
                 "motion_blur": lambda: timed.image(motion, SAMPLES_TOTAL, "NONE"),
-                "blur_1spp": lambda: timed.image(latent, 1, "NONE"),
             }
             timed.image(sharp, 1, "NONE")  # warm-up: kernels, BVH, persistent data
             runs: dict[str, list[dict]] = {k: [] for k in cases}
@@ -173,17 +173,6 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
                     runs[name].append(f())
             load = os.getloadavg()
     med = {k: {m: _med(v, m) for m in v[0]} for k, v in runs.items()}
-    fit = {}
-    for unit in ("wall", "cpu"):
-        t1, t4, ts = med["blur_1spp"][unit], med["blur"][unit], med["sharp"][unit]
-        b = (t4 - t1) / (LATENTS * (spf - 1))
-        a = t1 / LATENTS - b
-        fit[unit] = {
-            "per_render_s": a,
-            "per_sample_s": b,
-            "overhead_share": LATENTS * a / t4,
-            "content_factor": LATENTS * spf * b / ts,
-        }
     return {
         "resolution": res,
         "latents": LATENTS,
@@ -191,7 +180,6 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
         "samples_per_frame": spf,
         "repeats": repeats,
         "medians": med,
-        "fit": fit,
         "worker_start_s": t_start,
         "load_s": t_load,
         "load_average": load,
@@ -202,20 +190,20 @@ def run() -> list[dict]:
     m = measure()
     med = m["medians"]
     sharp, blur, blur_zip, mb = med["sharp"], med["blur"], med["blur_zip"], med["motion_blur"]
-    fw, fc = m["fit"]["wall"], m["fit"]["cpu"]
+    split = med["split_at_p"]
     where = {
+        "split_at_p_s": split["wall"],
+        "split_cost_ratio": split["wall"] / sharp["wall"],
+        "split_cost_ratio_cpu": split["cpu"] / sharp["cpu"],
+        "per_render_overhead_s": (split["wall"] - sharp["wall"]) / (m["latents"] - 1),
+        "content_factor": blur["wall"] / split["wall"],
+        "content_factor_cpu": blur["cpu"] / split["cpu"],
         "blur_render_s": blur["render_s"],
         "blur_accumulate_s": blur["accumulate_s"],
         "blur_outside_render_s": blur["outside_render_s"],
         "sharp_render_s": sharp["render_s"],
         "zip_extra_s": blur_zip["wall"] - blur["wall"],
         "zip_extra_cpu_s": blur_zip["cpu"] - blur["cpu"],
-        "per_render_s": fw["per_render_s"],
-        "per_render_cpu_s": fc["per_render_s"],
-        "overhead_share": fw["overhead_share"],
-        "overhead_share_cpu": fc["overhead_share"],
-        "content_factor": fw["content_factor"],
-        "content_factor_cpu": fc["content_factor"],
         "worker_start_s": m["worker_start_s"],
         "load_s": m["load_s"],
     }
