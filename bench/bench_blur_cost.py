@@ -40,6 +40,7 @@ RESOLUTION = int(os.environ.get("BLURSET_BENCH_RES", "512"))
 LATENTS = 34
 SAMPLES_TOTAL = int(os.environ.get("BLURSET_BENCH_SAMPLES", "136"))
 REPEATS = int(os.environ.get("BLURSET_BENCH_REPEATS", "3"))
+THREADS = int(os.environ.get("BLURSET_BENCH_THREADS", "0"))  # Cycles threads, 0 = all
 
 
 def _proc_cpu(pid: int) -> float:
@@ -118,7 +119,7 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
         work = Path(tmp)
         glb = make_demo_objects(work / "objects")[0]
         t0 = time.perf_counter()
-        with Worker(threads=0, timeout=3600, workdir=work / "scratch") as w:
+        with Worker(threads=THREADS, timeout=3600, workdir=work / "scratch") as w:
             t_start = time.perf_counter() - t0
             t1 = time.perf_counter()
             info = w.load(glb, work / "v.npy")

@@ -45,6 +45,13 @@ configs = st.fixed_dictionaries(
         "guards": st.fixed_dictionaries(
             {"orientation_max": st.floats(1.0, 1e6), "near_floor": st.floats(1e-9, 1.0)}
         ),
+        # issue 6: per-level latent counts, sample budgets, the motion blur method
+        "latents_auto": st.booleans(),
+        "latents_max": st.integers(1, 64),
+        "max_ghost_px": st.floats(0.01, 100.0),
+        "blur_method": st.sampled_from(["average", "motion_blur"]),
+        "samples": st.integers(1, 4096),
+        "samples_total": st.one_of(st.none(), st.integers(1, 2**20)),
     }
 )
 
@@ -79,7 +86,18 @@ def test_plans_and_pose_files_are_finite_everywhere(
         assert 0 < v["near"] < v["far"]
         assert v["w_u"] >= 0 and v["depth_range"] >= 1 and v["orientation"] >= 1
         for lvl in v["levels"].values():
-            assert lvl["w_l"] >= 0 and len(lvl["latent_frames"]) == cfg["latents"]
+            assert lvl["w_l"] >= 0 and lvl["samples_per_frame"] >= 1
+            if cfg["blur_method"] == "motion_blur":
+                keys = lvl["motion_blur"]["keys"]
+                assert lvl["latents"] == 1 and not lvl["latent_frames"]
+                assert len(keys) == 2 ** lvl["motion_blur"]["motion_steps"] + 1
+            elif cfg["latents_auto"]:
+                assert 1 <= len(lvl["latent_frames"]) == lvl["latents"] <= cfg["latents_max"]
+                assert (
+                    lvl["max_gap_px"] <= cfg["max_ghost_px"] or lvl["latents"] == cfg["latents_max"]
+                )
+            else:
+                assert len(lvl["latent_frames"]) == cfg["latents"]
     out = tmp_path_factory.mktemp("poses")
     levels = ["sharp"] + [f"blur_{lvl}" for lvl in cfg["levels"]]
     _core.write_setting_poses(plan_json, out, levels)

