@@ -174,3 +174,66 @@ def thumbnail_qa(
 ) -> tuple[float, float, float]:
     """(object coverage, mean object luma in [0, 1], fraction of the border touched) of an
     RGB8 image over `background` (linear RGB)."""
+
+# -- LLFF -------------------------------------------------------------------------------
+
+def read_poses_bounds(path: str | PathLike[str]) -> npt.NDArray[np.float64]:
+    """`poses_bounds.npy` as (N, 17) float64; PoseFormatError names the file and reason."""
+
+def write_poses_bounds(path: str | PathLike[str], rows: npt.NDArray[np.float64]) -> None:
+    """Write (N, 17) rows atomically; non-finite values are refused."""
+
+# -- sampling ---------------------------------------------------------------------------
+
+def default_sampling_config() -> str:
+    """The paper's sampling settings as SamplingConfig JSON."""
+
+def validate_sampling_config(config_json: str) -> None:
+    """ValueError naming the option when a SamplingConfig is out of range."""
+
+def seed_for(seed: int, uid: str, index: int) -> int:
+    """The seed of setting `index` of object `uid` under the build seed."""
+
+def plan_setting(
+    config_json: str,
+    *,
+    uid: str,
+    theta0_deg: float,
+    seed: int,
+    bbox_dims: list[float] | tuple[float, float, float],
+    vertices: npt.NDArray[np.float32],
+) -> str:
+    """A setting's plan (views, trajectories, weights, latent frames, seeds) as JSON."""
+
+def write_setting_poses(
+    plan_json: str, setting_dir: str | PathLike[str], level_dirs: list[str]
+) -> None:
+    """`<level>/poses_bounds.npy` for each level and `transforms.json` of a setting."""
+
+def test_views(views: int, stride: int) -> list[int]:
+    """Every `stride`-th view index below `views`."""
+
+def image_name(index: int, n: int) -> str:
+    """The image file name of view `index` of `n` (sorted order is view order)."""
+
+def make_splits(
+    entries_json: str,
+    *,
+    view_stride: int,
+    test_fraction: float,
+    test_objects: list[str] | None,
+    seed: int,
+) -> str:
+    """splits.json (by object) for setting entries `[{setting, object, views}]`."""
+
+def seeded_subset(ids: list[str], k: int, seed: int) -> list[str]:
+    """A seeded random subset of `k` ids, sorted; independent of the ids' order."""
+
+# -- render QA --------------------------------------------------------------------------
+
+def frame_qa(rgba: npt.NDArray[np.float32], *, thresholds: str | None = None) -> str:
+    """QA of a premultiplied linear (H, W, 4) image as JSON: coverage, luminance,
+    saturated, border_coverage and failure (the reason, or null)."""
+
+def default_qa_thresholds() -> str:
+    """The default QA thresholds (QaThresholds) as JSON."""
