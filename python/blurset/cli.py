@@ -14,6 +14,7 @@ COMMANDS = {
     "build": ("blurset.build", "render an Objaverse-Blur style dataset from GLB objects"),
     "noise": ("blurset.noise", "write reproducible noisy copies (LLFF-N style) of an LLFF scene"),
     "check-poses": ("blurset.check_poses", "cross-check a scene's poses with COLMAP"),
+    "stats": ("blurset.stats", "histograms, numbers and a report of a build's statistics"),
 }
 
 

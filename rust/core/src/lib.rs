@@ -11,6 +11,7 @@ pub mod noise;
 pub mod rng;
 pub mod sampling;
 pub mod splits;
+pub mod stats;
 pub mod weights;
 
 pub use error::{Error, Result};

@@ -7,6 +7,7 @@ mod error;
 mod llff;
 mod noise;
 mod sampling;
+mod stats;
 
 /// Run long core work without the GIL, so Python threads (progress bars, Ray) go on.
 pub(crate) fn run_detached<T, F>(py: Python<'_>, f: F) -> PyResult<T>
@@ -25,5 +26,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sampling::register(m)?;
     accumulate::register(m)?;
     noise::register(m)?;
+    stats::register(m)?;
     Ok(())
 }
