@@ -7,7 +7,7 @@
 //!   vertices at p (near floored at the sampling guard, as recorded in meta.json). It
 //!   is, by construction, the depth-range factor R of the blur weight.
 //! - scene dimension = geometric mean of the three bounding-box dimensions of a
-//!   setting, cbrt(dx · dy · dz), in object units (the normalized object's largest
+//!   setting, cbrt(dx · dy · dz) correctly rounded, in object units (the normalized object's largest
 //!   side is 1).
 //! - blur weight w_l, latent frames m and the largest screen motion (px) of a
 //!   bounding-box corner, per level and view; flatness F, depth range R, orientation O
@@ -240,9 +240,12 @@ pub fn scene_range(near: f64, far: f64) -> f64 {
     far / near
 }
 
-/// Scene dimension of a setting: cbrt(dx · dy · dz).
+/// Scene dimension of a setting: cbrt((dx · dy) · dz), the cube root correctly
+/// rounded (CORE-MATH's, through the libm crate), so the value does not depend on the
+/// toolchain (std's `cbrt` changed with Rust versions; glibc's can be 1 ulp off) and
+/// anyone can recompute it exactly.
 pub fn scene_dimension(bbox_dims: [f64; 3]) -> f64 {
-    (bbox_dims[0] * bbox_dims[1] * bbox_dims[2]).cbrt()
+    libm::cbrt(bbox_dims[0] * bbox_dims[1] * bbox_dims[2])
 }
 
 /// Median of finite values (None when empty): the middle value, or the mean of the
@@ -417,9 +420,13 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
                 },
             );
         }
+        let sr = scene_range(v.near, v.far);
+        check(sr.is_finite(), &path, || {
+            format!("view {i}: far / near = {} / {} is not finite", v.far, v.near)
+        })?;
         views.push(ViewRecord {
             index: i,
-            scene_range: scene_range(v.near, v.far),
+            scene_range: sr,
             flatness: v.flatness,
             depth_range: v.depth_range,
             orientation: v.orientation,
@@ -434,8 +441,12 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
             .collect()
     });
     let n = views.len();
+    let dim = scene_dimension(meta.bbox_dims);
+    check(dim.is_finite(), &path, || {
+        format!("bbox_dims {:?} overflow", meta.bbox_dims)
+    })?;
     Ok(SettingRecord {
-        scene_dimension: scene_dimension(meta.bbox_dims),
+        scene_dimension: dim,
         info: SettingInfo {
             name: name.to_string(),
             uid: meta.uid,
@@ -822,7 +833,7 @@ mod tests {
         assert_eq!(s.view_index, [0, 1, 0, 0]);
         assert_eq!(
             s.scene_dimension,
-            [(0.125f64).cbrt(), (0.125f64).cbrt(), 1.0]
+            [0.5, 0.5, 1.0]
         );
         assert_eq!(s.blur_weight[&1], [Some(0.5), Some(1.5), Some(0.5), None]);
         assert_eq!(
@@ -906,6 +917,9 @@ mod tests {
         assert_eq!(scene_range(2.0, 3.0), 1.5);
         assert_eq!(scene_dimension([1.0, 0.5, 0.25]), 0.5);
         assert_eq!(scene_dimension([1.0, 1.0, 0.0]), 0.0);
+        // correctly rounded: glibc's cbrt gives 0.7874832516804876 here
+        let d = 0.6988146305084229;
+        assert_eq!(scene_dimension([d, d, 1.0]), 0.7874832516804877);
         assert_eq!(median(&[]), None);
         assert_eq!(median(&[3.0, 1.0, 2.0]), Some(2.0));
         assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), Some(2.5));
