@@ -112,11 +112,15 @@ def write_synthetic_build(
                 frames = ""
                 if latent_frames:
                     ts = np.sort(g.uniform(0, 1, latents)).tolist()
-                    frames = ',"latent_frames":[' + ",".join(
-                        f'{{"t":{t!r},"r":{3 + t!r},"phi_deg":{60 + t!r},"theta_deg":{t!r},'
-                        f'"seed":{int(t * 1e9)}}}'
-                        for t in ts
-                    ) + "]"
+                    frames = (
+                        ',"latent_frames":['
+                        + ",".join(
+                            f'{{"t":{t!r},"r":{3 + t!r},"phi_deg":{60 + t!r},"theta_deg":{t!r},'
+                            f'"seed":{int(t * 1e9)}}}'
+                            for t in ts
+                        )
+                        + "]"
+                    )
                 lv.append(
                     f'"{lvl}":{{"w_l":{w_l!r},"latents":{latents},"motion_px":{10 * w_l!r},'
                     f'"max_gap_px":{10 * w_l / latents!r}{frames}}}'

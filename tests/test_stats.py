@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from blurset.stats import BAR, load_stats
 from PIL import Image
 
-from blurset.stats import BAR, load_stats
 from tests.conftest import DEMO_ARGS, run_cli, write_synthetic_build
 
 FIGURES = ["scene_range", "scene_dimension", "blur_weight", "factors", "latent_frames", "motion_px"]
@@ -37,16 +37,20 @@ def complete_settings(build: Path) -> list[Path]:
 
 def cbrt_correctly_rounded(p: float) -> float:
     """The double nearest to p^(1/3), decided exactly with rationals (math.cbrt is
-    glibc's, which can be 1 ulp off; blurset uses a correctly rounded cube root)."""
+    glibc's, which can be an ulp off; blurset uses a correctly rounded cube root)."""
     if p == 0:
         return 0.0
-    y = math.cbrt(p)
-    for c in (math.nextafter(y, 0), y, math.nextafter(y, math.inf)):
-        lo = (Fraction(math.nextafter(c, 0)) + Fraction(c)) / 2
-        hi = (Fraction(c) + Fraction(math.nextafter(c, math.inf))) / 2
-        if lo**3 <= Fraction(p) <= hi**3:
-            return c
-    raise AssertionError(f"no correctly rounded cube root of {p!r} near {y!r}")
+    x = Fraction(p)
+    c = math.cbrt(p)  # a start, a few ulp off at most; walk to the rounding interval
+
+    def mid(a: float, b: float) -> Fraction:
+        return (Fraction(a) + Fraction(b)) / 2
+
+    while mid(c, math.nextafter(c, math.inf)) ** 3 < x:
+        c = math.nextafter(c, math.inf)
+    while mid(math.nextafter(c, 0), c) ** 3 > x:
+        c = math.nextafter(c, 0)
+    return c
 
 
 def recompute(build: Path) -> dict:
@@ -198,7 +202,13 @@ def test_figures_open_and_are_not_blank(demo_stats):
         assert bars > 0.01, f"{name}: no histogram bars drawn ({bars:.4f})"
         assert ink > 0.005, f"{name}: no axes or labels ({ink:.4f})"
         assert f"]({name}.png)" in report
-    for section in ("## Counts", "## Summary", "| scene_range |", "| blur_weight_4 |", "test_images"):
+    for section in (
+        "## Counts",
+        "## Summary",
+        "| scene_range |",
+        "| blur_weight_4 |",
+        "test_images",
+    ):
         assert section in report
     assert not list(out.glob(".*tmp*")), "temporary files left behind"
 
