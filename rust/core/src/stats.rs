@@ -422,7 +422,10 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
         }
         let sr = scene_range(v.near, v.far);
         check(sr.is_finite(), &path, || {
-            format!("view {i}: far / near = {} / {} is not finite", v.far, v.near)
+            format!(
+                "view {i}: far / near = {} / {} is not finite",
+                v.far, v.near
+            )
         })?;
         views.push(ViewRecord {
             index: i,
@@ -831,10 +834,7 @@ mod tests {
         assert_eq!(s.scene_range, [3.0 / 2.0, 5.0 / 4.0, 2.0 / 1.0, 4.0 / 3.0]);
         assert_eq!(s.view_setting, [0, 0, 1, 2]);
         assert_eq!(s.view_index, [0, 1, 0, 0]);
-        assert_eq!(
-            s.scene_dimension,
-            [0.5, 0.5, 1.0]
-        );
+        assert_eq!(s.scene_dimension, [0.5, 0.5, 1.0]);
         assert_eq!(s.blur_weight[&1], [Some(0.5), Some(1.5), Some(0.5), None]);
         assert_eq!(
             s.blur_weight[&2],
