@@ -300,6 +300,35 @@ def test_bad_input_one_line_nonzero_exit_nothing_half_written(tmp_path):
     assert proc.returncode == 2 and "view 0: near 0 must be > 0" in proc.stderr
 
 
+def test_sharp_only_and_mixed_level_builds(tmp_path):
+    """A build without blur levels draws and reports; a setting lacking a level leaves
+    empty cells (null in stats.json), not shifted columns."""
+    sharp = tmp_path / "sharp"
+    write_synthetic_build(sharp, 4, views=5, levels=())
+    run_cli("stats", str(sharp), "--out", str(tmp_path / "st1"))
+    stats = json.loads((tmp_path / "st1" / "stats.json").read_text())
+    assert stats["blur_weight"] == {} and stats["counts"]["images"] == 4 * 5
+    check_against_meta(sharp, stats)
+    assert (tmp_path / "st1" / "blur_weight.png").stat().st_size > 0
+
+    mixed = tmp_path / "mixed"
+    write_synthetic_build(mixed, 3, views=4)
+    meta_path = mixed / "obj00000_090" / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    for v in meta["views"]:
+        del v["levels"]["4"]
+    meta["levels"] = meta["levels"][:-1]
+    meta_path.write_text(json.dumps(meta))
+    run_cli("stats", str(mixed), "--out", str(tmp_path / "st2"))
+    stats = json.loads((tmp_path / "st2" / "stats.json").read_text())
+    check_against_meta(mixed, stats)
+    assert stats["blur_weight"]["4"][4:8] == [None] * 4
+    assert stats["counts"]["images"] == 3 * 4 * 5 - 4
+    rows = list(csv.DictReader((tmp_path / "st2" / "views.csv").open()))
+    assert [r["blur_weight_4"] == "" for r in rows] == [False] * 4 + [True] * 4 + [False] * 4
+    assert float(rows[4]["blur_weight_3"]) == meta["views"][0]["levels"]["3"]["w_l"]
+
+
 def test_ten_thousand_settings_aggregate(tmp_path):
     build = tmp_path / "big"
     t0 = time.perf_counter()

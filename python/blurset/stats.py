@@ -117,8 +117,8 @@ def _write_text(path: Path, text: str | Iterable[str]) -> None:
 # -- figures ---------------------------------------------------------------------------
 
 
-def _summary(stats: dict, quantity: str) -> dict:
-    return next(s for s in stats["summary"] if s["quantity"] == quantity)
+def _median(stats: dict, quantity: str) -> float | None:
+    return next((s["median"] for s in stats["summary"] if s["quantity"] == quantity), None)
 
 
 def _hist(ax, values: list[float], max_bins: int, median: float | None) -> None:
@@ -186,7 +186,7 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
     def single(name: str, values: list, n_label: str) -> None:
         title, xlabel, ylabel = FIGURES[name]
         fig, (ax,) = _figure(1)
-        _hist(ax, values, max_bins, _summary(stats, name)["median"])
+        _hist(ax, values, max_bins, _median(stats, name))
         ax.set(title=f"{title} — {n_label}", xlabel=xlabel, ylabel=ylabel)
         _save(fig, out_dir / f"{name}.png")
         written.append(out_dir / f"{name}.png")
@@ -195,9 +195,9 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
     single("scene_dimension", stats["scene_dimension"], f"{n_set} settings, {c['objects']} objects")
 
     per_level = [
-        ("blur_weight", lambda ax, v, q: _hist(ax, v, max_bins, _summary(stats, q)["median"])),
+        ("blur_weight", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
         ("latent_frames", lambda ax, v, q: _bars(ax, v)),
-        ("motion_px", lambda ax, v, q: _hist(ax, v, max_bins, _summary(stats, q)["median"])),
+        ("motion_px", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
     ]
     for name, draw in per_level:
         by_level = stats[name]
@@ -210,14 +210,15 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
             values = by_level.get(lvl, [])
             n = sum(x is not None for x in values)
             draw(ax, values, f"{name}_{lvl}")
-            ax.set(title=f"level {lvl} ({n} views)", xlabel=xlabel, ylabel=ylabel)
+            panel = f"level {lvl} ({n} views)" if by_level else "no blur levels (sharp only)"
+            ax.set(title=panel, xlabel=xlabel, ylabel=ylabel)
         fig.suptitle(f"{title} — {n_views} views, {n_set} settings")
         _save(fig, out_dir / f"{name}.png")
         written.append(out_dir / f"{name}.png")
 
     fig, axes = _figure(len(FACTORS))
     for ax, (q, title, xlabel) in zip(axes, FACTORS, strict=True):
-        _hist(ax, stats[q], max_bins, _summary(stats, q)["median"])
+        _hist(ax, stats[q], max_bins, _median(stats, q))
         ax.set(title=title, xlabel=xlabel, ylabel="views")
     fig.suptitle(f"{FIGURES['factors'][0]} — {n_views} views, {n_set} settings")
     _save(fig, out_dir / "factors.png")
