@@ -14,6 +14,9 @@ class BlursetError(Exception): ...
 class PoseFormatError(BlursetError): ...
 class ImageError(BlursetError): ...
 
+class InputError(BlursetError):
+    """Bad input data (missing file, wrong shape, mismatched sizes); the message names the file."""
+
 # --- accumulate (rust/py/src/accumulate.rs) -----------------------------------------
 
 class Accumulator:
@@ -237,3 +240,14 @@ def frame_qa(rgba: npt.NDArray[np.float32], *, thresholds: str | None = None) ->
 
 def default_qa_thresholds() -> str:
     """The default QA thresholds (QaThresholds) as JSON."""
+
+# --- stats (rust/py/src/stats.rs) ---------------------------------------------------
+
+def build_stats(out: str | PathLike[str]) -> str:
+    """The statistics of the build at `out` as JSON text (the `stats.json` document,
+    schema "blurset-stats/1"): per-view and per-setting numbers of every complete
+    setting's meta.json, min/median/max/mean summaries and counts.
+
+    Raises InputError naming the file: no such directory, not a build, unreadable or
+    corrupt meta.json of a complete setting, corrupt splits.json or failures.jsonl.
+    """

@@ -21,6 +21,7 @@ COMMANDS = {
         "blurset.preview",
         "figure of a setting at every level, or a build's contact sheet",
     ),
+    "stats": ("blurset.stats", "histograms, numbers and a report of a build's statistics"),
 }
 
 

@@ -13,6 +13,7 @@ pub mod qa;
 pub mod rng;
 pub mod sampling;
 pub mod splits;
+pub mod stats;
 pub mod weights;
 
 pub use error::{Error, Result};

@@ -9,6 +9,7 @@ mod noise;
 mod noise_linear;
 mod qa;
 mod sampling;
+mod stats;
 
 /// Run long core work without the GIL, so Python threads (progress bars, Ray) go on.
 pub(crate) fn run_detached<T, F>(py: Python<'_>, f: F) -> PyResult<T>
@@ -29,5 +30,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     noise::register(m)?;
     noise_linear::register(m)?;
     qa::register(m)?;
+    stats::register(m)?;
     Ok(())
 }
