@@ -81,10 +81,13 @@ def recompute(build: Path) -> dict:
     splits_path = build / "splits.json"
     splits = json.loads(splits_path.read_text()) if splits_path.exists() else None
     test = [(d, m) for d, m in zip(dirs, metas, strict=True) if splits and d.name in splits["test"]]
-    fail_uids = set()
+    # failures.jsonl as the build leaves it: the failing work now (latest record per
+    # object or setting); a setting record whose setting is complete no longer counts.
+    records = []
     if (build / "failures.jsonl").exists():
-        for line in (build / "failures.jsonl").read_text().splitlines():
-            fail_uids.add(json.loads(line)["uid"])
+        records = [json.loads(line) for line in (build / "failures.jsonl").read_text().splitlines()]
+    done = {d.name for d in dirs}
+    failing = [r for r in records if not (r.get("setting") and r["setting"] in done)]
     uids = {m["uid"] for m in metas}
     exp["counts"] = {
         "objects": len(uids),
@@ -101,7 +104,9 @@ def recompute(build: Path) -> dict:
         "unsplit_settings": (
             sum(d.name not in splits["train"] + splits["test"] for d in dirs) if splits else None
         ),
-        "failures": len(fail_uids - uids),
+        "failures": len({r["uid"] for r in failing}),
+        "settings_failed": sum(1 for r in failing if r.get("setting")),
+        "failure_lines_skipped": 0,
         "incomplete_settings": sum(
             d.is_dir()
             and not d.name.startswith(".")
@@ -234,11 +239,11 @@ def test_failed_object_and_half_written_settings_are_counted(demo_build, tmp_pat
     c = stats["counts"]
     assert (c["settings"], c["views"], c["failures"], c["incomplete_settings"]) == (3, 51, 1, 2)
     assert stats["incomplete"] == sorted([f"{names[0]}.partial", "demo_half_000"])
-    assert stats["failures"][0]["uid"] == "broken" and stats["failures"][0]["stage"] == "load"
+    assert stats["failures"][0]["uid"] == "broken" and stats["failures"][0]["stage"] == "preflight"
     check_against_meta(build, stats)
     assert "2 incomplete settings; 1 failed objects" in proc.stdout
     report = (out / "report.md").read_text()
-    assert "failed object `broken` (load)" in report and "demo_half_000" in report
+    assert "failed object `broken` (preflight)" in report and "demo_half_000" in report
 
     # a setting completed after splits.json was written, then a build with no splits yet
     shutil.copytree(build / names[2], build / "demo_late_000")

@@ -251,3 +251,17 @@ def build_stats(out: str | PathLike[str]) -> str:
     Raises InputError naming the file: no such directory, not a build, unreadable or
     corrupt meta.json of a complete setting, corrupt splits.json or failures.jsonl.
     """
+
+# -- failures.jsonl ---------------------------------------------------------------------
+
+def setting_name(uid: str, theta0_deg: float) -> str:
+    """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
+
+def theta0s(n: int) -> list[float]:
+    """The θ0 of each of an object's `n` settings, evenly spaced from 0°."""
+
+def current_failures(
+    path: str | PathLike[str], *, complete: list[str], theta0s: list[float] | None = None
+) -> tuple[str, int]:
+    """(JSON list of the failures now, torn lines skipped): the latest record per
+    (uid, setting) whose work is still not complete."""

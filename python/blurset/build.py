@@ -669,8 +669,15 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
         with lock:
             new_settings += res.new_settings
             if res.failures:
-                with build_lock(out), open(out / "failures.jsonl", "a") as f:
-                    f.write("".join(json.dumps(r) + "\n" for r in res.failures))
+                with build_lock(out), open(out / "failures.jsonl", "a+b") as f:
+                    # A record torn by a kill mid-append gets its line ended first, so
+                    # the next record stays whole (readers skip the torn one).
+                    f.seek(0, os.SEEK_END)
+                    if f.tell() > 0:
+                        f.seek(-1, os.SEEK_END)
+                        if f.read(1) != b"\n":
+                            f.write(b"\n")
+                    f.write("".join(json.dumps(r) + "\n" for r in res.failures).encode())
                     f.flush()
                     os.fsync(f.fileno())
         for r in res.failures:
@@ -701,43 +708,14 @@ def _complete_settings(out: Path) -> list[tuple[str, dict]]:
     return found
 
 
-def read_failures(path: Path) -> list[dict]:
-    """failures.jsonl, tolerating a torn last line (a kill mid-append)."""
-    if not path.exists():
-        return []
-    records = []
-    for line in path.read_text().splitlines():
-        try:
-            rec = json.loads(line)
-        except ValueError:
-            continue
-        if isinstance(rec, dict) and "uid" in rec:
-            records.append(rec)
-    return records
-
-
 def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     """splits.json, dataset.json and failures.jsonl over what is on disk (call under
     build_lock). failures.jsonl keeps the latest record per object (or per setting, for
     QA failures) whose work is still not complete."""
     complete = _complete_settings(out)
-    done = {n for n, _ in complete}
-    latest: dict[tuple[str, str | None], dict] = {}
-    for rec in read_failures(out / "failures.jsonl"):
-        latest[(rec["uid"], rec.get("setting"))] = rec
-
-    def still_failing(key: tuple[str, str | None]) -> bool:
-        uid, setting = key
-        if setting is not None:
-            return setting not in done
-        return not all(setting_name(uid, t) in done for t in cfg.theta0s)
-
-    kept = [
-        r
-        for k, r in sorted(latest.items(), key=lambda kv: (kv[0][0], kv[0][1] or ""))
-        if still_failing(k)
-    ]
     fpath = out / "failures.jsonl"
+    text, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
+    kept = json.loads(text)
     tmp = fpath.with_name(f".failures.jsonl.tmp{os.getpid()}")
     tmp.write_text("".join(json.dumps(r) + "\n" for r in kept))
     os.replace(tmp, fpath)

@@ -103,7 +103,7 @@ class BuildConfig:
 
     @property
     def theta0s(self) -> list[float]:
-        return [360.0 * k / self.settings_per_object for k in range(self.settings_per_object)]
+        return _core.theta0s(self.settings_per_object)
 
     @property
     def level_dirs(self) -> list[str]:

@@ -114,5 +114,5 @@ def resolve_objects(
 
 
 def setting_name(uid: str, theta0_deg: float) -> str:
-    """`<uid>_<theta0>`, e.g. `chair_090`."""
-    return f"{uid}_{round(theta0_deg):03d}"
+    """`<uid>_<theta0>`, e.g. `chair_090` (blurset-core names it, for build and stats)."""
+    return _core.setting_name(uid, theta0_deg)

@@ -75,7 +75,13 @@ COUNTS = [
     ),
     ("test_images", "image files of those views at every level: Σ |test_views[s]| × levels(s)"),
     ("unsplit_settings", "complete settings not yet in splits.json (written when a build ends)"),
-    ("failures", "objects in failures.jsonl (latest record per uid) with no complete setting"),
+    (
+        "failures",
+        "objects failing now: the latest failures.jsonl record per object (or per setting, "
+        "for render QA) whose work is still not complete",
+    ),
+    ("settings_failed", "settings failing render QA now (records that name a setting)"),
+    ("failure_lines_skipped", "failures.jsonl lines that do not parse (torn by a kill)"),
     ("incomplete_settings", "setting directories skipped: `*.partial` or no `.complete` marker"),
 ]
 
@@ -373,9 +379,8 @@ def report_markdown(stats: dict, figures: list[Path]) -> str:
                 + (f" and {more} more" if more else "")
             ]
         for f in stats["failures"][:50]:
-            lines += [
-                f"- failed object `{f['uid']}` ({f.get('stage') or '?'}): {f.get('reason') or ''}"
-            ]
+            what = f"setting `{f['setting']}`" if f.get("setting") else f"object `{f['uid']}`"
+            lines += [f"- failed {what} ({f.get('stage') or '?'}): {f.get('reason') or ''}"]
         if len(stats["failures"]) > 50:
             lines += [f"- and {len(stats['failures']) - 50} more failed objects (failures.jsonl)"]
         lines += [""]

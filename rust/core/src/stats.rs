@@ -19,6 +19,7 @@
 //! counted as incomplete, so a build still running can be read. Hidden directories
 //! (`.work-*`, `.demo_objects`) and anything else are ignored.
 use crate::error::{Error, Result};
+use crate::failures;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
@@ -128,12 +129,14 @@ struct SplitsDoc {
 }
 
 #[derive(Debug, Deserialize)]
-struct FailureLine {
-    uid: String,
+struct DatasetDoc {
     #[serde(default)]
-    stage: Option<String>,
-    #[serde(default)]
-    reason: Option<String>,
+    config: DatasetConfig,
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct DatasetConfig {
+    settings_per_object: Option<usize>,
 }
 
 // -- the stats document ---------------------------------------------------------------
@@ -185,8 +188,13 @@ pub struct Counts {
     pub test_images: Option<usize>,
     /// Complete settings splits.json does not list yet (written at the end of a build).
     pub unsplit_settings: Option<usize>,
-    /// Objects in failures.jsonl (latest record per uid) with no complete setting.
+    /// Objects failing now: distinct uids among the current failures.jsonl records
+    /// (latest per object or setting, work not complete since; see `failures`).
     pub failures: usize,
+    /// Settings failing render QA now (records naming a setting).
+    pub settings_failed: usize,
+    /// failures.jsonl lines that do not parse (torn by a kill), skipped.
+    pub failure_lines_skipped: usize,
     /// Setting directories skipped as incomplete (`*.partial`, or no `.complete`).
     pub incomplete_settings: usize,
 }
@@ -194,6 +202,7 @@ pub struct Counts {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Failure {
     pub uid: String,
+    pub setting: Option<String>,
     pub stage: Option<String>,
     pub reason: Option<String>,
 }
@@ -475,50 +484,6 @@ fn read_json_file<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Re
         .map_err(|e| input_error(format!("corrupt {what} ({e})"), path))
 }
 
-/// The latest record per uid of `failures.jsonl`. A last line without its newline is
-/// a record being appended by a running build and is ignored; any other bad line is
-/// an error naming the line.
-fn read_failures(path: &Path) -> Result<BTreeMap<String, Failure>> {
-    let text = match std::fs::read_to_string(path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(BTreeMap::new()),
-        Err(e) => {
-            return Err(input_error(
-                format!("cannot read failures.jsonl ({e})"),
-                path,
-            ))
-        }
-    };
-    let lines: Vec<&str> = text.split('\n').collect();
-    let mut latest = BTreeMap::new();
-    for (k, line) in lines.iter().enumerate() {
-        if line.trim().is_empty() {
-            continue;
-        }
-        let last_unterminated = k + 1 == lines.len();
-        match serde_json::from_str::<FailureLine>(line) {
-            Ok(f) => {
-                latest.insert(
-                    f.uid.clone(),
-                    Failure {
-                        uid: f.uid,
-                        stage: f.stage,
-                        reason: f.reason,
-                    },
-                );
-            }
-            Err(_) if last_unterminated => {}
-            Err(e) => {
-                return Err(input_error(
-                    format!("corrupt failures.jsonl line {} ({e})", k + 1),
-                    path,
-                ))
-            }
-        }
-    }
-    Ok(latest)
-}
-
 /// Read every complete setting of the build at `out` (in parallel) and compute its
 /// statistics. Errors name the file: a missing or non-build directory, an unreadable
 /// or corrupt meta.json of a complete setting, a corrupt splits.json.
@@ -531,8 +496,26 @@ pub fn build_stats(out: &Path) -> Result<BuildStats> {
         .collect();
     let records = records.into_iter().collect::<Result<Vec<_>>>()?;
     let splits: Option<SplitsDoc> = read_json_file(&out.join("splits.json"), "splits.json")?;
-    let failures = read_failures(&out.join("failures.jsonl"))?;
-    Ok(assemble(out, scan, records, splits, failures))
+    let dataset: Option<DatasetDoc> = read_json_file(&out.join("dataset.json"), "dataset.json")?;
+    let theta0s = dataset
+        .and_then(|d| d.config.settings_per_object)
+        .map(failures::theta0s);
+    let (lines, skipped) = failures::read_records(&out.join("failures.jsonl"))?;
+    let complete: BTreeSet<String> = scan.complete.iter().cloned().collect();
+    let text =
+        |r: &serde_json::Value, k: &str| r.get(k).and_then(|v| v.as_str()).map(str::to_owned);
+    let failing = failures::current(&lines, &complete, theta0s.as_deref())
+        .iter()
+        .map(|r| Failure {
+            uid: text(r, "uid").unwrap_or_default(),
+            setting: text(r, "setting"),
+            stage: text(r, "stage"),
+            reason: text(r, "reason"),
+        })
+        .collect();
+    let mut st = assemble(out, scan, records, splits, failing);
+    st.counts.failure_lines_skipped = skipped;
+    Ok(st)
 }
 
 fn assemble(
@@ -540,7 +523,7 @@ fn assemble(
     scan: Scan,
     records: Vec<SettingRecord>,
     splits: Option<SplitsDoc>,
-    failures: BTreeMap<String, Failure>,
+    failures: Vec<Failure>,
 ) -> BuildStats {
     let n_views: usize = records.iter().map(|r| r.views.len()).sum();
     let levels: BTreeSet<u32> = records
@@ -614,16 +597,15 @@ fn assemble(
     st.motion_px.retain(|_, v| v.iter().any(Option::is_some));
 
     let complete_uids: BTreeSet<&str> = st.settings.iter().map(|s| s.uid.as_str()).collect();
-    st.failures = failures
-        .into_values()
-        .filter(|f| !complete_uids.contains(f.uid.as_str()))
-        .collect();
+    st.failures = failures;
+    let failed_uids: BTreeSet<&str> = st.failures.iter().map(|f| f.uid.as_str()).collect();
     let mut c = Counts {
         objects: complete_uids.len(),
         settings: st.settings.len(),
         views: n_views,
         images: st.settings.iter().map(|s| s.images).sum(),
-        failures: st.failures.len(),
+        failures: failed_uids.len(),
+        settings_failed: st.failures.iter().filter(|f| f.setting.is_some()).count(),
         incomplete_settings: st.incomplete.len(),
         ..Counts::default()
     };
@@ -849,8 +831,12 @@ mod tests {
             (Some(1), Some(1), Some(2))
         );
         assert_eq!(c.unsplit_settings, Some(0));
-        assert_eq!((c.failures, c.incomplete_settings), (1, 2));
-        assert_eq!(s.failures[0].reason.as_deref(), Some("bad glb"));
+        // No dataset.json yet (a first build still running): object records stay, even
+        // for `a`, whose settings are complete; the torn last line is skipped.
+        assert_eq!((c.failures, c.incomplete_settings), (2, 2));
+        assert_eq!(c.failure_lines_skipped, 1);
+        let reasons: Vec<_> = s.failures.iter().map(|f| f.reason.as_deref()).collect();
+        assert_eq!(reasons, [Some("retried ok"), Some("bad glb")]);
         let sum = |q: &str| s.summary.iter().find(|x| x.quantity == q).cloned();
         let b1 = sum("blur_weight_1").ok_or_else(|| Error::Value("no summary".into()))?;
         assert_eq!(
@@ -904,8 +890,10 @@ mod tests {
         std::fs::remove_file(b.join("z_0/meta.json")).map_err(|e| Error::io("rm", &b, e))?;
         assert!(msg(&b).contains("cannot read meta.json"));
         std::fs::remove_dir_all(b.join("z_0")).map_err(|e| Error::io("rm", &b, e))?;
+        // A torn record is not bad input: it is skipped and counted.
         write(&b.join("failures.jsonl"), "garbage\n{\"uid\":\"q\"}\n")?;
-        assert!(msg(&b).contains("failures.jsonl line 1"));
+        let c = build_stats(&b)?.counts;
+        assert_eq!((c.failures, c.failure_lines_skipped), (1, 1));
         write(&b.join("failures.jsonl"), "")?;
         write(&b.join("splits.json"), "{")?;
         assert!(msg(&b).contains("corrupt splits.json"));

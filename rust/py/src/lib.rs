@@ -4,6 +4,7 @@ use pyo3::prelude::*;
 
 mod accumulate;
 mod error;
+mod failures;
 mod llff;
 mod noise;
 mod noise_linear;
@@ -24,6 +25,7 @@ where
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     error::register(m)?;
+    failures::register(m)?;
     llff::register(m)?;
     sampling::register(m)?;
     accumulate::register(m)?;
