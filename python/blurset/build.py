@@ -267,6 +267,7 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
             "n_vertices": info.get("n_vertices"),
             "n_triangles": info.get("n_triangles"),
             "unlit_fixed": info.get("unlit_fixed"),
+            "blender_version": info.get("blender_version"),
             "warnings": info.get("warnings", []),
         },
         "timings": timings,
