@@ -32,6 +32,37 @@ fn fnv(h: &mut u64, bytes: &[u8]) {
     }
 }
 
+/// Time and size of the PNG encoder's compression and filter settings on one image.
+fn png_settings(rgb: &[u8], w: u32, h: u32) {
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    use image::ImageEncoder;
+    for (cname, c) in [
+        ("default", CompressionType::Default),
+        ("fast", CompressionType::Fast),
+        ("level1", CompressionType::Level(1)),
+        ("uncompressed", CompressionType::Uncompressed),
+    ] {
+        for (fname, f) in [
+            ("adaptive", FilterType::Adaptive),
+            ("paeth", FilterType::Paeth),
+            ("up", FilterType::Up),
+            ("none", FilterType::NoFilter),
+        ] {
+            let t0 = Instant::now();
+            let mut buf = Vec::new();
+            let ok = PngEncoder::new_with_quality(&mut buf, c, f)
+                .write_image(rgb, w, h, image::ExtendedColorType::Rgb8)
+                .is_ok();
+            println!(
+                "  png {cname:>12} {fname:>8}: {:.2} ms, {} bytes{}",
+                t0.elapsed().as_secs_f64() * 1e3,
+                buf.len(),
+                if ok { "" } else { " (failed)" }
+            );
+        }
+    }
+}
+
 fn main() -> blurset_core::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let usage = || {
@@ -124,6 +155,9 @@ fn main() -> blurset_core::Result<()> {
                 let t_add = t0.elapsed().as_secs_f64();
                 acc.write_png(&out, [1.0; 3])?;
                 let wall = t0.elapsed().as_secs_f64();
+                if rep == 0 {
+                    png_settings(&acc.encode_rgb8([1.0; 3])?, w, h);
+                }
                 let mut d = 0xCBF2_9CE4_8422_2325u64;
                 fnv(&mut d, &acc.encode_rgb8([1.0; 3])?);
                 println!(
