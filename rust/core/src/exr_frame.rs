@@ -92,20 +92,10 @@ pub(crate) fn decode_rgba(bytes: &[u8], path: &Path, rgba: &mut Vec<f32>) -> Res
     }
     let has_alpha = slots.contains(&Some(3));
 
-    let chunks = reader
-        .filter_chunks(false, |_, tile, block| {
-            block.layer == layer && tile.level_index == Vec2(0, 0)
-        })
-        .map_err(exr_err)?
-        .collect::<std::result::Result<Vec<_>, _>>()
-        .map_err(exr_err)?;
-
     if width == 0 || height == 0 {
         return Err(bad("empty image".into()));
     }
     let n = width * height * CH;
-    rgba.clear();
-    let alpha_fill = if has_alpha { 0.0 } else { 1.0 };
     let fast = matches!(
         header.compression,
         Compression::Uncompressed | Compression::ZIP1 | Compression::ZIP16
@@ -116,12 +106,35 @@ pub(crate) fn decode_rgba(bytes: &[u8], path: &Path, rgba: &mut Vec<f32>) -> Res
             .iter()
             .all(|c| c.sampling == Vec2(1, 1));
     let non_finite = if fast {
-        // Every pixel of a scan-line file belongs to exactly one block; the fill only
-        // matters for the alpha lane of RGB files and for files that lack blocks.
-        rgba.resize(n, alpha_fill);
-        decode_scanlines(chunks, header, &slots, width, height, rgba).map_err(bad)?
+        // Single-part files: the chunks are sliced out of `bytes` in place; a
+        // multi-part file's chunks are cut (copied) by the crate.
+        let owned;
+        let blocks: Vec<(i32, &[u8])> = match single_part_chunks(bytes, header.chunk_count) {
+            Some(blocks) if meta.headers.len() == 1 => blocks,
+            _ => {
+                owned = read_chunks(reader, layer).map_err(exr_err)?;
+                owned
+                    .iter()
+                    .filter_map(|c| match &c.compressed_block {
+                        CompressedBlock::ScanLine(b) => {
+                            Some((b.y_coordinate, b.compressed_pixels_le.as_slice()))
+                        }
+                        _ => None,
+                    })
+                    .collect()
+            }
+        };
+        // Every value of the frame is written (a missing block is an error), so a
+        // buffer of the right size is reused as it is.
+        if rgba.len() != n {
+            rgba.clear();
+            rgba.resize(n, 0.0);
+        }
+        decode_scanlines(&blocks, header, &slots, width, height, rgba).map_err(bad)?
     } else {
-        rgba.resize(n, alpha_fill);
+        let chunks = read_chunks(reader, layer).map_err(exr_err)?;
+        rgba.clear();
+        rgba.resize(n, if has_alpha { 0.0 } else { 1.0 });
         decode_generic(chunks, &meta, header, &slots, width, rgba).map_err(bad)?;
         first_non_finite(width, rgba)
     };
@@ -130,6 +143,52 @@ pub(crate) fn decode_rgba(bytes: &[u8], path: &Path, rgba: &mut Vec<f32>) -> Res
         height,
         non_finite,
     })
+}
+
+/// The chunks of one layer's full-resolution level, cut (copied) by the `exr` crate.
+fn read_chunks(
+    reader: exr::block::reader::Reader<Cursor<&[u8]>>,
+    layer: usize,
+) -> exr::error::Result<Vec<Chunk>> {
+    reader
+        .filter_chunks(false, |_, tile, block| {
+            block.layer == layer && tile.level_index == Vec2(0, 0)
+        })?
+        .collect()
+}
+
+/// The (y, data) chunks of a single-part file, sliced out of its bytes: the header's
+/// attributes (`name\0type\0size value`, ended by a null byte), the offset table of
+/// `chunk_count` u64, then at each offset `y: i32, size: i32, data`. `None` if the
+/// bytes do not have that shape (the caller then lets the crate read them).
+fn single_part_chunks(bytes: &[u8], chunk_count: usize) -> Option<Vec<(i32, &[u8])>> {
+    let i32_at = |at: usize| -> Option<i32> {
+        Some(i32::from_le_bytes(
+            bytes.get(at..at.checked_add(4)?)?.try_into().ok()?,
+        ))
+    };
+    // Magic number and version; bit 12 marks multi-part files.
+    if i32_at(0)? != 20_000_630 || i32_at(4)? & 0x1000 != 0 {
+        return None;
+    }
+    let mut at = 8;
+    while *bytes.get(at)? != 0 {
+        for _ in 0..2 {
+            at += bytes.get(at..)?.iter().position(|&b| b == 0)? + 1;
+        }
+        at = at.checked_add(4 + usize::try_from(i32_at(at)?).ok()?)?;
+    }
+    at += 1;
+    let table = bytes.get(at..at.checked_add(chunk_count.checked_mul(8)?)?)?;
+    table
+        .chunks_exact(8)
+        .map(|o| {
+            let off = usize::try_from(u64::from_le_bytes(o.try_into().ok()?)).ok()?;
+            let data = off.checked_add(8)?;
+            let size = usize::try_from(i32_at(off.checked_add(4)?)?).ok()?;
+            Some((i32_at(off)?, bytes.get(data..data.checked_add(size)?)?))
+        })
+        .collect()
 }
 
 /// The first non-finite value of an RGBA buffer in row-major order.
@@ -152,7 +211,7 @@ thread_local! {
 
 /// Scan-line blocks, uncompressed or ZIP/ZIPS, decoded block-parallel into `rgba`.
 fn decode_scanlines(
-    chunks: Vec<Chunk>,
+    chunks: &[(i32, &[u8])],
     header: &Header,
     slots: &[Option<usize>],
     width: usize,
@@ -171,20 +230,17 @@ fn decode_scanlines(
     let mut dst_rows: Vec<Option<&mut [f32]>> = rgba.chunks_mut(lines * row).map(Some).collect();
     let mut parts: Vec<Option<(&[u8], &mut [f32])>> = Vec::new();
     parts.resize_with(dst_rows.len(), || None);
-    for chunk in &chunks {
-        let CompressedBlock::ScanLine(block) = &chunk.compressed_block else {
-            return Err("a scan-line layer holds a tile block".into());
-        };
-        let y = i64::from(block.y_coordinate) - i64::from(header.own_attributes.layer_position.y());
+    for &(y, data) in chunks {
+        let y = i64::from(y) - i64::from(header.own_attributes.layer_position.y());
         let index = usize::try_from(y)
             .ok()
             .filter(|y| y % lines == 0 && *y < height)
             .map(|y| y / lines)
-            .ok_or_else(|| format!("scan-line block at y = {} lies outside the image", y))?;
+            .ok_or_else(|| format!("scan-line block at y = {y} lies outside the image"))?;
         let dst = dst_rows[index]
             .take()
             .ok_or_else(|| format!("scan-line block at y = {y} appears twice"))?;
-        parts[index] = Some((block.compressed_pixels_le.as_slice(), dst));
+        parts[index] = Some((data, dst));
     }
     if let Some(missing) = parts.iter().position(Option::is_none) {
         return Err(format!(

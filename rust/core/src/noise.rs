@@ -578,71 +578,83 @@ fn apply_layout<T: Sample, const CC: usize, const CH: usize>(
         .zip(processed.par_chunks_mut(w * CH))
         .zip(src.par_chunks(w * CH))
         .enumerate()
-        .for_each(|(row, ((lin, out), src_row))| {
-            let mut words = [0u32; BATCH_WORDS];
-            for p0 in (0..w).step_by(BATCH_PIXELS) {
-                let np = BATCH_PIXELS.min(w - p0);
-                let v0 = ((row * w + p0) * CC) as u64;
-                // The batch's words: whole blocks from the one holding v0.
-                let skip = (v0 & 3) as usize;
-                let blocks = (skip + np * CC).div_ceil(4);
-                philox_fill(key, stream, v0 >> 2, &mut words[..blocks.div_ceil(LANES) * LANES * 4]);
-                let src_b = &src_row[p0 * CH..(p0 + np) * CH];
-                let out_b = &mut out[p0 * CH..(p0 + np) * CH];
-                let lin_b = &mut lin[p0 * lc..(p0 + np) * lc];
-                let words = &words[skip..skip + np * CC];
-                let done = simd_batch::<T, CC, CH>(
-                    plan,
-                    words,
-                    src_b,
-                    lin_b,
-                    out_b,
-                    v0,
-                    fallback_key,
-                );
-                if done > 0 {
-                    // The few values the vector kernel left (RGB: value i is channel i % 3).
-                    for i in done..np * CC {
-                        let c = i % CC;
-                        let n = zig_normal(z, words[i], fallback_key, v0 + i as u64);
-                        let (clean, std) = tables[c][src_b[i].code()];
-                        let noisy = clean + std * n;
-                        lin_b[i] = noisy;
-                        out_b[i] = T::from_code(encoders[c].code(noisy));
+        .for_each_init(
+            || vec![0u32; BATCH_WORDS],
+            |words, (row, ((lin, out), src_row))| {
+                for p0 in (0..w).step_by(BATCH_PIXELS) {
+                    let np = BATCH_PIXELS.min(w - p0);
+                    let v0 = ((row * w + p0) * CC) as u64;
+                    // The batch's words: whole blocks from the one holding v0.
+                    let skip = (v0 & 3) as usize;
+                    let blocks = (skip + np * CC).div_ceil(4);
+                    philox_fill(
+                        key,
+                        stream,
+                        v0 >> 2,
+                        &mut words[..blocks.div_ceil(LANES) * LANES * 4],
+                    );
+                    let src_b = &src_row[p0 * CH..(p0 + np) * CH];
+                    let out_b = &mut out[p0 * CH..(p0 + np) * CH];
+                    let lin_b = &mut lin[p0 * lc..(p0 + np) * lc];
+                    let words = &words[skip..skip + np * CC];
+                    let done =
+                        simd_batch::<T, CC, CH>(plan, words, src_b, lin_b, out_b, v0, fallback_key);
+                    if done > 0 {
+                        // The few values the vector kernel left (RGB: value i is channel i % 3).
+                        for i in done..np * CC {
+                            let c = i % CC;
+                            let n = zig_normal(z, words[i], fallback_key, v0 + i as u64);
+                            let (clean, std) = tables[c][src_b[i].code()];
+                            let noisy = clean + std * n;
+                            lin_b[i] = noisy;
+                            out_b[i] = T::from_code(encoders[c].code(noisy));
+                        }
+                        continue;
                     }
-                    continue;
-                }
-                // Channel by channel, so each channel's tables stay in registers, and in
-                // two passes (noise, then encoding), each with a short dependency chain
-                // per value so that many values are in flight at once.
-                for c in 0..CC {
-                    let table = tables[c];
-                    let mut v = v0 + c as u64;
-                    for k in 0..np {
-                        let n = zig_normal(z, words[k * CC + c], fallback_key, v);
-                        let (clean, std) = table[src_b[k * CH + c].code()];
-                        lin_b[k * lc + c] = clean + std * n;
-                        v += CC as u64;
+                    // Channel by channel, so each channel's tables stay in registers, and in
+                    // two passes (noise, then encoding), each with a short dependency chain
+                    // per value so that many values are in flight at once.
+                    for c in 0..CC {
+                        let table = tables[c];
+                        let mut v = v0 + c as u64;
+                        for k in 0..np {
+                            let n = zig_normal(z, words[k * CC + c], fallback_key, v);
+                            let (clean, std) = table[src_b[k * CH + c].code()];
+                            lin_b[k * lc + c] = clean + std * n;
+                            v += CC as u64;
+                        }
+                        let enc = encoders[c];
+                        for k in 0..np {
+                            out_b[k * CH + c] = T::from_code(enc.code(lin_b[k * lc + c]));
+                        }
+                        if CC == 1 {
+                            for l in lin_b.chunks_exact_mut(lc) {
+                                l[1] = l[0];
+                                l[2] = l[0];
+                            }
+                        }
                     }
-                    let enc = encoders[c];
-                    for k in 0..np {
-                        out_b[k * CH + c] = T::from_code(enc.code(lin_b[k * lc + c]));
-                    }
-                    if CC == 1 {
-                        for l in lin_b.chunks_exact_mut(lc) {
-                            l[1] = l[0];
-                            l[2] = l[0];
+                    if CH > CC {
+                        for (s, l) in src_b.chunks_exact(CH).zip(lin_b.chunks_exact_mut(lc)) {
+                            l[3] = s[CC].code() as f32 / max;
                         }
                     }
                 }
-                if CH > CC {
-                    for (s, l) in src_b.chunks_exact(CH).zip(lin_b.chunks_exact_mut(lc)) {
-                        l[3] = s[CC].code() as f32 / max;
-                    }
-                }
-            }
-        });
+            },
+        );
     (linear, processed)
+}
+
+/// Tests compare the vector kernel with the scalar one by switching it off.
+#[cfg(test)]
+static SCALAR_ONLY: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+fn simd_enabled() -> bool {
+    #[cfg(test)]
+    if SCALAR_ONLY.load(std::sync::atomic::Ordering::Relaxed) {
+        return false;
+    }
+    true
 }
 
 /// The AVX2 kernel on an 8-bit RGB batch where the CPU has AVX2; returns how many
@@ -658,7 +670,7 @@ fn simd_batch<T: Sample, const CC: usize, const CH: usize>(
     fallback_key: u64,
 ) -> usize {
     #[cfg(target_arch = "x86_64")]
-    if CC == 3 && CH == 3 && std::arch::is_x86_feature_detected!("avx2") {
+    if CC == 3 && CH == 3 && simd_enabled() && std::arch::is_x86_feature_detected!("avx2") {
         if let (Some(enc), Some(src), Some(out)) = (&plan.rgb8, T::bytes(src), T::bytes_mut(out)) {
             let batch = avx2::Rgb8Batch {
                 words,
@@ -682,27 +694,12 @@ fn philox_fill(key: u64, stream: u64, first: u64, out: &mut [u32]) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2, checked just above.
-        unsafe { philox_fill_avx2(key, stream, first, out) };
+        unsafe { avx2::philox_fill(key, stream, first, out) };
         return;
     }
-    philox_fill_portable(key, stream, first, out);
-}
-
-#[inline(always)]
-fn philox_fill_portable(key: u64, stream: u64, first: u64, out: &mut [u32]) {
     for (i, chunk) in out.chunks_exact_mut(LANES * 4).enumerate() {
         philox_lanes(key, stream, first + (i * LANES) as u64, chunk);
     }
-}
-
-/// `philox_fill_portable` compiled for AVX2 (8 lanes of 32-bit products per step).
-///
-/// # Safety
-/// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn philox_fill_avx2(key: u64, stream: u64, first: u64, out: &mut [u32]) {
-    philox_fill_portable(key, stream, first, out);
 }
 
 fn apply_plan(img: &Image, plan: &Plan, key: u64, stream: u64) -> Result<Noisy> {
@@ -882,6 +879,52 @@ mod tests {
         // P(|x| > 3) = 0.0026998
         let p = tail as f64 / nf;
         assert!((p - 0.0027).abs() < 0.0003, "tail {p}");
+    }
+
+    #[test]
+    fn vector_kernel_matches_scalar_kernel() -> Result<()> {
+        // Odd sizes leave batch tails; bright, dark and mid codes; both curves; white
+        // balance on and off; a tiny white level pushes values below every threshold.
+        let mut s = rng::Stream::new(3, 3);
+        let src: Vec<u8> = (0..301 * 7 * 3).map(|_| s.next_u64() as u8).collect();
+        let img = Image::new(301, 7, 3, Samples::U8(src))?;
+        for (gamma, wb, wl, gain) in [
+            (Gamma::Power22, Some(sample_white_balance(2)), 1.0, 20.0),
+            (Gamma::Srgb, None, 1.0, 1.0),
+            (Gamma::Power22, None, 1e-3, 4.0),
+        ] {
+            let (sr, ss) = NoiseLevels::DEFAULT.sigmas(gain)?;
+            let m = NoiseModel {
+                gamma,
+                white_balance: wb,
+                white_level: wl,
+                ..model(sr, ss)
+            };
+            let fast = add_noise(&img, &m, 5, stream_id(1, 2))?;
+            SCALAR_ONLY.store(true, std::sync::atomic::Ordering::Relaxed);
+            let slow = add_noise(&img, &m, 5, stream_id(1, 2));
+            SCALAR_ONLY.store(false, std::sync::atomic::Ordering::Relaxed);
+            assert_eq!(fast, slow?, "{gamma:?} {wb:?} {wl}");
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn philox_fill_matches_rng() {
+        let mut out = vec![0u32; 3 * LANES * 4];
+        for (key, stream, first) in [(0, 0, 0), (u64::MAX, 0x1234_0000_0007, (1u64 << 32) - 21)] {
+            philox_fill(key, stream, first, &mut out);
+            for (j, w) in out.chunks_exact(4).enumerate() {
+                let b = first + j as u64;
+                let c = [
+                    b as u32,
+                    (b >> 32) as u32,
+                    stream as u32,
+                    (stream >> 32) as u32,
+                ];
+                assert_eq!(w, rng::philox4x32(key, c));
+            }
+        }
     }
 
     #[test]

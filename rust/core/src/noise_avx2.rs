@@ -181,9 +181,20 @@ pub(super) unsafe fn rgb8(
         let (clean, std) = gather_pairs::<8>(table, _mm256_add_epi32(l.table_base, codes));
         let noisy = _mm256_add_ps(clean, _mm256_mul_ps(std, normal));
         _mm256_storeu_ps(b.lin.as_mut_ptr().add(i), noisy);
+        i += 8;
+    }
+    // Second pass, the encoding: split from the noise so that each loop has a short
+    // chain of dependent gathers and many iterations can be in flight.
+    let mut i = 0;
+    while i + 8 <= n {
+        let l = &lanes[(i / 8) % 3];
+        let noisy = _mm256_loadu_ps(b.lin.as_ptr().add(i));
         // Encoder: bin (negative values below every bin), clamped to the table.
         let bin = _mm256_srai_epi32(_mm256_castps_si256(noisy), 16);
-        let rel = _mm256_min_epi32(_mm256_max_epi32(_mm256_sub_epi32(bin, l.first), zero), l.span);
+        let rel = _mm256_min_epi32(
+            _mm256_max_epi32(_mm256_sub_epi32(bin, l.first), zero),
+            l.span,
+        );
         let lo = _mm256_i32gather_epi32::<4>(start, _mm256_add_epi32(rel, l.start_base));
         // Thresholds lo and lo + 1 are neighbours: one 8-byte element per lane.
         let (t0, t1) = gather_pairs::<4>(thr, _mm256_add_epi32(lo, l.thr_base));
