@@ -172,11 +172,20 @@ fn to_f64x4(p: &[f32]) -> [f64; 4] {
 }
 
 fn encode_run(out: &mut [u8], pixels: impl Iterator<Item = [f64; 4]>, bg: [f64; 3]) {
+    // Renders are mostly flat background: a value equal to the one before reuses its
+    // code instead of another `powf` (same function, same result).
+    let mut last = (f64::NAN.to_bits(), 0u8);
+    let mut encode = |x: f64| {
+        if x.to_bits() != last.0 {
+            last = (x.to_bits(), srgb_encode_u8(x));
+        }
+        last.1
+    };
     for (o, p) in out.chunks_exact_mut(3).zip(pixels) {
         let c = composite_over(p, bg);
-        o[0] = srgb_encode_u8(c[0]);
-        o[1] = srgb_encode_u8(c[1]);
-        o[2] = srgb_encode_u8(c[2]);
+        o[0] = encode(c[0]);
+        o[1] = encode(c[1]);
+        o[2] = encode(c[2]);
     }
 }
 
