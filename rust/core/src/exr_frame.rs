@@ -313,17 +313,33 @@ fn decode_block(
     })
 }
 
+thread_local! {
+    /// One inflate state per rayon worker, reset between blocks (its window is
+    /// allocated once instead of once per block).
+    static INFLATE: RefCell<Option<zlib_rs::Inflate>> = const { RefCell::new(None) };
+}
+
 /// Inflate a zlib stream into exactly `out.len()` bytes.
 fn inflate_zlib(data: &[u8], out: &mut [u8]) -> std::result::Result<(), String> {
-    let want = out.len();
-    let (got, rc) = zlib_rs::decompress_slice(out, data, zlib_rs::InflateConfig::default());
-    if rc != zlib_rs::ReturnCode::Ok || got.len() != want {
-        return Err(format!(
-            "ZIP block does not inflate to {want} bytes ({rc:?}, {} bytes)",
-            got.len()
-        ));
-    }
-    Ok(())
+    INFLATE.with(|cell| {
+        let mut slot = cell.borrow_mut();
+        let inflate = match slot.as_mut() {
+            Some(i) => {
+                i.reset(true);
+                i
+            }
+            None => slot.insert(zlib_rs::Inflate::new(true, 15)),
+        };
+        let want = out.len();
+        let status = inflate.decompress(data, out, zlib_rs::InflateFlush::Finish);
+        match status {
+            Ok(zlib_rs::Status::StreamEnd) if inflate.total_out() == want as u64 => Ok(()),
+            other => Err(format!(
+                "ZIP block does not inflate to {want} bytes ({other:?}, {} bytes)",
+                inflate.total_out()
+            )),
+        }
+    })
 }
 
 /// Undo OpenEXR's ZIP predictor: each byte was stored as the difference to the one
