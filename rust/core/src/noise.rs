@@ -237,9 +237,9 @@ struct Ziggurat {
     ratio: [f64; ZIG_LAYERS],
     x32: [f32; ZIG_LAYERS],
     ratio32: [f32; ZIG_LAYERS],
-    /// (ratio32, x32) per layer, for the AVX2 kernel's paired gathers.
+    /// [ratio32, x32] per layer, for the AVX2 kernel's paired gathers.
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    pairs32: [(f32, f32); ZIG_LAYERS],
+    pairs32: [[f32; 2]; ZIG_LAYERS],
 }
 
 fn ziggurat() -> &'static Ziggurat {
@@ -264,7 +264,7 @@ fn ziggurat() -> &'static Ziggurat {
             ratio,
             x32,
             ratio32,
-            pairs32: std::array::from_fn(|i| (ratio32[i], x32[i])),
+            pairs32: std::array::from_fn(|i| [ratio32[i], x32[i]]),
         }
     })
 }
@@ -448,8 +448,9 @@ impl EncoderView<'_> {
 /// noise standard deviation depend only on the clean code, so they are looked up.
 struct Plan {
     codes: usize,
-    /// (clean linear value, noise std) per (channel, code).
-    table: Vec<(f32, f32)>,
+    /// [clean linear value, noise std] per (channel, code) (arrays, not tuples: the AVX2
+    /// kernel reads them as 8-byte pairs and relies on the order).
+    table: Vec<[f32; 2]>,
     encoders: Vec<Encoder>,
     /// The encoders of an 8-bit RGB plan in the AVX2 kernel's form.
     #[cfg(target_arch = "x86_64")]
@@ -467,7 +468,7 @@ impl Plan {
             let scale = model.channel_scale(c, color_channels);
             for code in 0..codes {
                 let y = scale * model.gamma.decode(code as f64 / max_code as f64);
-                table.push((y as f32, libm::sqrt(var_read + var_shot * y) as f32));
+                table.push([y as f32, libm::sqrt(var_read + var_shot * y) as f32]);
             }
             encoders.push(Encoder::new(model.gamma, max_code, scale));
         }
@@ -568,7 +569,7 @@ fn apply_layout<T: Sample, const CC: usize, const CH: usize>(
     let lc = if CH > CC { 4 } else { 3 };
     let max = img.samples.max_code() as f32;
     let fallback_key = rng::derive_seed(key, &[rng::fnv1a64(b"ziggurat_fallback"), stream]);
-    let tables: [&[(f32, f32)]; CC] =
+    let tables: [&[[f32; 2]]; CC] =
         std::array::from_fn(|c| &plan.table[c * plan.codes..(c + 1) * plan.codes]);
     let encoders: [EncoderView<'_>; CC] = std::array::from_fn(|c| plan.encoders[c].view());
     let mut linear = vec![0.0f32; src.len() / CH * lc];
@@ -604,7 +605,7 @@ fn apply_layout<T: Sample, const CC: usize, const CH: usize>(
                         for i in done..np * CC {
                             let c = i % CC;
                             let n = zig_normal(z, words[i], fallback_key, v0 + i as u64);
-                            let (clean, std) = tables[c][src_b[i].code()];
+                            let [clean, std] = tables[c][src_b[i].code()];
                             let noisy = clean + std * n;
                             lin_b[i] = noisy;
                             out_b[i] = T::from_code(encoders[c].code(noisy));
@@ -619,7 +620,7 @@ fn apply_layout<T: Sample, const CC: usize, const CH: usize>(
                         let mut v = v0 + c as u64;
                         for k in 0..np {
                             let n = zig_normal(z, words[k * CC + c], fallback_key, v);
-                            let (clean, std) = table[src_b[k * CH + c].code()];
+                            let [clean, std] = table[src_b[k * CH + c].code()];
                             lin_b[k * lc + c] = clean + std * n;
                             v += CC as u64;
                         }

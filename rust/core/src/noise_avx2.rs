@@ -96,7 +96,7 @@ pub(super) struct Rgb8Batch<'a> {
 pub(super) unsafe fn rgb8(
     b: Rgb8Batch<'_>,
     z: &Ziggurat,
-    table: &[(f32, f32)],
+    table: &[[f32; 2]],
     enc: &Rgb8Encoders,
     fallback_key: u64,
 ) -> usize {
