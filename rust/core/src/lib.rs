@@ -5,6 +5,7 @@ pub mod accumulate;
 pub mod atomic;
 pub mod camera;
 pub mod error;
+mod exr_frame;
 pub mod failures;
 pub mod image_io;
 pub mod llff;
