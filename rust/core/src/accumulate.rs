@@ -36,7 +36,7 @@ pub fn srgb_encode_f64(linear: f64) -> f64 {
     if x <= SRGB_LINEAR_BREAK {
         12.92 * x
     } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
+        1.055 * libm::pow(x, 1.0 / 2.4) - 0.055
     }
 }
 
@@ -50,7 +50,7 @@ pub fn srgb_decode_f64(encoded: f64) -> f64 {
     if x <= SRGB_ENCODED_BREAK {
         x / 12.92
     } else {
-        ((x + 0.055) / 1.055).powf(2.4)
+        libm::pow((x + 0.055) / 1.055, 2.4)
     }
 }
 
@@ -173,7 +173,7 @@ fn to_f64x4(p: &[f32]) -> [f64; 4] {
 
 fn encode_run(out: &mut [u8], pixels: impl Iterator<Item = [f64; 4]>, bg: [f64; 3]) {
     // Renders are mostly flat background: a value equal to the one before reuses its
-    // code instead of another `powf` (same function, same result).
+    // code instead of another `pow` (same function, same result).
     let mut last = (f64::NAN.to_bits(), 0u8);
     let mut encode = |x: f64| {
         if x.to_bits() != last.0 {
