@@ -11,6 +11,7 @@ writes) is reported beside it.
 
 from __future__ import annotations
 
+import os
 import statistics
 import subprocess
 import sys
@@ -58,14 +59,19 @@ def contender(images, gains, wb):
     return out
 
 
-def median_times(a, b, repeats: int = REPEATS) -> tuple[float, float]:
-    """Medians of interleaved runs, so load from other processes hits both sides alike."""
-    ta, tb = [], []
+def median_times(a, b, repeats: int = REPEATS, cpu: dict | None = None) -> tuple[float, float]:
+    """Medians of interleaved runs, so load from other processes hits both sides alike.
+    If `cpu` is given, the medians of the process CPU time (all threads) of each side
+    go to cpu["a"], cpu["b"]."""
+    ta, tb, ca, cb = [], [], [], []
     for _ in range(repeats):
-        for fn, times in ((a, ta), (b, tb)):
-            t0 = time.perf_counter()
+        for fn, times, cpus in ((a, ta, ca), (b, tb, cb)):
+            c0, t0 = time.process_time(), time.perf_counter()
             fn()
             times.append(time.perf_counter() - t0)
+            cpus.append(time.process_time() - c0)
+    if cpu is not None:
+        cpu["a"], cpu["b"] = statistics.median(ca), statistics.median(cb)
     return statistics.median(ta), statistics.median(tb)
 
 
@@ -93,8 +99,9 @@ def run() -> list[dict]:
     scale = np.array([1 / wb[0], 1.0, 1 / wb[1]], np.float32)
     y = (images[-1].astype(np.float32) / 255) ** 2.2 * scale
     std_ratio = float(np.std(lin_c - y) / np.std(lin_b - y))
+    cpu: dict = {}
     t_base, t_rust = median_times(
-        lambda: baseline(images, gains, wb, rng), lambda: contender(images, gains, wb)
+        lambda: baseline(images, gains, wb, rng), lambda: contender(images, gains, wb), cpu=cpu
     )
     t_cli = end_to_end()
     n_values = sum(im.size for im in images) * len(gains)
@@ -112,6 +119,10 @@ def run() -> list[dict]:
             "repeats": REPEATS,
             "cli_end_to_end_s": t_cli,
             "residual_std_ratio_gain20_last_view": std_ratio,
+            "contender_cpu_s": cpu["b"],
+            "baseline_cpu_s": cpu["a"],
+            "cpu_ratio": cpu["a"] / cpu["b"],
+            "loadavg_1min": os.getloadavg()[0],
         }
     ]
 

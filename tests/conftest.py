@@ -81,3 +81,100 @@ def linear_build(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo_linear") / "out"
     run_cli("build", *DEMO_ARGS, "--keep-linear", "--previews", "--out", str(out))
     return out
+
+
+def write_synthetic_build(
+    out: Path,
+    n_settings: int,
+    *,
+    views: int = 34,
+    levels: tuple[int, ...] = (1, 2, 3, 4),
+    latents: int = 34,
+    latent_frames: bool = False,
+    settings_per_object: int = 4,
+    templates: int = 200,
+    seed: int = 0,
+) -> None:
+    """A build of `n_settings` complete settings without rendering: meta.json with the
+    schema `blurset build` writes (DESIGN §4) and plausible numbers (F, R, O, w_u and
+    w_l follow their formulas). Setting bodies are drawn from `templates` distinct
+    random ones (fast to write at 10,000 settings); uid and θ0 are each setting's own.
+    `latent_frames=True` adds the per-frame records and the other per-view fields, so
+    files have a real build's size and structure. splits.json puts every 5th object in
+    test; failures.jsonl logs one failed object."""
+    import json
+
+    g = np.random.default_rng(seed)
+    out.mkdir(parents=True, exist_ok=True)
+    bodies = []
+    for _ in range(min(templates, n_settings)):
+        dims = [1.0, *g.uniform(0.05, 1.0, 2).tolist()]
+        near = g.uniform(1.2, 2.5, views)
+        far = near + g.uniform(0.2, 1.2, views)
+        orient = 1.0 / min(dims)
+        view_txt = []
+        for i in range(views):
+            n, f = float(near[i]), float(far[i])
+            flat, rng_ = f - n, f / n
+            w_u = (flat * rng_ * orient) ** (1 / 3)
+            lv = []
+            for lvl in levels:
+                w_l = float(g.uniform(0.9, 1.1)) * w_u * lvl
+                frames = ""
+                if latent_frames:
+                    ts = np.sort(g.uniform(0, 1, latents)).tolist()
+                    frames = (
+                        ',"latent_frames":['
+                        + ",".join(
+                            f'{{"t":{t!r},"r":{3 + t!r},"phi_deg":{60 + t!r},"theta_deg":{t!r},'
+                            f'"seed":{int(t * 1e9)}}}'
+                            for t in ts
+                        )
+                        + "]"
+                    )
+                lv.append(
+                    f'"{lvl}":{{"w_l":{w_l!r},"latents":{latents},"motion_px":{10 * w_l!r},'
+                    f'"max_gap_px":{10 * w_l / latents!r}{frames}}}'
+                )
+            extra = ""
+            if latent_frames:
+                extra = (
+                    '"r":3.0,"phi_deg":60.0,"theta_deg":0.0,'
+                    '"trajectory":{"dr":1.5,"dphi_deg":-2.0,"dtheta_deg":1.25},'
+                    f'"sharp_seed":{i},"c2w":[[1,0,0,0],[0,1,0,0],[0,0,1,3],[0,0,0,1]],'
+                )
+            view_txt.append(
+                f'{{"index":{i},{extra}"near":{n!r},"far":{f!r},"flatness":{flat!r},'
+                f'"depth_range":{rng_!r},"orientation":{orient!r},"w_u":{w_u!r},'
+                f'"levels":{{{",".join(lv)}}}}}'
+            )
+        level_dirs = ["sharp", *(f"blur_{lvl}" for lvl in levels)]
+        bodies.append(
+            f'"resolution":[512,512],"fov_deg":40.0,"bbox_dims":{json.dumps(dims)},'
+            f'"views":[{",".join(view_txt)}],'
+            f'"test_views":{json.dumps(list(range(0, views, 16)))},'
+            f'"levels":{json.dumps(level_dirs)}}}'
+        )
+    names = []
+    for s in range(n_settings):
+        uid = f"obj{s // settings_per_object:05d}"
+        theta0 = 90 * (s % settings_per_object)
+        name = f"{uid}_{theta0:03d}"
+        names.append((name, uid))
+        d = out / name
+        d.mkdir()
+        head = f'{{"uid":"{uid}","theta0_deg":{theta0}.0,"seed":{s},'
+        (d / "meta.json").write_text(head + bodies[s % len(bodies)])
+        (d / ".complete").write_text("synthetic\n")
+    objects = sorted({u for _, u in names})
+    test_objects = set(objects[::5])
+    splits = {
+        "view_stride": 16,
+        "train": [n for n, u in names if u not in test_objects],
+        "test": [n for n, u in names if u in test_objects],
+        "test_views": {n: list(range(0, views, 16)) for n, _ in names},
+    }
+    (out / "splits.json").write_text(json.dumps(splits))
+    (out / "failures.jsonl").write_text(
+        json.dumps({"uid": "broken", "stage": "load", "reason": "synthetic failure"}) + "\n"
+    )

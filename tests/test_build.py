@@ -34,6 +34,7 @@ def test_layout_and_names(demo_build):
     assert (demo_build / "dataset.json").exists()
     ds = json.loads((demo_build / "dataset.json").read_text())
     assert ds["counts"]["settings"] == 3 and ds["counts"]["objects_failed"] == 0
+    assert ds["versions"]["blender"].startswith("5.0")  # the pinned bpy that rendered it
     for s in settings(demo_build):
         meta = json.loads((s / "meta.json").read_text())
         for key in ("uid", "theta0_deg", "seed", "resolution", "fov_deg", "bbox_dims", "views"):

@@ -14,6 +14,9 @@ class BlursetError(Exception): ...
 class PoseFormatError(BlursetError): ...
 class ImageError(BlursetError): ...
 
+class InputError(BlursetError):
+    """Bad input data (missing file, wrong shape, mismatched sizes); the message names the file."""
+
 # --- accumulate (rust/py/src/accumulate.rs) -----------------------------------------
 
 class Accumulator:
@@ -190,3 +193,91 @@ def image_error(
 def pareto_front(seconds: list[float], psnr: list[float]) -> list[bool]:
     """Which (seconds, psnr) points no other point beats in both (ties count as beaten
     only when the other is strictly better in one)."""
+
+# -- LLFF -------------------------------------------------------------------------------
+
+def read_poses_bounds(path: str | PathLike[str]) -> npt.NDArray[np.float64]:
+    """`poses_bounds.npy` as (N, 17) float64; PoseFormatError names the file and reason."""
+
+def write_poses_bounds(path: str | PathLike[str], rows: npt.NDArray[np.float64]) -> None:
+    """Write (N, 17) rows atomically; non-finite values are refused."""
+
+# -- sampling ---------------------------------------------------------------------------
+
+def default_sampling_config() -> str:
+    """The paper's sampling settings as SamplingConfig JSON."""
+
+def validate_sampling_config(config_json: str) -> None:
+    """ValueError naming the option when a SamplingConfig is out of range."""
+
+def seed_for(seed: int, uid: str, index: int) -> int:
+    """The seed of setting `index` of object `uid` under the build seed."""
+
+def plan_setting(
+    config_json: str,
+    *,
+    uid: str,
+    theta0_deg: float,
+    seed: int,
+    bbox_dims: list[float] | tuple[float, float, float],
+    vertices: npt.NDArray[np.float32],
+) -> str:
+    """A setting's plan (views, trajectories, weights, latent frames, seeds) as JSON."""
+
+def write_setting_poses(
+    plan_json: str, setting_dir: str | PathLike[str], level_dirs: list[str]
+) -> None:
+    """`<level>/poses_bounds.npy` for each level and `transforms.json` of a setting."""
+
+def test_views(views: int, stride: int) -> list[int]:
+    """Every `stride`-th view index below `views`."""
+
+def image_name(index: int, n: int) -> str:
+    """The image file name of view `index` of `n` (sorted order is view order)."""
+
+def make_splits(
+    entries_json: str,
+    *,
+    view_stride: int,
+    test_fraction: float,
+    test_objects: list[str] | None,
+    seed: int,
+) -> str:
+    """splits.json (by object) for setting entries `[{setting, object, views}]`."""
+
+def seeded_subset(ids: list[str], k: int, seed: int) -> list[str]:
+    """A seeded random subset of `k` ids, sorted; independent of the ids' order."""
+
+# -- render QA --------------------------------------------------------------------------
+
+def frame_qa(rgba: npt.NDArray[np.float32], *, thresholds: str | None = None) -> str:
+    """QA of a premultiplied linear (H, W, 4) image as JSON: coverage, luminance,
+    saturated, border_coverage and failure (the reason, or null)."""
+
+def default_qa_thresholds() -> str:
+    """The default QA thresholds (QaThresholds) as JSON."""
+
+# --- stats (rust/py/src/stats.rs) ---------------------------------------------------
+
+def build_stats(out: str | PathLike[str]) -> str:
+    """The statistics of the build at `out` as JSON text (the `stats.json` document,
+    schema "blurset-stats/1"): per-view and per-setting numbers of every complete
+    setting's meta.json, min/median/max/mean summaries and counts.
+
+    Raises InputError naming the file: no such directory, not a build, unreadable or
+    corrupt meta.json of a complete setting, corrupt splits.json or failures.jsonl.
+    """
+
+# -- failures.jsonl ---------------------------------------------------------------------
+
+def setting_name(uid: str, theta0_deg: float) -> str:
+    """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
+
+def theta0s(n: int) -> list[float]:
+    """The θ0 of each of an object's `n` settings, evenly spaced from 0°."""
+
+def current_failures(
+    path: str | PathLike[str], *, complete: list[str], theta0s: list[float] | None = None
+) -> tuple[str, int]:
+    """(JSON list of the failures now, torn lines skipped): the latest record per
+    (uid, setting) whose work is still not complete."""

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import concurrent.futures as cf
 import contextlib
+import dataclasses
 import fcntl
 import json
 import os
@@ -30,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import __version__, _core, preflight
+from blurset import __version__, _core, objaverse_cache, preflight
 from blurset.config import BuildConfig, load_toml, make_config, parse_levels
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec, resolve_objects, setting_name
@@ -94,7 +95,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, help="objects rendered in parallel (1)")
     p.add_argument("--threads", type=int, help="Cycles threads per worker (0 = all cores)")
     p.add_argument("--executor", choices=["local", "ray"], help="local process pool or Ray")
-    p.add_argument("--shard", help="i/N: build only every N-th object from the i-th")
+    p.add_argument(
+        "--ray-address", help="Ray cluster to join (ray://host:10001 or auto); default: local"
+    )
+    p.add_argument(
+        "--shard", help="i/N: this job's share of the objects (0 ≤ i < N), for job arrays"
+    )
+    p.add_argument("--objaverse-dir", help="the objaverse package's cache directory (~/.objaverse)")
+    p.add_argument(
+        "--objaverse-offline",
+        action="store_true",
+        default=None,
+        help="never download: objects missing from the cache fail",
+    )
+    p.add_argument(
+        "--objaverse-count", type=int, help="a seeded random subset of N objaverse objects"
+    )
     p.add_argument(
         "--timeout", type=float, help="seconds without a worker reply before it is killed (600)"
     )
@@ -127,6 +143,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
             "samples samples_total blur_method sharp_samples resolution "
             "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
+            "ray_address objaverse_dir objaverse_offline objaverse_count "
             "blender check_poses previews"
         ).split()
     }
@@ -307,6 +324,7 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
             "n_vertices": info.get("n_vertices"),
             "n_triangles": info.get("n_triangles"),
             "unlit_fixed": info.get("unlit_fixed"),
+            "blender_version": info.get("blender_version"),
             "warnings": info.get("warnings", []),
         },
         "timings": timings,
@@ -465,10 +483,14 @@ def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> Objec
     if not pending:
         return result
     t0 = time.monotonic()
+    stage = "fetch"
     try:
+        if obj.source == "objaverse":
+            _objaverse(cfg).ensure(obj.uid, obj.path)
+        stage = "preflight"
         preflight.check(obj.path, preflight.Budget(cfg.max_triangles, cfg.max_texture_pixels))
-    except preflight.PreflightError as e:
-        result.failures.append(_failure(obj, "preflight", str(e), t0, 1))
+    except (objaverse_cache.FetchError, preflight.PreflightError) as e:
+        result.failures.append(_failure(obj, stage, str(e), t0, 1))
         progress.object_failed(len(pending))
         return result
     deadline = t0 + cfg.object_timeout if cfg.object_timeout > 0 else None
@@ -564,18 +586,47 @@ def _failure(obj: ObjectSpec, stage: str, reason: str, t0: float, attempts: int)
 # -- the whole build -------------------------------------------------------------------
 
 
+def _objaverse(cfg: BuildConfig) -> objaverse_cache.Cache:
+    return objaverse_cache.Cache(cfg.objaverse_dir, offline=cfg.objaverse_offline)
+
+
 def _objects(cfg: BuildConfig) -> list[ObjectSpec]:
+    """This job's objects: every entry resolved, sorted by id, then its shard. The
+    partition depends on the set of objects only, so the shards of one config are
+    disjoint and together are the whole build, however the entries were listed."""
     entries = list(cfg.objects)
     if cfg.demo:
         from blurset.demo import make_demo_objects
 
         demo_dir = Path(cfg.out) / ".demo_objects"
         entries += [str(p) for p in make_demo_objects(demo_dir, seed=cfg.seed)]
-    objs = resolve_objects(entries)
+    objs = sorted(
+        resolve_objects(
+            entries, cache=_objaverse(cfg), objaverse_count=cfg.objaverse_count, seed=cfg.seed
+        ),
+        key=lambda o: o.uid,
+    )
     if cfg.shard:
         i, n = (int(x) for x in cfg.shard.split("/"))
         objs = objs[i::n]
     return objs
+
+
+def _report_missing(objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress) -> None:
+    """Say up front which objaverse objects are not cached and what will happen to them."""
+    missing = [o for o in objs if o.source == "objaverse" and not o.path.is_file()]
+    if not missing:
+        return
+    names = ", ".join(o.uid for o in missing[:8]) + (" …" if len(missing) > 8 else "")
+    fate = (
+        "offline: they fail (failures.jsonl)"
+        if cfg.objaverse_offline
+        else "downloading each when its turn comes"
+    )
+    prog.write(
+        f"objaverse: {len(missing)} of {sum(o.source == 'objaverse' for o in objs)} objects "
+        f"are not in the cache {_objaverse(cfg).versioned} ({fate}): {names}"
+    )
 
 
 def _run_local(objs, cfg, progress, on_result) -> None:
@@ -589,20 +640,42 @@ def _run_local(objs, cfg, progress, on_result) -> None:
 
 
 def _run_ray(objs, cfg, progress, on_result) -> None:
+    """One Ray task per object. A task is idempotent (complete settings are skipped,
+    partial ones redone), so Ray may retry it after a lost worker or node."""
     try:
         import ray
     except ImportError:
-        raise BlursetError("--executor ray: the ray package is not installed") from None
-    if not ray.is_initialized():
-        ray.init(address=os.environ.get("RAY_ADDRESS"), log_to_driver=False)
-    remote = ray.remote(num_cpus=max(1, cfg.threads))(_ray_unit)
-    refs = [remote.remote(o, cfg) for o in objs]
-    pending = list(refs)
-    while pending:
-        done, pending = ray.wait(pending, num_returns=1)
-        res = ray.get(done[0])
-        progress.skip(len(res.settings))
-        on_result(res)
+        raise BlursetError(
+            "--executor ray: the ray package is not installed (pip install 'blurset[ray]')"
+        ) from None
+    started = not ray.is_initialized()
+    if started:
+        try:
+            ray.init(
+                address=cfg.ray_address or os.environ.get("RAY_ADDRESS"),
+                log_to_driver=False,
+                include_dashboard=False,
+            )
+        except (ConnectionError, RuntimeError, ValueError) as e:
+            raise BlursetError(f"--ray-address {cfg.ray_address}: {_first_line(e)}") from None
+    try:
+        remote = ray.remote(num_cpus=max(1, cfg.threads), max_retries=2)(_ray_unit)
+        pending = [remote.remote(o, cfg) for o in objs]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            res = ray.get(done[0])
+            progress.skip(len(res.settings) - res.new_settings)
+            progress.frame_done(res.new_settings * progress.fps)
+            for _ in range(res.new_settings):
+                progress.setting_done()
+            on_result(res)
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _first_line(e: BaseException) -> str:
+    return (str(e).strip().splitlines() or [type(e).__name__])[0]
 
 
 def _ray_unit(obj: ObjectSpec, cfg: BuildConfig) -> ObjectResult:
@@ -633,18 +706,19 @@ def _sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> None:
 
 
 def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
+    # Absolute, so Ray workers (another working directory, another machine with the
+    # same shared path) write where the driver reads.
+    cfg = dataclasses.replace(cfg, out=Path(cfg.out).resolve())
     out = Path(cfg.out)
-    resolve_objects(list(cfg.objects))  # bad entries fail before anything is written
+    # Bad entries fail before anything is written.
+    resolve_objects(list(cfg.objects), cache=_objaverse(cfg))
     out.mkdir(parents=True, exist_ok=True)
     objs = _objects(cfg)
     with build_lock(out):
         _sweep(out, objs, cfg)
     n_settings = len(objs) * len(cfg.theta0s)
-    prog = Progress(
-        n_settings,
-        frames_per_setting=frames_per_setting(cfg),
-        enabled=progress and cfg.executor == "local",
-    )
+    prog = Progress(n_settings, frames_per_setting=frames_per_setting(cfg), enabled=progress)
+    _report_missing(objs, cfg, prog)
     new_settings = 0
     lock = threading.Lock()
     t0 = time.time()
@@ -654,8 +728,15 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
         with lock:
             new_settings += res.new_settings
             if res.failures:
-                with build_lock(out), open(out / "failures.jsonl", "a") as f:
-                    f.write("".join(json.dumps(r) + "\n" for r in res.failures))
+                with build_lock(out), open(out / "failures.jsonl", "a+b") as f:
+                    # A record torn by a kill mid-append gets its line ended first, so
+                    # the next record stays whole (readers skip the torn one).
+                    f.seek(0, os.SEEK_END)
+                    if f.tell() > 0:
+                        f.seek(-1, os.SEEK_END)
+                        if f.read(1) != b"\n":
+                            f.write(b"\n")
+                    f.write("".join(json.dumps(r) + "\n" for r in res.failures).encode())
                     f.flush()
                     os.fsync(f.fileno())
         for r in res.failures:
@@ -686,43 +767,14 @@ def _complete_settings(out: Path) -> list[tuple[str, dict]]:
     return found
 
 
-def read_failures(path: Path) -> list[dict]:
-    """failures.jsonl, tolerating a torn last line (a kill mid-append)."""
-    if not path.exists():
-        return []
-    records = []
-    for line in path.read_text().splitlines():
-        try:
-            rec = json.loads(line)
-        except ValueError:
-            continue
-        if isinstance(rec, dict) and "uid" in rec:
-            records.append(rec)
-    return records
-
-
 def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     """splits.json, dataset.json and failures.jsonl over what is on disk (call under
     build_lock). failures.jsonl keeps the latest record per object (or per setting, for
     QA failures) whose work is still not complete."""
     complete = _complete_settings(out)
-    done = {n for n, _ in complete}
-    latest: dict[tuple[str, str | None], dict] = {}
-    for rec in read_failures(out / "failures.jsonl"):
-        latest[(rec["uid"], rec.get("setting"))] = rec
-
-    def still_failing(key: tuple[str, str | None]) -> bool:
-        uid, setting = key
-        if setting is not None:
-            return setting not in done
-        return not all(setting_name(uid, t) in done for t in cfg.theta0s)
-
-    kept = [
-        r
-        for k, r in sorted(latest.items(), key=lambda kv: (kv[0][0], kv[0][1] or ""))
-        if still_failing(k)
-    ]
     fpath = out / "failures.jsonl"
+    text, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
+    kept = json.loads(text)
     tmp = fpath.with_name(f".failures.jsonl.tmp{os.getpid()}")
     tmp.write_text("".join(json.dumps(r) + "\n" for r in kept))
     os.replace(tmp, fpath)

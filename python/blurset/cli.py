@@ -25,6 +25,7 @@ COMMANDS = {
         "blurset.tradeoff",
         "measure render time against PSNR for latent counts, samples and blur methods",
     ),
+    "stats": ("blurset.stats", "histograms, numbers and a report of a build's statistics"),
 }
 
 

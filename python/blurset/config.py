@@ -67,7 +67,14 @@ class BuildConfig:
     workers: int = 1
     threads: int = 0
     executor: str = "local"
+    # Ray cluster address (ray://host:10001, or "auto"); None starts a local Ray.
+    ray_address: str | None = None
     shard: str | None = None
+    # Objaverse: the package's cache directory (None = objaverse.BASE_PATH), no
+    # downloads when offline, and a seeded random subset of this many objaverse objects.
+    objaverse_dir: str | None = None
+    objaverse_offline: bool = False
+    objaverse_count: int | None = None
     # Seconds without a reply from the worker before it counts as hung and is killed.
     timeout: float = 600.0
     # Wall-clock budget of one object (load + all its settings); 0 = no budget.
@@ -128,7 +135,7 @@ class BuildConfig:
 
     @property
     def theta0s(self) -> list[float]:
-        return [360.0 * k / self.settings_per_object for k in range(self.settings_per_object)]
+        return _core.theta0s(self.settings_per_object)
 
     @property
     def level_dirs(self) -> list[str]:
@@ -200,9 +207,17 @@ def _coerce(name: str, value: Any, where: str) -> Any:
             if len(bg) != 3:
                 raise ValueError
             return bg
-        if name in ("sharp_samples", "samples_total", "shard", "blender") and value is None:
+        nullable = (
+            "sharp_samples",
+            "samples_total",
+            "shard",
+            "blender",
+            "ray_address",
+            "objaverse_dir",
+        )
+        if name in (*nullable, "objaverse_count") and value is None:
             return None
-        if name in ("sharp_samples", "samples_total"):
+        if name in ("sharp_samples", "samples_total", "objaverse_count"):
             if isinstance(value, bool) or int(value) != value:
                 raise ValueError
             return int(value)
@@ -307,6 +322,16 @@ def validate(cfg: BuildConfig) -> None:
     need(cfg.view_stride >= 1, "view_stride", "must be at least 1")
     need(0.0 <= cfg.test_fraction <= 1.0, "test_fraction", "must be in [0, 1]")
     need(cfg.executor in ("local", "ray"), "executor", "must be local or ray")
+    need(
+        cfg.ray_address is None or cfg.executor == "ray",
+        "ray_address",
+        "only with --executor ray",
+    )
+    need(
+        cfg.objaverse_count is None or cfg.objaverse_count >= 1,
+        "objaverse_count",
+        "must be at least 1",
+    )
     need(
         cfg.latent_positions in ("random", "stratified"), "latent_positions", "random or stratified"
     )

@@ -8,9 +8,10 @@
 //! sRGB-encode (IEC 61966-2-1), quantize to 8 bits.
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
+use crate::exr_frame;
 use image::ImageEncoder;
 use rayon::prelude::*;
-use std::io::{BufReader, Cursor};
+use std::io::Cursor;
 use std::path::Path;
 
 /// Linear value at which the sRGB curve switches from the line to the power law.
@@ -35,7 +36,7 @@ pub fn srgb_encode_f64(linear: f64) -> f64 {
     if x <= SRGB_LINEAR_BREAK {
         12.92 * x
     } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
+        1.055 * libm::pow(x, 1.0 / 2.4) - 0.055
     }
 }
 
@@ -49,7 +50,7 @@ pub fn srgb_decode_f64(encoded: f64) -> f64 {
     if x <= SRGB_ENCODED_BREAK {
         x / 12.92
     } else {
-        ((x + 0.055) / 1.055).powf(2.4)
+        libm::pow((x + 0.055) / 1.055, 2.4)
     }
 }
 
@@ -101,157 +102,14 @@ pub struct Frame {
 /// samples); blocks are decompressed in parallel on the rayon pool. Values are returned
 /// as stored: no check for NaN or inf (see [`Accumulator::add_exr`]).
 pub fn read_exr(path: &Path) -> Result<Frame> {
-    let bad = |reason: String| Error::Image {
-        reason,
-        path: path.to_path_buf(),
-    };
-    let exr_err = |e: exr::error::Error| bad(format!("EXR: {e}"));
-    let file = std::fs::File::open(path).map_err(|e| Error::io("cannot open EXR", path, e))?;
-    let reader = exr::block::read(BufReader::new(file), false).map_err(exr_err)?;
-    let meta = reader.meta_data().clone();
-
-    let slot_of = |name: &str| ["R", "G", "B", "A"].iter().position(|c| *c == name);
-    let has_rgb = |h: &exr::meta::header::Header| {
-        let names: Vec<String> = h.channels.list.iter().map(|c| c.name.to_string()).collect();
-        ["R", "G", "B"].iter().all(|c| names.iter().any(|n| n == c))
-    };
-    let Some(layer) = meta.headers.iter().position(|h| !h.deep && has_rgb(h)) else {
-        let names: Vec<String> = meta
-            .headers
-            .iter()
-            .flat_map(|h| h.channels.list.iter().map(|c| c.name.to_string()))
-            .collect();
-        return Err(bad(format!(
-            "no flat layer with R, G, B channels (channels: {names:?})"
-        )));
-    };
-    let header = &meta.headers[layer];
-    let display = header.shared_attributes.display_window;
-    let (width, height) = (header.layer_size.width(), header.layer_size.height());
-    if header.own_attributes.layer_position != display.position || header.layer_size != display.size
-    {
-        return Err(bad(format!(
-            "data window ({width}x{height} at {:?}) differs from the display window ({}x{} at {:?}); crop renders are not supported",
-            header.own_attributes.layer_position,
-            display.size.width(),
-            display.size.height(),
-            display.position
-        )));
-    }
-    let slots: Vec<Option<usize>> = header
-        .channels
-        .list
-        .iter()
-        .map(|c| slot_of(&c.name.to_string()))
-        .collect();
-    if let Some(c) = header
-        .channels
-        .list
-        .iter()
-        .zip(&slots)
-        .find(|(c, s)| s.is_some() && c.sampling != exr::math::Vec2(1, 1))
-    {
-        return Err(bad(format!("channel {} is subsampled", c.0.name)));
-    }
-    let has_alpha = slots.contains(&Some(3));
-
-    let chunks = reader
-        .filter_chunks(false, |_, tile, block| {
-            block.layer == layer && tile.level_index == exr::math::Vec2(0, 0)
-        })
-        .map_err(exr_err)?
-        .collect::<std::result::Result<Vec<_>, _>>()
-        .map_err(exr_err)?;
-    let blocks = chunks
-        .into_par_iter()
-        .map(|chunk| exr::block::UncompressedBlock::decompress_chunk(chunk, &meta, false))
-        .collect::<std::result::Result<Vec<_>, _>>()
-        .map_err(exr_err)?;
-
-    let mut blocks = blocks;
-    blocks.sort_by_key(|b| b.index.pixel_position.y());
-    let mut rgba = vec![if has_alpha { 0.0 } else { 1.0 }; width * height * CH];
-    let row = width * CH;
-    // Scan-line blocks span whole rows and tile the image: each gets its own rows and
-    // the conversion runs in parallel. Anything else (tiles) is placed sequentially.
-    let mut y = 0;
-    let full_rows = blocks.iter().all(|b| {
-        let ok = b.index.pixel_position.x() == 0
-            && b.index.pixel_size.width() == width
-            && b.index.pixel_position.y() == y;
-        y += b.index.pixel_size.height();
-        ok
-    }) && y == height;
-    let place = |block: &exr::block::UncompressedBlock, dst: &mut [f32], y0: usize| {
-        scatter_block(block, &header.channels, &slots, dst, y0, width)
-    };
-    if full_rows {
-        let mut parts = Vec::with_capacity(blocks.len());
-        let mut rest = rgba.as_mut_slice();
-        for b in &blocks {
-            let (mine, tail) = rest.split_at_mut(b.index.pixel_size.height() * row);
-            parts.push((b, mine));
-            rest = tail;
-        }
-        parts
-            .into_par_iter()
-            .try_for_each(|(b, dst)| place(b, dst, b.index.pixel_position.y()))
-            .map_err(bad)?;
-    } else {
-        for b in &blocks {
-            place(b, &mut rgba, 0).map_err(bad)?;
-        }
-    }
+    let bytes = std::fs::read(path).map_err(|e| Error::io("cannot open EXR", path, e))?;
+    let mut rgba = Vec::new();
+    let d = exr_frame::decode_rgba(&bytes, path, &mut rgba)?;
     Ok(Frame {
-        width: width as u32,
-        height: height as u32,
+        width: d.width as u32,
+        height: d.height as u32,
         rgba,
     })
-}
-
-/// Convert the lines of one decompressed block into interleaved RGBA; `dst` holds the
-/// image rows from `y0` on.
-fn scatter_block(
-    block: &exr::block::UncompressedBlock,
-    channels: &exr::meta::attribute::ChannelList,
-    slots: &[Option<usize>],
-    dst: &mut [f32],
-    y0: usize,
-    width: usize,
-) -> std::result::Result<(), String> {
-    use exr::meta::attribute::SampleType;
-    for line in block.lines(channels) {
-        let Some(slot) = slots[line.location.channel] else {
-            continue;
-        };
-        let (x0, y) = (line.location.position.x(), line.location.position.y());
-        let n = line.location.sample_count;
-        let start = y
-            .checked_sub(y0)
-            .map(|dy| (dy * width + x0) * CH)
-            .filter(|&s| x0 + n <= width && s + n * CH <= dst.len())
-            .ok_or_else(|| format!("block line at ({x0}, {y}) lies outside the image"))?;
-        let out = dst[start..start + n * CH].iter_mut().skip(slot).step_by(CH);
-        // Decompressed block data is native-endian (exr::block::UncompressedBlock).
-        match channels.list[line.location.channel].sample_type {
-            SampleType::F32 => {
-                for (d, b) in out.zip(line.value.chunks_exact(4)) {
-                    *d = f32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
-                }
-            }
-            SampleType::F16 => {
-                for (d, b) in out.zip(line.value.chunks_exact(2)) {
-                    *d = exr::prelude::f16::from_bits(u16::from_ne_bytes([b[0], b[1]])).to_f32();
-                }
-            }
-            SampleType::U32 => {
-                for (d, b) in out.zip(line.value.chunks_exact(4)) {
-                    *d = u32::from_ne_bytes([b[0], b[1], b[2], b[3]]) as f32;
-                }
-            }
-        }
-    }
-    Ok(())
 }
 
 /// Encode an RGBA f32 image as a ZIP-compressed (lossless) EXR file, written atomically.
@@ -314,12 +172,50 @@ fn to_f64x4(p: &[f32]) -> [f64; 4] {
 }
 
 fn encode_run(out: &mut [u8], pixels: impl Iterator<Item = [f64; 4]>, bg: [f64; 3]) {
+    // Renders are mostly flat background: a value equal to the one before reuses its
+    // code instead of another `pow` (same function, same result).
+    let mut last = (f64::NAN.to_bits(), 0u8);
+    let mut encode = |x: f64| {
+        if x.to_bits() != last.0 {
+            last = (x.to_bits(), srgb_encode_u8(x));
+        }
+        last.1
+    };
     for (o, p) in out.chunks_exact_mut(3).zip(pixels) {
         let c = composite_over(p, bg);
-        o[0] = srgb_encode_u8(c[0]);
-        o[1] = srgb_encode_u8(c[1]);
-        o[2] = srgb_encode_u8(c[2]);
+        o[0] = encode(c[0]);
+        o[1] = encode(c[1]);
+        o[2] = encode(c[2]);
     }
+}
+
+/// Read a whole file into `buf`, reusing its memory; on Unix the two halves are read
+/// at once on the rayon pool (the copy out of the page cache is a visible share of a
+/// frame's time).
+fn read_into(path: &Path, buf: &mut Vec<u8>) -> Result<()> {
+    use std::io::Read;
+    let err = |e| Error::io("cannot open EXR", path, e);
+    let mut f = std::fs::File::open(path).map_err(err)?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileExt;
+        let len = f.metadata().map_err(err)?.len();
+        if let Ok(len) = usize::try_from(len) {
+            buf.resize(len, 0);
+            let (a, b) = buf.split_at_mut(len / 2);
+            let (ra, rb) = rayon::join(
+                || f.read_exact_at(a, 0),
+                || f.read_exact_at(b, (len / 2) as u64),
+            );
+            ra.and(rb).map_err(err)?;
+            // A file that grew since `metadata` keeps its tail.
+            f.read_to_end(buf).map_err(err)?;
+            return Ok(());
+        }
+    }
+    buf.clear();
+    f.read_to_end(buf).map_err(err)?;
+    Ok(())
 }
 
 fn check_len(width: u32, height: u32, len: usize) -> Result<()> {
@@ -334,10 +230,7 @@ fn check_len(width: u32, height: u32, len: usize) -> Result<()> {
 
 /// The first non-finite value of an RGBA buffer, as (x, y, channel, value).
 fn first_non_finite(width: u32, rgba: &[f32]) -> Option<(usize, usize, usize, f32)> {
-    let i = rgba.par_iter().position_first(|v| !v.is_finite())?;
-    let px = i / CH;
-    let w = (width as usize).max(1);
-    Some((px % w, px / w, i % CH, rgba[i]))
+    exr_frame::first_non_finite(width as usize, rgba)
 }
 
 /// Running sum of linear RGBA frames of one size; the mean is the blurry image.
@@ -348,6 +241,10 @@ pub struct Accumulator {
     // f64: the sum of hundreds of f32 frames keeps every f32 bit of their mean.
     sum: Vec<f64>,
     count: u32,
+    /// The frame being added by `add_exr`, kept so its memory is reused.
+    staging: Vec<f32>,
+    /// The bytes of the EXR file being added, kept for the same reason.
+    file: Vec<u8>,
 }
 
 impl Accumulator {
@@ -357,6 +254,8 @@ impl Accumulator {
             height,
             sum: vec![0.0; width as usize * height as usize * CH],
             count: 0,
+            staging: Vec::new(),
+            file: Vec::new(),
         }
     }
 
@@ -391,24 +290,31 @@ impl Accumulator {
     /// Read an RGBA f32 EXR (alpha 1 when absent) and add it; the file must match the
     /// accumulator size and hold only finite values.
     pub fn add_exr(&mut self, path: &Path) -> Result<()> {
-        let f = read_exr(path)?;
-        if (f.width, f.height) != (self.width, self.height) {
-            return Err(Error::Shape(format!(
-                "EXR is {}x{} but the accumulator is {}x{}: {path:?}",
-                f.width, f.height, self.width, self.height
-            )));
-        }
-        if let Some((x, y, c, v)) = first_non_finite(f.width, &f.rgba) {
-            return Err(Error::Image {
-                reason: format!(
-                    "non-finite value {v} at pixel ({x}, {y}) channel {}; a render must not poison the average",
-                    "RGBA".as_bytes()[c] as char
-                ),
-                path: path.to_path_buf(),
-            });
-        }
-        self.add_unchecked(&f.rgba);
-        Ok(())
+        let mut file = std::mem::take(&mut self.file);
+        let mut staging = std::mem::take(&mut self.staging);
+        let res = read_into(path, &mut file).and_then(|()| {
+            let d = exr_frame::decode_rgba(&file, path, &mut staging)?;
+            if (d.width, d.height) != (self.width as usize, self.height as usize) {
+                return Err(Error::Shape(format!(
+                    "EXR is {}x{} but the accumulator is {}x{}: {path:?}",
+                    d.width, d.height, self.width, self.height
+                )));
+            }
+            if let Some((x, y, c, v)) = d.non_finite {
+                return Err(Error::Image {
+                    reason: format!(
+                        "non-finite value {v} at pixel ({x}, {y}) channel {}; a render must not poison the average",
+                        "RGBA".as_bytes()[c] as char
+                    ),
+                    path: path.to_path_buf(),
+                });
+            }
+            self.add_unchecked(&staging);
+            Ok(())
+        });
+        self.file = file;
+        self.staging = staging;
+        res
     }
 
     fn add_unchecked(&mut self, rgba: &[f32]) {

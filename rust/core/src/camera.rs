@@ -14,9 +14,9 @@ pub fn position(r: f64, phi_deg: f64, theta_deg: f64) -> DVec3 {
     let phi = clamp_polar(phi_deg).to_radians();
     let theta = theta_deg.to_radians();
     DVec3::new(
-        r * phi.sin() * theta.cos(),
-        r * phi.sin() * theta.sin(),
-        r * phi.cos(),
+        r * libm::sin(phi) * libm::cos(theta),
+        r * libm::sin(phi) * libm::sin(theta),
+        r * libm::cos(phi),
     )
 }
 
@@ -75,7 +75,7 @@ pub fn depth_range(c2w: &DMat4, points: &[[f32; 3]]) -> (f64, f64) {
 
 /// Focal length in pixels for a square image of `size` px and field of view `fov_deg`.
 pub fn focal_px(size: u32, fov_deg: f64) -> f64 {
-    0.5 * size as f64 / (0.5 * fov_deg.to_radians()).tan()
+    0.5 * size as f64 / libm::tan(0.5 * fov_deg.to_radians())
 }
 
 #[cfg(test)]

@@ -20,6 +20,9 @@ pub enum Error {
     Shape(String),
     #[error("invalid value: {0}")]
     Value(String),
+    /// Bad input data (a build's meta.json, splits.json, …): the reason, then the file.
+    #[error("{reason}: {path:?}")]
+    Input { reason: String, path: PathBuf },
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -5,6 +5,8 @@ pub mod accumulate;
 pub mod atomic;
 pub mod camera;
 pub mod error;
+mod exr_frame;
+pub mod failures;
 pub mod image_io;
 pub mod llff;
 pub mod noise;
@@ -13,6 +15,7 @@ pub mod qa;
 pub mod rng;
 pub mod sampling;
 pub mod splits;
+pub mod stats;
 pub mod tradeoff;
 pub mod weights;
 

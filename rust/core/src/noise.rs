@@ -19,6 +19,10 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+#[cfg(target_arch = "x86_64")]
+#[path = "noise_avx2.rs"]
+mod avx2;
+
 /// Transfer curve between the stored codes and linear values.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Gamma {
@@ -233,6 +237,9 @@ struct Ziggurat {
     ratio: [f64; ZIG_LAYERS],
     x32: [f32; ZIG_LAYERS],
     ratio32: [f32; ZIG_LAYERS],
+    /// [ratio32, x32] per layer, for the AVX2 kernel's paired gathers.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    pairs32: [[f32; 2]; ZIG_LAYERS],
 }
 
 fn ziggurat() -> &'static Ziggurat {
@@ -257,6 +264,7 @@ fn ziggurat() -> &'static Ziggurat {
             ratio,
             x32,
             ratio32,
+            pairs32: std::array::from_fn(|i| [ratio32[i], x32[i]]),
         }
     })
 }
@@ -311,7 +319,8 @@ const PHILOX_W1: u32 = 0xBB67_AE85;
 const LANES: usize = 16;
 
 /// `rng::philox4x32` of blocks `first .. first + LANES` of `stream`, lane-major so the
-/// compiler can interleave the rounds of many blocks (about 1.2x the scalar rate).
+/// compiler can interleave the rounds of many blocks and vectorize them.
+#[inline(always)]
 fn philox_lanes(key: u64, stream: u64, first: u64, out: &mut [u32]) {
     let mut c0 = [0u32; LANES];
     let mut c1 = [0u32; LANES];
@@ -347,7 +356,12 @@ fn philox_lanes(key: u64, stream: u64, first: u64, out: &mut [u32]) {
 /// i.e. round-to-nearest of the forward curve, found through a bin table.
 struct Encoder {
     thresholds: Vec<f32>,
-    start: Vec<u32>,
+    /// `start[b - first_bin]` = number of thresholds whose bin is below b, for the bins
+    /// from the lowest threshold's to one past the highest one's (a few thousand
+    /// entries: the table stays in L1 cache).
+    start: Vec<u16>,
+    first_bin: usize,
+    last_bin: usize,
 }
 
 /// Bin of a value: the top 16 bits of its IEEE pattern (sign, exponent, 7 mantissa
@@ -364,28 +378,61 @@ impl Encoder {
         let mut thresholds: Vec<f32> = (0..max_code)
             .map(|k| (gamma.decode((k as f64 + 0.5) / max_code as f64) * scale) as f32)
             .collect();
-        // start[b] = number of thresholds whose bin is below b. Binning is monotone, so
-        // those thresholds lie below every value of bin b and those of later bins above.
-        let mut counts = vec![0u32; (1 << 16) + 1];
+        // Binning is monotone, so the thresholds of bins below b lie below every value
+        // of bin b and those of later bins above it. A value below the lowest
+        // threshold's bin has code 0 and one above the highest's has code max: both
+        // are clamped onto the window's ends, where the comparisons give those codes.
+        let first_bin = thresholds.first().map_or(0, |&t| encoder_bin(t));
+        let last_bin = thresholds.last().map_or(0, |&t| encoder_bin(t)) + 1;
+        let mut start = vec![0u16; last_bin - first_bin + 2];
         for &t in &thresholds {
-            counts[encoder_bin(t) + 1] += 1;
+            start[encoder_bin(t) - first_bin + 1] += 1;
         }
         let mut acc = 0;
-        let start = counts
-            .iter()
-            .map(|c| {
-                acc += c;
-                acc
-            })
-            .collect();
+        for s in &mut start {
+            acc += *s;
+            *s = acc;
+        }
         // Two sentinels let `code` compare twice without bounds logic.
         thresholds.extend([f32::INFINITY; 2]);
-        Encoder { thresholds, start }
+        Encoder {
+            thresholds,
+            start,
+            first_bin,
+            last_bin,
+        }
     }
 
-    #[inline(always)]
+    /// The encoder's tables as plain locals for a hot loop.
+    fn view(&self) -> EncoderView<'_> {
+        EncoderView {
+            thresholds: &self.thresholds,
+            start: &self.start,
+            first_bin: self.first_bin,
+            span: self.last_bin - self.first_bin,
+        }
+    }
+
+    #[cfg(test)]
     fn code(&self, v: f32) -> u32 {
-        let b = encoder_bin(v);
+        self.view().code(v)
+    }
+}
+
+/// A borrowed copy of an [`Encoder`]'s fields: kept in registers across a loop that
+/// also stores bytes (which the compiler must otherwise assume may alias the fields).
+#[derive(Clone, Copy)]
+struct EncoderView<'a> {
+    thresholds: &'a [f32],
+    start: &'a [u16],
+    first_bin: usize,
+    span: usize,
+}
+
+impl EncoderView<'_> {
+    #[inline(always)]
+    fn code(self, v: f32) -> u32 {
+        let b = encoder_bin(v).saturating_sub(self.first_bin).min(self.span);
         let (lo, hi) = (self.start[b] as usize, self.start[b + 1] as usize);
         if hi - lo > 2 {
             return (lo + self.thresholds[lo..hi].partition_point(|t| v >= *t)) as u32;
@@ -401,9 +448,13 @@ impl Encoder {
 /// noise standard deviation depend only on the clean code, so they are looked up.
 struct Plan {
     codes: usize,
-    /// (clean linear value, noise std) per (channel, code).
-    table: Vec<(f32, f32)>,
+    /// [clean linear value, noise std] per (channel, code) (arrays, not tuples: the AVX2
+    /// kernel reads them as 8-byte pairs and relies on the order).
+    table: Vec<[f32; 2]>,
     encoders: Vec<Encoder>,
+    /// The encoders of an 8-bit RGB plan in the AVX2 kernel's form.
+    #[cfg(target_arch = "x86_64")]
+    rgb8: Option<avx2::Rgb8Encoders>,
 }
 
 impl Plan {
@@ -417,13 +468,15 @@ impl Plan {
             let scale = model.channel_scale(c, color_channels);
             for code in 0..codes {
                 let y = scale * model.gamma.decode(code as f64 / max_code as f64);
-                table.push((y as f32, libm::sqrt(var_read + var_shot * y) as f32));
+                table.push([y as f32, libm::sqrt(var_read + var_shot * y) as f32]);
             }
             encoders.push(Encoder::new(model.gamma, max_code, scale));
         }
         Plan {
             codes,
             table,
+            #[cfg(target_arch = "x86_64")]
+            rgb8: avx2::Rgb8Encoders::new(&encoders),
             encoders,
         }
     }
@@ -432,9 +485,18 @@ impl Plan {
 trait Sample: Copy + Send + Sync {
     fn code(self) -> usize;
     fn from_code(c: u32) -> Self;
+    /// The samples as bytes, if they are 8-bit (for the AVX2 kernel).
+    fn bytes(s: &[Self]) -> Option<&[u8]>;
+    fn bytes_mut(s: &mut [Self]) -> Option<&mut [u8]>;
 }
 
 impl Sample for u8 {
+    fn bytes(s: &[Self]) -> Option<&[u8]> {
+        Some(s)
+    }
+    fn bytes_mut(s: &mut [Self]) -> Option<&mut [u8]> {
+        Some(s)
+    }
     #[inline(always)]
     fn code(self) -> usize {
         self as usize
@@ -446,6 +508,12 @@ impl Sample for u8 {
 }
 
 impl Sample for u16 {
+    fn bytes(_: &[Self]) -> Option<&[u8]> {
+        None
+    }
+    fn bytes_mut(_: &mut [Self]) -> Option<&mut [u8]> {
+        None
+    }
     #[inline(always)]
     fn code(self) -> usize {
         self as usize
@@ -466,6 +534,12 @@ pub struct Noisy {
     pub processed: Image,
 }
 
+/// Pixels per batch of a row: the batch's Philox words live on the stack.
+const BATCH_PIXELS: usize = 256;
+/// Words of one batch: up to 3 leading words of the first block belong to the value
+/// before the batch, and blocks are made `LANES` at a time.
+const BATCH_WORDS: usize = (3 + BATCH_PIXELS * 3).div_ceil(LANES * 4) * LANES * 4;
+
 fn apply<T: Sample>(
     src: &[T],
     img: &Image,
@@ -473,48 +547,160 @@ fn apply<T: Sample>(
     key: u64,
     stream: u64,
 ) -> (Vec<f32>, Vec<T>) {
+    // One monomorphic kernel per layout, so the channel loops unroll.
+    match (img.color_channels(), img.channels) {
+        (1, 1) => apply_layout::<T, 1, 1>(src, img, plan, key, stream),
+        (1, _) => apply_layout::<T, 1, 2>(src, img, plan, key, stream),
+        (_, 3) => apply_layout::<T, 3, 3>(src, img, plan, key, stream),
+        _ => apply_layout::<T, 3, 4>(src, img, plan, key, stream),
+    }
+}
+
+/// The noise of `CC` colour channels of a `CH`-channel image (alpha, if any, last).
+fn apply_layout<T: Sample, const CC: usize, const CH: usize>(
+    src: &[T],
+    img: &Image,
+    plan: &Plan,
+    key: u64,
+    stream: u64,
+) -> (Vec<f32>, Vec<T>) {
     let z = ziggurat();
-    let (w, ch, cc) = (img.width as usize, img.channels, img.color_channels());
-    let lc = if img.has_alpha() { 4 } else { 3 };
+    let w = img.width as usize;
+    let lc = if CH > CC { 4 } else { 3 };
     let max = img.samples.max_code() as f32;
     let fallback_key = rng::derive_seed(key, &[rng::fnv1a64(b"ziggurat_fallback"), stream]);
-    let mut linear = vec![0.0f32; src.len() / ch * lc];
+    let tables: [&[[f32; 2]]; CC] =
+        std::array::from_fn(|c| &plan.table[c * plan.codes..(c + 1) * plan.codes]);
+    let encoders: [EncoderView<'_>; CC] = std::array::from_fn(|c| plan.encoders[c].view());
+    let mut linear = vec![0.0f32; src.len() / CH * lc];
     let mut processed = src.to_vec();
     linear
         .par_chunks_mut(w * lc)
-        .zip(processed.par_chunks_mut(w * ch))
+        .zip(processed.par_chunks_mut(w * CH))
+        .zip(src.par_chunks(w * CH))
         .enumerate()
-        .for_each(|(row, (lin, out))| {
-            let src_row = &src[row * w * ch..(row + 1) * w * ch];
-            let v0 = (row * w * cc) as u64;
-            // The row's words: whole blocks from the one holding v0, LANES at a time.
-            let first = v0 >> 2;
-            let blocks = ((v0 + (w * cc) as u64 + 3) >> 2) - first;
-            let mut words = vec![0u32; (blocks as usize).div_ceil(LANES) * LANES * 4];
-            for (i, chunk) in words.chunks_exact_mut(LANES * 4).enumerate() {
-                philox_lanes(key, stream, first + (i * LANES) as u64, chunk);
-            }
-            let skip = (v0 & 3) as usize;
-            for p in 0..w {
-                for c in 0..cc {
-                    let i = p * cc + c;
-                    let v = v0 + i as u64;
-                    let n = zig_normal(z, words[skip + i], fallback_key, v);
-                    let (clean, std) = plan.table[c * plan.codes + src_row[p * ch + c].code()];
-                    let noisy = clean + std * n;
-                    if cc == 3 {
-                        lin[p * lc + c] = noisy;
-                    } else {
-                        lin[p * lc..p * lc + 3].fill(noisy);
+        .for_each_init(
+            || vec![0u32; BATCH_WORDS],
+            |words, (row, ((lin, out), src_row))| {
+                for p0 in (0..w).step_by(BATCH_PIXELS) {
+                    let np = BATCH_PIXELS.min(w - p0);
+                    let v0 = ((row * w + p0) * CC) as u64;
+                    // The batch's words: whole blocks from the one holding v0.
+                    let skip = (v0 & 3) as usize;
+                    let blocks = (skip + np * CC).div_ceil(4);
+                    philox_fill(
+                        key,
+                        stream,
+                        v0 >> 2,
+                        &mut words[..blocks.div_ceil(LANES) * LANES * 4],
+                    );
+                    let src_b = &src_row[p0 * CH..(p0 + np) * CH];
+                    let out_b = &mut out[p0 * CH..(p0 + np) * CH];
+                    let lin_b = &mut lin[p0 * lc..(p0 + np) * lc];
+                    let words = &words[skip..skip + np * CC];
+                    let done =
+                        simd_batch::<T, CC, CH>(plan, words, src_b, lin_b, out_b, v0, fallback_key);
+                    if done > 0 {
+                        // The few values the vector kernel left (RGB: value i is channel i % 3).
+                        for i in done..np * CC {
+                            let c = i % CC;
+                            let n = zig_normal(z, words[i], fallback_key, v0 + i as u64);
+                            let [clean, std] = tables[c][src_b[i].code()];
+                            let noisy = clean + std * n;
+                            lin_b[i] = noisy;
+                            out_b[i] = T::from_code(encoders[c].code(noisy));
+                        }
+                        continue;
                     }
-                    out[p * ch + c] = T::from_code(plan.encoders[c].code(noisy));
+                    // Channel by channel, so each channel's tables stay in registers, and in
+                    // two passes (noise, then encoding), each with a short dependency chain
+                    // per value so that many values are in flight at once.
+                    for c in 0..CC {
+                        let table = tables[c];
+                        let mut v = v0 + c as u64;
+                        for k in 0..np {
+                            let n = zig_normal(z, words[k * CC + c], fallback_key, v);
+                            let [clean, std] = table[src_b[k * CH + c].code()];
+                            lin_b[k * lc + c] = clean + std * n;
+                            v += CC as u64;
+                        }
+                        let enc = encoders[c];
+                        for k in 0..np {
+                            out_b[k * CH + c] = T::from_code(enc.code(lin_b[k * lc + c]));
+                        }
+                        if CC == 1 {
+                            for l in lin_b.chunks_exact_mut(lc) {
+                                l[1] = l[0];
+                                l[2] = l[0];
+                            }
+                        }
+                    }
+                    if CH > CC {
+                        for (s, l) in src_b.chunks_exact(CH).zip(lin_b.chunks_exact_mut(lc)) {
+                            l[3] = s[CC].code() as f32 / max;
+                        }
+                    }
                 }
-                if ch > cc {
-                    lin[p * lc + 3] = src_row[p * ch + cc].code() as f32 / max;
-                }
-            }
-        });
+            },
+        );
     (linear, processed)
+}
+
+/// Tests compare the vector kernel with the scalar one by switching it off.
+#[cfg(test)]
+static SCALAR_ONLY: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+fn simd_enabled() -> bool {
+    #[cfg(test)]
+    if SCALAR_ONLY.load(std::sync::atomic::Ordering::Relaxed) {
+        return false;
+    }
+    true
+}
+
+/// The AVX2 kernel on an 8-bit RGB batch where the CPU has AVX2; returns how many
+/// values (from the start) it did, 0 if it did not apply.
+#[allow(clippy::too_many_arguments)]
+fn simd_batch<T: Sample, const CC: usize, const CH: usize>(
+    plan: &Plan,
+    words: &[u32],
+    src: &[T],
+    lin: &mut [f32],
+    out: &mut [T],
+    v0: u64,
+    fallback_key: u64,
+) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if CC == 3 && CH == 3 && simd_enabled() && std::arch::is_x86_feature_detected!("avx2") {
+        if let (Some(enc), Some(src), Some(out)) = (&plan.rgb8, T::bytes(src), T::bytes_mut(out)) {
+            let batch = avx2::Rgb8Batch {
+                words,
+                src,
+                lin,
+                out,
+                v0,
+            };
+            // SAFETY: the CPU supports AVX2 (checked above); `plan.table` holds the
+            // 3 · 256 entries of an 8-bit RGB plan (`plan.rgb8` exists only for those).
+            return unsafe { avx2::rgb8(batch, ziggurat(), &plan.table, enc, fallback_key) };
+        }
+    }
+    let _ = (plan, words, src, lin, out, v0, fallback_key);
+    0
+}
+
+/// Philox blocks `first ..` of `stream` into `out` (a whole number of `LANES` blocks),
+/// with AVX2 where the CPU has it: the same integer arithmetic, so the same words.
+fn philox_fill(key: u64, stream: u64, first: u64, out: &mut [u32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2, checked just above.
+        unsafe { avx2::philox_fill(key, stream, first, out) };
+        return;
+    }
+    for (i, chunk) in out.chunks_exact_mut(LANES * 4).enumerate() {
+        philox_lanes(key, stream, first + (i * LANES) as u64, chunk);
+    }
 }
 
 fn apply_plan(img: &Image, plan: &Plan, key: u64, stream: u64) -> Result<Noisy> {
@@ -694,6 +880,52 @@ mod tests {
         // P(|x| > 3) = 0.0026998
         let p = tail as f64 / nf;
         assert!((p - 0.0027).abs() < 0.0003, "tail {p}");
+    }
+
+    #[test]
+    fn vector_kernel_matches_scalar_kernel() -> Result<()> {
+        // Odd sizes leave batch tails; bright, dark and mid codes; both curves; white
+        // balance on and off; a tiny white level pushes values below every threshold.
+        let mut s = rng::Stream::new(3, 3);
+        let src: Vec<u8> = (0..301 * 7 * 3).map(|_| s.next_u64() as u8).collect();
+        let img = Image::new(301, 7, 3, Samples::U8(src))?;
+        for (gamma, wb, wl, gain) in [
+            (Gamma::Power22, Some(sample_white_balance(2)), 1.0, 20.0),
+            (Gamma::Srgb, None, 1.0, 1.0),
+            (Gamma::Power22, None, 1e-3, 4.0),
+        ] {
+            let (sr, ss) = NoiseLevels::DEFAULT.sigmas(gain)?;
+            let m = NoiseModel {
+                gamma,
+                white_balance: wb,
+                white_level: wl,
+                ..model(sr, ss)
+            };
+            let fast = add_noise(&img, &m, 5, stream_id(1, 2))?;
+            SCALAR_ONLY.store(true, std::sync::atomic::Ordering::Relaxed);
+            let slow = add_noise(&img, &m, 5, stream_id(1, 2));
+            SCALAR_ONLY.store(false, std::sync::atomic::Ordering::Relaxed);
+            assert_eq!(fast, slow?, "{gamma:?} {wb:?} {wl}");
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn philox_fill_matches_rng() {
+        let mut out = vec![0u32; 3 * LANES * 4];
+        for (key, stream, first) in [(0, 0, 0), (u64::MAX, 0x1234_0000_0007, (1u64 << 32) - 21)] {
+            philox_fill(key, stream, first, &mut out);
+            for (j, w) in out.chunks_exact(4).enumerate() {
+                let b = first + j as u64;
+                let c = [
+                    b as u32,
+                    (b >> 32) as u32,
+                    stream as u32,
+                    (stream >> 32) as u32,
+                ];
+                assert_eq!(w, rng::philox4x32(key, c));
+            }
+        }
     }
 
     #[test]

@@ -24,6 +24,37 @@ pub struct Splits {
     pub seed: u64,
 }
 
+const TEST_OBJECTS_STREAM: u64 = 0x5e11_7500;
+const SUBSET_STREAM: u64 = 0x5e11_5b5e;
+
+/// A seeded permutation of ids (Fisher–Yates over their sorted order): it depends on
+/// the seed and the set of ids only, never on the order they were listed or built in.
+pub fn seeded_order(ids: &[String], seed: u64, stream: u64) -> Vec<String> {
+    let mut order: Vec<String> = ids
+        .iter()
+        .cloned()
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let mut s = Stream::new(seed, stream);
+    for i in (1..order.len()).rev() {
+        let j = (s.uniform() * (i + 1) as f64) as usize;
+        order.swap(i, j.min(i));
+    }
+    order
+}
+
+/// A seeded random subset of `k` ids (all of them when k ≥ their number), sorted.
+/// Growing k keeps the smaller subset: the first k of one seeded order.
+pub fn seeded_subset(ids: &[String], k: usize, seed: u64) -> Vec<String> {
+    let mut chosen: Vec<String> = seeded_order(ids, seed, SUBSET_STREAM)
+        .into_iter()
+        .take(k)
+        .collect();
+    chosen.sort();
+    chosen
+}
+
 /// Every `stride`-th view index below `views`.
 pub fn test_views(views: usize, stride: usize) -> Vec<usize> {
     (0..views).step_by(stride.max(1)).collect()
@@ -70,15 +101,10 @@ pub fn make_splits(
             } else if n < 2 {
                 k = 0;
             }
-            // Fisher–Yates over the sorted ids: the choice depends on the seed and the
-            // set of objects only, not on build order.
-            let mut order = objects.clone();
-            let mut s = Stream::new(seed, 0x5e11_7500);
-            for i in (1..n).rev() {
-                let j = (s.uniform() * (i + 1) as f64) as usize;
-                order.swap(i, j.min(i));
-            }
-            order.into_iter().take(k).collect()
+            seeded_order(&objects, seed, TEST_OBJECTS_STREAM)
+                .into_iter()
+                .take(k)
+                .collect()
         }
     };
     let (mut train, mut test) = (Vec::new(), Vec::new());
@@ -106,6 +132,21 @@ pub fn make_splits(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn subsets_are_seeded_nested_and_order_free() {
+        let ids: Vec<String> = (0..50).map(|i| format!("obj{i:02}")).collect();
+        let mut reversed = ids.clone();
+        reversed.reverse();
+        let a = seeded_subset(&ids, 10, 7);
+        assert_eq!(a, seeded_subset(&reversed, 10, 7));
+        assert_eq!(a.len(), 10);
+        assert_ne!(a, seeded_subset(&ids, 10, 8));
+        let b = seeded_subset(&ids, 20, 7);
+        assert!(a.iter().all(|x| b.contains(x)));
+        assert_eq!(seeded_subset(&ids, 99, 7).len(), 50);
+        assert!(seeded_subset(&[], 3, 7).is_empty());
+    }
 
     fn entries(objects: usize, per: usize) -> Vec<SettingEntry> {
         (0..objects)

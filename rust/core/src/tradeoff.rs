@@ -34,7 +34,7 @@ pub const PSNR_CAP_DB: f64 = 200.0;
 
 /// Compare `image` with `reference` (same size, premultiplied linear RGBA, row-major).
 pub fn image_error(image: &[f32], reference: &[f32], background: [f64; 3]) -> Result<ImageError> {
-    if image.len() != reference.len() || image.is_empty() || image.len() % CH != 0 {
+    if image.len() != reference.len() || image.is_empty() || !image.len().is_multiple_of(CH) {
         return Err(Error::Shape(format!(
             "image has {} values and reference {}: both must be the same non-empty RGBA size",
             image.len(),

@@ -59,7 +59,7 @@ pub fn scene_weight(near: f64, far: f64, bbox_dims: [f64; 3], g: &Guards) -> Sce
         flatness,
         depth_range,
         orientation,
-        w_u: (flatness * depth_range * orientation).cbrt(),
+        w_u: libm::cbrt(flatness * depth_range * orientation),
     }
 }
 

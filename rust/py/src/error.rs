@@ -6,6 +6,12 @@ use pyo3::prelude::*;
 pyo3::create_exception!(_core, BlursetError, pyo3::exceptions::PyException);
 pyo3::create_exception!(_core, PoseFormatError, BlursetError);
 pyo3::create_exception!(_core, ImageError, BlursetError);
+pyo3::create_exception!(
+    _core,
+    InputError,
+    BlursetError,
+    "Bad input data (missing file, wrong shape, mismatched sizes); the message names the file."
+);
 
 pub(crate) fn to_pyerr(e: Error) -> PyErr {
     let msg = e.to_string();
@@ -18,6 +24,7 @@ pub(crate) fn to_pyerr(e: Error) -> PyErr {
         Error::PoseFormat { .. } => PoseFormatError::new_err(msg),
         Error::Image { .. } => ImageError::new_err(msg),
         Error::Shape(_) | Error::Value(_) => PyValueError::new_err(msg),
+        Error::Input { .. } => InputError::new_err(msg),
     }
 }
 
@@ -26,5 +33,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("BlursetError", py.get_type::<BlursetError>())?;
     m.add("PoseFormatError", py.get_type::<PoseFormatError>())?;
     m.add("ImageError", py.get_type::<ImageError>())?;
+    m.add("InputError", py.get_type::<InputError>())?;
     Ok(())
 }

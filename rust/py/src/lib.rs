@@ -4,11 +4,13 @@ use pyo3::prelude::*;
 
 mod accumulate;
 mod error;
+mod failures;
 mod llff;
 mod noise;
 mod noise_linear;
 mod qa;
 mod sampling;
+mod stats;
 mod tradeoff;
 
 /// Run long core work without the GIL, so Python threads (progress bars, Ray) go on.
@@ -24,6 +26,7 @@ where
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     error::register(m)?;
+    failures::register(m)?;
     llff::register(m)?;
     sampling::register(m)?;
     accumulate::register(m)?;
@@ -31,5 +34,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     noise_linear::register(m)?;
     qa::register(m)?;
     tradeoff::register(m)?;
+    stats::register(m)?;
     Ok(())
 }

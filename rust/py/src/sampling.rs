@@ -108,7 +108,14 @@ fn make_splits(
     to_json(&s)
 }
 
+/// A seeded random subset of `k` ids, sorted (it depends on the set of ids, not their order).
+#[pyfunction]
+fn seeded_subset(ids: Vec<String>, k: usize, seed: u64) -> Vec<String> {
+    splits::seeded_subset(&ids, k, seed)
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(seeded_subset, m)?)?;
     m.add_function(wrap_pyfunction!(default_sampling_config, m)?)?;
     m.add_function(wrap_pyfunction!(validate_sampling_config, m)?)?;
     m.add_function(wrap_pyfunction!(seed_for, m)?)?;

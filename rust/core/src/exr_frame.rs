@@ -1,0 +1,718 @@
+//! Reading a linear RGBA EXR frame (a latent render) into an interleaved f32 buffer,
+//! as fast as the file's codec allows.
+//!
+//! The `exr` crate parses the header and the offset table and cuts the chunks. Scan-line
+//! files stored without compression or with ZIP/ZIPS (Blender's codecs for latent
+//! frames) are decoded here: each block is inflated straight into a per-thread buffer,
+//! the ZIP byte predictor is undone in place, and the two byte halves are read back as
+//! samples directly into the frame, so no block is copied or re-interleaved on the way.
+//! Every other layout (tiles, PIZ, RLE, …) goes through the crate's own decompressor.
+//! Blocks are decoded in parallel on the rayon pool; each block also reports whether it
+//! held a NaN or inf, so the accumulator needs no second pass to refuse such a frame.
+use crate::error::{Error, Result};
+use exr::block::chunk::{Chunk, CompressedBlock};
+use exr::block::UncompressedBlock;
+use exr::compression::Compression;
+use exr::math::Vec2;
+use exr::meta::attribute::{ChannelList, SampleType};
+use exr::meta::header::Header;
+use exr::meta::{BlockDescription, MetaData};
+use rayon::prelude::*;
+use std::cell::RefCell;
+use std::io::Cursor;
+use std::path::Path;
+
+/// RGBA f32 channels per pixel.
+pub(crate) const CH: usize = 4;
+
+/// A NaN or inf found in a frame: pixel x, y, RGBA channel index, value.
+pub(crate) type NonFinite = (usize, usize, usize, f32);
+
+/// Size of a decoded frame and its first non-finite value in row-major order.
+pub(crate) struct Decoded {
+    pub width: usize,
+    pub height: usize,
+    pub non_finite: Option<NonFinite>,
+}
+
+/// Decode the first flat RGB(A) layer of the EXR file `bytes` into `rgba` (resized to
+/// width · height · 4; alpha 1 when the layer has none). `path` only names the file
+/// in errors.
+pub(crate) fn decode_rgba(bytes: &[u8], path: &Path, rgba: &mut Vec<f32>) -> Result<Decoded> {
+    let bad = |reason: String| Error::Image {
+        reason,
+        path: path.to_path_buf(),
+    };
+    let exr_err = |e: exr::error::Error| bad(format!("EXR: {e}"));
+    let reader = exr::block::read(Cursor::new(bytes), false).map_err(exr_err)?;
+    let meta = reader.meta_data().clone();
+
+    let has_rgb = |h: &Header| {
+        ["R", "G", "B"]
+            .iter()
+            .all(|c| h.channels.list.iter().any(|ch| ch.name.eq(c)))
+    };
+    let Some(layer) = meta.headers.iter().position(|h| !h.deep && has_rgb(h)) else {
+        let names: Vec<String> = meta
+            .headers
+            .iter()
+            .flat_map(|h| h.channels.list.iter().map(|c| c.name.to_string()))
+            .collect();
+        return Err(bad(format!(
+            "no flat layer with R, G, B channels (channels: {names:?})"
+        )));
+    };
+    let header = &meta.headers[layer];
+    let display = header.shared_attributes.display_window;
+    let (width, height) = (header.layer_size.width(), header.layer_size.height());
+    if header.own_attributes.layer_position != display.position || header.layer_size != display.size
+    {
+        return Err(bad(format!(
+            "data window ({width}x{height} at {:?}) differs from the display window ({}x{} at {:?}); crop renders are not supported",
+            header.own_attributes.layer_position,
+            display.size.width(),
+            display.size.height(),
+            display.position
+        )));
+    }
+    let slots: Vec<Option<usize>> = header
+        .channels
+        .list
+        .iter()
+        .map(|c| ["R", "G", "B", "A"].iter().position(|n| c.name.eq(n)))
+        .collect();
+    if let Some(c) = header
+        .channels
+        .list
+        .iter()
+        .zip(&slots)
+        .find(|(c, s)| s.is_some() && c.sampling != Vec2(1, 1))
+    {
+        return Err(bad(format!("channel {} is subsampled", c.0.name)));
+    }
+    let has_alpha = slots.contains(&Some(3));
+
+    if width == 0 || height == 0 {
+        return Err(bad("empty image".into()));
+    }
+    let n = width * height * CH;
+    let fast = matches!(
+        header.compression,
+        Compression::Uncompressed | Compression::ZIP1 | Compression::ZIP16
+    ) && matches!(header.blocks, BlockDescription::ScanLines)
+        && header
+            .channels
+            .list
+            .iter()
+            .all(|c| c.sampling == Vec2(1, 1));
+    let non_finite = if fast {
+        // Single-part files: the chunks are sliced out of `bytes` in place; a
+        // multi-part file's chunks are cut (copied) by the crate.
+        let owned;
+        let blocks: Vec<(i32, &[u8])> = match single_part_chunks(bytes, header.chunk_count) {
+            Some(blocks) if meta.headers.len() == 1 => blocks,
+            _ => {
+                owned = read_chunks(reader, layer).map_err(exr_err)?;
+                owned
+                    .iter()
+                    .filter_map(|c| match &c.compressed_block {
+                        CompressedBlock::ScanLine(b) => {
+                            Some((b.y_coordinate, b.compressed_pixels_le.as_slice()))
+                        }
+                        _ => None,
+                    })
+                    .collect()
+            }
+        };
+        // Every value of the frame is written (a missing block is an error), so a
+        // buffer of the right size is reused as it is.
+        if rgba.len() != n {
+            rgba.clear();
+            rgba.resize(n, 0.0);
+        }
+        decode_scanlines(&blocks, header, &slots, width, height, rgba).map_err(bad)?
+    } else {
+        let chunks = read_chunks(reader, layer).map_err(exr_err)?;
+        rgba.clear();
+        rgba.resize(n, if has_alpha { 0.0 } else { 1.0 });
+        decode_generic(chunks, &meta, header, &slots, width, rgba).map_err(bad)?;
+        first_non_finite(width, rgba)
+    };
+    Ok(Decoded {
+        width,
+        height,
+        non_finite,
+    })
+}
+
+/// The chunks of one layer's full-resolution level, cut (copied) by the `exr` crate.
+fn read_chunks(
+    reader: exr::block::reader::Reader<Cursor<&[u8]>>,
+    layer: usize,
+) -> exr::error::Result<Vec<Chunk>> {
+    reader
+        .filter_chunks(false, |_, tile, block| {
+            block.layer == layer && tile.level_index == Vec2(0, 0)
+        })?
+        .collect()
+}
+
+/// The (y, data) chunks of a single-part file, sliced out of its bytes: the header's
+/// attributes (`name\0type\0size value`, ended by a null byte), the offset table of
+/// `chunk_count` u64, then at each offset `y: i32, size: i32, data`. `None` if the
+/// bytes do not have that shape (the caller then lets the crate read them).
+fn single_part_chunks(bytes: &[u8], chunk_count: usize) -> Option<Vec<(i32, &[u8])>> {
+    let i32_at = |at: usize| -> Option<i32> {
+        Some(i32::from_le_bytes(
+            bytes.get(at..at.checked_add(4)?)?.try_into().ok()?,
+        ))
+    };
+    // Magic number and version; bit 12 marks multi-part files.
+    if i32_at(0)? != 20_000_630 || i32_at(4)? & 0x1000 != 0 {
+        return None;
+    }
+    let mut at = 8;
+    while *bytes.get(at)? != 0 {
+        for _ in 0..2 {
+            at += bytes.get(at..)?.iter().position(|&b| b == 0)? + 1;
+        }
+        at = at.checked_add(4 + usize::try_from(i32_at(at)?).ok()?)?;
+    }
+    at += 1;
+    let table = bytes.get(at..at.checked_add(chunk_count.checked_mul(8)?)?)?;
+    table
+        .chunks_exact(8)
+        .map(|o| {
+            let off = usize::try_from(u64::from_le_bytes(o.try_into().ok()?)).ok()?;
+            let data = off.checked_add(8)?;
+            let size = usize::try_from(i32_at(off.checked_add(4)?)?).ok()?;
+            Some((i32_at(off)?, bytes.get(data..data.checked_add(size)?)?))
+        })
+        .collect()
+}
+
+/// The first non-finite value of an RGBA buffer in row-major order.
+pub(crate) fn first_non_finite(width: usize, rgba: &[f32]) -> Option<NonFinite> {
+    let row = (width * CH).max(1);
+    let (r, i) = rgba.par_chunks(row).enumerate().find_map_first(|(r, s)| {
+        if s.iter().all(|v| v.is_finite()) {
+            None
+        } else {
+            s.iter().position(|v| !v.is_finite()).map(|i| (r, i))
+        }
+    })?;
+    Some((i / CH, r, i % CH, rgba[r * row + i]))
+}
+
+thread_local! {
+    /// Inflated bytes of the block being decoded (one per rayon worker, reused).
+    static SCRATCH: RefCell<Vec<u8>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Scan-line blocks, uncompressed or ZIP/ZIPS, decoded block-parallel into `rgba`.
+fn decode_scanlines(
+    chunks: &[(i32, &[u8])],
+    header: &Header,
+    slots: &[Option<usize>],
+    width: usize,
+    height: usize,
+    rgba: &mut [f32],
+) -> std::result::Result<Option<NonFinite>, String> {
+    let row = width * CH;
+    let lines = header.compression.scan_lines_per_block();
+    let line_bytes: usize = header
+        .channels
+        .list
+        .iter()
+        .map(|c| width * c.sample_type.bytes_per_sample())
+        .sum();
+    // Each block owns its rows of the frame; a file that repeats a block is refused.
+    let mut dst_rows: Vec<Option<&mut [f32]>> = rgba.chunks_mut(lines * row).map(Some).collect();
+    let mut parts: Vec<Option<(&[u8], &mut [f32])>> = Vec::new();
+    parts.resize_with(dst_rows.len(), || None);
+    for &(y, data) in chunks {
+        let y = i64::from(y) - i64::from(header.own_attributes.layer_position.y());
+        let index = usize::try_from(y)
+            .ok()
+            .filter(|y| y % lines == 0 && *y < height)
+            .map(|y| y / lines)
+            .ok_or_else(|| format!("scan-line block at y = {y} lies outside the image"))?;
+        let dst = dst_rows[index]
+            .take()
+            .ok_or_else(|| format!("scan-line block at y = {y} appears twice"))?;
+        parts[index] = Some((data, dst));
+    }
+    if let Some(missing) = parts.iter().position(Option::is_none) {
+        return Err(format!(
+            "scan-line block at y = {} is missing",
+            missing * lines
+        ));
+    }
+    let compression = header.compression;
+    let found = parts
+        .into_par_iter()
+        .enumerate()
+        .filter_map(|(i, p)| p.map(|p| (i, p)))
+        .map(|(i, (data, dst))| {
+            let n_lines = dst.len() / row.max(1);
+            let expected = n_lines * line_bytes;
+            let bad = decode_block(compression, data, expected, header, slots, width, dst)?;
+            // The first non-finite value of the block, row-major (channel lines come
+            // in name order, so look again in pixel order).
+            Ok(bad
+                .then(|| {
+                    dst.iter()
+                        .position(|v| !v.is_finite())
+                        .map(|k| ((k % row) / CH, i * lines + k / row, k % CH, dst[k]))
+                })
+                .flatten())
+        })
+        .collect::<std::result::Result<Vec<Option<NonFinite>>, String>>()?;
+    Ok(found.into_iter().flatten().next())
+}
+
+/// Decode one scan-line block into its rows; true if it held a NaN or inf in R, G, B or A.
+fn decode_block(
+    compression: Compression,
+    data: &[u8],
+    expected: usize,
+    header: &Header,
+    slots: &[Option<usize>],
+    width: usize,
+    dst: &mut [f32],
+) -> std::result::Result<bool, String> {
+    // A block whose compressed form would not be smaller is stored raw (OpenEXR rule).
+    if compression == Compression::Uncompressed || data.len() == expected {
+        if data.len() != expected {
+            return Err(format!(
+                "uncompressed block holds {} bytes, expected {expected}",
+                data.len()
+            ));
+        }
+        return Ok(scatter(
+            &header.channels,
+            slots,
+            width,
+            dst,
+            Bytes::Raw(data),
+        ));
+    }
+    SCRATCH.with(|s| {
+        let mut buf = s.borrow_mut();
+        buf.resize(expected, 0);
+        inflate_zlib(data, &mut buf)?;
+        undo_predictor(&mut buf);
+        let (lo, hi) = buf.split_at(expected.div_ceil(2));
+        Ok(scatter(
+            &header.channels,
+            slots,
+            width,
+            dst,
+            Bytes::Split(lo, hi),
+        ))
+    })
+}
+
+thread_local! {
+    /// One inflate state per rayon worker, reset between blocks (its window is
+    /// allocated once instead of once per block).
+    static INFLATE: RefCell<Option<zlib_rs::Inflate>> = const { RefCell::new(None) };
+}
+
+/// Inflate a zlib stream into exactly `out.len()` bytes.
+fn inflate_zlib(data: &[u8], out: &mut [u8]) -> std::result::Result<(), String> {
+    INFLATE.with(|cell| {
+        let mut slot = cell.borrow_mut();
+        let inflate = match slot.as_mut() {
+            Some(i) => {
+                i.reset(true);
+                i
+            }
+            None => slot.insert(zlib_rs::Inflate::new(true, 15)),
+        };
+        let want = out.len();
+        let status = inflate.decompress(data, out, zlib_rs::InflateFlush::Finish);
+        match status {
+            Ok(zlib_rs::Status::StreamEnd) if inflate.total_out() == want as u64 => Ok(()),
+            other => Err(format!(
+                "ZIP block does not inflate to {want} bytes ({other:?}, {} bytes)",
+                inflate.total_out()
+            )),
+        }
+    })
+}
+
+/// Undo OpenEXR's ZIP predictor: each byte was stored as the difference to the one
+/// before it, plus 128 (mod 256), so the data is a running sum.
+fn undo_predictor(buf: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        // SAFETY: SSE2 is part of the x86_64 baseline.
+        unsafe { undo_predictor_sse2(buf) }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    undo_predictor_swar(buf)
+}
+
+/// The running sum 16 bytes at a time: a log-step prefix sum inside the register plus
+/// the carry-in byte broadcast from the block before.
+///
+/// # Safety
+/// The CPU must support SSE2 (every x86_64 CPU does).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse2")]
+unsafe fn undo_predictor_sse2(buf: &mut [u8]) {
+    use std::arch::x86_64::*;
+    let Some(&first) = buf.first() else {
+        return;
+    };
+    let rest = &mut buf[1..];
+    let bias = _mm_set1_epi8(-128);
+    let mut prev = _mm_set1_epi8(first as i8);
+    let mut chunks = rest.chunks_exact_mut(16);
+    for c in &mut chunks {
+        let p = c.as_mut_ptr() as *mut __m128i;
+        let mut x = _mm_xor_si128(_mm_loadu_si128(p), bias);
+        x = _mm_add_epi8(x, _mm_slli_si128::<1>(x));
+        x = _mm_add_epi8(x, _mm_slli_si128::<2>(x));
+        x = _mm_add_epi8(x, _mm_slli_si128::<4>(x));
+        x = _mm_add_epi8(x, _mm_slli_si128::<8>(x));
+        x = _mm_add_epi8(x, prev);
+        _mm_storeu_si128(p, x);
+        // Broadcast byte 15 for the next block.
+        let hi = _mm_shufflehi_epi16::<0xFF>(_mm_unpackhi_epi8(x, x));
+        prev = _mm_shuffle_epi32::<0xFF>(hi);
+    }
+    let mut last = _mm_cvtsi128_si32(prev) as u8;
+    for v in chunks.into_remainder() {
+        last = last.wrapping_add(*v ^ 0x80);
+        *v = last;
+    }
+}
+
+/// The running sum without SIMD intrinsics, eight bytes per step: the even and odd
+/// bytes go to 16-bit lanes, where one multiplication forms the prefix sums of the
+/// byte pairs (at most 4 · 510 per lane, so no lane overflows), and only the carry-in
+/// byte waits for the step before.
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+fn undo_predictor_swar(buf: &mut [u8]) {
+    const LOW: u64 = 0x00FF_00FF_00FF_00FF;
+    let Some((first, rest)) = buf.split_first_mut() else {
+        return;
+    };
+    let mut prev = u64::from(*first);
+    let mut words = rest.chunks_exact_mut(8);
+    for w in &mut words {
+        let mut le = [0u8; 8];
+        le.copy_from_slice(w);
+        let x = u64::from_le_bytes(le) ^ 0x8080_8080_8080_8080;
+        let even = x & LOW;
+        let odd = (x >> 8) & LOW;
+        // Lane i holds the sum of bytes 0 ..= 2i + 1 (mod 2^16).
+        let pairs = (even + odd).wrapping_mul(0x0001_0001_0001_0001);
+        let carry = prev * 0x0001_0001_0001_0001;
+        let at_odd = pairs + carry;
+        let at_even = at_odd - odd;
+        let y = (at_even & LOW) | ((at_odd & LOW) << 8);
+        w.copy_from_slice(&y.to_le_bytes());
+        prev = y >> 56;
+    }
+    let mut prev = prev as u8;
+    for v in words.into_remainder() {
+        prev = prev.wrapping_add(*v ^ 0x80);
+        *v = prev;
+    }
+}
+
+/// The bytes of one block in file order: stored as they are, or (ZIP) split into the
+/// even-indexed bytes followed by the odd-indexed ones.
+#[derive(Clone, Copy)]
+enum Bytes<'a> {
+    Raw(&'a [u8]),
+    Split(&'a [u8], &'a [u8]),
+}
+
+/// Write the R, G, B, A lines of a block into interleaved RGBA rows; true if any
+/// written value is NaN or inf. Lines are `for y { for channel (name order) { width
+/// samples } }`, little-endian; every channel line starts at an even byte offset.
+/// Each line is first decoded into a contiguous plane, then the four planes are
+/// interleaved: both loops are plain enough for the compiler to vectorize.
+fn scatter(
+    channels: &ChannelList,
+    slots: &[Option<usize>],
+    width: usize,
+    dst: &mut [f32],
+    bytes: Bytes<'_>,
+) -> bool {
+    PLANES.with(|p| {
+        let (planes, line) = &mut *p.borrow_mut();
+        planes.clear();
+        // A missing alpha plane reads as 1 (opaque).
+        planes.resize(width * CH, 1.0);
+        let (r, rest) = planes.split_at_mut(width);
+        let (g, rest) = rest.split_at_mut(width);
+        let (b, a) = rest.split_at_mut(width);
+        let mut offset = 0;
+        let mut non_finite = 0u32;
+        for dst_row in dst.chunks_exact_mut((width * CH).max(1)) {
+            for (c, slot) in channels.list.iter().zip(slots) {
+                let ty = c.sample_type;
+                let len = width * ty.bytes_per_sample();
+                let plane: &mut [f32] = match slot {
+                    Some(0) => r,
+                    Some(1) => g,
+                    Some(2) => b,
+                    Some(_) => a,
+                    None => {
+                        offset += len;
+                        continue;
+                    }
+                };
+                match bytes {
+                    Bytes::Raw(src) => line_raw(ty, &src[offset..offset + len], plane),
+                    Bytes::Split(lo, hi) => {
+                        let h = offset / 2;
+                        line.resize(len, 0);
+                        interleave(&lo[h..h + len / 2], &hi[h..h + len / 2], line);
+                        line_raw(ty, line, plane)
+                    }
+                }
+                offset += len;
+            }
+            for ((((d, &r), &g), &b), &a) in dst_row
+                .chunks_exact_mut(CH)
+                .zip(&*r)
+                .zip(&*g)
+                .zip(&*b)
+                .zip(&*a)
+            {
+                d.copy_from_slice(&[r, g, b, a]);
+            }
+            // No early exit, so the check vectorizes.
+            non_finite |= dst_row
+                .iter()
+                .fold(0, |acc, v| acc | u32::from(!v.is_finite()));
+        }
+        non_finite != 0
+    })
+}
+
+thread_local! {
+    /// One row of R, G, B and A planes and one channel line of bytes (one per rayon
+    /// worker, reused).
+    static PLANES: RefCell<(Vec<f32>, Vec<u8>)> = const { RefCell::new((Vec::new(), Vec::new())) };
+}
+
+fn sample_f32(ty: SampleType, b: [u8; 4]) -> f32 {
+    match ty {
+        SampleType::F32 => f32::from_le_bytes(b),
+        SampleType::F16 => exr::prelude::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32(),
+        SampleType::U32 => u32::from_le_bytes(b) as f32,
+    }
+}
+
+/// One channel line from file-order bytes into a plane (one loop per sample type, so
+/// each is a plain conversion the compiler can vectorize).
+fn line_raw(ty: SampleType, b: &[u8], out: &mut [f32]) {
+    match ty {
+        SampleType::F32 => {
+            for (d, s) in out.iter_mut().zip(b.chunks_exact(4)) {
+                *d = f32::from_le_bytes([s[0], s[1], s[2], s[3]]);
+            }
+        }
+        SampleType::F16 => {
+            for (d, s) in out.iter_mut().zip(b.chunks_exact(2)) {
+                *d = exr::prelude::f16::from_bits(u16::from_le_bytes([s[0], s[1]])).to_f32();
+            }
+        }
+        SampleType::U32 => {
+            for (d, s) in out.iter_mut().zip(b.chunks_exact(4)) {
+                *d = u32::from_le_bytes([s[0], s[1], s[2], s[3]]) as f32;
+            }
+        }
+    }
+}
+
+/// Bytes in file order from ZIP's split halves: `lo` the even bytes, `hi` the odd ones.
+fn interleave(lo: &[u8], hi: &[u8], out: &mut [u8]) {
+    for ((o, &l), &h) in out.chunks_exact_mut(2).zip(lo).zip(hi) {
+        o[0] = l;
+        o[1] = h;
+    }
+}
+
+/// Any other layout: the `exr` crate decompresses each block, then its lines are placed.
+fn decode_generic(
+    chunks: Vec<Chunk>,
+    meta: &MetaData,
+    header: &Header,
+    slots: &[Option<usize>],
+    width: usize,
+    rgba: &mut [f32],
+) -> std::result::Result<(), String> {
+    let blocks = chunks
+        .into_par_iter()
+        .map(|chunk| UncompressedBlock::decompress_chunk(chunk, meta, false))
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(|e| format!("EXR: {e}"))?;
+    for b in &blocks {
+        place_block(b, &header.channels, slots, rgba, width)?;
+    }
+    Ok(())
+}
+
+/// Convert the lines of one decompressed block (native-endian samples) into
+/// interleaved RGBA.
+fn place_block(
+    block: &UncompressedBlock,
+    channels: &ChannelList,
+    slots: &[Option<usize>],
+    dst: &mut [f32],
+    width: usize,
+) -> std::result::Result<(), String> {
+    for line in block.lines(channels) {
+        let Some(slot) = slots[line.location.channel] else {
+            continue;
+        };
+        let (x0, y) = (line.location.position.x(), line.location.position.y());
+        let n = line.location.sample_count;
+        let start = Some((y * width + x0) * CH)
+            .filter(|&s| x0 + n <= width && s + n * CH <= dst.len())
+            .ok_or_else(|| format!("block line at ({x0}, {y}) lies outside the image"))?;
+        let out = dst[start..start + n * CH].iter_mut().skip(slot).step_by(CH);
+        let ty = channels.list[line.location.channel].sample_type;
+        match ty {
+            SampleType::F16 => {
+                for (d, b) in out.zip(line.value.chunks_exact(2)) {
+                    let v = u16::from_ne_bytes([b[0], b[1]]).to_le_bytes();
+                    *d = sample_f32(ty, [v[0], v[1], 0, 0]);
+                }
+            }
+            _ => {
+                for (d, b) in out.zip(line.value.chunks_exact(4)) {
+                    let v = u32::from_ne_bytes([b[0], b[1], b[2], b[3]]).to_le_bytes();
+                    *d = sample_f32(ty, v);
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Blocks, Encoding, FlatSamples, Image, Layer, LayerAttributes,
+        LineOrder, SmallVec, WritableImage,
+    };
+
+    #[test]
+    fn predictor_matches_the_reference_loop() {
+        let mut s = crate::rng::Stream::new(5, 0);
+        for n in [0usize, 1, 2, 3, 8, 9, 17, 1000, 4099] {
+            let src: Vec<u8> = (0..n).map(|_| s.next_u64() as u8).collect();
+            let mut want = src.clone();
+            for i in 1..want.len() {
+                want[i] = (want[i - 1] as i32 + want[i] as i32 - 128) as u8;
+            }
+            let mut got = src.clone();
+            undo_predictor(&mut got);
+            assert_eq!(got, want, "n = {n}");
+            let mut got = src;
+            undo_predictor_swar(&mut got);
+            assert_eq!(got, want, "swar, n = {n}");
+        }
+    }
+
+    /// A file with every sample type, an extra channel, a ragged last block and a NaN.
+    fn sample_file(compression: Compression, blocks: Blocks, nan: bool) -> Result<Vec<u8>> {
+        let (w, h) = (37usize, 23usize);
+        let v = |c: usize, i: usize| ((i * 7 + c * 13) % 97) as f32 / 8.0 - 2.0;
+        let n = w * h;
+        let mut b: Vec<f32> = (0..n).map(|i| v(2, i)).collect();
+        if nan {
+            b[5 * w + 7] = f32::NAN;
+        }
+        let channels = AnyChannels::sort(SmallVec::from_vec(vec![
+            AnyChannel::new(
+                "A",
+                FlatSamples::F16(
+                    (0..n)
+                        .map(|i| exr::prelude::f16::from_f32(v(3, i)))
+                        .collect(),
+                ),
+            ),
+            AnyChannel::new("B", FlatSamples::F32(b)),
+            AnyChannel::new(
+                "G",
+                FlatSamples::U32((0..n).map(|i| (i % 1000) as u32).collect()),
+            ),
+            AnyChannel::new("R", FlatSamples::F32((0..n).map(|i| v(0, i)).collect())),
+            AnyChannel::new("Z", FlatSamples::F32(vec![f32::NAN; n])),
+        ]));
+        let encoding = Encoding {
+            compression,
+            blocks,
+            line_order: LineOrder::Increasing,
+        };
+        let layer = Layer::new((w, h), LayerAttributes::default(), encoding, channels);
+        let mut out = Cursor::new(Vec::new());
+        Image::from_layer(layer)
+            .write()
+            .non_parallel()
+            .to_buffered(&mut out)
+            .map_err(|e| Error::Value(e.to_string()))?;
+        Ok(out.into_inner())
+    }
+
+    #[test]
+    fn every_codec_and_sample_type_decodes_alike() -> Result<()> {
+        let (w, h) = (37usize, 23usize);
+        let v = |c: usize, i: usize| ((i * 7 + c * 13) % 97) as f32 / 8.0 - 2.0;
+        let want: Vec<f32> = (0..w * h)
+            .flat_map(|i| [v(0, i), (i % 1000) as f32, v(2, i), v(3, i)])
+            .collect();
+        let path = Path::new("sample.exr");
+        for compression in [
+            Compression::Uncompressed,
+            Compression::ZIP1,
+            Compression::ZIP16,
+            Compression::RLE,
+            Compression::PIZ,
+        ] {
+            for blocks in [Blocks::ScanLines, Blocks::Tiles(Vec2(16, 8))] {
+                let mut got = Vec::new();
+                let d = decode_rgba(&sample_file(compression, blocks, false)?, path, &mut got)?;
+                assert_eq!((d.width, d.height), (w, h));
+                assert_eq!(d.non_finite, None, "{compression:?} {blocks:?}");
+                assert_eq!(got, want, "{compression:?} {blocks:?}");
+                let d = decode_rgba(&sample_file(compression, blocks, true)?, path, &mut got)?;
+                let (x, y, c, value) = d.non_finite.ok_or(Error::Value("no NaN found".into()))?;
+                assert_eq!((x, y, c), (7, 5, 2), "{compression:?} {blocks:?}");
+                assert!(value.is_nan());
+            }
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn truncated_and_garbage_files_are_errors() -> Result<()> {
+        let file = sample_file(Compression::ZIP16, Blocks::ScanLines, false)?;
+        let mut out = Vec::new();
+        for bad in [
+            &file[..file.len() - 10],
+            &file[..file.len() / 2],
+            b"v/1\x01 junk",
+        ] {
+            assert!(decode_rgba(bad, Path::new("bad.exr"), &mut out).is_err());
+        }
+        // A corrupt ZIP stream is an error, not a panic or a silent zero block.
+        let mut flipped = file.clone();
+        let k = file.len() - 200;
+        flipped[k] ^= 0xFF;
+        flipped[k + 1] ^= 0x5A;
+        let _ = decode_rgba(&flipped, Path::new("bad.exr"), &mut out);
+        Ok(())
+    }
+}

@@ -1,0 +1,929 @@
+//! The statistics of a build (DESIGN §7): the numbers behind `blurset stats`.
+//!
+//! Every complete setting's `meta.json` is read in parallel (rayon) and reduced to the
+//! quantities a dataset paper shows. The definitions live here and nowhere else:
+//!
+//! - scene range = far / near of a view: the camera-space depth range of the object's
+//!   vertices at p (near floored at the sampling guard, as recorded in meta.json). It
+//!   is, by construction, the depth-range factor R of the blur weight.
+//! - scene dimension = geometric mean of the three bounding-box dimensions of a
+//!   setting, cbrt(dx · dy · dz) correctly rounded, in object units (the normalized object's largest
+//!   side is 1).
+//! - blur weight w_l, latent frames m and the largest screen motion (px) of a
+//!   bounding-box corner, per level and view; flatness F, depth range R, orientation O
+//!   and w_u = (F · R · O)^(1/3) per view, as sampled.
+//!
+//! What counts (see [`Counts`]): a setting is complete when its directory has the
+//! `.complete` marker and is not a `*.partial` directory; any other directory that looks
+//! like a setting (`*.partial`, or holding `meta.json` or `sharp/`) is skipped and
+//! counted as incomplete, so a build still running can be read. Hidden directories
+//! (`.work-*`, `.demo_objects`) and anything else are ignored.
+use crate::error::{Error, Result};
+use crate::failures;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// The marker a setting directory gets last, when it is complete.
+pub const MARKER: &str = ".complete";
+const PARTIAL_SUFFIX: &str = ".partial";
+
+/// Schema name of the stats document (`stats.json`).
+pub const SCHEMA: &str = "blurset-stats/1";
+
+/// Per-quantity unit and definition, in the order summaries are listed. A per-level
+/// quantity `q` is summarized as `q_<level>`.
+pub const QUANTITIES: &[(&str, &str, &str)] = &[
+    (
+        "scene_range",
+        "ratio",
+        "far / near: camera-space depth range of the object at the view (one per view)",
+    ),
+    (
+        "scene_dimension",
+        "object units",
+        "geometric mean of the 3 bounding-box dimensions, cbrt(dx·dy·dz); largest side = 1 (one per setting)",
+    ),
+    (
+        "flatness",
+        "ratio",
+        "F = (far − near) / max(d) (one per view)",
+    ),
+    (
+        "depth_range",
+        "ratio",
+        "R = far / near, as sampled (one per view)",
+    ),
+    (
+        "orientation",
+        "ratio",
+        "O = max(d) / min(d), capped by the sampling guard (one per view)",
+    ),
+    (
+        "w_u",
+        "1",
+        "scene weight w_u = (F·R·O)^(1/3) (one per view)",
+    ),
+    (
+        "blur_weight",
+        "1",
+        "w_l ~ U[0.9, 1.1]·w_u·l: multiplier of the trajectory δ at level l (one per view)",
+    ),
+    (
+        "latent_frames",
+        "frames",
+        "m, latent frames averaged into the blurry image at level l (one per view)",
+    ),
+    (
+        "motion_px",
+        "px",
+        "largest screen motion of a bounding-box corner over the trajectory at level l (one per view)",
+    ),
+];
+
+// -- what is read from meta.json (other fields are skipped unparsed) -------------------
+
+#[derive(Debug, Deserialize)]
+struct MetaLevel {
+    w_l: f64,
+    latents: u64,
+    #[serde(default)]
+    motion_px: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+struct MetaView {
+    index: u64,
+    near: f64,
+    far: f64,
+    flatness: f64,
+    depth_range: f64,
+    orientation: f64,
+    w_u: f64,
+    #[serde(default)]
+    levels: BTreeMap<String, MetaLevel>,
+}
+
+#[derive(Debug, Deserialize)]
+struct Meta {
+    uid: String,
+    theta0_deg: f64,
+    bbox_dims: [f64; 3],
+    views: Vec<MetaView>,
+    /// Level directories written (`sharp`, `blur_1`, …).
+    #[serde(default)]
+    levels: Option<Vec<String>>,
+    #[serde(default)]
+    test_views: Option<Vec<u64>>,
+}
+
+#[derive(Debug, Deserialize)]
+struct SplitsDoc {
+    #[serde(default)]
+    train: Vec<String>,
+    #[serde(default)]
+    test: Vec<String>,
+    #[serde(default)]
+    test_views: BTreeMap<String, Vec<u64>>,
+}
+
+#[derive(Debug, Deserialize)]
+struct DatasetDoc {
+    #[serde(default)]
+    config: DatasetConfig,
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct DatasetConfig {
+    settings_per_object: Option<usize>,
+}
+
+// -- the stats document ---------------------------------------------------------------
+
+/// One complete setting.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct SettingInfo {
+    /// Directory name, `<uid>_<theta0>`.
+    pub name: String,
+    pub uid: String,
+    pub theta0_deg: f64,
+    pub views: usize,
+    pub bbox_dims: [f64; 3],
+    /// Level directories (`sharp`, `blur_1`, …); images = views × levels.
+    pub level_dirs: Vec<String>,
+    pub images: usize,
+    pub test_views: Vec<u64>,
+}
+
+/// Minimum, median (mean of the two middle values for an even count), maximum and
+/// mean (left-to-right sum in document order / n) of one quantity.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Summary {
+    pub quantity: String,
+    pub unit: String,
+    pub n: usize,
+    pub min: Option<f64>,
+    pub median: Option<f64>,
+    pub max: Option<f64>,
+    pub mean: Option<f64>,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Counts {
+    /// Distinct uids among complete settings.
+    pub objects: usize,
+    /// Complete settings.
+    pub settings: usize,
+    /// Views of complete settings.
+    pub views: usize,
+    /// Image files of complete settings: views × level directories (sharp + blur levels).
+    pub images: usize,
+    /// Complete settings listed as test in splits.json (None without splits.json).
+    pub test_settings: Option<usize>,
+    /// Held-out target views of the test settings: Σ |test_views[s]| over complete
+    /// test settings (the paper's "52 settings → 156 test images" counts these).
+    pub test_views: Option<usize>,
+    /// Image files of those target views at every level: Σ |test_views[s]| × levels(s).
+    pub test_images: Option<usize>,
+    /// Complete settings splits.json does not list yet (written at the end of a build).
+    pub unsplit_settings: Option<usize>,
+    /// Objects failing now: distinct uids among the current failures.jsonl records
+    /// (latest per object or setting, work not complete since; see `failures`).
+    pub failures: usize,
+    /// Settings failing render QA now (records naming a setting).
+    pub settings_failed: usize,
+    /// failures.jsonl lines that do not parse (torn by a kill), skipped.
+    pub failure_lines_skipped: usize,
+    /// Setting directories skipped as incomplete (`*.partial`, or no `.complete`).
+    pub incomplete_settings: usize,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Failure {
+    pub uid: String,
+    pub setting: Option<String>,
+    pub stage: Option<String>,
+    pub reason: Option<String>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Quantity {
+    pub name: String,
+    pub unit: String,
+    pub definition: String,
+}
+
+/// Everything `blurset stats` reports. Per-view arrays are aligned: entry k belongs to
+/// view `view_index[k]` of setting `settings[view_setting[k]]`, settings sorted by
+/// name, views in meta.json order. Per-level maps are keyed by level ("1" … "4") and
+/// hold one entry per view, `null` where a view has no such level.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct BuildStats {
+    pub schema: String,
+    pub build: PathBuf,
+    pub counts: Counts,
+    pub quantities: Vec<Quantity>,
+    pub summary: Vec<Summary>,
+    pub settings: Vec<SettingInfo>,
+    pub incomplete: Vec<String>,
+    pub failures: Vec<Failure>,
+    pub view_setting: Vec<usize>,
+    pub view_index: Vec<u64>,
+    pub scene_range: Vec<f64>,
+    /// One per setting, aligned with `settings`.
+    pub scene_dimension: Vec<f64>,
+    pub flatness: Vec<f64>,
+    pub depth_range: Vec<f64>,
+    pub orientation: Vec<f64>,
+    pub w_u: Vec<f64>,
+    pub blur_weight: BTreeMap<u32, Vec<Option<f64>>>,
+    pub latent_frames: BTreeMap<u32, Vec<Option<u64>>>,
+    pub motion_px: BTreeMap<u32, Vec<Option<f64>>>,
+}
+
+// -- the formulas ----------------------------------------------------------------------
+
+/// Scene range of a view: far / near.
+pub fn scene_range(near: f64, far: f64) -> f64 {
+    far / near
+}
+
+/// Scene dimension of a setting: cbrt((dx · dy) · dz), the cube root correctly
+/// rounded (CORE-MATH's, through the libm crate), so the value does not depend on the
+/// toolchain (std's `cbrt` changed with Rust versions; glibc's can be 1 ulp off) and
+/// anyone can recompute it exactly.
+pub fn scene_dimension(bbox_dims: [f64; 3]) -> f64 {
+    libm::cbrt(bbox_dims[0] * bbox_dims[1] * bbox_dims[2])
+}
+
+/// Median of finite values (None when empty): the middle value, or the mean of the
+/// two middle values for an even count.
+pub fn median(values: &[f64]) -> Option<f64> {
+    let n = values.len();
+    if n == 0 {
+        return None;
+    }
+    let mut v = values.to_vec();
+    let (_, hi, _) = v.select_nth_unstable_by(n / 2, f64::total_cmp);
+    let hi = *hi;
+    if n % 2 == 1 {
+        return Some(hi);
+    }
+    let lo = v[..n / 2].iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    Some((lo + hi) / 2.0)
+}
+
+/// min / median / max / mean of `values`.
+pub fn summarize(quantity: &str, unit: &str, values: &[f64]) -> Summary {
+    let n = values.len();
+    let some = |x: f64| (n > 0).then_some(x);
+    Summary {
+        quantity: quantity.to_string(),
+        unit: unit.to_string(),
+        n,
+        min: some(values.iter().copied().fold(f64::INFINITY, f64::min)),
+        median: median(values),
+        max: some(values.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
+        mean: some(values.iter().sum::<f64>() / n as f64),
+    }
+}
+
+// -- reading a build -------------------------------------------------------------------
+
+fn input_error(reason: impl Into<String>, path: impl Into<PathBuf>) -> Error {
+    Error::Input {
+        reason: reason.into(),
+        path: path.into(),
+    }
+}
+
+/// Complete and incomplete setting directories of a build, sorted by name.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scan {
+    pub complete: Vec<String>,
+    pub incomplete: Vec<String>,
+    /// Whether the directory holds any file only a build writes.
+    pub is_build: bool,
+}
+
+/// List the setting directories of `out`; refuse a path that is not a build.
+pub fn scan(out: &Path) -> Result<Scan> {
+    if !out.exists() {
+        return Err(input_error("no such build directory", out));
+    }
+    if !out.is_dir() {
+        return Err(input_error("not a directory (expected a build)", out));
+    }
+    let rd = std::fs::read_dir(out).map_err(|e| Error::io("cannot list", out, e))?;
+    let mut s = Scan::default();
+    for entry in rd {
+        let entry = entry.map_err(|e| Error::io("cannot list", out, e))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let path = entry.path();
+        if ["dataset.json", "splits.json", "failures.jsonl"].contains(&name.as_str()) {
+            s.is_build = true;
+        }
+        if name.starts_with('.') || !path.is_dir() {
+            if name.starts_with(".work-") || name == ".demo_objects" {
+                s.is_build = true;
+            }
+            continue;
+        }
+        let partial = name.ends_with(PARTIAL_SUFFIX);
+        if !partial && path.join(MARKER).is_file() {
+            s.complete.push(name);
+        } else if partial || path.join("meta.json").exists() || path.join("sharp").is_dir() {
+            s.incomplete.push(name);
+        }
+    }
+    s.is_build |= !s.complete.is_empty() || !s.incomplete.is_empty();
+    if !s.is_build {
+        return Err(input_error(
+            "not a blurset build (no dataset.json, failures.jsonl or setting directories)",
+            out,
+        ));
+    }
+    s.complete.sort();
+    s.incomplete.sort();
+    Ok(s)
+}
+
+struct ViewRecord {
+    index: u64,
+    scene_range: f64,
+    flatness: f64,
+    depth_range: f64,
+    orientation: f64,
+    w_u: f64,
+    levels: BTreeMap<u32, MetaLevel>,
+}
+
+struct SettingRecord {
+    info: SettingInfo,
+    scene_dimension: f64,
+    views: Vec<ViewRecord>,
+}
+
+fn check(ok: bool, path: &Path, what: impl FnOnce() -> String) -> Result<()> {
+    if ok {
+        Ok(())
+    } else {
+        Err(input_error(format!("bad meta.json ({})", what()), path))
+    }
+}
+
+/// Read one complete setting's meta.json and reduce it to its statistics.
+fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
+    let path = dir.join(name).join("meta.json");
+    let bytes = std::fs::read(&path).map_err(|e| {
+        input_error(
+            format!("cannot read meta.json of a complete setting ({e})"),
+            &path,
+        )
+    })?;
+    let meta: Meta = serde_json::from_slice(&bytes)
+        .map_err(|e| input_error(format!("corrupt meta.json ({e})"), &path))?;
+    check(
+        meta.bbox_dims.iter().all(|d| d.is_finite() && *d >= 0.0),
+        &path,
+        || format!("bbox_dims {:?} must be finite and ≥ 0", meta.bbox_dims),
+    )?;
+    check(!meta.views.is_empty(), &path, || "no views".into())?;
+    let mut views = Vec::with_capacity(meta.views.len());
+    for v in &meta.views {
+        let i = v.index;
+        check(v.near > 0.0, &path, || {
+            format!("view {i}: near {} must be > 0", v.near)
+        })?;
+        check(v.far >= v.near, &path, || {
+            format!("view {i}: far {} is below near {}", v.far, v.near)
+        })?;
+        for (what, x) in [
+            ("flatness", v.flatness),
+            ("depth_range", v.depth_range),
+            ("orientation", v.orientation),
+            ("w_u", v.w_u),
+        ] {
+            check(x >= 0.0, &path, || {
+                format!("view {i}: {what} {x} is negative")
+            })?;
+        }
+        let mut levels = BTreeMap::new();
+        for (key, lp) in &v.levels {
+            let l: u32 = key.parse().map_err(|_| {
+                input_error(
+                    format!("bad meta.json (view {i}: level key {key:?} is not a number)"),
+                    &path,
+                )
+            })?;
+            check(lp.w_l >= 0.0, &path, || {
+                format!("view {i} level {l}: w_l {} is negative", lp.w_l)
+            })?;
+            levels.insert(
+                l,
+                MetaLevel {
+                    w_l: lp.w_l,
+                    latents: lp.latents,
+                    motion_px: lp.motion_px,
+                },
+            );
+        }
+        let sr = scene_range(v.near, v.far);
+        check(sr.is_finite(), &path, || {
+            format!(
+                "view {i}: far / near = {} / {} is not finite",
+                v.far, v.near
+            )
+        })?;
+        views.push(ViewRecord {
+            index: i,
+            scene_range: sr,
+            flatness: v.flatness,
+            depth_range: v.depth_range,
+            orientation: v.orientation,
+            w_u: v.w_u,
+            levels,
+        });
+    }
+    // Older metas lack `levels`: sharp plus the blur levels of the first view.
+    let level_dirs = meta.levels.unwrap_or_else(|| {
+        std::iter::once("sharp".to_string())
+            .chain(views[0].levels.keys().map(|l| format!("blur_{l}")))
+            .collect()
+    });
+    let n = views.len();
+    let dim = scene_dimension(meta.bbox_dims);
+    check(dim.is_finite(), &path, || {
+        format!("bbox_dims {:?} overflow", meta.bbox_dims)
+    })?;
+    Ok(SettingRecord {
+        scene_dimension: dim,
+        info: SettingInfo {
+            name: name.to_string(),
+            uid: meta.uid,
+            theta0_deg: meta.theta0_deg,
+            views: n,
+            bbox_dims: meta.bbox_dims,
+            images: n * level_dirs.len(),
+            level_dirs,
+            test_views: meta.test_views.unwrap_or_default(),
+        },
+        views,
+    })
+}
+
+fn read_json_file<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<Option<T>> {
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(input_error(format!("cannot read {what} ({e})"), path)),
+    };
+    serde_json::from_slice(&bytes)
+        .map(Some)
+        .map_err(|e| input_error(format!("corrupt {what} ({e})"), path))
+}
+
+/// Read every complete setting of the build at `out` (in parallel) and compute its
+/// statistics. Errors name the file: a missing or non-build directory, an unreadable
+/// or corrupt meta.json of a complete setting, a corrupt splits.json.
+pub fn build_stats(out: &Path) -> Result<BuildStats> {
+    let scan = scan(out)?;
+    let records: Vec<Result<SettingRecord>> = scan
+        .complete
+        .par_iter()
+        .map(|name| read_setting(out, name))
+        .collect();
+    let records = records.into_iter().collect::<Result<Vec<_>>>()?;
+    let splits: Option<SplitsDoc> = read_json_file(&out.join("splits.json"), "splits.json")?;
+    let dataset: Option<DatasetDoc> = read_json_file(&out.join("dataset.json"), "dataset.json")?;
+    let theta0s = dataset
+        .and_then(|d| d.config.settings_per_object)
+        .map(failures::theta0s);
+    let (lines, skipped) = failures::read_records(&out.join("failures.jsonl"))?;
+    let complete: BTreeSet<String> = scan.complete.iter().cloned().collect();
+    let text =
+        |r: &serde_json::Value, k: &str| r.get(k).and_then(|v| v.as_str()).map(str::to_owned);
+    let failing = failures::current(&lines, &complete, theta0s.as_deref())
+        .iter()
+        .map(|r| Failure {
+            uid: text(r, "uid").unwrap_or_default(),
+            setting: text(r, "setting"),
+            stage: text(r, "stage"),
+            reason: text(r, "reason"),
+        })
+        .collect();
+    let mut st = assemble(out, scan, records, splits, failing);
+    st.counts.failure_lines_skipped = skipped;
+    Ok(st)
+}
+
+fn assemble(
+    out: &Path,
+    scan: Scan,
+    records: Vec<SettingRecord>,
+    splits: Option<SplitsDoc>,
+    failures: Vec<Failure>,
+) -> BuildStats {
+    let n_views: usize = records.iter().map(|r| r.views.len()).sum();
+    let levels: BTreeSet<u32> = records
+        .iter()
+        .flat_map(|r| r.views.iter().flat_map(|v| v.levels.keys().copied()))
+        .collect();
+    let col = || Vec::with_capacity(n_views);
+    let mut st = BuildStats {
+        schema: SCHEMA.to_string(),
+        build: out.to_path_buf(),
+        counts: Counts::default(),
+        quantities: QUANTITIES
+            .iter()
+            .map(|(n, u, d)| Quantity {
+                name: n.to_string(),
+                unit: u.to_string(),
+                definition: d.to_string(),
+            })
+            .collect(),
+        summary: Vec::new(),
+        settings: Vec::with_capacity(records.len()),
+        incomplete: scan.incomplete,
+        failures: Vec::new(),
+        view_setting: Vec::with_capacity(n_views),
+        view_index: Vec::with_capacity(n_views),
+        scene_range: col(),
+        scene_dimension: Vec::with_capacity(records.len()),
+        flatness: col(),
+        depth_range: col(),
+        orientation: col(),
+        w_u: col(),
+        blur_weight: levels
+            .iter()
+            .map(|&l| (l, Vec::with_capacity(n_views)))
+            .collect(),
+        latent_frames: levels
+            .iter()
+            .map(|&l| (l, Vec::with_capacity(n_views)))
+            .collect(),
+        motion_px: levels
+            .iter()
+            .map(|&l| (l, Vec::with_capacity(n_views)))
+            .collect(),
+    };
+    for (k, r) in records.into_iter().enumerate() {
+        for v in &r.views {
+            st.view_setting.push(k);
+            st.view_index.push(v.index);
+            st.scene_range.push(v.scene_range);
+            st.flatness.push(v.flatness);
+            st.depth_range.push(v.depth_range);
+            st.orientation.push(v.orientation);
+            st.w_u.push(v.w_u);
+            for &l in &levels {
+                let lp = v.levels.get(&l);
+                st.blur_weight.entry(l).or_default().push(lp.map(|x| x.w_l));
+                st.latent_frames
+                    .entry(l)
+                    .or_default()
+                    .push(lp.map(|x| x.latents));
+                st.motion_px
+                    .entry(l)
+                    .or_default()
+                    .push(lp.and_then(|x| x.motion_px));
+            }
+        }
+        st.scene_dimension.push(r.scene_dimension);
+        st.settings.push(r.info);
+    }
+    // A level nobody recorded motion for (older metas) has no motion column.
+    st.motion_px.retain(|_, v| v.iter().any(Option::is_some));
+
+    let complete_uids: BTreeSet<&str> = st.settings.iter().map(|s| s.uid.as_str()).collect();
+    st.failures = failures;
+    let failed_uids: BTreeSet<&str> = st.failures.iter().map(|f| f.uid.as_str()).collect();
+    let mut c = Counts {
+        objects: complete_uids.len(),
+        settings: st.settings.len(),
+        views: n_views,
+        images: st.settings.iter().map(|s| s.images).sum(),
+        failures: failed_uids.len(),
+        settings_failed: st.failures.iter().filter(|f| f.setting.is_some()).count(),
+        incomplete_settings: st.incomplete.len(),
+        ..Counts::default()
+    };
+    if let Some(sp) = &splits {
+        let test: BTreeSet<&str> = sp.test.iter().map(String::as_str).collect();
+        let listed: BTreeSet<&str> = sp
+            .train
+            .iter()
+            .chain(&sp.test)
+            .map(String::as_str)
+            .collect();
+        let (mut ts, mut tv, mut ti) = (0, 0, 0);
+        for s in st
+            .settings
+            .iter()
+            .filter(|s| test.contains(s.name.as_str()))
+        {
+            let views = sp
+                .test_views
+                .get(&s.name)
+                .map_or(s.test_views.len(), Vec::len);
+            ts += 1;
+            tv += views;
+            ti += views * s.level_dirs.len();
+        }
+        c.test_settings = Some(ts);
+        c.test_views = Some(tv);
+        c.test_images = Some(ti);
+        c.unsplit_settings = Some(
+            st.settings
+                .iter()
+                .filter(|s| !listed.contains(s.name.as_str()))
+                .count(),
+        );
+    }
+    st.counts = c;
+    st.summary = summaries(&st);
+    st
+}
+
+fn unit_of(q: &str) -> &'static str {
+    QUANTITIES
+        .iter()
+        .find(|(n, _, _)| *n == q)
+        .map_or("", |(_, u, _)| u)
+}
+
+fn summaries(st: &BuildStats) -> Vec<Summary> {
+    let mut out = vec![
+        summarize("scene_range", unit_of("scene_range"), &st.scene_range),
+        summarize(
+            "scene_dimension",
+            unit_of("scene_dimension"),
+            &st.scene_dimension,
+        ),
+        summarize("flatness", unit_of("flatness"), &st.flatness),
+        summarize("depth_range", unit_of("depth_range"), &st.depth_range),
+        summarize("orientation", unit_of("orientation"), &st.orientation),
+        summarize("w_u", unit_of("w_u"), &st.w_u),
+    ];
+    let present = |v: &[Option<f64>]| v.iter().flatten().copied().collect::<Vec<f64>>();
+    for (l, v) in &st.blur_weight {
+        out.push(summarize(
+            &format!("blur_weight_{l}"),
+            unit_of("blur_weight"),
+            &present(v),
+        ));
+    }
+    for (l, v) in &st.latent_frames {
+        let m: Vec<f64> = v.iter().flatten().map(|&x| x as f64).collect();
+        out.push(summarize(
+            &format!("latent_frames_{l}"),
+            unit_of("latent_frames"),
+            &m,
+        ));
+    }
+    for (l, v) in &st.motion_px {
+        out.push(summarize(
+            &format!("motion_px_{l}"),
+            unit_of("motion_px"),
+            &present(v),
+        ));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use serde_json::json;
+
+    struct TempDir(PathBuf);
+    impl TempDir {
+        fn new(tag: &str) -> Result<Self> {
+            let p = std::env::temp_dir().join(format!(
+                "blurset-stats-{tag}-{}-{:?}",
+                std::process::id(),
+                std::thread::current().id()
+            ));
+            let _ = std::fs::remove_dir_all(&p);
+            std::fs::create_dir_all(&p).map_err(|e| Error::io("mkdir", &p, e))?;
+            Ok(TempDir(p))
+        }
+    }
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn write(path: &Path, text: &str) -> Result<()> {
+        if let Some(d) = path.parent() {
+            std::fs::create_dir_all(d).map_err(|e| Error::io("mkdir", d, e))?;
+        }
+        std::fs::write(path, text).map_err(|e| Error::io("write", path, e))
+    }
+
+    /// A meta.json in the shape `blurset build` writes (extra fields included).
+    fn meta(uid: &str, theta0: f64, dims: [f64; 3], nears: &[f64], levels: &[u32]) -> String {
+        let views: Vec<_> = nears
+            .iter()
+            .enumerate()
+            .map(|(i, &n)| {
+                let f = n + 1.0;
+                let lv: serde_json::Map<String, serde_json::Value> = levels
+                    .iter()
+                    .map(|&l| {
+                        (
+                            l.to_string(),
+                            json!({"w_l": 0.5 * l as f64 + i as f64, "latents": 4 + l,
+                                   "motion_px": 10.0 * l as f64, "max_gap_px": 1.0,
+                                   "latent_frames": [{"t": 0.1, "r": 3.0, "seed": 7}]}),
+                        )
+                    })
+                    .collect();
+                json!({"index": i, "r": 3.0, "phi_deg": 60.0, "theta_deg": theta0,
+                       "near": n, "far": f, "flatness": 1.0, "depth_range": f / n.max(1e-3),
+                       "orientation": 2.0, "w_u": 1.1, "trajectory": {"dr": 1.0},
+                       "sharp_seed": 3, "c2w": [[1.0]], "levels": lv})
+            })
+            .collect();
+        let mut dirs = vec!["sharp".to_string()];
+        dirs.extend(levels.iter().map(|l| format!("blur_{l}")));
+        json!({"uid": uid, "theta0_deg": theta0, "seed": 1, "resolution": [64, 64],
+               "fov_deg": 40.0, "bbox_dims": dims, "views": views,
+               "test_views": [0], "levels": dirs})
+        .to_string()
+    }
+
+    fn setting(out: &Path, name: &str, meta_text: &str, complete: bool) -> Result<()> {
+        write(&out.join(name).join("meta.json"), meta_text)?;
+        if complete {
+            write(&out.join(name).join(MARKER), "done\n")?;
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn numbers_counts_and_skips() -> Result<()> {
+        let t = TempDir::new("numbers")?;
+        let out = &t.0;
+        setting(
+            out,
+            "a_0",
+            &meta("a", 0.0, [1.0, 0.5, 0.25], &[2.0, 4.0], &[1, 2]),
+            true,
+        )?;
+        setting(
+            out,
+            "a_90",
+            &meta("a", 90.0, [1.0, 0.5, 0.25], &[1.0], &[1, 2]),
+            true,
+        )?;
+        setting(
+            out,
+            "b_0",
+            &meta("b", 0.0, [1.0, 1.0, 1.0], &[3.0], &[2]),
+            true,
+        )?;
+        // half-written: a copy with marker under .partial, and one without marker
+        setting(
+            out,
+            "c_0.partial",
+            &meta("c", 0.0, [1.0; 3], &[1.0], &[1]),
+            true,
+        )?;
+        setting(out, "c_90", &meta("c", 90.0, [1.0; 3], &[1.0], &[1]), false)?;
+        write(&out.join(".work-c/worker.log"), "")?;
+        write(&out.join("stats/report.md"), "")?; // a user directory: ignored
+        write(
+            &out.join("failures.jsonl"),
+            "{\"uid\":\"d\",\"stage\":\"load\",\"reason\":\"old\"}\n\
+             {\"uid\":\"a\",\"stage\":\"render\",\"reason\":\"retried ok\"}\n\
+             {\"uid\":\"d\",\"stage\":\"load\",\"reason\":\"bad glb\"}\n\
+             {\"uid\":\"e\",\"sta",
+        )?;
+        write(
+            &out.join("splits.json"),
+            &json!({"train": ["a_0", "a_90"], "test": ["b_0", "gone_0"],
+                    "test_views": {"b_0": [0]}})
+            .to_string(),
+        )?;
+        let s = build_stats(out)?;
+        let names: Vec<&str> = s.settings.iter().map(|x| x.name.as_str()).collect();
+        assert_eq!(names, ["a_0", "a_90", "b_0"]);
+        assert_eq!(s.incomplete, ["c_0.partial", "c_90"]);
+        assert_eq!(s.scene_range, [3.0 / 2.0, 5.0 / 4.0, 2.0 / 1.0, 4.0 / 3.0]);
+        assert_eq!(s.view_setting, [0, 0, 1, 2]);
+        assert_eq!(s.view_index, [0, 1, 0, 0]);
+        assert_eq!(s.scene_dimension, [0.5, 0.5, 1.0]);
+        assert_eq!(s.blur_weight[&1], [Some(0.5), Some(1.5), Some(0.5), None]);
+        assert_eq!(
+            s.blur_weight[&2],
+            [Some(1.0), Some(2.0), Some(1.0), Some(1.0)]
+        );
+        assert_eq!(s.latent_frames[&2], [Some(6); 4]);
+        let c = &s.counts;
+        assert_eq!((c.objects, c.settings, c.views), (2, 3, 4));
+        assert_eq!(c.images, 2 * 3 + 3 + 2);
+        assert_eq!(
+            (c.test_settings, c.test_views, c.test_images),
+            (Some(1), Some(1), Some(2))
+        );
+        assert_eq!(c.unsplit_settings, Some(0));
+        // No dataset.json yet (a first build still running): object records stay, even
+        // for `a`, whose settings are complete; the torn last line is skipped.
+        assert_eq!((c.failures, c.incomplete_settings), (2, 2));
+        assert_eq!(c.failure_lines_skipped, 1);
+        let reasons: Vec<_> = s.failures.iter().map(|f| f.reason.as_deref()).collect();
+        assert_eq!(reasons, [Some("retried ok"), Some("bad glb")]);
+        let sum = |q: &str| s.summary.iter().find(|x| x.quantity == q).cloned();
+        let b1 = sum("blur_weight_1").ok_or_else(|| Error::Value("no summary".into()))?;
+        assert_eq!(
+            (b1.n, b1.min, b1.median, b1.max),
+            (3, Some(0.5), Some(0.5), Some(1.5))
+        );
+        let sr = sum("scene_range").ok_or_else(|| Error::Value("no summary".into()))?;
+        assert_eq!(sr.median, Some((4.0 / 3.0 + 1.5) / 2.0));
+        assert!(sum("motion_px_2").is_some());
+        // the document is valid JSON without NaN
+        let text = serde_json::to_string(&s).map_err(|e| Error::Value(e.to_string()))?;
+        assert!(text.contains("\"blur_weight\":{\"1\":[0.5,1.5,0.5,null]"));
+        Ok(())
+    }
+
+    #[test]
+    fn running_build_without_splits_and_empty_build() -> Result<()> {
+        let t = TempDir::new("running")?;
+        setting(&t.0, "x_0.partial", "{\"uid\": \"x\"", false)?;
+        let s = build_stats(&t.0)?;
+        assert_eq!(s.counts.settings, 0);
+        assert_eq!(s.counts.incomplete_settings, 1);
+        assert_eq!(s.counts.test_images, None);
+        assert!(s.summary.iter().all(|x| x.n == 0 && x.median.is_none()));
+        Ok(())
+    }
+
+    #[test]
+    fn bad_input_names_the_file() -> Result<()> {
+        let t = TempDir::new("bad")?;
+        let msg = |p: &Path| {
+            build_stats(p)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default()
+        };
+        assert!(msg(&t.0.join("missing")).contains("no such build directory"));
+        write(&t.0.join("empty/readme.txt"), "hi")?;
+        assert!(msg(&t.0.join("empty")).contains("not a blurset build"));
+        let b = t.0.join("b");
+        setting(&b, "a_0", &meta("a", 0.0, [1.0; 3], &[1.0], &[1]), true)?;
+        setting(&b, "z_0", "{\"uid\": \"z\", \"views\": [", true)?;
+        let m = msg(&b);
+        assert!(
+            m.contains("corrupt meta.json") && m.contains("z_0/meta.json"),
+            "{m}"
+        );
+        setting(&b, "z_0", &meta("z", 0.0, [1.0; 3], &[0.0], &[1]), true)?;
+        let m = msg(&b);
+        assert!(m.contains("near 0 must be > 0") && m.contains("z_0"), "{m}");
+        std::fs::remove_file(b.join("z_0/meta.json")).map_err(|e| Error::io("rm", &b, e))?;
+        assert!(msg(&b).contains("cannot read meta.json"));
+        std::fs::remove_dir_all(b.join("z_0")).map_err(|e| Error::io("rm", &b, e))?;
+        // A torn record is not bad input: it is skipped and counted.
+        write(&b.join("failures.jsonl"), "garbage\n{\"uid\":\"q\"}\n")?;
+        let c = build_stats(&b)?.counts;
+        assert_eq!((c.failures, c.failure_lines_skipped), (1, 1));
+        write(&b.join("failures.jsonl"), "")?;
+        write(&b.join("splits.json"), "{")?;
+        assert!(msg(&b).contains("corrupt splits.json"));
+        Ok(())
+    }
+
+    #[test]
+    fn formulas() {
+        assert_eq!(scene_range(2.0, 3.0), 1.5);
+        assert_eq!(scene_dimension([1.0, 0.5, 0.25]), 0.5);
+        assert_eq!(scene_dimension([1.0, 1.0, 0.0]), 0.0);
+        // correctly rounded: glibc's cbrt gives 0.7874832516804876 here
+        let d = 0.6988146305084229;
+        assert_eq!(scene_dimension([d, d, 1.0]), 0.7874832516804877);
+        assert_eq!(median(&[]), None);
+        assert_eq!(median(&[3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), Some(2.5));
+    }
+
+    proptest! {
+        #[test]
+        fn summary_matches_sorting(mut v in prop::collection::vec(-1e6f64..1e6, 1..200)) {
+            let s = summarize("q", "u", &v);
+            v.sort_by(f64::total_cmp);
+            let n = v.len();
+            let med = if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 };
+            prop_assert_eq!(s.min, Some(v[0]));
+            prop_assert_eq!(s.max, Some(v[n - 1]));
+            prop_assert_eq!(s.median, Some(med));
+            prop_assert!(s.min <= s.median && s.median <= s.max);
+        }
+    }
+}
