@@ -30,6 +30,10 @@ def main() -> int:
             )
             results.append(r)
     out = HERE / "results.json"
+    if only and out.exists():
+        # A partial run (`bench/run.py bench_noise …`) replaces its own entries only.
+        new = {r["name"] for r in results}
+        results = [r for r in json.loads(out.read_text()) if r["name"] not in new] + results
     out.write_text(json.dumps(results, indent=2) + "\n")
     print(f"wrote {out}")
     return 0
