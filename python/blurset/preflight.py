@@ -21,8 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from blurset.exceptions import BlursetError
+from blurset.scripts import blender_script
 
-_GLB_INSPECT = Path(__file__).resolve().parents[2] / "blender_scripts" / "glb_inspect.py"
+_GLB_INSPECT = blender_script("glb_inspect.py")
 _spec = importlib.util.spec_from_file_location("blurset_glb_inspect", _GLB_INSPECT)
 assert _spec is not None and _spec.loader is not None
 glb_inspect = importlib.util.module_from_spec(_spec)

@@ -24,8 +24,9 @@ from pathlib import Path
 from typing import IO, Any
 
 from blurset.exceptions import BlursetError
+from blurset.scripts import blender_script
 
-WORKER_SCRIPT = Path(__file__).resolve().parents[2] / "blender_scripts" / "worker.py"
+WORKER_SCRIPT = blender_script("worker.py")
 STDERR_TAIL_LINES = 6
 
 
