@@ -115,6 +115,23 @@ def test_contact_sheet_grid_and_flags(linear_build, tmp_path):
         assert (red > 20) == (k > 0), (k, red)
 
 
+def test_contact_sheet_of_one_setting_keeps_its_counts_whole(linear_build, tmp_path):
+    one = tmp_path / "one"
+    shutil.copytree(linear_build, one, ignore=shutil.ignore_patterns("linear"))
+    for s in settings(one)[1:]:
+        shutil.rmtree(s)
+    out = tmp_path / "sheet.png"
+    p = run_cli("preview", str(one), "--out", str(out))
+    assert "contact sheet of 1 setting (0 flagged)" in p.stdout, p.stdout
+    sheet = rgb(out)
+    assert sheet.shape[1] == preview.SHEET_MIN_W
+    # The counts line ends well inside the sheet: cut with an ellipsis, it would run to the
+    # right margin (it did, above a single thumbnail, before the sheet had a minimum width).
+    counts = sheet[24 : preview.SHEET_TITLE_H, :]
+    inked = np.flatnonzero((counts.min(axis=2) < 100).any(axis=0))
+    assert inked.size and inked[-1] < sheet.shape[1] - preview.PAD - 20, inked[-1]
+
+
 def test_preview_bad_input_one_line(linear_build, tmp_path):
     s = settings(linear_build)[0]
     cases = [

@@ -41,6 +41,7 @@ HEADER_H = 24
 LABEL_W = 84
 CAPTION_H = 34  # contact sheet: two lines under each thumbnail
 SHEET_TITLE_H = 46  # contact sheet: title and a line of counts
+SHEET_MIN_W = 380  # the counts line whole, even above one or two small thumbnails
 MIN_TILE, MAX_TILE = 128, 256
 BG = (255, 255, 255)
 INK = (20, 20, 20)
@@ -292,7 +293,7 @@ def sheet_size(n: int, cols: int, tile: tuple[int, int]) -> tuple[int, int]:
     tw, th = tile
     rows = max(1, math.ceil(n / cols))
     return (
-        PAD + cols * tw + (cols - 1) * GAP + PAD,
+        max(SHEET_MIN_W, PAD + cols * tw + (cols - 1) * GAP + PAD),
         SHEET_TITLE_H + rows * (th + CAPTION_H) + (rows - 1) * GAP + PAD,
     )
 
@@ -340,10 +341,13 @@ def contact_sheet(
         cells.append((s.name, view, path, bg))
     with Image.open(cells[0][2]) as im:
         ts = tile_size(*im.size, tile)
+    failed = _failed_objects(build)
+    f_title, f_label, f_small = _font(16, bold=True), _font(12), _font(11)
+    plural = "" if len(cells) == 1 else "s"
+    title = f"{build.resolve().name}: {len(cells)} setting{plural}"
     size = sheet_size(len(cells), cols, ts)
     fig = Image.new("RGB", size, BG)
     draw = ImageDraw.Draw(fig)
-    f_title, f_label, f_small = _font(16, bold=True), _font(12), _font(11)
     flagged = []
     for k, (name, view, path, bg) in enumerate(cells):
         x, y = sheet_origin(k, cols, ts)
@@ -359,10 +363,6 @@ def contact_sheet(
         draw.text((x, y + ts[1] + 2), _fit(draw, name, f_label, ts[0]), fill=ink, font=f_label)
         sub = f"view {view:03d}" + (f"  {' '.join(flags)}" if flags else "")
         draw.text((x, y + ts[1] + 18), _fit(draw, sub, f_small, ts[0]), fill=ink, font=f_small)
-    failed = 0
-    if (build / "failures.jsonl").is_file():
-        failed = sum(1 for ln in (build / "failures.jsonl").read_text().splitlines() if ln.strip())
-    title = f"{build.resolve().name}: {len(cells)} settings"
     counts = f"sharp, first test view; {failed} objects failed; {len(flagged)} flagged"
     draw.text((PAD, 5), _fit(draw, title, f_title, size[0] - 2 * PAD), fill=INK, font=f_title)
     draw.text(
@@ -373,6 +373,16 @@ def contact_sheet(
     )
     _save(fig, out)
     return Figure(out, [c[1] for c in cells], [c[0] for c in cells], ts, size, flagged)
+
+
+def _failed_objects(build: Path) -> int:
+    """Objects failing now, as the build counted them in dataset.json (failures.jsonl keeps
+    every attempt, also of objects a later run built)."""
+    try:
+        counts = json.loads((build / "dataset.json").read_text())["counts"]
+        return int(counts["objects_failed"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0
 
 
 # -- command ---------------------------------------------------------------------------------
@@ -393,7 +403,8 @@ def run(args) -> int:
         for name, flags in fig.flagged:
             print(f"flagged: {name}: {flags}", file=sys.stderr)
         print(
-            f"blurset preview: contact sheet of {len(fig.columns)} settings "
+            f"blurset preview: contact sheet of {len(fig.columns)} "
+            f"setting{'' if len(fig.columns) == 1 else 's'} "
             f"({len(fig.flagged)} flagged) -> {fig.path}"
         )
         return 0
