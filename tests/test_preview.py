@@ -13,7 +13,7 @@ import pytest
 from blurset import preview
 from PIL import Image
 
-from tests.conftest import run_cli
+from tests.conftest import DEMO_ARGS, run_cli
 
 pytestmark = pytest.mark.blender
 
@@ -66,6 +66,22 @@ def check_setting_figure(path: Path, setting: Path, columns: list[tuple[str, Pat
 def test_build_previews_are_the_labelled_level_grid(linear_build):
     for s in settings(linear_build):
         check_setting_figure(s / "preview.png", s, [(lvl, s / lvl / "images") for lvl in LEVELS])
+
+
+def test_rerun_with_previews_draws_the_missing_ones_only(linear_build, tmp_path):
+    out = tmp_path / "out"
+    shutil.copytree(linear_build, out)
+    names = [s.name for s in settings(out)]
+    (out / names[0] / "preview.png").unlink()
+    kept = (out / names[1] / "preview.png").stat().st_mtime_ns
+    image = out / names[0] / "blur_4" / "images" / "000.png"
+    rendered = image.stat().st_mtime_ns
+    p = run_cli("build", *DEMO_ARGS, "--keep-linear", "--previews", "--out", str(out))
+    assert "(0 new)" in p.stderr + p.stdout, p.stdout + p.stderr
+    assert image.stat().st_mtime_ns == rendered  # nothing re-rendered
+    check_setting_figure(out / names[0] / "preview.png", out / names[0],
+                         [(lvl, out / names[0] / lvl / "images") for lvl in LEVELS])  # fmt: skip
+    assert (out / names[1] / "preview.png").stat().st_mtime_ns == kept
 
 
 def test_preview_with_a_noise_gain(linear_build, tmp_path):

@@ -478,6 +478,13 @@ def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> Objec
     pending = [j for j in jobs if not (out / j.name / MARKER).exists()]
     result.settings = [j.name for j in jobs if j not in pending]
     progress.skip(len(jobs) - len(pending))
+    if cfg.previews:
+        from blurset.preview import write_build_preview
+
+        # A rerun with --previews also draws the settings an earlier run finished without.
+        for name in result.settings:
+            if not (out / name / "preview.png").exists():
+                write_build_preview(out / name, warn=progress.write)
     work = out / f".work-{obj.uid}"
     shutil.rmtree(work, ignore_errors=True)  # a killed run's scratch: worker log, frames
     if not pending:
