@@ -101,7 +101,7 @@ def _build(out: Path, glb: Path, preset: dict) -> dict:
 def _reference(glb: Path, work: Path) -> dict:
     """Reference images (premultiplied linear RGBA) per (view, level dir)."""
     from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
-    from blurset.build import level_renders
+    from blurset.build.setting import level_renders
     from blurset.worker_client import Worker
 
     cfg = _config(work / "unused", glb, latents=REFERENCE[0], latent_positions="stratified",

@@ -166,7 +166,7 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.mark.skipif(not HAS_BPY, reason="bpy cannot be imported")
 def test_motion_blur_equals_a_high_m_average_of_the_same_segment(tmp_path, demo_glbs):
     from blurset import _core  # noqa: TID251
-    from blurset.build import level_renders
+    from blurset.build.setting import level_renders
     from blurset.config import BuildConfig
     from blurset.worker_client import Worker
 

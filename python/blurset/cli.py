@@ -11,9 +11,9 @@ from blurset.exceptions import BlursetError
 
 # subcommand -> (module, one-line help)
 COMMANDS = {
-    "build": ("blurset.build", "render an Objaverse-Blur style dataset from GLB objects"),
+    "build": ("blurset.build.cli", "render an Objaverse-Blur style dataset from GLB objects"),
     "noise": (
-        "blurset.noise",
+        "blurset.noise.cli",
         "write reproducible noisy copies (LLFF-N style) of an LLFF scene or of a whole build",
     ),
     "check-poses": ("blurset.check_poses", "cross-check a scene's poses with COLMAP"),

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,10 +29,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from blurset import _core
+from blurset import _core, layout
 from blurset.exceptions import ConfigError, InputError
 
-MARKER = ".complete"
 PAD = 8
 GAP = 4
 TITLE_H = 30
@@ -126,9 +124,7 @@ def _frame(draw: ImageDraw.ImageDraw, x: int, y: int, tile: tuple[int, int]) -> 
 
 def _save(img: Image.Image, out: Path) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
-    img.save(tmp, format="PNG")
-    os.replace(tmp, out)
+    layout.write_figure(out, lambda f: img.save(f, format="PNG"))
 
 
 # -- setting figure ------------------------------------------------------------------------
@@ -191,10 +187,10 @@ def _noise_columns(
     noise_dir: Path, setting: str, levels: list[str], gain: str
 ) -> list[tuple[str, Path]]:
     """(label, gain dir) for every level of `setting` that `noise_dir` holds at `gain`."""
-    from blurset.noise import gain_name, parse_gains
+    from blurset.noise.params import parse_gains
 
     g = parse_gains([gain], any_gain=True)[0]
-    gname = gain_name(g)
+    gname = layout.gain_name(g)
     if not noise_dir.is_dir():
         raise InputError(f"--noise directory not found: {noise_dir}")
     cols = []
@@ -322,9 +318,9 @@ def contact_sheet(
 ) -> Figure:
     """Write the contact sheet of a build to `out`."""
     build = Path(build)
-    settings = sorted(d for d in build.iterdir() if d.is_dir() and (d / MARKER).is_file())
+    settings = layout.complete_settings(build)
     if not settings:
-        raise InputError(f"no complete setting (<setting>/{MARKER}) in build: {build}")
+        raise InputError(f"no complete setting (<setting>/{layout.MARKER}) in build: {build}")
     if columns is not None and columns < 1:
         raise ConfigError(f"--columns {columns}: must be at least 1")
     cols = columns or math.ceil(math.sqrt(len(settings)))

@@ -15,7 +15,6 @@ import csv
 import io
 import json
 import math
-import os
 import re
 import sys
 import time
@@ -26,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import __version__, _core
+from blurset import __version__, _core, layout
 
 BAR = "#3b6ea8"  # histogram bars (tests look for this colour in the PNGs)
 MEDIAN = "#c8553d"
@@ -100,24 +99,8 @@ def load_stats(build: Path) -> dict[str, Any]:
     return json.loads(_core.build_stats(Path(build)))
 
 
-# -- atomic writes ---------------------------------------------------------------------
-
-
-def _tmp(path: Path) -> Path:
-    return path.with_name(f".{path.name}.tmp{os.getpid()}")
-
-
 def _write_text(path: Path, text: str | Iterable[str]) -> None:
-    tmp = _tmp(path)
-    try:
-        with open(tmp, "w") as f:
-            if isinstance(text, str):
-                f.write(text)
-            else:
-                f.writelines(text)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    layout.write_text_atomic(path, text if isinstance(text, str) else "".join(text))
 
 
 # -- figures ---------------------------------------------------------------------------
@@ -175,12 +158,7 @@ def _figure(panels: int):
 
 
 def _save(fig, path: Path) -> None:
-    tmp = _tmp(path)
-    try:
-        fig.savefig(tmp, format="png", dpi=110)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    layout.write_figure(path, lambda f: fig.savefig(f, format="png", dpi=110))
 
 
 def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Path]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import math
 import os
@@ -27,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from blurset import _core
-from blurset.build import level_renders
+from blurset import _core, layout
+from blurset.build.setting import level_renders
 from blurset.config import BuildConfig
 from blurset.exceptions import ConfigError
 
@@ -355,13 +356,12 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="") as f:
-        wr = csv.DictWriter(f, fieldnames=list(COLUMNS))
-        wr.writeheader()
-        for r in rows:
-            wr.writerow({k: r[k] for k in COLUMNS})
-    os.replace(tmp, path)
+    buf = io.StringIO(newline="")
+    wr = csv.DictWriter(buf, fieldnames=list(COLUMNS))
+    wr.writeheader()
+    for r in rows:
+        wr.writerow({k: r[k] for k in COLUMNS})
+    layout.write_text_atomic(path, buf.getvalue())
 
 
 def recommend(rows: list[dict], tolerance_db: float = 1.0) -> dict:
@@ -447,10 +447,8 @@ def plot(path: Path, rows: list[dict], setup: dict) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=9, loc="lower right")
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp)
+    layout.write_figure(path, lambda f: fig.savefig(f, format="png"))
     plt.close(fig)
-    os.replace(tmp, path)
 
 
 def summary_lines(res: dict) -> list[str]:

@@ -1,0 +1,111 @@
+"""The files a build shares across all its objects: failures.jsonl, splits.json and
+dataset.json (DESIGN §4), and the lock every process building into OUT takes to write
+them (local workers, Ray tasks and Slurm shards alike)."""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import platform
+import shutil
+import time
+from pathlib import Path
+
+from blurset import __version__, _core, layout
+from blurset.config import BuildConfig
+from blurset.objects import ObjectSpec
+
+
+@contextlib.contextmanager
+def build_lock(out: Path):
+    """Serialize the writes shared by every process building into OUT."""
+    with open(out / ".lock", "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> None:
+    """What a killed run of these objects left behind: partial settings, scratch
+    directories, temp files of the shared writes. Other shards' objects are left alone."""
+    for o in objs:
+        shutil.rmtree(out / f".work-{o.uid}", ignore_errors=True)
+        for t in cfg.theta0s:
+            final = out / layout.setting_name(o.uid, t)
+            shutil.rmtree(layout.partial_dir(final), ignore_errors=True)
+    for tmp in out.glob(".*.tmp*"):
+        tmp.unlink(missing_ok=True)
+
+
+def append_failures(out: Path, records: list[dict]) -> None:
+    """Append failure records to failures.jsonl (call under build_lock)."""
+    with open(out / "failures.jsonl", "a+b") as f:
+        # A record torn by a kill mid-append gets its line ended first, so the next
+        # record stays whole (readers skip the torn one).
+        f.seek(0, os.SEEK_END)
+        if f.tell() > 0:
+            f.seek(-1, os.SEEK_END)
+            if f.read(1) != b"\n":
+                f.write(b"\n")
+        f.write("".join(json.dumps(r) + "\n" for r in records).encode())
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _complete_settings(out: Path) -> list[tuple[str, dict]]:
+    return [(d.name, json.loads((d / "meta.json").read_text())) for d in layout.complete_settings(out)]
+
+
+def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
+    """splits.json, dataset.json and failures.jsonl over what is on disk (call under
+    build_lock). failures.jsonl keeps the latest record per object (or per setting, for
+    QA failures) whose work is still not complete."""
+    complete = _complete_settings(out)
+    fpath = out / "failures.jsonl"
+    text, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
+    kept = json.loads(text)
+    layout.write_text_atomic(fpath, "".join(json.dumps(r) + "\n" for r in kept))
+    entries = [{"setting": n, "object": m["uid"], "views": len(m["views"])} for n, m in complete]
+    splits = json.loads(
+        _core.make_splits(
+            json.dumps(entries),
+            view_stride=cfg.view_stride,
+            test_fraction=cfg.test_fraction,
+            test_objects=cfg.test_objects,
+            seed=cfg.seed,
+        )
+    )
+    layout.write_json(out / "splits.json", splits)
+    checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
+    dataset = {
+        "name": "blurset Objaverse-Blur",
+        "blurset_version": __version__,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "config": cfg.to_json(),
+        "seed": cfg.seed,
+        "levels": cfg.level_dirs,
+        "versions": {
+            "blurset": __version__,
+            "python": platform.python_version(),
+            "blender": next(
+                (m["object"].get("blender_version") for _, m in complete if m.get("object")), None
+            ),
+        },
+        "counts": {
+            "objects": len({m["uid"] for _, m in complete}),
+            "objects_failed": len({r["uid"] for r in kept}),
+            "settings": len(complete),
+            "settings_failed": sum(1 for r in kept if r.get("setting")),
+            "images": sum(len(m["views"]) * len(m["levels"]) for _, m in complete),
+        },
+        "settings": [n for n, _ in complete],
+        "seconds": round(seconds, 1),
+    }
+    if checks:
+        dataset["pose_checks"] = checks
+    layout.write_json(out / "dataset.json", dataset)
+    return {"settings_complete": len(complete), "failures": kept}

@@ -1,0 +1,74 @@
+"""Where the object units run: in this process (one at a time, or a thread pool of
+workers, each driving its own Blender process) or as Ray tasks (DESIGN §11)."""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import os
+from collections.abc import Callable
+
+from blurset.build.unit import ObjectResult, build_object
+from blurset.config import BuildConfig
+from blurset.exceptions import BlursetError
+from blurset.objects import ObjectSpec
+from blurset.progress import Progress
+
+
+OnResult = Callable[[ObjectResult], None]
+
+
+def run_local(
+    objs: list[ObjectSpec], cfg: BuildConfig, progress: Progress, on_result: OnResult
+) -> None:
+    if cfg.workers == 1:
+        for o in objs:
+            on_result(build_object(o, cfg, progress))
+        return
+    with cf.ThreadPoolExecutor(cfg.workers) as pool:
+        for fut in cf.as_completed([pool.submit(build_object, o, cfg, progress) for o in objs]):
+            on_result(fut.result())
+
+
+def run_ray(
+    objs: list[ObjectSpec], cfg: BuildConfig, progress: Progress, on_result: OnResult
+) -> None:
+    """One Ray task per object. A task is idempotent (complete settings are skipped,
+    partial ones redone), so Ray may retry it after a lost worker or node."""
+    try:
+        import ray
+    except ImportError:
+        raise BlursetError(
+            "--executor ray: the ray package is not installed (pip install 'blurset[ray]')"
+        ) from None
+    started = not ray.is_initialized()
+    if started:
+        try:
+            ray.init(
+                address=cfg.ray_address or os.environ.get("RAY_ADDRESS"),
+                log_to_driver=False,
+                include_dashboard=False,
+            )
+        except (ConnectionError, RuntimeError, ValueError) as e:
+            raise BlursetError(f"--ray-address {cfg.ray_address}: {_first_line(e)}") from None
+    try:
+        remote = ray.remote(num_cpus=max(1, cfg.threads), max_retries=2)(_ray_unit)
+        pending = [remote.remote(o, cfg) for o in objs]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            res = ray.get(done[0])
+            progress.skip(len(res.settings) - res.new_settings)
+            progress.frame_done(res.new_settings * progress.fps)
+            for _ in range(res.new_settings):
+                progress.setting_done()
+            on_result(res)
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _first_line(e: BaseException) -> str:
+    return (str(e).strip().splitlines() or [type(e).__name__])[0]
+
+
+def _ray_unit(obj: ObjectSpec, cfg: BuildConfig) -> ObjectResult:
+    return build_object(obj, cfg, Progress(0, enabled=False))

@@ -1,0 +1,169 @@
+"""One object: the retried, idempotent unit of work of a build (DESIGN §10, §11).
+
+Every pending setting of one object renders in one Blender worker process; a crash or
+hang is retried, a refused file is not, and any failure costs this object only
+(recorded for failures.jsonl). Complete settings are skipped and partial ones redone,
+so a retry (here, by Ray, or a rerun after a kill) is always safe.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from blurset import layout, objaverse_cache, preflight
+from blurset.build.setting import SettingFailed, SettingJob, render_setting
+from blurset.config import BuildConfig
+from blurset.exceptions import BlursetError
+from blurset.objects import ObjectSpec
+from blurset.progress import Progress
+
+
+@dataclass
+class ObjectResult:
+    uid: str
+    settings: list[str] = field(default_factory=list)
+    # Failure records (failures.jsonl): the object's, or one per setting that failed QA.
+    failures: list[dict[str, Any]] = field(default_factory=list)
+    new_settings: int = 0
+
+
+class ObjectUnit:
+    """Every pending setting of one object, rendered in one worker process per attempt.
+
+    `stage` is where the current attempt is (fetch, preflight, start, load, render): a
+    failure is recorded under the stage it happened in."""
+
+    def __init__(self, obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> None:
+        self.obj, self.cfg, self.progress = obj, cfg, progress
+        self.out = Path(cfg.out)
+        self.work = self.out / f".work-{obj.uid}"
+        self.result = ObjectResult(uid=obj.uid)
+        self.stage = "fetch"
+
+    def run(self) -> ObjectResult:
+        obj, cfg, progress, result = self.obj, self.cfg, self.progress, self.result
+        jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
+        pending = [j for j in jobs if not layout.is_complete(self.out / j.name)]
+        result.settings = [j.name for j in jobs if j not in pending]
+        progress.skip(len(jobs) - len(pending))
+        if cfg.previews:
+            from blurset.preview import write_build_preview
+
+            # A rerun with --previews also draws the settings an earlier run finished without.
+            for name in result.settings:
+                if not (self.out / name / "preview.png").exists():
+                    write_build_preview(self.out / name, warn=progress.write)
+        shutil.rmtree(self.work, ignore_errors=True)  # a killed run's scratch: log, frames
+        if not pending:
+            return result
+        t0 = time.monotonic()
+        self.stage = "fetch"
+        try:
+            if obj.source == "objaverse":
+                objaverse(cfg).ensure(obj.uid, obj.path)
+            self.stage = "preflight"
+            preflight.check(obj.path, preflight.Budget(cfg.max_triangles, cfg.max_texture_pixels))
+        except (objaverse_cache.FetchError, preflight.PreflightError) as e:
+            result.failures.append(failure_record(obj, self.stage, str(e), t0, 1))
+            progress.object_failed(len(pending))
+            return result
+        deadline = t0 + cfg.object_timeout if cfg.object_timeout > 0 else None
+        attempt = 0
+        while pending:
+            attempt += 1
+            self.stage = "start"
+            try:
+                self._attempt(pending, deadline)
+            except Exception as e:
+                from blurset.worker_client import WorkerError
+
+                for j in pending:
+                    shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
+                if isinstance(e, WorkerError) and e.transient and attempt <= cfg.retries:
+                    progress.write(f"retrying {obj.uid} (attempt {attempt + 1}) after: {e}")
+                    continue
+                if isinstance(e, BlursetError | ValueError | OSError):
+                    reason = str(e).splitlines()[0] if str(e) else repr(e)
+                else:  # a bug must cost this object only, and be visible
+                    tb = traceback.format_exc(limit=3).strip().splitlines()[-1]
+                    reason = f"{type(e).__name__}: {e} [{tb}]"
+                result.failures.append(failure_record(obj, self.stage, reason, t0, attempt))
+                progress.object_failed(len(pending))
+                break
+        shutil.rmtree(self.work, ignore_errors=True)
+        return result
+
+    def _attempt(self, pending: list[SettingJob], deadline: float | None) -> None:
+        """Load the object in a fresh worker and render the pending settings in order,
+        taking each off `pending` once it is complete or has failed QA."""
+        from blurset.worker_client import Worker
+
+        obj, cfg, progress, result, work = (
+            self.obj,
+            self.cfg,
+            self.progress,
+            self.result,
+            self.work,
+        )
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
+        t0 = time.monotonic()
+        with Worker(
+            blender=cfg.blender,
+            threads=cfg.threads,
+            timeout=cfg.timeout,
+            log_path=work / "worker.log",
+            workdir=work / "scratch",
+            deadline=deadline,
+        ) as w:
+            self.stage = "load"
+            info = w.load(obj.path, work / "vertices.npy")
+            info["load_s"] = round(time.monotonic() - t0, 3)
+            info["blender_version"] = w.info.get("blender_version")
+            verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
+            self.stage = "render"
+            while pending:
+                j = pending[0]
+                t1 = time.monotonic()
+                try:
+                    render_setting(j, cfg, w, info, verts, progress)
+                except SettingFailed as e:
+                    shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
+                    rec = failure_record(obj, e.stage, str(e), t1, 1)
+                    rec["setting"] = j.name
+                    result.failures.append(rec)
+                    progress.object_failed(1)
+                else:
+                    result.settings.append(j.name)
+                    result.new_settings += 1
+                    progress.setting_done()
+                pending.pop(0)
+
+
+def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> ObjectResult:
+    """One work unit: every pending setting of one object (see ObjectUnit)."""
+    return ObjectUnit(obj, cfg, progress).run()
+
+
+def failure_record(obj: ObjectSpec, stage: str, reason: str, t0: float, attempts: int) -> dict:
+    """A failures.jsonl record: uid, path, stage, reason, seconds (+ attempts, time)."""
+    return {
+        "uid": obj.uid,
+        "path": str(obj.path),
+        "stage": stage,
+        "reason": reason,
+        "seconds": round(time.monotonic() - t0, 3),
+        "attempts": attempts,
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+
+
+def objaverse(cfg: BuildConfig) -> objaverse_cache.Cache:
+    return objaverse_cache.Cache(cfg.objaverse_dir, offline=cfg.objaverse_offline)

@@ -1,0 +1,152 @@
+"""The layout of what blurset writes, in one place (DESIGN §4, §10).
+
+Every reader and writer of a build or a noise output goes through here for: the names
+of settings, level directories and gain directories; the `.complete` marker and what a
+complete setting is; the `.partial` staging directories; atomic JSON writes. A setting
+(or a noise unit) is complete only when its final directory (never a `*.partial` one)
+holds the marker, which is written last, just before the rename that publishes it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from blurset import _core
+
+MARKER = ".complete"
+PARTIAL_SUFFIX = ".partial"
+SHARP = "sharp"
+
+
+def setting_name(uid: str, theta0_deg: float) -> str:
+    """`<uid>_<theta0>`, e.g. `chair_090`."""
+    return _core.setting_name(uid, theta0_deg)
+
+
+def theta0s(settings_per_object: int) -> list[float]:
+    """The θ0 of each of an object's settings, evenly spaced from 0°."""
+    return _core.theta0s(settings_per_object)
+
+
+def image_name(view: int, n_views: int) -> str:
+    """The image file of a view (`000.png` …): sorted file order is view order."""
+    return _core.image_name(view, n_views)
+
+
+def level_dir(level: int) -> str:
+    """Directory of a blur level (`blur_<l>`); level 0 is the sharp image."""
+    return SHARP if level == 0 else f"blur_{level}"
+
+
+def level_dirs(levels: list[int]) -> list[str]:
+    """`sharp` then `blur_<l>` of every blur level, in order."""
+    return [SHARP] + [level_dir(lvl) for lvl in levels]
+
+
+def is_level_dir(name: str) -> bool:
+    """`sharp` or `blur_<l>` with l in 1..64 (what `blurset build` can write)."""
+    if name == SHARP:
+        return True
+    head, _, num = name.partition("_")
+    return head == "blur" and num.isdigit() and not num.startswith("0") and 1 <= int(num) <= 64
+
+
+def level_order(name: str) -> int:
+    """Sort key of level directories: sharp first, then blur levels by number."""
+    return 0 if name == SHARP else int(name.partition("_")[2])
+
+
+def setting_levels(setting: Path) -> list[str]:
+    """The level directories a setting holds (`sharp`, `blur_1` …), in level order."""
+    found = [d.name for d in Path(setting).iterdir() if d.is_dir() and is_level_dir(d.name)]
+    return sorted(found, key=level_order)
+
+
+def gain_name(g: float) -> str:
+    """Directory name of a noise gain: gain_4, gain_2.5."""
+    return f"gain_{int(g)}" if float(g).is_integer() else f"gain_{g:g}"
+
+
+def partial_dir(final: Path) -> Path:
+    """Where a setting or noise unit is written before it is published."""
+    return final.with_name(final.name + PARTIAL_SUFFIX)
+
+
+def is_complete(d: Path) -> bool:
+    """A finished setting or noise unit: a final (not `*.partial`) directory with its marker."""
+    return not d.name.endswith(PARTIAL_SUFFIX) and (d / MARKER).is_file()
+
+
+def complete_settings(build: Path) -> list[Path]:
+    """The complete setting directories of a build, sorted by name."""
+    return sorted(
+        d
+        for d in Path(build).iterdir()
+        if d.is_dir() and not d.name.startswith(".") and is_complete(d)
+    )
+
+
+def publish(partial: Path, final: Path) -> None:
+    """Write the marker into `partial` and rename it to `final` (replacing an old one)."""
+    import shutil
+
+    (partial / MARKER).write_text(f"{time.strftime('%Y-%m-%dT%H:%M:%S')}\n")
+    if final.exists():
+        shutil.rmtree(final)
+    os.replace(partial, final)
+
+
+def temp_path(path: Path) -> Path:
+    """The temp name of an atomic write of `path` (dot-prefixed, per process)."""
+    return path.with_name(f".{path.name}.tmp{os.getpid()}")
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    """Write `data` to `path` through a synced temp file and a rename, so readers see the
+    old file or the new one, never a torn one, even after a crash."""
+    tmp = temp_path(path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """`write_bytes_atomic` of UTF-8 text."""
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def write_figure(path: Path, save) -> None:
+    """An image made by `save(file_object)` (PIL, matplotlib), written atomically."""
+    import io
+
+    buf = io.BytesIO()
+    save(buf)
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def write_json(path: Path, data: Any, *, indent: int = 1) -> None:
+    """JSON (no NaN/inf) written atomically."""
+    write_text_atomic(path, json.dumps(data, indent=indent, allow_nan=False) + "\n")
+
+
+def read_json(path: Path, what: str | None = None) -> Any:
+    """JSON of a file blurset wrote; InputError names the file when it is missing or bad."""
+    from blurset.exceptions import InputError
+
+    what = what or path.name
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{what} not found: {path}") from None
+    except (OSError, ValueError) as e:
+        raise InputError(f"{what} is not readable JSON ({e}): {path}") from None
