@@ -20,7 +20,7 @@ from blurset.demo import make_demo_objects
 from blurset.objects import resolve_objects, sanitize, setting_name
 from blurset.preflight import glb_inspect
 
-from tests.conftest import SHARED_DATA, run_cli
+from tests.conftest import run_cli, shared_if_present
 
 pytestmark = pytest.mark.blender
 
@@ -88,8 +88,8 @@ def objects(tmp_path_factory, demo_glbs) -> Path:
     rewrite_json(box, d / "missing_texture.glb", external_texture)
     rewrite_json(box, d / "empty_scene.glb", lambda doc: doc.pop("meshes"))
     shutil.copy(box, d / "hangs.glb")
-    draco = SHARED_DATA / "glb" / "edge_BoxTextured_draco.glb"
-    if draco.exists():
+    draco = shared_if_present("glb", "edge_BoxTextured_draco.glb")
+    if draco is not None:
         shutil.copy(draco, d / "draco.glb")
     return d
 
@@ -118,7 +118,7 @@ def test_each_broken_class_fails_with_its_reason_good_objects_complete(broken_bu
         assert [setting_name(good, t) for t in (0, 180)] == [d for d in done if d.startswith(good)]
     if "draco" in fails:  # failing is allowed, silently is not
         assert "Draco" in fails.pop("draco")["reason"]
-    elif (SHARED_DATA / "glb" / "edge_BoxTextured_draco.glb").exists():
+    elif shared_if_present("glb", "edge_BoxTextured_draco.glb") is not None:
         assert {"draco_000", "draco_180"} <= set(done)
     assert not fails, fails
     n_failed = len(BROKEN)

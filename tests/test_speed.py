@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tests.conftest import HAS_BPY, run_cli
+from tests.conftest import run_cli
 
 LEVEL_DIRS = ["sharp", "blur_1", "blur_4"]
 
@@ -163,7 +163,6 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @pytest.mark.blender
-@pytest.mark.skipif(not HAS_BPY, reason="bpy cannot be imported")
 def test_motion_blur_equals_a_high_m_average_of_the_same_segment(tmp_path, demo_glbs):
     from blurset import _core  # noqa: TID251
     from blurset.build.setting import level_renders
