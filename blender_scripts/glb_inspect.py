@@ -51,8 +51,14 @@ def read_glb(path: str) -> tuple[dict, bytes | None]:
             raise GlbError(f"truncated GLB chunk at byte {offset}: {path}")
         if ctype == CHUNK_JSON and doc is None:
             try:
-                doc = json.loads(body.decode("utf-8"))
-            except (UnicodeDecodeError, ValueError) as e:
+                text = body.decode("utf-8")
+            except UnicodeDecodeError as e:
+                raise GlbError(
+                    f"the JSON chunk is not UTF-8 (glTF requires UTF-8; byte {e.start}): {path}"
+                ) from None
+            try:
+                doc = json.loads(text)
+            except ValueError as e:
                 raise GlbError(f"GLB JSON chunk is not valid JSON ({e}): {path}") from None
         elif ctype == CHUNK_BIN and bin_chunk is None:
             bin_chunk = body

@@ -108,5 +108,3 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     summary["settings_new"] = new_settings
     summary["failures"] = failed
     return summary
-
-

@@ -57,7 +57,9 @@ def append_failures(out: Path, records: list[dict]) -> None:
 
 
 def _complete_settings(out: Path) -> list[tuple[str, dict]]:
-    return [(d.name, json.loads((d / "meta.json").read_text())) for d in layout.complete_settings(out)]
+    return [
+        (d.name, json.loads((d / "meta.json").read_text())) for d in layout.complete_settings(out)
+    ]
 
 
 def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:

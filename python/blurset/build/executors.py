@@ -13,7 +13,6 @@ from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
 from blurset.progress import Progress
 
-
 OnResult = Callable[[ObjectResult], None]
 
 

@@ -70,8 +70,13 @@ class ObjectUnit:
                 objaverse(cfg).ensure(obj.uid, obj.path)
             self.stage = "preflight"
             preflight.check(obj.path, preflight.Budget(cfg.max_triangles, cfg.max_texture_pixels))
-        except (objaverse_cache.FetchError, preflight.PreflightError) as e:
-            result.failures.append(failure_record(obj, self.stage, str(e), t0, 1))
+        except Exception as e:
+            # Whatever a file does to the fetch or the pre-flight costs that file only.
+            if isinstance(e, objaverse_cache.FetchError | preflight.PreflightError):
+                reason = str(e)
+            else:
+                reason = f"{type(e).__name__}: {' '.join(str(e).split())[:300]}"
+            result.failures.append(failure_record(obj, self.stage, reason, t0, 1))
             progress.object_failed(len(pending))
             return result
         deadline = t0 + cfg.object_timeout if cfg.object_timeout > 0 else None
