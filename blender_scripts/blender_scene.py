@@ -72,10 +72,10 @@ def draco_available() -> bool:
 def import_glb(path: str, workdir: str, unlit_mode: str) -> tuple[list[str], bool]:
     """Fresh factory scene + the GLB. Returns (warnings, unlit_fixed)."""
     if not os.path.isfile(path):
-        raise LoadError(f"GLB file not found: {path}")
+        raise LoadError(f"model file not found: {path}")
     warnings: list[str] = []
     try:
-        doc, bin_chunk = glb_inspect.read_glb(path)
+        doc, bin_chunk = glb_inspect.read_model(path)
     except (OSError, glb_inspect.GlbError) as e:
         raise LoadError(str(e)) from None
     problem = glb_inspect.compression_problem(doc, draco_available=draco_available())
@@ -90,13 +90,24 @@ def import_glb(path: str, workdir: str, unlit_mode: str) -> tuple[list[str], boo
         fixed_doc, n_fixed = glb_inspect.fix_unlit(doc, unlit_mode)
         unlit_fixed = n_fixed > 0 or unlit_mode == "lit"
         if unlit_fixed:
+            doc = fixed_doc
             source = os.path.join(workdir, "unlit_fixed.glb")
-            glb_inspect.write_glb(source, fixed_doc, bin_chunk)
             n_unlit = len(glb_inspect.unlit_materials(doc))
             warnings.append(
                 f"{n_unlit} unlit material(s) (KHR_materials_unlit); {n_fixed} had a black "
                 f"base colour and were rebuilt from their emissive colour; mode {unlit_mode}"
             )
+
+    if source != path or bin_chunk is None:
+        # A rewritten model lands in the scratch folder, away from the files it names: so
+        # it, and every .gltf, is imported as one self-contained GLB.
+        if source == path:
+            source = os.path.join(workdir, "model.glb")
+        try:
+            doc, bin_chunk = glb_inspect.embed_external(doc, bin_chunk, os.path.dirname(path))
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise LoadError(f"cannot read the model's external files: {e}") from None
+        glb_inspect.write_glb(source, doc, bin_chunk)
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     # GLBs are untrusted input; glTF carries no scripts, but keep auto-run off regardless.

@@ -8,6 +8,7 @@ so a retry (here, by Ray, or a rerun after a kill) is always safe.
 
 from __future__ import annotations
 
+import json
 import shutil
 import time
 import traceback
@@ -50,7 +51,7 @@ class ObjectUnit:
     def run(self) -> ObjectResult:
         obj, cfg, progress, result = self.obj, self.cfg, self.progress, self.result
         jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
-        pending = [j for j in jobs if not layout.is_complete(self.out / j.name)]
+        pending = [j for j in jobs if not self._reusable(self.out / j.name)]
         result.settings = [j.name for j in jobs if j not in pending]
         progress.skip(len(jobs) - len(pending))
         if cfg.previews:
@@ -104,6 +105,17 @@ class ObjectUnit:
                 break
         shutil.rmtree(self.work, ignore_errors=True)
         return result
+
+    def _reusable(self, setting: Path) -> bool:
+        """A complete setting made from this very file (another file may have had this
+        id in an earlier run: its settings are redone, never passed off as this one's)."""
+        if not layout.is_complete(setting):
+            return False
+        try:
+            meta = json.loads((setting / "meta.json").read_text())
+            return meta["object"]["source"] == str(self.obj.path)
+        except (OSError, ValueError, KeyError, TypeError):
+            return False
 
     def _attempt(self, pending: list[SettingJob], deadline: float | None) -> None:
         """Load the object in a fresh worker and render the pending settings in order,
