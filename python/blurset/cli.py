@@ -49,6 +49,9 @@ def make_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
+    from blurset import stop
+
+    stop.install()
     try:
         return int(importlib.import_module(args._module).run(args) or 0)
     except (BlursetError, OSError, ValueError) as e:
@@ -57,9 +60,11 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"blurset {args.command}: error: {_one_line(e)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"blurset {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        code = stop.exit_code(e)
+        why = f" ({e.args[0]})" if code != 130 else ""
+        print(f"blurset {args.command}: interrupted{why}", file=sys.stderr)
+        return code
     except Exception as e:  # a bug: still one line, with the way to see more
         if args.debug:
             raise

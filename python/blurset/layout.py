@@ -105,6 +105,85 @@ def temp_path(path: Path) -> Path:
     return path.with_name(f".{path.name}.tmp{os.getpid()}")
 
 
+def refuse_overlap(out: Path, inputs: list[Path], option: str = "--out") -> None:
+    """An output may not be, lie inside or contain any input: writing (or replacing with
+    --overwrite) would destroy what it reads. ConfigError names both."""
+    from blurset.exceptions import ConfigError
+
+    o = Path(out).resolve()
+    for i in inputs:
+        r = Path(i).resolve()
+        if o == r:
+            raise ConfigError(f"{option} is an input of this command: {out}")
+        if o.is_relative_to(r):
+            raise ConfigError(f"{option} lies inside the input {str(i)!r}: {out}")
+        if r.is_relative_to(o):
+            raise ConfigError(f"{option} contains the input {str(i)!r}: {out}")
+
+
+def setting_of(path: Path) -> Path | None:
+    """The build setting directory `path` lies in (a folder with meta.json whose parent
+    holds dataset.json or .lock), or None."""
+    p = Path(path).resolve()
+    for d in [p, *p.parents]:
+        if (d / "meta.json").is_file() and (
+            (d.parent / "dataset.json").is_file() or (d.parent / ".lock").exists()
+        ):
+            return d
+    return None
+
+
+def refuse_inside_settings(out: Path, option: str = "--out", allow: tuple[str, ...] = ()) -> None:
+    """Outputs of previews and statistics never go into a build's settings (they would
+    replace dataset images or add files to an LLFF folder); `allow` names the files a
+    setting may take at its top (e.g. preview.png)."""
+    from blurset.exceptions import ConfigError
+
+    o = Path(out).resolve()
+    s = setting_of(o if o.exists() else o.parent)
+    if s is None or (o.parent == s and o.name in allow):
+        return
+    raise ConfigError(f"{option} lies inside the build setting {str(s)!r}: {out}")
+
+
+def is_build_dir(path: Path) -> bool:
+    """A directory `blurset build` has written into (its lock or dataset.json)."""
+    return (path / "dataset.json").is_file() or (path / ".lock").exists()
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temps(folder: Path, names: list[str]) -> list[Path]:
+    """Remove the temp files or folders (`.<name>.tmp<pid>`) of these names whose process
+    is gone (a killed run's); a live process's and anything else are left alone."""
+    import re
+    import shutil
+
+    removed = []
+    if not folder.is_dir():
+        return removed
+    wanted = {f".{n}" for n in names}
+    pattern = re.compile(r"^(\..+)\.tmp(\d+)$")
+    for p in folder.iterdir():
+        m = pattern.match(p.name)
+        if not m or m.group(1) not in wanted or _pid_alive(int(m.group(2))):
+            continue
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+        removed.append(p)
+    return removed
+
+
 def write_bytes_atomic(path: Path, data: bytes) -> None:
     """Write `data` to `path` through a synced temp file and a rename, so readers see the
     old file or the new one, never a torn one, even after a crash."""

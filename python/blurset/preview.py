@@ -32,6 +32,8 @@ from PIL import Image, ImageDraw, ImageFont
 from blurset import _core, layout
 from blurset.exceptions import ConfigError, InputError
 
+# The file types a figure is written as, by the suffix of --out.
+IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP"}
 PAD = 8
 GAP = 4
 TITLE_H = 30
@@ -124,7 +126,9 @@ def _frame(draw: ImageDraw.ImageDraw, x: int, y: int, tile: tuple[int, int]) -> 
 
 def _save(img: Image.Image, out: Path) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
-    layout.write_figure(out, lambda f: img.save(f, format="PNG"))
+    fmt = IMAGE_FORMATS.get(out.suffix.lower(), "PNG")
+    rgb = img.convert("RGB") if fmt == "JPEG" else img
+    layout.write_figure(out, lambda f: rgb.save(f, format=fmt))
 
 
 # -- setting figure ------------------------------------------------------------------------
@@ -390,6 +394,11 @@ def run(args) -> int:
         raise InputError(f"setting or build directory not found: {path}")
     if args.tile is not None and not (16 <= args.tile <= 2048):
         raise ConfigError(f"--tile {args.tile}: must be in 16..2048")
+    if args.out is not None:
+        if args.out.suffix.lower() not in IMAGE_FORMATS:
+            raise ConfigError(f"--out {args.out}: the figure is an image: .png, .jpg or .webp")
+        # A figure never replaces a dataset image or lands in a level folder.
+        layout.refuse_inside_settings(args.out, allow=("preview.png",))
     if (path / "dataset.json").is_file():
         if args.noise is not None or args.gain is not None:
             raise ConfigError("--noise/--gain apply to a setting figure, not to a contact sheet")

@@ -422,6 +422,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--bins {args.bins} must be at least 1")
     build = args.build.expanduser().absolute()
     out_dir = (args.out or build / "stats").expanduser().absolute()
+    layout.refuse_inside_settings(out_dir)
     t0 = time.perf_counter()
     document = _core.build_stats(build)
     stats = json.loads(document)

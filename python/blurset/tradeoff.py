@@ -229,6 +229,8 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
     if not glb.is_file():
         raise ConfigError(f"--object: no such file {str(glb)!r}")
     out = Path(args.out)
+    layout.refuse_overlap(out, [glb])
+    layout.refuse_inside_settings(out)
     out.mkdir(parents=True, exist_ok=True)
     work = out / ".work"
     shutil.rmtree(work, ignore_errors=True)

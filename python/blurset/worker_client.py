@@ -19,6 +19,7 @@ import sys
 import tempfile
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
@@ -28,6 +29,20 @@ from blurset.scripts import blender_script
 
 WORKER_SCRIPT = blender_script("worker.py")
 STDERR_TAIL_LINES = 6
+# Lines of worker stdout held at most: a worker that floods its stdout blocks on the pipe
+# instead of filling this process's memory, and its deadline still runs (issue 14 H3).
+QUEUE_LINES = 256
+
+_LIVE: weakref.WeakSet[Worker] = weakref.WeakSet()
+_LIVE_LOCK = threading.Lock()
+
+
+def kill_all() -> None:
+    """Kill every live worker process of this process (a stop: Ctrl-C, SIGTERM)."""
+    with _LIVE_LOCK:
+        workers = list(_LIVE)
+    for w in workers:
+        w.kill()
 
 
 class WorkerError(BlursetError):
@@ -49,6 +64,10 @@ class WorkerTimeout(WorkerError):
     """The worker sent nothing for `timeout` seconds; its process was killed."""
 
     transient = True
+
+
+class WorkerStopped(WorkerError):
+    """The command is stopping (Ctrl-C, SIGTERM): no worker starts, none is retried."""
 
 
 class ObjectTimeout(WorkerTimeout):
@@ -120,6 +139,10 @@ class Worker:
     # -- process management ---------------------------------------------------------
 
     def _start(self) -> None:
+        from blurset.stop import STOP
+
+        if STOP.is_set():
+            raise WorkerStopped("stopping: no new Blender worker")
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         self._log = open(self.log_path, "ab")  # noqa: SIM115 - lives as long as the process
         try:
@@ -135,7 +158,9 @@ class Worker:
             raise WorkerError(
                 f"cannot start Blender worker {self.blender or sys.executable}: {e}"
             ) from None
-        self._lines = queue.Queue()
+        with _LIVE_LOCK:
+            _LIVE.add(self)
+        self._lines = queue.Queue(maxsize=QUEUE_LINES)
         threading.Thread(target=_pump, args=(self._proc.stdout, self._lines), daemon=True).start()
         self.info = self._receive(startup=True)
 
@@ -147,6 +172,15 @@ class Worker:
         if not self.alive:
             self._discard()
             self._start()
+
+    def kill(self) -> None:
+        """Kill the process now (from any thread); the caller's next read fails."""
+        proc = self._proc
+        if proc is not None and proc.poll() is None:
+            try:
+                proc.kill()
+            except OSError:
+                pass
 
     def _discard(self) -> None:
         """Kill the process (if any) and forget it."""
@@ -195,7 +229,9 @@ class Worker:
         while True:
             left = deadline - time.monotonic()
             try:
-                raw = self._lines.get(timeout=max(left, 0.0))
+                if left <= 0:  # checked per line: a flood of noise cannot outrun it
+                    raise queue.Empty
+                raw = self._lines.get(timeout=left)
             except queue.Empty:
                 self._discard()
                 if deadline < reply_by:
@@ -207,6 +243,11 @@ class Worker:
                     f"Blender worker did not {what} within {self.timeout:g} s; killed it"
                 ) from None
             if raw is None:
+                from blurset.stop import STOP
+
+                if STOP.is_set():
+                    self._discard()
+                    raise WorkerStopped("stopping: the Blender worker was killed")
                 self._crashed()
             line = raw.decode("utf-8", "replace").strip()
             # A Blender binary prints its banner on stdout before the worker script takes
@@ -343,11 +384,23 @@ def _matrix(m: Any) -> list[list[float]]:
 
 
 def _pump(stream: IO[bytes] | None, out: queue.Queue[bytes | None]) -> None:
-    """Move the worker's protocol lines onto a queue, so reads can time out."""
+    """Move the worker's protocol lines onto a bounded queue, so reads can time out and
+    a flood waits in the pipe; gives up once the stream is closed (worker discarded)."""
+
+    def put(item: bytes | None) -> bool:
+        while True:
+            try:
+                out.put(item, timeout=0.5)
+                return True
+            except queue.Full:
+                if stream is None or stream.closed:
+                    return False
+
     if stream is not None:
         try:
             for line in iter(stream.readline, b""):
-                out.put(line)
+                if not put(line):
+                    return
         except (OSError, ValueError):
             pass
-    out.put(None)
+    put(None)

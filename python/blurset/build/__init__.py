@@ -15,15 +15,31 @@ import threading
 import time
 from pathlib import Path
 
+from blurset import layout
 from blurset.build.dataset import append_failures, build_lock, finalize, sweep
 from blurset.build.executors import run_local, run_ray
 from blurset.build.setting import frames_per_setting
 from blurset.build.unit import ObjectResult, objaverse
 from blurset.config import BuildConfig
+from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec, resolve_objects
 from blurset.progress import Progress
 
 __all__ = ["build", "BuildConfig"]
+
+
+def check_out(out: Path, cfg: BuildConfig) -> None:
+    """OUT is new, empty, or a blurset build; it never is, holds or lies in an input."""
+    if out.exists():
+        if not out.is_dir():
+            raise ConfigError(f"--out exists and is not a directory: {out}")
+        if not layout.is_build_dir(out) and any(out.iterdir()):
+            raise ConfigError(
+                f"--out is a folder with other files, not a blurset build: {out} "
+                "(give a new or empty folder)"
+            )
+    inputs = [Path(e[1:] if e.startswith("@") else e) for e in cfg.objects]
+    layout.refuse_overlap(out, [p for p in inputs if p.exists()])
 
 
 def job_objects(cfg: BuildConfig) -> list[ObjectSpec]:
@@ -72,6 +88,7 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     out = Path(cfg.out)
     # Bad entries fail before anything is written.
     resolve_objects(list(cfg.objects), cache=objaverse(cfg))
+    check_out(out, cfg)
     out.mkdir(parents=True, exist_ok=True)
     objs = job_objects(cfg)
     with build_lock(out):

@@ -17,6 +17,9 @@ from blurset import __version__, _core, layout
 from blurset.config import BuildConfig
 from blurset.objects import ObjectSpec
 
+# The files every process building into OUT shares (written under build_lock).
+SHARED_FILES = ("failures.jsonl", "splits.json", "dataset.json")
+
 
 @contextlib.contextmanager
 def build_lock(out: Path):
@@ -37,8 +40,8 @@ def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> None:
         for t in cfg.theta0s:
             final = out / layout.setting_name(o.uid, t)
             shutil.rmtree(layout.partial_dir(final), ignore_errors=True)
-    for tmp in out.glob(".*.tmp*"):
-        tmp.unlink(missing_ok=True)
+    # Only blurset's own temp names: a user's `.notes.tmp1` in OUT is not ours to delete.
+    layout.remove_stale_temps(out, list(SHARED_FILES))
 
 
 def append_failures(out: Path, records: list[dict]) -> None:

@@ -12,6 +12,8 @@ from blurset.config import BuildConfig
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
 from blurset.progress import Progress
+from blurset.stop import STOP
+from blurset.worker_client import kill_all
 
 OnResult = Callable[[ObjectResult], None]
 
@@ -23,9 +25,20 @@ def run_local(
         for o in objs:
             on_result(build_object(o, cfg, progress))
         return
-    with cf.ThreadPoolExecutor(cfg.workers) as pool:
+    pool = cf.ThreadPoolExecutor(cfg.workers)
+    try:
         for fut in cf.as_completed([pool.submit(build_object, o, cfg, progress) for o in objs]):
             on_result(fut.result())
+    except BaseException:
+        # Ctrl-C / SIGTERM (or a bug): queued objects never start, running ones lose
+        # their Blender process now and end without a failure record (STOP is set);
+        # what is complete stays.
+        STOP.set()
+        pool.shutdown(wait=False, cancel_futures=True)
+        kill_all()
+        pool.shutdown(wait=True)
+        raise
+    pool.shutdown(wait=True)
 
 
 def run_ray(
@@ -51,6 +64,7 @@ def run_ray(
             raise BlursetError(f"--ray-address {cfg.ray_address}: {_first_line(e)}") from None
     try:
         remote = ray.remote(num_cpus=max(1, cfg.threads), max_retries=2)(_ray_unit)
+        pending: list = []
         pending = [remote.remote(o, cfg) for o in objs]
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
@@ -60,6 +74,15 @@ def run_ray(
             for _ in range(res.new_settings):
                 progress.setting_done()
             on_result(res)
+    except BaseException:
+        # A stop: cancel what is queued or running (force kills the task's process, and
+        # its Blender worker dies with it); complete settings stay on the shared path.
+        for ref in pending:
+            try:
+                ray.cancel(ref, force=True)
+            except Exception:  # noqa: BLE001 - best effort while stopping
+                pass
+        raise
     finally:
         if started:
             ray.shutdown()

@@ -8,6 +8,7 @@ so a retry (here, by Ray, or a rerun after a kill) is always safe.
 
 from __future__ import annotations
 
+import errno
 import json
 import shutil
 import time
@@ -24,6 +25,7 @@ from blurset.config import BuildConfig
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
 from blurset.progress import Progress
+from blurset.stop import STOP
 
 
 @dataclass
@@ -92,6 +94,11 @@ class ObjectUnit:
 
                 for j in pending:
                     shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
+                if STOP.is_set():  # stopping: not this object's failure; a rerun redoes it
+                    break
+                if disk_full(self.out, e):
+                    # Not this object's fault, and every next one would fail the same way.
+                    raise DiskFull(f"No space left on device: {self.out}") from e
                 if isinstance(e, WorkerError) and e.transient and attempt <= cfg.retries:
                     progress.write(f"retrying {obj.uid} (attempt {attempt + 1}) after: {e}")
                     continue
@@ -162,6 +169,26 @@ class ObjectUnit:
                     result.new_settings += 1
                     progress.setting_done()
                 pending.pop(0)
+
+
+# Below this much free space an object's failure is taken for a full disk: Blender then
+# writes truncated EXRs, whose read errors do not say ENOSPC themselves.
+DISK_FULL_BYTES = 64 * 2**20
+
+
+class DiskFull(BlursetError):
+    """OUT's file system is full: the build stops (nothing half-written is kept)."""
+
+
+def disk_full(out: Path, e: BaseException) -> bool:
+    if isinstance(e, OSError) and e.errno == errno.ENOSPC:
+        return True
+    if "No space left on device" in str(e) or "os error 28" in str(e):
+        return True
+    try:
+        return shutil.disk_usage(out).free < DISK_FULL_BYTES
+    except OSError:
+        return False
 
 
 def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> ObjectResult:

@@ -164,8 +164,7 @@ def _params(args, kind: str, gamma: str, table) -> dict:
 
 
 def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
-    if out.resolve() == build.resolve() or build.resolve() in out.resolve().parents:
-        raise ConfigError(f"--out must not lie inside the build: {out}")
+    layout.refuse_overlap(out, [build])
     if out.exists():
         if not out.is_dir():
             raise ConfigError(f"--out exists and is not a directory: {out}")

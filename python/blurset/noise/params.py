@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import __version__, _core
+from blurset import __version__, _core, layout
 from blurset.exceptions import ConfigError, InputError
 
 # The gain levels of the LLFF-N benchmark (NAN, Pearl et al. 2022).
@@ -34,6 +34,11 @@ def parse_gains(values: list[str], any_gain: bool) -> list[float]:
             )
         if g in gains:
             raise ConfigError(f"gain {v!r} given twice (--gains)")
+        same = next((h for h in gains if layout.gain_name(h) == layout.gain_name(g)), None)
+        if same is not None:
+            raise ConfigError(
+                f"--gains {same:.17g} and {v}: both would be written to {layout.gain_name(g)}/"
+            )
         gains.append(g)
     return gains
 

@@ -9,7 +9,6 @@ appears complete or not at all.
 
 from __future__ import annotations
 
-import os
 import shutil
 from pathlib import Path
 
@@ -104,10 +103,14 @@ def run(args) -> int:
     factor = args.factor or 1
     names = output_names(sources, args.frames)
 
+    layout.refuse_overlap(out, [scene])
+    layout.refuse_inside_settings(out)
     if out.exists() and not args.overwrite:
         raise ConfigError(f"--out exists (pass --overwrite to replace it): {out}")
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.parent / f".{out.name}.tmp{os.getpid()}"
+    # A killed run's temp tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
+    layout.remove_stale_temps(out.parent, [out.name])
+    tmp = layout.temp_path(out)
     shutil.rmtree(tmp, ignore_errors=True)
     try:
         variants = []
