@@ -1,8 +1,7 @@
-//! Bindings of `blurset_core::noise` and `blurset_core::image_io`: conversion and
+//! Bindings of the core's noise kernel and image files: conversion and
 //! one core call each.
 use crate::run_detached;
-use blurset_core::image_io::{self, Image, Samples};
-use blurset_core::noise::{self as core, Gamma, NoiseLevels, NoiseModel, WhiteBalance};
+use blurset_core::{self as core, Gamma, Image, NoiseLevels, NoiseModel, Samples, WhiteBalance};
 use numpy::{
     PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
@@ -135,13 +134,13 @@ fn noise_key(seed: u64, gain: f64) -> u64 {
 /// (width, height, channels, bits per sample) from an image file's header.
 #[pyfunction]
 fn image_info(py: Python<'_>, path: PathBuf) -> PyResult<(u32, u32, usize, u32)> {
-    run_detached(py, || image_io::image_info(&path))
+    run_detached(py, || core::image_info(&path))
 }
 
 /// Decode an image file to an (H, W, C) uint8 or uint16 array.
 #[pyfunction]
 fn read_image(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyAny>> {
-    let img = run_detached(py, || image_io::read_image(&path))?;
+    let img = run_detached(py, || core::read_image(&path))?;
     image_to_py(py, img)
 }
 
@@ -164,7 +163,7 @@ fn noise_image(
 ) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
     let img = image_from_py(image)?;
     let m = model(sigma_read, sigma_shot, gamma, white_balance, white_level)?;
-    let stream = core::stream_id(view, frame);
+    let stream = core::noise_stream_id(view, frame);
     let noisy = run_detached(py, || core::add_noise(&img, &m, key, stream))?;
     let (h, w) = (img.height as usize, img.width as usize);
     let linear = PyArray1::from_vec(py, noisy.linear)

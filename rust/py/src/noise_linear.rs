@@ -1,8 +1,6 @@
-//! Bindings of `blurset_core::noise_linear`: conversion and one core call each.
+//! Bindings of the core's noise from linear images: conversion and one core call each.
 use crate::run_detached;
-use blurset_core::image_io::Samples;
-use blurset_core::noise::{self as noise_core, Gamma, NoiseModel, WhiteBalance};
-use blurset_core::noise_linear::{self as core, LinearRgb};
+use blurset_core::{self as core, Gamma, LinearRgb, NoiseModel, Samples, WhiteBalance};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -115,7 +113,7 @@ fn noise_image_linear(
 ) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
     let img = linear_from_py(image)?;
     let m = model(sigma_read, sigma_shot, gamma, white_balance, white_level)?;
-    let stream = noise_core::stream_id(view, frame);
+    let stream = core::noise_stream_id(view, frame);
     let noisy = run_detached(py, || core::add_noise_linear(&img, &m, key, stream))?;
     let Samples::U8(codes) = noisy.processed.samples else {
         return Err(PyValueError::new_err("processed image is not 8-bit"));
@@ -150,7 +148,7 @@ fn noise_write_variants_linear(
     let variants = variants
         .into_iter()
         .map(|(out_dir, sr, ss, key)| {
-            Ok(noise_core::Variant {
+            Ok(core::Variant {
                 out_dir,
                 model: model(sr, ss, gamma, white_balance, white_level)?,
                 key,

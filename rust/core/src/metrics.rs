@@ -1,7 +1,7 @@
 //! The numbers of `blurset tradeoff` (DESIGN §8): image error against a reference and
 //! the Pareto front of (seconds, PSNR).
-use crate::accumulate::{composite_over, srgb_encode_f64};
 use crate::error::{Error, Result};
+use crate::image::accumulate::{composite_over, srgb_encode_f64};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -4,9 +4,9 @@
 //! camera-to-world pose with columns [down, right, backwards], flattened row-major,
 //! then near and far. This is what IBRNet / NAN / GeoNeRF loaders read; they turn the
 //! columns into OpenGL [right, up, backwards] themselves.
-use crate::atomic::write_atomic;
+use super::atomic::write_atomic;
 use crate::error::{Error, Result};
-use crate::sampling::SettingPlan;
+use crate::plan::sampling::SettingPlan;
 use glam::{DMat4, DVec3, DVec4};
 use std::path::Path;
 
@@ -371,13 +371,14 @@ mod tests {
 
     #[test]
     fn setting_rows_point_at_the_object() -> Result<()> {
-        let cfg = crate::sampling::SamplingConfig {
+        let cfg = crate::plan::sampling::SamplingConfig {
             views: 5,
             latents: 2,
             ..Default::default()
         };
         let verts: Vec<[f32; 3]> = vec![[-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]];
-        let plan = crate::sampling::plan_setting(&cfg, "u", 180.0, 4, [1.0, 1.0, 1.0], &verts)?;
+        let plan =
+            crate::plan::sampling::plan_setting(&cfg, "u", 180.0, 4, [1.0, 1.0, 1.0], &verts)?;
         for (row, v) in setting_rows(&plan).iter().zip(&plan.views) {
             let (c2w, hwf, near, far) = c2w_gl_from_row(row);
             let eye = c2w.w_axis.truncate();

@@ -6,9 +6,9 @@
 //! sharp image goes through the same path with one frame, so sharp and blurry images
 //! share a single encoding: composite over a background (premultiplied alpha, §3),
 //! sRGB-encode (IEC 61966-2-1), quantize to 8 bits.
-use crate::atomic::write_atomic;
+use super::exr::read as exr_frame;
+use crate::dataset::atomic::write_atomic;
 use crate::error::{Error, Result};
-use crate::exr_frame;
 use image::ImageEncoder;
 use rayon::prelude::*;
 use std::io::Cursor;

@@ -13,14 +13,14 @@
 //! by `v`, so every value is a pure function of (seed, gain, view, frame, v) and the
 //! output is bit-identical for any thread count.
 use crate::error::{Error, Result};
-use crate::image_io::{self, Image, Samples};
+use crate::image::io::{self as image_io, Image, Samples};
 use crate::rng;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 #[cfg(target_arch = "x86_64")]
-#[path = "noise_avx2.rs"]
+#[path = "avx2.rs"]
 mod avx2;
 
 /// Transfer curve between the stored codes and linear values.

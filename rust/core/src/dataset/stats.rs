@@ -18,8 +18,8 @@
 //! like a setting (`*.partial`, or holding `meta.json` or `sharp/`) is skipped and
 //! counted as incomplete, so a build still running can be read. Hidden directories
 //! (`.work-*`, `.demo_objects`) and anything else are ignored.
+use super::failures;
 use crate::error::{Error, Result};
-use crate::failures;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};

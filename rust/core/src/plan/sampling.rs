@@ -4,10 +4,10 @@
 //! Every draw comes from a Philox stream keyed by the setting seed; the stream id names
 //! what is drawn (view, purpose), so changing the number of latents does not move the
 //! viewpoints, and dropping a level does not change the others.
-use crate::camera::{clamp_polar, depth_range, focal_px, orbit_c2w};
+use super::camera::{clamp_polar, depth_range, focal_px, orbit_c2w};
+use super::weights::{level_interval, scene_weight, Guards};
 use crate::error::{Error, Result};
 use crate::rng::{derive_seed, Stream};
-use crate::weights::{level_interval, scene_weight, Guards};
 use glam::{DMat4, DVec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -920,7 +920,7 @@ mod tests {
             for v in &p.views {
                 for lp in v.levels.values() {
                     for f in &lp.latent_frames {
-                        assert!(f.phi_deg >= crate::camera::POLE_MARGIN_DEG);
+                        assert!(f.phi_deg >= crate::plan::camera::POLE_MARGIN_DEG);
                         assert!(f.r >= 1.05 * bounding_radius(d) - 1e-12);
                     }
                 }

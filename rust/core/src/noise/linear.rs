@@ -6,14 +6,14 @@
 //! `blurset build --keep-linear` stores): composite over the build's background exactly
 //! as its PNG was (`rgb + (1 − a)·bg`), clip to [0, 1] (the PNG's white point), then
 //! `y = white_level · L / wb[c]` and `y' = y + sqrt(σ_r² + σ_s²·y) · n` with the same
-//! model and the same standard normals `n` as the PNG path of [`crate::noise`] (same
+//! model and the same standard normals `n` as the PNG path of [`super::kernel`] (same
 //! key, stream and value index). The PNG path's clean value is `decode(code / 255)`
 //! instead of `L`, so with the shared draws the two paths differ only by what the 8-bit
 //! PNG (and, for `gamma = 2.2`, its curve) did to the clean image.
-use crate::accumulate::{composite_over, read_exr, srgb_encode_u8};
+use super::kernel::{self as noise, Gamma, NoiseModel, Noisy, Variant};
 use crate::error::{Error, Result};
-use crate::image_io::{self, Image, Samples};
-use crate::noise::{self, Gamma, NoiseModel, Noisy, Variant};
+use crate::image::accumulate::{composite_over, read_exr, srgb_encode_u8};
+use crate::image::io::{self as image_io, Image, Samples};
 use crate::rng;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -307,7 +307,7 @@ pub fn thumbnail_qa(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::noise::{sample_white_balance, NoiseLevels, WhiteBalance};
+    use crate::noise::kernel::{sample_white_balance, NoiseLevels, WhiteBalance};
 
     fn model(sr: f64, ss: f64, wb: Option<WhiteBalance>, gamma: Gamma) -> NoiseModel {
         NoiseModel {
@@ -427,7 +427,7 @@ mod tests {
         let rgba = [0.2f32, 0.1, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0];
         let c = composite(2, 1, &rgba, [1.0, 1.0, 1.0])?;
         assert_eq!(c.rgb, vec![0.7, 0.6, 0.5, 1.0, 1.0, 1.0]);
-        let bytes = crate::accumulate::encode_rgb8(&rgba, [1.0; 3]);
+        let bytes = crate::image::accumulate::encode_rgb8(&rgba, [1.0; 3]);
         let again: Vec<u8> = c
             .rgb
             .iter()
@@ -445,7 +445,7 @@ mod tests {
         let src = dir.join("src");
         let paths: Vec<PathBuf> = (0..2).map(|i| src.join(format!("{i:03}.exr"))).collect();
         for p in &paths {
-            crate::accumulate::write_exr(p, w, h, &rgba)?;
+            crate::image::accumulate::write_exr(p, w, h, &rgba)?;
         }
         let m = model(0.02, 0.03, None, Gamma::Srgb);
         let v = Variant {
@@ -469,7 +469,7 @@ mod tests {
         // A NaN in a source names the file.
         let mut bad = rgba.clone();
         bad[5] = f32::NAN;
-        crate::accumulate::write_exr(&paths[0], w, h, &bad)?;
+        crate::image::accumulate::write_exr(&paths[0], w, h, &bad)?;
         let e = write_variants_linear(&paths, &names, 1, &[v], [1.0; 3])
             .err()
             .map(|e| e.to_string())

@@ -1,0 +1,2 @@
+//! Linear float images on disk (OpenEXR).
+pub(crate) mod read;
