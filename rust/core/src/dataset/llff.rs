@@ -7,7 +7,7 @@
 use super::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::plan::sampling::SettingPlan;
-use glam::{DMat4, DVec3, DVec4};
+use glam::DMat4;
 use std::path::Path;
 
 /// One row of `poses_bounds.npy`.
@@ -32,32 +32,6 @@ pub fn row_from_c2w_gl(c2w: &DMat4, hwf: [f64; 3], near: f64, far: f64) -> PoseR
     row[15] = near;
     row[16] = far;
     row
-}
-
-/// The OpenGL camera-to-world matrix, hwf and bounds of an LLFF row.
-pub fn c2w_gl_from_row(row: &PoseRow) -> (DMat4, [f64; 3], f64, f64) {
-    let col = |j: usize| DVec3::new(row[j], row[5 + j], row[10 + j]);
-    let (down, right, back, t) = (col(0), col(1), col(2), col(3));
-    let c2w = DMat4::from_cols(
-        right.extend(0.0),
-        (-down).extend(0.0),
-        back.extend(0.0),
-        DVec4::new(t.x, t.y, t.z, 1.0),
-    );
-    (c2w, [row[4], row[9], row[14]], row[15], row[16])
-}
-
-/// Replace hwf of every row (e.g. after downsampling by a factor).
-pub fn with_hwf(rows: &[PoseRow], h: f64, w: f64, focal: f64) -> Vec<PoseRow> {
-    rows.iter()
-        .map(|r| {
-            let mut r = *r;
-            r[4] = h;
-            r[9] = w;
-            r[14] = focal;
-            r
-        })
-        .collect()
 }
 
 fn npy_bytes(rows: &[PoseRow]) -> Vec<u8> {
@@ -265,7 +239,22 @@ pub fn write_setting_poses(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::{DVec3, DVec4};
     use proptest::prelude::*;
+
+    /// The OpenGL camera-to-world matrix, hwf and bounds of an LLFF row (the inverse of
+    /// `row_from_c2w_gl`, which the tests check rows against).
+    fn c2w_gl_from_row(row: &PoseRow) -> (DMat4, [f64; 3], f64, f64) {
+        let col = |j: usize| DVec3::new(row[j], row[5 + j], row[10 + j]);
+        let (down, right, back, t) = (col(0), col(1), col(2), col(3));
+        let c2w = DMat4::from_cols(
+            right.extend(0.0),
+            (-down).extend(0.0),
+            back.extend(0.0),
+            DVec4::new(t.x, t.y, t.z, 1.0),
+        );
+        (c2w, [row[4], row[9], row[14]], row[15], row[16])
+    }
 
     fn valid_npy(n: usize) -> Vec<u8> {
         let rows: Vec<PoseRow> = (0..n).map(|i| [i as f64 + 0.5; 17]).collect();

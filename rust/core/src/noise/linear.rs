@@ -427,7 +427,9 @@ mod tests {
         let rgba = [0.2f32, 0.1, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0];
         let c = composite(2, 1, &rgba, [1.0, 1.0, 1.0])?;
         assert_eq!(c.rgb, vec![0.7, 0.6, 0.5, 1.0, 1.0, 1.0]);
-        let bytes = crate::image::accumulate::encode_rgb8(&rgba, [1.0; 3]);
+        let mut acc = crate::image::accumulate::Accumulator::new(2, 1);
+        acc.add_frame(&rgba)?;
+        let bytes = acc.encode_rgb8([1.0; 3])?;
         let again: Vec<u8> = c
             .rgb
             .iter()

@@ -355,18 +355,6 @@ pub fn sample_view(cfg: &SamplingConfig, seed: u64, theta0_deg: f64, index: usiz
     }
 }
 
-/// w_l and the latent positions t_1..t_m (sorted) of one level (purpose = level),
-/// with m = `cfg.latents`.
-pub fn sample_level(
-    cfg: &SamplingConfig,
-    seed: u64,
-    index: usize,
-    level: u32,
-    w_u: f64,
-) -> (f64, Vec<f64>) {
-    sample_level_m(cfg, seed, index, level, w_u, cfg.latents)
-}
-
 /// w_l and m latent positions of one level. w_l is the stream's first draw, so it does
 /// not depend on m, and a given m always gets the same positions.
 pub fn sample_level_m(
@@ -878,7 +866,7 @@ mod tests {
             latents: 10,
             ..Default::default()
         };
-        let (_, t) = sample_level(&cfg, 5, 0, 4, 1.5);
+        let (_, t) = sample_level_m(&cfg, 5, 0, 4, 1.5, cfg.latents);
         for (i, ti) in t.iter().enumerate() {
             assert!(*ti >= i as f64 / 10.0 && *ti < (i + 1) as f64 / 10.0);
         }
