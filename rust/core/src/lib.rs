@@ -22,7 +22,9 @@ pub use crate::rng::seed_for;
 pub use crate::plan::sampling::{plan_setting, SamplingConfig, SettingPlan};
 
 // Linear frames in, encoded images out; image files; render QA.
-pub use crate::image::accumulate::{read_exr, srgb_encode_slice, Accumulator, Frame};
+pub use crate::image::accumulate::Accumulator;
+pub use crate::image::color::srgb_encode_slice;
+pub use crate::image::exr::read::{read_exr, Frame};
 pub use crate::image::io::{image_info, read_image, Image, Samples};
 pub use crate::image::qa::{frame_qa, QaThresholds};
 

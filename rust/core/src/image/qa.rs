@@ -3,12 +3,11 @@
 //!
 //! The numbers come from the premultiplied linear RGBA mean the accumulator already
 //! holds, so QA costs one pass over one frame and sees exactly what gets encoded.
+use super::color::luma;
+use super::CH;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 
-const CH: usize = 4;
-/// Rec. 709 / sRGB luminance weights (linear light).
-const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
 /// A pixel counts as covered by the object from this alpha on.
 const COVERED_ALPHA: f32 = 0.5;
 
@@ -80,11 +79,11 @@ pub fn frame_qa(width: u32, height: u32, rgba: &[f32]) -> Result<FrameQa> {
             rgba.len()
         )));
     }
-    let (mut alpha, mut luma, mut covered, mut clipped) = (0.0f64, 0.0f64, 0u64, 0u64);
+    let (mut alpha, mut y, mut covered, mut clipped) = (0.0f64, 0.0f64, 0u64, 0u64);
     for p in rgba.chunks_exact(CH) {
         let a = f64::from(p[3]);
         alpha += a;
-        luma += LUMA[0] * f64::from(p[0]) + LUMA[1] * f64::from(p[1]) + LUMA[2] * f64::from(p[2]);
+        y += luma([p[0], p[1], p[2]].map(f64::from));
         if p[3] >= COVERED_ALPHA {
             covered += 1;
             // Unpremultiplied colour ≥ 1 ⇔ premultiplied ≥ alpha.
@@ -108,7 +107,7 @@ pub fn frame_qa(width: u32, height: u32, rgba: &[f32]) -> Result<FrameQa> {
     let n = (w * h) as f64;
     Ok(FrameQa {
         coverage: alpha / n,
-        luminance: if alpha > 0.0 { luma / alpha } else { 0.0 },
+        luminance: if alpha > 0.0 { y / alpha } else { 0.0 },
         saturated: if covered > 0 {
             clipped as f64 / covered as f64
         } else {

@@ -13,6 +13,8 @@
 //! by `v`, so every value is a pure function of (seed, gain, view, frame, v) and the
 //! output is bit-identical for any thread count.
 use crate::error::{Error, Result};
+use crate::image::color;
+use crate::image::exr::write::exr_bytes;
 use crate::image::io::{self as image_io, Image, Samples};
 use crate::rng;
 use rayon::prelude::*;
@@ -52,21 +54,17 @@ impl Gamma {
 
     /// Code value in [0, 1] → linear.
     pub fn decode(self, x: f64) -> f64 {
-        let x = x.clamp(0.0, 1.0);
         match self {
-            Gamma::Power22 => libm::pow(x, 2.2),
-            Gamma::Srgb if x <= 0.04045 => x / 12.92,
-            Gamma::Srgb => libm::pow((x + 0.055) / 1.055, 2.4),
+            Gamma::Power22 => libm::pow(x.clamp(0.0, 1.0), 2.2),
+            Gamma::Srgb => color::srgb_decode_f64(x),
         }
     }
 
     /// Linear in [0, 1] → code value (inverse of `decode`).
     pub fn encode(self, y: f64) -> f64 {
-        let y = y.clamp(0.0, 1.0);
         match self {
-            Gamma::Power22 => libm::pow(y, 1.0 / 2.2),
-            Gamma::Srgb if y <= 0.0031308 => y * 12.92,
-            Gamma::Srgb => 1.055 * libm::pow(y, 1.0 / 2.4) - 0.055,
+            Gamma::Power22 => libm::pow(y.clamp(0.0, 1.0), 1.0 / 2.2),
+            Gamma::Srgb => color::srgb_encode_f64(y),
         }
     }
 }
@@ -814,12 +812,7 @@ pub fn write_variants(
                 )?;
                 write_file(
                     &v.out_dir.join("linear").join(format!("{name}.exr")),
-                    &image_io::exr_bytes(
-                        img.width,
-                        img.height,
-                        noisy.linear_channels,
-                        &noisy.linear,
-                    )?,
+                    &exr_bytes(img.width, img.height, noisy.linear_channels, &noisy.linear)?,
                 )?;
             }
         }

@@ -12,7 +12,9 @@
 //! PNG (and, for `gamma = 2.2`, its curve) did to the clean image.
 use super::kernel::{self as noise, Gamma, NoiseModel, Noisy, Variant};
 use crate::error::{Error, Result};
-use crate::image::accumulate::{composite_over, read_exr, srgb_encode_u8};
+use crate::image::color::{self, composite_over, srgb_encode_u8};
+use crate::image::exr::read::read_exr;
+use crate::image::exr::write::exr_bytes;
 use crate::image::io::{self as image_io, Image, Samples};
 use crate::rng;
 use rayon::prelude::*;
@@ -241,7 +243,7 @@ pub fn write_variants_linear(
                 )?;
                 write_file(
                     &v.out_dir.join("linear").join(format!("{name}.exr")),
-                    &image_io::exr_bytes(img.width, img.height, 3, &noisy.linear)?,
+                    &exr_bytes(img.width, img.height, 3, &noisy.linear)?,
                 )?;
             }
         }
@@ -289,7 +291,7 @@ pub fn thumbnail_qa(
         if is_object(p) {
             count += 1;
             let [r, g, b] = [0, 1, 2].map(|c| f64::from(rgb[p * 3 + c]) / 255.0);
-            luma += 0.2126 * r + 0.7152 * g + 0.0722 * b;
+            luma += color::luma([r, g, b]);
         }
     }
     let border: Vec<usize> = (0..w)
@@ -447,7 +449,7 @@ mod tests {
         let src = dir.join("src");
         let paths: Vec<PathBuf> = (0..2).map(|i| src.join(format!("{i:03}.exr"))).collect();
         for p in &paths {
-            crate::image::accumulate::write_exr(p, w, h, &rgba)?;
+            crate::image::exr::write::write_exr(p, w, h, &rgba)?;
         }
         let m = model(0.02, 0.03, None, Gamma::Srgb);
         let v = Variant {
@@ -471,7 +473,7 @@ mod tests {
         // A NaN in a source names the file.
         let mut bad = rgba.clone();
         bad[5] = f32::NAN;
-        crate::image::accumulate::write_exr(&paths[0], w, h, &bad)?;
+        crate::image::exr::write::write_exr(&paths[0], w, h, &bad)?;
         let e = write_variants_linear(&paths, &names, 1, &[v], [1.0; 3])
             .err()
             .map(|e| e.to_string())

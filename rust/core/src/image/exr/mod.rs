@@ -1,2 +1,3 @@
-//! Linear float images on disk (OpenEXR).
-pub(crate) mod read;
+//! Linear float images on disk (OpenEXR): the reader of latent frames and the writers.
+pub mod read;
+pub mod write;
