@@ -26,17 +26,16 @@ pub use crate::image::accumulate::Accumulator;
 pub use crate::image::color::srgb_encode_slice;
 pub use crate::image::exr::read::{read_exr, Frame};
 pub use crate::image::io::{image_info, read_image, Image, Samples};
-pub use crate::image::qa::{frame_qa, QaThresholds};
+pub use crate::image::qa::{frame_qa, thumbnail_qa, QaThresholds};
 
 // Sensor noise, from 8/16-bit images or from a build's linear EXRs.
-pub use crate::noise::kernel::{
-    add_noise, clean_linear, noise_key, sample_white_balance, stream_id as noise_stream_id,
-    write_variants, Gamma, NoiseLevels, NoiseModel, Variant, WhiteBalance,
+pub use crate::noise::kernel::{add_noise, clean_linear};
+pub use crate::noise::linear::{add_noise_linear, clean_from_linear, read_linear, LinearRgb};
+pub use crate::noise::model::{
+    noise_key, sample_white_balance, scene_seed, stream_id as noise_stream_id, Gamma, NoiseLevels,
+    NoiseModel, WhiteBalance,
 };
-pub use crate::noise::linear::{
-    add_noise_linear, clean_from_linear, read_linear, scene_seed, thumbnail_qa,
-    write_variants_linear, LinearRgb,
-};
+pub use crate::noise::variants::{write_variants, write_variants_linear, Variant};
 
 // The files of a build.
 pub use crate::dataset::failures::{

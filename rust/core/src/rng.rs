@@ -6,10 +6,12 @@
 //! bits with exact IEEE arithmetic (the noise kernel's normals use `libm`, a pure-Rust
 //! libm, so that transcendental functions give the same bits on every machine).
 
-const PHILOX_M0: u32 = 0xD251_1F53;
-const PHILOX_M1: u32 = 0xCD9E_8D57;
-const PHILOX_W0: u32 = 0x9E37_79B9;
-const PHILOX_W1: u32 = 0xBB67_AE85;
+// The Philox4x32-10 multipliers and Weyl key increments; the noise kernel's lane-wise
+// versions of `philox4x32` use them too.
+pub(crate) const PHILOX_M0: u32 = 0xD251_1F53;
+pub(crate) const PHILOX_M1: u32 = 0xCD9E_8D57;
+pub(crate) const PHILOX_W0: u32 = 0x9E37_79B9;
+pub(crate) const PHILOX_W1: u32 = 0xBB67_AE85;
 
 /// One Philox4x32-10 block: 128 random bits for a 128-bit counter under a 64-bit key.
 pub fn philox4x32(key: u64, counter: [u32; 4]) -> [u32; 4] {
