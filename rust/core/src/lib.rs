@@ -39,11 +39,11 @@ pub use crate::noise::variants::{write_variants, write_variants_linear, Variant}
 
 // The files of a build.
 pub use crate::dataset::failures::{
-    current as current_failures, read_records as read_failure_records, setting_name, theta0s,
+    current as current_failures, read_records as read_failure_records,
 };
+pub use crate::dataset::layout::{image_name, setting_name, theta0s};
 pub use crate::dataset::llff::{
-    image_name, parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses,
-    PoseRow,
+    parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses, PoseRow,
 };
 pub use crate::dataset::splits::{make_splits, seeded_subset, test_views, SettingEntry};
 pub use crate::dataset::stats::build_stats;

@@ -5,6 +5,7 @@
 //! then near and far. This is what IBRNet / NAN / GeoNeRF loaders read; they turn the
 //! columns into OpenGL [right, up, backwards] themselves.
 use super::atomic::write_atomic;
+use super::layout::image_name;
 use crate::error::{Error, Result};
 use crate::plan::sampling::SettingPlan;
 use glam::DMat4;
@@ -158,12 +159,6 @@ pub fn parse_poses_bounds(bytes: &[u8]) -> std::result::Result<Vec<PoseRow>, Str
         rows.push(row);
     }
     Ok(rows)
-}
-
-/// Image file name of view `index` among `n`: zero-padded so sorted order is view order.
-pub fn image_name(index: usize, n: usize) -> String {
-    let width = n.saturating_sub(1).to_string().len().max(3);
-    format!("{index:0width$}.png")
 }
 
 fn c2w_from_rows(rows: &[[f64; 4]; 4]) -> DMat4 {
@@ -350,12 +345,6 @@ mod tests {
             .unwrap_or_default();
         assert!(err.contains("expected (N, 17)"), "{err}");
         let _ = std::fs::remove_file(&p);
-    }
-
-    #[test]
-    fn image_names_sort_in_view_order() {
-        assert_eq!(image_name(7, 34), "007.png");
-        assert_eq!(image_name(7, 1500), "0007.png");
     }
 
     #[test]
