@@ -764,7 +764,11 @@ mod tests {
         let k = file.len() - 200;
         flipped[k] ^= 0xFF;
         flipped[k + 1] ^= 0x5A;
-        let _ = decode_rgba(&flipped, Path::new("bad.exr"), &mut out);
+        let e = decode_rgba(&flipped, Path::new("bad.exr"), &mut out)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("bad.exr") && e.contains("ZIP block"), "{e}");
         Ok(())
     }
 }
