@@ -16,11 +16,12 @@ fn levels_to_py(l: NoiseLevels) -> Levels {
     (l.log10_read, l.read_step, l.log10_shot, l.shot_step)
 }
 
-fn value_err(e: blurset_core::Error) -> PyErr {
+pub(crate) fn value_err(e: blurset_core::Error) -> PyErr {
     PyValueError::new_err(e.to_string())
 }
 
-fn model(
+/// A validated noise model from the bindings' arguments.
+pub(crate) fn model(
     sigma_read: f64,
     sigma_shot: f64,
     gamma: &str,
@@ -36,6 +37,25 @@ fn model(
     };
     m.validate().map_err(value_err)?;
     Ok(m)
+}
+
+/// The variants of a scene from (out_dir, sigma_read, sigma_shot, key) per gain.
+pub(crate) fn variants_from_py(
+    variants: Vec<(PathBuf, f64, f64, u64)>,
+    gamma: &str,
+    white_balance: Option<(f64, f64)>,
+    white_level: f64,
+) -> PyResult<Vec<core::Variant>> {
+    variants
+        .into_iter()
+        .map(|(out_dir, sr, ss, key)| {
+            Ok(core::Variant {
+                out_dir,
+                model: model(sr, ss, gamma, white_balance, white_level)?,
+                key,
+            })
+        })
+        .collect()
 }
 
 /// An (H, W) or (H, W, C) uint8 / uint16 array as a core image (copied).
@@ -209,16 +229,7 @@ fn noise_write_variants(
     white_balance: Option<(f64, f64)>,
     white_level: f64,
 ) -> PyResult<()> {
-    let variants = variants
-        .into_iter()
-        .map(|(out_dir, sr, ss, key)| {
-            Ok(core::Variant {
-                out_dir,
-                model: model(sr, ss, gamma, white_balance, white_level)?,
-                key,
-            })
-        })
-        .collect::<PyResult<Vec<_>>>()?;
+    let variants = variants_from_py(variants, gamma, white_balance, white_level)?;
     run_detached(py, || {
         core::write_variants(&sources, &names, frames, &variants)
     })

@@ -24,13 +24,6 @@ impl Gamma {
         }
     }
 
-    pub fn name(self) -> &'static str {
-        match self {
-            Gamma::Power22 => "2.2",
-            Gamma::Srgb => "srgb",
-        }
-    }
-
     /// Code value in [0, 1] → linear.
     pub fn decode(self, x: f64) -> f64 {
         match self {
