@@ -47,7 +47,7 @@ impl LinearRgb {
 }
 
 /// Premultiplied linear RGBA composited over `background` (linear RGB), as the build's
-/// PNG encoding does it (`accumulate::composite_over`), unclipped.
+/// PNG encoding does it ([`composite_over`]), unclipped.
 pub fn composite(width: u32, height: u32, rgba: &[f32], background: [f64; 3]) -> Result<LinearRgb> {
     let n = width as usize * height as usize;
     if rgba.len() != n * 4 {
