@@ -1,5 +1,5 @@
-//! Bindings of `blurset_core::failures`: the rules of failures.jsonl, for `blurset build`.
-use blurset_core::failures;
+//! Bindings of the core's failures and setting names: the rules of failures.jsonl, for `blurset build`.
+use blurset_core as core;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use std::collections::BTreeSet;
@@ -8,13 +8,13 @@ use std::path::PathBuf;
 /// `<uid>_<theta0>`, the directory name of one setting.
 #[pyfunction]
 fn setting_name(uid: &str, theta0_deg: f64) -> String {
-    failures::setting_name(uid, theta0_deg)
+    core::setting_name(uid, theta0_deg)
 }
 
 /// The θ0 of each of an object's `n` settings, evenly spaced from 0°.
 #[pyfunction]
 fn theta0s(n: usize) -> Vec<f64> {
-    failures::theta0s(n)
+    core::theta0s(n)
 }
 
 /// The current failures of a failures.jsonl as a JSON list, and the number of lines
@@ -29,8 +29,8 @@ fn current_failures(
     theta0s: Option<Vec<f64>>,
 ) -> PyResult<(String, usize)> {
     let done: BTreeSet<String> = complete.into_iter().collect();
-    let (records, skipped) = crate::run_detached(py, || failures::read_records(&path))?;
-    let now = failures::current(&records, &done, theta0s.as_deref());
+    let (records, skipped) = crate::run_detached(py, || core::read_failure_records(&path))?;
+    let now = core::current_failures(&records, &done, theta0s.as_deref());
     let text = serde_json::to_string(&now).map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok((text, skipped))
 }

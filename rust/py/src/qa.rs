@@ -1,5 +1,5 @@
-//! Binding of `blurset_core::qa`: one (H, W, 4) float32 image in, its QA numbers out.
-use blurset_core::qa;
+//! Binding of the core's render QA: one (H, W, 4) float32 image in, its QA numbers out.
+use blurset_core as core;
 use numpy::{PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -16,13 +16,14 @@ fn frame_qa(rgba: PyReadonlyArray3<'_, f32>, thresholds: Option<&str>) -> PyResu
             "QA needs shape (H, W, 4) premultiplied RGBA, got {shape:?}"
         )));
     }
-    let t: qa::QaThresholds = match thresholds {
+    let t: core::QaThresholds = match thresholds {
         Some(s) => serde_json::from_str(s)
             .map_err(|e| PyValueError::new_err(format!("QA thresholds: {e}")))?,
-        None => qa::QaThresholds::default(),
+        None => core::QaThresholds::default(),
     };
     let data = rgba.as_slice()?;
-    let r = qa::frame_qa(shape[1] as u32, shape[0] as u32, data).map_err(crate::error::to_pyerr)?;
+    let r =
+        core::frame_qa(shape[1] as u32, shape[0] as u32, data).map_err(crate::error::to_pyerr)?;
     let mut v = serde_json::to_value(r).map_err(|e| PyValueError::new_err(e.to_string()))?;
     v["failure"] = t.verdict(&r).into();
     Ok(v.to_string())
@@ -31,7 +32,7 @@ fn frame_qa(rgba: PyReadonlyArray3<'_, f32>, thresholds: Option<&str>) -> PyResu
 /// The default QA thresholds as JSON (one place for the numbers).
 #[pyfunction]
 fn default_qa_thresholds() -> PyResult<String> {
-    serde_json::to_string(&qa::QaThresholds::default())
+    serde_json::to_string(&core::QaThresholds::default())
         .map_err(|e| PyValueError::new_err(e.to_string()))
 }
 

@@ -1,6 +1,6 @@
 //! Sampling, setting poses and splits. Structured values cross the boundary as JSON
 //! text (serde on this side, `json` on the other): one schema, defined in blurset-core.
-use blurset_core::{llff, rng, sampling, splits};
+use blurset_core as core;
 use numpy::PyReadonlyArray2;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -17,20 +17,20 @@ fn to_json<T: serde::Serialize>(value: &T) -> PyResult<String> {
 /// The default sampling configuration (the paper's settings) as JSON.
 #[pyfunction]
 fn default_sampling_config() -> PyResult<String> {
-    to_json(&sampling::SamplingConfig::default())
+    to_json(&core::SamplingConfig::default())
 }
 
 /// Check a sampling configuration; raises ValueError naming the bad option.
 #[pyfunction]
 fn validate_sampling_config(config_json: &str) -> PyResult<()> {
-    let cfg: sampling::SamplingConfig = from_json("sampling config", config_json)?;
+    let cfg: core::SamplingConfig = from_json("sampling config", config_json)?;
     cfg.validate().map_err(crate::error::to_pyerr)
 }
 
 /// The seed of setting `index` of object `uid` under the build seed.
 #[pyfunction]
 fn seed_for(seed: u64, uid: &str, index: u64) -> u64 {
-    rng::seed_for(seed, uid, index)
+    core::seed_for(seed, uid, index)
 }
 
 /// Plan one setting (views, near/far from the vertices, weights, latent frames, seeds) → JSON.
@@ -45,7 +45,7 @@ fn plan_setting(
     bbox_dims: [f64; 3],
     vertices: PyReadonlyArray2<'_, f32>,
 ) -> PyResult<String> {
-    let cfg: sampling::SamplingConfig = from_json("sampling config", config_json)?;
+    let cfg: core::SamplingConfig = from_json("sampling config", config_json)?;
     let v = vertices.as_array();
     if v.ncols() != 3 {
         return Err(PyValueError::new_err(format!(
@@ -55,7 +55,7 @@ fn plan_setting(
     }
     let pts: Vec<[f32; 3]> = v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
     let plan = crate::run_detached(py, || {
-        sampling::plan_setting(&cfg, uid, theta0_deg, seed, bbox_dims, &pts)
+        core::plan_setting(&cfg, uid, theta0_deg, seed, bbox_dims, &pts)
     })?;
     to_json(&plan)
 }
@@ -68,22 +68,22 @@ fn write_setting_poses(
     setting_dir: PathBuf,
     level_dirs: Vec<String>,
 ) -> PyResult<()> {
-    let plan: sampling::SettingPlan = from_json("setting plan", plan_json)?;
+    let plan: core::SettingPlan = from_json("setting plan", plan_json)?;
     crate::run_detached(py, || {
-        llff::write_setting_poses(&plan, &setting_dir, &level_dirs)
+        core::write_setting_poses(&plan, &setting_dir, &level_dirs)
     })
 }
 
 /// Every `stride`-th view index below `views` (the held-out views of a setting).
 #[pyfunction]
 fn test_views(views: usize, stride: usize) -> Vec<usize> {
-    splits::test_views(views, stride)
+    core::test_views(views, stride)
 }
 
 /// Image file name of view `index` among `n` views.
 #[pyfunction]
 fn image_name(index: usize, n: usize) -> String {
-    llff::image_name(index, n)
+    core::image_name(index, n)
 }
 
 /// Train/test splits by object → JSON (the `splits.json` document).
@@ -96,8 +96,8 @@ fn make_splits(
     test_objects: Option<Vec<String>>,
     seed: u64,
 ) -> PyResult<String> {
-    let entries: Vec<splits::SettingEntry> = from_json("split entries", entries_json)?;
-    let s = splits::make_splits(
+    let entries: Vec<core::SettingEntry> = from_json("split entries", entries_json)?;
+    let s = core::make_splits(
         &entries,
         view_stride,
         test_fraction,
@@ -111,7 +111,7 @@ fn make_splits(
 /// A seeded random subset of `k` ids, sorted (it depends on the set of ids, not their order).
 #[pyfunction]
 fn seeded_subset(ids: Vec<String>, k: usize, seed: u64) -> Vec<String> {
-    splits::seeded_subset(&ids, k, seed)
+    core::seeded_subset(&ids, k, seed)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -1,5 +1,5 @@
-//! Bindings of `blurset_core::tradeoff`: image error against a reference, Pareto front.
-use blurset_core::tradeoff;
+//! Bindings of the core's metrics: image error against a reference, Pareto front.
+use blurset_core as core;
 use numpy::{PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -34,14 +34,14 @@ fn image_error(
     }
     let (a, b) = (rgba(&image, "image")?, rgba(&reference, "reference")?);
     let bg = [background.0, background.1, background.2];
-    let e = crate::run_detached(py, || tradeoff::image_error(a, b, bg))?;
+    let e = crate::run_detached(py, || core::image_error(a, b, bg))?;
     serde_json::to_string(&e).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
 /// Which points (seconds, psnr) are Pareto-optimal (faster or better than every other).
 #[pyfunction]
 fn pareto_front(seconds: Vec<f64>, psnr: Vec<f64>) -> PyResult<Vec<bool>> {
-    tradeoff::pareto_front(&seconds, &psnr).map_err(crate::error::to_pyerr)
+    core::pareto_front(&seconds, &psnr).map_err(crate::error::to_pyerr)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -3,12 +3,13 @@
 //!
 //! The numbers come from the premultiplied linear RGBA mean the accumulator already
 //! holds, so QA costs one pass over one frame and sees exactly what gets encoded.
+//! A contact sheet's thumbnails (8-bit RGB over the background) get the same kind of
+//! numbers from their codes ([`thumbnail_qa`]).
+use super::color::{luma, srgb_encode_u8};
+use super::CH;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 
-const CH: usize = 4;
-/// Rec. 709 / sRGB luminance weights (linear light).
-const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
 /// A pixel counts as covered by the object from this alpha on.
 const COVERED_ALPHA: f32 = 0.5;
 
@@ -80,11 +81,11 @@ pub fn frame_qa(width: u32, height: u32, rgba: &[f32]) -> Result<FrameQa> {
             rgba.len()
         )));
     }
-    let (mut alpha, mut luma, mut covered, mut clipped) = (0.0f64, 0.0f64, 0u64, 0u64);
+    let (mut alpha, mut y, mut covered, mut clipped) = (0.0f64, 0.0f64, 0u64, 0u64);
     for p in rgba.chunks_exact(CH) {
         let a = f64::from(p[3]);
         alpha += a;
-        luma += LUMA[0] * f64::from(p[0]) + LUMA[1] * f64::from(p[1]) + LUMA[2] * f64::from(p[2]);
+        y += luma([p[0], p[1], p[2]].map(f64::from));
         if p[3] >= COVERED_ALPHA {
             covered += 1;
             // Unpremultiplied colour ≥ 1 ⇔ premultiplied ≥ alpha.
@@ -108,13 +109,64 @@ pub fn frame_qa(width: u32, height: u32, rgba: &[f32]) -> Result<FrameQa> {
     let n = (w * h) as f64;
     Ok(FrameQa {
         coverage: alpha / n,
-        luminance: if alpha > 0.0 { luma / alpha } else { 0.0 },
+        luminance: if alpha > 0.0 { y / alpha } else { 0.0 },
         saturated: if covered > 0 {
             clipped as f64 / covered as f64
         } else {
             0.0
         },
         border_coverage: border as f64 / border_px as f64,
+    })
+}
+
+/// What a contact sheet says about one sharp thumbnail (8-bit RGB over a background).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThumbnailQa {
+    /// Fraction of pixels that differ from the background by more than `tolerance` codes.
+    pub coverage: f64,
+    /// Mean Rec. 709 luma (codes / 255) of those object pixels; 0 when there are none.
+    pub object_luma: f64,
+    /// Fraction of the one-pixel frame border covered by the object.
+    pub border: f64,
+}
+
+/// Codes an object pixel must differ from the background by (any channel).
+pub const QA_TOLERANCE: u8 = 8;
+
+/// Coverage, object brightness and border contact of an RGB8 image whose background is
+/// `background` (linear RGB, encoded to sRGB codes as the build's PNGs are).
+pub fn thumbnail_qa(
+    width: u32,
+    height: u32,
+    rgb: &[u8],
+    background: [f64; 3],
+) -> Result<ThumbnailQa> {
+    let (w, h) = (width as usize, height as usize);
+    if rgb.len() != w * h * 3 || w == 0 || h == 0 {
+        return Err(Error::Shape(format!(
+            "{} values for a {width} x {height} RGB8 image",
+            rgb.len()
+        )));
+    }
+    let bg = background.map(srgb_encode_u8);
+    let is_object = |p: usize| (0..3).any(|c| rgb[p * 3 + c].abs_diff(bg[c]) > QA_TOLERANCE);
+    let (mut count, mut sum) = (0usize, 0.0f64);
+    for p in 0..w * h {
+        if is_object(p) {
+            count += 1;
+            let [r, g, b] = [0, 1, 2].map(|c| f64::from(rgb[p * 3 + c]) / 255.0);
+            sum += luma([r, g, b]);
+        }
+    }
+    let border: Vec<usize> = (0..w)
+        .flat_map(|x| [x, (h - 1) * w + x])
+        .chain((1..h.saturating_sub(1)).flat_map(|y| [y * w, y * w + w - 1]))
+        .collect();
+    let touching = border.iter().filter(|&&p| is_object(p)).count();
+    Ok(ThumbnailQa {
+        coverage: count as f64 / (w * h) as f64,
+        object_luma: if count > 0 { sum / count as f64 } else { 0.0 },
+        border: touching as f64 / border.len().max(1) as f64,
     })
 }
 
@@ -185,6 +237,32 @@ mod tests {
         assert!(QaThresholds::default().verdict(&qa).is_some());
         assert!(frame_qa(16, 16, &img[..10]).is_err());
         assert!(frame_qa(0, 16, &[]).is_err());
+        Ok(())
+    }
+
+    #[test]
+    fn qa_sees_empty_black_and_clipped() -> Result<()> {
+        let (w, h) = (20u32, 10u32);
+        let white = vec![255u8; (w * h * 3) as usize];
+        let qa = thumbnail_qa(w, h, &white, [1.0; 3])?;
+        assert_eq!((qa.coverage, qa.border), (0.0, 0.0));
+        let mut img = white.clone();
+        // A black 4 x 4 square inside, then one touching the left edge.
+        for y in 3..7 {
+            for x in 8..12 {
+                img[(y * w as usize + x) * 3..][..3].fill(0);
+            }
+        }
+        let qa = thumbnail_qa(w, h, &img, [1.0; 3])?;
+        assert!((qa.coverage - 16.0 / 200.0).abs() < 1e-12);
+        assert_eq!((qa.object_luma, qa.border), (0.0, 0.0));
+        for y in 0..h as usize {
+            img[y * w as usize * 3..][..3].fill(128);
+        }
+        let qa = thumbnail_qa(w, h, &img, [1.0; 3])?;
+        // 10 left-column pixels of the 56 border pixels (2·20 + 2·8).
+        assert!((qa.border - 10.0 / 56.0).abs() < 1e-12, "{}", qa.border);
+        assert!(thumbnail_qa(w, h, &img[1..], [1.0; 3]).is_err());
         Ok(())
     }
 }

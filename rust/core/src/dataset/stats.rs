@@ -18,15 +18,14 @@
 //! like a setting (`*.partial`, or holding `meta.json` or `sharp/`) is skipped and
 //! counted as incomplete, so a build still running can be read. Hidden directories
 //! (`.work-*`, `.demo_objects`) and anything else are ignored.
+use super::failures;
+use super::layout::{self, MARKER};
 use crate::error::{Error, Result};
-use crate::failures;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-/// The marker a setting directory gets last, when it is complete.
-pub const MARKER: &str = ".complete";
 const PARTIAL_SUFFIX: &str = ".partial";
 
 /// Schema name of the stats document (`stats.json`).
@@ -499,7 +498,7 @@ pub fn build_stats(out: &Path) -> Result<BuildStats> {
     let dataset: Option<DatasetDoc> = read_json_file(&out.join("dataset.json"), "dataset.json")?;
     let theta0s = dataset
         .and_then(|d| d.config.settings_per_object)
-        .map(failures::theta0s);
+        .map(layout::theta0s);
     let (lines, skipped) = failures::read_records(&out.join("failures.jsonl"))?;
     let complete: BTreeSet<String> = scan.complete.iter().cloned().collect();
     let text =

@@ -4,10 +4,10 @@
 //! Every draw comes from a Philox stream keyed by the setting seed; the stream id names
 //! what is drawn (view, purpose), so changing the number of latents does not move the
 //! viewpoints, and dropping a level does not change the others.
-use crate::camera::{clamp_polar, depth_range, focal_px, orbit_c2w};
+use super::camera::{clamp_polar, depth_range, focal_px, orbit_c2w};
+use super::weights::{level_interval, scene_weight, Guards};
 use crate::error::{Error, Result};
 use crate::rng::{derive_seed, Stream};
-use crate::weights::{level_interval, scene_weight, Guards};
 use glam::{DMat4, DVec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -353,18 +353,6 @@ pub fn sample_view(cfg: &SamplingConfig, seed: u64, theta0_deg: f64, index: usiz
         theta_deg,
         trajectory,
     }
-}
-
-/// w_l and the latent positions t_1..t_m (sorted) of one level (purpose = level),
-/// with m = `cfg.latents`.
-pub fn sample_level(
-    cfg: &SamplingConfig,
-    seed: u64,
-    index: usize,
-    level: u32,
-    w_u: f64,
-) -> (f64, Vec<f64>) {
-    sample_level_m(cfg, seed, index, level, w_u, cfg.latents)
 }
 
 /// w_l and m latent positions of one level. w_l is the stream's first draw, so it does
@@ -878,7 +866,7 @@ mod tests {
             latents: 10,
             ..Default::default()
         };
-        let (_, t) = sample_level(&cfg, 5, 0, 4, 1.5);
+        let (_, t) = sample_level_m(&cfg, 5, 0, 4, 1.5, cfg.latents);
         for (i, ti) in t.iter().enumerate() {
             assert!(*ti >= i as f64 / 10.0 && *ti < (i + 1) as f64 / 10.0);
         }
@@ -920,7 +908,7 @@ mod tests {
             for v in &p.views {
                 for lp in v.levels.values() {
                     for f in &lp.latent_frames {
-                        assert!(f.phi_deg >= crate::camera::POLE_MARGIN_DEG);
+                        assert!(f.phi_deg >= crate::plan::camera::POLE_MARGIN_DEG);
                         assert!(f.r >= 1.05 * bounding_radius(d) - 1e-12);
                     }
                 }
