@@ -267,7 +267,7 @@ def test_a_full_disk_stops_the_build_naming_it(objs, small_disk):
     proc = subprocess.run(
         [sys.executable, "-m", "blurset.cli", "build", "--objects", str(objs), "--out", str(out),
          "--views", "4", "--levels", "1", "--latents", "4", "--samples", "2",
-         "--resolution", "256", "--settings-per-object", "1", "--quiet"],
+         "--resolution", "256", "--settings-per-object", "1", "--keep-linear", "--quiet"],
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert proc.returncode != 0, proc.stderr

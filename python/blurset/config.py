@@ -88,6 +88,9 @@ class BuildConfig:
     max_texture_pixels: int = 256 * 2**20
     blender: str | None = None
     check_poses: bool = False
+    # A rerun into an OUT made with other output-shaping options is refused unless this
+    # is set (the dataset would mix settings that dataset.json cannot describe).
+    allow_mixed: bool = False
 
     def sampling_json(self) -> str:
         """The blurset-core SamplingConfig of this build."""
