@@ -190,28 +190,38 @@ class ObjectUnit:
 
 @contextlib.contextmanager
 def object_lock(out: Path, uid: str, say):
-    """Hold OUT/.locks/<uid>.lock (flock) while an object is built; a process that finds
-    it held says who holds it and waits."""
-    locks = out / ".locks"
-    locks.mkdir(exist_ok=True)
-    with open(locks / f"{uid}.lock", "a+") as f:
+    """Hold OUT/.lock-<uid> (flock) while an object is built; a process that finds it
+    held says who holds it and waits. The file is removed on release: a waiter that
+    then holds a lock on the removed file sees it is stale (another inode) and retries."""
+    path = out / f".lock-{uid}"
+    said = False
+    while True:
+        f = open(path, "a+")  # noqa: SIM115 - held across the yield
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             f.seek(0)
             holder = f.read().strip() or "another process"
-            say(f"waiting: {out / uid}_* is being built by {holder}")
+            if not said:
+                say(f"waiting: {out / uid}_* is being built by {holder}")
+                said = True
             fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            same = os.fstat(f.fileno()).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        f.close()
+    try:
         f.seek(0)
         f.truncate()
         f.write(f"pid {os.getpid()} on host {socket.gethostname()}\n")
         f.flush()
-        try:
-            yield
-        finally:
-            f.seek(0)
-            f.truncate()
-            fcntl.flock(f, fcntl.LOCK_UN)
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        f.close()
 
 
 # Below this much free space an object's failure is taken for a full disk: Blender then
