@@ -150,6 +150,7 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
         },
         "object": {
             "source": str(obj.path),
+            "sha256": info.get("sha256"),
             "bbox_dims": info.get("bbox_dims"),
             "scale": info.get("scale"),
             "center": info.get("center"),
