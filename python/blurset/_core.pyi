@@ -48,8 +48,11 @@ class Accumulator:
         self,
         path: str | PathLike[str],
         background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        *,
+        downsample: int = 1,
     ) -> None:
-        """Write the mean as 8-bit sRGB PNG over `background` (linear RGB), atomically."""
+        """Write the mean as 8-bit sRGB PNG over `background` (linear RGB), atomically;
+        area-averaged over `downsample` x `downsample` blocks in linear light first."""
     def write_exr(self, path: str | PathLike[str]) -> None:
         """Write the linear mean as a ZIP-compressed RGBA float32 EXR, atomically."""
 
@@ -121,9 +124,13 @@ def noise_write_variants(
     gamma: str = "2.2",
     white_balance: tuple[float, float] | None = None,
     white_level: float = 1.0,
+    downsample: list[int] = ...,
+    clean_views: list[int] = ...,
 ) -> None:
     """Write images/<name>.png and linear/<name>.exr of every (out_dir, sigma_read,
-    sigma_shot, key) variant; `names` holds len(sources) * frames stems, view-major."""
+    sigma_shot, key) variant; `names` holds len(sources) * frames stems, view-major;
+    images_<f>/ and linear_<f>/ for each `downsample` factor (noise drawn at that size);
+    the views in `clean_views` stay clean (sigma 0)."""
 
 # --- noise on a build, from linear light (rust/py/src/noise_linear.rs) ---------------
 
@@ -169,6 +176,8 @@ def noise_write_variants_linear(
     white_balance: tuple[float, float] | None = None,
     white_level: float = 1.0,
     background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    downsample: list[int] = ...,
+    clean_views: list[int] = ...,
 ) -> None:
     """`noise_write_variants` from a build's linear EXRs (composited over `background`)."""
 
@@ -225,9 +234,26 @@ def plan_setting(
     """A setting's plan (views, trajectories, weights, latent frames, seeds) as JSON."""
 
 def write_setting_poses(
-    plan_json: str, setting_dir: str | PathLike[str], level_dirs: list[str]
+    plan_json: str,
+    setting_dir: str | PathLike[str],
+    level_dirs: list[str],
+    *,
+    test_views: list[int] = ...,
+    sharp_test_views: bool = True,
 ) -> None:
-    """`<level>/poses_bounds.npy` for each level and `transforms.json` of a setting."""
+    """`<level>/poses_bounds.npy` and `<level>/transforms.json` for each level and the
+    setting's `transforms.json`."""
+
+def write_scene_transforms(
+    path: str | PathLike[str],
+    setting_json: str,
+    files: list[tuple[int, str]],
+    *,
+    test_views: list[int],
+    extra_json: str = "{}",
+) -> None:
+    """The transforms.json of one scene of a setting: the setting's cameras, a frame per
+    (view, file path), train/val/test_filenames, and the fields of `extra_json`."""
 
 def test_views(views: int, stride: int) -> list[int]:
     """Every `stride`-th view index below `views`."""
@@ -242,8 +268,11 @@ def make_splits(
     test_fraction: float,
     test_objects: list[str] | None,
     seed: int,
+    test_settings: int | None = None,
+    sharp_test_views: bool = True,
 ) -> str:
-    """splits.json (by object) for setting entries `[{setting, object, views}]`."""
+    """splits.json for setting entries `[{setting, object, views}]`: whole objects held
+    out, or `test_settings` random settings."""
 
 def seeded_subset(ids: list[str], k: int, seed: int) -> list[str]:
     """A seeded random subset of `k` ids, sorted; independent of the ids' order."""

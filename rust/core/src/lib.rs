@@ -35,7 +35,7 @@ pub use crate::noise::model::{
     noise_key, sample_white_balance, scene_seed, stream_id as noise_stream_id, Gamma, NoiseLevels,
     NoiseModel, WhiteBalance,
 };
-pub use crate::noise::variants::{write_variants, write_variants_linear, Variant};
+pub use crate::noise::variants::{write_variants, write_variants_linear, Variant, VariantOptions};
 
 // The files of a build.
 pub use crate::dataset::failures::{
@@ -43,9 +43,10 @@ pub use crate::dataset::failures::{
 };
 pub use crate::dataset::layout::{image_name, setting_name, theta0s};
 pub use crate::dataset::llff::{
-    parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses, PoseRow,
+    parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_scene_transforms,
+    write_setting_poses, PoseRow,
 };
-pub use crate::dataset::splits::{make_splits, seeded_subset, test_views, SettingEntry};
+pub use crate::dataset::splits::{make_splits, seeded_subset, test_views, Holdout, SettingEntry};
 pub use crate::dataset::stats::build_stats;
 
 // Image error against a reference and the speed/quality front.

@@ -60,17 +60,48 @@ fn plan_setting(
     to_json(&plan)
 }
 
-/// Write `<level>/poses_bounds.npy` for each level dir and `transforms.json` of a setting.
+/// Write `<level>/poses_bounds.npy` and `<level>/transforms.json` for each level dir and
+/// the setting's `transforms.json`; `test_views` hold sharp images in the blur levels
+/// when `sharp_test_views`.
 #[pyfunction]
+#[pyo3(signature = (plan_json, setting_dir, level_dirs, *, test_views = Vec::new(), sharp_test_views = true))]
 fn write_setting_poses(
     py: Python<'_>,
     plan_json: &str,
     setting_dir: PathBuf,
     level_dirs: Vec<String>,
+    test_views: Vec<usize>,
+    sharp_test_views: bool,
 ) -> PyResult<()> {
     let plan: core::SettingPlan = from_json("setting plan", plan_json)?;
     crate::run_detached(py, || {
-        core::write_setting_poses(&plan, &setting_dir, &level_dirs)
+        core::write_setting_poses(
+            &plan,
+            &setting_dir,
+            &level_dirs,
+            &test_views,
+            sharp_test_views,
+        )
+    })
+}
+
+/// Write the `transforms.json` of one scene of a setting (a level, or a gain of one) at
+/// `path`: the cameras of the setting's transforms.json (`setting_json`), one frame per
+/// (view, file path), the train/val/test file lists, and the fields of `extra_json`.
+#[pyfunction]
+#[pyo3(signature = (path, setting_json, files, *, test_views, extra_json = "{}"))]
+fn write_scene_transforms(
+    py: Python<'_>,
+    path: PathBuf,
+    setting_json: &str,
+    files: Vec<(usize, String)>,
+    test_views: Vec<usize>,
+    extra_json: &str,
+) -> PyResult<()> {
+    let setting: serde_json::Value = from_json("setting transforms.json", setting_json)?;
+    let extra: serde_json::Map<String, serde_json::Value> = from_json("extra fields", extra_json)?;
+    crate::run_detached(py, || {
+        core::write_scene_transforms(&path, &setting, &files, &test_views, extra)
     })
 }
 
@@ -86,25 +117,29 @@ fn image_name(index: usize, n: usize) -> String {
     core::image_name(index, n)
 }
 
-/// Train/test splits by object → JSON (the `splits.json` document).
+/// Train/test splits (whole objects, or `test_settings` random settings) → JSON (the
+/// `splits.json` document).
 #[pyfunction]
-#[pyo3(signature = (entries_json, *, view_stride, test_fraction, test_objects, seed))]
+#[pyo3(signature = (entries_json, *, view_stride, test_fraction, test_objects, seed, test_settings = None, sharp_test_views = true))]
 fn make_splits(
     entries_json: &str,
     view_stride: usize,
     test_fraction: f64,
     test_objects: Option<Vec<String>>,
     seed: u64,
+    test_settings: Option<usize>,
+    sharp_test_views: bool,
 ) -> PyResult<String> {
     let entries: Vec<core::SettingEntry> = from_json("split entries", entries_json)?;
-    let s = core::make_splits(
-        &entries,
-        view_stride,
-        test_fraction,
-        test_objects.as_deref(),
-        seed,
-    )
-    .map_err(crate::error::to_pyerr)?;
+    let holdout = match test_settings {
+        Some(n) => core::Holdout::Settings(n),
+        None => core::Holdout::Objects {
+            fraction: test_fraction,
+            list: test_objects.as_deref(),
+        },
+    };
+    let s = core::make_splits(&entries, view_stride, &holdout, sharp_test_views, seed)
+        .map_err(crate::error::to_pyerr)?;
     to_json(&s)
 }
 
@@ -121,6 +156,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(seed_for, m)?)?;
     m.add_function(wrap_pyfunction!(plan_setting, m)?)?;
     m.add_function(wrap_pyfunction!(write_setting_poses, m)?)?;
+    m.add_function(wrap_pyfunction!(write_scene_transforms, m)?)?;
     m.add_function(wrap_pyfunction!(image_name, m)?)?;
     m.add_function(wrap_pyfunction!(test_views, m)?)?;
     m.add_function(wrap_pyfunction!(make_splits, m)?)?;
