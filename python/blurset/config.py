@@ -61,9 +61,18 @@ class BuildConfig:
     write_linear: bool = False
     # `--previews`: <setting>/preview.png (blurset.preview), written before the marker.
     previews: bool = False
+    # `--test-view-stride`: every k-th view of a setting is held out (LLFF's llffhold).
     view_stride: int = 16
+    # Test settings: a seeded fraction of the objects (`--test-objects F`) or the objects
+    # listed, or N random settings (`--test-settings N`, the paper's 52), not both.
     test_fraction: float = 0.2
     test_objects: list[str] | None = None
+    test_settings: int | None = None
+    # Deblur-NeRF's convention unless set: the blur levels hold the sharp image at the
+    # held-out views (copied; their blurry renders are skipped).
+    blurry_test_views: bool = False
+    # `images_<f>/` beside `images/` in every level: area average in linear light, sRGB.
+    downsample: list[int] = field(default_factory=lambda: [4])
     workers: int = 1
     threads: int = 0
     executor: str = "local"
@@ -164,7 +173,36 @@ DEMO_DEFAULTS: dict[str, Any] = {
 
 FIELDS = {f.name: f for f in dataclasses.fields(BuildConfig)}
 # Other spellings of option names in TOML files (the issue's name → the field).
-ALIASES = {"keep_linear": "write_linear"}
+ALIASES = {"keep_linear": "write_linear", "test_view_stride": "view_stride"}
+
+
+def parse_downsample(value: Any, where: str = "--downsample") -> list[int]:
+    """`4 8`, `[4, 8]`, `4,8` or `none` → distinct factors ≥ 2, sorted."""
+    items = value if isinstance(value, list) else [value]
+    words = [w for v in items for w in str(v).replace(",", " ").split()]
+    if [w.lower() for w in words] in ([], ["none"]):
+        return []
+    try:
+        factors = [int(w) for w in words]
+    except ValueError:
+        raise ConfigError(f"{where}: expected factors like 4 8, or none, got {value!r}") from None
+    if any(f < 2 or f > 64 for f in factors) or len(set(factors)) != len(factors):
+        raise ConfigError(f"{where}: factors must be distinct integers in 2..64, got {value!r}")
+    return sorted(factors)
+
+
+def split_test_objects(value: Any, where: str) -> dict[str, Any]:
+    """`test-objects`: a fraction of the objects (0.2) or a list of object ids."""
+    if isinstance(value, bool):
+        raise ConfigError(f"{where}: expected a fraction in [0, 1] or object ids, got {value!r}")
+    if isinstance(value, int | float):
+        return {"test_fraction": _coerce("test_fraction", value, where)}
+    if isinstance(value, str):
+        try:
+            return {"test_fraction": _coerce("test_fraction", float(value), where)}
+        except ValueError:
+            value = [v.strip() for v in value.split(",") if v.strip()]
+    return {"test_objects": _coerce("test_objects", value, where)}
 
 
 def parse_levels(value: Any, where: str = "--levels") -> list[int]:
@@ -188,6 +226,8 @@ def parse_levels(value: Any, where: str = "--levels") -> list[int]:
 def _coerce(name: str, value: Any, where: str) -> Any:
     if name == "levels":
         return parse_levels(value, where)
+    if name == "downsample":
+        return parse_downsample(value, where)
     if name == "latents" and isinstance(value, str):
         if value.strip().lower() == "auto":
             return "auto"
@@ -218,9 +258,10 @@ def _coerce(name: str, value: Any, where: str) -> Any:
             "ray_address",
             "objaverse_dir",
         )
-        if name in (*nullable, "objaverse_count") and value is None:
+        counts = ("sharp_samples", "samples_total", "objaverse_count", "test_settings")
+        if name in (*nullable, *counts) and value is None:
             return None
-        if name in ("sharp_samples", "samples_total", "objaverse_count"):
+        if name in counts:
             if isinstance(value, bool) or int(value) != value:
                 raise ValueError
             return int(value)
@@ -254,6 +295,9 @@ def load_toml(path: Path) -> dict[str, Any]:
         name = ALIASES.get(key.replace("-", "_"), key.replace("-", "_"))
         if name not in FIELDS or name == "demo" and not isinstance(value, bool):
             raise ConfigError(f"{path}: unknown option {key!r}")
+        if name == "test_objects":
+            out.update(split_test_objects(value, f"{path}: {key}"))
+            continue
         out[name] = _coerce(name, value, f"{path}: {key}")
     return out
 
@@ -282,6 +326,12 @@ def make_config(file_values: dict[str, Any], flag_values: dict[str, Any]) -> Bui
     given.update(_latents_layer(flag_values, "--latents"))
     values.update(given)
     values["demo"] = demo
+    if given.get("test_settings") is not None and (
+        given.get("test_objects") is not None or "test_fraction" in given
+    ):
+        raise ConfigError(
+            "--test-settings: give either N random test settings or --test-objects, not both"
+        )
     cfg = BuildConfig(**{k: _coerce(k, v, f"--{k.replace('_', '-')}") for k, v in values.items()})
     for name in AUTO_ONLY:
         if name in given and not cfg.latents_auto:
@@ -322,8 +372,20 @@ def validate(cfg: BuildConfig) -> None:
     need(0.0 <= cfg.max_failure_rate <= 1.0, "max_failure_rate", "must be in [0, 1]")
     need(cfg.max_triangles >= 1, "max_triangles", "must be at least 1")
     need(cfg.max_texture_pixels >= 0, "max_texture_pixels", "must be ≥ 0")
-    need(cfg.view_stride >= 1, "view_stride", "must be at least 1")
-    need(0.0 <= cfg.test_fraction <= 1.0, "test_fraction", "must be in [0, 1]")
+    need(cfg.view_stride >= 1, "test_view_stride", "must be at least 1")
+    need(0.0 <= cfg.test_fraction <= 1.0, "test_objects", "a fraction must be in [0, 1]")
+    need(
+        cfg.test_settings is None or cfg.test_settings >= 1,
+        "test_settings",
+        "must be at least 1",
+    )
+    bad = next((f for f in cfg.downsample if cfg.resolution % f), None)
+    need(
+        bad is None,
+        "downsample",
+        f"factor {bad} does not divide --resolution {cfg.resolution} (LLFF loaders scale "
+        "the focal length by exactly 1/factor)",
+    )
     need(cfg.executor in ("local", "ray"), "executor", "must be local or ray")
     need(
         cfg.ray_address is None or cfg.executor == "ray",

@@ -53,8 +53,10 @@ RUN_OPTIONS = frozenset(
     "objects out demo workers threads executor ray_address shard objaverse_dir "
     "objaverse_offline objaverse_count timeout object_timeout retries max_failure_rate "
     "max_triangles max_texture_pixels blender check_poses previews allow_mixed "
-    "view_stride test_fraction test_objects".split()
+    "test_fraction test_objects test_settings".split()
 )
+# What a build made before an option existed did: its dataset.json lacks the key.
+LEGACY = {"blurry_test_views": True, "downsample": []}
 
 
 def check_same_options(out: Path, cfg: BuildConfig) -> None:
@@ -76,7 +78,9 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
         ) from None
     defaults = BuildConfig(out=cfg.out, objects=cfg.objects).to_json()
     differ = [
-        k for k in sorted(now) if k not in RUN_OPTIONS and was.get(k, defaults.get(k)) != now[k]
+        k
+        for k in sorted(now)
+        if k not in RUN_OPTIONS and was.get(k, LEGACY.get(k, defaults.get(k))) != now[k]
     ]
     if differ and not cfg.allow_mixed:
         said = ", ".join(f"--{k.replace('_', '-')} {was.get(k)!r} → {now[k]!r}" for k in differ[:4])
@@ -137,6 +141,8 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
             test_fraction=cfg.test_fraction,
             test_objects=cfg.test_objects,
             seed=cfg.seed,
+            test_settings=cfg.test_settings,
+            sharp_test_views=not cfg.blurry_test_views,
         )
     )
     layout.write_json(out / "splits.json", splits)

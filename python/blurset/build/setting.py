@@ -71,8 +71,15 @@ def level_renders(lp: dict, exr_prefix: Path) -> list[dict[str, Any]]:
     ]
 
 
-def _render_frames(plan: dict, exr_dir: Path) -> list[dict[str, Any]]:
-    """The render list of a setting in stream order: per view, sharp then each level."""
+def sharp_views(cfg: BuildConfig, n_views: int) -> set[int]:
+    """The views whose blur levels hold the sharp image (Deblur-NeRF's convention: the
+    held-out views, `--test-view-stride`); none with `--blurry-test-views`."""
+    return set() if cfg.blurry_test_views else set(_core.test_views(n_views, cfg.view_stride))
+
+
+def _render_frames(plan: dict, exr_dir: Path, sharp: set[int]) -> list[dict[str, Any]]:
+    """The render list of a setting in stream order: per view, sharp then each level
+    (the views in `sharp` render no blur levels: they get the sharp image)."""
     frames = []
     for v in plan["views"]:
         i = v["index"]
@@ -80,19 +87,35 @@ def _render_frames(plan: dict, exr_dir: Path) -> list[dict[str, Any]]:
             {"c2w": v["c2w"], "seed": v["sharp_seed"], "out": str(exr_dir / f"{i:04d}_s.exr")}
         )
         for lvl, lp in v["levels"].items():
-            frames.extend(level_renders(lp, exr_dir / f"{i:04d}_{lvl}"))
+            if i not in sharp:
+                frames.extend(level_renders(lp, exr_dir / f"{i:04d}_{lvl}"))
     return frames
 
 
-def _keys(plan: dict) -> list[tuple[int, str]]:
+def _keys(plan: dict, sharp: set[int]) -> list[tuple[int, str]]:
     """(view, level dir) of each rendered frame, aligned with `_render_frames`."""
     keys = []
     for v in plan["views"]:
         keys.append((v["index"], layout.SHARP))
         for lvl, lp in v["levels"].items():
+            if v["index"] in sharp:
+                continue
             n = 1 if lp.get("motion_blur") else len(lp["latent_frames"])
             keys.extend([(v["index"], layout.level_dir(int(lvl)))] * n)
     return keys
+
+
+def _copy_sharp(setting: Path, views: set[int], n_views: int, cfg: BuildConfig) -> None:
+    """The sharp files of `views` into every blur level (byte-identical copies)."""
+    subdirs = ["images", *(f"images_{f}" for f in cfg.downsample)]
+    for view in sorted(views):
+        name = layout.image_name(view, n_views)
+        files = [(d, name) for d in subdirs]
+        if cfg.write_linear:
+            files.append(("linear", name.replace(".png", ".exr")))
+        for level in cfg.level_dirs[1:]:
+            for d, f in files:
+                shutil.copyfile(setting / layout.SHARP / d / f, setting / level / d / f)
 
 
 def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: dict) -> dict:
@@ -133,7 +156,11 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
         "radius": plan["radius"],
         "views": views,
         "test_views": _core.test_views(len(views), cfg.view_stride),
+        # What the blur levels hold at the test views: `sharp` copies (Deblur-NeRF) or
+        # `blurry` renders (--blurry-test-views).
+        "test_view_images": "blurry" if cfg.blurry_test_views else "sharp",
         "levels": cfg.level_dirs,
+        "downsample": cfg.downsample,
         "sampling": plan["config"],
         "render": {
             "engine": "CYCLES",
@@ -193,13 +220,15 @@ def render_setting(
         )
     )
     n_views = len(plan["views"])
-    frames = _render_frames(plan, exr_dir)
-    keys = _keys(plan)
+    sharp = sharp_views(cfg, n_views)
+    frames = _render_frames(plan, exr_dir, sharp)
+    keys = _keys(plan, sharp)
     need: dict[tuple[int, str], int] = {}
     for k in keys:
         need[k] = need.get(k, 0) + 1
     for d in cfg.level_dirs:
-        (partial / d / "images").mkdir(parents=True)
+        for sub in ["images", *(f"images_{f}" for f in cfg.downsample)]:
+            (partial / d / sub).mkdir(parents=True)
     acc: dict[tuple[int, str], Any] = {}
     res = cfg.resolution
     qa: dict[int, dict] = {}
@@ -214,7 +243,10 @@ def render_setting(
         if a.count == need[key]:
             view, level = key
             name = layout.image_name(view, n_views)
-            a.write_png(partial / level / "images" / name, background=tuple(cfg.background))
+            bg = tuple(cfg.background)
+            a.write_png(partial / level / "images" / name, background=bg)
+            for f in cfg.downsample:
+                a.write_png(partial / level / f"images_{f}" / name, background=bg, downsample=f)
             if cfg.write_linear:
                 a.write_exr(partial / level / "linear" / name.replace(".png", ".exr"))
             if level == layout.SHARP:
@@ -252,7 +284,14 @@ def render_setting(
     # --latents auto / motion blur render fewer frames than the bar's per-setting bound.
     progress.frame_done(frames_per_setting(cfg) - len(frames))
     shutil.rmtree(exr_dir)
-    _core.write_setting_poses(json.dumps(plan), partial, cfg.level_dirs)
+    _copy_sharp(partial, sharp, n_views, cfg)
+    _core.write_setting_poses(
+        json.dumps(plan),
+        partial,
+        cfg.level_dirs,
+        test_views=_core.test_views(n_views, cfg.view_stride),
+        sharp_test_views=not cfg.blurry_test_views,
+    )
     timings = {
         "plan_s": round(t_plan, 3),
         "sharp_s": round(t_sharp, 3),
