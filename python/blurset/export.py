@@ -84,9 +84,14 @@ def plan(args) -> dict:
     if args.gains and noise is None:
         raise ConfigError("--gains needs --noise (a `blurset noise BUILD` output)")
     available = dataset.get("levels") or [layout.SHARP]
-    if noise:  # the levels the noise output has
+    factors = config.get("downsample", [])
+    held = splits.get("test_view_images", "blurry")
+    if noise:  # the levels, factors and test views of the noise output
         noised = layout.read_json(noise / "noise_dataset.json", "noise_dataset.json")
         available = [lvl for lvl in available if lvl in noised.get("levels", [])]
+        params = noised.get("params", {})
+        factors = params.get("downsample", [])
+        held = held if params.get("clean_views") == "test_views" else "noisy"
     levels = _levels(args.levels, available)
     gains = _gains(noise, args.gains) if noise else []
     test = set(splits.get("test", []))
@@ -106,7 +111,6 @@ def plan(args) -> dict:
                 (test_list if setting.name in test else train_list).append(name)
     if not scenes:
         raise InputError(f"nothing to export (no complete setting with {levels}): {args.build}")
-    downsample = config.get("downsample", [])
     return {
         "kind": "blurset export",
         "blurset_version": __version__,
@@ -117,8 +121,8 @@ def plan(args) -> dict:
         "gains": gains,
         "copy": bool(args.copy),
         "llffhold": splits.get("view_stride", 16),
-        "factors": downsample,
-        "test_view_images": splits.get("test_view_images", "blurry"),
+        "factors": factors,
+        "test_view_images": held,
         "scenes_dir": SCENES_DIR[args.target],
         "scenes": scenes,
         "train": sorted(train_list),

@@ -115,6 +115,7 @@ def setting_problem(setting: Path) -> str | None:
     try:
         meta = json.loads((setting / "meta.json").read_text())
         views, levels = len(meta["views"]), list(meta["levels"])
+        subdirs = ["images", *(f"images_{f}" for f in meta.get("downsample", []))]
     except FileNotFoundError:
         return "meta.json is missing"
     except (OSError, ValueError, KeyError, TypeError) as e:
@@ -127,20 +128,23 @@ def setting_problem(setting: Path) -> str | None:
         d = setting / lvl
         if not d.is_dir():
             return f"level folder {lvl}/ is missing"
-        images = sorted((d / "images").glob("*.png")) if (d / "images").is_dir() else []
-        if len(images) != views:
-            return f"{lvl}/images holds {len(images)} of {views} images"
+        images = []
+        for sub in subdirs:
+            found = sorted((d / sub).glob("*.png")) if (d / sub).is_dir() else []
+            if len(found) != views:
+                return f"{lvl}/{sub} holds {len(found)} of {views} images"
+            images += found
         for p in images:
             with open(p, "rb") as f:
                 head = f.read(8)
                 f.seek(0, os.SEEK_END)
                 size = f.tell()
             if head != PNG_MAGIC or size < 67:
-                return f"{lvl}/images/{p.name} is not a whole PNG"
+                return f"{lvl}/{p.parent.name}/{p.name} is not a whole PNG"
             with open(p, "rb") as f:
                 f.seek(size - 12)
                 if f.read(12)[4:8] != b"IEND":
-                    return f"{lvl}/images/{p.name} is truncated"
+                    return f"{lvl}/{p.parent.name}/{p.name} is truncated"
         npy = d / "poses_bounds.npy"
         if not npy.is_file():
             return f"{lvl}/poses_bounds.npy is missing"
