@@ -115,6 +115,7 @@ def _copy_sharp(setting: Path, views: set[int], n_views: int, cfg: BuildConfig) 
             files.append(("linear", name.replace(".png", ".exr")))
         for level in cfg.level_dirs[1:]:
             for d, f in files:
+                (setting / level / d).mkdir(exist_ok=True)  # linear/: no view rendered
                 shutil.copyfile(setting / layout.SHARP / d / f, setting / level / d / f)
 
 
