@@ -69,7 +69,7 @@ def clean_reference(
     build: Path, unit: Path, meta: dict, stem: str, source: str, factor: int = 1
 ) -> np.ndarray:
     """The clean linear y of one view, computed here in NumPy from the build's files, at
-    full size or area-averaged `factor` times in linear light (before the clip)."""
+    full size or clipped and area-averaged `factor` times in linear light."""
     wb = meta["white_balance"]
     scale = np.array([1 / wb["red"], 1.0, 1 / wb["blue"]]) if wb else np.ones(3)
     level_dir = build / meta["source"]["setting"] / meta["source"]["level"]
@@ -80,9 +80,10 @@ def clean_reference(
     else:
         x = np.asarray(Image.open(level_dir / "images" / f"{stem}.png"), np.float64) / 255
         lin = srgb_decode(x)
+    lin = np.clip(lin, 0, 1)
     if factor > 1:
         lin = block_mean(lin, factor)
-    return np.clip(lin, 0, 1) * scale * meta["white_level"]
+    return lin * scale * meta["white_level"]
 
 
 @pytest.fixture(scope="module")

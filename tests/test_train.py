@@ -70,8 +70,8 @@ def test_images_4_are_the_linear_area_mean_and_hwf_stays_full(demo_build):
                 full = np.asarray(Image.open(s / lvl / "images" / name), np.float64) / 255
                 small = np.asarray(Image.open(s / lvl / "images_4" / name), np.float64)
                 assert small.shape == (16, 16, 3)
-                # From the float image, so within one code of the area mean of the 8-bit
-                # image in linear light; averaging the sRGB codes instead is further off.
+                # images/ downsampled in linear light from the float image: within one
+                # code of the same from the 8-bit PNG; averaging sRGB codes is further off.
                 linear = srgb_encode(block_mean(srgb_decode(full), 4)) * 255
                 worst_linear = max(worst_linear, np.abs(linear - small).max())
                 worst_srgb = max(worst_srgb, np.abs(block_mean(full, 4) * 255 - small).max())

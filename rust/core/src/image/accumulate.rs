@@ -166,9 +166,10 @@ impl Accumulator {
         Ok(out)
     }
 
-    /// The mean composited over `background`, area-averaged over `factor × factor`
-    /// blocks in linear light, then sRGB-encoded as RGB8 (LLFF's `images_<f>/`); factor
-    /// 1 is [`Self::encode_rgb8`]. The factor must divide both sides.
+    /// The mean composited over `background` and clipped to the PNG's [0, 1] (as
+    /// `images/` shows it), area-averaged over `factor × factor` blocks in linear light,
+    /// then sRGB-encoded as RGB8 (LLFF's `images_<f>/`: `images/` downsampled, from the
+    /// float image); factor 1 is [`Self::encode_rgb8`]. The factor must divide both sides.
     pub fn encode_rgb8_downsampled(&self, background: [f32; 3], factor: u32) -> Result<Vec<u8>> {
         if factor == 1 {
             return self.encode_rgb8(background);
@@ -179,7 +180,10 @@ impl Accumulator {
         let rgb: Vec<f64> = self
             .sum
             .par_chunks_exact(CH)
-            .flat_map_iter(|p| composite_over([p[0] * inv, p[1] * inv, p[2] * inv, p[3] * inv], bg))
+            .flat_map_iter(|p| {
+                composite_over([p[0] * inv, p[1] * inv, p[2] * inv, p[3] * inv], bg)
+                    .map(|v| v.clamp(0.0, 1.0))
+            })
             .collect();
         let small = area_mean(self.width, self.height, 3, &rgb, factor)?;
         Ok(small.par_iter().map(|&v| srgb_encode_u8(v)).collect())
@@ -361,7 +365,7 @@ mod tests {
         let bg = [1.0f32, 0.5, 0.0];
         let small = acc.encode_rgb8_downsampled(bg, 4)?;
         assert_eq!(small.len(), 2 * 3);
-        // Reference: composite every pixel, average 4 x 4 blocks, encode once.
+        // Reference: composite and clip every pixel, average 4 x 4 blocks, encode once.
         for (ox, px) in small.chunks_exact(3).enumerate() {
             let mut sum = [0.0f64; 3];
             for y in 0..4 {
@@ -370,7 +374,7 @@ mod tests {
                     let c =
                         composite_over([p[0], p[1], p[2], p[3]].map(f64::from), bg.map(f64::from));
                     for k in 0..3 {
-                        sum[k] += c[k];
+                        sum[k] += c[k].clamp(0.0, 1.0);
                     }
                 }
             }

@@ -48,10 +48,15 @@ impl LinearRgb {
 }
 
 impl LinearRgb {
-    /// The image area-averaged over `factor × factor` blocks (LLFF's `images_<f>/`), in
-    /// linear light, unclipped: the clean image noise is drawn on at that size.
+    /// The image clipped to [0, 1] per pixel (the white point its PNG shows) and
+    /// area-averaged over `factor × factor` blocks in linear light, as the build's
+    /// `images_<f>/`: the clean image noise is drawn on at that size.
     pub fn downsample(&self, factor: u32) -> Result<LinearRgb> {
-        let data: Vec<f64> = self.rgb.iter().map(|&v| f64::from(v)).collect();
+        let data: Vec<f64> = self
+            .rgb
+            .iter()
+            .map(|&v| f64::from(v).clamp(0.0, 1.0))
+            .collect();
         let small = area_mean(self.width, self.height, 3, &data, factor)?;
         LinearRgb::new(
             self.width / factor,
