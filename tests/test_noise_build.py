@@ -456,3 +456,26 @@ def test_nan_in_a_linear_image_fails_cleanly(linear_build, tmp_path):
     assert not (out / "demo_cylinder_000" / "blur_1" / "gain_1").exists()
     done = list(out.glob("*/*/gain_1"))
     assert done and all((d / ".complete").is_file() for d in done)
+
+
+def test_open_scene_gives_noisy_sources_and_clean_pairs(noised):
+    """`blurset.data.open_scene` with a gain: the gain's files at the size asked, the
+    sharp images as `clean`, clean (level) images at the test views."""
+    from blurset.data import open_scene
+
+    build, _, png = noised
+    s = settings(build)[2].name
+    sc = open_scene(build, s, "blur_2", gain=16, noise=png, downsample=4)
+    unit = png / s / "blur_2" / "gain_16"
+    assert sc.noise["gain"] == 16 and sc.images.shape == (17, 16, 16, 3)
+    for v in (0, 3):
+        want = np.asarray(Image.open(unit / "images_4" / f"{v:03d}.png")) / 255
+        np.testing.assert_allclose(sc.images[v], want, atol=1e-6)
+        clean = np.asarray(Image.open(build / s / "sharp" / "images_4" / f"{v:03d}.png")) / 255
+        np.testing.assert_allclose(sc.clean[v], clean, atol=1e-6)
+    np.testing.assert_array_equal(sc.images[sc.test_views], sc.clean[sc.test_views])
+    noise = sc.images[sc.train_views] - sc.clean[sc.train_views]
+    assert noise.std() > 0.05  # gain 16 at 16 px: visibly noisy
+    level = open_scene(build, s, "blur_2", downsample=4)
+    np.testing.assert_array_equal(sc.c2w_opencv, level.c2w_opencv)
+    np.testing.assert_array_equal(sc.intrinsics, level.intrinsics)
