@@ -4,6 +4,7 @@ One section per binding file; keep each section next to its Rust counterpart's n
 """
 
 from os import PathLike
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -16,6 +17,60 @@ class ImageError(BlursetError): ...
 
 class InputError(BlursetError):
     """Bad input data (missing file, wrong shape, mismatched sizes); the message names the file."""
+
+# --- layout (rust/py/src/layout.rs) --------------------------------------------------
+
+MARKER: str
+PARTIAL_SUFFIX: str
+SHARP: str
+
+def setting_name(uid: str, theta0_deg: float) -> str:
+    """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
+
+def theta0s(n: int) -> list[float]:
+    """The θ0 of each of an object's `n` settings, evenly spaced from 0°."""
+
+def image_name(index: int, n: int) -> str:
+    """The image file name of view `index` of `n` (sorted order is view order)."""
+
+def level_dir(level: int) -> str:
+    """Directory of a blur level (`blur_<l>`); level 0 is `sharp`."""
+
+def level_dirs(levels: list[int]) -> list[str]:
+    """`sharp`, then `blur_<l>` of every level."""
+
+def parse_level_dir(name: str) -> int | None:
+    """The level of a level directory name (`sharp` -> 0, `blur_<l>` -> l), or None."""
+
+def sort_level_dirs(names: list[str]) -> list[str]:
+    """Level directory names in level order; other names are dropped."""
+
+def setting_levels(setting: str | PathLike[str]) -> list[str]:
+    """The level directories a setting holds, in level order."""
+
+def gain_name(gain: float) -> str:
+    """Directory name of a noise gain (`gain_4`, `gain_2.5`)."""
+
+def partial_dir(final_dir: str | PathLike[str]) -> Path:
+    """Where a setting or noise unit is written before it is published."""
+
+def is_complete(dir: str | PathLike[str]) -> bool:
+    """A final (not `*.partial`) directory holding its marker."""
+
+def complete_settings(build: str | PathLike[str]) -> list[str]:
+    """The complete setting directory names of a build, sorted."""
+
+def publish(partial: str | PathLike[str], final_dir: str | PathLike[str], stamp: str) -> None:
+    """Write the marker (holding `stamp`) into `partial` and rename it to `final_dir`."""
+
+def temp_path(path: str | PathLike[str]) -> Path:
+    """The temp path an atomic write of `path` goes through (`.<name>.tmp<pid>`)."""
+
+def parse_temp_name(name: str) -> tuple[str, int] | None:
+    """(target name, pid) of a temp file name `.<name>.tmp<pid>`, or None."""
+
+def write_atomic(path: str | PathLike[str], data: bytes) -> None:
+    """Write `data` through a synced temp file and a rename (parents created)."""
 
 # --- accumulate (rust/py/src/accumulate.rs) -----------------------------------------
 
@@ -232,9 +287,6 @@ def write_setting_poses(
 def test_views(views: int, stride: int) -> list[int]:
     """Every `stride`-th view index below `views`."""
 
-def image_name(index: int, n: int) -> str:
-    """The image file name of view `index` of `n` (sorted order is view order)."""
-
 def make_splits(
     entries_json: str,
     *,
@@ -269,12 +321,6 @@ def build_stats(out: str | PathLike[str]) -> str:
     """
 
 # -- failures.jsonl ---------------------------------------------------------------------
-
-def setting_name(uid: str, theta0_deg: float) -> str:
-    """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
-
-def theta0s(n: int) -> list[float]:
-    """The θ0 of each of an object's `n` settings, evenly spaced from 0°."""
 
 def current_failures(
     path: str | PathLike[str], *, complete: list[str], theta0s: list[float] | None = None

@@ -38,10 +38,15 @@ pub use crate::noise::model::{
 pub use crate::noise::variants::{write_variants, write_variants_linear, Variant};
 
 // The files of a build.
+pub use crate::dataset::atomic::write_atomic;
 pub use crate::dataset::failures::{
     current as current_failures, read_records as read_failure_records,
 };
-pub use crate::dataset::layout::{image_name, setting_name, theta0s};
+pub use crate::dataset::layout::{
+    complete_settings, gain_name, image_name, is_complete, level_dir, level_dirs, parse_level_dir,
+    parse_temp_name, partial_dir, publish, setting_levels, setting_name, sort_level_dirs,
+    temp_path, theta0s, MARKER, PARTIAL_SUFFIX, SHARP,
+};
 pub use crate::dataset::llff::{
     parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses, PoseRow,
 };

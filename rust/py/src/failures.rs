@@ -5,18 +5,6 @@ use pyo3::prelude::*;
 use std::collections::BTreeSet;
 use std::path::PathBuf;
 
-/// `<uid>_<theta0>`, the directory name of one setting.
-#[pyfunction]
-fn setting_name(uid: &str, theta0_deg: f64) -> String {
-    core::setting_name(uid, theta0_deg)
-}
-
-/// The θ0 of each of an object's `n` settings, evenly spaced from 0°.
-#[pyfunction]
-fn theta0s(n: usize) -> Vec<f64> {
-    core::theta0s(n)
-}
-
 /// The current failures of a failures.jsonl as a JSON list, and the number of lines
 /// skipped (torn). `complete`: the complete setting names; `theta0s`: an object's
 /// azimuths (None keeps every object record).
@@ -36,8 +24,6 @@ fn current_failures(
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(setting_name, m)?)?;
-    m.add_function(wrap_pyfunction!(theta0s, m)?)?;
     m.add_function(wrap_pyfunction!(current_failures, m)?)?;
     Ok(())
 }

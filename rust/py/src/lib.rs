@@ -5,6 +5,7 @@ use pyo3::prelude::*;
 mod accumulate;
 mod error;
 mod failures;
+mod layout;
 mod llff;
 mod noise;
 mod noise_linear;
@@ -27,6 +28,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     error::register(m)?;
     failures::register(m)?;
+    layout::register(m)?;
     llff::register(m)?;
     sampling::register(m)?;
     accumulate::register(m)?;

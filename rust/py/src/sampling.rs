@@ -80,12 +80,6 @@ fn test_views(views: usize, stride: usize) -> Vec<usize> {
     core::test_views(views, stride)
 }
 
-/// Image file name of view `index` among `n` views.
-#[pyfunction]
-fn image_name(index: usize, n: usize) -> String {
-    core::image_name(index, n)
-}
-
 /// Train/test splits by object → JSON (the `splits.json` document).
 #[pyfunction]
 #[pyo3(signature = (entries_json, *, view_stride, test_fraction, test_objects, seed))]
@@ -121,7 +115,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(seed_for, m)?)?;
     m.add_function(wrap_pyfunction!(plan_setting, m)?)?;
     m.add_function(wrap_pyfunction!(write_setting_poses, m)?)?;
-    m.add_function(wrap_pyfunction!(image_name, m)?)?;
     m.add_function(wrap_pyfunction!(test_views, m)?)?;
     m.add_function(wrap_pyfunction!(make_splits, m)?)?;
     Ok(())
