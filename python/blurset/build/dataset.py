@@ -71,26 +71,23 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     QA failures) whose work is still not complete."""
     complete = _complete_settings(out)
     fpath = out / "failures.jsonl"
-    text, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
-    kept = json.loads(text)
+    kept, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
     layout.write_text_atomic(fpath, "".join(json.dumps(r) + "\n" for r in kept))
-    entries = [{"setting": n, "object": m["uid"], "views": len(m["views"])} for n, m in complete]
-    splits = json.loads(
-        _core.make_splits(
-            json.dumps(entries),
-            view_stride=cfg.view_stride,
-            test_fraction=cfg.test_fraction,
-            test_objects=cfg.test_objects,
-            seed=cfg.seed,
-        )
+    entries = [(n, m["uid"], len(m["views"])) for n, m in complete]
+    splits = _core.make_splits(
+        entries,
+        view_stride=cfg.view_stride,
+        test_fraction=cfg.test_fraction,
+        test_objects=cfg.test_objects,
+        seed=cfg.seed,
     )
-    layout.write_json(out / "splits.json", splits)
+    splits.write(out / "splits.json")
     checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
     dataset = {
         "name": "blurset Objaverse-Blur",
         "blurset_version": __version__,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "config": cfg.to_json(),
+        "config": cfg.record(),
         "seed": cfg.seed,
         "levels": cfg.level_dirs,
         "versions": {

@@ -3,6 +3,7 @@
 use pyo3::prelude::*;
 
 mod accumulate;
+mod config;
 mod error;
 mod failures;
 mod layout;
@@ -27,6 +28,7 @@ where
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     error::register(m)?;
+    config::register(m)?;
     failures::register(m)?;
     layout::register(m)?;
     llff::register(m)?;

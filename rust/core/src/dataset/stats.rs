@@ -22,6 +22,7 @@ use super::failures;
 #[cfg(test)]
 use super::layout::MARKER;
 use super::layout::{self, Scan};
+use super::meta::{ReadLevel as MetaLevel, ReadMeta as Meta};
 use crate::error::{Error, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -81,41 +82,7 @@ pub const QUANTITIES: &[(&str, &str, &str)] = &[
     ),
 ];
 
-// -- what is read from meta.json (other fields are skipped unparsed) -------------------
-
-#[derive(Debug, Deserialize)]
-struct MetaLevel {
-    w_l: f64,
-    latents: u64,
-    #[serde(default)]
-    motion_px: Option<f64>,
-}
-
-#[derive(Debug, Deserialize)]
-struct MetaView {
-    index: u64,
-    near: f64,
-    far: f64,
-    flatness: f64,
-    depth_range: f64,
-    orientation: f64,
-    w_u: f64,
-    #[serde(default)]
-    levels: BTreeMap<String, MetaLevel>,
-}
-
-#[derive(Debug, Deserialize)]
-struct Meta {
-    uid: String,
-    theta0_deg: f64,
-    bbox_dims: [f64; 3],
-    views: Vec<MetaView>,
-    /// Level directories written (`sharp`, `blur_1`, …).
-    #[serde(default)]
-    levels: Option<Vec<String>>,
-    #[serde(default)]
-    test_views: Option<Vec<u64>>,
-}
+// -- what is read besides meta.json (other fields are skipped unparsed) ------------------
 
 #[derive(Debug, Deserialize)]
 struct SplitsDoc {
