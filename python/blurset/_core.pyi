@@ -571,6 +571,18 @@ def frame_qa(rgba_: npt.NDArray[np.float32], *, thresholds: QaThresholds | None 
 def default_qa_thresholds() -> QaThresholds:
     """The default QA thresholds (one place for the numbers)."""
 
+OBJECT_QA_RESOLUTION: int
+OBJECT_QA_SAMPLES: int
+OBJECT_QA_FOV_DEG: float
+
+def object_qa_cameras(bbox_dims: list[float] | tuple[float, float, float]) -> list[list[list[float]]]:
+    """OpenGL camera-to-world (row-major) of each load-time QA view of an object of this box."""
+
+def object_qa_verdict(
+    views: list[FrameQa], *, thresholds: QaThresholds | None = None
+) -> str | None:
+    """The reason an object fails its load-time QA (invisible or black in every view), or None."""
+
 # --- stats (rust/py/src/stats.rs) ---------------------------------------------------
 
 class BuildStats:

@@ -28,7 +28,7 @@ pub use crate::image::accumulate::Accumulator;
 pub use crate::image::color::srgb_encode_slice;
 pub use crate::image::exr::read::{read_exr, Frame};
 pub use crate::image::io::{image_info, read_image, Image, Samples};
-pub use crate::image::qa::{frame_qa, thumbnail_qa, FrameQa, QaThresholds};
+pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
 
 // Sensor noise, from 8/16-bit images or from a build's linear EXRs.
 pub use crate::noise::kernel::{add_noise, clean_linear};

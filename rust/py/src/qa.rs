@@ -119,10 +119,33 @@ fn default_qa_thresholds() -> QaThresholds {
     QaThresholds::new(None, None, None)
 }
 
+/// OpenGL camera-to-world (row-major) of each load-time QA view of an object of this box.
+#[pyfunction]
+fn object_qa_cameras(bbox_dims: [f64; 3]) -> Vec<[[f64; 4]; 4]> {
+    core::object_qa::cameras(bbox_dims)
+}
+
+/// The reason an object fails its load-time QA (invisible or black in every view), or None.
+#[pyfunction]
+#[pyo3(signature = (views, *, thresholds = None))]
+fn object_qa_verdict(
+    views: Vec<PyRef<'_, FrameQa>>,
+    thresholds: Option<QaThresholds>,
+) -> Option<String> {
+    let t: core::QaThresholds = thresholds.map(Into::into).unwrap_or_default();
+    let v: Vec<core::FrameQa> = views.iter().map(|q| q.0).collect();
+    core::object_qa::verdict(&v, &t)
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<QaThresholds>()?;
     m.add_class::<FrameQa>()?;
     m.add_function(wrap_pyfunction!(frame_qa, m)?)?;
     m.add_function(wrap_pyfunction!(default_qa_thresholds, m)?)?;
+    m.add_function(wrap_pyfunction!(object_qa_cameras, m)?)?;
+    m.add_function(wrap_pyfunction!(object_qa_verdict, m)?)?;
+    m.add("OBJECT_QA_RESOLUTION", core::object_qa::RESOLUTION)?;
+    m.add("OBJECT_QA_SAMPLES", core::object_qa::SAMPLES)?;
+    m.add("OBJECT_QA_FOV_DEG", core::object_qa::FOV_DEG)?;
     Ok(())
 }
