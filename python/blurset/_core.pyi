@@ -5,7 +5,7 @@ One section per binding file; keep each section next to its Rust counterpart's n
 
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias, final
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +27,7 @@ class ConfigValueError(ValueError):
 
 # --- build config (rust/py/src/config.rs) ---------------------------------------------
 
+@final
 class BuildConfig:
     """Every option of `blurset build`, validated (frozen: `replace` makes a new one).
 
@@ -218,8 +219,16 @@ def parse_temp_name(name: str) -> tuple[str, int] | None:
 def write_atomic(path: str | PathLike[str], data: bytes) -> None:
     """Write `data` through a synced temp file and a rename (parents created)."""
 
+def write_dataset_json(path: str | PathLike[str], doc: dict[str, Any]) -> None:
+    """Write a build's dataset.json; `doc` must match the core's DatasetDoc (unknown or
+    missing fields are errors)."""
+
+def write_noise_json(path: str | PathLike[str], doc: dict[str, Any]) -> None:
+    """Write a noisy scene's noise.json; `doc` must match the core's NoiseDoc."""
+
 # --- accumulate (rust/py/src/accumulate.rs) -----------------------------------------
 
+@final
 class Accumulator:
     """Running mean of premultiplied linear RGBA frames of one size.
 
@@ -248,7 +257,7 @@ class Accumulator:
     def write_png(
         self,
         path: str | PathLike[str],
-        background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        background: tuple[float, float, float] = ...,
     ) -> None:
         """Write the mean as 8-bit sRGB PNG over `background` (linear RGB), atomically."""
     def write_exr(self, path: str | PathLike[str]) -> None:
@@ -262,18 +271,18 @@ def read_exr(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
 
 # --- noise (rust/py/src/noise.rs) ---------------------------------------------------
 
-NoiseLevelTable = tuple[float, float, float, float]
+_NoiseLevelTable: TypeAlias = tuple[float, float, float, float]
 """(log10 sigma_read(1), read step, log10 sigma_shot(1), shot step) per log2 gain."""
 
-def noise_default_levels() -> NoiseLevelTable:
+def noise_default_levels() -> _NoiseLevelTable:
     """blurset's default gain table (derived from KPN's training ranges; not NAN's)."""
 
 def noise_levels_from_kpn(
     sig_read: npt.NDArray[np.float64], sig_shot: npt.NDArray[np.float64]
-) -> NoiseLevelTable:
+) -> _NoiseLevelTable:
     """NAN's mapping: sorted unique values, two lowest dropped, first two used (1-D arrays)."""
 
-def noise_sigmas(gain: float, levels: NoiseLevelTable) -> tuple[float, float]:
+def noise_sigmas(gain: float, levels: _NoiseLevelTable) -> tuple[float, float]:
     """(sigma_read, sigma_shot) at `gain`: log10 sigma(g) = log10 sigma(1) + step * log2 g."""
 
 def noise_white_balance(seed: int) -> tuple[float, float]:
@@ -332,7 +341,7 @@ def noise_scene_seed(seed: int, setting: str, level: str) -> int:
     """The noise seed of one level of one setting of a build (plays `--seed`'s role)."""
 
 def read_linear_composited(
-    path: str | PathLike[str], *, background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    path: str | PathLike[str], *, background: tuple[float, float, float] = ...
 ) -> npt.NDArray[np.float32]:
     """A build's linear RGBA EXR composited over `background`: float32 (H, W, 3), unclipped;
     ImageError names the file on NaN/inf."""
@@ -369,18 +378,19 @@ def noise_write_variants_linear(
     gamma: str = "2.2",
     white_balance: tuple[float, float] | None = None,
     white_level: float = 1.0,
-    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    background: tuple[float, float, float] = ...,
 ) -> None:
     """`noise_write_variants` from a build's linear EXRs (composited over `background`)."""
 
 def thumbnail_qa(
-    image: npt.NDArray[np.uint8], *, background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    image: npt.NDArray[np.uint8], *, background: tuple[float, float, float] = ...
 ) -> tuple[float, float, float]:
     """(object coverage, mean object luma in [0, 1], fraction of the border touched) of an
     RGB8 image over `background` (linear RGB)."""
 
 # --- tradeoff (rust/py/src/tradeoff.rs) ---------------------------------------------
 
+@final
 class ImageMetrics:
     """Error of an image against a reference (DESIGN §8): PSNR and MSE, sRGB and linear."""
 
@@ -399,7 +409,7 @@ def image_error(
     image: npt.NDArray[np.float32],
     reference: npt.NDArray[np.float32],
     *,
-    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    background: tuple[float, float, float] = ...,
 ) -> ImageMetrics:
     """{psnr, psnr_linear, mse, mse_linear} of `image` against `reference`, both
     float32 (H, W, 4) premultiplied linear RGBA; `psnr` is of the sRGB image composited
@@ -419,6 +429,7 @@ def write_poses_bounds(path: str | PathLike[str], rows: npt.NDArray[np.float64])
 
 # -- sampling and the plan (rust/py/src/sampling.rs) ---------------------------------
 
+@final
 class SamplingConfig:
     """The sampling of a setting's plan (views, trajectory, levels, latents, samples).
 
@@ -442,6 +453,7 @@ def seed_for(seed: int, uid: str, index: int) -> int:
 def check_theta0_deg(theta0_deg: float) -> None:
     """ConfigValueError unless θ0 is a finite number of degrees."""
 
+@final
 class Plan:
     """The plan of one setting: every view, trajectory, level, latent frame and seed."""
 
@@ -492,6 +504,7 @@ def plan_setting(
 def test_views(views: int, stride: int) -> list[int]:
     """Every `stride`-th view index below `views`."""
 
+@final
 class Splits:
     """The train/test splits of a build (the `splits.json` document)."""
 
@@ -526,6 +539,7 @@ def seeded_subset(ids: list[str], k: int, seed: int) -> list[str]:
 
 # -- render QA (rust/py/src/qa.rs) ---------------------------------------------------
 
+@final
 class QaThresholds:
     """When a view fails render QA (the core's defaults unless given)."""
 
@@ -546,6 +560,7 @@ class QaThresholds:
     def max_saturated(self) -> float:
         """Largest fraction of the object's pixels clipped in sRGB."""
 
+@final
 class FrameQa:
     """What one view looks like in numbers, and its verdict under the thresholds."""
 
@@ -585,6 +600,7 @@ def object_qa_verdict(
 
 # --- stats (rust/py/src/stats.rs) ---------------------------------------------------
 
+@final
 class BuildStats:
     """The statistics of a build (the `stats.json` document, schema "blurset-stats/1")."""
 

@@ -109,5 +109,5 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     }
     if checks:
         dataset["pose_checks"] = checks
-    layout.write_json(out / "dataset.json", dataset)
+    _core.write_dataset_json(out / "dataset.json", dataset)
     return {"settings_complete": len(complete), "failures": kept}

@@ -253,7 +253,7 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             part = partials[g]
             _core.write_poses_bounds(part / "poses_bounds.npy", rows)
             sr, ss = gains_sigmas[g]
-            layout.write_json(
+            _core.write_noise_json(
                 part / "noise.json", _noise_json(unit, g, sr, ss, wb, params, args, build)
             )
             layout.publish(part, unit.dst / gain_name(g))

@@ -159,7 +159,7 @@ def run(args) -> int:
                 "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
                 files=files,
             )
-            layout.write_json(gdir / "noise.json", doc, indent=2)
+            _core.write_noise_json(gdir / "noise.json", doc)
         if out.exists():
             shutil.rmtree(out)
         tmp.rename(out)

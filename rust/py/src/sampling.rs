@@ -142,6 +142,7 @@ impl Plan {
     /// worker reported it (dict), the timings (dict), the QA of every view and, with
     /// --check-poses, the COLMAP verdict (dict).
     #[pyo3(signature = (path, *, config, object, timings, qa, pose_check = None))]
+    #[allow(clippy::too_many_arguments)] // keyword arguments of one Python call
     fn write_meta(
         &self,
         py: Python<'_>,

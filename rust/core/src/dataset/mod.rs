@@ -5,5 +5,6 @@ pub mod failures;
 pub mod layout;
 pub mod llff;
 pub mod meta;
+pub mod records;
 pub mod splits;
 pub mod stats;
