@@ -6,9 +6,7 @@ use super::splits::test_views;
 use crate::error::{Error, Result};
 use crate::image::qa::FrameQa;
 use crate::plan::config::BuildConfig;
-use crate::plan::sampling::{
-    BlurMethod, LevelPlan, SamplingConfig, SettingPlan, Trajectory, ViewPlan,
-};
+use crate::plan::sampling::{BlurMethod, LevelPlan, SamplingConfig, SettingPlan, ViewPlan};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -157,22 +155,12 @@ impl From<&LevelPlan> for MetaLevel {
     }
 }
 
+/// A view as meta.json records it: the plan's view with its levels' records and the
+/// render QA of its sharp image.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct MetaView {
-    pub index: usize,
-    pub r: f64,
-    pub phi_deg: f64,
-    pub theta_deg: f64,
-    pub near: f64,
-    pub far: f64,
-    pub flatness: f64,
-    pub depth_range: f64,
-    pub orientation: f64,
-    pub w_u: f64,
-    pub trajectory: Trajectory,
-    pub sharp_seed: u32,
-    pub c2w: [[f64; 4]; 4],
-    pub levels: BTreeMap<String, MetaLevel>,
+    #[serde(flatten)]
+    pub view: ViewPlan<MetaLevel>,
     /// Render QA of the sharp view.
     pub qa: FrameQa,
 }
@@ -180,24 +168,7 @@ pub struct MetaView {
 impl MetaView {
     fn of(v: &ViewPlan, qa: FrameQa) -> Self {
         MetaView {
-            index: v.index,
-            r: v.r,
-            phi_deg: v.phi_deg,
-            theta_deg: v.theta_deg,
-            near: v.near,
-            far: v.far,
-            flatness: v.flatness,
-            depth_range: v.depth_range,
-            orientation: v.orientation,
-            w_u: v.w_u,
-            trajectory: v.trajectory,
-            sharp_seed: v.sharp_seed,
-            c2w: v.c2w,
-            levels: v
-                .levels
-                .iter()
-                .map(|(k, l)| (k.clone(), l.into()))
-                .collect(),
+            view: v.map_levels(|l| MetaLevel::from(l)),
             qa,
         }
     }

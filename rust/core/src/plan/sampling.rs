@@ -242,8 +242,10 @@ pub struct LevelPlan {
     pub motion_blur: Option<MotionBlurPlan>,
 }
 
+/// One view of a setting; `L` is what each blur level records (the plan's [`LevelPlan`],
+/// or meta.json's record of it, which drops the latent cameras).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct ViewPlan {
+pub struct ViewPlan<L = LevelPlan> {
     pub index: usize,
     pub r: f64,
     pub phi_deg: f64,
@@ -259,7 +261,29 @@ pub struct ViewPlan {
     pub sharp_seed: u32,
     /// OpenGL camera-to-world at p (the pose written for every level), row-major.
     pub c2w: [[f64; 4]; 4],
-    pub levels: BTreeMap<String, LevelPlan>,
+    pub levels: BTreeMap<String, L>,
+}
+
+impl<L> ViewPlan<L> {
+    /// The same view with each level's record made by `f`.
+    pub fn map_levels<M>(&self, f: impl Fn(&L) -> M) -> ViewPlan<M> {
+        ViewPlan {
+            index: self.index,
+            r: self.r,
+            phi_deg: self.phi_deg,
+            theta_deg: self.theta_deg,
+            near: self.near,
+            far: self.far,
+            flatness: self.flatness,
+            depth_range: self.depth_range,
+            orientation: self.orientation,
+            w_u: self.w_u,
+            trajectory: self.trajectory,
+            sharp_seed: self.sharp_seed,
+            c2w: self.c2w,
+            levels: self.levels.iter().map(|(k, l)| (k.clone(), f(l))).collect(),
+        }
+    }
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
