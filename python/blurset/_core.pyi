@@ -590,7 +590,9 @@ OBJECT_QA_RESOLUTION: int
 OBJECT_QA_SAMPLES: int
 OBJECT_QA_FOV_DEG: float
 
-def object_qa_cameras(bbox_dims: list[float] | tuple[float, float, float]) -> list[list[list[float]]]:
+def object_qa_cameras(
+    bbox_dims: list[float] | tuple[float, float, float],
+) -> list[list[list[float]]]:
     """OpenGL camera-to-world (row-major) of each load-time QA view of an object of this box."""
 
 def object_qa_verdict(
