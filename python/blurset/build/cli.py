@@ -100,6 +100,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--check-poses", action="store_true", default=None, help="COLMAP check per setting"
     )
+    p.add_argument(
+        "--allow-mixed",
+        action="store_true",
+        default=None,
+        help="build into an OUT made with other output-shaping options (mixes settings)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -113,7 +119,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
             "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "ray_address objaverse_dir objaverse_offline objaverse_count "
-            "blender check_poses previews"
+            "blender check_poses previews allow_mixed"
         ).split()
     }
     if args.levels is not None:

@@ -8,9 +8,13 @@ so a retry (here, by Ray, or a rerun after a kill) is always safe.
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import fcntl
 import json
+import os
 import shutil
+import socket
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -51,6 +55,13 @@ class ObjectUnit:
         self.stage = "fetch"
 
     def run(self) -> ObjectResult:
+        # One process at a time per object in OUT: two builds of the same object (a
+        # repeated command, overlapping shard lists) take turns; the second finds the
+        # first's settings complete.
+        with object_lock(self.out, self.obj.uid, self.progress.write):
+            return self._run()
+
+    def _run(self) -> ObjectResult:
         obj, cfg, progress, result = self.obj, self.cfg, self.progress, self.result
         jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
         pending = [j for j in jobs if not self._reusable(self.out / j.name)]
@@ -98,6 +109,7 @@ class ObjectUnit:
                     break
                 if disk_full(self.out, e):
                     # Not this object's fault, and every next one would fail the same way.
+                    shutil.rmtree(self.work, ignore_errors=True)
                     raise DiskFull(f"No space left on device: {self.out}") from e
                 if isinstance(e, WorkerError) and e.transient and attempt <= cfg.retries:
                     progress.write(f"retrying {obj.uid} (attempt {attempt + 1}) after: {e}")
@@ -114,15 +126,20 @@ class ObjectUnit:
         return result
 
     def _reusable(self, setting: Path) -> bool:
-        """A complete setting made from this very file (another file may have had this
-        id in an earlier run: its settings are redone, never passed off as this one's)."""
+        """A complete setting made from this very file, and whole (another file may have
+        had this id in an earlier run, a file may have been damaged or deleted since):
+        anything else is redone, never passed off as this object's."""
         if not layout.is_complete(setting):
             return False
-        try:
+        problem = layout.setting_problem(setting)
+        if problem is None:
             meta = json.loads((setting / "meta.json").read_text())
-            return meta["object"]["source"] == str(self.obj.path)
-        except (OSError, ValueError, KeyError, TypeError):
-            return False
+            source = (meta.get("object") or {}).get("source")
+            if source == str(self.obj.path):
+                return True
+            problem = f"made from another file ({source})"
+        self.progress.write(f"redoing {setting.name}: {problem}")
+        return False
 
     def _attempt(self, pending: list[SettingJob], deadline: float | None) -> None:
         """Load the object in a fresh worker and render the pending settings in order,
@@ -169,6 +186,42 @@ class ObjectUnit:
                     result.new_settings += 1
                     progress.setting_done()
                 pending.pop(0)
+
+
+@contextlib.contextmanager
+def object_lock(out: Path, uid: str, say):
+    """Hold OUT/.lock-<uid> (flock) while an object is built; a process that finds it
+    held says who holds it and waits. The file is removed on release: a waiter that
+    then holds a lock on the removed file sees it is stale (another inode) and retries."""
+    path = out / f".lock-{uid}"
+    said = False
+    while True:
+        f = open(path, "a+")  # noqa: SIM115 - held across the yield
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            holder = f.read().strip() or "another process"
+            if not said:
+                say(f"waiting: {out / uid}_* is being built by {holder}")
+                said = True
+            fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            same = os.fstat(f.fileno()).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        f.close()
+    try:
+        f.seek(0)
+        f.truncate()
+        f.write(f"pid {os.getpid()} on host {socket.gethostname()}\n")
+        f.flush()
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        f.close()
 
 
 # Below this much free space an object's failure is taken for a full disk: Blender then

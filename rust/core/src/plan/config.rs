@@ -467,6 +467,8 @@ build_config! {
     /// A Blender binary instead of the bpy module.
     blender: Option<String> = None, Spec::Str;
     check_poses: bool = false, Spec::Bool;
+    /// Build into an OUT made with other output-shaping options (mixes settings).
+    allow_mixed: bool = false, Spec::Bool;
 }
 
 impl BuildConfig {
