@@ -6,7 +6,7 @@ use super::splits::test_views;
 use crate::error::{Error, Result};
 use crate::image::qa::FrameQa;
 use crate::plan::config::BuildConfig;
-use crate::plan::sampling::{BlurMethod, LevelPlan, SamplingConfig, SettingPlan, ViewPlan};
+use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan, ViewPlan};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -95,64 +95,25 @@ pub struct MetaKey {
     pub theta_deg: f64,
 }
 
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct MetaMotionBlur {
-    pub seed: u32,
-    pub motion_steps: u32,
-    pub interpolation_error_px: f64,
-    pub keys: Vec<MetaKey>,
-}
+/// A blur level as meta.json records it: the plan's, without camera matrices.
+pub type MetaLevel = LevelPlan<MetaLatent, MetaKey>;
 
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct MetaLevel {
-    pub w_l: f64,
-    pub latents: usize,
-    pub motion_px: f64,
-    pub max_gap_px: f64,
-    pub method: BlurMethod,
-    pub samples_per_frame: u32,
-    pub latent_frames: Vec<MetaLatent>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub motion_blur: Option<MetaMotionBlur>,
-}
-
-impl From<&LevelPlan> for MetaLevel {
-    fn from(lp: &LevelPlan) -> Self {
-        MetaLevel {
-            w_l: lp.w_l,
-            latents: lp.latents,
-            motion_px: lp.motion_px,
-            max_gap_px: lp.max_gap_px,
-            method: lp.method,
-            samples_per_frame: lp.samples_per_frame,
-            latent_frames: lp
-                .latent_frames
-                .iter()
-                .map(|f| MetaLatent {
-                    t: f.t,
-                    r: f.r,
-                    phi_deg: f.phi_deg,
-                    theta_deg: f.theta_deg,
-                    seed: f.seed,
-                })
-                .collect(),
-            motion_blur: lp.motion_blur.as_ref().map(|mb| MetaMotionBlur {
-                seed: mb.seed,
-                motion_steps: mb.motion_steps,
-                interpolation_error_px: mb.interpolation_error_px,
-                keys: mb
-                    .keys
-                    .iter()
-                    .map(|k| MetaKey {
-                        t: k.t,
-                        r: k.r,
-                        phi_deg: k.phi_deg,
-                        theta_deg: k.theta_deg,
-                    })
-                    .collect(),
-            }),
-        }
-    }
+fn meta_level(lp: &LevelPlan) -> MetaLevel {
+    lp.map_frames(
+        |f| MetaLatent {
+            t: f.t,
+            r: f.r,
+            phi_deg: f.phi_deg,
+            theta_deg: f.theta_deg,
+            seed: f.seed,
+        },
+        |k| MetaKey {
+            t: k.t,
+            r: k.r,
+            phi_deg: k.phi_deg,
+            theta_deg: k.theta_deg,
+        },
+    )
 }
 
 /// A view as meta.json records it: the plan's view with its levels' records and the
@@ -168,7 +129,7 @@ pub struct MetaView {
 impl MetaView {
     fn of(v: &ViewPlan, qa: FrameQa) -> Self {
         MetaView {
-            view: v.map_levels(|l| MetaLevel::from(l)),
+            view: v.map_levels(meta_level),
             qa,
         }
     }

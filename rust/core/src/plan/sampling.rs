@@ -214,17 +214,20 @@ pub struct MotionKey {
 /// opens at t = 0, and Cycles gets `motion_steps` = steps on the camera object, so its
 /// motion steps fall exactly on the keys.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct MotionBlurPlan {
+pub struct MotionBlurPlan<K = MotionKey> {
     pub seed: u32,
     pub motion_steps: u32,
     /// Largest screen error (px) of Cycles' interpolation between keys, estimated at
     /// the middle of every key interval (≤ MOTION_KEY_TOLERANCE_PX unless capped).
     pub interpolation_error_px: f64,
-    pub keys: Vec<MotionKey>,
+    pub keys: Vec<K>,
 }
 
+/// One blur level of a view; `F` and `K` are its latent frames and motion keys (the
+/// plan's, or meta.json's records of them, which drop the camera matrices).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct LevelPlan {
+#[serde(bound(deserialize = "F: Deserialize<'de>, K: Deserialize<'de>"))]
+pub struct LevelPlan<F = LatentFrame, K = MotionKey> {
     pub w_l: f64,
     /// m, the number of latent frames averaged (1 for the motion blur method: one render).
     pub latents: usize,
@@ -237,9 +240,34 @@ pub struct LevelPlan {
     pub method: BlurMethod,
     /// Cycles samples of each render of this image.
     pub samples_per_frame: u32,
-    pub latent_frames: Vec<LatentFrame>,
+    pub latent_frames: Vec<F>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub motion_blur: Option<MotionBlurPlan>,
+    pub motion_blur: Option<MotionBlurPlan<K>>,
+}
+
+impl<F, K> LevelPlan<F, K> {
+    /// The same level with its latent frames and motion keys recorded by `f` and `k`.
+    pub fn map_frames<F2, K2>(
+        &self,
+        f: impl Fn(&F) -> F2,
+        k: impl Fn(&K) -> K2,
+    ) -> LevelPlan<F2, K2> {
+        LevelPlan {
+            w_l: self.w_l,
+            latents: self.latents,
+            motion_px: self.motion_px,
+            max_gap_px: self.max_gap_px,
+            method: self.method,
+            samples_per_frame: self.samples_per_frame,
+            latent_frames: self.latent_frames.iter().map(f).collect(),
+            motion_blur: self.motion_blur.as_ref().map(|mb| MotionBlurPlan {
+                seed: mb.seed,
+                motion_steps: mb.motion_steps,
+                interpolation_error_px: mb.interpolation_error_px,
+                keys: mb.keys.iter().map(k).collect(),
+            }),
+        }
+    }
 }
 
 /// One view of a setting; `L` is what each blur level records (the plan's [`LevelPlan`],
