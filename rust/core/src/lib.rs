@@ -46,8 +46,8 @@ pub use crate::dataset::failures::{
 };
 pub use crate::dataset::layout::{
     complete_settings, gain_name, image_name, is_complete, level_dir, level_dirs, parse_level_dir,
-    parse_temp_name, partial_dir, publish, setting_levels, setting_name, sort_level_dirs,
-    temp_path, theta0s, MARKER, PARTIAL_SUFFIX, SHARP,
+    parse_temp_name, partial_dir, publish, setting_levels, setting_name, setting_problem,
+    sort_level_dirs, temp_path, theta0s, MARKER, PARTIAL_SUFFIX, SHARP,
 };
 pub use crate::dataset::llff::{
     parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses, PoseRow,

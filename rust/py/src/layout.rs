@@ -70,6 +70,12 @@ fn is_complete(dir: PathBuf) -> bool {
     core::is_complete(&dir)
 }
 
+/// What is missing or damaged in a complete setting (checked cheaply), or None.
+#[pyfunction]
+fn setting_problem(py: Python<'_>, setting: PathBuf) -> Option<String> {
+    py.detach(|| core::setting_problem(&setting))
+}
+
 /// The complete setting directory names of a build, sorted.
 #[pyfunction]
 fn complete_settings(py: Python<'_>, build: PathBuf) -> PyResult<Vec<String>> {
@@ -132,6 +138,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(partial_dir, m)?)?;
     m.add_function(wrap_pyfunction!(is_complete, m)?)?;
     m.add_function(wrap_pyfunction!(complete_settings, m)?)?;
+    m.add_function(wrap_pyfunction!(setting_problem, m)?)?;
     m.add_function(wrap_pyfunction!(publish, m)?)?;
     m.add_function(wrap_pyfunction!(temp_path, m)?)?;
     m.add_function(wrap_pyfunction!(parse_temp_name, m)?)?;

@@ -162,6 +162,105 @@ pub fn publish(partial: &Path, final_dir: &Path, stamp: &str) -> Result<()> {
     std::fs::rename(partial, final_dir).map_err(|e| Error::io("cannot publish", final_dir, e))
 }
 
+const PNG_MAGIC: &[u8; 8] = b"\x89PNG\r\n\x1a\n";
+/// Bytes of one `poses_bounds.npy` row (17 float64).
+const POSE_ROW_BYTES: u64 = 17 * 8;
+
+/// What is missing or damaged in a complete setting, checked cheaply (names, sizes, PNG
+/// signatures and IEND chunks, the pose file's size; `blurset verify` decodes
+/// everything): None when it looks whole. A rerun redoes a setting with a problem
+/// instead of counting it.
+pub fn setting_problem(setting: &Path) -> Option<String> {
+    #[derive(serde::Deserialize)]
+    struct Counts {
+        views: Vec<serde::de::IgnoredAny>,
+        levels: Vec<String>,
+    }
+    let meta = setting.join("meta.json");
+    let text = match std::fs::read(&meta) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Some("meta.json is missing".into())
+        }
+        Err(e) => return Some(format!("meta.json is unreadable ({})", e.kind())),
+    };
+    let Counts { views, levels } = match serde_json::from_slice::<Counts>(&text) {
+        Ok(c) => c,
+        Err(e) => return Some(format!("meta.json is unreadable ({e})")),
+    };
+    let views = views.len();
+    if !setting.join("transforms.json").is_file() {
+        return Some("transforms.json is missing".into());
+    }
+    for lvl in &levels {
+        let d = setting.join(lvl);
+        if !d.is_dir() {
+            return Some(format!("level folder {lvl}/ is missing"));
+        }
+        let mut images: Vec<PathBuf> = std::fs::read_dir(d.join("images"))
+            .map(|rd| {
+                rd.filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|p| p.extension().is_some_and(|x| x == "png"))
+                    .collect()
+            })
+            .unwrap_or_default();
+        images.sort();
+        if images.len() != views {
+            return Some(format!(
+                "{lvl}/images holds {} of {views} images",
+                images.len()
+            ));
+        }
+        for p in &images {
+            let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
+            let name = name.unwrap_or_default();
+            match png_state(p) {
+                PngState::Whole => {}
+                PngState::NotPng => return Some(format!("{lvl}/images/{name} is not a whole PNG")),
+                PngState::Truncated => return Some(format!("{lvl}/images/{name} is truncated")),
+            }
+        }
+        let npy = d.join("poses_bounds.npy");
+        match std::fs::metadata(&npy) {
+            Ok(m) if m.is_file() => {
+                if m.len() < views as u64 * POSE_ROW_BYTES + 16 {
+                    return Some(format!("{lvl}/poses_bounds.npy is truncated"));
+                }
+            }
+            _ => return Some(format!("{lvl}/poses_bounds.npy is missing")),
+        }
+    }
+    None
+}
+
+enum PngState {
+    Whole,
+    NotPng,
+    Truncated,
+}
+
+/// A PNG's signature and its last chunk (IEND), read without decoding.
+fn png_state(path: &Path) -> PngState {
+    use std::io::{Read, Seek, SeekFrom};
+    let read = || -> std::io::Result<PngState> {
+        let mut f = std::fs::File::open(path)?;
+        let size = f.metadata()?.len();
+        let mut head = [0u8; 8];
+        if size < 67 || f.read_exact(&mut head).is_err() || &head != PNG_MAGIC {
+            return Ok(PngState::NotPng);
+        }
+        let mut tail = [0u8; 12];
+        f.seek(SeekFrom::Start(size - 12))?;
+        f.read_exact(&mut tail)?;
+        Ok(if &tail[4..8] == b"IEND" {
+            PngState::Whole
+        } else {
+            PngState::Truncated
+        })
+    };
+    read().unwrap_or(PngState::NotPng)
+}
+
 /// Complete and incomplete setting directories of a build, sorted by name.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Scan {
@@ -295,6 +394,60 @@ mod tests {
         for (g, name) in cases {
             assert_eq!(gain_name(g), name, "{g}");
         }
+    }
+
+    #[test]
+    fn setting_problems_are_named() -> Result<()> {
+        let dir = std::env::temp_dir().join(format!("blurset-problem-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let put = |rel: &str, bytes: &[u8]| write_atomic(&dir.join(rel), bytes);
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("meta.json is missing")
+        );
+        put("meta.json", b"[]")?;
+        let p = setting_problem(&dir).unwrap_or_default();
+        assert!(p.starts_with("meta.json is unreadable"), "{p}");
+        put(
+            "meta.json",
+            br#"{"views": [{}, {}], "levels": ["sharp"], "uid": "x"}"#,
+        )?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("transforms.json is missing")
+        );
+        put("transforms.json", b"{}")?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("level folder sharp/ is missing")
+        );
+        let mut png = PNG_MAGIC.to_vec();
+        png.extend([0u8; 60]);
+        png.extend(b"\0\0\0\0IEND\xaeB`\x82");
+        put("sharp/images/000.png", &png)?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/images holds 1 of 2 images")
+        );
+        put("sharp/images/001.png", &png[..png.len() - 4])?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/images/001.png is truncated")
+        );
+        put("sharp/images/001.png", &png)?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/poses_bounds.npy is missing")
+        );
+        put("sharp/poses_bounds.npy", &[0u8; 100])?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/poses_bounds.npy is truncated")
+        );
+        put("sharp/poses_bounds.npy", &[0u8; 400])?;
+        assert_eq!(setting_problem(&dir), None);
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
     }
 
     #[test]
