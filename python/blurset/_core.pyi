@@ -206,6 +206,9 @@ def partial_dir(final_dir: str | PathLike[str]) -> Path:
 def is_complete(dir: str | PathLike[str]) -> bool:
     """A final (not `*.partial`) directory holding its marker."""
 
+def setting_problem(setting: str | PathLike[str]) -> str | None:
+    """What is missing or damaged in a complete setting (checked cheaply), or None."""
+
 def complete_settings(build: str | PathLike[str]) -> list[str]:
     """The complete setting directory names of a build, sorted."""
 
