@@ -143,6 +143,10 @@ def test_the_core_owns_limits_and_derived_numbers():
         (["--theta0-deg", "nan"], "--theta0-deg nan: must be a finite number"),
         (["--timeout", "inf"], "--timeout inf: must be a finite number > 0"),
         (["--threads", "-3"], "--threads -3: must be an integer in 0..=4096"),
+        # Its grids are checked against the build's ranges (the core's, not a copy).
+        (["--budgets", "16,0"], "--budgets 16,0: value 0: must be an integer in 1..=1048576"),
+        (["--latents", "2,5000"], "--latents 2,5000: value 5000: must be an integer in 1..=4096"),
+        (["--level", "65"], "--level [65]: must be distinct integers in 1..=64"),
     ],
 )
 def test_tradeoff_refuses_bad_flags_up_front(capsys, tmp_path, flags, message):

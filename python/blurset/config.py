@@ -157,10 +157,11 @@ def make_config(
     return cfg
 
 
-def from_flags(**values: Any) -> BuildConfig:
+def from_flags(names: dict[str, str] | None = None, **values: Any) -> BuildConfig:
     """A config of these options over the defaults, for commands whose flags are options
-    (tradeoff); an error names the flag."""
+    (tradeoff); an error names the flag (`names` maps an option to another flag)."""
     try:
         return BuildConfig(**{k: _plain(v) for k, v in values.items()})
     except _core.ConfigValueError as e:
-        raise ConfigError(f"{flag(e.option)} {e.detail}") from None
+        where = (names or {}).get(e.option, flag(e.option))
+        raise ConfigError(f"{where} {e.detail}") from None

@@ -105,45 +105,53 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no per-candidate lines")
 
 
-def _ints(text: str | None, option: str, lo: int = 1, hi: int = 4096) -> tuple[int, ...] | None:
+def _ints(text: str | None, option: str, as_option: str) -> tuple[int, ...] | None:
+    """Comma-separated integers, each checked as the build option `as_option` (its range
+    lives in the core's config)."""
     if text is None:
         return None
     try:
         vals = tuple(int(x) for x in text.split(",") if x.strip())
     except ValueError:
         raise ConfigError(f"{option}: expected integers like 2,8,32, got {text!r}") from None
-    if not vals or any(not lo <= v <= hi for v in vals):
-        raise ConfigError(f"{option}: values must be in {lo}..{hi}, got {text!r}")
+    if not vals:
+        raise ConfigError(f"{option}: expected integers like 2,8,32, got {text!r}")
+    for v in vals:
+        try:
+            BuildConfig(**{as_option: v})
+        except ValueError as e:
+            raise ConfigError(f"{option} {text}: value {getattr(e, 'detail', e)}") from None
     return vals
 
 
 def preset_from_args(args: argparse.Namespace) -> Preset:
     base = PRESETS["quick" if args.quick else "full"]
-    ref = _ints(args.reference, "--reference", 1, 65536)
+    ref = _ints(args.reference, "--reference", "latents")
     if ref is not None and len(ref) != 2:
         raise ConfigError(f"--reference: expected M,S (frames, samples), got {args.reference!r}")
+    if ref is not None:
+        from_flags(samples=ref[1])
     pre = Preset(
         resolution=args.resolution or base.resolution,
         level=args.level or base.level,
         reference=ref or base.reference,  # type: ignore[arg-type]
-        budgets=_ints(args.budgets, "--budgets", 1, 2**20) or base.budgets,
-        latents=_ints(args.latents, "--latents") or base.latents,
+        budgets=_ints(args.budgets, "--budgets", "samples_total") or base.budgets,
+        latents=_ints(args.latents, "--latents", "latents") or base.latents,
         samplings=base.samplings,
     )
-    if not 8 <= pre.resolution <= 4096:
-        raise ConfigError(f"--resolution: must be in 8..4096, got {pre.resolution}")
-    if not 1 <= pre.level <= 64:
-        raise ConfigError(f"--level: must be in 1..64, got {pre.level}")
-    if not 0 <= args.view < 4096:
-        raise ConfigError(f"--view: must be in 0..4095, got {args.view}")
+    if args.view < 0:
+        raise ConfigError(f"--view {args.view}: must be an integer ≥ 0")
     # The options a build shares are checked by the build config's validator.
     from_flags(
+        {"levels": "--level", "views": "--view (+1)"},
         seed=args.seed,
         timeout=args.timeout,
         threads=args.threads,
         max_ghost_px=args.max_ghost_px,
         resolution=pre.resolution,
         levels=[pre.level],
+        # the plan holds views 0..view
+        views=args.view + 1,
     )
     try:
         _core.check_theta0_deg(args.theta0_deg)

@@ -16,7 +16,14 @@ import numpy as np
 
 from blurset import _core, layout
 from blurset.exceptions import ConfigError, InputError
-from blurset.noise.params import files_record, noise_json, noise_table, parse_gains, table_record
+from blurset.noise.params import (
+    check_options,
+    files_record,
+    noise_json,
+    noise_table,
+    parse_gains,
+    table_record,
+)
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
 MODEL = "y' = y + sqrt(sigma_read^2 + sigma_shot^2 * y) * N(0, 1), y = white_level * decode(x) / wb"
@@ -63,12 +70,7 @@ def run(args) -> int:
     args.gamma = args.gamma or "2.2"
     if args.factor is not None and args.factor < 1:
         raise ConfigError(f"--factor {args.factor}: must be >= 1")
-    if args.frames < 1:
-        raise ConfigError(f"--frames {args.frames}: must be >= 1")
-    if not (1e-6 <= args.white_level <= 1.0):
-        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
-    if not (0 <= args.seed < 2**64):
-        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+    check_options(args)
     gains = parse_gains(args.gains, args.any_gain)
 
     image_dir = scene / (f"images_{args.factor}" if args.factor else "images")
