@@ -53,6 +53,7 @@ def _object_record(obj: ObjectSpec, info: dict) -> dict[str, Any]:
     keys = ("bbox_dims", "scale", "center", "n_vertices", "n_triangles", "unlit_fixed")
     return {
         "source": str(obj.path),
+        "sha256": info.get("sha256"),
         **{k: info.get(k) for k in keys},
         "blender_version": info.get("blender_version"),
         "warnings": info.get("warnings", []),

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import hashlib
 import json
 import os
 import shutil
@@ -133,13 +134,29 @@ class ObjectUnit:
             return False
         problem = layout.setting_problem(setting)
         if problem is None:
-            meta = json.loads((setting / "meta.json").read_text())
-            source = (meta.get("object") or {}).get("source")
-            if source == str(self.obj.path):
+            made_from = json.loads((setting / "meta.json").read_text()).get("object") or {}
+            # The file's content decides (a build moved elsewhere, or a demo object made
+            # again, is still the same object); without a recorded hash, its path.
+            if made_from.get("sha256") == self.sha256() or (
+                "sha256" not in made_from and made_from.get("source") == str(self.obj.path)
+            ):
                 return True
-            problem = f"made from another file ({source})"
+            problem = f"made from another file ({made_from.get('source')})"
         self.progress.write(f"redoing {setting.name}: {problem}")
         return False
+
+    def sha256(self) -> str | None:
+        """The object file's sha256 (once per unit); None when it cannot be read (yet)."""
+        if not hasattr(self, "_sha256"):
+            try:
+                h = hashlib.sha256()
+                with open(self.obj.path, "rb") as f:
+                    for block in iter(lambda: f.read(1 << 20), b""):
+                        h.update(block)
+                self._sha256: str | None = h.hexdigest()
+            except OSError:
+                self._sha256 = None
+        return self._sha256
 
     def _attempt(self, pending: list[SettingJob], deadline: float | None) -> None:
         """Load the object in a fresh worker and render the pending settings in order,
@@ -168,6 +185,7 @@ class ObjectUnit:
             info = w.load(obj.path, work / "vertices.npy")
             info["load_s"] = round(time.monotonic() - t0, 3)
             info["blender_version"] = w.info.get("blender_version")
+            info["sha256"] = self.sha256()
             verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
             self.stage = "render"
             while pending:

@@ -13,10 +13,12 @@ use std::path::Path;
 
 /// What the worker reported about the object it loaded (null where it did not say).
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct ObjectRecord {
     /// The model file the setting was rendered from.
     pub source: String,
+    /// SHA-256 of that file: a rerun reuses a setting made from the same bytes.
+    pub sha256: Option<String>,
     pub bbox_dims: Option<Vec<f64>>,
     pub scale: Option<f64>,
     pub center: Option<Vec<f64>>,
@@ -29,7 +31,7 @@ pub struct ObjectRecord {
 
 /// Wall-clock seconds of a setting's stages (not part of the data: they vary per run).
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct Timings {
     pub plan_s: Option<f64>,
     pub sharp_s: Option<f64>,
