@@ -20,7 +20,6 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-
 from blurset.data import Scene, list_scenes, open_scene
 
 

@@ -239,8 +239,8 @@ def test_split_options_flags_and_toml_keys(tmp_path):
     with pytest.raises(SystemExit):  # argparse: one of the two
         parser.parse_args(["--test-objects", "0.1", "--test-settings", "3"])
     for args, words in [
-        (["--downsample", "5"], ["--downsample", "factor 5", "96"]),
-        (["--downsample", "1"], ["--downsample", "2..64"]),
+        (["--downsample", "5"], ["--downsample", "5: does not divide", "96"]),
+        (["--downsample", "1"], ["--downsample", "2..=64"]),
         (["--test-objects", "1.5"], ["--test-objects"]),
         (["--test-settings", "0"], ["--test-settings"]),
         (["--test-view-stride", "0"], ["--test-view-stride"]),

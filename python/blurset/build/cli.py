@@ -6,7 +6,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from blurset.config import BuildConfig, load_toml, make_config, parse_levels, split_test_objects
+from blurset.config import (
+    BuildConfig,
+    load_toml,
+    make_config,
+    parse_downsample,
+    parse_levels,
+    split_test_objects,
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -154,9 +161,11 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
     }
     if args.levels is not None:
         flags["levels"] = parse_levels(args.levels)
+    if args.downsample is not None:
+        flags["downsample"] = parse_downsample(args.downsample)
     if args.test_objects is not None:
         flags.update(split_test_objects(args.test_objects, "--test-objects"))
-    return make_config(file_values, flags)
+    return make_config(file_values, flags, config_path=args.config)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -36,10 +36,11 @@ from pathlib import Path
 import numpy as np
 
 from blurset import __version__, _core, layout
-from blurset.config import parse_downsample
+from blurset.config import check_downsample, parse_downsample
 from blurset.exceptions import ConfigError, InputError
 from blurset.layout import gain_name
 from blurset.noise.params import (
+    check_options,
     copy_clean,
     files_record,
     noise_json,
@@ -292,7 +293,7 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
         # build's rows already hold the written resolution and focal length.
         rows = np.repeat(unit.rows, args.frames, axis=0)
         small = {f: unit.src / f"images_{f}" for f in params["downsample"]}
-        setting_transforms = (unit.src.parent / "transforms.json").read_text()
+        setting_transforms = json.loads((unit.src.parent / "transforms.json").read_text())
         files = [
             (v, f"images/{unit.names[v * args.frames + k]}.png")
             for v in range(len(unit.pngs))
@@ -307,16 +308,14 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
                 setting_transforms,
                 files,
                 test_views=unit.test_views,
-                extra_json=json.dumps(
-                    {
-                        "level": unit.level,
-                        "gain": int(g) if float(g).is_integer() else g,
-                        "test_view_images": "clean" if unit.clean_views else "noisy",
-                    }
-                ),
+                extra={
+                    "level": unit.level,
+                    "gain": int(g) if float(g).is_integer() else g,
+                    "test_view_images": "clean" if unit.clean_views else "noisy",
+                },
             )
             sr, ss = gains_sigmas[g]
-            layout.write_json(
+            _core.write_noise_json(
                 part / "noise.json", _noise_json(unit, g, sr, ss, wb, params, args, build)
             )
             layout.publish(part, unit.dst / gain_name(g))
@@ -373,12 +372,7 @@ def run(args) -> int:
     out: Path = args.out
     if args.factor is not None:
         raise ConfigError("--factor: a build has no images_<F>/ directories; omit it")
-    if args.frames < 1:
-        raise ConfigError(f"--frames {args.frames}: must be >= 1")
-    if not (1e-6 <= args.white_level <= 1.0):
-        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
-    if not (0 <= args.seed < 2**64):
-        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+    check_options(args)
     if args.clean_views is not None:
         raise ConfigError(
             "--clean-views applies to a scene: a build keeps its own test views clean "
@@ -387,7 +381,7 @@ def run(args) -> int:
     gains = parse_gains(args.gains, args.any_gain)
     dataset = layout.read_json(build / "dataset.json", "dataset.json")
     if args.downsample is not None:
-        downsample = parse_downsample(args.downsample)
+        downsample = check_downsample(parse_downsample(args.downsample))
     else:  # the build's own images_<f>/ factors (none in a build made before them)
         downsample = list((dataset.get("config") or {}).get("downsample") or [])
     clean_policy = "none" if args.noisy_test_views else "test_views"

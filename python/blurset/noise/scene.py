@@ -15,9 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from blurset import _core, layout
-from blurset.config import parse_downsample
+from blurset.config import check_downsample, parse_downsample
 from blurset.exceptions import ConfigError, InputError
 from blurset.noise.params import (
+    check_options,
     copy_clean,
     every_kth,
     files_record,
@@ -78,12 +79,7 @@ def run(args) -> int:
     args.gamma = args.gamma or "2.2"
     if args.factor is not None and args.factor < 1:
         raise ConfigError(f"--factor {args.factor}: must be >= 1")
-    if args.frames < 1:
-        raise ConfigError(f"--frames {args.frames}: must be >= 1")
-    if not (1e-6 <= args.white_level <= 1.0):
-        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
-    if not (0 <= args.seed < 2**64):
-        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+    check_options(args)
     gains = parse_gains(args.gains, args.any_gain)
 
     image_dir = scene / (f"images_{args.factor}" if args.factor else "images")
@@ -118,7 +114,7 @@ def run(args) -> int:
     factor = args.factor or 1
     names = output_names(sources, args.frames)
     clean = every_kth(len(sources), args.clean_views)
-    downsample = parse_downsample(args.downsample) if args.downsample else []
+    downsample = check_downsample(parse_downsample(args.downsample)) if args.downsample else []
     bad = next((f for f in downsample if width % f or height % f), None)
     if bad is not None:
         raise ConfigError(f"--downsample {bad}: does not divide the image size {width}x{height}")
@@ -188,7 +184,7 @@ def run(args) -> int:
                 "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
                 files=files,
             )
-            layout.write_json(gdir / "noise.json", doc, indent=2)
+            _core.write_noise_json(gdir / "noise.json", doc)
         if out.exists():
             shutil.rmtree(out)
         tmp.rename(out)
