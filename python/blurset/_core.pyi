@@ -281,3 +281,31 @@ def current_failures(
 ) -> tuple[str, int]:
     """(JSON list of the failures now, torn lines skipped): the latest record per
     (uid, setting) whose work is still not complete."""
+
+# -- publishing: checksums, the image check of verify (rust/py/src/publish.rs) ----------
+
+MANIFEST: str
+
+def sha256_file(path: str | PathLike[str]) -> str:
+    """sha256 of a file's bytes, lowercase hex."""
+
+def manifest_files(root: str | PathLike[str]) -> list[str]:
+    """The files MANIFEST.sha256 of `root` lists: relative, '/'-separated, sorted
+    bytewise; not the manifest, dot files, dot folders or `*.partial` folders."""
+
+def write_manifest(root: str | PathLike[str]) -> int:
+    """Hash every listed file (in parallel) into root/MANIFEST.sha256 (sha256sum
+    format, atomic); returns the number of files."""
+
+def update_manifest(root: str | PathLike[str], rels: list[str]) -> int:
+    """Rehash these files (relative to `root`) into its existing manifest, dropping
+    those no longer there; returns the number of files listed."""
+
+def check_manifest(root: str | PathLike[str]) -> list[tuple[str, str]]:
+    """(relative path, problem) of each file that does not match root/MANIFEST.sha256:
+    `missing`, `checksum mismatch` or `not in MANIFEST.sha256`, sorted by path.
+    Raises FileNotFoundError without a manifest, InputError naming a bad line."""
+
+def check_images(items: list[tuple[str | PathLike[str], int, int]]) -> list[str | None]:
+    """For each (path, width, height): None when the image (PNG/JPEG, or a linear EXR
+    by its extension) decodes whole at that size, else the problem. In parallel."""

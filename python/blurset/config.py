@@ -88,6 +88,11 @@ class BuildConfig:
     max_texture_pixels: int = 256 * 2**20
     blender: str | None = None
     check_poses: bool = False
+    # `--licenses cc-by-4.0,cc0-1.0,…` (issue 19): objects under any other licence (or an
+    # unknown one, unless `unknown` is listed) are skipped before rendering, recorded in
+    # failures.jsonl (stage license). None = every licence. Canonical ids (SPDX case,
+    # `other`, `unknown`) from blurset.attribution.parse_licenses.
+    licenses: list[str] | None = None
 
     def sampling_json(self) -> str:
         """The blurset-core SamplingConfig of this build."""
@@ -185,6 +190,10 @@ def parse_levels(value: Any, where: str = "--levels") -> list[int]:
 def _coerce(name: str, value: Any, where: str) -> Any:
     if name == "levels":
         return parse_levels(value, where)
+    if name == "licenses":
+        from blurset.attribution import parse_licenses
+
+        return parse_licenses(value, where)
     if name == "latents" and isinstance(value, str):
         if value.strip().lower() == "auto":
             return "auto"

@@ -15,7 +15,7 @@ import threading
 import time
 from pathlib import Path
 
-from blurset import layout
+from blurset import layout, publish
 from blurset.build.dataset import append_failures, build_lock, finalize, sweep
 from blurset.build.executors import run_local, run_ray
 from blurset.build.setting import frames_per_setting
@@ -104,9 +104,12 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
         nonlocal new_settings
         with lock:
             new_settings += res.new_settings
-            if res.failures:
+            if res.failures or res.local:
                 with build_lock(out):
-                    append_failures(out, res.failures)
+                    if res.failures:
+                        append_failures(out, res.failures)
+                    # The absolute path stays here, unpublished (issue 19).
+                    publish.log_local(out, [res.local] if res.local else [])
         for r in res.failures:
             prog.write(f"failed: {r.get('setting') or r['uid']}: {r['stage']}: {r['reason']}")
 

@@ -13,12 +13,12 @@ import shutil
 import time
 from pathlib import Path
 
-from blurset import __version__, _core, layout
+from blurset import __version__, _core, layout, publish
 from blurset.config import BuildConfig
 from blurset.objects import ObjectSpec
 
 # The files every process building into OUT shares (written under build_lock).
-SHARED_FILES = ("failures.jsonl", "splits.json", "dataset.json")
+SHARED_FILES = ("failures.jsonl", "splits.json", "dataset.json", "MANIFEST.sha256")
 
 
 @contextlib.contextmanager
@@ -90,7 +90,8 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
         "name": "blurset Objaverse-Blur",
         "blurset_version": __version__,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "config": cfg.to_json(),
+        # No builder paths in what is published (issue 19): see blurset.publish.
+        "config": publish.public_config(cfg.to_json()),
         "seed": cfg.seed,
         "levels": cfg.level_dirs,
         "versions": {
@@ -113,4 +114,6 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     if checks:
         dataset["pose_checks"] = checks
     layout.write_json(out / "dataset.json", dataset)
+    # Last: the checksums of everything above (another shard's finalize rewrites it).
+    publish.write_manifest(out)
     return {"settings_complete": len(complete), "failures": kept}

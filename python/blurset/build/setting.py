@@ -147,9 +147,14 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
             "background": cfg.background,
             "alpha": "premultiplied, averaged with colour, composited over background",
             "encoding": "sRGB (IEC 61966-2-1) of linear radiance, 8-bit PNG",
+            # <level>/linear/<view>.exr beside images/ (--keep-linear): blurset verify
+            # expects them when true.
+            "linear": cfg.write_linear,
         },
         "object": {
-            "source": str(obj.path),
+            # path (relative to its root), sha256, title, author, licence, source_url:
+            # where the object came from, never the builder's absolute path (issue 19).
+            **info.get("provenance", {}),
             "bbox_dims": info.get("bbox_dims"),
             "scale": info.get("scale"),
             "center": info.get("center"),

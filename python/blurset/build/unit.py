@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import layout, objaverse_cache, preflight
+from blurset import _core, attribution, layout, objaverse_cache, preflight
 from blurset.build.setting import SettingFailed, SettingJob, render_setting
 from blurset.config import BuildConfig
 from blurset.exceptions import BlursetError
@@ -35,6 +35,8 @@ class ObjectResult:
     # Failure records (failures.jsonl): the object's, or one per setting that failed QA.
     failures: list[dict[str, Any]] = field(default_factory=list)
     new_settings: int = 0
+    # For OUT/.local/paths.jsonl (never published): where this object came from.
+    local: dict[str, Any] = field(default_factory=dict)
 
 
 class ObjectUnit:
@@ -47,10 +49,35 @@ class ObjectUnit:
         self.obj, self.cfg, self.progress = obj, cfg, progress
         self.out = Path(cfg.out)
         self.work = self.out / f".work-{obj.uid}"
-        self.result = ObjectResult(uid=obj.uid)
+        self.result = ObjectResult(
+            uid=obj.uid, local={"uid": obj.uid, "path": str(obj.path), "rel": obj.rel}
+        )
         self.stage = "fetch"
+        self._sha256: str | None = None
+        # meta.json `object` fields that say where the object came from (issue 19).
+        self.provenance: dict[str, Any] = {}
 
     def run(self) -> ObjectResult:
+        result = self._run()
+        for r in result.failures:
+            r["reason"] = self._scrub(r["reason"])
+        return result
+
+    def _scrub(self, text: str) -> str:
+        """A failure reason without the builder's absolute paths (worker and importer
+        messages name files): the input becomes its relative path, OUT becomes `OUT`."""
+        swaps = [
+            (str(self.obj.path), self.obj.rel or self.obj.path.name),
+            (str(self.out), "OUT"),
+            (str(self.obj.path.parent), "."),
+            (str(Path.home()), "~"),
+        ]
+        for old, new in sorted(swaps, key=lambda s: -len(s[0])):
+            if len(old) > 1:
+                text = text.replace(old, new)
+        return text
+
+    def _run(self) -> ObjectResult:
         obj, cfg, progress, result = self.obj, self.cfg, self.progress, self.result
         jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
         pending = [j for j in jobs if not self._reusable(self.out / j.name)]
@@ -72,10 +99,22 @@ class ObjectUnit:
             if obj.source == "objaverse":
                 objaverse(cfg).ensure(obj.uid, obj.path)
             self.stage = "preflight"
-            preflight.check(obj.path, preflight.Budget(cfg.max_triangles, cfg.max_texture_pixels))
+            report = preflight.check(
+                obj.path, preflight.Budget(cfg.max_triangles, cfg.max_texture_pixels)
+            )
+            self.provenance = self._provenance(report)
+            self.stage = "license"
+            lic = self.provenance["license"]
+            if not attribution.allowed(lic, cfg.licenses):
+                raise LicenseRefused(
+                    f"licence {lic} ({self.provenance['license_text']}) is not in --licenses "
+                    f"{','.join(cfg.licenses or [])}"
+                )
         except Exception as e:
             # Whatever a file does to the fetch or the pre-flight costs that file only.
-            if isinstance(e, objaverse_cache.FetchError | preflight.PreflightError):
+            if isinstance(
+                e, objaverse_cache.FetchError | preflight.PreflightError | LicenseRefused
+            ):
                 reason = str(e)
             else:
                 reason = f"{type(e).__name__}: {' '.join(str(e).split())[:300]}"
@@ -113,14 +152,35 @@ class ObjectUnit:
         shutil.rmtree(self.work, ignore_errors=True)
         return result
 
+    def sha256(self) -> str:
+        """sha256 of the object's file (hashed once per unit)."""
+        if self._sha256 is None:
+            self._sha256 = _core.sha256_file(self.obj.path)
+            self.result.local["sha256"] = self._sha256
+        return self._sha256
+
+    def _provenance(self, report: preflight.Report) -> dict[str, Any]:
+        """Where the object came from and who made it, for meta.json: its relative path,
+        the sha256 of its bytes and its attribution (blurset.attribution)."""
+        obj = self.obj
+        sources = [attribution.from_asset(report.asset)]
+        if obj.source == "objaverse":
+            cache = objaverse(self.cfg)
+            ann = attribution.objaverse_annotation(cache.versioned, obj.path, obj.uid)
+            sources.append(attribution.from_objaverse_annotation(ann))
+        return {"path": obj.rel, "sha256": self.sha256(), **attribution.attribution(*sources)}
+
     def _reusable(self, setting: Path) -> bool:
-        """A complete setting made from this very file (another file may have had this
-        id in an earlier run: its settings are redone, never passed off as this one's)."""
+        """A complete setting made from this very file: the same relative path and the
+        same bytes (another file may have had this id in an earlier run: its settings
+        are redone, never passed off as this one's)."""
         if not layout.is_complete(setting):
             return False
         try:
-            meta = json.loads((setting / "meta.json").read_text())
-            return meta["object"]["source"] == str(self.obj.path)
+            made_from = json.loads((setting / "meta.json").read_text())["object"]
+            if "sha256" not in made_from:  # written before issue 19: an absolute path
+                return made_from["source"] == str(self.obj.path)
+            return made_from["path"] == self.obj.rel and made_from["sha256"] == self.sha256()
         except (OSError, ValueError, KeyError, TypeError):
             return False
 
@@ -150,6 +210,7 @@ class ObjectUnit:
             self.stage = "load"
             info = w.load(obj.path, work / "vertices.npy")
             info["load_s"] = round(time.monotonic() - t0, 3)
+            info["provenance"] = self.provenance
             info["blender_version"] = w.info.get("blender_version")
             verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
             self.stage = "render"
@@ -176,6 +237,10 @@ class ObjectUnit:
 DISK_FULL_BYTES = 64 * 2**20
 
 
+class LicenseRefused(BlursetError):
+    """The object's licence is not one `--licenses` allows: skipped before rendering."""
+
+
 class DiskFull(BlursetError):
     """OUT's file system is full: the build stops (nothing half-written is kept)."""
 
@@ -197,10 +262,11 @@ def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> Objec
 
 
 def failure_record(obj: ObjectSpec, stage: str, reason: str, t0: float, attempts: int) -> dict:
-    """A failures.jsonl record: uid, path, stage, reason, seconds (+ attempts, time)."""
+    """A failures.jsonl record: uid, path (relative to its root: the absolute one goes to
+    OUT/.local only), stage, reason, seconds (+ attempts, time)."""
     return {
         "uid": obj.uid,
-        "path": str(obj.path),
+        "path": obj.rel or obj.path.name,
         "stage": stage,
         "reason": reason,
         "seconds": round(time.monotonic() - t0, 3),

@@ -45,8 +45,13 @@ pub use crate::dataset::layout::{image_name, setting_name, theta0s};
 pub use crate::dataset::llff::{
     parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses, PoseRow,
 };
+pub use crate::dataset::manifest::{
+    check_manifest, list_files as manifest_files, sha256_file, update_manifest, write_manifest,
+    ManifestProblem, MANIFEST,
+};
 pub use crate::dataset::splits::{make_splits, seeded_subset, test_views, SettingEntry};
 pub use crate::dataset::stats::build_stats;
+pub use crate::dataset::verify::{check_images, ImageCheck};
 
 // Image error against a reference and the speed/quality front.
 pub use crate::metrics::{image_error, pareto_front};

@@ -8,6 +8,7 @@ mod failures;
 mod llff;
 mod noise;
 mod noise_linear;
+mod publish;
 mod qa;
 mod sampling;
 mod stats;
@@ -32,6 +33,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     accumulate::register(m)?;
     noise::register(m)?;
     noise_linear::register(m)?;
+    publish::register(m)?;
     qa::register(m)?;
     tradeoff::register(m)?;
     stats::register(m)?;

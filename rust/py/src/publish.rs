@@ -1,0 +1,65 @@
+//! Checksums and the image check of a published build (issue 19, `blurset verify`):
+//! one core call each.
+use blurset_core as core;
+use pyo3::prelude::*;
+use std::path::PathBuf;
+
+/// sha256 of a file's bytes, lowercase hex.
+#[pyfunction]
+fn sha256_file(py: Python<'_>, path: PathBuf) -> PyResult<String> {
+    crate::run_detached(py, || core::sha256_file(&path))
+}
+
+/// The files MANIFEST.sha256 of `root` lists (relative, sorted).
+#[pyfunction]
+fn manifest_files(py: Python<'_>, root: PathBuf) -> PyResult<Vec<String>> {
+    crate::run_detached(py, || core::manifest_files(&root))
+}
+
+/// Hash every listed file of `root` (in parallel) into root/MANIFEST.sha256; the count.
+#[pyfunction]
+fn write_manifest(py: Python<'_>, root: PathBuf) -> PyResult<usize> {
+    crate::run_detached(py, || core::write_manifest(&root))
+}
+
+/// Rehash these files (relative to `root`) into its existing manifest; the count.
+#[pyfunction]
+fn update_manifest(py: Python<'_>, root: PathBuf, rels: Vec<String>) -> PyResult<usize> {
+    crate::run_detached(py, || core::update_manifest(&root, &rels))
+}
+
+/// [(relative path, problem)] of the files that do not match root/MANIFEST.sha256.
+#[pyfunction]
+fn check_manifest(py: Python<'_>, root: PathBuf) -> PyResult<Vec<(String, String)>> {
+    let problems = crate::run_detached(py, || core::check_manifest(&root))?;
+    Ok(problems
+        .into_iter()
+        .map(|(p, what)| (p, what.as_str().to_string()))
+        .collect())
+}
+
+/// For each (path, width, height): None when the image decodes whole at that size,
+/// else what is wrong. Decoded in parallel.
+#[pyfunction]
+fn check_images(py: Python<'_>, items: Vec<(PathBuf, u32, u32)>) -> Vec<Option<String>> {
+    let items: Vec<core::ImageCheck> = items
+        .into_iter()
+        .map(|(path, width, height)| core::ImageCheck {
+            path,
+            width,
+            height,
+        })
+        .collect();
+    py.detach(|| core::check_images(&items))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("MANIFEST", core::MANIFEST)?;
+    m.add_function(wrap_pyfunction!(sha256_file, m)?)?;
+    m.add_function(wrap_pyfunction!(manifest_files, m)?)?;
+    m.add_function(wrap_pyfunction!(write_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(update_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(check_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(check_images, m)?)?;
+    Ok(())
+}
