@@ -26,6 +26,16 @@ COMMANDS = {
         "measure render time against PSNR for latent counts, samples and blur methods",
     ),
     "stats": ("blurset.stats", "histograms, numbers and a report of a build's statistics"),
+    "card": (
+        "blurset.card",
+        "write a Hugging Face dataset card (README.md) for a build: licences, construction, "
+        "counts, attribution",
+    ),
+    "verify": (
+        "blurset.verify",
+        "check that a build (or a noise output) is whole: every file, every image decoded, "
+        "counts, MANIFEST.sha256",
+    ),
 }
 
 
