@@ -62,6 +62,11 @@ def public_config(config: dict[str, Any]) -> dict[str, Any]:
     return c
 
 
+def manifest_files(root: Path) -> list[str]:
+    """The files MANIFEST.sha256 of `root` lists (relative, sorted bytewise)."""
+    return _core.manifest_files(Path(root))
+
+
 def write_manifest(root: Path) -> int:
     """Hash every listed file of `root` into root/MANIFEST.sha256 (atomic); the count."""
     return _core.write_manifest(Path(root))

@@ -309,7 +309,7 @@ def _check_manifest(root: Path, rep: Report) -> None:
     except (OSError, ValueError) as e:
         rep.bad(publish.MANIFEST, str(e).rsplit(": ", 1)[0])
         return
-    rep.manifest_files = len(_core.manifest_files(root))
+    rep.manifest_files = len(publish.manifest_files(root))
     for rel, what in found:
         if what.startswith("not in"):
             rep.note(rel, f"{what} (added after it was written)")

@@ -72,6 +72,9 @@ class ObjectUnit:
             (str(self.obj.path.parent), "."),
             (str(Path.home()), "~"),
         ]
+        if self.obj.source == "objaverse":
+            root = objaverse(self.cfg).root
+            swaps.append((str(root), root.name))
         for old, new in sorted(swaps, key=lambda s: -len(s[0])):
             if len(old) > 1:
                 text = text.replace(old, new)
