@@ -163,6 +163,16 @@ def setting_problems(
     return rep.problems, to_decode
 
 
+def cheap_problems(setting: Path) -> list[tuple[str, str]]:
+    """What a rerun can afford to check of a complete setting before reusing it: every
+    promised file there, pose rows, and each image's size from its header (no pixels
+    decoded). [] when it looks whole."""
+    problems, images = setting_problems(setting)
+    rep = Report(setting.parent)
+    _decode(images, setting.parent, rep, decode=False)
+    return problems + rep.problems
+
+
 def _decode(items: list[tuple[Path, int, int]], root: Path, report: Report, decode: bool) -> None:
     if decode:
         results = _core.check_images([(str(p), w, h) for p, w, h in items])
@@ -174,15 +184,27 @@ def _decode(items: list[tuple[Path, int, int]], root: Path, report: Report, deco
     report.images += len(items)
 
 
+# Every PNG ends with this chunk: a file cut short (a full disk, a killed copy) does not.
+PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+
+
 def _header(p: Path, w: int, h: int) -> str | None:
-    """The cheap check of an image: its header's size (PNG/JPEG; EXRs: non-empty)."""
+    """The cheap check of an image: its header's size, and for a PNG its end chunk
+    (EXRs: non-empty)."""
     if p.suffix.lower() == ".exr":
         return None if p.stat().st_size > 0 else "empty file"
     try:
         iw, ih, _, _ = _core.image_info(p)
     except (OSError, ValueError) as e:
         return f"does not decode ({str(e).rsplit(': ', 1)[0]})"
-    return None if (iw, ih) == (w, h) else f"is {iw}x{ih}, expected {w}x{h}"
+    if (iw, ih) != (w, h):
+        return f"is {iw}x{ih}, expected {w}x{h}"
+    if p.suffix.lower() == ".png":
+        with open(p, "rb") as f:
+            f.seek(max(0, p.stat().st_size - len(PNG_END)))
+            if f.read() != PNG_END:
+                return "truncated (no PNG end chunk)"
+    return None
 
 
 # -- a build ----------------------------------------------------------------------------
