@@ -267,7 +267,7 @@ def test_a_full_disk_stops_the_build_naming_it(objs, small_disk):
     proc = subprocess.run(
         [sys.executable, "-m", "blurset.cli", "build", "--objects", str(objs), "--out", str(out),
          "--views", "4", "--levels", "1", "--latents", "4", "--samples", "2",
-         "--resolution", "256", "--settings-per-object", "1", "--quiet"],
+         "--resolution", "256", "--settings-per-object", "1", "--keep-linear", "--quiet"],
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert proc.returncode != 0, proc.stderr
@@ -279,3 +279,75 @@ def test_a_full_disk_stops_the_build_naming_it(objs, small_disk):
         for lvl in meta["levels"]:
             assert len(list((s / lvl / "images").glob("*.png"))) == len(meta["views"])
     assert os.path.ismount(small_disk)
+
+
+# -- one OUT, one object, two processes (D3); mixed options (D5); damage (D6) --------------
+
+
+@pytest.mark.blender
+def test_two_identical_builds_at_once_take_turns_per_object(objs, tmp_path):
+    out = tmp_path / "out"
+    first = start_build(objs, out)
+    assert wait_for(lambda: len(workers_of(out)) == 1, 120), first.stderr
+    second = start_build(objs, out)
+    _, err1 = first.communicate(timeout=900)
+    _, err2 = second.communicate(timeout=900)
+    assert first.returncode == 0 and second.returncode == 0, (err1, err2)
+    assert "is being built by pid" in err1 + err2
+    names = [d.name for d in layout.complete_settings(out)]
+    assert len(names) == 6, names
+    for n in names:
+        assert layout.setting_problem(out / n) is None, n
+    assert not (out / "failures.jsonl").read_text().strip()
+
+
+@pytest.fixture
+def one_glb(tmp_path) -> Path:
+    return make_demo_objects(tmp_path / "objs", seed=0)[0]
+
+
+@pytest.mark.blender
+def test_a_rerun_with_other_options_is_refused_unless_mixing_is_allowed(one_glb, tmp_path):
+    out = tmp_path / "out"
+    run_cli("build", "--objects", str(one_glb), "--out", str(out), *TINY)
+    before = tree(out)
+    other = ["--views", "3", "--resolution", "24", "--levels", "1", "--latents", "2",
+             "--samples", "2", "--settings-per-object", "1", "--quiet"]  # fmt: skip
+    proc = run_cli("build", "--objects", str(one_glb), "--out", str(out), *other, check=False)
+    one_error_line(proc, "--views 2", "--resolution 16", "--allow-mixed")
+    assert tree(out) == before
+    # Options that do not shape the files may change.
+    run_cli("build", "--objects", str(one_glb), "--out", str(out), *TINY, "--workers", "2",
+            "--timeout", "100")  # fmt: skip
+    run_cli("build", "--objects", str(one_glb), "--out", str(out), *other, "--allow-mixed")
+
+
+@pytest.mark.blender
+def test_damage_in_a_complete_setting_is_named_and_redone(one_glb, tmp_path):
+    out = tmp_path / "out"
+    run_cli("build", "--objects", str(one_glb), "--out", str(out), *TINY)
+    (setting,) = layout.complete_settings(out)
+    whole = tree(setting)
+
+    def truncate_png():
+        p = setting / "sharp" / "images" / "000.png"
+        p.write_bytes(p.read_bytes()[:40])
+
+    damages = {
+        "sharp/images/000.png is": truncate_png,
+        "blur_1/poses_bounds.npy is missing": lambda: (
+            setting / "blur_1" / "poses_bounds.npy"
+        ).unlink(),
+        "level folder blur_1/ is missing": lambda: shutil.rmtree(setting / "blur_1"),
+        "meta.json is unreadable": lambda: (setting / "meta.json").write_text("[]"),
+    }
+    for words, damage in damages.items():
+        damage()
+        proc = run_cli("build", "--objects", str(one_glb), "--out", str(out), *TINY)
+        assert f"redoing {setting.name}: {words}" in proc.stderr, proc.stderr
+        assert layout.setting_problem(setting) is None
+        again = tree(setting)
+        assert sorted(again) == sorted(whole)
+        for name in whole:
+            if not name.endswith(("meta.json", ".complete")):
+                assert again[name] == whole[name], name

@@ -296,8 +296,8 @@ def test_verify_finds_damage_without_a_manifest(published, tmp_path):
                 "sketchfab_MazdaRX7Stylised_000/sharp/images/001.png"):  # fmt: skip
         assert found[f"{build}/{rel}"].startswith("does not decode"), found
     assert "4 problem(s)" in proc.stderr
-    # The cheap check a rerun can afford (headers, PNG end chunks, files, pose rows)
-    # catches the cut PNG too; only the full decode sees inside the EXR.
+    # The cheap check (headers, PNG end chunks, files, pose rows) catches the cut PNG
+    # too; only the full decode sees inside the EXR.
     cheap = run_cli("verify", "--no-decode", str(build), check=False)
     assert cheap.returncode == 1
     found = dict(line.split(": ", 1) for line in cheap.stdout.splitlines())

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from blurset import layout
 from blurset.demo import make_demo_objects
 from blurset.objects import resolve_objects, sanitize, setting_name
 from blurset.preflight import glb_inspect
@@ -49,7 +50,21 @@ def rewrite_json(src: Path, dst: Path, edit) -> None:
 
 
 def setting_dirs(out: Path) -> list[str]:
-    return sorted(d.name for d in out.iterdir() if (d / ".complete").exists())
+    return [d.name for d in layout.complete_settings(out)]
+
+
+def assert_complete_means_whole(out: Path) -> None:
+    """What every reader (finalize, noise, preview, stats) counts as complete is whole:
+    never a `.partial`, never a setting missing a file (issue 14)."""
+    from blurset.stats import load_stats  # stats' own scan, in Rust
+
+    names = setting_dirs(out)
+    assert not any(n.endswith(".partial") for n in names), names
+    for n in names:
+        assert layout.setting_problem(out / n) is None, (n, layout.setting_problem(out / n))
+    if (out / "dataset.json").exists() or names:
+        stats = load_stats(out)
+        assert stats["counts"]["settings"] == len(names), stats["counts"]
 
 
 def failures(out: Path) -> dict[str, dict]:
@@ -228,7 +243,10 @@ def tree(out: Path) -> dict[str, bytes]:
         str(p.relative_to(out)): p.read_bytes()
         for p in sorted(out.rglob("*"))
         # .local/ keeps the builder's paths, one record per object and run
-        if p.is_file() and p.name != ".lock" and ".local" not in p.relative_to(out).parts
+        if p.is_file()
+        and p.name != ".lock"
+        and ".locks" not in p.parts
+        and ".local" not in p.relative_to(out).parts
     }
 
 
@@ -282,6 +300,7 @@ def test_killed_three_times_then_resumed_equals_an_uninterrupted_build(objects, 
         os.killpg(p.pid, signal.SIGKILL)
         p.wait()
         p.stderr.close()
+        assert_complete_means_whole(killed)
     # The kills did leave debris for the resume to clean up.
     debris = [n for n in tree(killed) if ".partial" in n or ".work-" in n]
     assert debris

@@ -88,6 +88,9 @@ class BuildConfig:
     max_texture_pixels: int = 256 * 2**20
     blender: str | None = None
     check_poses: bool = False
+    # A rerun into an OUT made with other output-shaping options is refused unless this
+    # is set (the dataset would mix settings that dataset.json cannot describe).
+    allow_mixed: bool = False
     # `--licenses cc-by-4.0,cc0-1.0,…` (issue 19): objects under any other licence (or an
     # unknown one, unless `unknown` is listed) are skipped before rendering, recorded in
     # failures.jsonl (stage license). None = every licence. Canonical ids (SPDX case,

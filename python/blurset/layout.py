@@ -105,6 +105,50 @@ def temp_path(path: Path) -> Path:
     return path.with_name(f".{path.name}.tmp{os.getpid()}")
 
 
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def setting_problem(setting: Path) -> str | None:
+    """What is missing or damaged in a complete setting, checked cheaply (names, sizes,
+    headers; `blurset verify` decodes everything): None when it looks whole. A rerun
+    redoes a setting with a problem instead of counting it."""
+    try:
+        meta = json.loads((setting / "meta.json").read_text())
+        views, levels = len(meta["views"]), list(meta["levels"])
+    except FileNotFoundError:
+        return "meta.json is missing"
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        return f"meta.json is unreadable ({type(e).__name__})"
+    if not (setting / "transforms.json").is_file():
+        return "transforms.json is missing"
+    # Rows of poses_bounds.npy: a float64 (N, 17) array after an npy header.
+    row_bytes = 17 * 8
+    for lvl in levels:
+        d = setting / lvl
+        if not d.is_dir():
+            return f"level folder {lvl}/ is missing"
+        images = sorted((d / "images").glob("*.png")) if (d / "images").is_dir() else []
+        if len(images) != views:
+            return f"{lvl}/images holds {len(images)} of {views} images"
+        for p in images:
+            with open(p, "rb") as f:
+                head = f.read(8)
+                f.seek(0, os.SEEK_END)
+                size = f.tell()
+            if head != PNG_MAGIC or size < 67:
+                return f"{lvl}/images/{p.name} is not a whole PNG"
+            with open(p, "rb") as f:
+                f.seek(size - 12)
+                if f.read(12)[4:8] != b"IEND":
+                    return f"{lvl}/images/{p.name} is truncated"
+        npy = d / "poses_bounds.npy"
+        if not npy.is_file():
+            return f"{lvl}/poses_bounds.npy is missing"
+        if npy.stat().st_size < views * row_bytes + 16:
+            return f"{lvl}/poses_bounds.npy is truncated"
+    return None
+
+
 def refuse_overlap(out: Path, inputs: list[Path], option: str = "--out") -> None:
     """An output may not be, lie inside or contain any input: writing (or replacing with
     --overwrite) would destroy what it reads. ConfigError names both."""

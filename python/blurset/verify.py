@@ -163,16 +163,6 @@ def setting_problems(
     return rep.problems, to_decode
 
 
-def cheap_problems(setting: Path) -> list[tuple[str, str]]:
-    """What a rerun can afford to check of a complete setting before reusing it: every
-    promised file there, pose rows, and each image's size from its header (no pixels
-    decoded). [] when it looks whole."""
-    problems, images = setting_problems(setting)
-    rep = Report(setting.parent)
-    _decode(images, setting.parent, rep, decode=False)
-    return problems + rep.problems
-
-
 def _decode(items: list[tuple[Path, int, int]], root: Path, report: Report, decode: bool) -> None:
     if decode:
         results = _core.check_images([(str(p), w, h) for p, w, h in items])

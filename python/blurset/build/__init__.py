@@ -16,7 +16,13 @@ import time
 from pathlib import Path
 
 from blurset import layout, publish
-from blurset.build.dataset import append_failures, build_lock, finalize, sweep
+from blurset.build.dataset import (
+    append_failures,
+    build_lock,
+    check_same_options,
+    finalize,
+    sweep,
+)
 from blurset.build.executors import run_local, run_ray
 from blurset.build.setting import frames_per_setting
 from blurset.build.unit import ObjectResult, objaverse
@@ -92,6 +98,7 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     objs = job_objects(cfg)
     with build_lock(out):
+        check_same_options(out, cfg)
         sweep(out, objs, cfg)
     n_settings = len(objs) * len(cfg.theta0s)
     prog = Progress(n_settings, frames_per_setting=frames_per_setting(cfg), enabled=progress)

@@ -101,6 +101,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--check-poses", action="store_true", default=None, help="COLMAP check per setting"
     )
     p.add_argument(
+        "--allow-mixed",
+        action="store_true",
+        default=None,
+        help="build into an OUT made with other output-shaping options (mixes settings)",
+    )
+    p.add_argument(
         "--licenses",
         help="only objects under these licences, e.g. cc-by-4.0,cc0-1.0 (SPDX ids; add "
         "unknown for objects that name none, other for unmapped ones); the rest are skipped "
@@ -119,7 +125,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
             "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "ray_address objaverse_dir objaverse_offline objaverse_count "
-            "blender check_poses previews licenses"
+            "blender check_poses previews allow_mixed licenses"
         ).split()
     }
     if args.levels is not None:

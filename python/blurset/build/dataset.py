@@ -10,13 +10,16 @@ import json
 import os
 import platform
 import shutil
+import sys
 import time
 from pathlib import Path
 
 from blurset import __version__, _core, layout, publish
 from blurset.config import BuildConfig
+from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec
 
+DATASET_NAME = "blurset Objaverse-Blur"
 # The files every process building into OUT shares (written under build_lock).
 SHARED_FILES = ("failures.jsonl", "splits.json", "dataset.json", "MANIFEST.sha256")
 
@@ -44,6 +47,47 @@ def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> None:
     layout.remove_stale_temps(out, list(SHARED_FILES))
 
 
+# Options that decide where and how a build runs, not what it writes: a rerun may change
+# them freely. Every other option shapes the files, so a rerun must keep it.
+RUN_OPTIONS = frozenset(
+    "objects out demo workers threads executor ray_address shard objaverse_dir "
+    "objaverse_offline objaverse_count timeout object_timeout retries max_failure_rate "
+    "max_triangles max_texture_pixels blender check_poses previews allow_mixed "
+    "view_stride test_fraction test_objects".split()
+)
+
+
+def check_same_options(out: Path, cfg: BuildConfig) -> None:
+    """Refuse (naming the options) a rerun into OUT whose output-shaping options differ
+    from those OUT was made with, unless --allow-mixed; the first run records them in a
+    provisional dataset.json (call under build_lock)."""
+    path = out / "dataset.json"
+    # Compared and recorded without the builder's paths (issue 19): the paths are run
+    # options, never compared.
+    now = publish.public_config(cfg.to_json())
+    if not path.is_file():
+        layout.write_json(path, {"name": DATASET_NAME, "config": now, "provisional": True})
+        return
+    try:
+        was = json.loads(path.read_text())["config"]
+        if not isinstance(was, dict):
+            raise TypeError
+    except (OSError, ValueError, KeyError, TypeError):
+        raise ConfigError(
+            f"dataset.json of OUT is unreadable; move it away to rebuild: {path}"
+        ) from None
+    defaults = publish.public_config(BuildConfig(out=cfg.out, objects=cfg.objects).to_json())
+    differ = [
+        k for k in sorted(now) if k not in RUN_OPTIONS and was.get(k, defaults.get(k)) != now[k]
+    ]
+    if differ and not cfg.allow_mixed:
+        said = ", ".join(f"--{k.replace('_', '-')} {was.get(k)!r} → {now[k]!r}" for k in differ[:4])
+        raise ConfigError(
+            f"--out was built with other options ({said}{' …' if len(differ) > 4 else ''}): "
+            f"use a new --out, or --allow-mixed to mix settings: {out}"
+        )
+
+
 def append_failures(out: Path, records: list[dict]) -> None:
     """Append failure records to failures.jsonl (call under build_lock)."""
     with open(out / "failures.jsonl", "a+b") as f:
@@ -60,9 +104,22 @@ def append_failures(out: Path, records: list[dict]) -> None:
 
 
 def _complete_settings(out: Path) -> list[tuple[str, dict]]:
-    return [
-        (d.name, json.loads((d / "meta.json").read_text())) for d in layout.complete_settings(out)
-    ]
+    """(name, meta.json) of the complete settings; one whose meta.json does not read is
+    left out of splits.json and dataset.json, named on stderr (its object's next run
+    redoes it)."""
+    found = []
+    for d in layout.complete_settings(out):
+        try:
+            meta = json.loads((d / "meta.json").read_text())
+            if not isinstance(meta, dict) or not isinstance(meta.get("views"), list):
+                raise ValueError("not a setting's meta.json")
+        except (OSError, ValueError) as e:
+            print(
+                f"skipped {d.name}: unreadable meta.json ({e}): {d / 'meta.json'}", file=sys.stderr
+            )
+            continue
+        found.append((d.name, meta))
+    return found
 
 
 def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
@@ -87,7 +144,7 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     layout.write_json(out / "splits.json", splits)
     checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
     dataset = {
-        "name": "blurset Objaverse-Blur",
+        "name": DATASET_NAME,
         "blurset_version": __version__,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
         # No builder paths in what is published (issue 19): see blurset.publish.

@@ -8,9 +8,13 @@ so a retry (here, by Ray, or a rerun after a kill) is always safe.
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import fcntl
 import json
+import os
 import shutil
+import socket
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -58,7 +62,11 @@ class ObjectUnit:
         self.provenance: dict[str, Any] = {}
 
     def run(self) -> ObjectResult:
-        result = self._run()
+        # One process at a time per object in OUT: two builds of the same object (a
+        # repeated command, overlapping shard lists) take turns; the second finds the
+        # first's settings complete.
+        with object_lock(self.out, self.obj.uid, self.progress.write):
+            result = self._run()
         for r in result.failures:
             r["reason"] = self._scrub(r["reason"])
         return result
@@ -140,6 +148,7 @@ class ObjectUnit:
                     break
                 if disk_full(self.out, e):
                     # Not this object's fault, and every next one would fail the same way.
+                    shutil.rmtree(self.work, ignore_errors=True)
                     raise DiskFull(f"No space left on device: {self.out}") from e
                 if isinstance(e, WorkerError) and e.transient and attempt <= cfg.retries:
                     progress.write(f"retrying {obj.uid} (attempt {attempt + 1}) after: {e}")
@@ -174,18 +183,35 @@ class ObjectUnit:
         return {"path": obj.rel, "sha256": self.sha256(), **attribution.attribution(*sources)}
 
     def _reusable(self, setting: Path) -> bool:
-        """A complete setting made from this very file: the same relative path and the
-        same bytes (another file may have had this id in an earlier run: its settings
-        are redone, never passed off as this one's)."""
+        """A complete setting made from this very file (the same relative path and the
+        same bytes), and whole (another file may have had this id in an earlier run, a
+        file may have been damaged or deleted since): anything else is redone, never
+        passed off as this object's."""
         if not layout.is_complete(setting):
             return False
+        problem = layout.setting_problem(setting)
+        if problem is None:
+            made_from = json.loads((setting / "meta.json").read_text()).get("object") or {}
+            problem = self._other_file(made_from)
+            if problem is None:
+                return True
+        self.progress.write(f"redoing {setting.name}: {problem}")
+        return False
+
+    def _other_file(self, made_from: dict[str, Any]) -> str | None:
+        """Why a setting's meta.json `object` is not this object's file, or None."""
+        if "sha256" not in made_from:  # written before issue 19: an absolute path
+            source = made_from.get("source")
+            return None if source == str(self.obj.path) else f"made from another file ({source})"
+        if made_from.get("path") != self.obj.rel:
+            return f"made from another file ({made_from.get('path')})"
+        if self.obj.source == "objaverse" and not self.obj.path.is_file():
+            return None  # an objaverse uid names one file; a cleaned cache needs no refetch
         try:
-            made_from = json.loads((setting / "meta.json").read_text())["object"]
-            if "sha256" not in made_from:  # written before issue 19: an absolute path
-                return made_from["source"] == str(self.obj.path)
-            return made_from["path"] == self.obj.rel and made_from["sha256"] == self.sha256()
-        except (OSError, ValueError, KeyError, TypeError):
-            return False
+            same = made_from["sha256"] == self.sha256()
+        except OSError as e:
+            return f"cannot read {self.obj.rel} ({e.strerror})"
+        return None if same else f"made from other bytes of {self.obj.rel} (sha256 differs)"
 
     def _attempt(self, pending: list[SettingJob], deadline: float | None) -> None:
         """Load the object in a fresh worker and render the pending settings in order,
@@ -233,6 +259,42 @@ class ObjectUnit:
                     result.new_settings += 1
                     progress.setting_done()
                 pending.pop(0)
+
+
+@contextlib.contextmanager
+def object_lock(out: Path, uid: str, say):
+    """Hold OUT/.lock-<uid> (flock) while an object is built; a process that finds it
+    held says who holds it and waits. The file is removed on release: a waiter that
+    then holds a lock on the removed file sees it is stale (another inode) and retries."""
+    path = out / f".lock-{uid}"
+    said = False
+    while True:
+        f = open(path, "a+")  # noqa: SIM115 - held across the yield
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            holder = f.read().strip() or "another process"
+            if not said:
+                say(f"waiting: {out / uid}_* is being built by {holder}")
+                said = True
+            fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            same = os.fstat(f.fileno()).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        f.close()
+    try:
+        f.seek(0)
+        f.truncate()
+        f.write(f"pid {os.getpid()} on host {socket.gethostname()}\n")
+        f.flush()
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        f.close()
 
 
 # Below this much free space an object's failure is taken for a full disk: Blender then

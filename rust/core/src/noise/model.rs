@@ -224,6 +224,34 @@ mod tests {
     use super::*;
 
     #[test]
+    fn white_balance_draws_fill_the_unprocessing_ranges() {
+        // Red U[1.9, 2.4], blue U[1.5, 1.9] (Brooks et al. 2019; DESIGN §5): a swap of
+        // the two ranges, or a narrowed one, fails here.
+        let draws: Vec<WhiteBalance> = (0..4000u64).map(sample_white_balance).collect();
+        let span = |f: fn(&WhiteBalance) -> f64| {
+            draws
+                .iter()
+                .map(f)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+                    (lo.min(x), hi.max(x))
+                })
+        };
+        let (r_lo, r_hi) = span(|w| w.red);
+        let (b_lo, b_hi) = span(|w| w.blue);
+        assert!(
+            (1.9..1.91).contains(&r_lo) && (2.39..=2.4).contains(&r_hi),
+            "red {r_lo} {r_hi}"
+        );
+        assert!(
+            (1.5..1.51).contains(&b_lo) && (1.89..=1.9).contains(&b_hi),
+            "blue {b_lo} {b_hi}"
+        );
+        let mean = |f: fn(&WhiteBalance) -> f64| draws.iter().map(f).sum::<f64>() / 4000.0;
+        assert!((mean(|w| w.red) - 2.15).abs() < 0.01);
+        assert!((mean(|w| w.blue) - 1.7).abs() < 0.01);
+    }
+
+    #[test]
     fn scene_seeds_differ_and_are_stable() {
         let a = scene_seed(7, "demo_box_000", "blur_2");
         assert_eq!(a, scene_seed(7, "demo_box_000", "blur_2"));
