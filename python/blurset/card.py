@@ -223,6 +223,10 @@ def make_card(
     relative to it)."""
     build = Path(build)
     dataset = layout.read_json(build / "dataset.json", "dataset.json")
+    if dataset.get("provisional"):
+        raise InputError(
+            f"the build has not finished (dataset.json is provisional): rerun it to the end: {build}"
+        )
     splits = layout.read_json(build / "splits.json", "splits.json")
     settings = layout.complete_settings(build)
     if not settings:
