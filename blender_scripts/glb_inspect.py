@@ -80,7 +80,9 @@ def read_model(path: str) -> tuple[dict, bytes | None]:
         with open(path, encoding="utf-8") as f:
             doc = json.load(f)
     except UnicodeDecodeError as e:
-        raise GlbError(f"the glTF JSON is not UTF-8 (glTF requires UTF-8; byte {e.start}): {path}")
+        raise GlbError(
+            f"the glTF JSON is not UTF-8 (glTF requires UTF-8; byte {e.start}): {path}"
+        ) from None
     except ValueError as e:
         raise GlbError(f"glTF JSON does not parse ({e}): {path}") from None
     if not isinstance(doc, dict):
