@@ -72,9 +72,7 @@ def read_glb(path: str) -> tuple[dict, bytes | None]:
 
 def read_model(path: str) -> tuple[dict, bytes | None]:
     """The JSON document and BIN chunk of a .glb, or the document of a .gltf (None)."""
-    with open(path, "rb") as f:
-        head = f.read(4)
-    if head == GLB_MAGIC:
+    if not path.lower().endswith(".gltf"):
         return read_glb(path)
     try:
         with open(path, encoding="utf-8") as f:

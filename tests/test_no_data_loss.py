@@ -81,13 +81,15 @@ def test_sigterm_during_noise_leaves_nothing(fern_copy, tmp_path):
     out = tmp_path / "n"
     proc = subprocess.Popen(
         [sys.executable, "-m", "blurset.cli", "noise", str(fern_copy), "--factor", "8",
-         "--frames", "24", "--out", str(out)],
+         "--frames", "40", "--out", str(out)],
         stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     time.sleep(1.5)
     assert proc.poll() is None, "the noise run ended before it could be stopped"
+    t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
+    assert time.monotonic() - t0 < 5.0, "SIGTERM waited for the core's noise call"
     assert proc.returncode == 128 + signal.SIGTERM, err
     assert "interrupted (SIGTERM)" in err
     assert not out.exists()
@@ -190,16 +192,16 @@ def objs(tmp_path_factory) -> Path:
 def start_build(objs: Path, out: Path, *extra: str) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "blurset.cli", "build", "--objects", str(objs), "--out", str(out),
-         "--views", "6", "--levels", "1,4", "--latents", "8", "--samples", "8",
-         "--resolution", "96", "--settings-per-object", "2", "--quiet", *extra],
+         "--views", "4", "--levels", "1", "--latents", "6", "--samples", "4",
+         "--resolution", "64", "--settings-per-object", "1", "--quiet", *extra],
         stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
 
 
 @pytest.mark.blender
-@pytest.mark.parametrize(("sig", "workers"), [(signal.SIGINT, "2"), (signal.SIGTERM, "1"),
-                                              (signal.SIGHUP, "2")])  # fmt: skip
-def test_a_signal_stops_the_build_within_a_second(objs, tmp_path, sig, workers):
+@pytest.mark.parametrize(("sig", "workers", "rerun"), [(signal.SIGINT, "2", True),
+                         (signal.SIGTERM, "1", False), (signal.SIGHUP, "2", False)])  # fmt: skip
+def test_a_signal_stops_the_build_within_a_second(objs, tmp_path, sig, workers, rerun):
     out = tmp_path / "out"
     proc = start_build(objs, out, "--workers", workers)
     assert wait_for(lambda: len(workers_of(out)) == int(workers), 120), proc.stderr
@@ -214,10 +216,11 @@ def test_a_signal_stops_the_build_within_a_second(objs, tmp_path, sig, workers):
     # No failure was recorded for the objects that were stopped, and a rerun finishes.
     fails = out / "failures.jsonl"
     assert not fails.exists() or fails.read_text().strip() == ""
-    rerun = start_build(objs, out, "--workers", workers)
-    _, err = rerun.communicate(timeout=600)
-    assert rerun.returncode == 0, err
-    assert len(layout.complete_settings(out)) == 6
+    if rerun:
+        again = start_build(objs, out, "--workers", workers)
+        _, err = again.communicate(timeout=600)
+        assert again.returncode == 0, err
+        assert len(layout.complete_settings(out)) == 3
 
 
 @pytest.mark.blender
@@ -295,7 +298,7 @@ def test_two_identical_builds_at_once_take_turns_per_object(objs, tmp_path):
     assert first.returncode == 0 and second.returncode == 0, (err1, err2)
     assert "is being built by pid" in err1 + err2
     names = [d.name for d in layout.complete_settings(out)]
-    assert len(names) == 6, names
+    assert len(names) == 3, names
     for n in names:
         assert layout.setting_problem(out / n) is None, n
     assert not (out / "failures.jsonl").read_text().strip()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from blurset.exceptions import BlursetError
@@ -74,6 +75,10 @@ def main(argv: list[str] | None = None) -> int:
         code = stop.exit_code(e)
         why = f" ({e.args[0]})" if code != 130 else ""
         print(f"blurset {args.command}: interrupted{why}", file=sys.stderr)
+        if stop.must_exit_now():
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
         return code
     except Exception as e:  # a bug: still one line, with the way to see more
         if args.debug:

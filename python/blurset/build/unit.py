@@ -183,10 +183,9 @@ class ObjectUnit:
         return {"path": obj.rel, "sha256": self.sha256(), **attribution.attribution(*sources)}
 
     def _reusable(self, setting: Path) -> bool:
-        """A complete setting made from this very file (the same relative path and the
-        same bytes), and whole (another file may have had this id in an earlier run, a
-        file may have been damaged or deleted since): anything else is redone, never
-        passed off as this object's."""
+        """A complete setting made from this very file (the same bytes), and whole
+        (another file may have had this id in an earlier run, a file may have been damaged
+        or deleted since): anything else is redone, never passed off as this object's."""
         if not layout.is_complete(setting):
             return False
         problem = layout.setting_problem(setting)
@@ -199,19 +198,24 @@ class ObjectUnit:
         return False
 
     def _other_file(self, made_from: dict[str, Any]) -> str | None:
-        """Why a setting's meta.json `object` is not this object's file, or None."""
-        if "sha256" not in made_from:  # written before issue 19: an absolute path
+        """Why a setting's meta.json `object` is not this object's file, or None. The
+        file's content decides (a build moved elsewhere, or a demo object made again, is
+        still the same object); without a recorded hash (a build before issue 19), its
+        absolute path."""
+        if "sha256" not in made_from:
             source = made_from.get("source")
             return None if source == str(self.obj.path) else f"made from another file ({source})"
-        if made_from.get("path") != self.obj.rel:
-            return f"made from another file ({made_from.get('path')})"
         if self.obj.source == "objaverse" and not self.obj.path.is_file():
-            return None  # an objaverse uid names one file; a cleaned cache needs no refetch
+            # An objaverse uid names one file: a cleaned cache needs no refetch.
+            return None if made_from.get("path") == self.obj.rel else "made from another file"
         try:
-            same = made_from["sha256"] == self.sha256()
+            if made_from["sha256"] == self.sha256():
+                return None
         except OSError as e:
             return f"cannot read {self.obj.rel} ({e.strerror})"
-        return None if same else f"made from other bytes of {self.obj.rel} (sha256 differs)"
+        if made_from.get("path") != self.obj.rel:
+            return f"made from another file ({made_from.get('path')})"
+        return f"made from other bytes of {self.obj.rel} (sha256 differs)"
 
     def _attempt(self, pending: list[SettingJob], deadline: float | None) -> None:
         """Load the object in a fresh worker and render the pending settings in order,

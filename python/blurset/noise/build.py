@@ -39,6 +39,7 @@ from blurset.exceptions import ConfigError, InputError
 from blurset.layout import gain_name
 from blurset.noise.params import files_record, noise_json, noise_table, parse_gains, table_record
 from blurset.noise.scene import list_images, output_names
+from blurset.stop import interruptible, remove_tree
 
 DATASET_FILE = "noise_dataset.json"
 SEED_DERIVATION = (
@@ -242,11 +243,16 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             "white_level": args.white_level,
         }
         if params["source"] == "linear":
-            _core.noise_write_variants_linear(
-                unit.sources, unit.names, variants, background=unit.background, **common
+            interruptible(
+                _core.noise_write_variants_linear,
+                unit.sources,
+                unit.names,
+                variants,
+                background=unit.background,
+                **common,
             )
         else:
-            _core.noise_write_variants(unit.sources, unit.names, variants, **common)
+            interruptible(_core.noise_write_variants, unit.sources, unit.names, variants, **common)
         # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the
         # build's rows already hold the written resolution and focal length.
         rows = np.repeat(unit.rows, args.frames, axis=0)
@@ -260,7 +266,7 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             layout.publish(part, unit.dst / gain_name(g))
     except BaseException:
         for p in partials.values():
-            shutil.rmtree(p, ignore_errors=True)
+            remove_tree(p)
         raise
 
 

@@ -17,6 +17,7 @@ import numpy as np
 from blurset import _core, layout
 from blurset.exceptions import ConfigError, InputError
 from blurset.noise.params import files_record, noise_json, noise_table, parse_gains, table_record
+from blurset.stop import interruptible, remove_tree
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
 MODEL = "y' = y + sqrt(sigma_read^2 + sigma_shot^2 * y) * N(0, 1), y = white_level * decode(x) / wb"
@@ -117,7 +118,8 @@ def run(args) -> int:
         for g in gains:
             sr, ss = _core.noise_sigmas(g, levels)
             variants.append((tmp / layout.gain_name(g), sr, ss, _core.noise_key(args.seed, g)))
-        _core.noise_write_variants(
+        interruptible(
+            _core.noise_write_variants,
             sources,
             names,
             variants,
@@ -164,7 +166,7 @@ def run(args) -> int:
             shutil.rmtree(out)
         tmp.rename(out)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        remove_tree(tmp)
         raise
     print(
         f"blurset noise: wrote {len(gains)} scene(s) x {len(files)} images to {out} "
