@@ -10,7 +10,9 @@ Sources, first found wins per field, nothing guessed:
 A field no source gives is "unknown".
 
 Licences become SPDX ids where the text maps to one (`CC-BY-4.0`, `CC0-1.0` …); text
-that maps to none is `other` (the raw text is always kept in `license_text`).
+that maps to none is `other` (the raw text is always kept in `license_text`). The ids,
+that mapping and the filter are blurset-core's (dataset/license.rs); `--licenses` is a
+field of its BuildConfig.
 """
 
 from __future__ import annotations
@@ -22,26 +24,10 @@ import re
 from pathlib import Path
 from typing import Any
 
-from blurset.exceptions import ConfigError
+from blurset import _core
 
 UNKNOWN = "unknown"
 OTHER = "other"
-
-# The Creative Commons licences Sketchfab and Objaverse use, as SPDX ids.
-_CC = ("by", "by-sa", "by-nd", "by-nc", "by-nc-sa", "by-nc-nd")
-SPDX_IDS = (
-    *(f"CC-{k.upper()}-{v}" for k in _CC for v in ("4.0", "3.0", "2.5", "2.0")),
-    "CC0-1.0",
-    "CC-PDDC",
-)
-_BY_LOWER = {s.lower(): s for s in SPDX_IDS}
-# Objaverse 1.0 annotations name licences by Sketchfab's short codes.
-_OBJAVERSE_CODES = {
-    **{k: f"CC-{k.upper()}-4.0" for k in _CC},
-    "cc0": "CC0-1.0",
-}
-_CC_URL = re.compile(r"creativecommons\.org/licenses/([a-z-]+)/(\d\.\d)", re.I)
-_CC0_URL = re.compile(r"creativecommons\.org/publicdomain/zero/1\.0", re.I)
 _NAME_URL = re.compile(r"^(.*?)\s*\((https?://[^\s)]+)\)\s*$")
 
 # The fields of meta.json `object` this module fills.
@@ -50,21 +36,8 @@ FIELDS = ("title", "author", "author_url", "license", "license_text", "source_ur
 
 def spdx(text: str | None) -> str:
     """The SPDX id a licence text names, `other` for text that maps to none, `unknown`
-    for no text."""
-    if text is None or not str(text).strip():
-        return UNKNOWN
-    t = " ".join(str(text).split())
-    head = t.split(" ", 1)[0].strip("(),;")
-    if head.lower() in _BY_LOWER:
-        return _BY_LOWER[head.lower()]
-    if t.lower() in _OBJAVERSE_CODES:
-        return _OBJAVERSE_CODES[t.lower()]
-    if _CC0_URL.search(t) or re.fullmatch(r"cc0(\s*1\.0)?", t, re.I):
-        return "CC0-1.0"
-    m = _CC_URL.search(t)
-    if m and m.group(1).lower() in _CC:
-        return f"CC-{m.group(1).upper()}-{m.group(2)}"
-    return OTHER
+    for no text (the rule is blurset-core's dataset::license)."""
+    return _core.spdx_of(None if text is None else str(text))
 
 
 def _split_name_url(text: str) -> tuple[str, str | None]:
@@ -154,45 +127,12 @@ def attribution(*sources: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-# -- the --licenses filter ---------------------------------------------------------------
-
-
-def parse_licenses(value: Any, where: str = "--licenses") -> list[str] | None:
-    """`cc-by-4.0,cc0-1.0,unknown` (or a TOML list) → canonical ids; None = no filter.
-    Ids are case-insensitive; anything but a known SPDX id, `other` or `unknown` is an
-    error (a typo would otherwise skip every object)."""
-    if value is None:
-        return None
-    items = value if isinstance(value, list) else str(value).split(",")
-    out: list[str] = []
-    for raw in items:
-        if not isinstance(raw, str):
-            raise ConfigError(f"{where}: expected licence ids, got {raw!r}")
-        s = raw.strip()
-        if not s:
-            continue
-        low = s.lower()
-        if low in (UNKNOWN, OTHER):
-            canon = low
-        elif low in _BY_LOWER:
-            canon = _BY_LOWER[low]
-        else:
-            raise ConfigError(
-                f"{where}: unknown licence {s!r} (SPDX ids such as cc-by-4.0, cc-by-sa-4.0, "
-                "cc-by-nc-4.0, cc0-1.0, or other / unknown)"
-            )
-        if canon not in out:
-            out.append(canon)
-    if not out:
-        raise ConfigError(f"{where}: give at least one licence id (e.g. cc-by-4.0,cc0-1.0)")
-    return out
+# -- the --licenses filter (an option of the core's BuildConfig) -----------------------
 
 
 def allowed(license_id: str, licenses: list[str] | None) -> bool:
     """Whether an object under `license_id` passes the filter (None lets all pass)."""
-    if licenses is None:
-        return True
-    return license_id.lower() in {x.lower() for x in licenses}
+    return _core.license_allowed(license_id, licenses)
 
 
 def hf_license(license_id: str) -> str:

@@ -4,7 +4,8 @@ checksum manifest of every file.
 - Absolute paths (the input files, OUT, a cache or a Blender binary) stay on the build
   machine, in `OUT/.local/paths.jsonl`: dot-prefixed, so never in the manifest, the card
   or an upload that skips dot files. Outputs name inputs by their path relative to the
-  folder or list they came from (blurset.objects) and a build by its folder's name.
+  folder or list they came from (blurset.objects) and a build by its folder's name;
+  dataset.json's config record drops the paths in the core (BuildConfig.record()).
 - `MANIFEST.sha256` (sha256sum format) is hashed in blurset-core, which also owns the
   rule of which files it lists (the manifest itself, the lock, dot files and dot
   folders, `*.partial` staging directories are not).
@@ -35,31 +36,6 @@ def log_local(out: Path, records: list[dict[str, Any]]) -> None:
         f.write("".join(json.dumps(r) + "\n" for r in records))
         f.flush()
         os.fsync(f.fileno())
-
-
-def public_entry(entry: str) -> str:
-    """An `--objects` entry as a published config shows it: objaverse references as
-    they are, paths by their last component (`@` of a list kept)."""
-    if entry.startswith("objaverse:"):
-        return entry
-    at = "@" if entry.startswith("@") else ""
-    name = Path(entry[len(at) :]).name
-    return f"{at}{name}" if name else entry
-
-
-def public_config(config: dict[str, Any]) -> dict[str, Any]:
-    """A build config (BuildConfig.to_json()) without the builder's paths: OUT by its
-    folder name, inputs by public_entry, the objaverse cache and a Blender binary by
-    their names."""
-    c = dict(config)
-    if c.get("out"):
-        c["out"] = Path(str(c["out"])).name
-    if isinstance(c.get("objects"), list):
-        c["objects"] = [public_entry(str(e)) for e in c["objects"]]
-    for key in ("objaverse_dir", "blender"):
-        if c.get(key):
-            c[key] = Path(str(c[key])).name
-    return c
 
 
 def manifest_files(root: Path) -> list[str]:

@@ -104,17 +104,24 @@ def _expect_files(
 
 
 def setting_problems(
-    setting: Path, *, root: Path | None = None, linear_default: bool = False
+    setting: Path, *, root: Path | None = None
 ) -> tuple[list[tuple[str, str]], list[tuple[Path, int, int]]]:
     """The problems of one complete setting's files (no pixels decoded) and the images
-    (path, width, height) to decode. linear/ EXRs must be there when its meta.json
-    says so (`render.linear`), or, in a build older than that field, `linear_default`."""
+    (path, width, height) to decode. The cheap check is the rerun's own
+    (blurset.layout.setting_problems, from the core); on top, verify names each missing
+    or unexpected file, counts pose rows and checks transforms.json's file paths."""
     root = root or setting.parent
     rep = Report(root)
     name = setting.relative_to(root)
-    meta = _read_json(root, f"{name}/meta.json", rep)
-    if meta is None:
+    cheap = layout.setting_problems(setting)
+    for rel, what in cheap:
+        # A wrong count of images is named file by file below.
+        if not what.startswith("holds "):
+            rep.bad(name / rel, what)
+    flagged = {rel for rel, _ in cheap}
+    if "meta.json" in flagged:
         return rep.problems, []
+    meta = _read_json(root, f"{name}/meta.json", rep)
     try:
         views = meta["views"]
         levels = list(meta["levels"])
@@ -125,25 +132,30 @@ def setting_problems(
         return rep.problems, []
     n = len(indices)
     render = meta.get("render") if isinstance(meta.get("render"), dict) else {}
-    linear = bool(render.get("linear", linear_default))
     images = [layout.image_name(i, n) for i in indices]
     to_decode: list[tuple[Path, int, int]] = []
     for level in levels:
         d = setting / level
-        if not d.is_dir():
-            rep.bad(d.relative_to(root), "level folder missing")
+        if level in flagged:  # the level folder is missing
             continue
-        for p in _expect_files(root, d / "images", images, rep, "images"):
-            to_decode.append((p, w, h))
-        if linear:
-            exrs = [i.replace(".png", ".exr") for i in images]
-            for p in _expect_files(root, d / "linear", exrs, rep, "linear"):
-                to_decode.append((p, w, h))
+        for sub, names, on in (
+            ("images", images, True),
+            ("linear", [i.replace(".png", ".exr") for i in images], bool(render.get("linear"))),
+        ):
+            if not on:
+                continue
+            for p in _expect_files(root, d / sub, names, rep, sub):
+                if f"{level}/{sub}/{p.name}" not in flagged:
+                    to_decode.append((p, w, h))
+        if f"{level}/poses_bounds.npy" in flagged:
+            continue
         rows = _rows(d / "poses_bounds.npy")
         if isinstance(rows, str):
             rep.bad((d / "poses_bounds.npy").relative_to(root), rows)
         elif rows != n:
             rep.bad((d / "poses_bounds.npy").relative_to(root), f"{rows} rows, expected {n}")
+    if "transforms.json" in flagged:
+        return rep.problems, to_decode
     tf = _read_json(root, f"{name}/transforms.json", rep)
     if tf is not None:
         frames = tf.get("frames") if isinstance(tf, dict) else None
@@ -174,27 +186,18 @@ def _decode(items: list[tuple[Path, int, int]], root: Path, report: Report, deco
     report.images += len(items)
 
 
-# Every PNG ends with this chunk: a file cut short (a full disk, a killed copy) does not.
-PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
-
-
 def _header(p: Path, w: int, h: int) -> str | None:
-    """The cheap check of an image: its header's size, and for a PNG its end chunk
-    (EXRs: non-empty)."""
+    """Without decoding: a PNG's signature and end chunk (the cheap check's rule,
+    blurset.layout.png_problem) and the size its header states; an EXR is not empty."""
     if p.suffix.lower() == ".exr":
-        return None if p.stat().st_size > 0 else "empty file"
+        return None if p.stat().st_size > 0 else "empty"
+    if p.suffix.lower() == ".png" and (problem := layout.png_problem(p)):
+        return problem
     try:
         iw, ih, _, _ = _core.image_info(p)
     except (OSError, ValueError) as e:
         return f"does not decode ({str(e).rsplit(': ', 1)[0]})"
-    if (iw, ih) != (w, h):
-        return f"is {iw}x{ih}, expected {w}x{h}"
-    if p.suffix.lower() == ".png":
-        with open(p, "rb") as f:
-            f.seek(max(0, p.stat().st_size - len(PNG_END)))
-            if f.read() != PNG_END:
-                return "truncated (no PNG end chunk)"
-    return None
+    return None if (iw, ih) == (w, h) else f"is {iw}x{ih}, expected {w}x{h}"
 
 
 # -- a build ----------------------------------------------------------------------------
@@ -204,7 +207,6 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
     rep = Report(root)
     dataset = _read_json(root, "dataset.json", rep)
     dataset = dataset if isinstance(dataset, dict) else {}
-    config = dataset.get("config") if isinstance(dataset.get("config"), dict) else {}
     complete = layout.complete_settings(root)
     for d in sorted(root.iterdir()):
         if d.is_dir() and not d.name.startswith(".") and d not in complete:
@@ -214,9 +216,7 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
     uids: set[str] = set()
     todo: list[tuple[Path, int, int]] = []
     for s in complete:
-        problems, images = setting_problems(
-            s, root=root, linear_default=bool(config.get("write_linear"))
-        )
+        problems, images = setting_problems(s, root=root)
         rep.problems.extend(problems)
         todo.extend(images)
         try:

@@ -53,6 +53,26 @@ fn check_images(py: Python<'_>, items: Vec<(PathBuf, u32, u32)>) -> Vec<Option<S
     py.detach(|| core::check_images(&items))
 }
 
+/// The SPDX id a licence text names, `other` when it maps to none, `unknown` for none.
+#[pyfunction]
+#[pyo3(signature = (text))]
+fn spdx_of(text: Option<&str>) -> String {
+    core::spdx_of(text)
+}
+
+/// The canonical spelling of a licence id (SPDX, `other`, `unknown`), or None.
+#[pyfunction]
+fn canonical_license(id: &str) -> Option<String> {
+    core::canonical_license(id)
+}
+
+/// Whether an object under licence `id` passes a `--licenses` filter (None: all pass).
+#[pyfunction]
+#[pyo3(signature = (id, licenses))]
+fn license_allowed(id: &str, licenses: Option<Vec<String>>) -> bool {
+    core::license_allowed(id, licenses.as_deref())
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MANIFEST", core::MANIFEST)?;
     m.add_function(wrap_pyfunction!(sha256_file, m)?)?;
@@ -61,5 +81,9 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(update_manifest, m)?)?;
     m.add_function(wrap_pyfunction!(check_manifest, m)?)?;
     m.add_function(wrap_pyfunction!(check_images, m)?)?;
+    m.add_function(wrap_pyfunction!(spdx_of, m)?)?;
+    m.add_function(wrap_pyfunction!(canonical_license, m)?)?;
+    m.add_function(wrap_pyfunction!(license_allowed, m)?)?;
+    m.add("SPDX_IDS", core::spdx_ids())?;
     Ok(())
 }

@@ -3,8 +3,11 @@
 pub mod atomic;
 pub mod failures;
 pub mod layout;
+pub mod license;
 pub mod llff;
 pub mod manifest;
+pub mod meta;
+pub mod records;
 pub mod splits;
 pub mod stats;
 pub mod verify;
