@@ -324,7 +324,7 @@ def test_verify_compares_counts_and_meta(published, tmp_path):
     out = proc.stdout
     assert f"{build}/dataset.json: counts.images is {ds['counts']['images']}" in out
     assert f"{build}/sketchfab_MapPin_000/sharp/images/004.png: not a file of this" in out
-    assert f"{build}/khronos_BoxTextured_000/meta.json: unreadable (invalid type" in out
+    assert f"{build}/khronos_BoxTextured_000/meta.json: unreadable (" in out
 
 
 @pytest.mark.blender

@@ -155,7 +155,7 @@ def setting_problems(
         elif rows != n:
             rep.bad((d / "poses_bounds.npy").relative_to(root), f"{rows} rows, expected {n}")
     if "transforms.json" in flagged:
-        return rep.problems, to_decode
+        return _one_per_file(rep.problems), to_decode
     tf = _read_json(root, f"{name}/transforms.json", rep)
     if tf is not None:
         frames = tf.get("frames") if isinstance(tf, dict) else None
@@ -172,7 +172,18 @@ def setting_problems(
             }
             if named != want:
                 rep.bad(f"{name}/transforms.json", "its file_paths are not this setting's images")
-    return rep.problems, to_decode
+    return _one_per_file(rep.problems), to_decode
+
+
+def _one_per_file(problems: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """One problem per file: a file that should not be there at all says so, instead of
+    what the cheap check found wrong with it."""
+    stray = {rel for rel, what in problems if what.startswith("not a file of this")}
+    return [
+        (rel, what)
+        for rel, what in problems
+        if rel not in stray or what.startswith("not a file of this")
+    ]
 
 
 def _decode(items: list[tuple[Path, int, int]], root: Path, report: Report, decode: bool) -> None:
