@@ -316,6 +316,25 @@ mod tests {
             serde_json::json!(["sharp", "blur_1", "blur_3"])
         );
         assert_eq!(v["render"]["samples_per_latent"], 32);
+        // A default build's render record is unchanged; --keep-linear says so.
+        assert!(v["render"].get("linear").is_none());
+        let linear = BuildConfig {
+            write_linear: true,
+            ..cfg.clone()
+        };
+        assert_eq!(
+            serde_json::to_value(RenderRecord::of(&linear))
+                .map_err(|e| Error::Value(e.to_string()))?["linear"],
+            true
+        );
+        // The object names no builder path (issue 19): `source` is no field.
+        let obj: ObjectRecord = serde_json::from_str(r#"{"path": "a.glb", "license": "CC0-1.0"}"#)
+            .map_err(|e| Error::Value(e.to_string()))?;
+        assert_eq!(
+            (obj.path.as_str(), obj.license.as_str()),
+            ("a.glb", "CC0-1.0")
+        );
+        assert!(serde_json::from_str::<ObjectRecord>(r#"{"source": "/home/u/a.glb"}"#).is_err());
         assert!(v.get("pose_check").is_none());
         let back: ReadMeta = serde_json::from_value(v).map_err(|e| Error::Value(e.to_string()))?;
         assert_eq!((back.views.len(), back.views[2].levels.len()), (3, 2));
