@@ -50,6 +50,8 @@ def refused(capsys, out: Path, *argv: str) -> str:
         (["--test-settings", "0"], "--test-settings 0: must be an integer in 1..="),
         (["--test-view-stride", "0"], "--test-view-stride 0: must be an integer in 1..=4096"),
         (["--test-objects", "1.5"], "--test-objects 1.5: must be a number in [0, 1]"),
+        (["--licenses", "cc-by-4"], '--licenses "cc-by-4": must be licence ids'),
+        (["--licenses", ","], '--licenses ",": must be licence ids'),
     ],
 )
 def test_flags_out_of_range_name_the_flag_value_and_range(capsys, tmp_path, flags, message):
@@ -84,6 +86,8 @@ def write(tmp_path: Path, text: str | bytes) -> Path:
         ("downsample = [5]\n", "downsample 5: does not divide resolution 96"),
         ("test-view-stride = 0\n", "view_stride 0: must be an integer in 1..=4096"),
         ("test-settings = 5\ntest-objects = 0.3\n", "either N random test settings"),
+        ('licenses = "cc-by-nc"\n', 'licenses "cc-by-nc": must be licence ids'),
+        ("licenses = [4]\n", "licenses [4]: must be licence ids"),
     ],
 )
 def test_toml_is_read_strictly_and_errors_name_the_file_and_key(capsys, tmp_path, text, message):
@@ -138,6 +142,17 @@ def test_training_options_map_onto_the_core(tmp_path):
     assert (cfg.test_settings, cfg.test_objects) == (52, None)
     cfg = make_config({}, {"out": "o", "demo": True, "downsample": [8, 4], "test_fraction": 0.5})
     assert (cfg.downsample, cfg.test_fraction) == ([4, 8], 0.5)
+
+
+def test_licenses_flag_and_toml_key():
+    # Issue 19: ids are canonical (SPDX case, other, unknown), once each, in order.
+    cfg = make_config({"licenses": ["cc-by-4.0", "Other"]}, {"out": "o", "demo": True})
+    assert cfg.licenses == ["CC-BY-4.0", "other"]
+    cfg = make_config(
+        {}, {"licenses": "cc0-1.0, CC-BY-4.0,cc0-1.0,unknown", "out": "o", "demo": True}
+    )
+    assert cfg.licenses == ["CC0-1.0", "CC-BY-4.0", "unknown"]
+    assert make_config({}, {"out": "o", "demo": True}).licenses is None
 
 
 def test_toml_values_name_their_file_and_key(tmp_path):

@@ -4,6 +4,7 @@ separate-file .gltf that builds with its textures."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -153,6 +154,8 @@ def test_a_setting_of_another_file_with_the_same_id_is_redone(glbs, tmp_path):
     first = sorted((out / "same_000" / "sharp" / "images").iterdir())[0].read_bytes()
     run_cli("build", "--objects", str(tmp_path / "b"), "--out", str(out), *args)
     meta = json.loads((out / "same_000" / "meta.json").read_text())
-    assert meta["object"]["source"] == str((tmp_path / "b" / "same.glb").resolve())
+    # Same relative path, other bytes (issue 19: meta.json names no absolute path).
+    b_sha = hashlib.sha256((tmp_path / "b" / "same.glb").read_bytes()).hexdigest()
+    assert meta["object"]["path"] == "same.glb" and meta["object"]["sha256"] == b_sha
     second = sorted((out / "same_000" / "sharp" / "images").iterdir())[0].read_bytes()
     assert first != second

@@ -139,16 +139,21 @@ def test_each_broken_class_fails_with_its_reason_good_objects_complete(broken_bu
     n_failed = len(BROKEN)
     assert f"{n_failed} of " in proc.stderr and "objects failed" in proc.stderr
     assert "hangs: load: Blender worker did not reply within 15 s" in proc.stderr
-    leftovers = [p.name for p in out.iterdir() if p.name.startswith(".") and p.name != ".lock"]
+    # .local/ is no leftover: it keeps the builder's absolute paths (issue 19).
+    leftovers = [
+        p.name
+        for p in out.iterdir()
+        if p.name.startswith(".") and p.name not in (".lock", ".local")
+    ]
     assert leftovers == [], leftovers
 
 
-def test_rerun_retries_failed_objects_and_max_failure_rate_fails_the_build(broken_build):
+def test_rerun_retries_failed_objects_and_max_failure_rate_fails_the_build(broken_build, objects):
     out, _ = broken_build
     before = setting_dirs(out)
     # Without the injected hang, `hangs` (a good box) now builds and leaves failures.jsonl;
     # the seven broken files still fail: 7 of 10+ objects is above a 0.2 ceiling.
-    objects_dir = Path(json.loads((out / "dataset.json").read_text())["config"]["objects"][0])
+    objects_dir = objects  # dataset.json names inputs without their path (issue 19)
     proc = run_cli(
         "build", "--objects", str(objects_dir), "--out", str(out), *TINY,
         "--max-failure-rate", "0.2", check=False,
@@ -242,7 +247,11 @@ def tree(out: Path) -> dict[str, bytes]:
     return {
         str(p.relative_to(out)): p.read_bytes()
         for p in sorted(out.rglob("*"))
-        if p.is_file() and p.name != ".lock" and ".locks" not in p.parts
+        # .local/ keeps the builder's paths, one record per object and run
+        if p.is_file()
+        and p.name != ".lock"
+        and ".locks" not in p.parts
+        and ".local" not in p.relative_to(out).parts
     }
 
 
@@ -259,6 +268,8 @@ def without_timings(name: str, data: bytes):
             ds.pop(k)
         ds["config"].pop("out")
         return ds
+    if name == "MANIFEST.sha256":  # hashes meta.json timings: the files it lists
+        return [line.split("  ", 1)[1] for line in data.decode().splitlines()]
     if name == "failures.jsonl":
         recs = [json.loads(line) for line in data.decode().splitlines()]
         return [{k: v for k, v in r.items() if k not in ("seconds", "time")} for r in recs]

@@ -181,6 +181,8 @@ class BuildConfig:
     def check_poses(self) -> bool: ...
     @property
     def allow_mixed(self) -> bool: ...
+    @property
+    def licenses(self) -> list[str] | None: ...
 
 # --- layout (rust/py/src/layout.rs) --------------------------------------------------
 
@@ -223,6 +225,13 @@ def is_complete(dir: str | PathLike[str]) -> bool:
 
 def setting_problem(setting: str | PathLike[str]) -> str | None:
     """What is missing or damaged in a complete setting (checked cheaply), or None."""
+
+def setting_problems(setting: str | PathLike[str]) -> list[tuple[str, str]]:
+    """Every problem of a complete setting the cheap check finds: (path relative to
+    the setting, what is wrong), in the order the check meets them."""
+
+def png_problem(path: str | PathLike[str]) -> str | None:
+    """What is wrong with a PNG read without decoding (signature, end chunk), or None."""
 
 def complete_settings(build: str | PathLike[str]) -> list[str]:
     """The complete setting directory names of a build, sorted."""
@@ -688,3 +697,43 @@ def current_failures(
 ) -> tuple[list[dict[str, Any]], int]:
     """(the failures now, torn lines skipped): the latest record per (uid, setting)
     whose work is still not complete."""
+
+# -- publishing: checksums, the image check of verify (rust/py/src/publish.rs) ----------
+
+MANIFEST: str
+
+def sha256_file(path: str | PathLike[str]) -> str:
+    """sha256 of a file's bytes, lowercase hex."""
+
+def manifest_files(root: str | PathLike[str]) -> list[str]:
+    """The files MANIFEST.sha256 of `root` lists: relative, '/'-separated, sorted
+    bytewise; not the manifest, dot files, dot folders or `*.partial` folders."""
+
+def write_manifest(root: str | PathLike[str]) -> int:
+    """Hash every listed file (in parallel) into root/MANIFEST.sha256 (sha256sum
+    format, atomic); returns the number of files."""
+
+def update_manifest(root: str | PathLike[str], rels: list[str]) -> int:
+    """Rehash these files (relative to `root`) into its existing manifest, dropping
+    those no longer there; returns the number of files listed."""
+
+def check_manifest(root: str | PathLike[str]) -> list[tuple[str, str]]:
+    """(relative path, problem) of each file that does not match root/MANIFEST.sha256:
+    `missing`, `checksum mismatch` or `not in MANIFEST.sha256`, sorted by path.
+    Raises FileNotFoundError without a manifest, InputError naming a bad line."""
+
+def check_images(items: list[tuple[str | PathLike[str], int, int]]) -> list[str | None]:
+    """For each (path, width, height): None when the image (PNG/JPEG, or a linear EXR
+    by its extension) decodes whole at that size, else the problem. In parallel."""
+
+def spdx_of(text: str | None) -> str:
+    """The SPDX id a licence text names, `other` when it maps to none, `unknown` for
+    no text."""
+
+def canonical_license(id: str) -> str | None:
+    """The canonical spelling of a licence id (SPDX, `other`, `unknown`), or None."""
+
+def license_allowed(id: str, licenses: list[str] | None) -> bool:
+    """Whether an object under licence `id` passes a `--licenses` filter (None: all)."""
+
+SPDX_IDS: list[str]

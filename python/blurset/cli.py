@@ -31,6 +31,16 @@ COMMANDS = {
         "blurset.export",
         "one root of LLFF scenes (IBRNet/NAN/GNT/GeoNeRF) or nerfstudio scenes of a build",
     ),
+    "card": (
+        "blurset.card",
+        "write a Hugging Face dataset card (README.md) for a build: licences, construction, "
+        "counts, attribution",
+    ),
+    "verify": (
+        "blurset.verify",
+        "check that a build (or a noise output) is whole: every file, every image decoded, "
+        "counts, MANIFEST.sha256",
+    ),
 }
 
 

@@ -99,6 +99,18 @@ def setting_problem(setting: Path) -> str | None:
     return _core.setting_problem(setting)
 
 
+def setting_problems(setting: Path) -> list[tuple[str, str]]:
+    """Every problem the check of setting_problem finds (it reports the first): (path
+    relative to the setting, what is wrong); `blurset verify` lists them all."""
+    return _core.setting_problems(setting)
+
+
+def png_problem(path: Path) -> str | None:
+    """What is wrong with a PNG read without decoding (its signature, its end chunk), or
+    None: the image rule of setting_problems."""
+    return _core.png_problem(path)
+
+
 def refuse_overlap(out: Path, inputs: list[Path], option: str = "--out") -> None:
     """An output may not be, lie inside or contain any input: writing (or replacing with
     --overwrite) would destroy what it reads. ConfigError names both."""

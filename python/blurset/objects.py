@@ -11,6 +11,7 @@ sanitized ids, never from file contents (DESIGN §10).
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import sys
 from dataclasses import dataclass
@@ -28,6 +29,10 @@ class ObjectSpec:
     path: Path
     # "file", or "objaverse" for an object fetched into the objaverse cache on demand.
     source: str = "file"
+    # The path relative to the root it was found in (the folder or list naming it; a
+    # file given itself: its name), or `objaverse:<uid>`: what a build publishes instead
+    # of the builder's absolute path (issue 19).
+    rel: str = ""
 
 
 def sanitize(stem: str) -> str:
@@ -39,11 +44,11 @@ MODEL_SUFFIXES = (".glb", ".gltf")
 LIST_SUFFIXES = (".txt", ".lst")
 
 
-def _models_in(folder: Path, warn) -> list[Path]:
+def _models_in(folder: Path, warn) -> list[tuple[Path, str]]:
     """The .glb/.gltf files under a folder (its subfolders too: a .gltf usually sits in
     its own folder with its textures), sorted; hidden folders are not entered. Dangling
     symlinks are named, not silently dropped."""
-    found: list[Path] = []
+    found: list[tuple[Path, str]] = []
     dangling: list[Path] = []
     for p in sorted(folder.rglob("*")):
         rel = p.relative_to(folder)
@@ -52,7 +57,7 @@ def _models_in(folder: Path, warn) -> list[Path]:
         if p.suffix.lower() not in MODEL_SUFFIXES:
             continue
         if p.is_file():
-            found.append(p)
+            found.append((p, rel.as_posix()))
         elif p.is_symlink():
             dangling.append(p)
     if dangling:
@@ -74,8 +79,9 @@ def _model_or_list(p: Path, where: str) -> str:
     )
 
 
-def _expand(entry: str, refs: list[str], warn) -> list[Path]:
-    """Model paths of one entry; objaverse references go to `refs` instead."""
+def _expand(entry: str, refs: list[str], warn) -> list[tuple[Path, str]]:
+    """(path, path relative to its root) of the models of one entry; objaverse
+    references go to `refs` instead."""
     if objaverse_cache.is_entry(entry):
         refs.append(entry)
         return []
@@ -90,11 +96,21 @@ def _expand(entry: str, refs: list[str], warn) -> list[Path]:
         what = "dangling symlink" if p.is_symlink() else "no such file or folder"
         raise InputError(f"--objects: {what} {str(p)!r}")
     if not forced_list and _model_or_list(p, "--objects") == "model":
-        return [p]
+        return [(p, p.name)]
     return _read_list(p, refs, warn)
 
 
-def _read_list(p: Path, refs: list[str], warn) -> list[Path]:
+def _relative_to_list(q: Path, root: Path, fallback: str | None = None) -> str:
+    """A list line's model relative to the list's folder; when it lies elsewhere, the
+    fallback (its path in a listed folder) or its name (never `..` or an absolute path)."""
+    norm = Path(os.path.normpath(q))
+    try:
+        return norm.relative_to(os.path.normpath(root)).as_posix()
+    except ValueError:
+        return fallback or norm.name
+
+
+def _read_list(p: Path, refs: list[str], warn) -> list[tuple[Path, str]]:
     """A list file: one entry per line (a model, a folder of models, an objaverse
     reference), `#` comments; relative paths are relative to the list's folder."""
     try:
@@ -104,7 +120,7 @@ def _read_list(p: Path, refs: list[str], warn) -> list[Path]:
         raise InputError(f"--objects: list {str(p)!r} is not UTF-8 text") from None
     except IsADirectoryError:
         raise InputError(f"--objects: @{str(p)!r} is a folder, not a list file") from None
-    out: list[Path] = []
+    out: list[tuple[Path, str]] = []
     named = 0
     for n, line in enumerate(lines, 1):
         line = line.split("#", 1)[0].strip()
@@ -121,14 +137,14 @@ def _read_list(p: Path, refs: list[str], warn) -> list[Path]:
             found = _models_in(q, warn)
             if not found:
                 raise InputError(f"{where}: no .glb/.gltf files in folder {str(q)!r}")
-            out.extend(found)
+            out.extend((m, _relative_to_list(m, p.parent, rel)) for m, rel in found)
             continue
         if not q.is_file():
             what = "dangling symlink" if q.is_symlink() else "no such file"
             raise InputError(f"{where}: {what} {str(q)!r}")
         if q.suffix.lower() not in MODEL_SUFFIXES:
             raise InputError(f"{where}: {str(q)!r} is not a .glb/.gltf model")
-        out.append(q)
+        out.append((q, _relative_to_list(q, p.parent)))
     if not named:
         raise InputError(f"--objects: list {str(p)!r} names no files")
     return out
@@ -167,16 +183,16 @@ def resolve_objects(
     subset of `objaverse_count` of them when given). Objaverse files need not be local
     yet: the build fetches each one when it gets to it."""
     paths: list[Path] = []
+    rels: dict[Path, str] = {}
     refs: list[str] = []
-    seen: set[Path] = set()
     for e in entries:
-        for p in _expand(e, refs, warn):
+        for p, rel in _expand(e, refs, warn):
             r = p.resolve()
-            if r not in seen:
-                seen.add(r)
+            if r not in rels:
+                rels[r] = rel
                 paths.append(r)
     ids = local_ids(paths)
-    specs = [ObjectSpec(uid=ids[p], path=p) for p in paths]
+    specs = [ObjectSpec(uid=ids[p], path=p, rel=rels[p]) for p in paths]
     used = set(ids.values())
     if refs:
         cache = cache or objaverse_cache.Cache()
@@ -188,7 +204,9 @@ def resolve_objects(
             if uid in used:
                 raise InputError(f"--objects: objaverse:{u} clashes with a local file's id {uid!r}")
             used.add(uid)
-            specs.append(ObjectSpec(uid=uid, path=cache.path(u), source="objaverse"))
+            specs.append(
+                ObjectSpec(uid=uid, path=cache.path(u), source="objaverse", rel=f"objaverse:{u}")
+            )
     return specs
 
 

@@ -17,7 +17,7 @@ import base64
 import importlib.util
 import json
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path, PureWindowsPath
 from urllib.parse import unquote
 
@@ -52,6 +52,9 @@ class Report:
     texture_pixels: int
     textures: int
     extensions: list[str]
+    # The glTF `asset` object as the file has it ({} when absent): who made the model
+    # and under which licence, for blurset.attribution.
+    asset: dict = field(default_factory=dict)
 
 
 def check(path: Path, budget: Budget = Budget()) -> Report:
@@ -134,7 +137,14 @@ def _check_document(doc: dict, bin_chunk: bytes | None, base: Path, budget: Budg
             f"textures too large: {pixels} pixels in {n_tex} images "
             f"(budget --max-texture-pixels {budget.max_texture_pixels})"
         )
-    return Report(triangles, pixels, n_tex, sorted(glb_inspect._extensions(doc)))
+    asset = doc.get("asset")
+    return Report(
+        triangles,
+        pixels,
+        n_tex,
+        sorted(glb_inspect._extensions(doc)),
+        asset if isinstance(asset, dict) else {},
+    )
 
 
 def _list(doc: dict, key: str) -> list[dict]:

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from blurset import _core, layout
+from blurset import _core, layout, publish
 from blurset.exceptions import ConfigError, InputError
 
 # The file types a figure is written as, by the suffix of --out.
@@ -405,6 +405,7 @@ def run(args) -> int:
         fig = contact_sheet(
             path, args.out or path / "contact_sheet.png", columns=args.columns, tile=args.tile
         )
+        publish.refresh_manifest([fig.path])
         for name, flags in fig.flagged:
             print(f"flagged: {name}: {flags}", file=sys.stderr)
         print(
@@ -421,6 +422,7 @@ def run(args) -> int:
         noise=args.noise,
         gain=args.gain,
     )
+    publish.refresh_manifest([fig.path])
     print(
         f"blurset preview: {len(fig.rows)} views x {len(fig.columns)} columns "
         f"({', '.join(fig.columns)}) -> {fig.path}"

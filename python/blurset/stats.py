@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import __version__, _core, layout
+from blurset import __version__, _core, layout, publish
 
 BAR = "#3b6ea8"  # histogram bars (tests look for this colour in the PNGs)
 MEDIAN = "#c8553d"
@@ -432,6 +432,8 @@ def run(args: argparse.Namespace) -> int:
     stats = document.to_dict()
     t_read = time.perf_counter() - t0
     report = write_stats(stats, out_dir, max_bins=args.bins, document=document)
+    # Statistics written into a published build keep its manifest whole.
+    publish.refresh_manifest([p for p in out_dir.rglob("*") if p.is_file()])
     if args.quiet:
         print(report)
     else:

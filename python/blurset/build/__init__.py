@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from blurset import layout
+from blurset import layout, publish
 from blurset.build.dataset import (
     append_failures,
     build_lock,
@@ -110,9 +110,12 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
         nonlocal new_settings
         with lock:
             new_settings += res.new_settings
-            if res.failures:
+            if res.failures or res.local:
                 with build_lock(out):
-                    append_failures(out, res.failures)
+                    if res.failures:
+                        append_failures(out, res.failures)
+                    # The absolute path stays here, unpublished (issue 19).
+                    publish.log_local(out, [res.local] if res.local else [])
         for r in res.failures:
             prog.write(f"failed: {r.get('setting') or r['uid']}: {r['stage']}: {r['reason']}")
 

@@ -142,6 +142,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="build into an OUT made with other output-shaping options (mixes settings)",
     )
+    p.add_argument(
+        "--licenses",
+        help="only objects under these licences, e.g. cc-by-4.0,cc0-1.0 (SPDX ids; add "
+        "unknown for objects that name none, other for unmapped ones); the rest are skipped "
+        "before rendering and recorded in failures.jsonl (stage license)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -156,7 +162,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "ray_address objaverse_dir objaverse_offline objaverse_count "
             "blender check_poses previews allow_mixed view_stride test_settings "
-            "blurry_test_views downsample"
+            "blurry_test_views downsample licenses"
         ).split()
     }
     if args.levels is not None:

@@ -14,14 +14,14 @@ import sys
 import time
 from pathlib import Path
 
-from blurset import __version__, _core, layout
+from blurset import __version__, _core, layout, publish
 from blurset.config import BuildConfig, flag
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec
 
 DATASET_NAME = "blurset Objaverse-Blur"
 # The files every process building into OUT shares (written under build_lock).
-SHARED_FILES = ("failures.jsonl", "splits.json", "dataset.json")
+SHARED_FILES = ("failures.jsonl", "splits.json", "dataset.json", "MANIFEST.sha256")
 
 
 @contextlib.contextmanager
@@ -173,4 +173,6 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     if checks:
         dataset["pose_checks"] = checks
     _core.write_dataset_json(out / "dataset.json", dataset)
+    # Last: the checksums of everything above (another shard's finalize rewrites it).
+    publish.write_manifest(out)
     return {"settings_complete": len(complete), "failures": kept}

@@ -66,8 +66,9 @@ def _object_record(obj: ObjectSpec, info: dict) -> dict[str, Any]:
     """meta.json's `object`: the file and what the worker reported about it."""
     keys = ("bbox_dims", "scale", "center", "n_vertices", "n_triangles", "unlit_fixed")
     return {
-        "source": str(obj.path),
-        "sha256": info.get("sha256"),
+        # path (relative to its root), sha256, title, author, licence, source_url: where
+        # the object came from, never the builder's absolute path (issue 19).
+        **info.get("provenance", {}),
         **{k: info.get(k) for k in keys},
         "blender_version": info.get("blender_version"),
         "warnings": info.get("warnings", []),

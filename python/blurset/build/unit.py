@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
-import hashlib
 import json
 import os
 import shutil
@@ -24,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import layout, objaverse_cache, preflight
+from blurset import _core, attribution, layout, objaverse_cache, preflight
 from blurset.build.setting import SettingFailed, SettingJob, render_setting
 from blurset.config import BuildConfig
 from blurset.exceptions import BlursetError
@@ -40,6 +39,8 @@ class ObjectResult:
     # Failure records (failures.jsonl): the object's, or one per setting that failed QA.
     failures: list[dict[str, Any]] = field(default_factory=list)
     new_settings: int = 0
+    # For OUT/.local/paths.jsonl (never published): where this object came from.
+    local: dict[str, Any] = field(default_factory=dict)
 
 
 class ObjectUnit:
@@ -52,15 +53,40 @@ class ObjectUnit:
         self.obj, self.cfg, self.progress = obj, cfg, progress
         self.out = Path(cfg.out)
         self.work = self.out / f".work-{obj.uid}"
-        self.result = ObjectResult(uid=obj.uid)
+        self.result = ObjectResult(
+            uid=obj.uid, local={"uid": obj.uid, "path": str(obj.path), "rel": obj.rel}
+        )
         self.stage = "fetch"
+        self._sha256: str | None = None
+        # meta.json `object` fields that say where the object came from (issue 19).
+        self.provenance: dict[str, Any] = {}
 
     def run(self) -> ObjectResult:
         # One process at a time per object in OUT: two builds of the same object (a
         # repeated command, overlapping shard lists) take turns; the second finds the
         # first's settings complete.
         with object_lock(self.out, self.obj.uid, self.progress.write):
-            return self._run()
+            result = self._run()
+        for r in result.failures:
+            r["reason"] = self._scrub(r["reason"])
+        return result
+
+    def _scrub(self, text: str) -> str:
+        """A failure reason without the builder's absolute paths (worker and importer
+        messages name files): the input becomes its relative path, OUT becomes `OUT`."""
+        swaps = [
+            (str(self.obj.path), self.obj.rel or self.obj.path.name),
+            (str(self.out), "OUT"),
+            (str(self.obj.path.parent), "."),
+            (str(Path.home()), "~"),
+        ]
+        if self.obj.source == "objaverse":
+            root = objaverse(self.cfg).root
+            swaps.append((str(root), root.name))
+        for old, new in sorted(swaps, key=lambda s: -len(s[0])):
+            if len(old) > 1:
+                text = text.replace(old, new)
+        return text
 
     def _run(self) -> ObjectResult:
         obj, cfg, progress, result = self.obj, self.cfg, self.progress, self.result
@@ -84,10 +110,22 @@ class ObjectUnit:
             if obj.source == "objaverse":
                 objaverse(cfg).ensure(obj.uid, obj.path)
             self.stage = "preflight"
-            preflight.check(obj.path, preflight.Budget(cfg.max_triangles, cfg.max_texture_pixels))
+            report = preflight.check(
+                obj.path, preflight.Budget(cfg.max_triangles, cfg.max_texture_pixels)
+            )
+            self.provenance = self._provenance(report)
+            self.stage = "license"
+            lic = self.provenance["license"]
+            if not attribution.allowed(lic, cfg.licenses):
+                raise LicenseRefused(
+                    f"licence {lic} ({self.provenance['license_text']}) is not in --licenses "
+                    f"{','.join(cfg.licenses or [])}"
+                )
         except Exception as e:
             # Whatever a file does to the fetch or the pre-flight costs that file only.
-            if isinstance(e, objaverse_cache.FetchError | preflight.PreflightError):
+            if isinstance(
+                e, objaverse_cache.FetchError | preflight.PreflightError | LicenseRefused
+            ):
                 reason = str(e)
             else:
                 reason = f"{type(e).__name__}: {' '.join(str(e).split())[:300]}"
@@ -126,37 +164,58 @@ class ObjectUnit:
         shutil.rmtree(self.work, ignore_errors=True)
         return result
 
+    def sha256(self) -> str:
+        """sha256 of the object's file (hashed once per unit)."""
+        if self._sha256 is None:
+            self._sha256 = _core.sha256_file(self.obj.path)
+            self.result.local["sha256"] = self._sha256
+        return self._sha256
+
+    def _provenance(self, report: preflight.Report) -> dict[str, Any]:
+        """Where the object came from and who made it, for meta.json: its relative path,
+        the sha256 of its bytes and its attribution (blurset.attribution)."""
+        obj = self.obj
+        sources = [attribution.from_asset(report.asset)]
+        if obj.source == "objaverse":
+            cache = objaverse(self.cfg)
+            ann = attribution.objaverse_annotation(cache.versioned, obj.path, obj.uid)
+            sources.append(attribution.from_objaverse_annotation(ann))
+        return {"path": obj.rel, "sha256": self.sha256(), **attribution.attribution(*sources)}
+
     def _reusable(self, setting: Path) -> bool:
-        """A complete setting made from this very file, and whole (another file may have
-        had this id in an earlier run, a file may have been damaged or deleted since):
-        anything else is redone, never passed off as this object's."""
+        """A complete setting made from this very file (the same bytes), and whole
+        (another file may have had this id in an earlier run, a file may have been damaged
+        or deleted since): anything else is redone, never passed off as this object's."""
         if not layout.is_complete(setting):
             return False
         problem = layout.setting_problem(setting)
         if problem is None:
             made_from = json.loads((setting / "meta.json").read_text()).get("object") or {}
-            # The file's content decides (a build moved elsewhere, or a demo object made
-            # again, is still the same object); without a recorded hash, its path.
-            if made_from.get("sha256") == self.sha256() or (
-                "sha256" not in made_from and made_from.get("source") == str(self.obj.path)
-            ):
+            problem = self._other_file(made_from)
+            if problem is None:
                 return True
-            problem = f"made from another file ({made_from.get('source')})"
         self.progress.write(f"redoing {setting.name}: {problem}")
         return False
 
-    def sha256(self) -> str | None:
-        """The object file's sha256 (once per unit); None when it cannot be read (yet)."""
-        if not hasattr(self, "_sha256"):
-            try:
-                h = hashlib.sha256()
-                with open(self.obj.path, "rb") as f:
-                    for block in iter(lambda: f.read(1 << 20), b""):
-                        h.update(block)
-                self._sha256: str | None = h.hexdigest()
-            except OSError:
-                self._sha256 = None
-        return self._sha256
+    def _other_file(self, made_from: dict[str, Any]) -> str | None:
+        """Why a setting's meta.json `object` is not this object's file, or None. The
+        file's content decides (a build moved elsewhere, or a demo object made again, is
+        still the same object); without a recorded hash (a build before issue 19), its
+        absolute path."""
+        if "sha256" not in made_from:
+            source = made_from.get("source")
+            return None if source == str(self.obj.path) else f"made from another file ({source})"
+        if self.obj.source == "objaverse" and not self.obj.path.is_file():
+            # An objaverse uid names one file: a cleaned cache needs no refetch.
+            return None if made_from.get("path") == self.obj.rel else "made from another file"
+        try:
+            if made_from["sha256"] == self.sha256():
+                return None
+        except OSError as e:
+            return f"cannot read {self.obj.rel} ({e.strerror})"
+        if made_from.get("path") != self.obj.rel:
+            return f"made from another file ({made_from.get('path')})"
+        return f"made from other bytes of {self.obj.rel} (sha256 differs)"
 
     def _attempt(self, pending: list[SettingJob], deadline: float | None) -> None:
         """Load the object in a fresh worker and render the pending settings in order,
@@ -184,8 +243,8 @@ class ObjectUnit:
             self.stage = "load"
             info = w.load(obj.path, work / "vertices.npy")
             info["load_s"] = round(time.monotonic() - t0, 3)
+            info["provenance"] = self.provenance
             info["blender_version"] = w.info.get("blender_version")
-            info["sha256"] = self.sha256()
             verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
             self.stage = "render"
             while pending:
@@ -247,6 +306,10 @@ def object_lock(out: Path, uid: str, say):
 DISK_FULL_BYTES = 64 * 2**20
 
 
+class LicenseRefused(BlursetError):
+    """The object's licence is not one `--licenses` allows: skipped before rendering."""
+
+
 class DiskFull(BlursetError):
     """OUT's file system is full: the build stops (nothing half-written is kept)."""
 
@@ -268,10 +331,11 @@ def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> Objec
 
 
 def failure_record(obj: ObjectSpec, stage: str, reason: str, t0: float, attempts: int) -> dict:
-    """A failures.jsonl record: uid, path, stage, reason, seconds (+ attempts, time)."""
+    """A failures.jsonl record: uid, path (relative to its root: the absolute one goes to
+    OUT/.local only), stage, reason, seconds (+ attempts, time)."""
     return {
         "uid": obj.uid,
-        "path": str(obj.path),
+        "path": obj.rel or obj.path.name,
         "stage": stage,
         "reason": reason,
         "seconds": round(time.monotonic() - t0, 3),

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from blurset import __version__, _core, layout
+from blurset import __version__, _core, layout, publish
 from blurset.config import check_downsample, parse_downsample
 from blurset.exceptions import ConfigError, InputError
 from blurset.layout import gain_name
@@ -217,7 +217,7 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
     if not (out / DATASET_FILE).is_file():
         # Written first (options only) so that a run killed before its end resumes;
         # rewritten with the seeds and counts at the end.
-        layout.write_json(out / DATASET_FILE, {"build": str(build.resolve()), "params": params})
+        layout.write_json(out / DATASET_FILE, {"build": build.resolve().name, "params": params})
     for stale in out.glob("*/*/gain_*.partial"):
         shutil.rmtree(stale, ignore_errors=True)
 
@@ -241,7 +241,8 @@ def _noise_json(unit: Unit, g: float, sr: float, ss: float, wb, params: dict, ar
         },
         source={
             "kind": params["source"],
-            "build": str(build.resolve()),
+            # The build by its folder's name: no builder paths in outputs (issue 19).
+            "build": build.resolve().name,
             "setting": unit.setting,
             "level": unit.level,
             "background": list(unit.background),
@@ -349,7 +350,7 @@ def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
         "name": "blurset Objaverse-Blur + noise",
         "blurset_version": __version__,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "build": str(build.resolve()),
+        "build": build.resolve().name,
         "build_seed": dataset.get("seed"),
         "params": params,
         "seed_derivation": SEED_DERIVATION,
@@ -426,6 +427,7 @@ def run(args) -> int:
     if show and todo:
         print(file=sys.stderr)
     doc = _finalize(out, build, params, dataset)
+    publish.write_manifest(out)
     print(
         f"blurset noise: {written} scene(s) written, {skipped} complete skipped "
         f"({len(settings)} settings x {len(levels)} levels x {len(gains)} gains, "

@@ -46,12 +46,20 @@ pub use crate::dataset::failures::{
 };
 pub use crate::dataset::layout::{
     complete_settings, gain_name, image_name, is_complete, level_dir, level_dirs, parse_level_dir,
-    parse_temp_name, partial_dir, publish, setting_levels, setting_name, setting_problem,
-    sort_level_dirs, temp_path, theta0s, MARKER, PARTIAL_SUFFIX, SHARP,
+    parse_temp_name, partial_dir, png_problem, publish, setting_levels, setting_name,
+    setting_problem, setting_problems, sort_level_dirs, temp_path, theta0s, SettingProblem, MARKER,
+    PARTIAL_SUFFIX, SHARP,
+};
+pub use crate::dataset::license::{
+    allowed as license_allowed, canonical as canonical_license, spdx_ids, spdx_of,
 };
 pub use crate::dataset::llff::{
     parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_scene_transforms,
     write_setting_poses, PoseRow,
+};
+pub use crate::dataset::manifest::{
+    check_manifest, list_files as manifest_files, sha256_file, update_manifest, write_manifest,
+    ManifestProblem, MANIFEST,
 };
 pub use crate::dataset::meta::{write_json, Meta, ObjectRecord, Timings};
 pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
@@ -59,6 +67,7 @@ pub use crate::dataset::splits::{
     make_splits, seeded_subset, test_views, Holdout, SettingEntry, Splits,
 };
 pub use crate::dataset::stats::{build_stats, BuildStats};
+pub use crate::dataset::verify::{check_images, ImageCheck};
 
 // Image error against a reference and the speed/quality front.
 pub use crate::metrics::{image_error, pareto_front};

@@ -84,6 +84,7 @@ build_config_methods!(fields {
     objaverse_offline: bool, objaverse_count: Option<usize>, timeout: f64,
     object_timeout: f64, retries: u32, max_failure_rate: f64, max_triangles: u64,
     max_texture_pixels: u64, blender: Option<String>, check_poses: bool, allow_mixed: bool,
+    licenses: Option<Vec<String>>,
 }
     #[new]
     #[pyo3(signature = (**values))]

@@ -76,6 +76,22 @@ fn setting_problem(py: Python<'_>, setting: PathBuf) -> Option<String> {
     py.detach(|| core::setting_problem(&setting))
 }
 
+/// Every problem of a complete setting the cheap check finds: (path relative to the
+/// setting, what is wrong), in the order the check meets them.
+#[pyfunction]
+fn setting_problems(py: Python<'_>, setting: PathBuf) -> Vec<(String, String)> {
+    py.detach(|| core::setting_problems(&setting))
+        .into_iter()
+        .map(|p| (p.path, p.what))
+        .collect()
+}
+
+/// What is wrong with a PNG read without decoding (signature, end chunk), or None.
+#[pyfunction]
+fn png_problem(path: PathBuf) -> Option<&'static str> {
+    core::png_problem(&path)
+}
+
 /// The complete setting directory names of a build, sorted.
 #[pyfunction]
 fn complete_settings(py: Python<'_>, build: PathBuf) -> PyResult<Vec<String>> {
@@ -139,6 +155,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(is_complete, m)?)?;
     m.add_function(wrap_pyfunction!(complete_settings, m)?)?;
     m.add_function(wrap_pyfunction!(setting_problem, m)?)?;
+    m.add_function(wrap_pyfunction!(setting_problems, m)?)?;
+    m.add_function(wrap_pyfunction!(png_problem, m)?)?;
     m.add_function(wrap_pyfunction!(publish, m)?)?;
     m.add_function(wrap_pyfunction!(temp_path, m)?)?;
     m.add_function(wrap_pyfunction!(parse_temp_name, m)?)?;

@@ -10,6 +10,7 @@ mod layout;
 mod llff;
 mod noise;
 mod noise_linear;
+mod publish;
 mod qa;
 mod sampling;
 mod stats;
@@ -36,6 +37,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     accumulate::register(m)?;
     noise::register(m)?;
     noise_linear::register(m)?;
+    publish::register(m)?;
     qa::register(m)?;
     tradeoff::register(m)?;
     stats::register(m)?;

@@ -166,11 +166,47 @@ const PNG_MAGIC: &[u8; 8] = b"\x89PNG\r\n\x1a\n";
 /// Bytes of one `poses_bounds.npy` row (17 float64).
 const POSE_ROW_BYTES: u64 = 17 * 8;
 
+/// One problem of a complete setting found by the cheap check: the file or folder
+/// (relative to the setting, `/`-separated), what is wrong with it, and the sentence a
+/// rerun prints when it redoes the setting.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SettingProblem {
+    pub path: String,
+    pub what: String,
+    pub message: String,
+}
+
+impl SettingProblem {
+    fn new(path: impl Into<String>, what: impl Into<String>) -> Self {
+        let (path, what) = (path.into(), what.into());
+        SettingProblem {
+            message: format!("{path} is {what}"),
+            path,
+            what,
+        }
+    }
+}
+
 /// What is missing or damaged in a complete setting, checked cheaply (names, sizes, PNG
 /// signatures and IEND chunks, the pose file's size; `blurset verify` decodes
 /// everything): None when it looks whole. A rerun redoes a setting with a problem
 /// instead of counting it.
 pub fn setting_problem(setting: &Path) -> Option<String> {
+    setting_problems(setting)
+        .into_iter()
+        .next()
+        .map(|p| p.message)
+}
+
+/// Every problem [`setting_problem`] checks for (it reports the first): `blurset verify`
+/// lists them all, then decodes what is there. Linear EXRs are checked (count, not
+/// empty) when meta.json's `render.linear` says they were kept.
+pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
+    #[derive(serde::Deserialize)]
+    struct Render {
+        #[serde(default)]
+        linear: bool,
+    }
     #[derive(serde::Deserialize)]
     struct Counts {
         views: Vec<serde::de::IgnoredAny>,
@@ -178,72 +214,130 @@ pub fn setting_problem(setting: &Path) -> Option<String> {
         /// Factors of the `images_<f>/` copies (none in builds made before them).
         #[serde(default)]
         downsample: Vec<u32>,
+        render: Option<Render>,
     }
+    let mut out = Vec::new();
     let meta = setting.join("meta.json");
     let text = match std::fs::read(&meta) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Some("meta.json is missing".into())
+            return vec![SettingProblem::new("meta.json", "missing")]
         }
-        Err(e) => return Some(format!("meta.json is unreadable ({})", e.kind())),
+        Err(e) => {
+            return vec![SettingProblem::new(
+                "meta.json",
+                format!("unreadable ({})", e.kind()),
+            )]
+        }
     };
     let Counts {
         views,
         levels,
         downsample,
+        render,
     } = match serde_json::from_slice::<Counts>(&text) {
         Ok(c) => c,
-        Err(e) => return Some(format!("meta.json is unreadable ({e})")),
+        Err(e) => {
+            return vec![SettingProblem::new(
+                "meta.json",
+                format!("unreadable ({e})"),
+            )]
+        }
     };
     let views = views.len();
+    let linear = render.is_some_and(|r| r.linear);
     if !setting.join("transforms.json").is_file() {
-        return Some("transforms.json is missing".into());
+        out.push(SettingProblem::new("transforms.json", "missing"));
     }
     for lvl in &levels {
         let d = setting.join(lvl);
         if !d.is_dir() {
-            return Some(format!("level folder {lvl}/ is missing"));
+            out.push(SettingProblem {
+                path: lvl.clone(),
+                what: "level folder missing".into(),
+                message: format!("level folder {lvl}/ is missing"),
+            });
+            continue;
         }
         let subdirs = std::iter::once("images".to_string())
             .chain(downsample.iter().map(|f| format!("images_{f}")));
         for sub in subdirs {
-            let mut images: Vec<PathBuf> = std::fs::read_dir(d.join(&sub))
-                .map(|rd| {
-                    rd.filter_map(|e| e.ok().map(|e| e.path()))
-                        .filter(|p| p.extension().is_some_and(|x| x == "png"))
-                        .collect()
-                })
-                .unwrap_or_default();
-            images.sort();
+            let images = files_with(&d.join(&sub), "png");
             if images.len() != views {
-                return Some(format!(
-                    "{lvl}/{sub} holds {} of {views} images",
-                    images.len()
-                ));
+                let path = format!("{lvl}/{sub}");
+                out.push(SettingProblem {
+                    what: format!("holds {} of {views} images", images.len()),
+                    message: format!("{path} holds {} of {views} images", images.len()),
+                    path,
+                });
             }
-            for p in &images {
-                let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
-                let name = name.unwrap_or_default();
-                match png_state(p) {
-                    PngState::Whole => {}
-                    PngState::NotPng => {
-                        return Some(format!("{lvl}/{sub}/{name} is not a whole PNG"))
-                    }
-                    PngState::Truncated => return Some(format!("{lvl}/{sub}/{name} is truncated")),
+            for (name, p) in &images {
+                let Some(what) = png_problem(p) else {
+                    continue;
+                };
+                let path = format!("{lvl}/{sub}/{name}");
+                out.push(SettingProblem {
+                    message: format!("{path} is {}", what.split(" (").next().unwrap_or(what)),
+                    path,
+                    what: what.into(),
+                });
+            }
+        }
+        if linear {
+            let exrs = files_with(&d.join("linear"), "exr");
+            if exrs.len() != views {
+                let path = format!("{lvl}/linear");
+                out.push(SettingProblem {
+                    what: format!("holds {} of {views} EXRs", exrs.len()),
+                    message: format!("{path} holds {} of {views} EXRs", exrs.len()),
+                    path,
+                });
+            }
+            for (name, p) in &exrs {
+                if std::fs::metadata(p).map_or(true, |m| m.len() == 0) {
+                    out.push(SettingProblem::new(format!("{lvl}/linear/{name}"), "empty"));
                 }
             }
         }
-        let npy = d.join("poses_bounds.npy");
-        match std::fs::metadata(&npy) {
+        let npy = format!("{lvl}/poses_bounds.npy");
+        match std::fs::metadata(d.join("poses_bounds.npy")) {
             Ok(m) if m.is_file() => {
                 if m.len() < views as u64 * POSE_ROW_BYTES + 16 {
-                    return Some(format!("{lvl}/poses_bounds.npy is truncated"));
+                    out.push(SettingProblem::new(npy, "truncated"));
                 }
             }
-            _ => return Some(format!("{lvl}/poses_bounds.npy is missing")),
+            _ => out.push(SettingProblem::new(npy, "missing")),
         }
     }
-    None
+    out
+}
+
+/// (name, path) of a folder's files with this extension, sorted by name (none when the
+/// folder is missing).
+fn files_with(dir: &Path, ext: &str) -> Vec<(String, PathBuf)> {
+    let mut found: Vec<(String, PathBuf)> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == ext))
+                .map(|p| {
+                    let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
+                    (name.unwrap_or_default(), p)
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    found.sort();
+    found
+}
+
+/// What is wrong with a PNG file, read without decoding (its signature and its last
+/// chunk, IEND: a file cut short by a full disk or a killed copy has none), or None.
+pub fn png_problem(path: &Path) -> Option<&'static str> {
+    match png_state(path) {
+        PngState::Whole => None,
+        PngState::NotPng => Some("not a whole PNG"),
+        PngState::Truncated => Some("truncated (no PNG end chunk)"),
+    }
 }
 
 enum PngState {
@@ -476,6 +570,27 @@ mod tests {
         );
         put("sharp/images_4/001.png", &png)?;
         assert_eq!(setting_problem(&dir), None);
+        // Every problem is listed (verify names them all), linear EXRs when kept.
+        put(
+            "meta.json",
+            br#"{"views": [{}, {}], "levels": ["sharp", "blur_1"], "render": {"linear": true}}"#,
+        )?;
+        put("sharp/images/001.png", &png[..png.len() - 4])?;
+        put("sharp/linear/000.exr", b"")?;
+        let all: Vec<(String, String)> = setting_problems(&dir)
+            .into_iter()
+            .map(|p| (p.path, p.what))
+            .collect();
+        let want = [
+            ("sharp/images/001.png", "truncated (no PNG end chunk)"),
+            ("sharp/linear", "holds 1 of 2 EXRs"),
+            ("sharp/linear/000.exr", "empty"),
+            ("blur_1", "level folder missing"),
+        ];
+        assert_eq!(
+            all,
+            want.map(|(a, b)| (a.to_string(), b.to_string())).to_vec()
+        );
         let _ = std::fs::remove_dir_all(&dir);
         Ok(())
     }

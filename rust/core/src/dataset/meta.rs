@@ -11,14 +11,29 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// What the worker reported about the object it loaded (null where it did not say).
+/// Where the object came from, who made it and under which licence (issue 19: no path
+/// of the build machine), and what the worker reported about it (null where it did not
+/// say).
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct ObjectRecord {
-    /// The model file the setting was rendered from.
-    pub source: String,
+    /// The model file, relative to the folder or list it was found in (or
+    /// `objaverse:<uid>`).
+    pub path: String,
     /// SHA-256 of that file: a rerun reuses a setting made from the same bytes.
     pub sha256: Option<String>,
+    /// Attribution (dataset::license, blurset.attribution): `unknown` where the model
+    /// and its annotations say nothing; `license` is the SPDX id (or `other`) of
+    /// `license_text`, kept as given.
+    pub title: String,
+    pub author: String,
+    pub author_url: Option<String>,
+    pub license: String,
+    pub license_text: String,
+    pub source_url: String,
+    /// The glTF `asset.copyright`, when the file has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub copyright: Option<String>,
     pub bbox_dims: Option<Vec<f64>>,
     pub scale: Option<f64>,
     pub center: Option<Vec<f64>>,
@@ -56,6 +71,11 @@ pub struct RenderRecord {
     pub background: [f64; 3],
     pub alpha: String,
     pub encoding: String,
+    /// `<level>/linear/<view>.exr` beside images/ (`--keep-linear`), which `blurset
+    /// verify` then expects; written only when true (a default build's meta.json is
+    /// unchanged).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub linear: bool,
 }
 
 impl RenderRecord {
@@ -75,6 +95,7 @@ impl RenderRecord {
             background: cfg.background,
             alpha: "premultiplied, averaged with colour, composited over background".into(),
             encoding: "sRGB (IEC 61966-2-1) of linear radiance, 8-bit PNG".into(),
+            linear: cfg.write_linear,
         }
     }
 }
@@ -309,6 +330,25 @@ mod tests {
             serde_json::json!(["sharp", "blur_1", "blur_3"])
         );
         assert_eq!(v["render"]["samples_per_latent"], 32);
+        // A default build's render record is unchanged; --keep-linear says so.
+        assert!(v["render"].get("linear").is_none());
+        let linear = BuildConfig {
+            write_linear: true,
+            ..cfg.clone()
+        };
+        assert_eq!(
+            serde_json::to_value(RenderRecord::of(&linear))
+                .map_err(|e| Error::Value(e.to_string()))?["linear"],
+            true
+        );
+        // The object names no builder path (issue 19): `source` is no field.
+        let obj: ObjectRecord = serde_json::from_str(r#"{"path": "a.glb", "license": "CC0-1.0"}"#)
+            .map_err(|e| Error::Value(e.to_string()))?;
+        assert_eq!(
+            (obj.path.as_str(), obj.license.as_str()),
+            ("a.glb", "CC0-1.0")
+        );
+        assert!(serde_json::from_str::<ObjectRecord>(r#"{"source": "/home/u/a.glb"}"#).is_err());
         assert!(v.get("pose_check").is_none());
         let back: ReadMeta = serde_json::from_value(v).map_err(|e| Error::Value(e.to_string()))?;
         assert_eq!((back.views.len(), back.views[2].levels.len()), (3, 2));

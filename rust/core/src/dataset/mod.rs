@@ -1,10 +1,13 @@
 //! The files of a build: names and layout, LLFF poses, splits, failures, statistics,
-//! atomic writes.
+//! atomic writes, the checksum manifest and the image check of `blurset verify`.
 pub mod atomic;
 pub mod failures;
 pub mod layout;
+pub mod license;
 pub mod llff;
+pub mod manifest;
 pub mod meta;
 pub mod records;
 pub mod splits;
 pub mod stats;
+pub mod verify;

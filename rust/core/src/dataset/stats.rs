@@ -411,6 +411,14 @@ fn read_json_file<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Re
         .map_err(|e| input_error(format!("corrupt {what} ({e})"), path))
 }
 
+/// A build's folder name (`.` and relative paths resolved), or the path as given.
+fn build_name(out: &Path) -> PathBuf {
+    out.canonicalize()
+        .ok()
+        .and_then(|p| p.file_name().map(PathBuf::from))
+        .unwrap_or_else(|| out.to_path_buf())
+}
+
 /// Read every complete setting of the build at `out` (in parallel) and compute its
 /// statistics. Errors name the file: a missing or non-build directory, an unreadable
 /// or corrupt meta.json of a complete setting, a corrupt splits.json.
@@ -460,7 +468,8 @@ fn assemble(
     let col = || Vec::with_capacity(n_views);
     let mut st = BuildStats {
         schema: SCHEMA.to_string(),
-        build: out.to_path_buf(),
+        // The build by its folder's name: a published stats.json names no builder path.
+        build: build_name(out),
         counts: Counts::default(),
         quantities: QUANTITIES
             .iter()

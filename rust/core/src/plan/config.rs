@@ -8,6 +8,7 @@
 use super::sampling::{BlurMethod, LatentPositions, SamplingConfig, MAX_COUNT, MAX_SAMPLES};
 use super::weights::Guards;
 use crate::dataset::layout::{self, MAX_LEVEL};
+use crate::dataset::license;
 use crate::dataset::splits::test_views;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -81,6 +82,8 @@ pub enum Spec {
     Rgb,
     /// A string or a list of strings.
     StrList,
+    /// Licence ids (dataset::license::canonical), comma-separated or a list, at least one.
+    Licenses,
 }
 
 impl Spec {
@@ -138,6 +141,9 @@ impl Spec {
             }
             Spec::Rgb => "must be 3 numbers in [0, 1] (linear RGB)".into(),
             Spec::StrList => "must be a string or a list of strings".into(),
+            Spec::Licenses => "must be licence ids, comma-separated or a list: SPDX ids such as \
+                cc-by-4.0, cc-by-sa-4.0, cc-by-nc-4.0, cc0-1.0, or other / unknown"
+                .into(),
         }
     }
 
@@ -254,7 +260,10 @@ impl<T: OptionValue> OptionValue for Option<T> {
 }
 
 impl OptionValue for Vec<String> {
-    fn from_raw(raw: &Raw, _: &Spec) -> Option<Self> {
+    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
+        if *spec == Spec::Licenses {
+            return licenses_from_raw(raw);
+        }
         match raw {
             Raw::Str(s) => Some(vec![s.clone()]),
             Raw::List(v) => v
@@ -270,6 +279,30 @@ impl OptionValue for Vec<String> {
     fn to_raw(&self) -> Raw {
         Raw::List(self.iter().cloned().map(Raw::Str).collect())
     }
+}
+
+/// `cc-by-4.0, CC0-1.0` or a list of ids → their canonical spellings, once each, in the
+/// order given; None when an id is unknown or none is given.
+fn licenses_from_raw(raw: &Raw) -> Option<Vec<String>> {
+    let items: Vec<&str> = match raw {
+        Raw::Str(s) => s.split(',').collect(),
+        Raw::List(v) => v
+            .iter()
+            .map(|x| match x {
+                Raw::Str(s) => Some(s.as_str()),
+                _ => None,
+            })
+            .collect::<Option<_>>()?,
+        _ => return None,
+    };
+    let mut out: Vec<String> = Vec::new();
+    for item in items.iter().filter(|s| !s.trim().is_empty()) {
+        let id = license::canonical(item)?;
+        if !out.contains(&id) {
+            out.push(id);
+        }
+    }
+    (!out.is_empty()).then_some(out)
 }
 
 impl OptionValue for Vec<u32> {
@@ -500,6 +533,9 @@ build_config! {
     check_poses: bool = false, Spec::Bool;
     /// Build into an OUT made with other output-shaping options (mixes settings).
     allow_mixed: bool = false, Spec::Bool;
+    /// Only objects under these licences (SPDX ids, `other`, `unknown`); the rest are
+    /// skipped before rendering (failures.jsonl stage `license`). None = every licence.
+    licenses: Option<Vec<String>> = None, Spec::Licenses;
 }
 
 impl BuildConfig {
@@ -685,9 +721,17 @@ impl BuildConfig {
     }
 
     /// The `config` record of dataset.json: every option, `latents` = "auto" under
-    /// latents auto, and the effective sharp samples.
+    /// latents auto, and the effective sharp samples. It names no path of the build
+    /// machine (issue 19: a build is published as is): OUT, the objaverse cache and a
+    /// Blender binary by their last component, `--objects` entries by [`public_entry`].
+    /// Those are run options, never compared between runs.
     pub fn record(&self) -> serde_json::Value {
-        let mut v = serde_json::to_value(self).unwrap_or_default();
+        let mut public = self.clone();
+        public.out = public.out.as_deref().map(last_component);
+        public.objaverse_dir = public.objaverse_dir.as_deref().map(last_component);
+        public.blender = public.blender.as_deref().map(last_component);
+        public.objects = public.objects.iter().map(|e| public_entry(e)).collect();
+        let mut v = serde_json::to_value(&public).unwrap_or_default();
         if let Some(m) = v.as_object_mut() {
             m.insert(
                 "effective_sharp_samples".into(),
@@ -698,6 +742,25 @@ impl BuildConfig {
             }
         }
         v
+    }
+}
+
+/// A path's last component (`.`/`..`/`/` kept as given).
+fn last_component(path: &str) -> String {
+    std::path::Path::new(path)
+        .file_name()
+        .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+/// An `--objects` entry as a published record shows it: an objaverse reference as it
+/// is, a path by its last component (a list's `@` kept).
+pub fn public_entry(entry: &str) -> String {
+    if entry.starts_with("objaverse:") {
+        return entry.to_string();
+    }
+    match entry.strip_prefix('@') {
+        Some(list) => format!("@{}", last_component(list)),
+        None => last_component(entry),
     }
 }
 
@@ -794,6 +857,10 @@ mod tests {
             ("test_objects", Raw::Str("a".into()))
         ])
         .starts_with("test_settings and test_objects"));
+        assert!(err(&[("licenses", Raw::Str("cc-by-4".into()))])
+            .starts_with("licenses \"cc-by-4\": must be licence ids"));
+        assert!(err(&[("licenses", Raw::Str(" , ".into()))]).starts_with("licenses"));
+        assert!(err(&[("licenses", Raw::List(vec![Raw::Int(1)]))]).starts_with("licenses [1]"));
     }
 
     #[test]
@@ -818,6 +885,45 @@ mod tests {
         back.validate()?;
         assert_eq!(back, c);
         assert!(serde_json::from_str::<BuildConfig>("{\"vews\": 3}").is_err());
+        let lic = BuildConfig::from_values(&values(&[(
+            "licenses",
+            Raw::Str("cc-by-4.0, CC0-1.0,unknown,cc-by-4.0".into()),
+        )]))?;
+        assert_eq!(
+            lic.licenses,
+            Some(vec!["CC-BY-4.0".into(), "CC0-1.0".into(), "unknown".into()])
+        );
+        let listed = BuildConfig::from_values(&values(&[(
+            "licenses",
+            Raw::List(vec![Raw::Str("Other".into())]),
+        )]))?;
+        assert_eq!(listed.licenses, Some(vec!["other".into()]));
+        Ok(())
+    }
+
+    #[test]
+    fn the_record_names_no_builder_path() -> Result<()> {
+        let c = BuildConfig::from_values(&values(&[
+            ("out", Raw::Str("/home/u/data/out".into())),
+            (
+                "objects",
+                Raw::List(vec![
+                    Raw::Str("/home/u/glb/a.glb".into()),
+                    Raw::Str("@/home/u/lists/l.txt".into()),
+                    Raw::Str("objaverse:abc".into()),
+                ]),
+            ),
+            ("objaverse_dir", Raw::Str("/home/u/.objaverse".into())),
+        ]))?;
+        let r = c.record();
+        assert_eq!(r["out"], "out");
+        assert_eq!(
+            r["objects"],
+            serde_json::json!(["a.glb", "@l.txt", "objaverse:abc"])
+        );
+        assert_eq!(r["objaverse_dir"], ".objaverse");
+        assert_eq!(r["licenses"], serde_json::Value::Null);
+        assert!(!r.to_string().contains("/home/u"));
         Ok(())
     }
 

@@ -1,0 +1,498 @@
+"""`blurset card BUILD`: a Hugging Face dataset card (README.md) for a build (issue 19).
+
+The YAML header carries what the Hub reads (licence, task categories, size category,
+pretty name, tags); the body explains the dataset from the build's own files: the
+paper's parameters as this build used them (dataset.json, meta.json), the counts and
+splits, the noise gains when a `blurset noise BUILD` output is given or found beside
+the build, how to load it and check it, the paper's citation, and the attribution of
+every object (title, author, licence, link). Nothing in it names a builder path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+from blurset import __version__, attribution, layout, publish
+from blurset.exceptions import ConfigError, InputError
+
+PAPER = (
+    "Towards Degradation-Robust Reconstruction in Generalizable NeRF "
+    "(Chi Ho Park, Ka Leong Cheng, Zhicheng Wang, Qifeng Chen)"
+)
+BIBTEX = """@article{park2024degradation,
+  title   = {Towards Degradation-Robust Reconstruction in Generalizable NeRF},
+  author  = {Park, Chi Ho and Cheng, Ka Leong and Wang, Zhicheng and Chen, Qifeng},
+  journal = {arXiv preprint},
+  year    = {2024}
+}"""
+TASKS = ("image-to-3d", "image-to-image")
+TAGS = (
+    "nerf",
+    "generalizable-nerf",
+    "novel-view-synthesis",
+    "motion-blur",
+    "deblurring",
+    "multi-view",
+    "llff",
+    "synthetic",
+    "blender",
+)
+# The paper's values (DESIGN §2) beside which the build's own are shown.
+PAPER_VALUES = {
+    "settings_per_object": 4,
+    "views": 34,
+    "phi0_deg": 60.0,
+    "window_deg": 7.5,
+    "delta0": 2.5,
+    "levels": [1, 2, 3, 4],
+    "level_spread": 0.1,
+    "latents": 34,
+    "latent_positions": "random",
+    "view_stride": 16,
+}
+MAX_PREVIEWS = 12
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("build", type=Path, help="a build directory (dataset.json)")
+    p.add_argument("--out", type=Path, help="the card to write (default: BUILD/README.md)")
+    p.add_argument(
+        "--noise",
+        type=Path,
+        action="append",
+        help="a `blurset noise BUILD` output to describe (default: any found beside BUILD)",
+    )
+    p.add_argument(
+        "--previews",
+        action="store_true",
+        help="show the build's pictures (contact_sheet.png, <setting>/preview.png) when present",
+    )
+    p.add_argument("--pretty-name", help="the card's title (default: from the build's name)")
+
+
+# -- reading the build ------------------------------------------------------------------
+
+
+def _objects(build: Path, settings: list[Path]) -> tuple[dict[str, dict], list[dict]]:
+    """Per object uid its meta.json `object` record, and every setting's meta.json."""
+    objects: dict[str, dict] = {}
+    metas = []
+    for s in settings:
+        meta = layout.read_json(s / "meta.json", "meta.json")
+        metas.append(meta)
+        rec = meta.get("object") if isinstance(meta.get("object"), dict) else {}
+        objects.setdefault(str(meta.get("uid", s.name)), rec)
+    return objects, metas
+
+
+def _noise_outputs(build: Path, given: list[Path] | None) -> list[tuple[Path, dict]]:
+    """The noise outputs to describe: those given, or the folders beside the build whose
+    noise_dataset.json names it."""
+    if given:
+        out = []
+        for p in given:
+            doc = layout.read_json(p / "noise_dataset.json", "noise_dataset.json")
+            out.append((p, doc))
+        return out
+    found = []
+    name = build.resolve().name
+    for d in sorted(build.resolve().parent.iterdir()):
+        f = d / "noise_dataset.json"
+        if d.is_dir() and f.is_file():
+            try:
+                doc = json.loads(f.read_text())
+            except (OSError, ValueError):
+                continue
+            if isinstance(doc, dict) and Path(str(doc.get("build", ""))).name == name:
+                found.append((d, doc))
+    return found
+
+
+# -- pieces of the card -----------------------------------------------------------------
+
+
+def size_category(n: int) -> str:
+    """The Hub's size category of n examples (images here)."""
+    bounds = [
+        (1_000, "n<1K"),
+        (10_000, "1K<n<10K"),
+        (100_000, "10K<n<100K"),
+        (1_000_000, "100K<n<1M"),
+        (10_000_000, "1M<n<10M"),
+    ]
+    for b, name in bounds:
+        if n < b:
+            return name
+    return "n>10M" if n >= 10_000_000 else "other"
+
+
+def _q(s: Any) -> str:
+    """A YAML scalar: JSON's double-quoted string is valid YAML."""
+    return json.dumps(str(s), ensure_ascii=False)
+
+
+def yaml_header(meta: dict[str, Any]) -> str:
+    lines = ["---"]
+    for key, value in meta.items():
+        if isinstance(value, list):
+            lines.append(f"{key}:")
+            lines.extend(f"- {_q(v)}" for v in value)
+        else:
+            lines.append(f"{key}: {_q(value)}")
+    lines.append("---")
+    return "\n".join(lines) + "\n"
+
+
+def _cell(s: Any) -> str:
+    """Text safe in a Markdown table cell."""
+    text = " ".join(str(s).split())
+    return text.replace("\\", "\\\\").replace("|", "\\|") or "-"
+
+
+def _link(text: str, url: Any) -> str:
+    if isinstance(url, str) and url.startswith(("http://", "https://")):
+        return f"[{_cell(text)}]({url.replace(')', '%29').replace(' ', '%20')})"
+    return _cell(text)
+
+
+def _fmt(x: Any) -> str:
+    if isinstance(x, float):
+        return f"{x:g}"
+    if isinstance(x, list):
+        return ", ".join(_fmt(v) for v in x) or "none"
+    return "-" if x is None else str(x)
+
+
+def licence_header(licences: Counter) -> dict[str, Any]:
+    """`license` of the header: the one licence, or `other` with the list when mixed."""
+    ids = sorted(licences)
+    if len(ids) == 1:
+        return {"license": attribution.hf_license(ids[0])}
+    listed = ", ".join(
+        f"{attribution.hf_license(k)} ({licences[k]} object{'s' if licences[k] > 1 else ''})"
+        for k in ids
+    )
+    return {
+        "license": "other",
+        "license_name": "per-object",
+        "license_details": f"Each object keeps its own licence: {listed}; "
+        "see the attribution table.",
+    }
+
+
+def _level_table(metas: list[dict], levels: list[str]) -> list[str]:
+    rows = ["| level | w_l (median) | motion on screen, px (median) | latent frames (median) |"]
+    rows.append("|---|---|---|---|")
+    for lvl in levels:
+        if lvl == layout.SHARP:
+            rows.append("| sharp | 0 | 0 | 1 (ground truth) |")
+            continue
+        key = lvl.partition("_")[2]
+        w, px, m = [], [], []
+        for meta in metas:
+            for v in meta.get("views", []):
+                lp = (v.get("levels") or {}).get(key)
+                if isinstance(lp, dict):
+                    w.append(lp.get("w_l"))
+                    px.append(lp.get("motion_px"))
+                    m.append(lp.get("latents"))
+
+        def med(xs: list) -> str:
+            xs = [x for x in xs if isinstance(x, int | float)]
+            return f"{statistics.median(xs):.3g}" if xs else "-"
+
+        rows.append(f"| {lvl} | {med(w)} | {med(px)} | {med(m)} |")
+    return rows
+
+
+def make_card(
+    build: Path,
+    *,
+    noise: list[Path] | None = None,
+    previews: bool = False,
+    pretty_name: str | None = None,
+    card_dir: Path | None = None,
+) -> str:
+    """The card's text. `card_dir` is where it will be written (picture links are
+    relative to it)."""
+    build = Path(build)
+    dataset = layout.read_json(build / "dataset.json", "dataset.json")
+    if dataset.get("provisional"):
+        raise InputError(
+            f"the build has not finished (dataset.json is provisional): rerun it to the end: {build}"
+        )
+    splits = layout.read_json(build / "splits.json", "splits.json")
+    settings = layout.complete_settings(build)
+    if not settings:
+        raise InputError(f"no complete setting in build: {build}")
+    objects, metas = _objects(build, settings)
+    cfg = dataset.get("config") or {}
+    counts = dataset.get("counts") or {}
+    levels = list(dataset.get("levels") or metas[0].get("levels") or [])
+    licences = Counter(str(o.get("license", attribution.UNKNOWN)) for o in objects.values())
+    name = pretty_name or f"blurset Objaverse-Blur: {build.resolve().name}"
+    n_images = int(counts.get("images", 0))
+    noise_docs = _noise_outputs(build, noise)
+    header = {
+        "pretty_name": name,
+        **licence_header(licences),
+        "task_categories": list(TASKS),
+        "size_categories": [size_category(n_images)],
+        "tags": list(TAGS) + (["denoising"] if noise_docs else []),
+    }
+    m0 = metas[0]
+    res = m0.get("resolution") or [cfg.get("resolution")] * 2
+    views = len(m0.get("views", []))
+    out: list[str] = [yaml_header(header), f"# {name}", ""]
+    out += [
+        "Multi-view images of 3D objects with realistic camera motion blur at several "
+        "levels, with sharp ground truth and LLFF poses, for training and evaluating "
+        "degradation-robust generalizable NeRFs (IBRNet, NAN, GeoNeRF, GNT). It re-creates "
+        f"the Objaverse Blur dataset of *{PAPER}* and was built with "
+        f"blurset {dataset.get('blurset_version', __version__)}"
+        f" on {str(dataset.get('created', '?'))[:10]}.",
+        "",
+        "## Contents",
+        "",
+        "| objects | settings | views per setting | levels | images | objects failed |",
+        "|---|---|---|---|---|---|",
+        f"| {counts.get('objects')} | {counts.get('settings')} | {views} | {len(levels)} "
+        f"| {counts.get('images')} | {counts.get('objects_failed', 0)} |",
+        "",
+        f"Images are {res[0]} x {res[1]} px sRGB PNG. Levels: {', '.join(levels)} "
+        "(`sharp` is the ground truth of every view; `blur_l` the same views blurred at "
+        "level l).",
+        "",
+        "### Splits",
+        "",
+        f"`splits.json`: {len(splits.get('train', []))} training and "
+        f"{len(splits.get('test', []))} test settings (whole objects are held out: "
+        f"{', '.join(splits.get('test_objects', []) or []) or 'none'}); in every setting "
+        f"views {', '.join(map(str, m0.get('test_views', [])))} (every "
+        f"{splits.get('view_stride')}th) are test views.",
+        "",
+        "### Layout",
+        "",
+        "```",
+        "dataset.json  splits.json  failures.jsonl  MANIFEST.sha256",
+        "<object>_<theta0>/            one setting (an object seen around one azimuth)",
+        "  meta.json                   every sampled number: views, trajectories, w_u, w_l, "
+        "seeds; the object's attribution",
+        "  transforms.json             OpenGL camera-to-world, intrinsics, per-level paths",
+        "  sharp/images/000.png …      sharp/poses_bounds.npy",
+        "  blur_1/images/000.png …     blur_1/poses_bounds.npy   (… every level)",
+        "```",
+        "",
+    ]
+    if any((s / layout.SHARP / "linear").is_dir() for s in settings[:1]):
+        out += [
+            "Each level also holds `linear/<view>.exr`: the linear premultiplied RGBA "
+            "image before compositing and sRGB.",
+            "",
+        ]
+    out += _construction(cfg, m0, metas, levels)
+    for path, doc in noise_docs:
+        out += _noise_section(path, doc)
+    out += _loading(levels)
+    if previews:
+        out += _previews(build, settings, card_dir or build)
+    out += _attribution(objects, licences)
+    out += ["## Citation", "", "```bibtex", BIBTEX, "```", ""]
+    return "\n".join(out)
+
+
+def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> list[str]:
+    sampling = m0.get("sampling") or {}
+    render = m0.get("render") or {}
+
+    def used(key: str) -> Any:
+        return cfg.get(key, sampling.get(key))
+
+    rows = [
+        ("settings per object (base azimuths θ0)", "settings_per_object"),
+        ("views n per setting", "views"),
+        ("polar angle φ0 (°, from +Z)", "phi0_deg"),
+        ("view window ± (°)", "window_deg"),
+        ("trajectory δ0 (Δr %, Δφ °, Δθ °)", "delta0"),
+        ("blur levels l", "levels"),
+        ("w_l spread (w_l ~ U[(1-s)·w_u·l, (1+s)·w_u·l])", "level_spread"),
+        ("latent frames m per blurry image", "latents"),
+        ("latent positions on the trajectory", "latent_positions"),
+        ("test view stride", "view_stride"),
+    ]
+    table = ["| parameter | paper | this build |", "|---|---|---|"]
+    for label, key in rows:
+        table.append(f"| {label} | {_fmt(PAPER_VALUES.get(key))} | {_fmt(used(key))} |")
+    extra = [
+        ("resolution (px)", cfg.get("resolution")),
+        ("field of view (°)", cfg.get("fov_deg", sampling.get("fov_deg"))),
+        ("blur method", render.get("blur_method", cfg.get("blur_method"))),
+        ("Cycles samples per latent frame", render.get("samples_per_latent")),
+        ("Cycles samples of a sharp image", render.get("sharp_samples")),
+        ("background", _fmt(render.get("background", cfg.get("background")))),
+        ("seed", cfg.get("seed")),
+    ]
+    for label, value in extra:
+        table.append(f"| {label} | - | {_fmt(value)} |")
+    return [
+        "## Construction",
+        "",
+        "Each object is centred and scaled so its largest side is 1 and rendered with "
+        "Blender (Cycles). Per setting, n camera positions are drawn around "
+        "(φ0, θ0); each view gets a trajectory δ = (Δr, Δφ, Δθ), components ~ "
+        "U[δ0/2, δ0] with random signs, and a scene-dependent weight "
+        "w_u = (F·R·O)^(1/3) from the object's depth range and shape. A blurry image at "
+        "level l is the mean **in linear light** of m renders at random positions on the "
+        "segment p → p + w_l·δ, w_l ~ U[0.9·w_u·l, 1.1·w_u·l]; the pose written for every "
+        "level is the sharp view's p. Every sampled number is in each setting's "
+        "meta.json.",
+        "",
+        *table,
+        "",
+        *_level_table(metas, levels),
+        "",
+    ]
+
+
+def _noise_section(path: Path, doc: dict) -> list[str]:
+    params = doc.get("params") or {}
+    gains = doc.get("gains") or []
+    rows = ["| gain | σ_read | σ_shot |", "|---|---|---|"]
+    rows += [
+        f"| {_fmt(g.get('gain'))} | {g.get('sigma_read', 0):.4g} | {g.get('sigma_shot', 0):.4g} |"
+        for g in gains
+    ]
+    counts = doc.get("counts") or {}
+    return [
+        f"## Noise variants (`{path.name}/`)",
+        "",
+        f"LLFF-N style sensor noise on levels {', '.join(doc.get('levels', []))}: "
+        "y' = y + sqrt(σ_read² + σ_shot²·y)·N(0, 1) in linear light, after inverse gamma "
+        f"({params.get('gamma')}) and "
+        + (
+            "a random white balance per scene"
+            if params.get("profile") == "paper"
+            else "no white balance"
+        )
+        + f"; clean source: the build's {params.get('source')} images, seed "
+        f"{params.get('seed')}. {counts.get('units')} noisy scenes, {counts.get('images')} "
+        "images; each `<setting>/<level>/gain_<g>/` is an LLFF scene with `noise.json`.",
+        "",
+        *rows,
+        "",
+    ]
+
+
+def _loading(levels: list[str]) -> list[str]:
+    blur = next((lvl for lvl in levels if lvl != layout.SHARP), layout.SHARP)
+    return [
+        "## Loading",
+        "",
+        "Every level directory is an LLFF scene as IBRNet, NAN and Deblur-NeRF read it: "
+        "`images/` (sorted file order is view order) and `poses_bounds.npy` (N x 17: the "
+        "3 x 5 camera-to-world [down, right, backwards | t | h w f] row-major, then near, "
+        "far). With IBRNet/NAN use `--llffhold 16`; nerfstudio reads `transforms.json` "
+        "(use `--center-method focus`). Training pairs a degraded level with `sharp/` of "
+        "the same setting.",
+        "",
+        "```python",
+        "import json",
+        "from pathlib import Path",
+        "",
+        "import numpy as np",
+        "from PIL import Image",
+        "",
+        'root = Path(".")  # e.g. huggingface_hub.snapshot_download(repo_id, repo_type="dataset")',
+        'splits = json.loads((root / "splits.json").read_text())',
+        'for setting in splits["train"]:',
+        f'    level = root / setting / "{blur}"',
+        '    pb = np.load(level / "poses_bounds.npy")  # (N, 17)',
+        "    poses = pb[:, :15].reshape(-1, 3, 5)  # camera-to-world [down, right, back | t]",
+        "    c2w, (h, w, focal) = poses[:, :, :4], poses[0, :, 4]",
+        "    near, far = pb[:, 15], pb[:, 16]",
+        '    images = [np.asarray(Image.open(p)) for p in sorted((level / "images").glob("*.png"))]',
+        '    sharp = sorted((root / setting / "sharp" / "images").glob("*.png"))  # ground truth',
+        "```",
+        "",
+        "### Checking a download",
+        "",
+        "`MANIFEST.sha256` lists the sha256 of every file: `sha256sum -c MANIFEST.sha256` "
+        "inside the dataset passes when it arrived whole; `blurset verify .` also decodes "
+        "every image and checks every setting against its meta.json.",
+        "",
+    ]
+
+
+def _previews(build: Path, settings: list[Path], card_dir: Path) -> list[str]:
+    pics = []
+    sheet = build / "contact_sheet.png"
+    if sheet.is_file():
+        pics.append(("contact sheet", sheet))
+    pics += [(s.name, s / "preview.png") for s in settings if (s / "preview.png").is_file()]
+    if not pics:
+        return []
+    out = ["## Previews", ""]
+    for label, p in pics[: MAX_PREVIEWS + 1]:
+        try:
+            rel = p.resolve().relative_to(card_dir.resolve()).as_posix()
+        except ValueError:
+            continue  # a card written elsewhere does not link into the build
+        out += [f"![{_cell(label)}]({rel})", ""]
+    if len(pics) > MAX_PREVIEWS + 1:
+        out += [f"… and {len(pics) - MAX_PREVIEWS - 1} more `<setting>/preview.png`.", ""]
+    return out
+
+
+def _attribution(objects: dict[str, dict], licences: Counter) -> list[str]:
+    summary = ", ".join(f"{k}: {licences[k]}" for k in sorted(licences))
+    rows = [
+        "## Licensing and attribution",
+        "",
+        "The images are renders of 3D models made by others; each object keeps the "
+        "licence its author gave it, and using the images means following those licences "
+        "(attribution for CC-BY, no commercial use for CC-BY-NC, …). Licences of the "
+        f"{len(objects)} objects: {summary}. `unknown` means the model file names no "
+        "licence: check its origin before publishing it. The same records are in each "
+        "setting's meta.json `object` (with the sha256 of the model file).",
+        "",
+        "| object | title | author | licence | source |",
+        "|---|---|---|---|---|",
+    ]
+    for uid in sorted(objects):
+        o = objects[uid]
+        rows.append(
+            f"| {_cell(uid)} | {_cell(o.get('title', attribution.UNKNOWN))} "
+            f"| {_link(str(o.get('author', attribution.UNKNOWN)), o.get('author_url'))} "
+            f"| {_cell(o.get('license', attribution.UNKNOWN))} "
+            f"| {_link(str(o.get('source_url', attribution.UNKNOWN)), o.get('source_url'))} |"
+        )
+    rows.append("")
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    build: Path = args.build
+    if not (build / "dataset.json").is_file():
+        raise InputError(f"not a blurset build (no dataset.json): {build}")
+    out: Path = args.out or build / "README.md"
+    if out.suffix.lower() != ".md":
+        raise ConfigError(f"--out {out}: a dataset card is a Markdown file (.md)")
+    layout.refuse_inside_settings(out)
+    text = make_card(
+        build,
+        noise=args.noise,
+        previews=args.previews,
+        pretty_name=args.pretty_name,
+        card_dir=out.resolve().parent,
+    )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    layout.write_text_atomic(out, text)
+    publish.refresh_manifest([out])
+    print(f"blurset card: {out}", file=sys.stderr)
+    return 0

@@ -1,0 +1,386 @@
+"""`blurset verify BUILD` (issue 14 D6, issue 19): is a build, or a noise output, whole?
+
+For a build, every complete setting must hold every file its meta.json promises: per
+level one image per view and a poses_bounds.npy with one row per view, linear/ EXRs
+when the build kept them, transforms.json naming those images; every image must decode
+whole at the setting's resolution (decoded in blurset-core, in parallel); dataset.json's
+counts and settings must be what is on disk; splits.json must name only settings that
+are there; and when MANIFEST.sha256 is present every file it lists must match it.
+
+For a noise output (`blurset noise BUILD --out DIR`): every complete unit holds the
+images and linear EXRs its noise.json lists, decoding at its resolution, and a
+poses_bounds.npy with one row per image; noise_dataset.json's counts match; and the
+manifest, as above.
+
+One line per problem, naming the file; exit 1 on damage, 0 when whole. Settings still
+being built (`*.partial`, no marker) and files added after the manifest are notes,
+not damage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from blurset import _core, layout, publish
+from blurset.exceptions import InputError
+
+NOISE_DATASET = "noise_dataset.json"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("path", type=Path, help="a build directory, or a `blurset noise BUILD` output")
+    p.add_argument(
+        "--no-decode",
+        action="store_true",
+        help="check files, sizes from headers and counts, without decoding every image",
+    )
+    p.add_argument("--quiet", action="store_true", help="print problems and the verdict only")
+
+
+@dataclass
+class Report:
+    """What verify found. `problems` are damage, `notes` are not."""
+
+    root: Path
+    problems: list[tuple[str, str]] = field(default_factory=list)
+    notes: list[tuple[str, str]] = field(default_factory=list)
+    settings: int = 0
+    # "settings" of a build, "units" (gains of a level of a setting) of a noise output.
+    unit: str = "settings"
+    images: int = 0
+    manifest_files: int | None = None
+
+    def bad(self, rel: str | Path, what: str) -> None:
+        self.problems.append((str(rel), what))
+
+    def note(self, rel: str | Path, what: str) -> None:
+        self.notes.append((str(rel), what))
+
+
+def _read_json(root: Path, rel: str, report: Report) -> Any:
+    try:
+        return json.loads((root / rel).read_text())
+    except FileNotFoundError:
+        report.bad(rel, "missing")
+    except (OSError, ValueError) as e:
+        report.bad(rel, f"not readable JSON ({' '.join(str(e).split())[:120]})")
+    return None
+
+
+def _rows(path: Path) -> int | str:
+    """The number of pose rows of a poses_bounds.npy, or what is wrong with it."""
+    try:
+        return len(_core.read_poses_bounds(path))
+    except FileNotFoundError:
+        return "missing"
+    except (OSError, ValueError) as e:
+        return f"does not parse ({str(e).rsplit(': ', 1)[0]})"
+
+
+def _expect_files(
+    root: Path, folder: Path, names: list[str], report: Report, what: str
+) -> list[Path]:
+    """The expected files of a folder that are there; one line for a missing folder,
+    one per missing or unexpected file."""
+    rel = folder.relative_to(root)
+    if not folder.is_dir():
+        report.bad(rel, f"{what} folder missing")
+        return []
+    present = {p.name for p in folder.iterdir() if not p.name.startswith(".")}
+    for n in names:
+        if n not in present:
+            report.bad(rel / n, "missing")
+    for n in sorted(present - set(names)):
+        report.bad(rel / n, f"not a file of this {what} folder")
+    return [folder / n for n in names if n in present]
+
+
+# -- one setting --------------------------------------------------------------------------
+
+
+def setting_problems(
+    setting: Path, *, root: Path | None = None
+) -> tuple[list[tuple[str, str]], list[tuple[Path, int, int]]]:
+    """The problems of one complete setting's files (no pixels decoded) and the images
+    (path, width, height) to decode. The cheap check is the rerun's own
+    (blurset.layout.setting_problems, from the core); on top, verify names each missing
+    or unexpected file, counts pose rows and checks transforms.json's file paths."""
+    root = root or setting.parent
+    rep = Report(root)
+    name = setting.relative_to(root)
+    cheap = layout.setting_problems(setting)
+    for rel, what in cheap:
+        # A wrong count of images is named file by file below.
+        if not what.startswith("holds "):
+            rep.bad(name / rel, what)
+    flagged = {rel for rel, _ in cheap}
+    if "meta.json" in flagged:
+        return rep.problems, []
+    meta = _read_json(root, f"{name}/meta.json", rep)
+    try:
+        views = meta["views"]
+        levels = list(meta["levels"])
+        w, h = (int(x) for x in meta["resolution"])
+        indices = [int(v["index"]) for v in views]
+    except (KeyError, TypeError, ValueError):
+        rep.bad(f"{name}/meta.json", "lacks views, levels or resolution")
+        return rep.problems, []
+    n = len(indices)
+    render = meta.get("render") if isinstance(meta.get("render"), dict) else {}
+    images = [layout.image_name(i, n) for i in indices]
+    to_decode: list[tuple[Path, int, int]] = []
+    for level in levels:
+        d = setting / level
+        if level in flagged:  # the level folder is missing
+            continue
+        for sub, names, on in (
+            ("images", images, True),
+            ("linear", [i.replace(".png", ".exr") for i in images], bool(render.get("linear"))),
+        ):
+            if not on:
+                continue
+            for p in _expect_files(root, d / sub, names, rep, sub):
+                if f"{level}/{sub}/{p.name}" not in flagged:
+                    to_decode.append((p, w, h))
+        if f"{level}/poses_bounds.npy" in flagged:
+            continue
+        rows = _rows(d / "poses_bounds.npy")
+        if isinstance(rows, str):
+            rep.bad((d / "poses_bounds.npy").relative_to(root), rows)
+        elif rows != n:
+            rep.bad((d / "poses_bounds.npy").relative_to(root), f"{rows} rows, expected {n}")
+    if "transforms.json" in flagged:
+        return _one_per_file(rep.problems), to_decode
+    tf = _read_json(root, f"{name}/transforms.json", rep)
+    if tf is not None:
+        frames = tf.get("frames") if isinstance(tf, dict) else None
+        if not isinstance(frames, list) or len(frames) != n:
+            got = len(frames) if isinstance(frames, list) else "no"
+            rep.bad(f"{name}/transforms.json", f"{got} frames, expected {n}")
+        else:
+            want = {f"{lvl}/images/{i}" for lvl in levels for i in images}
+            named = {
+                p
+                for f in frames
+                if isinstance(f, dict)
+                for p in (f.get("file_paths") or {}).values()
+            }
+            if named != want:
+                rep.bad(f"{name}/transforms.json", "its file_paths are not this setting's images")
+    return _one_per_file(rep.problems), to_decode
+
+
+def _one_per_file(problems: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """One problem per file: a file that should not be there at all says so, instead of
+    what the cheap check found wrong with it."""
+    stray = {rel for rel, what in problems if what.startswith("not a file of this")}
+    return [
+        (rel, what)
+        for rel, what in problems
+        if rel not in stray or what.startswith("not a file of this")
+    ]
+
+
+def _decode(items: list[tuple[Path, int, int]], root: Path, report: Report, decode: bool) -> None:
+    if decode:
+        results = _core.check_images([(str(p), w, h) for p, w, h in items])
+    else:
+        results = [_header(p, w, h) for p, w, h in items]
+    for (p, _, _), problem in zip(items, results, strict=True):
+        if problem:
+            report.bad(p.relative_to(root), problem)
+    report.images += len(items)
+
+
+def _header(p: Path, w: int, h: int) -> str | None:
+    """Without decoding: a PNG's signature and end chunk (the cheap check's rule,
+    blurset.layout.png_problem) and the size its header states; an EXR is not empty."""
+    if p.suffix.lower() == ".exr":
+        return None if p.stat().st_size > 0 else "empty"
+    if p.suffix.lower() == ".png" and (problem := layout.png_problem(p)):
+        return problem
+    try:
+        iw, ih, _, _ = _core.image_info(p)
+    except (OSError, ValueError) as e:
+        return f"does not decode ({str(e).rsplit(': ', 1)[0]})"
+    return None if (iw, ih) == (w, h) else f"is {iw}x{ih}, expected {w}x{h}"
+
+
+# -- a build ----------------------------------------------------------------------------
+
+
+def verify_build(root: Path, *, decode: bool = True) -> Report:
+    rep = Report(root)
+    dataset = _read_json(root, "dataset.json", rep)
+    dataset = dataset if isinstance(dataset, dict) else {}
+    complete = layout.complete_settings(root)
+    for d in sorted(root.iterdir()):
+        if d.is_dir() and not d.name.startswith(".") and d not in complete:
+            if (d / "meta.json").exists() or d.name.endswith(layout.PARTIAL_SUFFIX):
+                rep.note(d.name, "incomplete setting (a rerun of the build finishes it)")
+    n_images = 0
+    uids: set[str] = set()
+    todo: list[tuple[Path, int, int]] = []
+    for s in complete:
+        problems, images = setting_problems(s, root=root)
+        rep.problems.extend(problems)
+        todo.extend(images)
+        try:
+            meta = json.loads((s / "meta.json").read_text())
+            n_images += len(meta["views"]) * len(meta["levels"])
+            uids.add(str(meta["uid"]))
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    rep.settings = len(complete)
+    _decode(todo, root, rep, decode)
+    if dataset.get("provisional"):
+        rep.note("dataset.json", "provisional: the build has not finished (counts not compared)")
+    elif dataset:
+        counts = dataset.get("counts") if isinstance(dataset.get("counts"), dict) else {}
+        on_disk = {"settings": len(complete), "images": n_images, "objects": len(uids)}
+        for key, have in on_disk.items():
+            if counts.get(key) != have:
+                rep.bad("dataset.json", f"counts.{key} is {counts.get(key)}, {have} on disk")
+        listed = dataset.get("settings")
+        names = [s.name for s in complete]
+        if isinstance(listed, list) and sorted(map(str, listed)) != names:
+            gone = sorted(set(map(str, listed)) - set(names))
+            new = sorted(set(names) - set(map(str, listed)))
+            what = "; ".join(
+                x
+                for x in (
+                    f"lists {', '.join(gone[:5])} not on disk" if gone else "",
+                    f"does not list {', '.join(new[:5])}" if new else "",
+                )
+                if x
+            )
+            rep.bad("dataset.json", f"settings: {what}")
+    splits = _read_json(root, "splits.json", rep)
+    if isinstance(splits, dict):
+        names = {s.name for s in complete}
+        for part in ("train", "test"):
+            missing = [s for s in splits.get(part) or [] if s not in names]
+            if missing:
+                rep.bad(
+                    "splits.json", f"{part} names settings not on disk: {', '.join(missing[:5])}"
+                )
+    _check_manifest(root, rep)
+    return rep
+
+
+# -- a noise output ---------------------------------------------------------------------
+
+
+def verify_noise(root: Path, *, decode: bool = True) -> Report:
+    rep = Report(root, unit="units")
+    doc = _read_json(root, NOISE_DATASET, rep)
+    doc = doc if isinstance(doc, dict) else {}
+    units = sorted(u for u in root.glob("*/*/gain_*") if u.is_dir())
+    complete = [u for u in units if layout.is_complete(u)]
+    for u in units:
+        if u not in complete:
+            rep.note(
+                u.relative_to(root), "incomplete unit (a rerun of the noise build finishes it)"
+            )
+    todo: list[tuple[Path, int, int]] = []
+    n_images = 0
+    settings: set[str] = set()
+    for u in complete:
+        rel = u.relative_to(root)
+        meta = _read_json(root, f"{rel}/noise.json", rep)
+        try:
+            files = meta["files"]
+            w, h = (int(x) for x in meta["source"]["resolution"])
+            images = [str(f["image"]) for f in files]
+            linears = [str(f["linear"]) for f in files]
+        except (KeyError, TypeError, ValueError):
+            if meta is not None:
+                rep.bad(f"{rel}/noise.json", "lacks files or source.resolution")
+            continue
+        settings.add(rel.parts[0])
+        n_images += len(files)
+        for sub, names in (("images", images), ("linear", linears)):
+            base = [n.split("/", 1)[1] if n.startswith(f"{sub}/") else n for n in names]
+            for p in _expect_files(root, u / sub, base, rep, sub):
+                todo.append((p, w, h))
+        rows = _rows(u / "poses_bounds.npy")
+        if isinstance(rows, str):
+            rep.bad(rel / "poses_bounds.npy", rows)
+        elif rows != len(files):
+            rep.bad(rel / "poses_bounds.npy", f"{rows} rows, expected {len(files)}")
+    rep.settings = len(complete)
+    _decode(todo, root, rep, decode)
+    counts = doc.get("counts") if isinstance(doc.get("counts"), dict) else None
+    if counts is not None:
+        on_disk = {"units": len(complete), "images": n_images, "settings": len(settings)}
+        for key, have in on_disk.items():
+            if counts.get(key) != have:
+                rep.bad(NOISE_DATASET, f"counts.{key} is {counts.get(key)}, {have} on disk")
+    _check_manifest(root, rep)
+    return rep
+
+
+def _check_manifest(root: Path, rep: Report) -> None:
+    if not (root / publish.MANIFEST).is_file():
+        rep.note(publish.MANIFEST, "absent: file checksums not checked")
+        return
+    try:
+        found = publish.check_manifest(root)
+    except (OSError, ValueError) as e:
+        rep.bad(publish.MANIFEST, str(e).rsplit(": ", 1)[0])
+        return
+    rep.manifest_files = len(publish.manifest_files(root))
+    for rel, what in found:
+        if what.startswith("not in"):
+            rep.note(rel, f"{what} (added after it was written)")
+        else:
+            rep.bad(rel, f"{what} (MANIFEST.sha256)")
+
+
+def verify(path: Path, *, decode: bool = True) -> Report:
+    """Verify a build or a noise output (by what it holds)."""
+    root = Path(path)
+    if not root.is_dir():
+        raise InputError(f"no such build or noise output: {path}")
+    if (root / NOISE_DATASET).is_file():
+        return verify_noise(root, decode=decode)
+    if (root / "dataset.json").is_file() or layout.is_build_dir(root):
+        return verify_build(root, decode=decode)
+    raise InputError(
+        f"not a blurset build (dataset.json) or noise output ({NOISE_DATASET}): {path}"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    rep = verify(args.path, decode=not args.no_decode)
+    shown = str(args.path).rstrip("/")
+    for rel, what in sorted(rep.problems):
+        print(f"{shown}/{rel}: {what}")
+    if not args.quiet:
+        for rel, what in rep.notes:
+            print(f"note: {shown}/{rel}: {what}", file=sys.stderr)
+    checked = "checked from headers" if args.no_decode else "decoded"
+    manifest = (
+        f", {rep.manifest_files} files match MANIFEST.sha256"
+        if rep.manifest_files is not None
+        and not any(w.endswith("(MANIFEST.sha256)") for _, w in rep.problems)
+        else ""
+    )
+    if rep.problems:
+        print(
+            f"blurset verify: {len(rep.problems)} problem(s) in {shown} "
+            f"({rep.settings} complete {rep.unit}, {rep.images} images {checked})",
+            file=sys.stderr,
+        )
+        return 1
+    print(
+        f"blurset verify: {shown} is whole: {rep.settings} complete {rep.unit}, "
+        f"{rep.images} images {checked}{manifest}",
+        file=sys.stderr,
+    )
+    return 0

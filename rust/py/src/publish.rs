@@ -1,0 +1,89 @@
+//! Checksums and the image check of a published build (issue 19, `blurset verify`):
+//! one core call each.
+use blurset_core as core;
+use pyo3::prelude::*;
+use std::path::PathBuf;
+
+/// sha256 of a file's bytes, lowercase hex.
+#[pyfunction]
+fn sha256_file(py: Python<'_>, path: PathBuf) -> PyResult<String> {
+    crate::run_detached(py, || core::sha256_file(&path))
+}
+
+/// The files MANIFEST.sha256 of `root` lists (relative, sorted).
+#[pyfunction]
+fn manifest_files(py: Python<'_>, root: PathBuf) -> PyResult<Vec<String>> {
+    crate::run_detached(py, || core::manifest_files(&root))
+}
+
+/// Hash every listed file of `root` (in parallel) into root/MANIFEST.sha256; the count.
+#[pyfunction]
+fn write_manifest(py: Python<'_>, root: PathBuf) -> PyResult<usize> {
+    crate::run_detached(py, || core::write_manifest(&root))
+}
+
+/// Rehash these files (relative to `root`) into its existing manifest; the count.
+#[pyfunction]
+fn update_manifest(py: Python<'_>, root: PathBuf, rels: Vec<String>) -> PyResult<usize> {
+    crate::run_detached(py, || core::update_manifest(&root, &rels))
+}
+
+/// [(relative path, problem)] of the files that do not match root/MANIFEST.sha256.
+#[pyfunction]
+fn check_manifest(py: Python<'_>, root: PathBuf) -> PyResult<Vec<(String, String)>> {
+    let problems = crate::run_detached(py, || core::check_manifest(&root))?;
+    Ok(problems
+        .into_iter()
+        .map(|(p, what)| (p, what.as_str().to_string()))
+        .collect())
+}
+
+/// For each (path, width, height): None when the image decodes whole at that size,
+/// else what is wrong. Decoded in parallel.
+#[pyfunction]
+fn check_images(py: Python<'_>, items: Vec<(PathBuf, u32, u32)>) -> Vec<Option<String>> {
+    let items: Vec<core::ImageCheck> = items
+        .into_iter()
+        .map(|(path, width, height)| core::ImageCheck {
+            path,
+            width,
+            height,
+        })
+        .collect();
+    py.detach(|| core::check_images(&items))
+}
+
+/// The SPDX id a licence text names, `other` when it maps to none, `unknown` for none.
+#[pyfunction]
+#[pyo3(signature = (text))]
+fn spdx_of(text: Option<&str>) -> String {
+    core::spdx_of(text)
+}
+
+/// The canonical spelling of a licence id (SPDX, `other`, `unknown`), or None.
+#[pyfunction]
+fn canonical_license(id: &str) -> Option<String> {
+    core::canonical_license(id)
+}
+
+/// Whether an object under licence `id` passes a `--licenses` filter (None: all pass).
+#[pyfunction]
+#[pyo3(signature = (id, licenses))]
+fn license_allowed(id: &str, licenses: Option<Vec<String>>) -> bool {
+    core::license_allowed(id, licenses.as_deref())
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("MANIFEST", core::MANIFEST)?;
+    m.add_function(wrap_pyfunction!(sha256_file, m)?)?;
+    m.add_function(wrap_pyfunction!(manifest_files, m)?)?;
+    m.add_function(wrap_pyfunction!(write_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(update_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(check_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(check_images, m)?)?;
+    m.add_function(wrap_pyfunction!(spdx_of, m)?)?;
+    m.add_function(wrap_pyfunction!(canonical_license, m)?)?;
+    m.add_function(wrap_pyfunction!(license_allowed, m)?)?;
+    m.add("SPDX_IDS", core::spdx_ids())?;
+    Ok(())
+}
