@@ -233,8 +233,21 @@ def level_renders(lp: dict, exr_prefix: Path) -> list[dict[str, Any]]:
                 "out": f"{exr_prefix}_mb.exr",
             }
         ]
+    # Sample subsets (issue 15): frame k renders samples [offset, offset + spf) of the
+    # level's sequence; plans without the field (independent seeds) render their own first.
+    subsets = lp.get("latent_sampling") == "subsets"
     return [
-        {"c2w": f["c2w"], "seed": f["seed"], "samples": spf, "out": f"{exr_prefix}_{k:04d}.exr"}
+        {
+            "c2w": f["c2w"],
+            "seed": f["seed"],
+            "samples": spf,
+            "out": f"{exr_prefix}_{k:04d}.exr",
+            **(
+                {"sample_offset": f["sample_offset"], "sample_sequence": lp["sample_sequence"]}
+                if subsets
+                else {}
+            ),
+        }
         for k, f in enumerate(lp["latent_frames"])
     ]
 

@@ -45,6 +45,19 @@ class BuildConfig:
     # samples × latents), so ground truth is at least as clean as the blurry images
     # (m frames at s samples ≈ one frame at m·s).
     sharp_samples: int | None = None
+    # `subsets`: the m latent frames render the m blocks of one sample sequence on the
+    # view's seed, which the sharp image renders too (issue 15); `independent`: a seed
+    # per frame, as builds before it did (to reproduce their datasets).
+    latent_sampling: str = SAMPLING_DEFAULTS["latent_sampling"]
+    # Cycles adaptive sampling for sharp and latent frames alike; None = off.
+    noise_threshold: float | None = None
+    # `auto`: bounces from the object's materials; `fixed`: the same for every object.
+    light_paths: str = "auto"
+    # Cycles device (blurset.devices): auto|cpu|optix|cuda|hip|oneapi|metal, the GPU
+    # indices of its backend (None = all) and the GPUs each Ray task reserves.
+    device: str = "auto"
+    gpus: list[int] | None = None
+    gpus_per_task: float | None = None
     resolution: int = SAMPLING_DEFAULTS["resolution"]
     seed: int = 0
     fov_deg: float = SAMPLING_DEFAULTS["fov_deg"]
@@ -111,6 +124,7 @@ class BuildConfig:
                 "blur_method": self.blur_method,
                 "samples": self.samples,
                 **({"samples_total": self.samples_total} if self.samples_total else {}),
+                "latent_sampling": self.latent_sampling,
             }
         )
 
@@ -185,6 +199,10 @@ def parse_levels(value: Any, where: str = "--levels") -> list[int]:
 def _coerce(name: str, value: Any, where: str) -> Any:
     if name == "levels":
         return parse_levels(value, where)
+    if name == "gpus":
+        from blurset.devices import parse_gpus
+
+        return parse_gpus(value, where)
     if name == "latents" and isinstance(value, str):
         if value.strip().lower() == "auto":
             return "auto"
@@ -210,6 +228,8 @@ def _coerce(name: str, value: Any, where: str) -> Any:
         nullable = (
             "sharp_samples",
             "samples_total",
+            "noise_threshold",
+            "gpus_per_task",
             "shard",
             "blender",
             "ray_address",
@@ -217,6 +237,12 @@ def _coerce(name: str, value: Any, where: str) -> Any:
         )
         if name in (*nullable, "objaverse_count") and value is None:
             return None
+        if name in ("noise_threshold", "gpus_per_task"):
+            if isinstance(value, bool):
+                raise ValueError
+            return float(value)
+        if name == "device":
+            return str(value).strip().lower()
         if name in ("sharp_samples", "samples_total", "objaverse_count"):
             if isinstance(value, bool) or int(value) != value:
                 raise ValueError
@@ -336,6 +362,27 @@ def validate(cfg: BuildConfig) -> None:
         cfg.latent_positions in ("random", "stratified"), "latent_positions", "random or stratified"
     )
     need(cfg.blur_method in ("average", "motion_blur"), "blur_method", "average or motion_blur")
+    need(
+        cfg.latent_sampling in ("subsets", "independent"),
+        "latent_sampling",
+        "subsets or independent",
+    )
+    need(
+        cfg.noise_threshold is None
+        or (math.isfinite(cfg.noise_threshold) and 0.0 < cfg.noise_threshold <= 1.0),
+        "noise_threshold",
+        "must be in (0, 1] (Cycles adaptive sampling), or unset for off",
+    )
+    need(cfg.light_paths in ("auto", "fixed"), "light_paths", "auto or fixed")
+    from blurset.devices import DEVICES
+
+    need(cfg.device in DEVICES, "device", f"one of {', '.join(DEVICES)}")
+    need(
+        cfg.gpus_per_task is None
+        or (math.isfinite(cfg.gpus_per_task) and 0.0 <= cfg.gpus_per_task <= 64),
+        "gpus_per_task",
+        "must be in [0, 64]",
+    )
     need(1 <= cfg.latents_max <= 4096, "latents_max", "must be in 1..4096")
     need(
         math.isfinite(cfg.max_ghost_px) and cfg.max_ghost_px >= 0.01,
