@@ -20,6 +20,7 @@ import fcntl
 import json
 import os
 import platform
+import queue
 import shutil
 import sys
 import threading
@@ -31,8 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from blurset import __version__, _core, objaverse_cache, preflight
+from blurset import __version__, _core, devices, objaverse_cache, preflight
 from blurset.config import BuildConfig, load_toml, make_config, parse_levels
+from blurset.devices import Device
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec, resolve_objects, setting_name
 from blurset.progress import Progress
@@ -74,6 +76,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="average of latent renders (the paper; default) or one Cycles motion blur render",
     )
     p.add_argument("--sharp-samples", type=int, help="Cycles samples of the sharp image")
+    p.add_argument(
+        "--latent-sampling",
+        choices=["subsets", "independent"],
+        help="subsets: a blurry image's latent frames render the blocks of one sample "
+        "sequence on the view's seed, which the sharp image renders too (default); "
+        "independent: a seed per frame (builds before issue 15)",
+    )
+    p.add_argument(
+        "--noise-threshold",
+        type=float,
+        help="Cycles adaptive sampling threshold for sharp and latent frames (default: off)",
+    )
+    p.add_argument(
+        "--light-paths",
+        choices=["auto", "fixed"],
+        help="bounces from the object's materials (auto, default) or the same for every object",
+    )
+    p.add_argument(
+        "--device",
+        choices=["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"],
+        help="Cycles device; auto: the best backend Cycles reports "
+        "(OptiX > CUDA > HIP > oneAPI > Metal > CPU)",
+    )
+    p.add_argument("--gpus", help="GPU indices of the backend, e.g. 0,2 (default: all)")
+    p.add_argument(
+        "--gpus-per-task", type=float, help="GPUs each Ray task reserves (1 with a GPU device)"
+    )
     p.add_argument("--resolution", type=int, help="image side in pixels, square (512)")
     p.add_argument("--seed", type=int, help="build seed (0)")
     p.add_argument("--fov-deg", type=float, help="field of view in degrees (40)")
@@ -140,7 +169,8 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
         k: getattr(args, k)
         for k in (
             "objects out demo settings_per_object views latents latents_max max_ghost_px "
-            "samples samples_total blur_method sharp_samples resolution "
+            "samples samples_total blur_method sharp_samples resolution latent_sampling "
+            "noise_threshold light_paths device gpus gpus_per_task "
             "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "ray_address objaverse_dir objaverse_offline objaverse_count "
@@ -321,6 +351,19 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
             # Per level in views[].levels[].samples_per_frame; null when a budget splits.
             "samples_per_latent": None if cfg.samples_total else cfg.samples,
             "samples_total": cfg.samples_total,
+            # Per level: sample_sequence; per latent frame: seed and sample_offset.
+            "latent_sampling": cfg.latent_sampling,
+            "latent_sampling_is": (
+                "latent frame k of a level renders the Cycles samples [sample_offset, "
+                "sample_offset + samples_per_frame) of one sample_sequence-sample sequence "
+                "on the view's sharp_seed; the sharp image renders its first sharp_samples"
+                if cfg.latent_sampling == "subsets"
+                else "every latent frame renders the first samples_per_frame samples of "
+                "its own seed"
+            ),
+            "noise_threshold": cfg.noise_threshold,
+            "light_paths": info.get("light_paths"),
+            "device": info.get("device"),
             "blur_method": cfg.blur_method,
             "latents": "auto" if cfg.latents_auto else cfg.latents,
             "sharp_samples": cfg.effective_sharp_samples,
@@ -413,7 +456,8 @@ def render_setting(
     sharp_idx = [i for i, k in enumerate(keys) if k[1] == "sharp"]
     blur_idx = [i for i, k in enumerate(keys) if k[1] != "sharp"]
     t1 = time.time()
-    common = {"resolution": res, "fov_deg": cfg.fov_deg}
+    common: dict[str, Any] = {"resolution": res, "fov_deg": cfg.fov_deg}
+    common["noise_threshold"] = cfg.noise_threshold
     worker.render(
         [frames[i] for i in sharp_idx],
         samples=cfg.effective_sharp_samples,
@@ -480,8 +524,11 @@ def _pose_check(setting_dir: Path) -> dict:
 # -- per object ------------------------------------------------------------------------
 
 
-def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> ObjectResult:
-    """One work unit: every pending setting of one object, in one worker process.
+def build_object(
+    obj: ObjectSpec, cfg: BuildConfig, progress: Progress, device: Device = ("AUTO", None)
+) -> ObjectResult:
+    """One work unit: every pending setting of one object, in one worker process
+    rendering on `device` (a Cycles backend or AUTO, and GPU indices).
 
     Idempotent: complete settings are skipped, partial ones redone from scratch, so a
     retry (here, by Ray, or a rerun after a kill) is always safe."""
@@ -519,7 +566,7 @@ def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> Objec
         attempt += 1
         stage = ["start"]
         try:
-            _render_object(obj, cfg, pending, result, progress, work, deadline, stage)
+            _render_object(obj, cfg, pending, result, progress, work, deadline, stage, device)
         except Exception as e:
             from blurset.worker_client import WorkerError
 
@@ -549,6 +596,7 @@ def _render_object(
     work: Path,
     deadline: float | None,
     stage: list[str],
+    device: Device = ("AUTO", None),
 ) -> None:
     """Load the object in a fresh worker and render the pending settings in order,
     taking each off `pending` once it is complete or has failed QA."""
@@ -565,9 +613,11 @@ def _render_object(
         log_path=work / "worker.log",
         workdir=work / "scratch",
         deadline=deadline,
+        device=device[0],
+        gpus=device[1],
     ) as w:
         stage[0] = "load"
-        info = w.load(obj.path, work / "vertices.npy")
+        info = w.load(obj.path, work / "vertices.npy", light_paths=cfg.light_paths)
         info["load_s"] = round(time.monotonic() - t0, 3)
         info["blender_version"] = w.info.get("blender_version")
         verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
@@ -649,13 +699,26 @@ def _report_missing(objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress) ->
     )
 
 
-def _run_local(objs, cfg, progress, on_result) -> None:
+def _run_local(objs, cfg, progress, on_result, slots: list[Device]) -> None:
+    """`slots`: the device of each worker (blurset.devices.plan_local); an object takes
+    a free slot, so with GPUs worker i stays pinned to its device."""
     if cfg.workers == 1:
         for o in objs:
-            on_result(build_object(o, cfg, progress))
+            on_result(build_object(o, cfg, progress, slots[0]))
         return
+    free: queue.Queue[Device] = queue.Queue()
+    for s in slots:
+        free.put(s)
+
+    def unit(o: ObjectSpec) -> ObjectResult:
+        slot = free.get()
+        try:
+            return build_object(o, cfg, progress, slot)
+        finally:
+            free.put(slot)
+
     with cf.ThreadPoolExecutor(cfg.workers) as pool:
-        for fut in cf.as_completed([pool.submit(build_object, o, cfg, progress) for o in objs]):
+        for fut in cf.as_completed([pool.submit(unit, o) for o in objs]):
             on_result(fut.result())
 
 
@@ -679,7 +742,8 @@ def _run_ray(objs, cfg, progress, on_result) -> None:
         except (ConnectionError, RuntimeError, ValueError) as e:
             raise BlursetError(f"--ray-address {cfg.ray_address}: {_first_line(e)}") from None
     try:
-        remote = ray.remote(num_cpus=max(1, cfg.threads), max_retries=2)(_ray_unit)
+        gpus = devices.ray_gpus_per_task(cfg, ray.cluster_resources().get("GPU", 0))
+        remote = ray.remote(num_cpus=max(1, cfg.threads), num_gpus=gpus, max_retries=2)(_ray_unit)
         pending = [remote.remote(o, cfg) for o in objs]
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
@@ -699,7 +763,7 @@ def _first_line(e: BaseException) -> str:
 
 
 def _ray_unit(obj: ObjectSpec, cfg: BuildConfig) -> ObjectResult:
-    return build_object(obj, cfg, Progress(0, enabled=False))
+    return build_object(obj, cfg, Progress(0, enabled=False), devices.for_ray(cfg))
 
 
 @contextlib.contextmanager
@@ -730,8 +794,9 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # same shared path) write where the driver reads.
     cfg = dataclasses.replace(cfg, out=Path(cfg.out).resolve())
     out = Path(cfg.out)
-    # Bad entries fail before anything is written.
+    # Bad entries and a missing device fail before anything is written.
     resolve_objects(list(cfg.objects), cache=_objaverse(cfg))
+    slots = devices.plan_local(cfg) if cfg.executor == "local" else []
     out.mkdir(parents=True, exist_ok=True)
     objs = _objects(cfg)
     with build_lock(out):
@@ -766,7 +831,7 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
         if cfg.executor == "ray":
             _run_ray(objs, cfg, prog, on_result)
         else:
-            _run_local(objs, cfg, prog, on_result)
+            _run_local(objs, cfg, prog, on_result, slots)
     with build_lock(out):
         summary = finalize(out, cfg, time.time() - t0)
     mine = {o.uid for o in objs}
@@ -810,6 +875,12 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     )
     _write_json(out / "splits.json", splits)
     checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
+    # What the workers rendered on (backend, device names, Cycles kernel), once each.
+    used: list[dict] = []
+    for _, m in complete:
+        d = (m.get("render") or {}).get("device")
+        if d and d not in used:
+            used.append(d)
     dataset = {
         "name": "blurset Objaverse-Blur",
         "blurset_version": __version__,
@@ -832,6 +903,7 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
             "images": sum(len(m["views"]) * len(m["levels"]) for _, m in complete),
         },
         "settings": [n for n, _ in complete],
+        "render_devices": used,
         "seconds": round(seconds, 1),
     }
     if checks:

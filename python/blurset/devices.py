@@ -120,3 +120,36 @@ def worker_slots(backend: str, gpus: list[int] | None, n_gpus: int, workers: int
         return [gpus] * max(1, workers)
     chosen = gpus if gpus is not None else list(range(n_gpus))
     return [[chosen[i % len(chosen)]] for i in range(workers)]
+
+
+Device = tuple[str, "list[int] | None"]  # (Cycles backend or AUTO, GPU indices or None)
+
+
+def plan_local(cfg) -> list[Device]:
+    """The device of each local worker of a build (`cfg`: a BuildConfig), checked before
+    the build writes anything: one (backend, GPU indices) per worker slot."""
+    if not needs_probe(cfg.device, cfg.gpus, cfg.workers):
+        backend = "CPU" if cfg.device == "cpu" else "AUTO"
+        return [(backend, None)] * max(1, cfg.workers)
+    available = probe(cfg.blender)
+    backend, gpus = resolve(cfg.device, cfg.gpus, available)
+    n = len(available.get(backend, []))
+    return [(backend, g) for g in worker_slots(backend, gpus, n, cfg.workers)]
+
+
+def for_ray(cfg) -> Device:
+    """A Ray task's device: Ray hands each task its GPUs (CUDA_VISIBLE_DEVICES), so the
+    worker takes every device it sees; `auto` is resolved by the worker on its node."""
+    return ("AUTO" if cfg.device == "auto" else cfg.device.upper(), None)
+
+
+def ray_gpus_per_task(cfg, cluster_gpus: float) -> float:
+    """GPUs a Ray task reserves: --gpus-per-task, else 1 when the build renders on GPUs
+    (a GPU backend, or auto on a cluster that has GPUs), else 0."""
+    if cfg.gpus_per_task is not None:
+        return float(cfg.gpus_per_task)
+    if cfg.device == "cpu":
+        return 0.0
+    if cfg.device == "auto":
+        return 1.0 if cluster_gpus > 0 else 0.0
+    return 1.0
