@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.deps-stamp
 SO_STAMP := $(VENV)/.core-stamp
 RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: venv develop demo test test-rust test-py lint fmt bench clean
+.PHONY: venv develop demo test test-rust test-py lint fmt bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -48,6 +48,11 @@ fmt:
 
 bench: venv
 	$(PY) bench/run.py
+
+# Rendering benchmarks on the best GPU Cycles reports (refused without one):
+# bench/results_gpu.json. `bench/run.py --device cpu` runs the same on the CPU.
+bench-gpu: venv
+	$(PY) bench/run.py --device gpu
 
 clean:
 	rm -rf target $(VENV) demo_out

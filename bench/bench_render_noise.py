@@ -1,0 +1,156 @@
+"""render_noise_<preset>: how much Monte Carlo noise a blurry image carries next to its
+sharp truth (issue 15), for the presets of README "Choosing speed or accuracy".
+
+For one view of a demo object (96 px, level 4 and a zero-trajectory control), the build's
+own renders (Blender worker → EXR → Rust accumulator) of
+- the blurry image: its latent frames (or one motion blur render) as the preset plans them,
+  against a converged render of the SAME latent positions (8× the budget, other seeds):
+  `render_psnr` — render noise only, ghosting from too few positions does not count;
+- the sharp image at the preset's sharp budget against a converged sharp render:
+  `sharp_render_psnr`;
+with the latent frames as sample subsets of one sequence (the default) and with
+independent seeds (builds before issue 15). `ratio` = blurry MSE / sharp MSE (render
+noise, linear; parity is 1, the issue's bound 1.12 = 0.5 dB).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+RESOLUTION = int(os.environ.get("BLURSET_BENCH_NOISE_RES", "96"))
+LEVEL = 4
+FACTOR = 8  # converged renders: FACTOR × the image's own budget
+DEVICE = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")
+
+PRESETS = {
+    # name: (build options of the blurry image, sharp samples)
+    "paper": ({"latents": 34, "samples": 32}, 1088),
+    "balanced": (
+        {"latents_auto": True, "latent_positions": "stratified", "samples_total": 256},
+        256,
+    ),
+    "fast": ({"blur_method": "motion_blur", "samples_total": 128}, 256),
+}
+
+
+def _mse(a, b) -> float:
+    return float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
+
+
+def measure(res: int = RESOLUTION) -> dict:
+    from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
+    from blurset.config import BuildConfig
+    from blurset.demo import make_demo_objects
+    from blurset.tradeoff import REFERENCE_SEED_SALT, _render_image, _sharp_level
+    from blurset.worker_client import Worker
+
+    out: dict = {"resolution": res, "level": LEVEL, "factor": FACTOR, "presets": {}}
+    with tempfile.TemporaryDirectory(prefix="blurset-bench-") as tmp:
+        work = Path(tmp)
+        glb = make_demo_objects(work / "objects")[0]
+        with Worker(threads=0, timeout=3600, workdir=work / "scratch", device=DEVICE) as w:
+            info = w.load(glb, work / "v.npy")
+            verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
+
+            def view_of(**kw) -> dict:
+                cfg = BuildConfig(views=1, levels=[LEVEL], resolution=res, **kw)
+                plan = _core.plan_setting(
+                    cfg.sampling_json(),
+                    uid="bench",
+                    theta0_deg=0.0,
+                    seed=11,
+                    bbox_dims=info["bbox_dims"],
+                    vertices=verts,
+                )
+                return json.loads(plan)["views"][0]
+
+            def image(lp: dict, salt: int = 0):
+                return _render_image(w, lp, work, res, 40.0, salt)
+
+            for name, (kw, sharp_samples) in PRESETS.items():
+                row: dict = {"sharp_samples": sharp_samples}
+                for motion, delta0 in (("moving", 2.5), ("zero_trajectory", 0.0)):
+                    v = view_of(delta0=delta0, **kw)
+                    lp = v["levels"][str(LEVEL)]
+                    budget = lp["samples_per_frame"] * lp["latents"]
+                    sharp, _ = image(_sharp_level(v, sharp_samples))
+                    sharp_ref, _ = image(
+                        _sharp_level(v, FACTOR * sharp_samples), REFERENCE_SEED_SALT
+                    )
+                    conv_kw = dict(kw, samples_total=FACTOR * budget)
+                    conv_kw.pop("samples", None)
+                    lp_ref = view_of(delta0=delta0, **conv_kw)["levels"][str(LEVEL)]
+                    conv, _ = image(lp_ref, REFERENCE_SEED_SALT)
+                    sharp_mse = _mse(sharp, sharp_ref)
+                    entry = {
+                        "motion_px": lp["motion_px"],
+                        "latents": lp["latents"],
+                        "samples_per_frame": lp["samples_per_frame"],
+                        "blur_samples": budget,
+                        "sharp_mse": sharp_mse,
+                        "sharp_render_psnr": _psnr(sharp, sharp_ref),
+                    }
+                    for scheme in ("subsets", "independent"):
+                        lp_s = view_of(delta0=delta0, latent_sampling=scheme, **kw)["levels"][
+                            str(LEVEL)
+                        ]
+                        blur, t = image(lp_s)
+                        entry[scheme] = {
+                            "render_psnr": _psnr(blur, conv),
+                            "mse": _mse(blur, conv),
+                            "mse_vs_sharp": _mse(blur, conv) / sharp_mse,
+                            "seconds": t["seconds"],
+                        }
+                    row[motion] = entry
+                out["presets"][name] = row
+            out["device"] = w.info.get("device")
+            out["load_average"] = os.getloadavg()
+    return out
+
+
+def _psnr(a, b) -> float:
+    from blurset import _core  # noqa: TID251
+
+    return float(json.loads(_core.image_error(a, b, background=(1.0, 1.0, 1.0)))["psnr"])
+
+
+def run() -> list[dict]:
+    m = measure()
+    rows = []
+    for name, row in m["presets"].items():
+        for motion in ("moving", "zero_trajectory"):
+            e = row[motion]
+            for scheme in ("subsets", "independent"):
+                s = e[scheme]
+                rows.append(
+                    {
+                        "name": f"render_noise_{name}_{motion}_{scheme}",
+                        # blurry render-noise MSE / sharp render-noise MSE (parity 1.0)
+                        "ratio": s["mse_vs_sharp"],
+                        "ratio_is": "blurry render-noise MSE / sharp render-noise MSE",
+                        "render_psnr": s["render_psnr"],
+                        "sharp_render_psnr": e["sharp_render_psnr"],
+                        "contender": f"blurry, {e['latents']} x {e['samples_per_frame']} "
+                        f"samples ({scheme}): {s['render_psnr']:.2f} dB",
+                        "baseline": f"sharp, {row['sharp_samples']} samples: "
+                        f"{e['sharp_render_psnr']:.2f} dB",
+                        "motion_px": e["motion_px"],
+                        "resolution": m["resolution"],
+                        "level": m["level"],
+                        "converged_factor": m["factor"],
+                        "device": m["device"],
+                        "load_average": m["load_average"],
+                    }
+                )
+    return rows
+
+
+if __name__ == "__main__":
+    json.dump(measure(), sys.stdout, indent=1)
+    print()
