@@ -84,11 +84,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "independent: a seed per frame (builds before issue 15)",
     )
     p.add_argument(
-        "--noise-threshold",
-        type=float,
-        help="Cycles adaptive sampling threshold for sharp and latent frames (default: off)",
-    )
-    p.add_argument(
         "--light-paths",
         choices=["auto", "fixed"],
         help="bounces from the object's materials (auto, default) or the same for every object",
@@ -170,7 +165,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
         for k in (
             "objects out demo settings_per_object views latents latents_max max_ghost_px "
             "samples samples_total blur_method sharp_samples resolution latent_sampling "
-            "noise_threshold light_paths device gpus gpus_per_task "
+            "light_paths device gpus gpus_per_task "
             "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "ray_address objaverse_dir objaverse_offline objaverse_count "
@@ -361,7 +356,9 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
                 else "every latent frame renders the first samples_per_frame samples of "
                 "its own seed"
             ),
-            "noise_threshold": cfg.noise_threshold,
+            # Cycles adaptive sampling stays off: with it the sharp image stops early while
+            # sample blocks do not, and the pair loses its noise parity (issue 15).
+            "adaptive_sampling": False,
             "light_paths": info.get("light_paths"),
             "device": info.get("device"),
             "blur_method": cfg.blur_method,
@@ -457,7 +454,6 @@ def render_setting(
     blur_idx = [i for i, k in enumerate(keys) if k[1] != "sharp"]
     t1 = time.time()
     common: dict[str, Any] = {"resolution": res, "fov_deg": cfg.fov_deg}
-    common["noise_threshold"] = cfg.noise_threshold
     worker.render(
         [frames[i] for i in sharp_idx],
         samples=cfg.effective_sharp_samples,

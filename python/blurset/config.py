@@ -49,8 +49,6 @@ class BuildConfig:
     # view's seed, which the sharp image renders too (issue 15); `independent`: a seed
     # per frame, as builds before it did (to reproduce their datasets).
     latent_sampling: str = SAMPLING_DEFAULTS["latent_sampling"]
-    # Cycles adaptive sampling for sharp and latent frames alike; None = off.
-    noise_threshold: float | None = None
     # `auto`: bounces from the object's materials; `fixed`: the same for every object.
     light_paths: str = "auto"
     # Cycles device (blurset.devices): auto|cpu|optix|cuda|hip|oneapi|metal, the GPU
@@ -228,7 +226,6 @@ def _coerce(name: str, value: Any, where: str) -> Any:
         nullable = (
             "sharp_samples",
             "samples_total",
-            "noise_threshold",
             "gpus_per_task",
             "shard",
             "blender",
@@ -237,7 +234,7 @@ def _coerce(name: str, value: Any, where: str) -> Any:
         )
         if name in (*nullable, "objaverse_count") and value is None:
             return None
-        if name in ("noise_threshold", "gpus_per_task"):
+        if name == "gpus_per_task":
             if isinstance(value, bool):
                 raise ValueError
             return float(value)
@@ -366,12 +363,6 @@ def validate(cfg: BuildConfig) -> None:
         cfg.latent_sampling in ("subsets", "independent"),
         "latent_sampling",
         "subsets or independent",
-    )
-    need(
-        cfg.noise_threshold is None
-        or (math.isfinite(cfg.noise_threshold) and 0.0 < cfg.noise_threshold <= 1.0),
-        "noise_threshold",
-        "must be in (0, 1] (Cycles adaptive sampling), or unset for off",
     )
     need(cfg.light_paths in ("auto", "fixed"), "light_paths", "auto or fixed")
     from blurset.devices import DEVICES

@@ -215,7 +215,7 @@ RENDER_REFERENCE_FACTOR = 8
 
 
 def _render_image(
-    worker, lp: dict, work: Path, res: int, fov: float, salt: int = 0
+    worker, lp: dict, work: Path, res: int, fov: float, salt: int = 0, **render_kw: Any
 ) -> tuple[Any, dict]:
     """Render and accumulate one blurry image as the build does; (mean, timings)."""
     frames = level_renders(lp, work / "f")
@@ -230,7 +230,12 @@ def _render_image(
     pid = worker._proc.pid if worker._proc is not None else None
     c0, o0, t0 = _proc_cpu(pid), _own_cpu(), time.perf_counter()
     worker.render(
-        frames, resolution=res, fov_deg=fov, samples=lp["samples_per_frame"], on_frame=on_frame
+        frames,
+        resolution=res,
+        fov_deg=fov,
+        samples=lp["samples_per_frame"],
+        on_frame=on_frame,
+        **render_kw,
     )
     mean = acc.mean()
     seconds = time.perf_counter() - t0
