@@ -453,7 +453,7 @@ def render_setting(
     sharp_idx = [i for i, k in enumerate(keys) if k[1] == "sharp"]
     blur_idx = [i for i, k in enumerate(keys) if k[1] != "sharp"]
     t1 = time.time()
-    common: dict[str, Any] = {"resolution": res, "fov_deg": cfg.fov_deg}
+    common = {"resolution": res, "fov_deg": cfg.fov_deg}
     worker.render(
         [frames[i] for i in sharp_idx],
         samples=cfg.effective_sharp_samples,
