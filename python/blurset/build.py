@@ -242,10 +242,19 @@ def frames_per_setting(cfg: BuildConfig) -> int:
     return cfg.views * (1 + len(cfg.levels) * cfg.max_latents)
 
 
-def level_renders(lp: dict, exr_prefix: Path) -> list[dict[str, Any]]:
+def level_renders(lp: dict, exr_prefix: Path, sequence: int | None = None) -> list[dict[str, Any]]:
     """The renders of one blurry image of a plan: its latent frames (average method)
-    or its single motion blur render, each with its own Cycles samples."""
+    or its single motion blur render, each with its own Cycles samples. Under sample
+    subsets (issue 15) frame k renders the samples [offset, offset + spf) of a sequence
+    of `sequence` samples (default: the level's own); plans without subsets (independent
+    seeds) render each frame's own first samples."""
     spf = lp["samples_per_frame"]
+    subsets = lp.get("latent_sampling") == "subsets"
+    seq = sequence if sequence is not None else lp.get("sample_sequence")
+
+    def block(offset: int) -> dict[str, Any]:
+        return {"sample_offset": offset, "sample_sequence": seq} if subsets else {}
+
     mb = lp.get("motion_blur")
     if mb:
         keys = [k["c2w"] for k in mb["keys"]]
@@ -256,37 +265,45 @@ def level_renders(lp: dict, exr_prefix: Path) -> list[dict[str, Any]]:
                 "samples": spf,
                 "motion": {"steps": mb["motion_steps"], "keys": keys},
                 "out": f"{exr_prefix}_mb.exr",
+                **block(0),
             }
         ]
-    # Sample subsets (issue 15): frame k renders samples [offset, offset + spf) of the
-    # level's sequence; plans without the field (independent seeds) render their own first.
-    subsets = lp.get("latent_sampling") == "subsets"
     return [
         {
             "c2w": f["c2w"],
             "seed": f["seed"],
             "samples": spf,
             "out": f"{exr_prefix}_{k:04d}.exr",
-            **(
-                {"sample_offset": f["sample_offset"], "sample_sequence": lp["sample_sequence"]}
-                if subsets
-                else {}
-            ),
+            **block(f["sample_offset"]),
         }
         for k, f in enumerate(lp["latent_frames"])
     ]
 
 
-def _render_frames(plan: dict, exr_dir: Path) -> list[dict[str, Any]]:
-    """The render list of a setting in stream order: per view, sharp then each level."""
+def cycles_samples(plan: dict, cfg: BuildConfig) -> int | None:
+    """The Cycles `samples` every render of a subsets build is pinned to (None: each
+    render its own, as before): at least the longest sequence of the config and the
+    sharp budget. Cycles sizes its sample pattern from `samples` and never shrinks it
+    within a process, so one value for the whole build keeps every pixel independent of
+    what the worker rendered before it (a resumed object equals an uninterrupted one)."""
+    if cfg.latent_sampling != "subsets":
+        return None
+    return max(int(plan.get("sample_sequence_max") or 0), cfg.effective_sharp_samples)
+
+
+def _render_frames(plan: dict, exr_dir: Path, pin: int | None = None) -> list[dict[str, Any]]:
+    """The render list of a setting in stream order: per view, sharp then each level;
+    `pin` (cycles_samples): the sharp image renders the first samples of a `pin`-sample
+    sequence, the latent frames their blocks of it."""
     frames = []
     for v in plan["views"]:
         i = v["index"]
-        frames.append(
-            {"c2w": v["c2w"], "seed": v["sharp_seed"], "out": str(exr_dir / f"{i:04d}_s.exr")}
-        )
+        sharp = {"c2w": v["c2w"], "seed": v["sharp_seed"], "out": str(exr_dir / f"{i:04d}_s.exr")}
+        if pin is not None:
+            sharp.update(sample_offset=0, sample_sequence=pin)
+        frames.append(sharp)
         for lvl, lp in v["levels"].items():
-            frames.extend(level_renders(lp, exr_dir / f"{i:04d}_{lvl}"))
+            frames.extend(level_renders(lp, exr_dir / f"{i:04d}_{lvl}", pin))
     return frames
 
 
@@ -351,11 +368,14 @@ def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: di
             "latent_sampling_is": (
                 "latent frame k of a level renders the Cycles samples [sample_offset, "
                 "sample_offset + samples_per_frame) of one sample_sequence-sample sequence "
-                "on the view's sharp_seed; the sharp image renders its first sharp_samples"
+                "on the view's sharp_seed; the sharp image renders its first sharp_samples; "
+                "every render is a block of a cycles_samples-sample Cycles sequence"
                 if cfg.latent_sampling == "subsets"
                 else "every latent frame renders the first samples_per_frame samples of "
                 "its own seed"
             ),
+            # The Cycles `samples` of every render under subsets (see cycles_samples).
+            "cycles_samples": cycles_samples(plan, cfg),
             # Cycles adaptive sampling stays off: with it the sharp image stops early while
             # sample blocks do not, and the pair loses its noise parity (issue 15).
             "adaptive_sampling": False,
@@ -419,7 +439,8 @@ def render_setting(
         )
     )
     n_views = len(plan["views"])
-    frames = _render_frames(plan, exr_dir)
+    pin = cycles_samples(plan, cfg)
+    frames = _render_frames(plan, exr_dir, pin)
     keys = _keys(plan)
     need: dict[tuple[int, str], int] = {}
     for k in keys:

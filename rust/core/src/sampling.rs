@@ -264,6 +264,22 @@ impl SamplingConfig {
         }
     }
 
+    /// The longest sample sequence a blurry image of this config can render: the
+    /// largest `sample_blocks(m).0` over every m the config allows (all of
+    /// 1..=latents_max under `latents_auto`). Cycles sizes its sample-pattern table from
+    /// the `samples` of a render and never shrinks it within a process, so a pixel
+    /// depends on the largest `samples` rendered before it; a build pins every render to
+    /// one sequence length at least this long (and the sharp budget) to keep its pixels
+    /// independent of render order — a resumed object renders what an uninterrupted one did.
+    pub fn max_sequence(&self) -> u32 {
+        let ms = match (self.blur_method, self.latents_auto) {
+            (BlurMethod::MotionBlur, _) => 1..=1,
+            (BlurMethod::Average, true) => 1..=self.latents_max,
+            (BlurMethod::Average, false) => self.latents..=self.latents,
+        };
+        ms.map(|m| self.sample_blocks(m).0).max().unwrap_or(1)
+    }
+
     /// Camera distance for an object of the given box.
     pub fn radius(&self, bbox_dims: [f64; 3]) -> f64 {
         self.radius_margin * bounding_radius(bbox_dims) / libm::sin(0.5 * self.fov_deg.to_radians())
@@ -379,6 +395,10 @@ pub struct SettingPlan {
     pub bbox_dims: [f64; 3],
     pub radius: f64,
     pub config: SamplingConfig,
+    /// `SamplingConfig::max_sequence`: the longest sequence any blurry image of this
+    /// config renders, the same for every setting of a build.
+    #[serde(default)]
+    pub sample_sequence_max: u32,
     pub views: Vec<ViewPlan>,
 }
 
@@ -801,6 +821,7 @@ pub fn plan_setting(
         bbox_dims,
         radius,
         config: cfg.clone(),
+        sample_sequence_max: cfg.max_sequence(),
         views,
     })
 }
@@ -1325,6 +1346,34 @@ mod tests {
                 assert_eq!(last + lp.samples_per_frame, lp.sample_sequence);
             }
         }
+    }
+
+    #[test]
+    fn max_sequence_bounds_every_level() {
+        let auto = SamplingConfig {
+            latents_auto: true,
+            latent_positions: LatentPositions::Stratified,
+            samples_total: Some(100),
+            latents_max: 47,
+            views: 6,
+            ..Default::default()
+        };
+        // m = 34 needs 34·⌈100/34⌉ = 102, m = 47 needs 141; the most is at m = 47.
+        assert_eq!(auto.max_sequence(), 141);
+        let p = plan(&auto, 2, [1.0, 0.6, 0.5]);
+        assert_eq!(p.sample_sequence_max, 141);
+        for v in &p.views {
+            for lp in v.levels.values() {
+                assert!(lp.sample_sequence <= p.sample_sequence_max);
+            }
+        }
+        assert_eq!(SamplingConfig::default().max_sequence(), 34 * 32);
+        let mb = SamplingConfig {
+            blur_method: BlurMethod::MotionBlur,
+            samples_total: Some(128),
+            ..Default::default()
+        };
+        assert_eq!(mb.max_sequence(), 128);
     }
 
     #[test]
