@@ -6,7 +6,9 @@ STAMP  := $(VENV)/.deps-stamp
 SO_STAMP := $(VENV)/.core-stamp
 RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: venv develop demo test test-rust test-py lint fmt bench bench-gpu clean
+PYTEST := $(PY) -m pytest -q
+
+.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint fmt bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -27,19 +29,29 @@ develop: $(SO_STAMP)
 demo: venv
 	$(VENV)/bin/blurset build --demo --out demo_out
 
+# Every test (Rust, and Python with real Blender renders, COLMAP and Ray) but the
+# release-wheel build, which has its own target; CI runs both.
 test: test-rust test-py
+
+# The fast layer: Rust and the Python tests that render nothing (a couple of minutes).
+test-fast: test-rust venv
+	$(PYTEST) -m "not blender and not packaging" tests
 
 test-rust:
 	cargo test -p blurset-core --quiet
 
 test-py: venv
-	$(PY) -m pytest -q tests
+	$(PYTEST) -m "not packaging" tests
+
+test-packaging: venv
+	$(PYTEST) -m packaging tests
 
 lint: venv
 	cargo fmt --all -- --check
 	cargo clippy --workspace --all-targets -- -D warnings
 	$(VENV)/bin/ruff check python tests blender_scripts bench
 	$(VENV)/bin/ruff format --check python tests blender_scripts bench
+	$(PY) -m mypy.stubtest blurset._core --allowlist stubtest_allowlist.txt
 
 fmt:
 	cargo fmt --all

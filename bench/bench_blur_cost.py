@@ -76,9 +76,9 @@ class Timed:
         worker._receive_in_sync = receive
 
     def image(self, frames, samples: int, codec: str, batch: bool = True) -> dict:
-        from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
+        from blurset.image import Accumulator
 
-        acc = _core.Accumulator(self.res, self.res)
+        acc = Accumulator(self.res, self.res)
         acc_s = 0.0
 
         def on_frame(_i: int, path: str) -> None:
@@ -117,10 +117,8 @@ def _med(rows: list[dict], key: str) -> float:
 
 
 def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
-    from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
-    from blurset.build import level_renders
-    from blurset.config import BuildConfig
     from blurset.demo import make_demo_objects
+    from blurset.plan import BuildConfig, plan_setting
     from blurset.worker_client import Worker
 
     with tempfile.TemporaryDirectory(prefix="blurset-bench-") as tmp:
@@ -134,30 +132,28 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
             t_load = time.perf_counter() - t1
             verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
 
-            def plan(**kw) -> dict:
+            def plan(**kw):
                 cfg = BuildConfig(views=1, levels=[4], resolution=res, **kw)
-                p = _core.plan_setting(
-                    cfg.sampling_json(),
+                return plan_setting(
+                    cfg,
                     uid="bench",
                     theta0_deg=0.0,
                     seed=7,
                     bbox_dims=info["bbox_dims"],
                     vertices=verts,
                 )
-                return json.loads(p)["views"][0]
 
-            view = plan(latents=LATENTS, samples_total=SAMPLES_TOTAL)
-            lvl = view["levels"]["4"]
-            spf = lvl["samples_per_frame"]
-            latent = level_renders(lvl, work / "l")
-            independent = level_renders(
-                plan(latents=LATENTS, samples_total=SAMPLES_TOTAL, latent_sampling="independent")[
-                    "levels"
-                ]["4"],
-                work / "i",
-            )
+            subsets = plan(latents=LATENTS, samples_total=SAMPLES_TOTAL)
+            view = subsets.to_dict()["views"][0]
+            spf = view["levels"]["4"]["samples_per_frame"]
+            latent = subsets.level_renders(0, 4, str(work / "l"))
+            independent = plan(
+                latents=LATENTS, samples_total=SAMPLES_TOTAL, latent_sampling="independent"
+            ).level_renders(0, 4, str(work / "i"))
             sharp = [{"c2w": view["c2w"], "seed": view["sharp_seed"], "out": str(work / "s.exr")}]
-            mb = plan(blur_method="motion_blur", samples_total=SAMPLES_TOTAL)["levels"]["4"]
+            mb = plan(blur_method="motion_blur", samples_total=SAMPLES_TOTAL).to_dict()["views"][0][
+                "levels"
+            ]["4"]
             keys = [k["c2w"] for k in mb["motion_blur"]["keys"]]
             motion = [
                 {

@@ -47,8 +47,8 @@ def _proc_cpu(pid: int) -> float:
 def measure() -> dict:
     import time
 
-    from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
-    from blurset.config import BuildConfig
+    from blurset.image import image_error, read_exr
+    from blurset.plan import BuildConfig, plan_setting
     from blurset.worker_client import Worker, WorkerError
 
     out: dict = {"resolution": RES, "samples": SAMPLES, "repeats": REPEATS, "objects": {}}
@@ -63,10 +63,9 @@ def measure() -> dict:
                     continue
                 verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
                 cfg = BuildConfig(views=1, levels=[], resolution=RES)
-                view = json.loads(
-                    _core.plan_setting(cfg.sampling_json(), uid=name, theta0_deg=30.0, seed=3,
-                                       bbox_dims=info["bbox_dims"], vertices=verts)
-                )["views"][0]  # fmt: skip
+                view = plan_setting(cfg, uid=name, theta0_deg=30.0, seed=3,
+                                    bbox_dims=info["bbox_dims"], vertices=verts
+                                    ).to_dict()["views"][0]  # fmt: skip
                 frame = {"c2w": view["c2w"], "seed": view["sharp_seed"], "samples": SAMPLES}
                 times: dict[str, list[tuple[float, float]]] = {"fixed": [], "auto": []}
                 img, paths = {}, {}
@@ -79,8 +78,9 @@ def measure() -> dict:
                         c0, t0 = _proc_cpu(w._proc.pid), time.perf_counter()
                         w.render([f], resolution=RES, fov_deg=cfg.fov_deg, samples=SAMPLES)
                         times[mode].append((time.perf_counter() - t0, _proc_cpu(w._proc.pid) - c0))
-                        img[mode] = np.asarray(_core.read_exr(work / f"{mode}.exr"))
-                err = json.loads(_core.image_error(img["auto"], img["fixed"]))
+                        img[mode] = np.asarray(read_exr(work / f"{mode}.exr"))
+                e = image_error(img["auto"], img["fixed"])
+                err = {"psnr": e.psnr}
                 med = {m: [statistics.median(x[i] for x in v) for i in (0, 1)]
                        for m, v in times.items()}  # fmt: skip
                 out["objects"][name] = {

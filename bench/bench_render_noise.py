@@ -46,10 +46,9 @@ def _mse(a, b) -> float:
 
 
 def measure(res: int = RESOLUTION) -> dict:
-    from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
-    from blurset.config import BuildConfig
     from blurset.demo import make_demo_objects
-    from blurset.tradeoff import REFERENCE_SEED_SALT, _render_image, _sharp_level
+    from blurset.plan import BuildConfig, plan_setting
+    from blurset.tradeoff import REFERENCE_SEED_SALT, _render_image, _sharp
     from blurset.worker_client import Worker
 
     out: dict = {"resolution": res, "level": LEVEL, "factor": FACTOR, "presets": {}}
@@ -60,20 +59,29 @@ def measure(res: int = RESOLUTION) -> dict:
             info = w.load(glb, work / "v.npy")
             verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
 
-            def view_of(**kw) -> dict:
+            def plan_of(**kw):
                 cfg = BuildConfig(views=1, levels=[LEVEL], resolution=res, **kw)
-                plan = _core.plan_setting(
-                    cfg.sampling_json(),
+                return plan_setting(
+                    cfg,
                     uid="bench",
                     theta0_deg=0.0,
                     seed=11,
                     bbox_dims=info["bbox_dims"],
                     vertices=verts,
                 )
-                return json.loads(plan)["views"][0]
 
-            def image(lp: dict, salt: int = 0, **kw):
-                return _render_image(w, lp, work, res, 40.0, salt, **kw)
+            def view_of(**kw) -> dict:
+                return plan_of(**kw).to_dict()["views"][0]
+
+            def level_of(**kw) -> tuple[list[dict], dict]:
+                p = plan_of(**kw)
+                return p.level_renders(0, LEVEL, str(work / "f")), p.level(0, LEVEL)
+
+            def image(frames_lp: tuple[list[dict], dict], salt: int = 0, **kw):
+                return _render_image(w, *frames_lp, res, 40.0, salt, **kw)
+
+            def sharp_of(v: dict, samples: int) -> tuple[list[dict], dict]:
+                return _sharp(v, samples, work)
 
             for name, (kw, sharp_samples) in PRESETS.items():
                 row: dict = {"sharp_samples": sharp_samples}
@@ -86,14 +94,11 @@ def measure(res: int = RESOLUTION) -> dict:
                     v = view_of(delta0=delta0, **kw)
                     lp = v["levels"][str(LEVEL)]
                     budget = lp["samples_per_frame"] * lp["latents"]
-                    sharp, _ = image(_sharp_level(v, sharp_samples))
-                    sharp_ref, _ = image(
-                        _sharp_level(v, FACTOR * sharp_samples), REFERENCE_SEED_SALT
-                    )
+                    sharp, _ = image(sharp_of(v, sharp_samples))
+                    sharp_ref, _ = image(sharp_of(v, FACTOR * sharp_samples), REFERENCE_SEED_SALT)
                     conv_kw = dict(kw, samples_total=FACTOR * budget)
                     conv_kw.pop("samples", None)
-                    lp_ref = view_of(delta0=delta0, **conv_kw)["levels"][str(LEVEL)]
-                    conv, _ = image(lp_ref, REFERENCE_SEED_SALT)
+                    conv, _ = image(level_of(delta0=delta0, **conv_kw), REFERENCE_SEED_SALT)
                     sharp_mse = _mse(sharp, sharp_ref)
                     entry = {
                         "motion_px": lp["motion_px"],
@@ -104,12 +109,10 @@ def measure(res: int = RESOLUTION) -> dict:
                         "sharp_render_psnr": _psnr(sharp, sharp_ref),
                     }
                     for scheme in ("subsets", "independent"):
-                        lp_s = view_of(delta0=delta0, latent_sampling=scheme, **kw)["levels"][
-                            str(LEVEL)
-                        ]
+                        frames_s, lp_s = level_of(delta0=delta0, latent_sampling=scheme, **kw)
                         if scheme == "subsets":
                             assert lp_s == lp, "the plan's default is subsets"
-                        blur, t = image(lp_s)
+                        blur, t = image((frames_s, lp_s))
                         entry[scheme] = {
                             "render_psnr": _psnr(blur, conv),
                             "mse": _mse(blur, conv),
@@ -119,8 +122,8 @@ def measure(res: int = RESOLUTION) -> dict:
                     if motion == "zero_trajectory":
                         # Cycles adaptive sampling on both (issue 15 asked whether it keeps
                         # parity): the sharp render stops early, the sample blocks do not.
-                        sharp_a, _ = image(_sharp_level(v, sharp_samples), noise_threshold=ADAPTIVE)
-                        blur_a, _ = image(lp, noise_threshold=ADAPTIVE)
+                        sharp_a, _ = image(sharp_of(v, sharp_samples), noise_threshold=ADAPTIVE)
+                        blur_a, _ = image(level_of(delta0=delta0, **kw), noise_threshold=ADAPTIVE)
                         entry["adaptive"] = {
                             "noise_threshold": ADAPTIVE,
                             "sharp_mse": _mse(sharp_a, sharp_ref),
@@ -135,9 +138,9 @@ def measure(res: int = RESOLUTION) -> dict:
 
 
 def _psnr(a, b) -> float:
-    from blurset import _core  # noqa: TID251
+    from blurset.image import image_error
 
-    return float(json.loads(_core.image_error(a, b, background=(1.0, 1.0, 1.0)))["psnr"])
+    return float(image_error(a, b, background=(1.0, 1.0, 1.0)).psnr)
 
 
 def run() -> list[dict]:

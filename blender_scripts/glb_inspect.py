@@ -8,10 +8,12 @@ the emissive slot, which Blender's importer would render black.
 
 from __future__ import annotations
 
+import base64
 import copy
 import json
 import os
 import struct
+from urllib.parse import unquote
 
 GLB_MAGIC = b"glTF"
 CHUNK_JSON = 0x4E4F534A
@@ -51,8 +53,14 @@ def read_glb(path: str) -> tuple[dict, bytes | None]:
             raise GlbError(f"truncated GLB chunk at byte {offset}: {path}")
         if ctype == CHUNK_JSON and doc is None:
             try:
-                doc = json.loads(body.decode("utf-8"))
-            except (UnicodeDecodeError, ValueError) as e:
+                text = body.decode("utf-8")
+            except UnicodeDecodeError as e:
+                raise GlbError(
+                    f"the JSON chunk is not UTF-8 (glTF requires UTF-8; byte {e.start}): {path}"
+                ) from None
+            try:
+                doc = json.loads(text)
+            except ValueError as e:
                 raise GlbError(f"GLB JSON chunk is not valid JSON ({e}): {path}") from None
         elif ctype == CHUNK_BIN and bin_chunk is None:
             bin_chunk = body
@@ -60,6 +68,82 @@ def read_glb(path: str) -> tuple[dict, bytes | None]:
     if not isinstance(doc, dict):
         raise GlbError(f"GLB has no JSON chunk: {path}")
     return doc, bin_chunk
+
+
+def read_model(path: str) -> tuple[dict, bytes | None]:
+    """The JSON document and BIN chunk of a .glb, or the document of a .gltf (None)."""
+    if not path.lower().endswith(".gltf"):
+        return read_glb(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except UnicodeDecodeError as e:
+        raise GlbError(
+            f"the glTF JSON is not UTF-8 (glTF requires UTF-8; byte {e.start}): {path}"
+        ) from None
+    except ValueError as e:
+        raise GlbError(f"glTF JSON does not parse ({e}): {path}") from None
+    if not isinstance(doc, dict):
+        raise GlbError(f"glTF JSON is not an object: {path}")
+    return doc, None
+
+
+_MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".webp": "image/webp"}
+
+
+def _uri_bytes(uri: str, base: str) -> bytes:
+    if uri.startswith("data:"):
+        return base64.b64decode(uri.split(",", 1)[1])
+    with open(os.path.join(base, unquote(uri)), "rb") as f:
+        return f.read()
+
+
+def has_external_uris(doc: dict) -> bool:
+    items = (doc.get("buffers") or []) + (doc.get("images") or [])
+    return any(isinstance(x.get("uri"), str) and not x["uri"].startswith("data:") for x in items)
+
+
+def embed_external(doc: dict, bin_chunk: bytes | None, base: str) -> tuple[dict, bytes]:
+    """A self-contained GLB of a model whose buffers or images are separate files (a
+    .gltf with its .bin and textures, or a .glb with external textures): every buffer
+    becomes a slice of one BIN chunk and every external image a buffer view, so the
+    model can be written anywhere (the worker's scratch folder) and still import whole.
+    URIs were checked by the pre-flight to stay inside the model's folder."""
+    doc = copy.deepcopy(doc)
+    blob = bytearray()
+
+    def append(data: bytes) -> int:
+        offset = len(blob)
+        blob.extend(data)
+        blob.extend(b"\0" * (-len(blob) % 4))
+        return offset
+
+    offsets = []
+    for b in doc.get("buffers") or []:
+        uri = b.get("uri")
+        data = (bin_chunk or b"") if uri is None else _uri_bytes(uri, base)
+        offsets.append(append(data[: int(b.get("byteLength", len(data)))]))
+    for v in doc.get("bufferViews") or []:
+        v["byteOffset"] = int(v.get("byteOffset", 0)) + offsets[int(v.get("buffer", 0))]
+        v["buffer"] = 0
+    views = doc.setdefault("bufferViews", [])
+    for img in doc.get("images") or []:
+        uri = img.get("uri")
+        if not isinstance(uri, str) or uri.startswith("data:"):
+            continue
+        data = _uri_bytes(uri, base)
+        offset = append(data)
+        views.append({"buffer": 0, "byteOffset": offset, "byteLength": len(data)})
+        img.pop("uri")
+        img["bufferView"] = len(views) - 1
+        ext = os.path.splitext(unquote(uri))[1].lower()
+        img.setdefault("mimeType", _MIME.get(ext, "image/png"))
+    if not views:
+        doc.pop("bufferViews")
+    doc["buffers"] = [{"byteLength": len(blob)}] if blob else []
+    if not doc["buffers"]:
+        doc.pop("buffers")
+    return doc, bytes(blob)
 
 
 def write_glb(path: str, doc: dict, bin_chunk: bytes | None) -> None:

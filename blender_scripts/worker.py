@@ -61,6 +61,25 @@ def _take_over_stdout():
     return proto
 
 
+def _die_with_parent() -> None:
+    """Ask Linux to SIGKILL this process when the process that started it dies, so a
+    killed build (SIGKILL, a crash) never leaves Blender rendering on under PID 1."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+        import signal as _signal
+
+        parent = os.getppid()
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(_signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+        if os.getppid() != parent:  # the parent died before prctl took effect
+            os._exit(1)
+    except (OSError, AttributeError):
+        pass
+
+
+_die_with_parent()
 PROTO = _take_over_stdout()
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
@@ -156,7 +175,6 @@ class Worker:
             # Preferences are reset with the factory scene: the device goes on every load.
             device = blender_scene.use_device(*self.device)
             light_paths = blender_scene.set_light_paths(doc, str(cmd.get("light_paths", "auto")))
-            qa = blender_scene.render_qa(info["bbox_dims"], self.workdir)
         except blender_scene.LoadError as e:
             return {"ok": False, "reason": str(e)}
         save_npy_atomic(vertices_out, info.pop("vertices"))
@@ -169,7 +187,6 @@ class Worker:
             "unlit_fixed": unlit_fixed,
             "light_paths": light_paths,
             "device": device,
-            **qa,
             "seconds": time.perf_counter() - t0,
         }
 

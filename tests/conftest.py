@@ -1,9 +1,15 @@
 """Shared fixtures. Tests that need third-party data read it from ../shared/data and skip
-with a reason when it is absent (a user's clone); CI always has it."""
+with a reason when it is absent (a user's clone); CI always has it, so under CI=true a
+missing ../shared/data or bpy fails the run instead of skipping it.
+
+Markers: `blender` (renders with bpy; also given to every test that uses a build
+fixture), `slow` (long end-to-end runs), `packaging` (builds a release wheel: its own
+make target). `make test-fast` runs what is neither blender nor packaging."""
 
 from __future__ import annotations
 
 import importlib.util
+import os
 from pathlib import Path
 
 import numpy as np
@@ -12,19 +18,51 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"
 HAS_BPY = importlib.util.find_spec("bpy") is not None
+# In CI nothing may be skipped for want of bpy or the shared data: a hole there would
+# leave the run green with its render tests never run.
+IN_CI = os.environ.get("CI", "").strip().lower() in ("1", "true", "yes")
+# Fixtures that render a build: a test using one needs bpy.
+BUILD_FIXTURES = {"demo_build", "linear_build", "noised", "demo_setting"}
 
 
 def shared(*parts: str) -> Path:
-    """A path under ../shared/data, or skip the test when it is absent."""
+    """A path under ../shared/data, or skip the test when it is absent (fail under CI)."""
     p = SHARED_DATA.joinpath(*parts)
     if not p.exists():
-        pytest.skip(f"real data {p} is absent (it ships with CI, not with a clone)")
+        msg = f"real data {p} is absent (it ships with CI, not with a clone)"
+        if IN_CI:
+            pytest.fail(f"CI=true: {msg}")
+        pytest.skip(msg)
     return p
 
 
+def shared_if_present(*parts: str) -> Path | None:
+    """A path under ../shared/data, or None when it is absent (fail under CI): for tests
+    that check more when the real data is there."""
+    p = SHARED_DATA.joinpath(*parts)
+    if not p.exists():
+        if IN_CI:
+            pytest.fail(f"CI=true: real data {p} is absent")
+        return None
+    return p
+
+
+def needs_bpy() -> None:
+    """Skip (fail under CI) a test or fixture that renders when bpy cannot be imported."""
+    if not HAS_BPY:
+        if IN_CI:
+            pytest.fail("CI=true: bpy cannot be imported, so the render tests cannot run")
+        pytest.skip("bpy cannot be imported")
+
+
 def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if BUILD_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.blender)
     if HAS_BPY:
         return
+    if IN_CI:
+        raise pytest.UsageError("CI=true but bpy cannot be imported: the render tests must run")
     skip = pytest.mark.skip(reason="bpy cannot be imported")
     for item in items:
         if "blender" in item.keywords:
@@ -65,8 +103,7 @@ DEMO_ARGS = (
 
 @pytest.fixture(scope="session")
 def demo_build(tmp_path_factory):
-    if not HAS_BPY:
-        pytest.skip("bpy cannot be imported")
+    needs_bpy()
     out = tmp_path_factory.mktemp("demo") / "out"
     run_cli("build", *DEMO_ARGS, "--out", str(out))
     return out
@@ -76,8 +113,7 @@ def demo_build(tmp_path_factory):
 def linear_build(tmp_path_factory):
     """The demo build of DEMO_ARGS with `--keep-linear --previews` (issue 9): linear EXRs
     of every view and level, and a preview.png per setting."""
-    if not HAS_BPY:
-        pytest.skip("bpy cannot be imported")
+    needs_bpy()
     out = tmp_path_factory.mktemp("demo_linear") / "out"
     run_cli("build", *DEMO_ARGS, "--keep-linear", "--previews", "--out", str(out))
     return out

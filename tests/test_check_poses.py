@@ -16,7 +16,7 @@ from blurset import check_poses
 from blurset.exceptions import ConfigError, InputError
 from PIL import Image
 
-from tests.conftest import HAS_BPY, ROOT, shared
+from tests.conftest import ROOT, needs_bpy, shared
 
 
 def read_poses_bounds(path: Path) -> np.ndarray:
@@ -203,9 +203,8 @@ def test_cli_entry_point(tmp_path):
 def demo_setting(tmp_path_factory):
     """One setting of a tiny real demo build (textured procedural object), sharp and
     one blur level; DESIGN §4 layout."""
+    needs_bpy()
     out = tmp_path_factory.mktemp("build")
-    if not HAS_BPY:
-        pytest.skip("bpy cannot be imported")
     cmd = [
         sys.executable, "-m", "blurset.cli", "build", "--demo", "--out", out, "--views", "16", "--levels", "1",
         "--resolution", "160", "--latents", "2", "--samples", "8",

@@ -16,11 +16,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from blurset import layout
 from blurset.demo import make_demo_objects
 from blurset.objects import resolve_objects, sanitize, setting_name
 from blurset.preflight import glb_inspect
 
-from tests.conftest import SHARED_DATA, run_cli
+from tests.conftest import run_cli, shared_if_present
 
 pytestmark = pytest.mark.blender
 
@@ -49,7 +50,21 @@ def rewrite_json(src: Path, dst: Path, edit) -> None:
 
 
 def setting_dirs(out: Path) -> list[str]:
-    return sorted(d.name for d in out.iterdir() if (d / ".complete").exists())
+    return [d.name for d in layout.complete_settings(out)]
+
+
+def assert_complete_means_whole(out: Path) -> None:
+    """What every reader (finalize, noise, preview, stats) counts as complete is whole:
+    never a `.partial`, never a setting missing a file (issue 14)."""
+    from blurset.stats import load_stats  # stats' own scan, in Rust
+
+    names = setting_dirs(out)
+    assert not any(n.endswith(".partial") for n in names), names
+    for n in names:
+        assert layout.setting_problem(out / n) is None, (n, layout.setting_problem(out / n))
+    if (out / "dataset.json").exists() or names:
+        stats = load_stats(out)
+        assert stats["counts"]["settings"] == len(names), stats["counts"]
 
 
 def failures(out: Path) -> dict[str, dict]:
@@ -88,8 +103,8 @@ def objects(tmp_path_factory, demo_glbs) -> Path:
     rewrite_json(box, d / "missing_texture.glb", external_texture)
     rewrite_json(box, d / "empty_scene.glb", lambda doc: doc.pop("meshes"))
     shutil.copy(box, d / "hangs.glb")
-    draco = SHARED_DATA / "glb" / "edge_BoxTextured_draco.glb"
-    if draco.exists():
+    draco = shared_if_present("glb", "edge_BoxTextured_draco.glb")
+    if draco is not None:
         shutil.copy(draco, d / "draco.glb")
     return d
 
@@ -118,7 +133,7 @@ def test_each_broken_class_fails_with_its_reason_good_objects_complete(broken_bu
         assert [setting_name(good, t) for t in (0, 180)] == [d for d in done if d.startswith(good)]
     if "draco" in fails:  # failing is allowed, silently is not
         assert "Draco" in fails.pop("draco")["reason"]
-    elif (SHARED_DATA / "glb" / "edge_BoxTextured_draco.glb").exists():
+    elif shared_if_present("glb", "edge_BoxTextured_draco.glb") is not None:
         assert {"draco_000", "draco_180"} <= set(done)
     assert not fails, fails
     n_failed = len(BROKEN)
@@ -227,7 +242,7 @@ def tree(out: Path) -> dict[str, bytes]:
     return {
         str(p.relative_to(out)): p.read_bytes()
         for p in sorted(out.rglob("*"))
-        if p.is_file() and p.name != ".lock"
+        if p.is_file() and p.name != ".lock" and ".locks" not in p.parts
     }
 
 
@@ -279,6 +294,7 @@ def test_killed_three_times_then_resumed_equals_an_uninterrupted_build(objects, 
         os.killpg(p.pid, signal.SIGKILL)
         p.wait()
         p.stderr.close()
+        assert_complete_means_whole(killed)
     # The kills did leave debris for the resume to clean up.
     debris = [n for n in tree(killed) if ".partial" in n or ".work-" in n]
     assert debris

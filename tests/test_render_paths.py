@@ -11,10 +11,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from blurset import _core  # noqa: TID251  (plans and the accumulator, as the build drives them)
-from blurset.build import level_renders
-from blurset.config import BuildConfig
 from blurset.demo import make_demo_objects
+from blurset.image import Accumulator
+from blurset.plan import BuildConfig, Plan, plan_setting
 from blurset.worker_client import Worker, WorkerError
 
 from tests.test_worker import read_exr
@@ -37,30 +36,22 @@ def loaded(demo_glbs, tmp_path_factory):
         yield w, info, verts
 
 
-def plan(info, verts, **kw) -> dict:
-    cfg = BuildConfig(**kw)
-    return json.loads(
-        _core.plan_setting(
-            cfg.sampling_json(),
-            uid="t",
-            theta0_deg=30.0,
-            seed=5,
-            bbox_dims=info["bbox_dims"],
-            vertices=verts,
-        )
+def plan(info, verts, **kw) -> Plan:
+    return plan_setting(
+        BuildConfig(**kw),
+        uid="t",
+        theta0_deg=30.0,
+        seed=5,
+        bbox_dims=info["bbox_dims"],
+        vertices=verts,
     )
 
 
-def frames_of(p: dict, out: Path) -> list[dict]:
-    """Every render of a plan, sharp then the levels' latent frames, per view."""
-    frames = []
-    for v in p["views"]:
-        frames.append(
-            {"c2w": v["c2w"], "seed": v["sharp_seed"], "out": out / f"{v['index']}_s.exr"}
-        )
-        for lvl, lp in v["levels"].items():
-            frames += level_renders(lp, out / f"{v['index']}_{lvl}")
-    return frames
+def frames_of(p: Plan, out: Path) -> list[dict]:
+    """Every render of a plan, sharp then the levels' latent frames, per view (unpinned:
+    each level's own sequence)."""
+    out.mkdir(parents=True, exist_ok=True)
+    return p.renders(out)
 
 
 def test_one_animation_job_gives_the_pixels_of_one_call_per_frame(loaded, tmp_path):
@@ -99,7 +90,7 @@ def mse(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def render_mean(w, frames, res: int) -> np.ndarray:
-    acc = _core.Accumulator(res, res)
+    acc = Accumulator(res, res)
     w.render(frames, resolution=res, fov_deg=40.0, samples=1,
              on_frame=lambda _i, path: acc.add_exr(path))  # fmt: skip
     return np.asarray(acc.mean())
@@ -116,14 +107,14 @@ def test_subsets_at_zero_motion_carry_the_sharp_render_noise(loaded, tmp_path):
     errs = {}
     for scheme in ("subsets", "independent"):
         p = plan(info, verts, latent_sampling=scheme, **kw)
-        v = p["views"][0]
+        v = p.to_dict()["views"][0]
         lp = v["levels"]["2"]
         assert lp["motion_px"] == 0.0 and lp["samples_per_frame"] == s // m
         ref = render_mean(w, [{"c2w": v["c2w"], "seed": 99, "samples": 1024,
                                "out": tmp_path / "ref.exr"}], res)  # fmt: skip
         sharp = render_mean(w, [{"c2w": v["c2w"], "seed": v["sharp_seed"], "samples": s,
                                  "out": tmp_path / "s.exr"}], res)  # fmt: skip
-        blur = render_mean(w, level_renders(lp, tmp_path / scheme), res)
+        blur = render_mean(w, p.level_renders(0, 2, str(tmp_path / scheme)), res)
         errs[scheme] = (mse(blur, ref), mse(sharp, ref), mse(blur, sharp))
     b, sh, between = errs["subsets"]
     assert b <= 1.12 * sh, errs
@@ -236,31 +227,39 @@ def test_build_blur_grows_from_sharp_level_by_level(tmp_path):
 def test_pinned_sequence_makes_pixels_independent_of_render_order(demo_glbs, tmp_path):
     """Cycles sizes its sample pattern from a render's `samples` and never shrinks it in a
     process: a render depends on the largest one before it. A subsets build pins every
-    render to one sequence (build.cycles_samples), so the sharp image of a view is the
-    same whether or not longer sequences were rendered before it (as after a resume)."""
-    from blurset.build import _render_frames, cycles_samples
-
+    render to one sequence (BuildConfig.cycles_samples), so a view's sharp image and a
+    latent frame are the same whether or not longer sequences were rendered before them
+    in the worker (as in an uninterrupted build) or not (as after a resume)."""
     cfg = BuildConfig(views=1, levels=[2], latents=7, samples_total=300, sharp_samples=200,
                       resolution=24)  # fmt: skip
+    assert cfg.cycles_samples == 7 * 43
+    kw = {"resolution": 24, "fov_deg": 40.0}
     got = {}
     for pinned in (True, False):
-        with Worker(threads=1, timeout=300) as w:
-            info = w.load(demo_glbs[0], tmp_path / "v.npy")
-            verts = np.ascontiguousarray(np.load(tmp_path / "v.npy"), dtype=np.float32)
-            p = plan(info, verts, **{k: getattr(cfg, k) for k in
-                                     ("views", "levels", "latents", "samples_total",
-                                      "resolution")})  # fmt: skip
-            pin = cycles_samples(p, cfg) if pinned else None
-            assert p["views"][0]["levels"]["2"]["sample_sequence"] == 7 * 43
-            frames = _render_frames(p, tmp_path / f"f{pinned}", pin)
-            sharp, blur = frames[0], frames[1:]
-            assert (sharp.get("sample_sequence"), len(blur)) == (pin, 7)
-            kw = {"resolution": 24, "fov_deg": 40.0}
-            imgs = []
-            for batch in ([sharp], blur, [sharp]):
-                w.render(batch, samples=200, **kw)
-                imgs.append(read_exr(batch[0]["out"]))
-            got[pinned] = (imgs[0], imgs[2])
-    assert np.array_equal(*got[True])
-    # Without the pin the 301-sample blocks grew Cycles' table: the same render changed.
-    assert not np.array_equal(*got[False])
+        pin = cfg.cycles_samples if pinned else None
+        runs = []
+        # A fresh worker each: the resumed order (frame alone) and the uninterrupted one
+        # (after the whole setting).
+        for first in (False, True):
+            with Worker(threads=1, timeout=300) as w:
+                info = w.load(demo_glbs[0], tmp_path / "v.npy")
+                verts = np.ascontiguousarray(np.load(tmp_path / "v.npy"), dtype=np.float32)
+                p = plan_setting(cfg, uid="t", theta0_deg=30.0, seed=5,
+                                 bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
+                assert p.level(0, 2)["sample_sequence"] == 7 * 43
+                d = tmp_path / f"f{pinned}{first}"
+                d.mkdir()
+                frames = p.renders(d, pin)
+                sharp, blur = frames[0], frames[1:]
+                assert (sharp.get("sample_sequence"), len(blur)) == (pin, 7)
+                if first:
+                    w.render([sharp, *blur], samples=200, **kw)
+                w.render([sharp], samples=200, **kw)
+                w.render([blur[3]], samples=200, **kw)
+                runs.append((read_exr(sharp["out"]), read_exr(blur[3]["out"])))
+        got[pinned] = runs
+    for a, b in zip(*got[True], strict=True):
+        assert np.array_equal(a, b)
+    # Without the pin the 301-sample blocks grew Cycles' table past the sharp 200: the
+    # same sharp render changed, so the comparison above can fail.
+    assert not np.array_equal(got[False][0][0], got[False][1][0])

@@ -111,14 +111,14 @@ def test_local_pool_ray_and_shards_build_the_same_dataset(demo_glbs, tmp_path):
 
 
 def test_shards_partition_by_object_whatever_the_listing_order(demo_glbs, tmp_path):
-    from blurset.build import _objects
+    from blurset.build import job_objects
     from blurset.config import make_config
 
     entries = [str(g) for g in demo_glbs]
 
     def shard(i: int, order: list[str]) -> list[str]:
         cfg = make_config({}, {"objects": order, "out": tmp_path / "o", "shard": f"{i}/2"})
-        return [o.uid for o in _objects(cfg)]
+        return [o.uid for o in job_objects(cfg)]
 
     a = [shard(i, entries) for i in range(2)]
     b = [shard(i, entries[::-1]) for i in range(2)]

@@ -256,7 +256,7 @@ def test_invisible_object_fails_render_qa(worker, tmp_path):
 def test_bad_inputs_give_clear_errors_and_the_worker_survives(worker, tmp_path):
     pid = worker.info["pid"]
     missing = tmp_path / "nope.glb"
-    with pytest.raises(WorkerError, match=r"GLB file not found: .*nope\.glb"):
+    with pytest.raises(WorkerError, match=r"model file not found: .*nope\.glb"):
         worker.load(missing, tmp_path / "v.npy")
     text = tmp_path / "text.glb"
     text.write_text("hello")

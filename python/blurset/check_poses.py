@@ -12,7 +12,6 @@ poses are OpenCV world-to-camera (x right, y down, z forward).
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import tempfile
 import time
@@ -21,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from blurset import layout
 from blurset._core import read_poses_bounds
 from blurset.exceptions import ConfigError, InputError
 
@@ -37,7 +37,6 @@ OUTLIER_PX = 2.0
 # Fewer registered views than this cannot fix a similarity robustly.
 MIN_REGISTERED_VIEWS = 3
 
-LEVELS = ("sharp", "blur_1", "blur_2", "blur_3", "blur_4")
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
 
 EXIT_PASS, EXIT_FAIL, EXIT_NOT_CHECKABLE = 0, 1, 3
@@ -498,7 +497,7 @@ def is_setting(path: Path) -> bool:
     """A build setting directory holds level directories, not a scene of its own."""
     path = Path(path)
     return not (path / "poses_bounds.npy").exists() and any(
-        (path / lv / "poses_bounds.npy").exists() for lv in LEVELS
+        (path / lv / "poses_bounds.npy").exists() for lv in layout.setting_levels(path)
     )
 
 
@@ -509,13 +508,17 @@ def check_setting(
     setting_dir = Path(setting_dir)
     out = {}
     for level in levels:
-        if level not in LEVELS:
-            raise ConfigError(f"--level must be one of {', '.join(LEVELS)} or all, got {level!r}")
+        _check_level_name(level)
         scene = setting_dir / level
         if not scene.is_dir():
             raise InputError(f"no level directory {level} in setting {setting_dir}")
         out[level] = check_scene(scene, factor=factor)
     return out
+
+
+def _check_level_name(level: str) -> None:
+    if not layout.is_level_dir(level):
+        raise ConfigError(f"--level must be sharp, blur_<l> (l in 1..64) or all, got {level!r}")
 
 
 # --------------------------------------------------------------------------- CLI
@@ -526,8 +529,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--level",
         default="sharp",
-        choices=[*LEVELS, "all"],
-        help="level directory of a build setting to check (default sharp); `all` checks "
+        help="level directory of a build setting to check: sharp, blur_<l> (default sharp); `all` checks "
         "every level and prints how blur degrades SfM (the exit code follows sharp)",
     )
     parser.add_argument(
@@ -576,9 +578,7 @@ def _table(reports: dict[str, dict]) -> str:
 
 def _write_json(path: Path, data) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    tmp.replace(path)
+    layout.write_json(path, data, indent=2)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -589,9 +589,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"not a directory: {path}")
     workdir = getattr(args, "workdir", None)
     if is_setting(path):
-        levels = (
-            [lv for lv in LEVELS if (path / lv).is_dir()] if args.level == "all" else [args.level]
-        )
+        if args.level != "all":
+            _check_level_name(args.level)
+        levels = layout.setting_levels(path) if args.level == "all" else [args.level]
         reports = {}
         for level in levels:
             scene = path / level

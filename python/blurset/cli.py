@@ -5,15 +5,16 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from blurset.exceptions import BlursetError
 
 # subcommand -> (module, one-line help)
 COMMANDS = {
-    "build": ("blurset.build", "render an Objaverse-Blur style dataset from GLB objects"),
+    "build": ("blurset.build.cli", "render an Objaverse-Blur style dataset from GLB objects"),
     "noise": (
-        "blurset.noise",
+        "blurset.noise.cli",
         "write reproducible noisy copies (LLFF-N style) of an LLFF scene or of a whole build",
     ),
     "check-poses": ("blurset.check_poses", "cross-check a scene's poses with COLMAP"),
@@ -49,6 +50,9 @@ def make_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
+    from blurset import stop
+
+    stop.install()
     try:
         return int(importlib.import_module(args._module).run(args) or 0)
     except (BlursetError, OSError, ValueError) as e:
@@ -57,9 +61,15 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"blurset {args.command}: error: {_one_line(e)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"blurset {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        code = stop.exit_code(e)
+        why = f" ({e.args[0]})" if code != 130 else ""
+        print(f"blurset {args.command}: interrupted{why}", file=sys.stderr)
+        if stop.must_exit_now():
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+        return code
     except Exception as e:  # a bug: still one line, with the way to see more
         if args.debug:
             raise

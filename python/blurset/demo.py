@@ -10,13 +10,14 @@ Deterministic for a seed: the same seed gives byte-identical files.
 from __future__ import annotations
 
 import io
-import os
 from pathlib import Path
 
 import numpy as np
 import trimesh
 from PIL import Image, ImageDraw, ImageFilter
 from trimesh.visual.material import PBRMaterial
+
+from blurset import layout
 
 TEXTURE_SIZE = 512
 # (file stem, builder name): order is part of the contract (index k gets sub-seed k).
@@ -39,9 +40,7 @@ def make_demo_objects(out_dir: Path, seed: int = 0) -> list[Path]:
         vertices, faces, normals, uv = builders[name]()
         data = _glb_bytes(vertices, faces, normals, uv, texture)
         path = out_dir / f"{name}.glb"
-        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
+        layout.write_bytes_atomic(path, data)
         paths.append(path)
     return paths
 

@@ -21,28 +21,6 @@ GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "ONEAPI", "METAL")
 NAMES = {"OPTIX": "OptiX", "CUDA": "CUDA", "HIP": "HIP", "ONEAPI": "oneAPI", "METAL": "Metal"}
 
 
-def parse_gpus(value, where: str = "--gpus") -> list[int] | None:
-    """`0,2`, a list, or None/"" (all devices of the backend)."""
-    if value is None:
-        return None
-    if isinstance(value, int) and not isinstance(value, bool):
-        items = [value]
-    elif isinstance(value, list):
-        items = value
-    else:
-        text = str(value).strip()
-        if text.lower() in ("", "all"):
-            return None
-        items = [s for s in text.split(",") if s.strip()]
-    try:
-        gpus = [int(x) for x in items]
-    except (TypeError, ValueError):
-        raise ConfigError(f"{where}: expected GPU indices like 0,2, got {value!r}") from None
-    if not gpus or any(g < 0 for g in gpus) or len(set(gpus)) != len(gpus):
-        raise ConfigError(f"{where}: GPU indices must be distinct and ≥ 0, got {value!r}")
-    return gpus
-
-
 def needs_probe(device: str, gpus: list[int] | None, workers: int) -> bool:
     """Whether the choice can fail or needs the device count (to pin workers)."""
     return device not in ("auto", "cpu") or gpus is not None or (device == "auto" and workers > 1)

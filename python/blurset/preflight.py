@@ -18,7 +18,8 @@ import importlib.util
 import json
 import struct
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PureWindowsPath
+from urllib.parse import unquote
 
 from blurset.exceptions import BlursetError
 from blurset.scripts import blender_script
@@ -72,16 +73,30 @@ def check(path: Path, budget: Budget = Budget()) -> Report:
             doc, bin_chunk = glb_inspect.read_glb(str(path))
         except glb_inspect.GlbError as e:
             raise PreflightError(str(e).rsplit(": ", 1)[0]) from None
+        except (OSError, MemoryError) as e:
+            raise PreflightError(f"cannot read: {e}") from None
     elif head.lstrip()[:1] == b"{":
         try:
             doc, bin_chunk = json.loads(path.read_text("utf-8")), None
-        except (UnicodeDecodeError, ValueError) as e:
+        except UnicodeDecodeError as e:
+            raise PreflightError(
+                f"the glTF JSON is not UTF-8 (glTF requires UTF-8; byte {e.start})"
+            ) from None
+        except ValueError as e:
             raise PreflightError(f"glTF JSON does not parse ({e})") from None
         if not isinstance(doc, dict):
             raise PreflightError("glTF JSON is not an object")
     else:
         raise PreflightError(f"not a glTF/GLB file (starts with {head!r}, expected b'glTF')")
-    return _check_document(doc, bin_chunk, path.parent, budget)
+    try:
+        return _check_document(doc, bin_chunk, path.parent, budget)
+    except PreflightError:
+        raise
+    except (TypeError, ValueError, AttributeError, KeyError, IndexError, OverflowError) as e:
+        # A wrongly typed field anywhere (`"count": "x"`, `"primitives": {}` …) is this
+        # file's failure, never the build's.
+        text = " ".join(str(e).split())[:200]
+        raise PreflightError(f"malformed glTF JSON ({type(e).__name__}: {text})") from None
 
 
 def _check_document(doc: dict, bin_chunk: bytes | None, base: Path, budget: Budget) -> Report:
@@ -129,15 +144,28 @@ def _list(doc: dict, key: str) -> list[dict]:
     return v
 
 
-def _external(uri: str, base: Path, what: str) -> Path:
-    p = (base / uri).resolve()
+def _external(uri: object, base: Path, what: str) -> Path:
+    """The file an external URI names. URIs are relative references inside the model's
+    folder: an absolute path, a NUL or one that leaves the folder is refused (Blender's
+    importer would open whatever it names)."""
+    if not isinstance(uri, str):
+        raise PreflightError(f"{what} has a uri that is not a string: {uri!r}")
+    name = unquote(uri)
+    if "\0" in name or "://" in name or name.startswith(("/", "\\")) or PureWindowsPath(name).drive:
+        raise PreflightError(
+            f"{what}: uri {uri!r} is not a relative path inside the model's folder"
+        )
+    root = base.resolve()
+    p = (root / name).resolve()
+    if not p.is_relative_to(root):
+        raise PreflightError(f"{what}: uri {uri!r} leaves the model's folder")
     if not p.is_file():
         raise PreflightError(f"missing {what}: {uri!r} is not next to the file")
     return p
 
 
-def _data_uri(uri: str) -> bytes | None:
-    if not uri.startswith("data:"):
+def _data_uri(uri: object) -> bytes | None:
+    if not isinstance(uri, str) or not uri.startswith("data:"):
         return None
     try:
         return base64.b64decode(uri.split(",", 1)[1], validate=False)
@@ -163,6 +191,10 @@ def _buffer_length(i: int, b: dict, bin_chunk: bytes | None, base: Path) -> int:
 
 
 def _check_accessor(i: int, a: dict, views: list[dict]) -> None:
+    for key in ("count", "byteOffset"):
+        n = a.get(key, 0)
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise PreflightError(f"accessor {i} has {key} {n!r}, not a count ≥ 0")
     v = a.get("bufferView")
     if v is None:
         return  # all zeros (or sparse only): nothing to read out of bounds

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,10 +29,11 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from blurset import _core
+from blurset import _core, layout
 from blurset.exceptions import ConfigError, InputError
 
-MARKER = ".complete"
+# The file types a figure is written as, by the suffix of --out.
+IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP"}
 PAD = 8
 GAP = 4
 TITLE_H = 30
@@ -126,9 +126,9 @@ def _frame(draw: ImageDraw.ImageDraw, x: int, y: int, tile: tuple[int, int]) -> 
 
 def _save(img: Image.Image, out: Path) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
-    img.save(tmp, format="PNG")
-    os.replace(tmp, out)
+    fmt = IMAGE_FORMATS.get(out.suffix.lower(), "PNG")
+    rgb = img.convert("RGB") if fmt == "JPEG" else img
+    layout.write_figure(out, lambda f: rgb.save(f, format=fmt))
 
 
 # -- setting figure ------------------------------------------------------------------------
@@ -191,10 +191,10 @@ def _noise_columns(
     noise_dir: Path, setting: str, levels: list[str], gain: str
 ) -> list[tuple[str, Path]]:
     """(label, gain dir) for every level of `setting` that `noise_dir` holds at `gain`."""
-    from blurset.noise import gain_name, parse_gains
+    from blurset.noise.params import parse_gains
 
     g = parse_gains([gain], any_gain=True)[0]
-    gname = gain_name(g)
+    gname = layout.gain_name(g)
     if not noise_dir.is_dir():
         raise InputError(f"--noise directory not found: {noise_dir}")
     cols = []
@@ -322,9 +322,9 @@ def contact_sheet(
 ) -> Figure:
     """Write the contact sheet of a build to `out`."""
     build = Path(build)
-    settings = sorted(d for d in build.iterdir() if d.is_dir() and (d / MARKER).is_file())
+    settings = layout.complete_settings(build)
     if not settings:
-        raise InputError(f"no complete setting (<setting>/{MARKER}) in build: {build}")
+        raise InputError(f"no complete setting (<setting>/{layout.MARKER}) in build: {build}")
     if columns is not None and columns < 1:
         raise ConfigError(f"--columns {columns}: must be at least 1")
     cols = columns or math.ceil(math.sqrt(len(settings)))
@@ -394,6 +394,11 @@ def run(args) -> int:
         raise InputError(f"setting or build directory not found: {path}")
     if args.tile is not None and not (16 <= args.tile <= 2048):
         raise ConfigError(f"--tile {args.tile}: must be in 16..2048")
+    if args.out is not None:
+        if args.out.suffix.lower() not in IMAGE_FORMATS:
+            raise ConfigError(f"--out {args.out}: the figure is an image: .png, .jpg or .webp")
+        # A figure never replaces a dataset image or lands in a level folder.
+        layout.refuse_inside_settings(args.out, allow=("preview.png",))
     if (path / "dataset.json").is_file():
         if args.noise is not None or args.gain is not None:
             raise ConfigError("--noise/--gain apply to a setting figure, not to a contact sheet")

@@ -1,4 +1,6 @@
-"""A progress bar of frames rendered, with settings done and an ETA (tqdm)."""
+"""Progress of a build: a bar of frames rendered with settings done and an ETA (tqdm) on a
+terminal; on a log (stderr not a TTY) one plain line per setting instead, since a bar's
+carriage returns would bury the `failed:` lines."""
 
 from __future__ import annotations
 
@@ -15,6 +17,8 @@ class Progress:
         self.failed = 0
         self.fps = frames_per_setting
         self._lock = threading.Lock()
+        tty = sys.stderr.isatty()
+        self._lines = enabled and not tty
         self._bar = (
             tqdm(
                 total=settings * frames_per_setting,
@@ -23,7 +27,7 @@ class Progress:
                 file=sys.stderr,
                 smoothing=0.05,
             )
-            if enabled and settings * frames_per_setting > 0
+            if enabled and tty and settings * frames_per_setting > 0
             else None
         )
         self._post()
@@ -44,6 +48,13 @@ class Progress:
         with self._lock:
             self.settings_done += 1
             self._post()
+            if self._lines:
+                failed = f", {self.failed} failed" if self.failed else ""
+                print(
+                    f"{self.settings_done}/{self.settings_total} settings done{failed}",
+                    file=sys.stderr,
+                    flush=True,
+                )
 
     def skip(self, settings: int) -> None:
         """Settings already complete (resumed) or finished elsewhere (Ray)."""
@@ -67,7 +78,7 @@ class Progress:
         if self._bar is not None:
             self._bar.write(msg, file=sys.stderr)
         else:
-            print(msg, file=sys.stderr)
+            print(msg, file=sys.stderr, flush=True)
 
     def __enter__(self) -> Progress:
         return self

@@ -24,8 +24,8 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import io
 import json
-import math
 import os
 import shutil
 import sys
@@ -36,9 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from blurset import _core
-from blurset.build import level_renders
-from blurset.config import BuildConfig
+from blurset import _core, layout
+from blurset.config import BuildConfig, from_flags
 from blurset.exceptions import ConfigError
 
 COLUMNS = (
@@ -123,39 +122,58 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no per-candidate lines")
 
 
-def _ints(text: str | None, option: str, lo: int = 1, hi: int = 4096) -> tuple[int, ...] | None:
+def _ints(text: str | None, option: str, as_option: str) -> tuple[int, ...] | None:
+    """Comma-separated integers, each checked as the build option `as_option` (its range
+    lives in the core's config)."""
     if text is None:
         return None
     try:
         vals = tuple(int(x) for x in text.split(",") if x.strip())
     except ValueError:
         raise ConfigError(f"{option}: expected integers like 2,8,32, got {text!r}") from None
-    if not vals or any(not lo <= v <= hi for v in vals):
-        raise ConfigError(f"{option}: values must be in {lo}..{hi}, got {text!r}")
+    if not vals:
+        raise ConfigError(f"{option}: expected integers like 2,8,32, got {text!r}")
+    for v in vals:
+        try:
+            BuildConfig(**{as_option: v})
+        except ValueError as e:
+            raise ConfigError(f"{option} {text}: value {getattr(e, 'detail', e)}") from None
     return vals
 
 
 def preset_from_args(args: argparse.Namespace) -> Preset:
     base = PRESETS["quick" if args.quick else "full"]
-    ref = _ints(args.reference, "--reference", 1, 65536)
+    ref = _ints(args.reference, "--reference", "latents")
     if ref is not None and len(ref) != 2:
         raise ConfigError(f"--reference: expected M,S (frames, samples), got {args.reference!r}")
+    if ref is not None:
+        from_flags(samples=ref[1])
     pre = Preset(
         resolution=args.resolution or base.resolution,
         level=args.level or base.level,
         reference=ref or base.reference,  # type: ignore[arg-type]
-        budgets=_ints(args.budgets, "--budgets", 1, 2**20) or base.budgets,
-        latents=_ints(args.latents, "--latents") or base.latents,
+        budgets=_ints(args.budgets, "--budgets", "samples_total") or base.budgets,
+        latents=_ints(args.latents, "--latents", "latents") or base.latents,
         samplings=base.samplings,
     )
-    if not 8 <= pre.resolution <= 4096:
-        raise ConfigError(f"--resolution: must be in 8..4096, got {pre.resolution}")
-    if not 1 <= pre.level <= 64:
-        raise ConfigError(f"--level: must be in 1..64, got {pre.level}")
-    if not 0 <= args.view < 4096:
-        raise ConfigError(f"--view: must be in 0..4095, got {args.view}")
-    if not (math.isfinite(args.max_ghost_px) and args.max_ghost_px >= 0.01):
-        raise ConfigError(f"--max-ghost-px: must be ≥ 0.01 px, got {args.max_ghost_px}")
+    if args.view < 0:
+        raise ConfigError(f"--view {args.view}: must be an integer ≥ 0")
+    # The options a build shares are checked by the build config's validator.
+    from_flags(
+        {"levels": "--level", "views": "--view (+1)"},
+        seed=args.seed,
+        timeout=args.timeout,
+        threads=args.threads,
+        max_ghost_px=args.max_ghost_px,
+        resolution=pre.resolution,
+        levels=[pre.level],
+        # the plan holds views 0..view
+        views=args.view + 1,
+    )
+    try:
+        _core.check_theta0_deg(args.theta0_deg)
+    except _core.ConfigValueError as e:
+        raise ConfigError(f"--theta0-deg {e.detail}") from None
     return pre
 
 
@@ -215,10 +233,9 @@ RENDER_REFERENCE_FACTOR = 8
 
 
 def _render_image(
-    worker, lp: dict, work: Path, res: int, fov: float, salt: int = 0, **render_kw: Any
+    worker, frames: list[dict], lp: dict, res: int, fov: float, salt: int = 0, **render_kw: Any
 ) -> tuple[Any, dict]:
     """Render and accumulate one blurry image as the build does; (mean, timings)."""
-    frames = level_renders(lp, work / "f")
     for f in frames:
         f["seed"] = (f["seed"] ^ salt) & 0x7FFFFFFF
     acc = _core.Accumulator(res, res)
@@ -243,12 +260,10 @@ def _render_image(
     return mean, {"seconds": seconds, "cpu_seconds": cpu, "frames": len(frames)}
 
 
-def _sharp_level(view: dict, samples: int) -> dict:
-    """The sharp render of a view at `samples`, as a one-frame level for _render_image."""
-    return {
-        "samples_per_frame": samples,
-        "latent_frames": [{"c2w": view["c2w"], "seed": view["sharp_seed"]}],
-    }
+def _sharp(view: dict, samples: int, work: Path) -> tuple[list[dict], dict]:
+    """The sharp render of a view at `samples`, as (frames, level) for _render_image."""
+    frame = {"c2w": view["c2w"], "seed": view["sharp_seed"], "out": str(work / "s.exr")}
+    return [frame], {"samples_per_frame": samples}
 
 
 def _save_png(mean: Any, path: Path, res: int) -> None:
@@ -265,6 +280,8 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
     if not glb.is_file():
         raise ConfigError(f"--object: no such file {str(glb)!r}")
     out = Path(args.out)
+    layout.refuse_overlap(out, [glb])
+    layout.refuse_inside_settings(out)
     out.mkdir(parents=True, exist_ok=True)
     work = out / ".work"
     shutil.rmtree(work, ignore_errors=True)
@@ -284,19 +301,32 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
         uid = glb.stem
 
-        def plan_view(cfg: BuildConfig) -> dict:
+        def plan_level(cfg: BuildConfig) -> tuple[list[dict], dict]:
+            """The renders of the measured image and its level plan (w_l, latents …)."""
             plan = _core.plan_setting(
-                cfg.sampling_json(),
+                cfg,
                 uid=uid,
                 theta0_deg=args.theta0_deg,
                 seed=args.seed,
                 bbox_dims=info["bbox_dims"],
                 vertices=verts,
             )
-            return json.loads(plan)["views"][args.view]
+            prefix = str(work / "f")
+            return (
+                plan.level_renders(args.view, pre.level, prefix),
+                plan.level(args.view, pre.level),
+            )
 
-        def plan_level(cfg: BuildConfig) -> dict:
-            return plan_view(cfg)["levels"][str(pre.level)]
+        def plan_view(cfg: BuildConfig) -> dict:
+            plan = _core.plan_setting(
+                cfg,
+                uid=uid,
+                theta0_deg=args.theta0_deg,
+                seed=args.seed,
+                bbox_dims=info["bbox_dims"],
+                vertices=verts,
+            )
+            return plan.to_dict()["views"][args.view]
 
         m_ref, s_ref = pre.reference
         ref_cfg = BuildConfig(
@@ -307,13 +337,13 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
             latent_positions="stratified",
             samples=s_ref,
         )
-        ref_lp = plan_level(ref_cfg)
+        ref_frames, ref_lp = plan_level(ref_cfg)
         say(
             f"reference: {m_ref} stratified frames x {s_ref} samples, "
             f"{ref_lp['motion_px']:.1f} px of motion at {pre.resolution} px"
         )
         ref, t_ref = _render_image(
-            w, ref_lp, work, pre.resolution, ref_cfg.fov_deg, salt=REFERENCE_SEED_SALT
+            w, ref_frames, ref_lp, pre.resolution, ref_cfg.fov_deg, salt=REFERENCE_SEED_SALT
         )
         _save_png(ref, out / "images" / "reference.png", pre.resolution)
         rows.append(
@@ -342,32 +372,33 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         fov = ref_cfg.fov_deg
 
         def psnr_of(a: Any, b: Any) -> float:
-            e = json.loads(_core.image_error(a, b, background=tuple(ref_cfg.background)))
-            return float(e["psnr"])
+            return float(_core.image_error(a, b, background=tuple(ref_cfg.background)).psnr)
 
         converged: dict[tuple, Any] = {}  # the same positions, r_samples, other seeds
         sharp_at: dict[int, float] = {}  # sharp_render_psnr per sharp budget
         sharp_ref, _ = _render_image(
-            w, _sharp_level(view, r_samples), work, pre.resolution, fov, REFERENCE_SEED_SALT
+            w, *_sharp(view, r_samples, work), pre.resolution, fov, REFERENCE_SEED_SALT
         )
         for i, c in enumerate(cands):
             cfg = _config(pre, args.view, c, args.max_ghost_px, scheme)
-            lp = plan_level(cfg)
-            mean, t = _render_image(w, lp, work, pre.resolution, cfg.fov_deg)
-            err = json.loads(_core.image_error(mean, ref, background=tuple(cfg.background)))
+            frames, lp = plan_level(cfg)
+            mean, t = _render_image(w, frames, lp, pre.resolution, cfg.fov_deg)
+            err = _core.image_error(mean, ref, background=tuple(cfg.background))
             key = (c.method, tuple(f["t"] for f in lp["latent_frames"]))
             if key not in converged:
                 c_ref = dataclasses.replace(c, samples_total=r_samples)
-                lp_ref = plan_level(_config(pre, args.view, c_ref, args.max_ghost_px, scheme))
-                assert [f["c2w"] for f in lp_ref["latent_frames"]] == [
-                    f["c2w"] for f in lp["latent_frames"]
-                ], "a budget must not move the latent positions"
+                frames_ref, lp_ref = plan_level(
+                    _config(pre, args.view, c_ref, args.max_ghost_px, scheme)
+                )
+                assert [f["c2w"] for f in frames_ref] == [f["c2w"] for f in frames], (
+                    "a budget must not move the latent positions"
+                )
                 converged[key], _ = _render_image(
-                    w, lp_ref, work, pre.resolution, fov, REFERENCE_SEED_SALT
+                    w, frames_ref, lp_ref, pre.resolution, fov, REFERENCE_SEED_SALT
                 )
             if c.samples_total not in sharp_at:
                 sharp, _ = _render_image(
-                    w, _sharp_level(view, c.samples_total), work, pre.resolution, fov
+                    w, *_sharp(view, c.samples_total, work), pre.resolution, fov
                 )
                 sharp_at[c.samples_total] = psnr_of(sharp, sharp_ref)
             name = c.label.replace(" ", "_").replace("=", "")
@@ -381,8 +412,8 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 "samples_total": lp["samples_per_frame"] * lp["latents"],
                 "budget": c.samples_total,
                 "seconds": round(t["seconds"], 3),
-                "psnr": round(err["psnr"], 3),
-                "psnr_linear": round(err["psnr_linear"], 3),
+                "psnr": round(err.psnr, 3),
+                "psnr_linear": round(err.psnr_linear, 3),
                 "render_psnr": round(psnr_of(mean, converged[key]), 3),
                 "sharp_render_psnr": round(sharp_at[c.samples_total], 3),
                 "cpu_seconds": round(t["cpu_seconds"], 3),
@@ -433,13 +464,12 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="") as f:
-        wr = csv.DictWriter(f, fieldnames=list(COLUMNS))
-        wr.writeheader()
-        for r in rows:
-            wr.writerow({k: r[k] for k in COLUMNS})
-    os.replace(tmp, path)
+    buf = io.StringIO(newline="")
+    wr = csv.DictWriter(buf, fieldnames=list(COLUMNS))
+    wr.writeheader()
+    for r in rows:
+        wr.writerow({k: r[k] for k in COLUMNS})
+    layout.write_text_atomic(path, buf.getvalue())
 
 
 def recommend(rows: list[dict], tolerance_db: float = 1.0) -> dict:
@@ -525,10 +555,8 @@ def plot(path: Path, rows: list[dict], setup: dict) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=9, loc="lower right")
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp)
+    layout.write_figure(path, lambda f: fig.savefig(f, format="png"))
     plt.close(fig)
-    os.replace(tmp, path)
 
 
 def summary_lines(res: dict) -> list[str]:

@@ -19,15 +19,31 @@ import sys
 import tempfile
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
+from blurset import _core
 from blurset.exceptions import BlursetError
 from blurset.scripts import blender_script
 
 WORKER_SCRIPT = blender_script("worker.py")
 STDERR_TAIL_LINES = 6
+# Lines of worker stdout held at most: a worker that floods its stdout blocks on the pipe
+# instead of filling this process's memory, and its deadline still runs (issue 14 H3).
+QUEUE_LINES = 256
+
+_LIVE: weakref.WeakSet[Worker] = weakref.WeakSet()
+_LIVE_LOCK = threading.Lock()
+
+
+def kill_all() -> None:
+    """Kill every live worker process of this process (a stop: Ctrl-C, SIGTERM)."""
+    with _LIVE_LOCK:
+        workers = list(_LIVE)
+    for w in workers:
+        w.kill()
 
 
 class WorkerError(BlursetError):
@@ -49,6 +65,10 @@ class WorkerTimeout(WorkerError):
     """The worker sent nothing for `timeout` seconds; its process was killed."""
 
     transient = True
+
+
+class WorkerStopped(WorkerError):
+    """The command is stopping (Ctrl-C, SIGTERM): no worker starts, none is retried."""
 
 
 class ObjectTimeout(WorkerTimeout):
@@ -138,6 +158,10 @@ class Worker:
     # -- process management ---------------------------------------------------------
 
     def _start(self) -> None:
+        from blurset.stop import STOP
+
+        if STOP.is_set():
+            raise WorkerStopped("stopping: no new Blender worker")
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         self._log = open(self.log_path, "ab")  # noqa: SIM115 - lives as long as the process
         try:
@@ -153,7 +177,9 @@ class Worker:
             raise WorkerError(
                 f"cannot start Blender worker {self.blender or sys.executable}: {e}"
             ) from None
-        self._lines = queue.Queue()
+        with _LIVE_LOCK:
+            _LIVE.add(self)
+        self._lines = queue.Queue(maxsize=QUEUE_LINES)
         threading.Thread(target=_pump, args=(self._proc.stdout, self._lines), daemon=True).start()
         self.info = self._receive(startup=True)
         if not self.info.get("ok"):
@@ -169,6 +195,15 @@ class Worker:
         if not self.alive:
             self._discard()
             self._start()
+
+    def kill(self) -> None:
+        """Kill the process now (from any thread); the caller's next read fails."""
+        proc = self._proc
+        if proc is not None and proc.poll() is None:
+            try:
+                proc.kill()
+            except OSError:
+                pass
 
     def _discard(self) -> None:
         """Kill the process (if any) and forget it."""
@@ -217,7 +252,9 @@ class Worker:
         while True:
             left = deadline - time.monotonic()
             try:
-                raw = self._lines.get(timeout=max(left, 0.0))
+                if left <= 0:  # checked per line: a flood of noise cannot outrun it
+                    raise queue.Empty
+                raw = self._lines.get(timeout=left)
             except queue.Empty:
                 self._discard()
                 if deadline < reply_by:
@@ -229,6 +266,11 @@ class Worker:
                     f"Blender worker did not {what} within {self.timeout:g} s; killed it"
                 ) from None
             if raw is None:
+                from blurset.stop import STOP
+
+                if STOP.is_set():
+                    self._discard()
+                    raise WorkerStopped("stopping: the Blender worker was killed")
                 self._crashed()
             line = raw.decode("utf-8", "replace").strip()
             # A Blender binary prints its banner on stdout before the worker script takes
@@ -258,10 +300,12 @@ class Worker:
     def load(
         self, glb: Path, vertices_out: Path, *, unlit: str = "lit", light_paths: str = "auto"
     ) -> dict[str, Any]:
-        """Import, normalize and QA-render one GLB; its reply (see blender_scripts/worker.py).
+        """Import and normalize one GLB (light-path bounces from its materials, or fixed),
+        then render its QA views and judge them; the worker's reply (see
+        blender_scripts/worker.py) plus `qa_coverage`, `qa_luminance`.
 
-        Raises WorkerError with the worker's one-line reason when the object cannot be
-        rendered (missing file, unsupported compression, no mesh, renders black, ...).
+        Raises WorkerError with a one-line reason when the object cannot be rendered
+        (missing file, unsupported compression, no mesh, invisible, renders black, ...).
         """
         self._send(
             {
@@ -275,7 +319,31 @@ class Worker:
         reply = self._receive_in_sync()
         if not reply.get("ok"):
             raise WorkerError(f"{reply.get('reason', 'load failed')} ({glb})")
+        qa = self._object_qa(reply["bbox_dims"])
+        failure = _core.object_qa_verdict(qa)
+        if failure:
+            raise WorkerError(f"{failure} ({glb})")
+        reply["qa_coverage"] = [q.coverage for q in qa]
+        reply["qa_luminance"] = [q.luminance for q in qa]
         return reply
+
+    def _object_qa(self, bbox_dims: list[float]) -> list[Any]:
+        """Render the core's QA views of the loaded object (tiny, few samples) and measure
+        each with the core's frame QA: the worker renders, blurset-core judges."""
+        if self.workdir is not None:
+            self.workdir.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix="blurset-qa-", dir=self.workdir) as d:
+            frames = [
+                {"c2w": c2w, "seed": k, "out": Path(d) / f"qa_{k}.exr"}
+                for k, c2w in enumerate(_core.object_qa_cameras(bbox_dims))
+            ]
+            self.render(
+                frames,
+                resolution=_core.OBJECT_QA_RESOLUTION,
+                fov_deg=_core.OBJECT_QA_FOV_DEG,
+                samples=_core.OBJECT_QA_SAMPLES,
+            )
+            return [_core.frame_qa(_core.read_exr(f["out"])) for f in frames]
 
     def render(
         self,
@@ -381,11 +449,23 @@ def _matrix(m: Any) -> list[list[float]]:
 
 
 def _pump(stream: IO[bytes] | None, out: queue.Queue[bytes | None]) -> None:
-    """Move the worker's protocol lines onto a queue, so reads can time out."""
+    """Move the worker's protocol lines onto a bounded queue, so reads can time out and
+    a flood waits in the pipe; gives up once the stream is closed (worker discarded)."""
+
+    def put(item: bytes | None) -> bool:
+        while True:
+            try:
+                out.put(item, timeout=0.5)
+                return True
+            except queue.Full:
+                if stream is None or stream.closed:
+                    return False
+
     if stream is not None:
         try:
             for line in iter(stream.readline, b""):
-                out.put(line)
+                if not put(line):
+                    return
         except (OSError, ValueError):
             pass
-    out.put(None)
+    put(None)

@@ -3,9 +3,7 @@
 //! `cargo run --release -p blurset-core --example kernels -- accumulate EXR_DIR OUT.png [reps]`
 //! Prints wall and process CPU seconds per repeat and a digest of the outputs, so a
 //! change can be checked for bit-identical results (the digest must not move).
-use blurset_core::accumulate::Accumulator;
-use blurset_core::image_io;
-use blurset_core::noise::{self, Gamma, NoiseLevels, NoiseModel};
+use blurset_core::{Accumulator, Gamma, NoiseLevels, NoiseModel, Samples};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -82,15 +80,15 @@ fn main() -> blurset_core::Result<()> {
             paths.sort();
             let images = paths
                 .iter()
-                .map(|p| image_io::read_image(p))
+                .map(|p| blurset_core::read_image(p))
                 .collect::<blurset_core::Result<Vec<_>>>()?;
-            let wb = noise::sample_white_balance(11);
+            let wb = blurset_core::sample_white_balance(11);
             let models: Vec<(u64, NoiseModel)> = [1.0, 2.0, 4.0, 8.0, 16.0, 20.0]
                 .iter()
                 .map(|&g| {
                     let (sr, ss) = NoiseLevels::DEFAULT.sigmas(g)?;
                     Ok((
-                        noise::noise_key(11, g),
+                        blurset_core::noise_key(11, g),
                         NoiseModel {
                             sigma_read: sr,
                             sigma_shot: ss,
@@ -108,12 +106,17 @@ fn main() -> blurset_core::Result<()> {
                 let mut h = 0xCBF2_9CE4_8422_2325u64;
                 for (key, m) in &models {
                     for (i, img) in images.iter().enumerate() {
-                        let n = noise::add_noise(img, m, *key, noise::stream_id(i as u32, 0))?;
+                        let n = blurset_core::add_noise(
+                            img,
+                            m,
+                            *key,
+                            blurset_core::noise_stream_id(i as u32, 0),
+                        )?;
                         if rep == 0 {
                             let lin: Vec<u8> =
                                 n.linear.iter().flat_map(|v| v.to_le_bytes()).collect();
                             fnv(&mut h, &lin);
-                            if let image_io::Samples::U8(p) = &n.processed.samples {
+                            if let Samples::U8(p) = &n.processed.samples {
                                 fnv(&mut h, p);
                             }
                         }
@@ -143,7 +146,7 @@ fn main() -> blurset_core::Result<()> {
                 .collect();
             paths.sort();
             let (w, h, _) = {
-                let f = blurset_core::accumulate::read_exr(&paths[0])?;
+                let f = blurset_core::read_exr(&paths[0])?;
                 (f.width, f.height, ())
             };
             for rep in 0..reps {

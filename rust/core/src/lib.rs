@@ -1,22 +1,61 @@
 //! blurset-core: every number blurset samples or computes.
 //!
 //! Pure Rust (glam, rayon, image); the Python bindings in `rust/py` only convert.
-pub mod accumulate;
-pub mod atomic;
-pub mod camera;
-pub mod error;
-mod exr_frame;
-pub mod failures;
-pub mod image_io;
-pub mod llff;
-pub mod noise;
-pub mod noise_linear;
-pub mod qa;
-pub mod rng;
-pub mod sampling;
-pub mod splits;
-pub mod stats;
-pub mod tradeoff;
-pub mod weights;
+//!
+//! The modules are private and grouped by concern: `plan` (what a setting renders),
+//! `image` (colour, accumulation, image files, QA), `noise` (the sensor noise model
+//! and its kernel), `dataset` (the files of a build) and `metrics` (PSNR, Pareto).
+//! What the bindings, the examples and the fuzz targets use is re-exported below and
+//! nothing else, so the compiler reports whatever nothing uses.
+mod dataset;
+mod error;
+mod image;
+mod metrics;
+mod noise;
+mod plan;
+mod rng;
 
-pub use error::{Error, Result};
+pub use crate::error::{Error, Result};
+pub use crate::rng::seed_for;
+
+// What one setting renders: views, trajectories, levels, latent frames.
+pub use crate::plan::config::{check_theta0, BuildConfig, Raw};
+pub use crate::plan::renders::{level_renders, Motion, Render};
+pub use crate::plan::sampling::{plan_setting, LevelPlan, SamplingConfig, SettingPlan};
+
+// Linear frames in, encoded images out; image files; render QA.
+pub use crate::image::accumulate::Accumulator;
+pub use crate::image::color::srgb_encode_slice;
+pub use crate::image::exr::read::{read_exr, Frame};
+pub use crate::image::io::{image_info, read_image, Image, Samples};
+pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
+
+// Sensor noise, from 8/16-bit images or from a build's linear EXRs.
+pub use crate::noise::kernel::{add_noise, clean_linear};
+pub use crate::noise::linear::{add_noise_linear, clean_from_linear, read_linear, LinearRgb};
+pub use crate::noise::model::{
+    noise_key, sample_white_balance, scene_seed, stream_id as noise_stream_id, Gamma, NoiseLevels,
+    NoiseModel, WhiteBalance,
+};
+pub use crate::noise::variants::{write_variants, write_variants_linear, Variant};
+
+// The files of a build.
+pub use crate::dataset::atomic::write_atomic;
+pub use crate::dataset::failures::{
+    current as current_failures, read_records as read_failure_records,
+};
+pub use crate::dataset::layout::{
+    complete_settings, gain_name, image_name, is_complete, level_dir, level_dirs, parse_level_dir,
+    parse_temp_name, partial_dir, publish, setting_levels, setting_name, setting_problem,
+    sort_level_dirs, temp_path, theta0s, MARKER, PARTIAL_SUFFIX, SHARP,
+};
+pub use crate::dataset::llff::{
+    parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses, PoseRow,
+};
+pub use crate::dataset::meta::{write_json, Meta, ObjectRecord, Timings};
+pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
+pub use crate::dataset::splits::{make_splits, seeded_subset, test_views, SettingEntry, Splits};
+pub use crate::dataset::stats::{build_stats, BuildStats};
+
+// Image error against a reference and the speed/quality front.
+pub use crate::metrics::{image_error, pareto_front};

@@ -3,13 +3,15 @@
 //! Every random number blurset writes comes from Philox4x32-10 (Salmon et al., SC'11):
 //! a pure function of (key, counter), so a draw depends only on *which* number it is,
 //! never on thread count, platform or library version. Uniforms are built from integer
-//! bits with exact IEEE arithmetic; normals use `libm` (a pure-Rust libm) so that
-//! transcendental functions give the same bits on every machine.
+//! bits with exact IEEE arithmetic (the noise kernel's normals use `libm`, a pure-Rust
+//! libm, so that transcendental functions give the same bits on every machine).
 
-const PHILOX_M0: u32 = 0xD251_1F53;
-const PHILOX_M1: u32 = 0xCD9E_8D57;
-const PHILOX_W0: u32 = 0x9E37_79B9;
-const PHILOX_W1: u32 = 0xBB67_AE85;
+// The Philox4x32-10 multipliers and Weyl key increments; the noise kernel's lane-wise
+// versions of `philox4x32` use them too.
+pub(crate) const PHILOX_M0: u32 = 0xD251_1F53;
+pub(crate) const PHILOX_M1: u32 = 0xCD9E_8D57;
+pub(crate) const PHILOX_W0: u32 = 0x9E37_79B9;
+pub(crate) const PHILOX_W1: u32 = 0xBB67_AE85;
 
 /// One Philox4x32-10 block: 128 random bits for a 128-bit counter under a 64-bit key.
 pub fn philox4x32(key: u64, counter: [u32; 4]) -> [u32; 4] {
@@ -83,15 +85,6 @@ impl Stream {
         }
     }
 
-    /// Position the stream at a given 64-bit draw index (random access, for parallel work).
-    pub fn at(key: u64, stream: u64, draw: u64) -> Self {
-        let mut s = Stream::new(key, stream);
-        s.block = draw / 2;
-        s.refill();
-        s.used = ((draw % 2) * 2) as usize;
-        s
-    }
-
     fn refill(&mut self) {
         let b = self.block;
         self.buf = philox4x32(
@@ -134,18 +127,6 @@ impl Stream {
             -1.0
         }
     }
-
-    /// Standard normal by Box–Muller; `1 - u` keeps the log argument in (0, 1].
-    pub fn normal_pair(&mut self) -> (f64, f64) {
-        let u1 = 1.0 - self.uniform();
-        let u2 = self.uniform();
-        let rad = libm::sqrt(-2.0 * libm::log(u1));
-        let (s, c) = (
-            libm::sin(std::f64::consts::TAU * u2),
-            libm::cos(std::f64::consts::TAU * u2),
-        );
-        (rad * c, rad * s)
-    }
 }
 
 #[cfg(test)]
@@ -167,11 +148,20 @@ mod tests {
     }
 
     #[test]
-    fn stream_random_access_matches_sequential() {
-        let mut s = Stream::new(42, 7);
-        let seq: Vec<u64> = (0..9).map(|_| s.next_u64()).collect();
-        for (k, v) in seq.iter().enumerate() {
-            assert_eq!(Stream::at(42, 7, k as u64).next_u64(), *v);
+    fn draw_k_is_word_pair_k_mod_2_of_block_k_div_2() {
+        let (key, stream) = (42u64, (9u64 << 32) | 7);
+        let mut s = Stream::new(key, stream);
+        for k in 0..9u64 {
+            let b = k / 2;
+            let c = [
+                b as u32,
+                (b >> 32) as u32,
+                stream as u32,
+                (stream >> 32) as u32,
+            ];
+            let w = philox4x32(key, c);
+            let i = (k % 2) as usize * 2;
+            assert_eq!(s.next_u64(), (u64::from(w[i]) << 32) | u64::from(w[i + 1]));
         }
     }
 
@@ -188,22 +178,5 @@ mod tests {
             }
         }
         assert_eq!(same, 0);
-    }
-
-    #[test]
-    fn normal_moments() {
-        let mut s = Stream::new(3, 0);
-        let n = 200_000;
-        let (mut m, mut v) = (0.0, 0.0);
-        for _ in 0..n / 2 {
-            let (a, b) = s.normal_pair();
-            assert!(a.is_finite() && b.is_finite());
-            m += a + b;
-            v += a * a + b * b;
-        }
-        m /= n as f64;
-        v = v / n as f64 - m * m;
-        assert!(m.abs() < 0.01, "mean {m}");
-        assert!((v - 1.0).abs() < 0.01, "var {v}");
     }
 }

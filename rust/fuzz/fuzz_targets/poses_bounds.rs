@@ -4,7 +4,7 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    if let Ok(rows) = blurset_core::llff::parse_poses_bounds(data) {
+    if let Ok(rows) = blurset_core::parse_poses_bounds(data) {
         assert!(rows.iter().flatten().all(|v| v.is_finite()));
     }
 });

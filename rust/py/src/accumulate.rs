@@ -1,6 +1,6 @@
-//! Bindings of `blurset_core::accumulate`: numpy/path conversion and one core call each.
+//! Bindings of the core's accumulator and EXR reader: numpy/path conversion and one core call each.
 use crate::run_detached;
-use blurset_core::accumulate as core;
+use blurset_core as core;
 use numpy::{
     PyArray1, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyReadonlyArray3,
     PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods,

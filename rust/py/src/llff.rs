@@ -1,4 +1,4 @@
-use blurset_core::llff;
+use blurset_core as core;
 use numpy::{PyArray2, PyArrayMethods, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -7,7 +7,7 @@ use std::path::PathBuf;
 /// Read `poses_bounds.npy` as an (N, 17) float64 array.
 #[pyfunction]
 fn read_poses_bounds<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let rows = crate::run_detached(py, || llff::read_poses_bounds(&path))?;
+    let rows = crate::run_detached(py, || core::read_poses_bounds(&path))?;
     let flat: Vec<f64> = rows.iter().flatten().copied().collect();
     numpy::PyArray1::from_vec(py, flat).reshape([rows.len(), 17])
 }
@@ -26,7 +26,7 @@ fn write_poses_bounds(
             a.ncols()
         )));
     }
-    let rows: Vec<llff::PoseRow> = a
+    let rows: Vec<core::PoseRow> = a
         .rows()
         .into_iter()
         .map(|r| {
@@ -37,7 +37,7 @@ fn write_poses_bounds(
             out
         })
         .collect();
-    crate::run_detached(py, || llff::write_poses_bounds(&path, &rows))
+    crate::run_detached(py, || core::write_poses_bounds(&path, &rows))
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -1,8 +1,7 @@
-//! Bindings of `blurset_core::noise` and `blurset_core::image_io`: conversion and
+//! Bindings of the core's noise kernel and image files: conversion and
 //! one core call each.
 use crate::run_detached;
-use blurset_core::image_io::{self, Image, Samples};
-use blurset_core::noise::{self as core, Gamma, NoiseLevels, NoiseModel, WhiteBalance};
+use blurset_core::{self as core, Gamma, Image, NoiseLevels, NoiseModel, Samples, WhiteBalance};
 use numpy::{
     PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
@@ -17,11 +16,12 @@ fn levels_to_py(l: NoiseLevels) -> Levels {
     (l.log10_read, l.read_step, l.log10_shot, l.shot_step)
 }
 
-fn value_err(e: blurset_core::Error) -> PyErr {
+pub(crate) fn value_err(e: blurset_core::Error) -> PyErr {
     PyValueError::new_err(e.to_string())
 }
 
-fn model(
+/// A validated noise model from the bindings' arguments.
+pub(crate) fn model(
     sigma_read: f64,
     sigma_shot: f64,
     gamma: &str,
@@ -37,6 +37,25 @@ fn model(
     };
     m.validate().map_err(value_err)?;
     Ok(m)
+}
+
+/// The variants of a scene from (out_dir, sigma_read, sigma_shot, key) per gain.
+pub(crate) fn variants_from_py(
+    variants: Vec<(PathBuf, f64, f64, u64)>,
+    gamma: &str,
+    white_balance: Option<(f64, f64)>,
+    white_level: f64,
+) -> PyResult<Vec<core::Variant>> {
+    variants
+        .into_iter()
+        .map(|(out_dir, sr, ss, key)| {
+            Ok(core::Variant {
+                out_dir,
+                model: model(sr, ss, gamma, white_balance, white_level)?,
+                key,
+            })
+        })
+        .collect()
 }
 
 /// An (H, W) or (H, W, C) uint8 / uint16 array as a core image (copied).
@@ -135,13 +154,13 @@ fn noise_key(seed: u64, gain: f64) -> u64 {
 /// (width, height, channels, bits per sample) from an image file's header.
 #[pyfunction]
 fn image_info(py: Python<'_>, path: PathBuf) -> PyResult<(u32, u32, usize, u32)> {
-    run_detached(py, || image_io::image_info(&path))
+    run_detached(py, || core::image_info(&path))
 }
 
 /// Decode an image file to an (H, W, C) uint8 or uint16 array.
 #[pyfunction]
 fn read_image(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyAny>> {
-    let img = run_detached(py, || image_io::read_image(&path))?;
+    let img = run_detached(py, || core::read_image(&path))?;
     image_to_py(py, img)
 }
 
@@ -164,7 +183,7 @@ fn noise_image(
 ) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
     let img = image_from_py(image)?;
     let m = model(sigma_read, sigma_shot, gamma, white_balance, white_level)?;
-    let stream = core::stream_id(view, frame);
+    let stream = core::noise_stream_id(view, frame);
     let noisy = run_detached(py, || core::add_noise(&img, &m, key, stream))?;
     let (h, w) = (img.height as usize, img.width as usize);
     let linear = PyArray1::from_vec(py, noisy.linear)
@@ -210,16 +229,7 @@ fn noise_write_variants(
     white_balance: Option<(f64, f64)>,
     white_level: f64,
 ) -> PyResult<()> {
-    let variants = variants
-        .into_iter()
-        .map(|(out_dir, sr, ss, key)| {
-            Ok(core::Variant {
-                out_dir,
-                model: model(sr, ss, gamma, white_balance, white_level)?,
-                key,
-            })
-        })
-        .collect::<PyResult<Vec<_>>>()?;
+    let variants = variants_from_py(variants, gamma, white_balance, white_level)?;
     run_detached(py, || {
         core::write_variants(&sources, &names, frames, &variants)
     })

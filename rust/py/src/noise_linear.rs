@@ -1,35 +1,12 @@
-//! Bindings of `blurset_core::noise_linear`: conversion and one core call each.
+//! Bindings of the core's noise from linear images: conversion and one core call each.
+use crate::noise::{model, value_err, variants_from_py};
 use crate::run_detached;
-use blurset_core::image_io::Samples;
-use blurset_core::noise::{self as noise_core, Gamma, NoiseModel, WhiteBalance};
-use blurset_core::noise_linear::{self as core, LinearRgb};
+use blurset_core::{self as core, LinearRgb, Samples};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::IntoPyObjectExt;
 use std::path::PathBuf;
-
-fn value_err(e: blurset_core::Error) -> PyErr {
-    PyValueError::new_err(e.to_string())
-}
-
-fn model(
-    sigma_read: f64,
-    sigma_shot: f64,
-    gamma: &str,
-    white_balance: Option<(f64, f64)>,
-    white_level: f64,
-) -> PyResult<NoiseModel> {
-    let m = NoiseModel {
-        sigma_read,
-        sigma_shot,
-        gamma: Gamma::parse(gamma).map_err(value_err)?,
-        white_balance: white_balance.map(|(red, blue)| WhiteBalance { red, blue }),
-        white_level,
-    };
-    m.validate().map_err(value_err)?;
-    Ok(m)
-}
 
 fn background(bg: (f64, f64, f64)) -> PyResult<[f64; 3]> {
     let b = [bg.0, bg.1, bg.2];
@@ -115,7 +92,7 @@ fn noise_image_linear(
 ) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
     let img = linear_from_py(image)?;
     let m = model(sigma_read, sigma_shot, gamma, white_balance, white_level)?;
-    let stream = noise_core::stream_id(view, frame);
+    let stream = core::noise_stream_id(view, frame);
     let noisy = run_detached(py, || core::add_noise_linear(&img, &m, key, stream))?;
     let Samples::U8(codes) = noisy.processed.samples else {
         return Err(PyValueError::new_err("processed image is not 8-bit"));
@@ -147,16 +124,7 @@ fn noise_write_variants_linear(
     background: (f64, f64, f64),
 ) -> PyResult<()> {
     let bg = self::background(background)?;
-    let variants = variants
-        .into_iter()
-        .map(|(out_dir, sr, ss, key)| {
-            Ok(noise_core::Variant {
-                out_dir,
-                model: model(sr, ss, gamma, white_balance, white_level)?,
-                key,
-            })
-        })
-        .collect::<PyResult<Vec<_>>>()?;
+    let variants = variants_from_py(variants, gamma, white_balance, white_level)?;
     run_detached(py, || {
         core::write_variants_linear(&sources, &names, frames, &variants, bg)
     })

@@ -4,10 +4,11 @@
 //! camera-to-world pose with columns [down, right, backwards], flattened row-major,
 //! then near and far. This is what IBRNet / NAN / GeoNeRF loaders read; they turn the
 //! columns into OpenGL [right, up, backwards] themselves.
-use crate::atomic::write_atomic;
+use super::atomic::write_atomic;
+use super::layout::image_name;
 use crate::error::{Error, Result};
-use crate::sampling::SettingPlan;
-use glam::{DMat4, DVec3, DVec4};
+use crate::plan::sampling::SettingPlan;
+use glam::DMat4;
 use std::path::Path;
 
 /// One row of `poses_bounds.npy`.
@@ -32,32 +33,6 @@ pub fn row_from_c2w_gl(c2w: &DMat4, hwf: [f64; 3], near: f64, far: f64) -> PoseR
     row[15] = near;
     row[16] = far;
     row
-}
-
-/// The OpenGL camera-to-world matrix, hwf and bounds of an LLFF row.
-pub fn c2w_gl_from_row(row: &PoseRow) -> (DMat4, [f64; 3], f64, f64) {
-    let col = |j: usize| DVec3::new(row[j], row[5 + j], row[10 + j]);
-    let (down, right, back, t) = (col(0), col(1), col(2), col(3));
-    let c2w = DMat4::from_cols(
-        right.extend(0.0),
-        (-down).extend(0.0),
-        back.extend(0.0),
-        DVec4::new(t.x, t.y, t.z, 1.0),
-    );
-    (c2w, [row[4], row[9], row[14]], row[15], row[16])
-}
-
-/// Replace hwf of every row (e.g. after downsampling by a factor).
-pub fn with_hwf(rows: &[PoseRow], h: f64, w: f64, focal: f64) -> Vec<PoseRow> {
-    rows.iter()
-        .map(|r| {
-            let mut r = *r;
-            r[4] = h;
-            r[9] = w;
-            r[14] = focal;
-            r
-        })
-        .collect()
 }
 
 fn npy_bytes(rows: &[PoseRow]) -> Vec<u8> {
@@ -186,12 +161,6 @@ pub fn parse_poses_bounds(bytes: &[u8]) -> std::result::Result<Vec<PoseRow>, Str
     Ok(rows)
 }
 
-/// Image file name of view `index` among `n`: zero-padded so sorted order is view order.
-pub fn image_name(index: usize, n: usize) -> String {
-    let width = n.saturating_sub(1).to_string().len().max(3);
-    format!("{index:0width$}.png")
-}
-
 fn c2w_from_rows(rows: &[[f64; 4]; 4]) -> DMat4 {
     DMat4::from_cols_array_2d(rows).transpose()
 }
@@ -265,7 +234,22 @@ pub fn write_setting_poses(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::{DVec3, DVec4};
     use proptest::prelude::*;
+
+    /// The OpenGL camera-to-world matrix, hwf and bounds of an LLFF row (the inverse of
+    /// `row_from_c2w_gl`, which the tests check rows against).
+    fn c2w_gl_from_row(row: &PoseRow) -> (DMat4, [f64; 3], f64, f64) {
+        let col = |j: usize| DVec3::new(row[j], row[5 + j], row[10 + j]);
+        let (down, right, back, t) = (col(0), col(1), col(2), col(3));
+        let c2w = DMat4::from_cols(
+            right.extend(0.0),
+            (-down).extend(0.0),
+            back.extend(0.0),
+            DVec4::new(t.x, t.y, t.z, 1.0),
+        );
+        (c2w, [row[4], row[9], row[14]], row[15], row[16])
+    }
 
     fn valid_npy(n: usize) -> Vec<u8> {
         let rows: Vec<PoseRow> = (0..n).map(|i| [i as f64 + 0.5; 17]).collect();
@@ -364,20 +348,15 @@ mod tests {
     }
 
     #[test]
-    fn image_names_sort_in_view_order() {
-        assert_eq!(image_name(7, 34), "007.png");
-        assert_eq!(image_name(7, 1500), "0007.png");
-    }
-
-    #[test]
     fn setting_rows_point_at_the_object() -> Result<()> {
-        let cfg = crate::sampling::SamplingConfig {
+        let cfg = crate::plan::sampling::SamplingConfig {
             views: 5,
             latents: 2,
             ..Default::default()
         };
         let verts: Vec<[f32; 3]> = vec![[-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]];
-        let plan = crate::sampling::plan_setting(&cfg, "u", 180.0, 4, [1.0, 1.0, 1.0], &verts)?;
+        let plan =
+            crate::plan::sampling::plan_setting(&cfg, "u", 180.0, 4, [1.0, 1.0, 1.0], &verts)?;
         for (row, v) in setting_rows(&plan).iter().zip(&plan.views) {
             let (c2w, hwf, near, far) = c2w_gl_from_row(row);
             let eye = c2w.w_axis.truncate();

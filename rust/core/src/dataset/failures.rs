@@ -7,22 +7,11 @@
 //! latest record per (uid, setting) whose work is still not complete: a setting record
 //! until its setting is complete, an object record until every setting of the object is.
 //! A line that does not parse (a record torn by a kill mid-append) is skipped, counted.
+use super::layout::setting_name;
 use crate::error::{Error, Result};
 use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
-
-/// `<uid>_<theta0>`: the directory of one setting, θ0 rounded to whole degrees.
-pub fn setting_name(uid: &str, theta0_deg: f64) -> String {
-    format!("{uid}_{:03}", theta0_deg.round() as i64)
-}
-
-/// The θ0 of each setting of an object: `n` azimuths evenly spaced from 0°.
-pub fn theta0s(settings_per_object: usize) -> Vec<f64> {
-    (0..settings_per_object)
-        .map(|k| 360.0 * k as f64 / settings_per_object as f64)
-        .collect()
-}
 
 /// The records of a failures.jsonl (none when the file is absent) and the number of
 /// lines skipped because they are not a JSON object with a string `uid`.
@@ -74,15 +63,8 @@ pub fn current(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::dataset::layout::theta0s;
     use serde_json::json;
-
-    #[test]
-    fn names_and_azimuths() {
-        assert_eq!(setting_name("chair", 90.0), "chair_090");
-        assert_eq!(setting_name("a", 359.6), "a_360");
-        assert_eq!(theta0s(4), [0.0, 90.0, 180.0, 270.0]);
-        assert_eq!(theta0s(3)[1], 120.0);
-    }
 
     #[test]
     fn latest_record_of_unfinished_work_survives() {

@@ -6,170 +6,14 @@
 //! sharp image goes through the same path with one frame, so sharp and blurry images
 //! share a single encoding: composite over a background (premultiplied alpha, §3),
 //! sRGB-encode (IEC 61966-2-1), quantize to 8 bits.
-use crate::atomic::write_atomic;
+use super::color::{composite_over, srgb_encode_u8};
+use super::exr::read::{decode_rgba, first_non_finite, read_into};
+use super::exr::write::write_exr;
+use super::io::write_png_rgb8;
+use super::{check_rgba_len, CH};
 use crate::error::{Error, Result};
-use crate::exr_frame;
-use image::ImageEncoder;
 use rayon::prelude::*;
-use std::io::Cursor;
 use std::path::Path;
-
-/// Linear value at which the sRGB curve switches from the line to the power law.
-pub const SRGB_LINEAR_BREAK: f64 = 0.003_130_8;
-/// Encoded value at which the inverse curve switches from the line to the power law.
-pub const SRGB_ENCODED_BREAK: f64 = 0.040_45;
-
-/// RGBA f32 channels per pixel.
-const CH: usize = 4;
-
-/// The exact IEC 61966-2-1 encoding of a linear value, clamped to [0, 1]; NaN maps to 0.
-///
-/// Evaluated in f64 so that the f32 result is correctly rounded and 8-bit quantization
-/// never depends on where the accumulation rounded.
-pub fn srgb_encode_f64(linear: f64) -> f64 {
-    // `clamp` passes NaN through; a NaN must not reach a PNG byte as an arbitrary value.
-    let x = if linear.is_nan() {
-        0.0
-    } else {
-        linear.clamp(0.0, 1.0)
-    };
-    if x <= SRGB_LINEAR_BREAK {
-        12.92 * x
-    } else {
-        1.055 * libm::pow(x, 1.0 / 2.4) - 0.055
-    }
-}
-
-/// The exact IEC 61966-2-1 decoding of an encoded value, clamped to [0, 1]; NaN maps to 0.
-pub fn srgb_decode_f64(encoded: f64) -> f64 {
-    let x = if encoded.is_nan() {
-        0.0
-    } else {
-        encoded.clamp(0.0, 1.0)
-    };
-    if x <= SRGB_ENCODED_BREAK {
-        x / 12.92
-    } else {
-        libm::pow((x + 0.055) / 1.055, 2.4)
-    }
-}
-
-/// sRGB encoding of one linear value (see [`srgb_encode_f64`]).
-pub fn srgb_encode(linear: f32) -> f32 {
-    srgb_encode_f64(f64::from(linear)) as f32
-}
-
-/// sRGB decoding of one encoded value (see [`srgb_decode_f64`]).
-pub fn srgb_decode(encoded: f32) -> f32 {
-    srgb_decode_f64(f64::from(encoded)) as f32
-}
-
-/// sRGB encoding of many values, in parallel.
-pub fn srgb_encode_slice(linear: &[f32]) -> Vec<f32> {
-    linear.par_iter().map(|&x| srgb_encode(x)).collect()
-}
-
-/// Linear value quantized to an 8-bit sRGB code (round to nearest).
-pub fn srgb_encode_u8(linear: f64) -> u8 {
-    // The encoding is clamped to [0, 1], so the rounded value fits in a u8.
-    (srgb_encode_f64(linear) * 255.0).round() as u8
-}
-
-/// A premultiplied RGBA pixel over an opaque background: `rgb + (1 - a) * bg`, in linear light.
-///
-/// Alpha is film coverage; it is clamped to [0, 1] so that a stray value never
-/// subtracts background.
-pub fn composite_over(rgba_premul: [f64; 4], background: [f64; 3]) -> [f64; 3] {
-    let t = 1.0 - rgba_premul[3].clamp(0.0, 1.0);
-    [
-        rgba_premul[0] + t * background[0],
-        rgba_premul[1] + t * background[1],
-        rgba_premul[2] + t * background[2],
-    ]
-}
-
-/// An RGBA f32 image read from an EXR file: `rgba` is row-major, 4 channels per pixel.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Frame {
-    pub width: u32,
-    pub height: u32,
-    pub rgba: Vec<f32>,
-}
-
-/// Read the first RGB(A) layer of an EXR file as RGBA f32 (alpha 1 when the file has none).
-///
-/// Channels are matched by name (`R`, `G`, `B`, optional `A`; half, float or uint
-/// samples); blocks are decompressed in parallel on the rayon pool. Values are returned
-/// as stored: no check for NaN or inf (see [`Accumulator::add_exr`]).
-pub fn read_exr(path: &Path) -> Result<Frame> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io("cannot open EXR", path, e))?;
-    let mut rgba = Vec::new();
-    let d = exr_frame::decode_rgba(&bytes, path, &mut rgba)?;
-    Ok(Frame {
-        width: d.width as u32,
-        height: d.height as u32,
-        rgba,
-    })
-}
-
-/// Encode an RGBA f32 image as a ZIP-compressed (lossless) EXR file, written atomically.
-pub fn write_exr(path: &Path, width: u32, height: u32, rgba: &[f32]) -> Result<()> {
-    use exr::prelude::{Encoding, Image, Layer, LayerAttributes, SpecificChannels, WritableImage};
-    check_len(width, height, rgba.len())?;
-    let (w, h) = (width as usize, height as usize);
-    let channels = SpecificChannels::rgba(|p: exr::math::Vec2<usize>| {
-        let i = (p.y() * w + p.x()) * CH;
-        (rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3])
-    });
-    let layer = Layer::new(
-        (w, h),
-        LayerAttributes::default(),
-        Encoding::SMALL_LOSSLESS,
-        channels,
-    );
-    let mut buf = Cursor::new(Vec::new());
-    Image::from_layer(layer)
-        .write()
-        .to_buffered(&mut buf)
-        .map_err(|e| Error::Image {
-            reason: format!("cannot encode EXR: {e}"),
-            path: path.to_path_buf(),
-        })?;
-    write_atomic(path, buf.get_ref())
-}
-
-/// Encode an 8-bit RGB image as a PNG file, written atomically.
-pub fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
-    let expected = width as usize * height as usize * 3;
-    if rgb.len() != expected {
-        return Err(Error::Shape(format!(
-            "RGB buffer has {} values, a {width}x{height} image needs {expected}",
-            rgb.len()
-        )));
-    }
-    let mut buf = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut buf)
-        .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
-        .map_err(|e| Error::Image {
-            reason: format!("cannot encode PNG: {e}"),
-            path: path.to_path_buf(),
-        })?;
-    write_atomic(path, &buf)
-}
-
-/// Composite premultiplied RGBA over `background`, sRGB-encode and quantize to RGB8.
-pub fn encode_rgb8(rgba_premul: &[f32], background: [f32; 3]) -> Vec<u8> {
-    let bg = background.map(f64::from);
-    let mut out = vec![0u8; rgba_premul.len() / CH * 3];
-    out.par_chunks_mut(3 * 1024)
-        .zip(rgba_premul.par_chunks(CH * 1024))
-        .for_each(|(o, px)| encode_run(o, px.chunks_exact(CH).map(to_f64x4), bg));
-    out
-}
-
-fn to_f64x4(p: &[f32]) -> [f64; 4] {
-    [p[0], p[1], p[2], p[3]].map(f64::from)
-}
 
 fn encode_run(out: &mut [u8], pixels: impl Iterator<Item = [f64; 4]>, bg: [f64; 3]) {
     // Renders are mostly flat background: a value equal to the one before reuses its
@@ -187,50 +31,6 @@ fn encode_run(out: &mut [u8], pixels: impl Iterator<Item = [f64; 4]>, bg: [f64; 
         o[1] = encode(c[1]);
         o[2] = encode(c[2]);
     }
-}
-
-/// Read a whole file into `buf`, reusing its memory; on Unix the two halves are read
-/// at once on the rayon pool (the copy out of the page cache is a visible share of a
-/// frame's time).
-fn read_into(path: &Path, buf: &mut Vec<u8>) -> Result<()> {
-    use std::io::Read;
-    let err = |e| Error::io("cannot open EXR", path, e);
-    let mut f = std::fs::File::open(path).map_err(err)?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileExt;
-        let len = f.metadata().map_err(err)?.len();
-        if let Ok(len) = usize::try_from(len) {
-            buf.resize(len, 0);
-            let (a, b) = buf.split_at_mut(len / 2);
-            let (ra, rb) = rayon::join(
-                || f.read_exact_at(a, 0),
-                || f.read_exact_at(b, (len / 2) as u64),
-            );
-            ra.and(rb).map_err(err)?;
-            // A file that grew since `metadata` keeps its tail.
-            f.read_to_end(buf).map_err(err)?;
-            return Ok(());
-        }
-    }
-    buf.clear();
-    f.read_to_end(buf).map_err(err)?;
-    Ok(())
-}
-
-fn check_len(width: u32, height: u32, len: usize) -> Result<()> {
-    let expected = width as usize * height as usize * CH;
-    if len != expected {
-        return Err(Error::Shape(format!(
-            "frame has {len} values, a {width}x{height} RGBA frame needs {expected}"
-        )));
-    }
-    Ok(())
-}
-
-/// The first non-finite value of an RGBA buffer, as (x, y, channel, value).
-fn first_non_finite(width: u32, rgba: &[f32]) -> Option<(usize, usize, usize, f32)> {
-    exr_frame::first_non_finite(width as usize, rgba)
 }
 
 /// Running sum of linear RGBA frames of one size; the mean is the blurry image.
@@ -276,8 +76,8 @@ impl Accumulator {
     ///
     /// A frame with a NaN or inf is refused whole, so the sum is never poisoned.
     pub fn add_frame(&mut self, rgba: &[f32]) -> Result<()> {
-        check_len(self.width, self.height, rgba.len())?;
-        if let Some((x, y, c, v)) = first_non_finite(self.width, rgba) {
+        check_rgba_len(self.width, self.height, rgba.len())?;
+        if let Some((x, y, c, v)) = first_non_finite(self.width as usize, rgba) {
             return Err(Error::Value(format!(
                 "frame has a non-finite value {v} at pixel ({x}, {y}) channel {}",
                 "RGBA".as_bytes()[c] as char
@@ -293,7 +93,7 @@ impl Accumulator {
         let mut file = std::mem::take(&mut self.file);
         let mut staging = std::mem::take(&mut self.staging);
         let res = read_into(path, &mut file).and_then(|()| {
-            let d = exr_frame::decode_rgba(&file, path, &mut staging)?;
+            let d = decode_rgba(&file, path, &mut staging)?;
             if (d.width, d.height) != (self.width as usize, self.height as usize) {
                 return Err(Error::Shape(format!(
                     "EXR is {}x{} but the accumulator is {}x{}: {path:?}",
@@ -382,7 +182,11 @@ impl Accumulator {
 #[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
 mod tests {
     use super::*;
+    use crate::dataset::atomic::write_atomic;
+    use crate::image::exr::read::read_exr;
+    use image::ImageEncoder;
     use proptest::prelude::*;
+    use std::io::Cursor;
     use std::path::PathBuf;
 
     fn tmp(name: &str) -> PathBuf {
@@ -400,46 +204,13 @@ mod tests {
         (0..w * h * 4).map(|_| s.uniform() as f32).collect()
     }
 
-    #[test]
-    fn srgb_breakpoints_are_exact() {
-        assert_eq!(srgb_encode_f64(0.0), 0.0);
-        // 1.055 - 0.055 is one ulp below 1 in f64; the f32 result and the byte are exact.
-        assert!((srgb_encode_f64(1.0) - 1.0).abs() < 1e-15);
-        assert_eq!(srgb_encode(1.0), 1.0);
-        assert_eq!(srgb_decode(1.0), 1.0);
-        // Both pieces meet at the break (continuity to ~1e-8, the standard's rounding).
-        let lo = 12.92 * SRGB_LINEAR_BREAK;
-        let hi = 1.055 * SRGB_LINEAR_BREAK.powf(1.0 / 2.4) - 0.055;
-        assert_eq!(srgb_encode_f64(SRGB_LINEAR_BREAK), lo);
-        assert!((lo - hi).abs() < 1e-7, "{lo} vs {hi}");
-        assert!((lo - SRGB_ENCODED_BREAK).abs() < 1e-6);
-        assert_eq!(
-            srgb_decode_f64(SRGB_ENCODED_BREAK),
-            SRGB_ENCODED_BREAK / 12.92
-        );
-        assert!(srgb_encode_f64(SRGB_LINEAR_BREAK + 1e-12) > lo - 1e-7);
-        assert_eq!(
-            srgb_encode(0.5),
-            (1.055 * 0.5f64.powf(1.0 / 2.4) - 0.055) as f32
-        );
-        // Known code values: linear 0.5 is sRGB 188, 0.2159 (the decode of 128/255) is 128.
-        assert_eq!(srgb_encode_u8(0.5), 188);
-        assert_eq!(srgb_encode_u8(0.215_860_5), 128);
-        assert_eq!(srgb_encode_u8(-3.0), 0);
-        assert_eq!(srgb_encode_u8(7.0), 255);
-        assert_eq!(srgb_encode_u8(f64::NAN), 0);
-    }
-
-    #[test]
-    fn composite_alpha_zero_gives_background_alpha_one_gives_colour() {
-        let bg = [0.25, 0.5, 1.0];
-        assert_eq!(composite_over([0.0, 0.0, 0.0, 0.0], bg), bg);
-        assert_eq!(composite_over([0.1, 0.2, 0.3, 1.0], bg), [0.1, 0.2, 0.3]);
-        // Half coverage of premultiplied red over white.
-        assert_eq!(
-            composite_over([0.5, 0.0, 0.0, 0.5], [1.0; 3]),
-            [1.0, 0.5, 0.5]
-        );
+    /// The encoding of one frame pixel by pixel, without the encoder's reuse of codes.
+    fn reference_rgb8(rgba: &[f32], background: [f32; 3]) -> Vec<u8> {
+        let bg = background.map(f64::from);
+        rgba.chunks_exact(CH)
+            .flat_map(|p| composite_over([p[0], p[1], p[2], p[3]].map(f64::from), bg))
+            .map(srgb_encode_u8)
+            .collect()
     }
 
     #[test]
@@ -499,7 +270,7 @@ mod tests {
             .map_err(|e| Error::Value(e.to_string()))?
             .into_rgb8();
         assert_eq!(img.dimensions(), (w, h));
-        assert_eq!(img.into_raw(), encode_rgb8(&f, [1.0; 3]));
+        assert_eq!(img.into_raw(), reference_rgb8(&f, [1.0; 3]));
 
         let mut small = Accumulator::new(w + 1, h);
         let e = small.add_exr(&p).unwrap_err().to_string();
@@ -564,22 +335,8 @@ mod tests {
             }
             prop_assert_eq!(acc.count(), n);
             prop_assert_eq!(acc.mean().unwrap(), f.clone());
-            prop_assert_eq!(acc.encode_rgb8([1.0, 0.5, 0.0]).unwrap(), encode_rgb8(&f, [1.0, 0.5, 0.0]));
+            prop_assert_eq!(acc.encode_rgb8([1.0, 0.5, 0.0]).unwrap(), reference_rgb8(&f, [1.0, 0.5, 0.0]));
         }
 
-        #[test]
-        fn srgb_roundtrip(x in 0.0f64..=1.0) {
-            prop_assert!((srgb_decode_f64(srgb_encode_f64(x)) - x).abs() < 1e-12);
-            prop_assert!((srgb_encode_f64(srgb_decode_f64(x)) - x).abs() < 1e-12);
-            let y = x as f32;
-            prop_assert!((srgb_decode(srgb_encode(y)) - y).abs() <= 2e-7_f32.max(y * 4e-7));
-        }
-
-        #[test]
-        fn srgb_is_monotone(a in -0.5f64..1.5, b in -0.5f64..1.5) {
-            let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
-            prop_assert!(srgb_encode_f64(lo) <= srgb_encode_f64(hi));
-            prop_assert!(srgb_encode_u8(lo) <= srgb_encode_u8(hi));
-        }
     }
 }

@@ -6,7 +6,8 @@
 //! channels; per-lane channel constants come from a permutation of three-entry
 //! vectors. The rare ziggurat rejections (≈1.2 % of values) leave the vector path:
 //! their lanes are redone by the scalar `zig_slow`, which keeps the exact stream.
-use super::{zig_slow, Ziggurat};
+use crate::noise::ziggurat::{zig_slow, Ziggurat};
+use crate::rng::{PHILOX_M0, PHILOX_M1, PHILOX_W0, PHILOX_W1};
 use std::arch::x86_64::*;
 
 /// The three colour channels' encoders of an 8-bit plan in one gather-friendly form:
@@ -230,8 +231,8 @@ unsafe fn mul_hi_lo(a: __m256i, m: __m256i) -> (__m256i, __m256i) {
 /// The CPU must support AVX2.
 #[target_feature(enable = "avx2")]
 pub(super) unsafe fn philox_fill(key: u64, stream: u64, first: u64, out: &mut [u32]) {
-    let m0 = _mm256_set1_epi32(super::PHILOX_M0 as i32);
-    let m1 = _mm256_set1_epi32(super::PHILOX_M1 as i32);
+    let m0 = _mm256_set1_epi32(PHILOX_M0 as i32);
+    let m1 = _mm256_set1_epi32(PHILOX_M1 as i32);
     let s0 = _mm256_set1_epi32(stream as u32 as i32);
     let s1 = _mm256_set1_epi32((stream >> 32) as u32 as i32);
     for (i, o) in out.chunks_exact_mut(32).enumerate() {
@@ -255,8 +256,8 @@ pub(super) unsafe fn philox_fill(key: u64, stream: u64, first: u64, out: &mut [u
             c1 = lo1;
             c2 = n2;
             c3 = lo0;
-            k0 = k0.wrapping_add(super::PHILOX_W0);
-            k1 = k1.wrapping_add(super::PHILOX_W1);
+            k0 = k0.wrapping_add(PHILOX_W0);
+            k1 = k1.wrapping_add(PHILOX_W1);
         }
         // Lane-major (word r of blocks 0..8) to block-major (4 words per block).
         let t0 = _mm256_unpacklo_epi32(c0, c1);

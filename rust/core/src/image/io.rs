@@ -1,6 +1,7 @@
-//! Reading and writing the images of an LLFF scene: 8- and 16-bit PNG, JPEG,
-//! grayscale or colour, with or without alpha, kept in their own sample depth so a
-//! 16-bit input is not silently truncated.
+//! Integer images on disk: reading the images of an LLFF scene (8- and 16-bit PNG,
+//! JPEG, grayscale or colour, with or without alpha, kept in their own sample depth so
+//! a 16-bit input is not silently truncated) and writing PNGs.
+use crate::dataset::atomic::write_atomic;
 use crate::error::{Error, Result};
 use image::{DynamicImage, ImageDecoder, ImageEncoder, ImageReader};
 use std::path::Path;
@@ -152,40 +153,23 @@ pub fn png_bytes(img: &Image) -> Result<Vec<u8>> {
     Ok(out)
 }
 
-/// Encode float RGB (3 channels) or RGBA (4) as an uncompressed 32-bit float EXR of
-/// increasing scan lines, written sequentially: exr's parallel writer emits blocks
-/// in completion order, which would make the bytes depend on thread timing.
-pub fn exr_bytes(width: u32, height: u32, channels: usize, data: &[f32]) -> Result<Vec<u8>> {
-    use exr::prelude::{Encoding, SpecificChannels, Vec2, WritableImage};
-    let (w, h) = (width as usize, height as usize);
-    if !(channels == 3 || channels == 4) {
+/// Encode an 8-bit RGB image as a PNG file, written atomically.
+pub fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
+    let expected = width as usize * height as usize * 3;
+    if rgb.len() != expected {
         return Err(Error::Shape(format!(
-            "EXR needs 3 or 4 channels, got {channels}"
+            "RGB buffer has {} values, a {width}x{height} image needs {expected}",
+            rgb.len()
         )));
     }
-    if data.len() != w * h * channels {
-        return Err(Error::Shape(format!(
-            "{} floats for a {width} x {height} x {channels} EXR",
-            data.len()
-        )));
-    }
-    let at = |p: Vec2<usize>, c: usize| data[(p.y() * w + p.x()) * channels + c];
-    let mut cur = std::io::Cursor::new(Vec::new());
-    let res = if channels == 3 {
-        let ch = SpecificChannels::rgb(|p: Vec2<usize>| (at(p, 0), at(p, 1), at(p, 2)));
-        exr::image::Image::from_encoded_channels((w, h), Encoding::UNCOMPRESSED, ch)
-            .write()
-            .non_parallel()
-            .to_buffered(&mut cur)
-    } else {
-        let ch = SpecificChannels::rgba(|p: Vec2<usize>| (at(p, 0), at(p, 1), at(p, 2), at(p, 3)));
-        exr::image::Image::from_encoded_channels((w, h), Encoding::UNCOMPRESSED, ch)
-            .write()
-            .non_parallel()
-            .to_buffered(&mut cur)
-    };
-    res.map_err(|e| Error::Value(format!("EXR encoding failed: {e}")))?;
-    Ok(cur.into_inner())
+    let mut buf = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut buf)
+        .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
+        .map_err(|e| Error::Image {
+            reason: format!("cannot encode PNG: {e}"),
+            path: path.to_path_buf(),
+        })?;
+    write_atomic(path, &buf)
 }
 
 #[cfg(test)]
@@ -228,13 +212,5 @@ mod tests {
             .unwrap_or_default();
         assert!(err.contains("garbage.png"), "{err}");
         let _ = std::fs::remove_file(&p);
-    }
-
-    #[test]
-    fn exr_has_the_right_size() -> Result<()> {
-        let b = exr_bytes(4, 2, 3, &[0.5; 24])?;
-        assert!(b.len() > 24 * 4);
-        assert!(exr_bytes(4, 2, 3, &[0.5; 23]).is_err());
-        Ok(())
     }
 }

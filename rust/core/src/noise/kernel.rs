@@ -1,321 +1,17 @@
-//! LLFF-N style sensor noise (DESIGN §5): inverse gamma, inverse white balance,
-//! heteroscedastic read + shot noise, forward processing back to an sRGB code.
-//!
-//! Per colour value, with x the clean code / max code:
-//! `y = white_level * decode(x) / wb[c]`, `y' = y + sqrt(σ_r² + σ_s²·y) · n`,
-//! `processed = round(max · encode(clip(y' · wb[c] / white_level, 0, 1)))`.
-//! `y'` is what `linear/*.exr` holds (unclipped, negative values included).
-//!
-//! Randomness: value `v = pixel · colour_channels + c` of view `i`, frame `k` takes
-//! 32-bit word `v % 4` of Philox block `v / 4` in stream `i << 32 | k` under
-//! `noise_key(seed, gain)`; the normal comes from a 128-layer ziggurat fed by that
-//! word. The rare rejected draws (≈1.2 %) continue in a second Philox stream indexed
-//! by `v`, so every value is a pure function of (seed, gain, view, frame, v) and the
-//! output is bit-identical for any thread count.
-use crate::error::{Error, Result};
-use crate::image_io::{self, Image, Samples};
-use crate::rng;
+//! The noise kernel of one image: noisy linear values and processed codes through
+//! per-code tables, the normals drawn `LANES` Philox blocks at a time. With AVX2 the
+//! 8-bit RGB case runs in `avx2`, bit for bit the scalar path.
+use super::model::{Gamma, NoiseModel};
+use super::ziggurat::{zig_normal, ziggurat};
+use crate::error::Result;
+use crate::image::io::{Image, Samples};
+use crate::rng::{self, PHILOX_M0, PHILOX_M1, PHILOX_W0, PHILOX_W1};
 use rayon::prelude::*;
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 #[cfg(target_arch = "x86_64")]
-#[path = "noise_avx2.rs"]
+#[path = "avx2.rs"]
 mod avx2;
 
-/// Transfer curve between the stored codes and linear values.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Gamma {
-    /// `y = x^2.2`: NAN's re-linearisation, the default.
-    Power22,
-    /// The exact piecewise sRGB curve (IEC 61966-2-1).
-    Srgb,
-}
-
-impl Gamma {
-    pub fn parse(s: &str) -> Result<Self> {
-        match s.to_ascii_lowercase().as_str() {
-            "2.2" | "power2.2" => Ok(Gamma::Power22),
-            "srgb" => Ok(Gamma::Srgb),
-            _ => Err(Error::Value(format!(
-                "gamma {s:?}, expected \"2.2\" or \"srgb\""
-            ))),
-        }
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Gamma::Power22 => "2.2",
-            Gamma::Srgb => "srgb",
-        }
-    }
-
-    /// Code value in [0, 1] → linear.
-    pub fn decode(self, x: f64) -> f64 {
-        let x = x.clamp(0.0, 1.0);
-        match self {
-            Gamma::Power22 => libm::pow(x, 2.2),
-            Gamma::Srgb if x <= 0.04045 => x / 12.92,
-            Gamma::Srgb => libm::pow((x + 0.055) / 1.055, 2.4),
-        }
-    }
-
-    /// Linear in [0, 1] → code value (inverse of `decode`).
-    pub fn encode(self, y: f64) -> f64 {
-        let y = y.clamp(0.0, 1.0);
-        match self {
-            Gamma::Power22 => libm::pow(y, 1.0 / 2.2),
-            Gamma::Srgb if y <= 0.0031308 => y * 12.92,
-            Gamma::Srgb => 1.055 * libm::pow(y, 1.0 / 2.4) - 0.055,
-        }
-    }
-}
-
-/// Gain → σ mapping: `log10 σ(g) = log10 σ(1) + step · log2 g`, read and shot apart.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NoiseLevels {
-    pub log10_read: f64,
-    pub read_step: f64,
-    pub log10_shot: f64,
-    pub shot_step: f64,
-}
-
-impl NoiseLevels {
-    /// blurset's default table; NOT the values of KPN's test file that NAN reads (that
-    /// file is not redistributable; pass it with `from_kpn` to reproduce NAN).
-    /// Derived from the ranges KPN (Mildenhall et al. 2018, §4) trains on,
-    /// log10 σ_r ∈ [−3, −1.5] and log10 σ_s ∈ [−4, −2], assuming its six test levels
-    /// are log-uniform over that range with gain 4 (level 4) at its top: one level per
-    /// doubling of gain, so the step is a quarter of each range and gain 1 (level 2)
-    /// sits half-way. Gain 8 then lies beyond the training range, like KPN's
-    /// "extreme" level, and 16 and 20 extrapolate as in NAN.
-    pub const DEFAULT: NoiseLevels = NoiseLevels {
-        log10_read: -2.25,
-        read_step: 0.375,
-        log10_shot: -3.0,
-        shot_step: 0.5,
-    };
-
-    /// NAN's mapping from KPN's synthetic test file: sorted unique values, the two
-    /// lowest dropped; the first remaining gives σ(1), the next one the step.
-    pub fn from_kpn(sig_read: &[f64], sig_shot: &[f64]) -> Result<Self> {
-        fn first_two(name: &str, values: &[f64]) -> Result<(f64, f64)> {
-            if let Some(v) = values.iter().find(|v| !v.is_finite() || **v <= 0.0) {
-                return Err(Error::Value(format!(
-                    "{name} holds {v}, expected positive values"
-                )));
-            }
-            let mut u = values.to_vec();
-            u.sort_by(f64::total_cmp);
-            u.dedup();
-            if u.len() < 4 {
-                return Err(Error::Value(format!(
-                    "{name} has {} distinct values, expected at least 4 (two dropped, two used)",
-                    u.len()
-                )));
-            }
-            let (a, b) = (libm::log10(u[2]), libm::log10(u[3]));
-            Ok((a, b - a))
-        }
-        let (log10_read, read_step) = first_two("sig_read", sig_read)?;
-        let (log10_shot, shot_step) = first_two("sig_shot", sig_shot)?;
-        Ok(NoiseLevels {
-            log10_read,
-            read_step,
-            log10_shot,
-            shot_step,
-        })
-    }
-
-    /// (σ_read, σ_shot) at a gain.
-    pub fn sigmas(&self, gain: f64) -> Result<(f64, f64)> {
-        if !(gain.is_finite() && gain > 0.0) {
-            return Err(Error::Value(format!(
-                "gain {gain}, expected a positive number"
-            )));
-        }
-        let l = libm::log2(gain);
-        Ok((
-            libm::pow(10.0, self.log10_read + self.read_step * l),
-            libm::pow(10.0, self.log10_shot + self.shot_step * l),
-        ))
-    }
-}
-
-/// Camera white-balance gains of the red and blue channels (green is 1).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WhiteBalance {
-    pub red: f64,
-    pub blue: f64,
-}
-
-/// One draw per scene in the unprocessing ranges (Brooks et al. 2019):
-/// red U[1.9, 2.4], blue U[1.5, 1.9].
-pub fn sample_white_balance(seed: u64) -> WhiteBalance {
-    let key = rng::derive_seed(seed, &[rng::fnv1a64(b"white_balance")]);
-    let mut s = rng::Stream::new(key, 0);
-    let red = s.uniform_in(1.9, 2.4);
-    let blue = s.uniform_in(1.5, 1.9);
-    WhiteBalance { red, blue }
-}
-
-/// Everything that decides the noisy values of one variant, except randomness.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NoiseModel {
-    pub sigma_read: f64,
-    pub sigma_shot: f64,
-    pub gamma: Gamma,
-    /// `None` leaves the channels alone (NAN parity).
-    pub white_balance: Option<WhiteBalance>,
-    /// Linear value of a white code; NAN tests at 1 and trains on 10^−U[0,1].
-    pub white_level: f64,
-}
-
-/// Below this the forward processing divides by a number so small that every noisy
-/// value saturates; a white level there is a unit mistake, not an experiment.
-pub const MIN_WHITE_LEVEL: f64 = 1e-6;
-
-impl NoiseModel {
-    pub fn validate(&self) -> Result<()> {
-        for (name, v) in [
-            ("sigma_read", self.sigma_read),
-            ("sigma_shot", self.sigma_shot),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(Error::Value(format!(
-                    "{name} = {v}, expected a finite value >= 0"
-                )));
-            }
-        }
-        if !(MIN_WHITE_LEVEL..=1.0).contains(&self.white_level) {
-            return Err(Error::Value(format!(
-                "white level {}, expected {MIN_WHITE_LEVEL} <= white level <= 1",
-                self.white_level
-            )));
-        }
-        if let Some(wb) = self.white_balance {
-            for (name, v) in [("red", wb.red), ("blue", wb.blue)] {
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(Error::Value(format!(
-                        "white balance {name} = {v}, expected a positive number"
-                    )));
-                }
-            }
-        }
-        Ok(())
-    }
-
-    /// Linear value per unit of processed value, per colour channel.
-    fn channel_scale(&self, c: usize, color_channels: usize) -> f64 {
-        let wb = match (self.white_balance, color_channels) {
-            (Some(wb), 3) => [wb.red, 1.0, wb.blue][c],
-            // Gray images have no red or blue to balance.
-            _ => 1.0,
-        };
-        self.white_level / wb
-    }
-}
-
-/// The Philox key of one gain of one seed.
-pub fn noise_key(seed: u64, gain: f64) -> u64 {
-    rng::derive_seed(seed, &[rng::fnv1a64(b"noise"), gain.to_bits()])
-}
-
-/// The Philox stream of one frame of one view.
-pub fn stream_id(view: u32, frame: u32) -> u64 {
-    ((view as u64) << 32) | frame as u64
-}
-
-// Ziggurat after Marsaglia & Tsang (2000) in Doornik's (2005) form, which draws the
-// layer and the abscissa from separate bits.
-const ZIG_LAYERS: usize = 128;
-const ZIG_R: f64 = 3.442_619_855_899;
-const ZIG_V: f64 = 9.912_563_035_262_17e-3;
-
-struct Ziggurat {
-    x: [f64; ZIG_LAYERS + 1],
-    ratio: [f64; ZIG_LAYERS],
-    x32: [f32; ZIG_LAYERS],
-    ratio32: [f32; ZIG_LAYERS],
-    /// [ratio32, x32] per layer, for the AVX2 kernel's paired gathers.
-    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    pairs32: [[f32; 2]; ZIG_LAYERS],
-}
-
-fn ziggurat() -> &'static Ziggurat {
-    static Z: OnceLock<Ziggurat> = OnceLock::new();
-    Z.get_or_init(|| {
-        let f = |x: f64| libm::exp(-0.5 * x * x);
-        let mut x = [0.0; ZIG_LAYERS + 1];
-        x[0] = ZIG_V / f(ZIG_R);
-        x[1] = ZIG_R;
-        for i in 2..ZIG_LAYERS {
-            x[i] = libm::sqrt(-2.0 * libm::log(ZIG_V / x[i - 1] + f(x[i - 1])));
-        }
-        let mut ratio = [0.0; ZIG_LAYERS];
-        let (mut x32, mut ratio32) = ([0.0f32; ZIG_LAYERS], [0.0f32; ZIG_LAYERS]);
-        for i in 0..ZIG_LAYERS {
-            ratio[i] = x[i + 1] / x[i];
-            x32[i] = x[i] as f32;
-            ratio32[i] = ratio[i] as f32;
-        }
-        Ziggurat {
-            x,
-            ratio,
-            x32,
-            ratio32,
-            pairs32: std::array::from_fn(|i| [ratio32[i], x32[i]]),
-        }
-    })
-}
-
-/// Standard normal from one 32-bit word: 7 bits layer, 1 bit sign, 24 bits abscissa.
-#[inline(always)]
-fn zig_normal(z: &Ziggurat, word: u32, fallback_key: u64, v: u64) -> f32 {
-    let i = (word & 127) as usize;
-    let u = ((word >> 8) as f32 + 0.5) * (1.0 / 16_777_216.0);
-    if u < z.ratio32[i] {
-        // Bit 7 becomes the sign bit without a branch (it is a coin flip).
-        return f32::from_bits((u * z.x32[i]).to_bits() ^ ((word & 128) << 24));
-    }
-    zig_slow(z, word, fallback_key, v) as f32
-}
-
-#[cold]
-fn zig_slow(z: &Ziggurat, mut word: u32, fallback_key: u64, v: u64) -> f64 {
-    let mut s = rng::Stream::new(fallback_key, v);
-    loop {
-        let i = (word & 127) as usize;
-        let sign = if word & 128 != 0 { -1.0 } else { 1.0 };
-        let u = ((word >> 8) as f64 + 0.5) * (1.0 / 16_777_216.0);
-        if u < z.ratio[i] {
-            return sign * u * z.x[i];
-        }
-        if i == 0 {
-            // Tail beyond R (Marsaglia 1964); 1 - uniform keeps the logs finite.
-            loop {
-                let a = libm::log(1.0 - s.uniform()) / ZIG_R;
-                let b = libm::log(1.0 - s.uniform());
-                if -2.0 * b >= a * a {
-                    return sign * (ZIG_R - a);
-                }
-            }
-        }
-        let x = u * z.x[i];
-        let f0 = libm::exp(-0.5 * (z.x[i] * z.x[i] - x * x));
-        let f1 = libm::exp(-0.5 * (z.x[i + 1] * z.x[i + 1] - x * x));
-        if f1 + s.uniform() * (f0 - f1) < 1.0 {
-            return sign * x;
-        }
-        word = s.next_u64() as u32;
-    }
-}
-
-// Philox4x32-10 constants (Salmon et al. 2011), as in `rng::philox4x32`.
-const PHILOX_M0: u32 = 0xD251_1F53;
-const PHILOX_M1: u32 = 0xCD9E_8D57;
-const PHILOX_W0: u32 = 0x9E37_79B9;
-const PHILOX_W1: u32 = 0xBB67_AE85;
 const LANES: usize = 16;
 
 /// `rng::philox4x32` of blocks `first .. first + LANES` of `stream`, lane-major so the
@@ -364,6 +60,14 @@ struct Encoder {
     last_bin: usize,
 }
 
+/// The forward processing's rounding points: code k + 1 starts at the linear value
+/// `decode((k + 0.5) / max) · scale`, for k in 0..max.
+pub(super) fn code_thresholds(gamma: Gamma, max_code: u32, scale: f64) -> Vec<f32> {
+    (0..max_code)
+        .map(|k| (gamma.decode((k as f64 + 0.5) / max_code as f64) * scale) as f32)
+        .collect()
+}
+
 /// Bin of a value: the top 16 bits of its IEEE pattern (sign, exponent, 7 mantissa
 /// bits), monotone in the value for v >= 0, so bins are log-spaced like the gamma
 /// curve's codes; negative values (sign bit set) go to bin 0, below every threshold.
@@ -375,9 +79,7 @@ fn encoder_bin(v: f32) -> usize {
 
 impl Encoder {
     fn new(gamma: Gamma, max_code: u32, scale: f64) -> Self {
-        let mut thresholds: Vec<f32> = (0..max_code)
-            .map(|k| (gamma.decode((k as f64 + 0.5) / max_code as f64) * scale) as f32)
-            .collect();
+        let mut thresholds = code_thresholds(gamma, max_code, scale);
         // Binning is monotone, so the thresholds of bins below b lie below every value
         // of bin b and those of later bins above it. A value below the lowest
         // threshold's bin has code 0 and one above the highest's has code max: both
@@ -446,7 +148,7 @@ impl EncoderView<'_> {
 
 /// Per-code tables of one (model, sample depth, colour layout): decoding and the
 /// noise standard deviation depend only on the clean code, so they are looked up.
-struct Plan {
+pub(super) struct Plan {
     codes: usize,
     /// [clean linear value, noise std] per (channel, code) (arrays, not tuples: the AVX2
     /// kernel reads them as 8-byte pairs and relies on the order).
@@ -458,17 +160,15 @@ struct Plan {
 }
 
 impl Plan {
-    fn new(model: &NoiseModel, max_code: u32, color_channels: usize) -> Self {
+    pub(super) fn new(model: &NoiseModel, max_code: u32, color_channels: usize) -> Self {
         let codes = max_code as usize + 1;
         let mut table = Vec::with_capacity(codes * color_channels);
-        let var_read = model.sigma_read * model.sigma_read;
-        let var_shot = model.sigma_shot * model.sigma_shot;
         let mut encoders = Vec::with_capacity(color_channels);
         for c in 0..color_channels {
             let scale = model.channel_scale(c, color_channels);
             for code in 0..codes {
                 let y = scale * model.gamma.decode(code as f64 / max_code as f64);
-                table.push([y as f32, libm::sqrt(var_read + var_shot * y) as f32]);
+                table.push([y as f32, model.noise_std(y) as f32]);
             }
             encoders.push(Encoder::new(model.gamma, max_code, scale));
         }
@@ -703,7 +403,7 @@ fn philox_fill(key: u64, stream: u64, first: u64, out: &mut [u32]) {
     }
 }
 
-fn apply_plan(img: &Image, plan: &Plan, key: u64, stream: u64) -> Result<Noisy> {
+pub(super) fn apply_plan(img: &Image, plan: &Plan, key: u64, stream: u64) -> Result<Noisy> {
     let lc = if img.has_alpha() { 4 } else { 3 };
     let samples = match &img.samples {
         Samples::U8(s) => {
@@ -748,92 +448,13 @@ pub fn clean_linear(img: &Image, model: &NoiseModel) -> Result<Vec<f32>> {
         .collect())
 }
 
-/// One noise variant of a scene (one gain): where it goes and how it is made.
-#[derive(Clone, Debug)]
-pub struct Variant {
-    pub out_dir: PathBuf,
-    pub model: NoiseModel,
-    pub key: u64,
-}
-
-/// Read every source image once and write, for each variant and frame,
-/// `out_dir/images/<name>.png` and `out_dir/linear/<name>.exr`; `names` holds
-/// `sources.len() · frames` stems, view-major. All images must share one size.
-/// Files are written in place: callers make the whole tree atomic by writing into a
-/// temporary directory and renaming it.
-pub fn write_variants(
-    sources: &[PathBuf],
-    names: &[String],
-    frames: u32,
-    variants: &[Variant],
-) -> Result<()> {
-    if frames == 0 {
-        return Err(Error::Value("frames must be at least 1".into()));
-    }
-    if names.len() != sources.len() * frames as usize {
-        return Err(Error::Shape(format!(
-            "{} output names for {} images x {frames} frames",
-            names.len(),
-            sources.len()
-        )));
-    }
-    for v in variants {
-        v.model.validate()?;
-        for sub in ["images", "linear"] {
-            let d = v.out_dir.join(sub);
-            std::fs::create_dir_all(&d).map_err(|e| Error::io("cannot create directory", &d, e))?;
-        }
-    }
-    let Some(first) = sources.first() else {
-        return Ok(());
-    };
-    let (w0, h0, _, _) = image_io::image_info(first)?;
-    // Plans depend on (variant, depth, colour layout); built once, on first use.
-    let plans: Vec<[OnceLock<Plan>; 4]> = variants.iter().map(|_| Default::default()).collect();
-    sources.par_iter().enumerate().try_for_each(|(i, path)| {
-        let img = image_io::read_image(path)?;
-        if (img.width, img.height) != (w0, h0) {
-            return Err(Error::Image {
-                reason: format!(
-                    "size {} x {} differs from {} x {} of {:?}",
-                    img.width, img.height, w0, h0, first
-                ),
-                path: path.clone(),
-            });
-        }
-        let slot = usize::from(img.samples.max_code() > 255) * 2 + usize::from(img.channels >= 3);
-        for (v, plan) in variants.iter().zip(&plans) {
-            let plan = plan[slot]
-                .get_or_init(|| Plan::new(&v.model, img.samples.max_code(), img.color_channels()));
-            for k in 0..frames {
-                let noisy = apply_plan(&img, plan, v.key, stream_id(i as u32, k))?;
-                let name = &names[i * frames as usize + k as usize];
-                write_file(
-                    &v.out_dir.join("images").join(format!("{name}.png")),
-                    &image_io::png_bytes(&noisy.processed)?,
-                )?;
-                write_file(
-                    &v.out_dir.join("linear").join(format!("{name}.exr")),
-                    &image_io::exr_bytes(
-                        img.width,
-                        img.height,
-                        noisy.linear_channels,
-                        &noisy.linear,
-                    )?,
-                )?;
-            }
-        }
-        Ok(())
-    })
-}
-
-fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    std::fs::write(path, bytes).map_err(|e| Error::io("cannot write", path, e))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::Error;
+    use crate::noise::model::{
+        sample_white_balance, stream_id, NoiseLevels, WhiteBalance, MIN_WHITE_LEVEL,
+    };
 
     fn model(sr: f64, ss: f64) -> NoiseModel {
         NoiseModel {
@@ -855,31 +476,6 @@ mod tests {
         let m = v.iter().map(|&x| x as f64).sum::<f64>() / n;
         let var = v.iter().map(|&x| (x as f64 - m).powi(2)).sum::<f64>() / n;
         (m, var)
-    }
-
-    #[test]
-    fn ziggurat_is_standard_normal() {
-        let z = ziggurat();
-        let n = 2_000_000u64;
-        let (mut s1, mut s2, mut s4, mut tail) = (0.0, 0.0, 0.0, 0u64);
-        for v in 0..n {
-            let w = rng::philox4x32(7, [(v >> 2) as u32, 0, 0, 0])[(v & 3) as usize];
-            let x = zig_normal(z, w, 99, v) as f64;
-            assert!(x.is_finite());
-            s1 += x;
-            s2 += x * x;
-            s4 += x * x * x * x;
-            if x.abs() > 3.0 {
-                tail += 1;
-            }
-        }
-        let nf = n as f64;
-        assert!((s1 / nf).abs() < 0.003, "mean {}", s1 / nf);
-        assert!((s2 / nf - 1.0).abs() < 0.005, "var {}", s2 / nf);
-        assert!((s4 / nf - 3.0).abs() < 0.05, "4th moment {}", s4 / nf);
-        // P(|x| > 3) = 0.0026998
-        let p = tail as f64 / nf;
-        assert!((p - 0.0027).abs() < 0.0003, "tail {p}");
     }
 
     #[test]
@@ -969,27 +565,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    #[test]
-    fn kpn_mapping_drops_two_lowest() -> Result<()> {
-        // Six levels, each repeated, as in KPN's file; gains 1, 2 are levels 2, 3.
-        let read: Vec<f64> = (0..12)
-            .map(|i| 10f64.powf(-3.0 + 0.25 * (i / 2) as f64))
-            .collect();
-        let shot: Vec<f64> = (0..12)
-            .map(|i| 10f64.powf(-4.0 + 0.5 * (i % 6) as f64))
-            .collect();
-        let l = NoiseLevels::from_kpn(&read, &shot)?;
-        assert!((l.log10_read + 2.5).abs() < 1e-12 && (l.read_step - 0.25).abs() < 1e-12);
-        assert!((l.log10_shot + 3.0).abs() < 1e-12 && (l.shot_step - 0.5).abs() < 1e-12);
-        let (r8, s8) = l.sigmas(8.0)?;
-        assert!((r8.log10() - (-2.5 + 0.75)).abs() < 1e-12);
-        assert!((s8.log10() - (-3.0 + 1.5)).abs() < 1e-12);
-        assert!(NoiseLevels::from_kpn(&[1.0, 2.0, 3.0], &shot).is_err());
-        assert!(NoiseLevels::from_kpn(&read, &[0.0, 1.0, 2.0, 3.0, 4.0]).is_err());
-        assert!(NoiseLevels::DEFAULT.sigmas(0.0).is_err());
-        Ok(())
     }
 
     #[test]

@@ -26,8 +26,6 @@ inverted (`--source png`). Both share the same draws, so they differ only by wha
 
 from __future__ import annotations
 
-import json
-import os
 import shutil
 import sys
 import time
@@ -36,17 +34,20 @@ from pathlib import Path
 
 import numpy as np
 
-from blurset import __version__, _core
+from blurset import __version__, _core, layout
 from blurset.exceptions import ConfigError, InputError
-from blurset.noise import (
-    gain_name,
-    list_images,
-    output_names,
+from blurset.layout import gain_name
+from blurset.noise.params import (
+    check_options,
+    files_record,
+    noise_json,
+    noise_table,
     parse_gains,
-    read_kpn_levels,
+    table_record,
 )
+from blurset.noise.scene import list_images, output_names
+from blurset.stop import interruptible, remove_tree
 
-MARKER = ".complete"
 DATASET_FILE = "noise_dataset.json"
 SEED_DERIVATION = (
     "noise_scene_seed(seed, setting, level) = derive_seed(seed, [fnv1a64('build_noise'), "
@@ -64,26 +65,6 @@ CLEAN = {
 def is_build(path: Path) -> bool:
     """A build directory (as `blurset build` writes it) rather than one LLFF scene."""
     return (path / "dataset.json").is_file()
-
-
-def _read_json(path: Path, what: str) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{what} not found: {path}") from None
-    except (OSError, ValueError) as e:
-        raise InputError(f"{what} is not readable JSON ({e}): {path}") from None
-
-
-def _write_json(path: Path, data) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n")
-    os.replace(tmp, path)
-
-
-def complete_settings(build: Path) -> list[Path]:
-    """Setting directories of a build whose `.complete` marker exists, sorted."""
-    return sorted(d for d in build.iterdir() if d.is_dir() and (d / MARKER).is_file())
 
 
 def parse_levels(value: str | None, available: list[str]) -> list[str]:
@@ -124,7 +105,7 @@ def _plan_unit(
     setting_dir: Path, level: str, out: Path, seed: int, gains: list[float], frames: int, kind: str
 ) -> Unit:
     src = setting_dir / level
-    meta = _read_json(setting_dir / "meta.json", "meta.json")
+    meta = layout.read_json(setting_dir / "meta.json", "meta.json")
     bg = meta.get("render", {}).get("background", [1.0, 1.0, 1.0])
     image_dir = src / "images"
     if not image_dir.is_dir():
@@ -153,7 +134,7 @@ def _plan_unit(
     else:
         sources = pngs
     dst = out / setting_dir.name / level
-    pending = [g for g in gains if not (dst / gain_name(g) / MARKER).is_file()]
+    pending = [g for g in gains if not layout.is_complete(dst / gain_name(g))]
     return Unit(
         setting=setting_dir.name,
         level=level,
@@ -177,7 +158,7 @@ def _has_linear(level_dir: Path) -> bool:
     return all((lin / f"{p.stem}.exr").is_file() for p in list_images(images))
 
 
-def _params(args, kind: str, gamma: str, levels_table) -> dict:
+def _params(args, kind: str, gamma: str, table) -> dict:
     """The options a noise build is made with; a rerun into the same DIR must match them."""
     return {
         "seed": args.seed,
@@ -186,26 +167,19 @@ def _params(args, kind: str, gamma: str, levels_table) -> dict:
         "gamma": gamma,
         "white_level": args.white_level,
         "frames": args.frames,
-        "levels_table": {
-            "source": "kpn" if args.kpn_levels else "blurset-default",
-            "log10_sigma_read_1": levels_table[0],
-            "read_step_per_log2_gain": levels_table[1],
-            "log10_sigma_shot_1": levels_table[2],
-            "shot_step_per_log2_gain": levels_table[3],
-        },
+        "levels_table": table_record(table, args.kpn_levels),
     }
 
 
 def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
-    if out.resolve() == build.resolve() or build.resolve() in out.resolve().parents:
-        raise ConfigError(f"--out must not lie inside the build: {out}")
+    layout.refuse_overlap(out, [build])
     if out.exists():
         if not out.is_dir():
             raise ConfigError(f"--out exists and is not a directory: {out}")
         if overwrite:
             shutil.rmtree(out)
         elif (out / DATASET_FILE).is_file():
-            old = _read_json(out / DATASET_FILE, DATASET_FILE).get("params", {})
+            old = layout.read_json(out / DATASET_FILE, DATASET_FILE).get("params", {})
             for k, v in params.items():
                 if old.get(k) != v:
                     raise ConfigError(
@@ -220,39 +194,29 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
     if not (out / DATASET_FILE).is_file():
         # Written first (options only) so that a run killed before its end resumes;
         # rewritten with the seeds and counts at the end.
-        _write_json(out / DATASET_FILE, {"build": str(build.resolve()), "params": params})
+        layout.write_json(out / DATASET_FILE, {"build": str(build.resolve()), "params": params})
     for stale in out.glob("*/*/gain_*.partial"):
         shutil.rmtree(stale, ignore_errors=True)
 
 
 def _noise_json(unit: Unit, g: float, sr: float, ss: float, wb, params: dict, args, build) -> dict:
-    files = [
-        {
-            "view": i,
-            "frame": k,
-            "source": f"{unit.level}/{'linear' if params['source'] == 'linear' else 'images'}/"
-            f"{unit.sources[i].name}",
-            "image": f"images/{unit.names[i * args.frames + k]}.png",
-            "linear": f"linear/{unit.names[i * args.frames + k]}.exr",
-        }
-        for i in range(len(unit.sources))
-        for k in range(args.frames)
-    ]
-    lt = params["levels_table"]
-    return {
-        "gain": int(g) if float(g).is_integer() else g,
-        "seed": unit.seed,
-        "sigma_read": sr,
-        "sigma_shot": ss,
-        "gamma": 2.2 if params["gamma"] == "2.2" else "srgb",
-        "white_balance": None if wb is None else {"red": wb[0], "blue": wb[1]},
-        "white_level": args.white_level,
-        "frames": args.frames,
-        "profile": args.profile,
-        "model": MODEL,
-        "clean": CLEAN[params["source"]],
-        "levels": {**lt, "file": args.kpn_levels.name if args.kpn_levels else None},
-        "source": {
+    subdir = "linear" if params["source"] == "linear" else "images"
+    return noise_json(
+        gain=g,
+        seed=unit.seed,
+        sigmas=(sr, ss),
+        gamma=params["gamma"],
+        white_balance=wb,
+        white_level=args.white_level,
+        frames=args.frames,
+        profile=args.profile,
+        model=MODEL,
+        clean=CLEAN[params["source"]],
+        levels={
+            **params["levels_table"],
+            "file": args.kpn_levels.name if args.kpn_levels else None,
+        },
+        source={
             "kind": params["source"],
             "build": str(build.resolve()),
             "setting": unit.setting,
@@ -260,17 +224,18 @@ def _noise_json(unit: Unit, g: float, sr: float, ss: float, wb, params: dict, ar
             "background": list(unit.background),
             "resolution": list(unit.resolution),
         },
-        "build_noise": {"seed": args.seed, "seed_derivation": SEED_DERIVATION},
-        "rng": "philox4x32-10, key noise_key(seed, gain), stream view<<32|frame, "
+        build_noise={"seed": args.seed, "seed_derivation": SEED_DERIVATION},
+        rng="philox4x32-10, key noise_key(seed, gain), stream view<<32|frame, "
         "word = pixel*3 + c; ziggurat normals (shared by the png and linear sources)",
-        "blurset_version": __version__,
-        "files": files,
-    }
+        files=files_record(
+            [f"{unit.level}/{subdir}/{p.name}" for p in unit.sources], unit.names, args.frames
+        ),
+    )
 
 
 def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -> None:
     unit.dst.mkdir(parents=True, exist_ok=True)
-    partials = {g: unit.dst / f"{gain_name(g)}.partial" for g in unit.pending}
+    partials = {g: layout.partial_dir(unit.dst / gain_name(g)) for g in unit.pending}
     for p in partials.values():
         shutil.rmtree(p, ignore_errors=True)
     try:
@@ -284,11 +249,16 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             "white_level": args.white_level,
         }
         if params["source"] == "linear":
-            _core.noise_write_variants_linear(
-                unit.sources, unit.names, variants, background=unit.background, **common
+            interruptible(
+                _core.noise_write_variants_linear,
+                unit.sources,
+                unit.names,
+                variants,
+                background=unit.background,
+                **common,
             )
         else:
-            _core.noise_write_variants(unit.sources, unit.names, variants, **common)
+            interruptible(_core.noise_write_variants, unit.sources, unit.names, variants, **common)
         # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the
         # build's rows already hold the written resolution and focal length.
         rows = np.repeat(unit.rows, args.frames, axis=0)
@@ -296,15 +266,13 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             part = partials[g]
             _core.write_poses_bounds(part / "poses_bounds.npy", rows)
             sr, ss = gains_sigmas[g]
-            _write_json(part / "noise.json", _noise_json(unit, g, sr, ss, wb, params, args, build))
-            (part / MARKER).write_text(f"{time.strftime('%Y-%m-%dT%H:%M:%S')}\n")
-            final = unit.dst / gain_name(g)
-            if final.exists():
-                shutil.rmtree(final)
-            os.replace(part, final)
+            _core.write_noise_json(
+                part / "noise.json", _noise_json(unit, g, sr, ss, wb, params, args, build)
+            )
+            layout.publish(part, unit.dst / gain_name(g))
     except BaseException:
         for p in partials.values():
-            shutil.rmtree(p, ignore_errors=True)
+            remove_tree(p)
         raise
 
 
@@ -313,9 +281,8 @@ def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
     seeds: dict[str, dict[str, int]] = {}
     gains_on_disk: dict[str, dict] = {}
     n_units = n_images = 0
-    for marker in sorted(out.glob(f"*/*/gain_*/{MARKER}")):
-        unit = marker.parent
-        meta = _read_json(unit / "noise.json", "noise.json")
+    for unit in sorted(u for u in out.glob("*/*/gain_*") if layout.is_complete(u)):
+        meta = layout.read_json(unit / "noise.json", "noise.json")
         setting, level = unit.parent.parent.name, unit.parent.name
         seeds.setdefault(setting, {})[level] = meta["seed"]
         gains_on_disk[unit.name] = {
@@ -346,7 +313,7 @@ def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
         "splits": "splits.json (copied from the build)",
         "counts": {"settings": len(seeds), "units": n_units, "images": n_images},
     }
-    _write_json(out / DATASET_FILE, doc)
+    layout.write_json(out / DATASET_FILE, doc)
     return doc
 
 
@@ -355,19 +322,14 @@ def run(args) -> int:
     out: Path = args.out
     if args.factor is not None:
         raise ConfigError("--factor: a build has no images_<F>/ directories; omit it")
-    if args.frames < 1:
-        raise ConfigError(f"--frames {args.frames}: must be >= 1")
-    if not (1e-6 <= args.white_level <= 1.0):
-        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
-    if not (0 <= args.seed < 2**64):
-        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+    check_options(args)
     gains = parse_gains(args.gains, args.any_gain)
-    dataset = _read_json(build / "dataset.json", "dataset.json")
+    dataset = layout.read_json(build / "dataset.json", "dataset.json")
     available = dataset.get("levels") or ["sharp"]
     levels = parse_levels(args.levels, available)
-    settings = complete_settings(build)
+    settings = layout.complete_settings(build)
     if not settings:
-        raise InputError(f"no complete setting (<setting>/{MARKER}) in build: {build}")
+        raise InputError(f"no complete setting (<setting>/{layout.MARKER}) in build: {build}")
     if not (build / "splits.json").is_file():
         raise InputError(f"splits.json not found: {build / 'splits.json'}")
 
@@ -375,7 +337,7 @@ def run(args) -> int:
     with_linear = all(_has_linear(s / lvl) for s in settings for lvl in levels)
     kind = ("linear" if with_linear else "png") if source == "auto" else source
     gamma = args.gamma or "srgb"
-    table = read_kpn_levels(args.kpn_levels) if args.kpn_levels else _core.noise_default_levels()
+    table = noise_table(args.kpn_levels)
     gains_sigmas = {g: _core.noise_sigmas(g, table) for g in gains}
     params = _params(args, kind, gamma, table)
 
@@ -388,9 +350,8 @@ def run(args) -> int:
     _prepare_out(out, build, params, args.overwrite)
     # The next lines re-plan pending gains: --overwrite may just have removed units.
     for u in units:
-        u.pending = [g for g in gains if not (u.dst / gain_name(g) / MARKER).is_file()]
-    shutil.copyfile(build / "splits.json", out / ".splits.json.tmp")
-    os.replace(out / ".splits.json.tmp", out / "splits.json")
+        u.pending = [g for g in gains if not layout.is_complete(u.dst / gain_name(g))]
+    layout.write_text_atomic(out / "splits.json", (build / "splits.json").read_text())
 
     written = 0
     todo = [u for u in units if u.pending]

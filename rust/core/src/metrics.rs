@@ -1,11 +1,10 @@
 //! The numbers of `blurset tradeoff` (DESIGN §8): image error against a reference and
 //! the Pareto front of (seconds, PSNR).
-use crate::accumulate::{composite_over, srgb_encode_f64};
 use crate::error::{Error, Result};
+use crate::image::color::{composite_over, srgb_encode_f64};
+use crate::image::CH;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-
-const CH: usize = 4;
 
 /// Error of an image against a reference, both premultiplied linear RGBA.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]

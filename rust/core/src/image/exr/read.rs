@@ -10,6 +10,7 @@
 //! Blocks are decoded in parallel on the rayon pool; each block also reports whether it
 //! held a NaN or inf, so the accumulator needs no second pass to refuse such a frame.
 use crate::error::{Error, Result};
+use crate::image::CH;
 use exr::block::chunk::{Chunk, CompressedBlock};
 use exr::block::UncompressedBlock;
 use exr::compression::Compression;
@@ -22,8 +23,59 @@ use std::cell::RefCell;
 use std::io::Cursor;
 use std::path::Path;
 
-/// RGBA f32 channels per pixel.
-pub(crate) const CH: usize = 4;
+/// An RGBA f32 image read from an EXR file: `rgba` is row-major, 4 channels per pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<f32>,
+}
+
+/// Read the first RGB(A) layer of an EXR file as RGBA f32 (alpha 1 when the file has none).
+///
+/// Channels are matched by name (`R`, `G`, `B`, optional `A`; half, float or uint
+/// samples); blocks are decompressed in parallel on the rayon pool. Values are returned
+/// as stored: no check for NaN or inf (see
+/// [`crate::image::accumulate::Accumulator::add_exr`]).
+pub fn read_exr(path: &Path) -> Result<Frame> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io("cannot open EXR", path, e))?;
+    let mut rgba = Vec::new();
+    let d = decode_rgba(&bytes, path, &mut rgba)?;
+    Ok(Frame {
+        width: d.width as u32,
+        height: d.height as u32,
+        rgba,
+    })
+}
+
+/// Read a whole file into `buf`, reusing its memory; on Unix the two halves are read
+/// at once on the rayon pool (the copy out of the page cache is a visible share of a
+/// frame's time).
+pub(crate) fn read_into(path: &Path, buf: &mut Vec<u8>) -> Result<()> {
+    use std::io::Read;
+    let err = |e| Error::io("cannot open EXR", path, e);
+    let mut f = std::fs::File::open(path).map_err(err)?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileExt;
+        let len = f.metadata().map_err(err)?.len();
+        if let Ok(len) = usize::try_from(len) {
+            buf.resize(len, 0);
+            let (a, b) = buf.split_at_mut(len / 2);
+            let (ra, rb) = rayon::join(
+                || f.read_exact_at(a, 0),
+                || f.read_exact_at(b, (len / 2) as u64),
+            );
+            ra.and(rb).map_err(err)?;
+            // A file that grew since `metadata` keeps its tail.
+            f.read_to_end(buf).map_err(err)?;
+            return Ok(());
+        }
+    }
+    buf.clear();
+    f.read_to_end(buf).map_err(err)?;
+    Ok(())
+}
 
 /// A NaN or inf found in a frame: pixel x, y, RGBA channel index, value.
 pub(crate) type NonFinite = (usize, usize, usize, f32);
@@ -712,7 +764,11 @@ mod tests {
         let k = file.len() - 200;
         flipped[k] ^= 0xFF;
         flipped[k + 1] ^= 0x5A;
-        let _ = decode_rgba(&flipped, Path::new("bad.exr"), &mut out);
+        let e = decode_rgba(&flipped, Path::new("bad.exr"), &mut out)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("bad.exr") && e.contains("ZIP block"), "{e}");
         Ok(())
     }
 }

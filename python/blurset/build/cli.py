@@ -1,0 +1,181 @@
+"""`blurset build` on the command line: its flags, and the config they make."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from blurset.config import BuildConfig, load_toml, make_config, parse_levels
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", type=Path, help="TOML file of options (flags override it)")
+    p.add_argument(
+        "--objects", nargs="+", help="GLB files, folders of GLBs, or text files listing them"
+    )
+    p.add_argument("--out", type=Path, help="output directory")
+    p.add_argument("--demo", action="store_true", default=None, help="built-in procedural objects")
+    p.add_argument("--settings-per-object", type=int, help="azimuth settings per object (4)")
+    p.add_argument("--views", type=int, help="views per setting (34)")
+    p.add_argument("--levels", type=str, help="blur levels, e.g. 1,2,3,4 or none (sharp only)")
+    p.add_argument(
+        "--latents",
+        type=str,
+        help="latent frames averaged per blurry image (34), or auto: per view and level, "
+        "the fewest that leave no gap over --max-ghost-px on screen",
+    )
+    p.add_argument("--latents-max", type=int, help="cap of --latents auto (34)")
+    p.add_argument(
+        "--max-ghost-px",
+        type=float,
+        help="--latents auto: largest screen gap between latent frames, px (1)",
+    )
+    p.add_argument("--samples", type=int, help="Cycles samples per latent frame (32)")
+    p.add_argument(
+        "--samples-total",
+        type=int,
+        help="sample budget of one blurry image: ceil(S/m) samples per latent frame",
+    )
+    p.add_argument(
+        "--blur-method",
+        choices=["average", "motion_blur"],
+        help="average of latent renders (the paper; default) or one Cycles motion blur render",
+    )
+    p.add_argument("--sharp-samples", type=int, help="Cycles samples of the sharp image")
+    p.add_argument(
+        "--latent-sampling",
+        choices=["subsets", "independent"],
+        help="subsets: a blurry image's latent frames render the blocks of one sample "
+        "sequence on the view's seed, which the sharp image renders too (default); "
+        "independent: a seed per frame (builds before issue 15)",
+    )
+    p.add_argument(
+        "--light-paths",
+        choices=["auto", "fixed"],
+        help="bounces from the object's materials (auto, default) or the same for every object",
+    )
+    p.add_argument(
+        "--device",
+        choices=["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"],
+        help="Cycles device; auto: the best backend Cycles reports "
+        "(OptiX > CUDA > HIP > oneAPI > Metal > CPU)",
+    )
+    p.add_argument("--gpus", help="GPU indices of the backend, e.g. 0,2 (default: all)")
+    p.add_argument(
+        "--gpus-per-task", type=float, help="GPUs each Ray task reserves (1 with a GPU device)"
+    )
+    p.add_argument("--resolution", type=int, help="image side in pixels, square (512)")
+    p.add_argument("--seed", type=int, help="build seed (0)")
+    p.add_argument("--fov-deg", type=float, help="field of view in degrees (40)")
+    p.add_argument(
+        "--latent-positions", choices=["random", "stratified"], help="latent positions (random)"
+    )
+    p.add_argument(
+        "--keep-linear",
+        "--write-linear",
+        dest="write_linear",
+        action="store_true",
+        default=None,
+        help="also store the linear float image (EXR) of every view and level; "
+        "`blurset noise BUILD` then starts from it",
+    )
+    p.add_argument(
+        "--previews", action="store_true", default=None, help="write <setting>/preview.png"
+    )
+    p.add_argument("--workers", type=int, help="objects rendered in parallel (1)")
+    p.add_argument("--threads", type=int, help="Cycles threads per worker (0 = all cores)")
+    p.add_argument("--executor", choices=["local", "ray"], help="local process pool or Ray")
+    p.add_argument(
+        "--ray-address", help="Ray cluster to join (ray://host:10001 or auto); default: local"
+    )
+    p.add_argument(
+        "--shard", help="i/N: this job's share of the objects (0 ≤ i < N), for job arrays"
+    )
+    p.add_argument("--objaverse-dir", help="the objaverse package's cache directory (~/.objaverse)")
+    p.add_argument(
+        "--objaverse-offline",
+        action="store_true",
+        default=None,
+        help="never download: objects missing from the cache fail",
+    )
+    p.add_argument(
+        "--objaverse-count", type=int, help="a seeded random subset of N objaverse objects"
+    )
+    p.add_argument(
+        "--timeout", type=float, help="seconds without a worker reply before it is killed (600)"
+    )
+    p.add_argument(
+        "--object-timeout", type=float, help="wall-clock budget of one object, s (0 = none)"
+    )
+    p.add_argument("--retries", type=int, help="extra attempts after a worker crash or hang (1)")
+    p.add_argument(
+        "--max-failure-rate",
+        type=float,
+        help="exit 1 when more than this fraction of objects failed (1.0)",
+    )
+    p.add_argument("--max-triangles", type=int, help="pre-flight triangle budget (5000000)")
+    p.add_argument(
+        "--max-texture-pixels", type=int, help="pre-flight texture budget, pixels (268435456)"
+    )
+    p.add_argument("--blender", help="a Blender binary instead of the bpy module")
+    p.add_argument(
+        "--check-poses", action="store_true", default=None, help="COLMAP check per setting"
+    )
+    p.add_argument(
+        "--allow-mixed",
+        action="store_true",
+        default=None,
+        help="build into an OUT made with other output-shaping options (mixes settings)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def config_from_args(args: argparse.Namespace) -> BuildConfig:
+    file_values = load_toml(args.config) if args.config else {}
+    flags = {
+        k: getattr(args, k)
+        for k in (
+            "objects out demo settings_per_object views latents latents_max max_ghost_px "
+            "samples samples_total blur_method sharp_samples latent_sampling light_paths "
+            "device gpus gpus_per_task resolution "
+            "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
+            "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
+            "ray_address objaverse_dir objaverse_offline objaverse_count "
+            "blender check_poses previews allow_mixed"
+        ).split()
+    }
+    if args.levels is not None:
+        flags["levels"] = parse_levels(args.levels)
+    return make_config(file_values, flags, config_path=args.config)
+
+
+def run(args: argparse.Namespace) -> int:
+    from blurset.build import build
+
+    cfg = config_from_args(args)
+    summary = build(cfg, progress=not args.quiet)
+    n, bad = summary["objects"], summary["objects_failed"]
+    rate = bad / n if n else 0.0
+    line = (
+        f"blurset build: {summary['settings_complete']} settings complete "
+        f"({summary['settings_new']} new), {bad} of {n} objects failed ({100 * rate:.0f}%)"
+    )
+    if summary["settings_failed"]:
+        line += f", {summary['settings_failed']} settings failed QA"
+    print(f"{line} -> {cfg.out}", file=sys.stderr)
+    for f in summary["failures"][:5]:
+        where = f.get("setting") or f["uid"]
+        print(f"  {where}: {f['stage']}: {f['reason']}", file=sys.stderr)
+    if len(summary["failures"]) > 5:
+        print(f"  … see {Path(cfg.out) / 'failures.jsonl'}", file=sys.stderr)
+    if n and summary["settings_complete"] == 0:
+        return 1
+    if rate > cfg.max_failure_rate:
+        print(
+            f"blurset build: error: {100 * rate:.0f}% of objects failed, more than "
+            f"--max-failure-rate {cfg.max_failure_rate:g}",
+            file=sys.stderr,
+        )
+        return 1
+    return 0

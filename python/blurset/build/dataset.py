@@ -1,0 +1,180 @@
+"""The files a build shares across all its objects: failures.jsonl, splits.json and
+dataset.json (DESIGN §4), and the lock every process building into OUT takes to write
+them (local workers, Ray tasks and Slurm shards alike)."""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import platform
+import shutil
+import sys
+import time
+from pathlib import Path
+
+from blurset import __version__, _core, layout
+from blurset.config import BuildConfig
+from blurset.exceptions import ConfigError
+from blurset.objects import ObjectSpec
+
+DATASET_NAME = "blurset Objaverse-Blur"
+# The files every process building into OUT shares (written under build_lock).
+SHARED_FILES = ("failures.jsonl", "splits.json", "dataset.json")
+
+
+@contextlib.contextmanager
+def build_lock(out: Path):
+    """Serialize the writes shared by every process building into OUT."""
+    with open(out / ".lock", "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> None:
+    """What a killed run of these objects left behind: partial settings, scratch
+    directories, temp files of the shared writes. Other shards' objects are left alone."""
+    for o in objs:
+        shutil.rmtree(out / f".work-{o.uid}", ignore_errors=True)
+        for t in cfg.theta0s:
+            final = out / layout.setting_name(o.uid, t)
+            shutil.rmtree(layout.partial_dir(final), ignore_errors=True)
+    # Only blurset's own temp names: a user's `.notes.tmp1` in OUT is not ours to delete.
+    layout.remove_stale_temps(out, list(SHARED_FILES))
+
+
+# Options that decide where and how a build runs, not what it writes: a rerun may change
+# them freely. Every other option shapes the files, so a rerun must keep it.
+RUN_OPTIONS = frozenset(
+    "objects out demo workers threads executor ray_address shard objaverse_dir "
+    "objaverse_offline objaverse_count timeout object_timeout retries max_failure_rate "
+    "max_triangles max_texture_pixels blender check_poses previews allow_mixed "
+    "view_stride test_fraction test_objects device gpus gpus_per_task".split()
+)
+# What a recorded config without the key was built with (blurset before the option):
+# independent seeds per latent frame and fixed light paths, not today's defaults.
+BEFORE_OPTION = {"latent_sampling": "independent", "light_paths": "fixed"}
+
+
+def check_same_options(out: Path, cfg: BuildConfig) -> None:
+    """Refuse (naming the options) a rerun into OUT whose output-shaping options differ
+    from those OUT was made with, unless --allow-mixed; the first run records them in a
+    provisional dataset.json (call under build_lock)."""
+    path = out / "dataset.json"
+    now = cfg.record()
+    if not path.is_file():
+        layout.write_json(path, {"name": DATASET_NAME, "config": now, "provisional": True})
+        return
+    try:
+        was = json.loads(path.read_text())["config"]
+        if not isinstance(was, dict):
+            raise TypeError
+    except (OSError, ValueError, KeyError, TypeError):
+        raise ConfigError(
+            f"dataset.json of OUT is unreadable; move it away to rebuild: {path}"
+        ) from None
+    defaults = BuildConfig(out=cfg.out, objects=cfg.objects).record()
+    differ = [
+        k
+        for k in sorted(now)
+        if k not in RUN_OPTIONS and was.get(k, BEFORE_OPTION.get(k, defaults.get(k))) != now[k]
+    ]
+    if differ and not cfg.allow_mixed:
+        said = ", ".join(f"--{k.replace('_', '-')} {was.get(k)!r} → {now[k]!r}" for k in differ[:4])
+        raise ConfigError(
+            f"--out was built with other options ({said}{' …' if len(differ) > 4 else ''}): "
+            f"use a new --out, or --allow-mixed to mix settings: {out}"
+        )
+
+
+def append_failures(out: Path, records: list[dict]) -> None:
+    """Append failure records to failures.jsonl (call under build_lock)."""
+    with open(out / "failures.jsonl", "a+b") as f:
+        # A record torn by a kill mid-append gets its line ended first, so the next
+        # record stays whole (readers skip the torn one).
+        f.seek(0, os.SEEK_END)
+        if f.tell() > 0:
+            f.seek(-1, os.SEEK_END)
+            if f.read(1) != b"\n":
+                f.write(b"\n")
+        f.write("".join(json.dumps(r) + "\n" for r in records).encode())
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _complete_settings(out: Path) -> list[tuple[str, dict]]:
+    """(name, meta.json) of the complete settings; one whose meta.json does not read is
+    left out of splits.json and dataset.json, named on stderr (its object's next run
+    redoes it)."""
+    found = []
+    for d in layout.complete_settings(out):
+        try:
+            meta = json.loads((d / "meta.json").read_text())
+            if not isinstance(meta, dict) or not isinstance(meta.get("views"), list):
+                raise ValueError("not a setting's meta.json")
+        except (OSError, ValueError) as e:
+            print(
+                f"skipped {d.name}: unreadable meta.json ({e}): {d / 'meta.json'}", file=sys.stderr
+            )
+            continue
+        found.append((d.name, meta))
+    return found
+
+
+def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
+    """splits.json, dataset.json and failures.jsonl over what is on disk (call under
+    build_lock). failures.jsonl keeps the latest record per object (or per setting, for
+    QA failures) whose work is still not complete."""
+    complete = _complete_settings(out)
+    fpath = out / "failures.jsonl"
+    kept, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
+    layout.write_text_atomic(fpath, "".join(json.dumps(r) + "\n" for r in kept))
+    entries = [(n, m["uid"], len(m["views"])) for n, m in complete]
+    splits = _core.make_splits(
+        entries,
+        view_stride=cfg.view_stride,
+        test_fraction=cfg.test_fraction,
+        test_objects=cfg.test_objects,
+        seed=cfg.seed,
+    )
+    splits.write(out / "splits.json")
+    checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
+    # What the workers rendered on (backend, device names, Cycles kernel), once each.
+    used: list[dict] = []
+    for _, m in complete:
+        d = (m.get("render") or {}).get("device")
+        if d and d not in used:
+            used.append(d)
+    dataset = {
+        "name": DATASET_NAME,
+        "blurset_version": __version__,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "config": cfg.record(),
+        "seed": cfg.seed,
+        "levels": cfg.level_dirs,
+        "versions": {
+            "blurset": __version__,
+            "python": platform.python_version(),
+            "blender": next(
+                (m["object"].get("blender_version") for _, m in complete if m.get("object")), None
+            ),
+        },
+        "counts": {
+            "objects": len({m["uid"] for _, m in complete}),
+            "objects_failed": len({r["uid"] for r in kept}),
+            "settings": len(complete),
+            "settings_failed": sum(1 for r in kept if r.get("setting")),
+            "images": sum(len(m["views"]) * len(m["levels"]) for _, m in complete),
+        },
+        "settings": [n for n, _ in complete],
+        "render_devices": used,
+        "seconds": round(seconds, 1),
+    }
+    if checks:
+        dataset["pose_checks"] = checks
+    _core.write_dataset_json(out / "dataset.json", dataset)
+    return {"settings_complete": len(complete), "failures": kept}

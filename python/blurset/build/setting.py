@@ -1,0 +1,188 @@
+"""One setting: plan it in blurset-core, render its frames in the worker, stream them
+into accumulators, and publish the setting directory (DESIGN §2–4).
+
+The setting is written under `<setting>.partial/` and renamed into place after its
+`.complete` marker (blurset.layout), so a rerun skips complete settings and redoes
+partial ones.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from blurset import _core, layout
+from blurset.config import BuildConfig
+from blurset.exceptions import BlursetError
+from blurset.objects import ObjectSpec
+from blurset.progress import Progress
+
+
+@dataclass
+class SettingJob:
+    obj: ObjectSpec
+    index: int
+    theta0_deg: float
+
+    @property
+    def name(self) -> str:
+        return layout.setting_name(self.obj.uid, self.theta0_deg)
+
+
+class SettingFailed(BlursetError):
+    """One setting cannot be made (render QA); the object's other settings go on."""
+
+    def __init__(self, stage: str, reason: str) -> None:
+        super().__init__(reason)
+        self.stage = stage
+
+
+def frames_per_setting(cfg: BuildConfig) -> int:
+    """Renders of a setting (an upper bound with --latents auto)."""
+    return cfg.frames_per_setting
+
+
+def _object_record(obj: ObjectSpec, info: dict) -> dict[str, Any]:
+    """meta.json's `object`: the file and what the worker reported about it."""
+    keys = ("bbox_dims", "scale", "center", "n_vertices", "n_triangles", "unlit_fixed")
+    return {
+        "source": str(obj.path),
+        "sha256": info.get("sha256"),
+        **{k: info.get(k) for k in keys},
+        "blender_version": info.get("blender_version"),
+        "warnings": info.get("warnings", []),
+    }
+
+
+def render_setting(
+    job: SettingJob,
+    cfg: BuildConfig,
+    worker: Any,
+    info: dict,
+    verts: np.ndarray,
+    progress: Progress,
+) -> Path:
+    """Plan, render, accumulate and write one setting; returns its final directory."""
+    out = Path(cfg.out)
+    final = out / job.name
+    partial = layout.partial_dir(final)
+    shutil.rmtree(partial, ignore_errors=True)
+    exr_dir = partial / ".frames"
+    exr_dir.mkdir(parents=True)
+    t0 = time.time()
+    seed = _core.seed_for(cfg.seed, job.obj.uid, job.index)
+    plan = _core.plan_setting(
+        cfg,
+        uid=job.obj.uid,
+        theta0_deg=job.theta0_deg,
+        seed=seed,
+        bbox_dims=info["bbox_dims"],
+        vertices=verts,
+    )
+    n_views = plan.n_views
+    # Under sample subsets every render of the build takes a block of one Cycles sequence
+    # length, so no pixel depends on what the worker rendered before (a resume equals an
+    # uninterrupted build).
+    frames = plan.renders(exr_dir, cfg.cycles_samples)
+    keys = [(f["view"], f["level"]) for f in frames]
+    need: dict[tuple[int, str], int] = {}
+    for k in keys:
+        need[k] = need.get(k, 0) + 1
+    for d in cfg.level_dirs:
+        (partial / d / "images").mkdir(parents=True)
+    acc: dict[tuple[int, str], Any] = {}
+    res = cfg.resolution
+    qa: dict[int, Any] = {}
+
+    def on_frame(i: int, path: str) -> None:
+        key = keys[i]
+        a = acc.get(key)
+        if a is None:
+            a = acc[key] = _core.Accumulator(res, res)
+        a.add_exr(path)
+        os.unlink(path)
+        if a.count == need[key]:
+            view, level = key
+            name = layout.image_name(view, n_views)
+            a.write_png(partial / level / "images" / name, background=tuple(cfg.background))
+            if cfg.write_linear:
+                a.write_exr(partial / level / "linear" / name.replace(".png", ".exr"))
+            if level == layout.SHARP:
+                qa[view] = _core.frame_qa(a.mean())
+            del acc[key]
+        progress.frame_done()
+
+    t_plan = time.time() - t0
+    # The sharp render gets its own (larger) sample count: render it separately.
+    sharp_idx = [i for i, k in enumerate(keys) if k[1] == layout.SHARP]
+    blur_idx = [i for i, k in enumerate(keys) if k[1] != layout.SHARP]
+    t1 = time.time()
+    common = {"resolution": res, "fov_deg": cfg.fov_deg}
+    worker.render(
+        [frames[i] for i in sharp_idx],
+        samples=cfg.effective_sharp_samples,
+        on_frame=lambda j, p: on_frame(sharp_idx[j], p),
+        **common,
+    )
+    # QA before the costly blur renders: a bad sharp view fails this setting only.
+    for view in sorted(qa):
+        if qa[view].failure:
+            raise SettingFailed("qa", f"render QA: view {view} is {qa[view].failure}")
+    t_sharp = time.time() - t1
+    if blur_idx:
+        worker.render(
+            [frames[i] for i in blur_idx],
+            samples=cfg.samples,
+            on_frame=lambda j, p: on_frame(blur_idx[j], p),
+            **common,
+        )
+    t_blur = time.time() - t1 - t_sharp
+    if acc:
+        raise BlursetError(f"{len(acc)} view/level images incomplete after rendering")
+    # --latents auto / motion blur render fewer frames than the bar's per-setting bound.
+    progress.frame_done(frames_per_setting(cfg) - len(frames))
+    shutil.rmtree(exr_dir)
+    plan.write_poses(partial, cfg.level_dirs)
+    timings = {
+        "plan_s": round(t_plan, 3),
+        "sharp_s": round(t_sharp, 3),
+        "blur_s": round(t_blur, 3),
+        "load_s": info.get("load_s"),
+        "total_s": round(time.time() - t0, 3),
+        "frames": len(frames),
+    }
+    meta = {
+        "config": cfg,
+        "object": _object_record(job.obj, info),
+        "timings": timings,
+        "qa": [qa[v] for v in range(n_views)],
+    }
+    meta["light_paths"] = info.get("light_paths")
+    meta["device"] = info.get("device")
+    plan.write_meta(partial / "meta.json", **meta)
+    if cfg.check_poses:
+        plan.write_meta(partial / "meta.json", **meta, pose_check=_pose_check(partial))
+    if cfg.previews:
+        from blurset.preview import write_build_preview
+
+        write_build_preview(partial, warn=progress.write)
+    layout.publish(partial, final)
+    return final
+
+
+def _pose_check(setting_dir: Path) -> dict:
+    """The COLMAP verdict of the sharp level (DESIGN §6), compact for meta.json."""
+    from blurset.check_poses import check_setting
+
+    try:
+        rep = check_setting(setting_dir, levels=[layout.SHARP])[layout.SHARP]
+    except Exception as e:  # the check must never cost the setting itself
+        return {"verdict": f"error: {e}", "pass": False}
+    keep = ("verdict", "pass", "registered", "total", "median_rot_err_deg", "median_center_err_rel")
+    return {k: rep.get(k) for k in keep}

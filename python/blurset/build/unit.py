@@ -1,0 +1,298 @@
+"""One object: the retried, idempotent unit of work of a build (DESIGN §10, §11).
+
+Every pending setting of one object renders in one Blender worker process; a crash or
+hang is retried, a refused file is not, and any failure costs this object only
+(recorded for failures.jsonl). Complete settings are skipped and partial ones redone,
+so a retry (here, by Ray, or a rerun after a kill) is always safe.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+import socket
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from blurset import layout, objaverse_cache, preflight
+from blurset.build.setting import SettingFailed, SettingJob, render_setting
+from blurset.config import BuildConfig
+from blurset.devices import Device
+from blurset.exceptions import BlursetError
+from blurset.objects import ObjectSpec
+from blurset.progress import Progress
+from blurset.stop import STOP
+
+
+@dataclass
+class ObjectResult:
+    uid: str
+    settings: list[str] = field(default_factory=list)
+    # Failure records (failures.jsonl): the object's, or one per setting that failed QA.
+    failures: list[dict[str, Any]] = field(default_factory=list)
+    new_settings: int = 0
+
+
+class ObjectUnit:
+    """Every pending setting of one object, rendered in one worker process per attempt.
+
+    `stage` is where the current attempt is (fetch, preflight, start, load, render): a
+    failure is recorded under the stage it happened in."""
+
+    def __init__(
+        self,
+        obj: ObjectSpec,
+        cfg: BuildConfig,
+        progress: Progress,
+        device: Device = ("AUTO", None),
+    ) -> None:
+        self.obj, self.cfg, self.progress = obj, cfg, progress
+        # The Cycles backend (or AUTO) and GPU indices the worker renders on.
+        self.device = device
+        self.out = Path(cfg.out)
+        self.work = self.out / f".work-{obj.uid}"
+        self.result = ObjectResult(uid=obj.uid)
+        self.stage = "fetch"
+
+    def run(self) -> ObjectResult:
+        # One process at a time per object in OUT: two builds of the same object (a
+        # repeated command, overlapping shard lists) take turns; the second finds the
+        # first's settings complete.
+        with object_lock(self.out, self.obj.uid, self.progress.write):
+            return self._run()
+
+    def _run(self) -> ObjectResult:
+        obj, cfg, progress, result = self.obj, self.cfg, self.progress, self.result
+        jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
+        pending = [j for j in jobs if not self._reusable(self.out / j.name)]
+        result.settings = [j.name for j in jobs if j not in pending]
+        progress.skip(len(jobs) - len(pending))
+        if cfg.previews:
+            from blurset.preview import write_build_preview
+
+            # A rerun with --previews also draws the settings an earlier run finished without.
+            for name in result.settings:
+                if not (self.out / name / "preview.png").exists():
+                    write_build_preview(self.out / name, warn=progress.write)
+        shutil.rmtree(self.work, ignore_errors=True)  # a killed run's scratch: log, frames
+        if not pending:
+            return result
+        t0 = time.monotonic()
+        self.stage = "fetch"
+        try:
+            if obj.source == "objaverse":
+                objaverse(cfg).ensure(obj.uid, obj.path)
+            self.stage = "preflight"
+            preflight.check(obj.path, preflight.Budget(cfg.max_triangles, cfg.max_texture_pixels))
+        except Exception as e:
+            # Whatever a file does to the fetch or the pre-flight costs that file only.
+            if isinstance(e, objaverse_cache.FetchError | preflight.PreflightError):
+                reason = str(e)
+            else:
+                reason = f"{type(e).__name__}: {' '.join(str(e).split())[:300]}"
+            result.failures.append(failure_record(obj, self.stage, reason, t0, 1))
+            progress.object_failed(len(pending))
+            return result
+        deadline = t0 + cfg.object_timeout if cfg.object_timeout > 0 else None
+        attempt = 0
+        while pending:
+            attempt += 1
+            self.stage = "start"
+            try:
+                self._attempt(pending, deadline)
+            except Exception as e:
+                from blurset.worker_client import WorkerError
+
+                for j in pending:
+                    shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
+                if STOP.is_set():  # stopping: not this object's failure; a rerun redoes it
+                    break
+                if disk_full(self.out, e):
+                    # Not this object's fault, and every next one would fail the same way.
+                    shutil.rmtree(self.work, ignore_errors=True)
+                    raise DiskFull(f"No space left on device: {self.out}") from e
+                if isinstance(e, WorkerError) and e.transient and attempt <= cfg.retries:
+                    progress.write(f"retrying {obj.uid} (attempt {attempt + 1}) after: {e}")
+                    continue
+                if isinstance(e, BlursetError | ValueError | OSError):
+                    reason = str(e).splitlines()[0] if str(e) else repr(e)
+                else:  # a bug must cost this object only, and be visible
+                    tb = traceback.format_exc(limit=3).strip().splitlines()[-1]
+                    reason = f"{type(e).__name__}: {e} [{tb}]"
+                result.failures.append(failure_record(obj, self.stage, reason, t0, attempt))
+                progress.object_failed(len(pending))
+                break
+        shutil.rmtree(self.work, ignore_errors=True)
+        return result
+
+    def _reusable(self, setting: Path) -> bool:
+        """A complete setting made from this very file, and whole (another file may have
+        had this id in an earlier run, a file may have been damaged or deleted since):
+        anything else is redone, never passed off as this object's."""
+        if not layout.is_complete(setting):
+            return False
+        problem = layout.setting_problem(setting)
+        if problem is None:
+            made_from = json.loads((setting / "meta.json").read_text()).get("object") or {}
+            # The file's content decides (a build moved elsewhere, or a demo object made
+            # again, is still the same object); without a recorded hash, its path.
+            if made_from.get("sha256") == self.sha256() or (
+                "sha256" not in made_from and made_from.get("source") == str(self.obj.path)
+            ):
+                return True
+            problem = f"made from another file ({made_from.get('source')})"
+        self.progress.write(f"redoing {setting.name}: {problem}")
+        return False
+
+    def sha256(self) -> str | None:
+        """The object file's sha256 (once per unit); None when it cannot be read (yet)."""
+        if not hasattr(self, "_sha256"):
+            try:
+                h = hashlib.sha256()
+                with open(self.obj.path, "rb") as f:
+                    for block in iter(lambda: f.read(1 << 20), b""):
+                        h.update(block)
+                self._sha256: str | None = h.hexdigest()
+            except OSError:
+                self._sha256 = None
+        return self._sha256
+
+    def _attempt(self, pending: list[SettingJob], deadline: float | None) -> None:
+        """Load the object in a fresh worker and render the pending settings in order,
+        taking each off `pending` once it is complete or has failed QA."""
+        from blurset.worker_client import Worker
+
+        obj, cfg, progress, result, work = (
+            self.obj,
+            self.cfg,
+            self.progress,
+            self.result,
+            self.work,
+        )
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
+        t0 = time.monotonic()
+        with Worker(
+            blender=cfg.blender,
+            threads=cfg.threads,
+            timeout=cfg.timeout,
+            log_path=work / "worker.log",
+            workdir=work / "scratch",
+            deadline=deadline,
+            device=self.device[0],
+            gpus=self.device[1],
+        ) as w:
+            self.stage = "load"
+            info = w.load(obj.path, work / "vertices.npy", light_paths=cfg.light_paths)
+            info["load_s"] = round(time.monotonic() - t0, 3)
+            info["blender_version"] = w.info.get("blender_version")
+            info["sha256"] = self.sha256()
+            verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
+            self.stage = "render"
+            while pending:
+                j = pending[0]
+                t1 = time.monotonic()
+                try:
+                    render_setting(j, cfg, w, info, verts, progress)
+                except SettingFailed as e:
+                    shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
+                    rec = failure_record(obj, e.stage, str(e), t1, 1)
+                    rec["setting"] = j.name
+                    result.failures.append(rec)
+                    progress.object_failed(1)
+                else:
+                    result.settings.append(j.name)
+                    result.new_settings += 1
+                    progress.setting_done()
+                pending.pop(0)
+
+
+@contextlib.contextmanager
+def object_lock(out: Path, uid: str, say):
+    """Hold OUT/.lock-<uid> (flock) while an object is built; a process that finds it
+    held says who holds it and waits. The file is removed on release: a waiter that
+    then holds a lock on the removed file sees it is stale (another inode) and retries."""
+    path = out / f".lock-{uid}"
+    said = False
+    while True:
+        f = open(path, "a+")  # noqa: SIM115 - held across the yield
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            holder = f.read().strip() or "another process"
+            if not said:
+                say(f"waiting: {out / uid}_* is being built by {holder}")
+                said = True
+            fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            same = os.fstat(f.fileno()).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        f.close()
+    try:
+        f.seek(0)
+        f.truncate()
+        f.write(f"pid {os.getpid()} on host {socket.gethostname()}\n")
+        f.flush()
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        f.close()
+
+
+# Below this much free space an object's failure is taken for a full disk: Blender then
+# writes truncated EXRs, whose read errors do not say ENOSPC themselves.
+DISK_FULL_BYTES = 64 * 2**20
+
+
+class DiskFull(BlursetError):
+    """OUT's file system is full: the build stops (nothing half-written is kept)."""
+
+
+def disk_full(out: Path, e: BaseException) -> bool:
+    if isinstance(e, OSError) and e.errno == errno.ENOSPC:
+        return True
+    if "No space left on device" in str(e) or "os error 28" in str(e):
+        return True
+    try:
+        return shutil.disk_usage(out).free < DISK_FULL_BYTES
+    except OSError:
+        return False
+
+
+def build_object(
+    obj: ObjectSpec, cfg: BuildConfig, progress: Progress, device: Device = ("AUTO", None)
+) -> ObjectResult:
+    """One work unit: every pending setting of one object (see ObjectUnit), rendered on
+    `device` (blurset.devices)."""
+    return ObjectUnit(obj, cfg, progress, device).run()
+
+
+def failure_record(obj: ObjectSpec, stage: str, reason: str, t0: float, attempts: int) -> dict:
+    """A failures.jsonl record: uid, path, stage, reason, seconds (+ attempts, time)."""
+    return {
+        "uid": obj.uid,
+        "path": str(obj.path),
+        "stage": stage,
+        "reason": reason,
+        "seconds": round(time.monotonic() - t0, 3),
+        "attempts": attempts,
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+
+
+def objaverse(cfg: BuildConfig) -> objaverse_cache.Cache:
+    return objaverse_cache.Cache(cfg.objaverse_dir, offline=cfg.objaverse_offline)

@@ -1,0 +1,213 @@
+"""The layout of what blurset writes, in one place (DESIGN §4, §10).
+
+Every reader and writer of a build or a noise output goes through here for: the names
+of settings, level directories and gain directories; the `.complete` marker and what a
+complete setting is; the `.partial` staging directories; atomic JSON writes. A setting
+(or a noise unit) is complete only when its final directory (never a `*.partial` one)
+holds the marker, which is written last, just before the rename that publishes it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from blurset import _core
+
+MARKER: str = _core.MARKER
+PARTIAL_SUFFIX: str = _core.PARTIAL_SUFFIX
+SHARP: str = _core.SHARP
+
+
+def setting_name(uid: str, theta0_deg: float) -> str:
+    """`<uid>_<theta0>`, e.g. `chair_090`."""
+    return _core.setting_name(uid, theta0_deg)
+
+
+def theta0s(settings_per_object: int) -> list[float]:
+    """The θ0 of each of an object's settings, evenly spaced from 0°."""
+    return _core.theta0s(settings_per_object)
+
+
+def image_name(view: int, n_views: int) -> str:
+    """The image file of a view (`000.png` …): sorted file order is view order."""
+    return _core.image_name(view, n_views)
+
+
+def level_dir(level: int) -> str:
+    """Directory of a blur level (`blur_<l>`); level 0 is the sharp image."""
+    return _core.level_dir(level)
+
+
+def level_dirs(levels: list[int]) -> list[str]:
+    """`sharp` then `blur_<l>` of every blur level, in order."""
+    return _core.level_dirs(levels)
+
+
+def is_level_dir(name: str) -> bool:
+    """`sharp` or `blur_<l>` with l in 1..64 (what `blurset build` can write)."""
+    return _core.parse_level_dir(name) is not None
+
+
+def sort_level_dirs(names: list[str]) -> list[str]:
+    """Level directory names in level order (sharp first, then by number)."""
+    return _core.sort_level_dirs(names)
+
+
+def setting_levels(setting: Path) -> list[str]:
+    """The level directories a setting holds (`sharp`, `blur_1` …), in level order."""
+    return _core.setting_levels(setting)
+
+
+def gain_name(g: float) -> str:
+    """Directory name of a noise gain: gain_4, gain_2.5."""
+    return _core.gain_name(g)
+
+
+def partial_dir(final: Path) -> Path:
+    """Where a setting or noise unit is written before it is published."""
+    return Path(_core.partial_dir(final))
+
+
+def is_complete(d: Path) -> bool:
+    """A finished setting or noise unit: a final (not `*.partial`) directory with its marker."""
+    return _core.is_complete(d)
+
+
+def complete_settings(build: Path) -> list[Path]:
+    """The complete setting directories of a build, sorted by name."""
+    return [Path(build) / n for n in _core.complete_settings(build)]
+
+
+def publish(partial: Path, final: Path) -> None:
+    """Write the marker into `partial` and rename it to `final` (replacing an old one)."""
+    _core.publish(partial, final, time.strftime("%Y-%m-%dT%H:%M:%S"))
+
+
+def temp_path(path: Path) -> Path:
+    """The temp name of an atomic write of `path` (dot-prefixed, per process)."""
+    return Path(_core.temp_path(path))
+
+
+def setting_problem(setting: Path) -> str | None:
+    """What is missing or damaged in a complete setting, checked cheaply (names, sizes,
+    headers; `blurset verify` decodes everything): None when it looks whole. A rerun
+    redoes a setting with a problem instead of counting it."""
+    return _core.setting_problem(setting)
+
+
+def refuse_overlap(out: Path, inputs: list[Path], option: str = "--out") -> None:
+    """An output may not be, lie inside or contain any input: writing (or replacing with
+    --overwrite) would destroy what it reads. ConfigError names both."""
+    from blurset.exceptions import ConfigError
+
+    o = Path(out).resolve()
+    for i in inputs:
+        r = Path(i).resolve()
+        if o == r:
+            raise ConfigError(f"{option} is an input of this command: {out}")
+        if o.is_relative_to(r):
+            raise ConfigError(f"{option} lies inside the input {str(i)!r}: {out}")
+        if r.is_relative_to(o):
+            raise ConfigError(f"{option} contains the input {str(i)!r}: {out}")
+
+
+def setting_of(path: Path) -> Path | None:
+    """The build setting directory `path` lies in (a folder with meta.json whose parent
+    holds dataset.json or .lock), or None."""
+    p = Path(path).resolve()
+    for d in [p, *p.parents]:
+        if (d / "meta.json").is_file() and (
+            (d.parent / "dataset.json").is_file() or (d.parent / ".lock").exists()
+        ):
+            return d
+    return None
+
+
+def refuse_inside_settings(out: Path, option: str = "--out", allow: tuple[str, ...] = ()) -> None:
+    """Outputs of previews and statistics never go into a build's settings (they would
+    replace dataset images or add files to an LLFF folder); `allow` names the files a
+    setting may take at its top (e.g. preview.png)."""
+    from blurset.exceptions import ConfigError
+
+    o = Path(out).resolve()
+    s = setting_of(o if o.exists() else o.parent)
+    if s is None or (o.parent == s and o.name in allow):
+        return
+    raise ConfigError(f"{option} lies inside the build setting {str(s)!r}: {out}")
+
+
+def is_build_dir(path: Path) -> bool:
+    """A directory `blurset build` has written into (its lock or dataset.json)."""
+    return (path / "dataset.json").is_file() or (path / ".lock").exists()
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temps(folder: Path, names: list[str]) -> list[Path]:
+    """Remove the temp files or folders (`.<name>.tmp<pid>`) of these names whose process
+    is gone (a killed run's); a live process's and anything else are left alone."""
+    import shutil
+
+    removed: list[Path] = []
+    if not folder.is_dir():
+        return removed
+    for p in folder.iterdir():
+        parsed = _core.parse_temp_name(p.name)
+        if parsed is None or parsed[0] not in names or _pid_alive(parsed[1]):
+            continue
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+        removed.append(p)
+    return removed
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    """Write `data` to `path` through a synced temp file and a rename, so readers see the
+    old file or the new one, never a torn one, even after a crash."""
+    _core.write_atomic(path, data)
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """`write_bytes_atomic` of UTF-8 text."""
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def write_figure(path: Path, save) -> None:
+    """An image made by `save(file_object)` (PIL, matplotlib), written atomically."""
+    import io
+
+    buf = io.BytesIO()
+    save(buf)
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def write_json(path: Path, data: Any, *, indent: int = 1) -> None:
+    """JSON (no NaN/inf) written atomically."""
+    write_text_atomic(path, json.dumps(data, indent=indent, allow_nan=False) + "\n")
+
+
+def read_json(path: Path, what: str | None = None) -> Any:
+    """JSON of a file blurset wrote; InputError names the file when it is missing or bad."""
+    from blurset.exceptions import InputError
+
+    what = what or path.name
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{what} not found: {path}") from None
+    except (OSError, ValueError) as e:
+        raise InputError(f"{what} is not readable JSON ({e}): {path}") from None

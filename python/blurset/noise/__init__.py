@@ -1,0 +1,2 @@
+"""LLFF-N style noise (DESIGN §5): `cli` (the command), `scene` (one LLFF scene), `build`
+(every level of a build), `params` (gains, the σ table, noise.json)."""

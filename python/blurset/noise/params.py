@@ -1,0 +1,143 @@
+"""What every noise output shares: the gain levels, the σ table, and the one writer of
+`noise.json` (DESIGN §4, §5), used by the single-scene and the build mode alike."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from blurset import __version__, _core, layout
+from blurset.exceptions import ConfigError, InputError
+
+# The gain levels of the LLFF-N benchmark (NAN, Pearl et al. 2022).
+LLFF_N_GAINS = (1.0, 2.0, 4.0, 8.0, 16.0, 20.0)
+NoiseTable = tuple[float, float, float, float]
+
+
+def check_options(args) -> None:
+    """The options both noise modes share: frames, white level, seed."""
+    if args.frames < 1:
+        raise ConfigError(f"--frames {args.frames}: must be >= 1")
+    if not (1e-6 <= args.white_level <= 1.0):
+        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
+    if not (0 <= args.seed < 2**64):
+        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+
+
+def parse_gains(values: list[str], any_gain: bool) -> list[float]:
+    gains: list[float] = []
+    for v in values:
+        try:
+            g = float(v)
+        except ValueError:
+            raise ConfigError(f"unknown gain {v!r} (--gains): not a number") from None
+        if not (math.isfinite(g) and g > 0):
+            raise ConfigError(f"unknown gain {v!r} (--gains): gains are positive numbers")
+        if not any_gain and g not in LLFF_N_GAINS:
+            known = " ".join(f"{k:g}" for k in LLFF_N_GAINS)
+            raise ConfigError(
+                f"unknown gain {v!r} (--gains): the LLFF-N levels are {known}; "
+                "pass --any-gain for other values"
+            )
+        if g in gains:
+            raise ConfigError(f"gain {v!r} given twice (--gains)")
+        same = next((h for h in gains if layout.gain_name(h) == layout.gain_name(g)), None)
+        if same is not None:
+            raise ConfigError(
+                f"--gains {same:.17g} and {v}: both would be written to {layout.gain_name(g)}/"
+            )
+        gains.append(g)
+    return gains
+
+
+def read_kpn_levels(path: Path) -> NoiseTable:
+    """NAN's mapping from KPN's synthetic test file."""
+    if not path.is_file():
+        raise InputError(f"--kpn-levels file not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {
+                k: np.asarray(data[k], dtype=np.float64).ravel() for k in ("sig_read", "sig_shot")
+            }
+    except KeyError as e:
+        raise InputError(f"--kpn-levels file has no array {e.args[0]!r}: {path}") from None
+    except (OSError, ValueError) as e:
+        raise InputError(f"--kpn-levels file is not a readable .npz ({e}): {path}") from None
+    try:
+        return _core.noise_levels_from_kpn(arrays["sig_read"], arrays["sig_shot"])
+    except ValueError as e:
+        raise InputError(f"--kpn-levels {e}: {path}") from None
+
+
+def noise_table(kpn_levels: Path | None) -> NoiseTable:
+    """The σ(gain) table: NAN's from KPN's file when given, else blurset's default."""
+    return read_kpn_levels(kpn_levels) if kpn_levels else _core.noise_default_levels()
+
+
+def table_record(table: NoiseTable, kpn_levels: Path | None) -> dict[str, Any]:
+    """The σ table as noise.json / noise_dataset.json record it."""
+    return {
+        "source": "kpn" if kpn_levels else "blurset-default",
+        "log10_sigma_read_1": table[0],
+        "read_step_per_log2_gain": table[1],
+        "log10_sigma_shot_1": table[2],
+        "shot_step_per_log2_gain": table[3],
+    }
+
+
+def files_record(sources: list[str], names: list[str], frames: int) -> list[dict[str, Any]]:
+    """Per written image: its view, frame, the clean source it came from and its files."""
+    return [
+        {
+            "view": i,
+            "frame": k,
+            "source": sources[i],
+            "image": f"images/{names[i * frames + k]}.png",
+            "linear": f"linear/{names[i * frames + k]}.exr",
+        }
+        for i in range(len(sources))
+        for k in range(frames)
+    ]
+
+
+def noise_json(
+    *,
+    gain: float,
+    seed: int,
+    sigmas: tuple[float, float],
+    gamma: str,
+    white_balance: tuple[float, float] | None,
+    white_level: float,
+    frames: int,
+    profile: str,
+    model: str,
+    levels: dict[str, Any],
+    source: dict[str, Any],
+    rng: str,
+    files: list[dict[str, Any]],
+    **extra: Any,
+) -> dict[str, Any]:
+    """The `noise.json` of one noisy scene (one gain)."""
+    wb = white_balance
+    return {
+        "gain": int(gain) if float(gain).is_integer() else gain,
+        "seed": seed,
+        "sigma_read": sigmas[0],
+        "sigma_shot": sigmas[1],
+        "gamma": 2.2 if gamma == "2.2" else "srgb",
+        "white_balance": None if wb is None else {"red": wb[0], "blue": wb[1]},
+        "white_level": white_level,
+        "frames": frames,
+        "profile": profile,
+        "model": model,
+        **({"clean": extra.pop("clean")} if "clean" in extra else {}),
+        "levels": levels,
+        "source": source,
+        **extra,
+        "rng": rng,
+        "blurset_version": __version__,
+        "files": files,
+    }

@@ -1,0 +1,177 @@
+"""`blurset noise`: reproducible LLFF-N style noisy copies of an LLFF scene (DESIGN §5).
+
+Per gain g, OUT/gain_<g>/ is a complete LLFF scene: images/ (processed sRGB PNG),
+linear/ (float EXR of the unclipped linear noisy image, same stems),
+poses_bounds.npy (hwf of the written resolution) and noise.json. The whole OUT tree
+is written into a temporary sibling directory and renamed at the end, so OUT either
+appears complete or not at all.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from blurset import _core, layout
+from blurset.exceptions import ConfigError, InputError
+from blurset.noise.params import (
+    check_options,
+    files_record,
+    noise_json,
+    noise_table,
+    parse_gains,
+    table_record,
+)
+from blurset.stop import interruptible, remove_tree
+
+IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
+MODEL = "y' = y + sqrt(sigma_read^2 + sigma_shot^2 * y) * N(0, 1), y = white_level * decode(x) / wb"
+
+
+def list_images(image_dir: Path) -> list[Path]:
+    """Image files in the order LLFF loaders use: sorted by file name."""
+    return sorted(
+        (
+            p
+            for p in image_dir.iterdir()
+            if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")
+        ),
+        key=lambda p: p.name,
+    )
+
+
+def output_names(sources: list[Path], frames: int) -> list[str]:
+    """Stems per (view, frame), view-major, whose sorted order is that order.
+    Source stems are kept when that holds; otherwise index names are used."""
+    stems = [p.stem for p in sources]
+    if frames == 1:
+        names = stems
+    else:
+        width = max(2, len(str(frames - 1)))
+        names = [f"{s}_f{k:0{width}d}" for s in stems for k in range(frames)]
+    if len(set(names)) == len(names) and sorted(names) == names:
+        return names
+    vw = max(3, len(str(len(sources) - 1)))
+    fw = max(2, len(str(frames - 1)))
+    if frames == 1:
+        return [f"view{i:0{vw}d}" for i in range(len(sources))]
+    return [f"view{i:0{vw}d}_f{k:0{fw}d}" for i in range(len(sources)) for k in range(frames)]
+
+
+def run(args) -> int:
+    """The single-scene mode: SCENE is one LLFF scene."""
+    scene: Path = args.scene
+    out: Path = args.out
+    if args.levels is not None:
+        raise ConfigError(f"--levels applies to a build (no dataset.json in {scene})")
+    if args.source != "auto":
+        raise ConfigError(f"--source applies to a build (no dataset.json in {scene})")
+    args.gamma = args.gamma or "2.2"
+    if args.factor is not None and args.factor < 1:
+        raise ConfigError(f"--factor {args.factor}: must be >= 1")
+    check_options(args)
+    gains = parse_gains(args.gains, args.any_gain)
+
+    image_dir = scene / (f"images_{args.factor}" if args.factor else "images")
+    if not image_dir.is_dir():
+        raise InputError(f"image directory not found: {image_dir}")
+    poses_path = scene / "poses_bounds.npy"
+    if not poses_path.is_file():
+        raise InputError(f"poses_bounds.npy not found: {poses_path}")
+    rows = _core.read_poses_bounds(poses_path)
+
+    sources = list_images(image_dir)
+    if not sources:
+        raise InputError(f"no .png/.jpg images in {image_dir}")
+    if len(sources) != len(rows):
+        raise InputError(
+            f"{len(sources)} images in {image_dir} but {len(rows)} pose rows in {poses_path}"
+        )
+    if len({p.stem for p in sources}) != len(sources):
+        raise InputError(f"two images share a file stem in {image_dir}")
+    # Headers only: a size mismatch or an unreadable file fails before any pixel work.
+    sizes = {}
+    for p in sources:
+        w, h, _, _ = _core.image_info(p)
+        sizes[p] = (w, h)
+        if (w, h) != sizes[sources[0]]:
+            w0, h0 = sizes[sources[0]]
+            raise InputError(f"image size {w}x{h} differs from {w0}x{h0} of {sources[0].name}: {p}")
+    width, height = sizes[sources[0]]
+
+    levels = noise_table(args.kpn_levels)
+    wb = _core.noise_white_balance(args.seed) if args.profile == "paper" else None
+    factor = args.factor or 1
+    names = output_names(sources, args.frames)
+
+    layout.refuse_overlap(out, [scene])
+    layout.refuse_inside_settings(out)
+    if out.exists() and not args.overwrite:
+        raise ConfigError(f"--out exists (pass --overwrite to replace it): {out}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    # A killed run's temp tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
+    layout.remove_stale_temps(out.parent, [out.name])
+    tmp = layout.temp_path(out)
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        variants = []
+        for g in gains:
+            sr, ss = _core.noise_sigmas(g, levels)
+            variants.append((tmp / layout.gain_name(g), sr, ss, _core.noise_key(args.seed, g)))
+        interruptible(
+            _core.noise_write_variants,
+            sources,
+            names,
+            variants,
+            frames=args.frames,
+            gamma=args.gamma,
+            white_balance=wb,
+            white_level=args.white_level,
+        )
+        # Every frame of a view shares its pose: the rows repeat, so a burst stays a
+        # valid LLFF scene (N * frames images, N * frames rows).
+        out_rows = np.repeat(np.asarray(rows, dtype=np.float64), args.frames, axis=0)
+        out_rows[:, 4] = height
+        out_rows[:, 9] = width
+        out_rows[:, 14] = out_rows[:, 14] / factor
+        files = files_record([p.name for p in sources], names, args.frames)
+        for g, (gdir, sr, ss, _key) in zip(gains, variants, strict=True):
+            _core.write_poses_bounds(gdir / "poses_bounds.npy", out_rows)
+            doc = noise_json(
+                gain=g,
+                seed=args.seed,
+                sigmas=(sr, ss),
+                gamma=args.gamma,
+                white_balance=wb,
+                white_level=args.white_level,
+                frames=args.frames,
+                profile=args.profile,
+                model=MODEL,
+                levels={
+                    **table_record(levels, args.kpn_levels),
+                    "file": args.kpn_levels.name if args.kpn_levels else None,
+                },
+                source={
+                    "scene": scene.resolve().name,
+                    "images": image_dir.name,
+                    "factor": factor,
+                    "resolution": [width, height],
+                },
+                rng="philox4x32-10, key derive_seed(seed, [fnv1a64('noise'), gain bits]), "
+                "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
+                files=files,
+            )
+            _core.write_noise_json(gdir / "noise.json", doc)
+        if out.exists():
+            shutil.rmtree(out)
+        tmp.rename(out)
+    except BaseException:
+        remove_tree(tmp)
+        raise
+    print(
+        f"blurset noise: wrote {len(gains)} scene(s) x {len(files)} images to {out} "
+        f"({', '.join(layout.gain_name(g) for g in gains)})"
+    )
+    return 0

@@ -1,0 +1,3 @@
+//! Linear float images on disk (OpenEXR): the reader of latent frames and the writers.
+pub mod read;
+pub mod write;

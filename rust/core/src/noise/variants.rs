@@ -1,0 +1,193 @@
+//! The files of a scene's noise variants: per gain and frame, the processed PNG and
+//! the linear EXR, from 8/16-bit images or from a build's linear EXRs.
+use super::kernel::{apply_plan, Noisy, Plan};
+use super::linear::{add_noise_linear, read_linear};
+use super::model::{stream_id, NoiseModel};
+use crate::error::{Error, Result};
+use crate::image::exr::write::exr_bytes;
+use crate::image::io as image_io;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// One noise variant of a scene (one gain): where it goes and how it is made.
+#[derive(Clone, Debug)]
+pub struct Variant {
+    pub out_dir: PathBuf,
+    pub model: NoiseModel,
+    pub key: u64,
+}
+
+/// Read every source image once and write, for each variant and frame,
+/// `out_dir/images/<name>.png` and `out_dir/linear/<name>.exr`; `names` holds
+/// `sources.len() · frames` stems, view-major. All images must share one size.
+/// Files are written in place: callers make the whole tree atomic by writing into a
+/// temporary directory and renaming it.
+pub fn write_variants(
+    sources: &[PathBuf],
+    names: &[String],
+    frames: u32,
+    variants: &[Variant],
+) -> Result<()> {
+    prepare(sources, names, frames, variants)?;
+    let Some(first) = sources.first() else {
+        return Ok(());
+    };
+    let (w0, h0, _, _) = image_io::image_info(first)?;
+    // Plans depend on (variant, depth, colour layout); built once, on first use.
+    let plans: Vec<[OnceLock<Plan>; 4]> = variants.iter().map(|_| Default::default()).collect();
+    sources.par_iter().enumerate().try_for_each(|(i, path)| {
+        let img = image_io::read_image(path)?;
+        if (img.width, img.height) != (w0, h0) {
+            return Err(Error::Image {
+                reason: format!(
+                    "size {} x {} differs from {} x {} of {:?}",
+                    img.width, img.height, w0, h0, first
+                ),
+                path: path.clone(),
+            });
+        }
+        let slot = usize::from(img.samples.max_code() > 255) * 2 + usize::from(img.channels >= 3);
+        for (v, plan) in variants.iter().zip(&plans) {
+            let plan = plan[slot]
+                .get_or_init(|| Plan::new(&v.model, img.samples.max_code(), img.color_channels()));
+            for k in 0..frames {
+                let noisy = apply_plan(&img, plan, v.key, stream_id(i as u32, k))?;
+                let name = &names[i * frames as usize + k as usize];
+                write_frame(v, name, img.width, img.height, &noisy)?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// The linear-path counterpart of [`write_variants`]: read every linear EXR once
+/// (composited over `background`) and write, per variant and frame,
+/// `out_dir/images/<name>.png` (8-bit RGB) and `out_dir/linear/<name>.exr` (RGB float).
+/// Keys and streams are those of the PNG path (`stream_id(view, frame)`). All images
+/// must share one size. Files are written in place; callers make the tree atomic.
+pub fn write_variants_linear(
+    sources: &[PathBuf],
+    names: &[String],
+    frames: u32,
+    variants: &[Variant],
+    background: [f64; 3],
+) -> Result<()> {
+    prepare(sources, names, frames, variants)?;
+    let size = std::sync::OnceLock::new();
+    sources.par_iter().enumerate().try_for_each(|(i, path)| {
+        let img = read_linear(path, background)?;
+        let (w0, h0, first) = *size.get_or_init(|| (img.width, img.height, i));
+        if (img.width, img.height) != (w0, h0) {
+            return Err(Error::Image {
+                reason: format!(
+                    "size {} x {} differs from {} x {} of {:?}",
+                    img.width, img.height, w0, h0, sources[first]
+                ),
+                path: path.clone(),
+            });
+        }
+        for v in variants {
+            for k in 0..frames {
+                let noisy = add_noise_linear(&img, &v.model, v.key, stream_id(i as u32, k))?;
+                let name = &names[i * frames as usize + k as usize];
+                write_frame(v, name, img.width, img.height, &noisy)?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// Refuse a call whose names do not match its sources and frames, or whose model is
+/// invalid; then create every variant's `images/` and `linear/` directories.
+fn prepare(sources: &[PathBuf], names: &[String], frames: u32, variants: &[Variant]) -> Result<()> {
+    if frames == 0 {
+        return Err(Error::Value("frames must be at least 1".into()));
+    }
+    if names.len() != sources.len() * frames as usize {
+        return Err(Error::Shape(format!(
+            "{} output names for {} images x {frames} frames",
+            names.len(),
+            sources.len()
+        )));
+    }
+    for v in variants {
+        v.model.validate()?;
+        for sub in ["images", "linear"] {
+            let d = v.out_dir.join(sub);
+            std::fs::create_dir_all(&d).map_err(|e| Error::io("cannot create directory", &d, e))?;
+        }
+    }
+    Ok(())
+}
+
+/// One noisy frame of a variant: `images/<name>.png` and `linear/<name>.exr`.
+fn write_frame(v: &Variant, name: &str, width: u32, height: u32, noisy: &Noisy) -> Result<()> {
+    write_file(
+        &v.out_dir.join("images").join(format!("{name}.png")),
+        &image_io::png_bytes(&noisy.processed)?,
+    )?;
+    write_file(
+        &v.out_dir.join("linear").join(format!("{name}.exr")),
+        &exr_bytes(width, height, noisy.linear_channels, &noisy.linear)?,
+    )
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    std::fs::write(path, bytes).map_err(|e| Error::io("cannot write", path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::exr::read::read_exr;
+    use crate::noise::model::Gamma;
+
+    #[test]
+    fn exr_files_round_trip_through_the_writer() -> Result<()> {
+        let dir = std::env::temp_dir().join(format!("blurset-noise-linear-{}", std::process::id()));
+        let (w, h) = (8u32, 6u32);
+        let rgba: Vec<f32> = (0..w * h * 4).map(|i| (i % 13) as f32 / 13.0).collect();
+        let src = dir.join("src");
+        let paths: Vec<PathBuf> = (0..2).map(|i| src.join(format!("{i:03}.exr"))).collect();
+        for p in &paths {
+            crate::image::exr::write::write_exr(p, w, h, &rgba)?;
+        }
+        let m = NoiseModel {
+            sigma_read: 0.02,
+            sigma_shot: 0.03,
+            gamma: Gamma::Srgb,
+            white_balance: None,
+            white_level: 1.0,
+        };
+        let v = Variant {
+            out_dir: dir.join("out"),
+            model: m,
+            key: 4,
+        };
+        let names = vec!["000".to_string(), "001".to_string()];
+        write_variants_linear(&paths, &names, 1, std::slice::from_ref(&v), [1.0; 3])?;
+        let back = read_exr(&dir.join("out/linear/001.exr"))?;
+        let img = read_linear(&paths[1], [1.0; 3])?;
+        let want = add_noise_linear(&img, &m, 4, stream_id(1, 0))?;
+        let got: Vec<f32> = back
+            .rgba
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect();
+        assert_eq!(got, want.linear);
+        let png = image_io::read_image(&dir.join("out/images/000.png"))?;
+        assert_eq!((png.width, png.height, png.channels), (w, h, 3));
+        // A NaN in a source names the file.
+        let mut bad = rgba.clone();
+        bad[5] = f32::NAN;
+        crate::image::exr::write::write_exr(&paths[0], w, h, &bad)?;
+        let e = write_variants_linear(&paths, &names, 1, &[v], [1.0; 3])
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("000.exr") && e.contains("non-finite"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+}

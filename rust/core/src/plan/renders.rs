@@ -1,0 +1,206 @@
+//! The render list of a planned setting: what the Blender worker renders, in the order
+//! the driver streams the frames into accumulators (per view: sharp, then each level).
+use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
+use crate::dataset::layout::{level_dir, SHARP};
+use serde::Serialize;
+use std::path::Path;
+
+/// The camera path of one Cycles motion blur render.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Motion {
+    pub steps: u32,
+    /// OpenGL camera-to-world matrices (row-major) at t_k = k / 2^steps.
+    pub keys: Vec<[[f64; 4]; 4]>,
+}
+
+/// One render: the camera, its Cycles seed and samples, the EXR it writes, and the
+/// view and level directory it is accumulated into.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Render {
+    pub view: usize,
+    pub level: String,
+    /// OpenGL camera-to-world, row-major.
+    pub c2w: [[f64; 4]; 4],
+    pub seed: u32,
+    /// Cycles samples of this render; None: the caller's (the sharp render's own count).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub samples: Option<u32>,
+    /// Under sample subsets (issue 15): this render takes the samples [sample_offset,
+    /// sample_offset + samples) of a Cycles sequence of `sample_sequence` samples.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sample_offset: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sample_sequence: Option<u32>,
+    pub out: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motion: Option<Motion>,
+}
+
+/// The renders of one blurry image: its latent frames (average method) or its single
+/// motion blur render, writing `<prefix>_<k>.exr` / `<prefix>_mb.exr`. Under sample
+/// subsets frame k renders the block at its `sample_offset` of a sequence of `pin`
+/// samples (the build's [`crate::BuildConfig::cycles_samples`]; None: the level's own
+/// `sample_sequence`); independent frames render their own first samples.
+pub fn level_renders(
+    view: usize,
+    level: u32,
+    lp: &LevelPlan,
+    prefix: &str,
+    pin: Option<u32>,
+) -> Vec<Render> {
+    let dir = level_dir(level);
+    let subsets = lp.latent_sampling == LatentSampling::Subsets;
+    let block = |offset: u32| {
+        if subsets {
+            (Some(offset), Some(pin.unwrap_or(lp.sample_sequence)))
+        } else {
+            (None, None)
+        }
+    };
+    if let Some(mb) = &lp.motion_blur {
+        let keys: Vec<_> = mb.keys.iter().map(|k| k.c2w).collect();
+        let (sample_offset, sample_sequence) = block(0);
+        return vec![Render {
+            view,
+            level: dir,
+            c2w: keys[0],
+            seed: mb.seed,
+            samples: Some(lp.samples_per_frame),
+            sample_offset,
+            sample_sequence,
+            out: format!("{prefix}_mb.exr"),
+            motion: Some(Motion {
+                steps: mb.motion_steps,
+                keys,
+            }),
+        }];
+    }
+    lp.latent_frames
+        .iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let (sample_offset, sample_sequence) = block(f.sample_offset);
+            Render {
+                view,
+                level: dir.clone(),
+                c2w: f.c2w,
+                seed: f.seed,
+                samples: Some(lp.samples_per_frame),
+                sample_offset,
+                sample_sequence,
+                out: format!("{prefix}_{k:04}.exr"),
+                motion: None,
+            }
+        })
+        .collect()
+}
+
+impl SettingPlan {
+    /// Every render of the setting, EXRs under `exr_dir`: per view the sharp render at p
+    /// (`<view>_s.exr`), then each level's renders (`<view>_<level>_…`). `pin`
+    /// ([`crate::BuildConfig::cycles_samples`]): the sharp image renders the first samples
+    /// of a `pin`-sample sequence and the latent frames their blocks of it.
+    pub fn renders(&self, exr_dir: &Path, pin: Option<u32>) -> Vec<Render> {
+        let mut out = Vec::new();
+        for v in &self.views {
+            let i = v.index;
+            out.push(Render {
+                view: i,
+                level: SHARP.into(),
+                c2w: v.c2w,
+                seed: v.sharp_seed,
+                samples: None,
+                sample_offset: pin.map(|_| 0),
+                sample_sequence: pin,
+                out: exr_dir.join(format!("{i:04}_s.exr")).display().to_string(),
+                motion: None,
+            });
+            for (key, lp) in &v.levels {
+                let level: u32 = key.parse().unwrap_or(0);
+                let prefix = exr_dir.join(format!("{i:04}_{key}"));
+                let prefix = prefix.display().to_string();
+                out.extend(level_renders(i, level, lp, &prefix, pin));
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::config::BuildConfig;
+    use crate::plan::sampling::plan_setting;
+
+    #[test]
+    fn render_list_order_names_and_counts() -> crate::Result<()> {
+        let cfg = BuildConfig {
+            views: 2,
+            levels: vec![1, 10],
+            latents: 3,
+            ..Default::default()
+        };
+        let plan = plan_setting(&cfg.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
+        let r = plan.renders(Path::new("/x"), None);
+        assert_eq!(r.len(), cfg.frames_per_setting());
+        assert_eq!(
+            (r[0].level.as_str(), r[0].out.as_str()),
+            ("sharp", "/x/0000_s.exr")
+        );
+        // Levels in the plan's key order ("1" < "10"), frames numbered per level.
+        assert_eq!(r[1].out, "/x/0000_1_0000.exr");
+        assert_eq!(
+            (r[4].level.as_str(), r[4].out.as_str()),
+            ("blur_10", "/x/0000_10_0000.exr")
+        );
+        assert_eq!(r[7].view, 1);
+        assert!(r.iter().skip(1).take(6).all(|f| f.samples == Some(32)));
+        let mb = BuildConfig {
+            blur_method: "motion_blur".into(),
+            ..cfg
+        };
+        let plan = plan_setting(&mb.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
+        let r = plan.renders(Path::new("/x"), None);
+        assert_eq!(r.len(), 2 * 3);
+        assert!(r[1].out.ends_with("0000_1_mb.exr") && r[1].motion.is_some());
+        Ok(())
+    }
+
+    #[test]
+    fn subsets_render_blocks_of_one_pinned_sequence() -> crate::Result<()> {
+        let cfg = BuildConfig {
+            views: 1,
+            levels: vec![2],
+            latents: 7,
+            samples_total: Some(300),
+            sharp_samples: Some(200),
+            ..Default::default()
+        };
+        let plan = plan_setting(&cfg.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
+        // 7 blocks of ⌈300/7⌉ = 43 samples: the sequence is 301 > the sharp 200.
+        let pin = cfg.cycles_samples();
+        assert_eq!(pin, Some(301));
+        let r = plan.renders(Path::new("/x"), pin);
+        assert_eq!((r[0].sample_offset, r[0].sample_sequence), (Some(0), pin));
+        let offsets: Vec<_> = r[1..].iter().map(|f| f.sample_offset).collect();
+        assert_eq!(offsets, (0..7).map(|k| Some(43 * k)).collect::<Vec<_>>());
+        assert!(r[1..]
+            .iter()
+            .all(|f| f.sample_sequence == pin && f.seed == r[0].seed));
+        // Unpinned: each level its own sequence, the sharp render none.
+        let r = plan.renders(Path::new("/x"), None);
+        assert_eq!(r[0].sample_sequence, None);
+        assert!(r[1..].iter().all(|f| f.sample_sequence == Some(301)));
+        // Independent: no blocks and no pin, frame seeds of their own.
+        let ind = BuildConfig {
+            latent_sampling: "independent".into(),
+            ..cfg
+        };
+        assert_eq!(ind.cycles_samples(), None);
+        let plan = plan_setting(&ind.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
+        let r = plan.renders(Path::new("/x"), None);
+        assert!(r.iter().all(|f| f.sample_offset.is_none()));
+        assert!(r[1..].iter().all(|f| f.seed != r[0].seed));
+        Ok(())
+    }
+}
