@@ -190,3 +190,27 @@ def test_tradeoff_refuses_bad_flags_up_front(capsys, tmp_path, flags, message):
     out = tmp_path / "out"
     err = refused(capsys, out, "tradeoff", "--object", str(glb), "--out", str(out), *flags)
     assert message in err, err
+
+
+def test_an_out_built_before_sample_subsets_is_not_resumed_with_them(tmp_path):
+    """An OUT whose dataset.json predates latent_sampling and light_paths was built with
+    independent seeds and fixed bounces: resuming it with today's defaults would mix two
+    noise schemes, so it is refused, naming the option; the old scheme resumes it, and
+    run-only options (device, gpus) never count."""
+    import json
+
+    from blurset.build.dataset import check_same_options
+
+    out = tmp_path / "out"
+    out.mkdir()
+    cfg = make_config({}, {"out": str(out), "demo": True})
+    old = {k: v for k, v in cfg.record().items() if k not in ("latent_sampling", "light_paths")}
+    (out / "dataset.json").write_text(json.dumps({"name": "x", "config": old}))
+    with pytest.raises(ConfigError, match="--latent-sampling 'independent' → 'subsets'"):
+        check_same_options(out, cfg)
+    same = make_config(
+        {},
+        {"out": str(out), "demo": True, "latent_sampling": "independent",
+         "light_paths": "fixed", "device": "cpu", "gpus_per_task": 1},
+    )  # fmt: skip
+    check_same_options(out, same)

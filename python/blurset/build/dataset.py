@@ -78,13 +78,10 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
             f"dataset.json of OUT is unreadable; move it away to rebuild: {path}"
         ) from None
     defaults = BuildConfig(out=cfg.out, objects=cfg.objects).record()
-    differ = [
-        k
-        for k in sorted(now)
-        if k not in RUN_OPTIONS and was.get(k, BEFORE_OPTION.get(k, defaults.get(k))) != now[k]
-    ]
+    before = {k: was.get(k, BEFORE_OPTION.get(k, defaults.get(k))) for k in now}
+    differ = [k for k in sorted(now) if k not in RUN_OPTIONS and before[k] != now[k]]
     if differ and not cfg.allow_mixed:
-        said = ", ".join(f"--{k.replace('_', '-')} {was.get(k)!r} → {now[k]!r}" for k in differ[:4])
+        said = ", ".join(f"--{k.replace('_', '-')} {before[k]!r} → {now[k]!r}" for k in differ[:4])
         raise ConfigError(
             f"--out was built with other options ({said}{' …' if len(differ) > 4 else ''}): "
             f"use a new --out, or --allow-mixed to mix settings: {out}"
