@@ -8,7 +8,7 @@ RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pypro
 
 PYTEST := $(PY) -m pytest -q
 
-.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint fmt bench clean
+.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint fmt bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -60,6 +60,11 @@ fmt:
 
 bench: venv
 	$(PY) bench/run.py
+
+# Rendering benchmarks on the best GPU Cycles reports (refused without one):
+# bench/results_gpu.json. `bench/run.py --device cpu` runs the same on the CPU.
+bench-gpu: venv
+	$(PY) bench/run.py --device gpu
 
 clean:
 	rm -rf target $(VENV) demo_out

@@ -3,21 +3,63 @@
 Each module exposes `run() -> list[dict]`, each dict `{name, ratio, contender, baseline}`
 (plus any extra fields: medians in seconds, repeats). Ratios are measured within one run,
 baseline time / contender time, from medians of several repeats: the machines are noisy.
+
+`bench/run.py --device gpu|cpu|auto|optix|cuda|hip|oneapi|metal [bench_… …]` renders on that
+Cycles device (`gpu`: the best GPU backend; refused, with what exists, on a machine without
+one) and writes bench/results_<device>.json; without modules it runs the rendering
+benchmarks GPU_BENCHES (`make bench-gpu`).
 """
 
 from __future__ import annotations
 
 import importlib.util
 import json
+import os
 import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+GPU_BENCHES = ("bench_blur_cost", "bench_settings_per_hour")
+
+
+def pick_device(name: str) -> str:
+    """The Cycles backend for `--device NAME`, or SystemExit naming what exists."""
+    from blurset import devices
+    from blurset.exceptions import ConfigError
+
+    if name == "cpu":
+        return "CPU"
+    available = devices.probe(None)
+    gpu = [b for b in devices.GPU_BACKENDS if available.get(b)]
+    try:
+        if name == "gpu":
+            if not gpu:
+                raise ConfigError(
+                    f"--device gpu: no GPU backend in this Blender's Cycles "
+                    f"({devices.describe(available)}); run with --device cpu"
+                )
+            return gpu[0]
+        return devices.resolve(name, None, available)[0]
+    except ConfigError as e:
+        raise SystemExit(f"bench/run.py: {e}") from None
 
 
 def main() -> int:
     results = []
-    only = set(sys.argv[1:])
+    argv = sys.argv[1:]
+    out = HERE / "results.json"
+    if "--device" in argv:
+        i = argv.index("--device")
+        if i + 1 >= len(argv):
+            raise SystemExit("bench/run.py: --device needs a value (gpu, cpu, auto, optix …)")
+        name = argv[i + 1].lower()
+        del argv[i : i + 2]
+        backend = pick_device(name)
+        os.environ["BLURSET_BENCH_DEVICE"] = backend
+        print(f"rendering on {backend}", flush=True)
+        out = HERE / f"results_{name}.json"
+        argv = argv or list(GPU_BENCHES)
+    only = set(argv)
     for path in sorted(HERE.glob("bench_*.py")):
         if only and path.stem not in only:
             continue
@@ -29,7 +71,6 @@ def main() -> int:
                 f"{r['name']}: {r['ratio']:.2f}x  ({r['contender']} vs {r['baseline']})", flush=True
             )
             results.append(r)
-    out = HERE / "results.json"
     if only and out.exists():
         # A partial run (`bench/run.py bench_noise …`) replaces its own entries only.
         new = {r["name"] for r in results}

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 import tempfile
 import time
 
@@ -22,6 +23,8 @@ ROOT_NAME = "blurset_root"
 DEFAULT_EXR_CODEC = "NONE"
 EXR_CODECS = ("NONE", "ZIP", "ZIPS", "PIZ", "RLE", "PXR24", "B44", "DWAA")
 CAMERA_NAME = "blurset_camera"
+# Longest sample sequence Cycles renders (its `samples` property tops out here).
+MAX_SEQUENCE = 1 << 24
 
 # Fixed world-space lights: (elevation deg, azimuth deg, strength W/m^2, angular size deg).
 # A warm key from above, a cool fill and a rim from behind, so every side of the object
@@ -61,8 +64,9 @@ def draco_available() -> bool:
 # ----------------------------------------------------------------------------- import
 
 
-def import_glb(path: str, workdir: str, unlit_mode: str) -> tuple[list[str], bool]:
-    """Fresh factory scene + the GLB. Returns (warnings, unlit_fixed)."""
+def import_glb(path: str, workdir: str, unlit_mode: str) -> tuple[list[str], bool, dict]:
+    """Fresh factory scene + the GLB. Returns (warnings, unlit_fixed, the glTF JSON that
+    was imported: the file's, or its unlit-fixed rewrite)."""
     if not os.path.isfile(path):
         raise LoadError(f"model file not found: {path}")
     warnings: list[str] = []
@@ -111,7 +115,7 @@ def import_glb(path: str, workdir: str, unlit_mode: str) -> tuple[list[str], boo
         raise LoadError(f"glTF import failed: {msg[:300]}") from None
     if "FINISHED" not in result:
         raise LoadError(f"glTF import failed ({', '.join(sorted(result))})")
-    return warnings, unlit_fixed
+    return warnings, unlit_fixed, doc
 
 
 def _strip_non_mesh(warnings: list[str]) -> None:
@@ -292,19 +296,143 @@ def setup_scene(threads: int) -> None:
 
     c = scene.cycles
     c.device = "CPU"
-    c.use_adaptive_sampling = False  # s samples means s samples: m frames at s/m ≈ 1 at s
+    c.use_adaptive_sampling = False  # s samples means s samples (set_noise_threshold)
     c.use_denoising = False
     c.use_preview_denoising = False
     c.use_animated_seed = False
-    c.max_bounces = 6
-    c.diffuse_bounces = 2
-    c.glossy_bounces = 2
-    c.transmission_bounces = 4
-    c.volume_bounces = 0
-    c.transparent_max_bounces = 8
+    for name, value in FIXED_BOUNCES.items():
+        setattr(c, name, value)
     c.caustics_reflective = False
     c.caustics_refractive = False
     c.sample_clamp_indirect = 10.0  # fireflies would survive averaging of latent frames
+
+
+# The light paths of every object before issue 15 (`--light-paths fixed`).
+FIXED_BOUNCES = {
+    "max_bounces": 6,
+    "diffuse_bounces": 2,
+    "glossy_bounces": 2,
+    "transmission_bounces": 4,
+    "volume_bounces": 0,
+    "transparent_max_bounces": 8,
+}
+
+
+def bounces_for(needs: dict) -> dict:
+    """Cycles bounce limits for what the materials can do (glb_inspect.light_paths):
+    no transmission → no transmission bounces, no alpha blend/mask → no transparent
+    bounces, unlit (camera-only emission) everywhere → no bounce at all: the camera ray
+    sees the emission directly. Everything else keeps FIXED_BOUNCES."""
+    b = dict(FIXED_BOUNCES)
+    if not needs.get("transmission"):
+        b["transmission_bounces"] = 0
+    if not needs.get("transparency"):
+        b["transparent_max_bounces"] = 0
+    if needs.get("unlit_only"):
+        b.update(max_bounces=0, diffuse_bounces=0, glossy_bounces=0, transmission_bounces=0)
+    return b
+
+
+def set_light_paths(doc: dict, mode: str) -> dict:
+    """Apply the bounce limits of `mode` ("auto": from the imported glTF's materials;
+    "fixed": FIXED_BOUNCES); returns what meta.json records."""
+    if mode not in ("auto", "fixed"):
+        raise ValueError(f"light_paths must be auto or fixed, got {mode!r}")
+    needs = glb_inspect.light_paths(doc)
+    bounces = bounces_for(needs) if mode == "auto" else dict(FIXED_BOUNCES)
+    c = bpy.context.scene.cycles
+    for name, value in bounces.items():
+        setattr(c, name, value)
+    return {"mode": mode, **needs, "bounces": bounces}
+
+
+def set_noise_threshold(threshold: float | None) -> None:
+    """Cycles adaptive sampling: off (every pixel gets all its samples), or on with this
+    noise threshold; min samples stay Cycles' automatic choice."""
+    c = bpy.context.scene.cycles
+    if threshold is None:
+        c.use_adaptive_sampling = False
+        return
+    t = float(threshold)
+    if not (math.isfinite(t) and 0.0 < t <= 1.0):
+        raise ValueError(f"noise_threshold must be in (0, 1], got {threshold}")
+    c.use_adaptive_sampling = True
+    c.adaptive_threshold = t
+    c.adaptive_min_samples = 0
+
+
+# ----------------------------------------------------------------------------- devices
+
+# Cycles GPU backends, best first: `--device auto` takes the first one with a device.
+GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "ONEAPI", "METAL")
+
+
+def _cycles_prefs():
+    return bpy.context.preferences.addons["cycles"].preferences
+
+
+def cpu_kernel() -> str:
+    """The CPU kernel Cycles runs: it picks the widest instruction set the CPU has."""
+    import _cycles  # type: ignore[import-not-found]
+
+    info = _cycles.system_info()
+    caps = ""
+    for line in info.splitlines():
+        if "capabilities" in line:
+            caps = line.split(":", 1)[1].strip()
+    return f"CPU {caps.split()[-1]}" if caps else "CPU"
+
+
+def list_devices() -> dict:
+    """Every backend Cycles reports here with its devices, CPU last:
+    {"OPTIX": ["NVIDIA …", …], …, "CPU": ["AMD EPYC"]}."""
+    prefs = _cycles_prefs()
+    prefs.refresh_devices()
+    out: dict[str, list[str]] = {}
+    for backend in GPU_BACKENDS:
+        try:
+            devs = prefs.get_devices_for_type(backend)
+        except Exception:  # a backend this build of Blender does not know (Metal on Linux)
+            continue
+        names = [d.name for d in devs if d.type == backend]
+        if names:
+            out[backend] = names
+    cpus = [d.name for d in prefs.devices if d.type == "CPU"]
+    out["CPU"] = cpus[:1] or ["CPU"]
+    return out
+
+
+def use_device(backend: str, gpus: list[int] | None) -> dict:
+    """Render on `backend` (CPU or a GPU backend) with the devices at indices `gpus`
+    of that backend's list (None: all); AUTO takes the first of GPU_BACKENDS that has a
+    device, else the CPU. Returns {backend, devices, kernel}; a missing backend or index
+    is a ValueError naming what exists."""
+    scene = bpy.context.scene
+    if backend == "AUTO":
+        found = list_devices()
+        backend = next((b for b in GPU_BACKENDS if found.get(b)), "CPU")
+    if backend == "CPU":
+        scene.cycles.device = "CPU"
+        return {"backend": "CPU", "devices": list_devices()["CPU"], "kernel": cpu_kernel()}
+    if backend not in GPU_BACKENDS:
+        raise ValueError(f"unknown Cycles backend {backend!r}")
+    prefs = _cycles_prefs()
+    prefs.compute_device_type = backend
+    prefs.refresh_devices()
+    devs = prefs.get_devices_for_type(backend)
+    gpu = [d for d in devs if d.type == backend]
+    if not gpu:
+        raise ValueError(f"no {backend} device (Cycles reports: {list_devices()})")
+    idx = list(range(len(gpu))) if gpus is None else list(gpus)
+    bad = [i for i in idx if not 0 <= i < len(gpu)]
+    if bad:
+        raise ValueError(f"{backend} has no device {bad[0]} (it has 0..{len(gpu) - 1})")
+    for d in devs:
+        d.use = False
+    for i in idx:
+        gpu[i].use = True
+    scene.cycles.device = "GPU"
+    return {"backend": backend, "devices": [gpu[i].name for i in idx], "kernel": backend}
 
 
 # ---------------------------------------------------------------------------- render
@@ -324,16 +452,7 @@ def _render_to(path: str) -> None:
         tmp = os.path.join(d, f".blurset-{os.getpid()}.tmp.exr")
     scene.render.filepath = tmp
     bpy.ops.render.render(write_still=True)
-    if not os.path.isfile(tmp):
-        raise RuntimeError(f"Blender wrote no image for {path}")
-    try:
-        os.replace(tmp, path)
-    except OSError:  # crosses file systems (the '#' case): copy next to it, then rename
-        part = path + ".part"
-        with open(tmp, "rb") as src, open(part, "wb") as dst:
-            dst.write(src.read())
-        os.replace(part, path)
-        os.remove(tmp)
+    _move(tmp, path)  # crosses file systems in the '#' case
 
 
 def set_camera(c2w, resolution: int, fov_deg: float, samples: int) -> None:
@@ -350,7 +469,159 @@ def set_camera(c2w, resolution: int, fov_deg: float, samples: int) -> None:
     scene.render.resolution_x = scene.render.resolution_y = int(resolution)
     scene.camera.data.angle = math.radians(fov_deg)
     scene.camera.matrix_world = Matrix(m.tolist())
-    scene.cycles.samples = int(samples)
+    set_samples(int(samples))
+
+
+def set_samples(samples: int, offset: int | None = None, sequence: int | None = None) -> None:
+    """Render `samples` Cycles samples: the first ones of the seed's sequence, or with
+    `offset` the block [offset, offset + samples) of a `sequence`-sample sequence
+    (Cycles sample subsets: `samples` = the sequence, `sample_offset`,
+    `sample_subset_length`; `sample_offset` alone changes nothing)."""
+    c = bpy.context.scene.cycles
+    if samples < 1:
+        raise ValueError(f"samples must be >= 1, got {samples}")
+    if offset is None:
+        c.use_sample_subset = False
+        c.samples = int(samples)
+        return
+    seq = int(sequence if sequence is not None else offset + samples)
+    if not (0 <= offset and offset + samples <= seq <= MAX_SEQUENCE):
+        raise ValueError(
+            f"sample block [{offset}, {offset + samples}) does not fit a sequence of {seq} "
+            f"samples (at most {MAX_SEQUENCE})"
+        )
+    c.samples = seq
+    c.use_sample_subset = True
+    c.sample_offset = int(offset)
+    c.sample_subset_length = int(samples)
+
+
+def apply_frame(fr: dict, resolution: int, fov_deg: float, samples: int) -> None:
+    """Camera, samples (or sample block) and seed of one frame of a render command."""
+    set_camera(fr["c2w"], resolution, fov_deg, int(fr.get("samples", samples)))
+    set_samples(
+        int(fr.get("samples", samples)),
+        None if fr.get("sample_offset") is None else int(fr["sample_offset"]),
+        None if fr.get("sample_sequence") is None else int(fr["sample_sequence"]),
+    )
+    # Cycles takes a signed 32-bit seed; fold larger integers into that range.
+    bpy.context.scene.cycles.seed = int(fr["seed"]) % (2**31)
+
+
+def scene_is_animated() -> bool:
+    """Whether anything in the scene changes with the frame number (actions, drivers,
+    NLA): then frames must not be rendered as an animation job."""
+    for coll in (
+        bpy.data.objects,
+        bpy.data.meshes,
+        bpy.data.shape_keys,
+        bpy.data.materials,
+        bpy.data.node_groups,
+        bpy.data.cameras,
+        bpy.data.lights,
+        bpy.data.worlds,
+        bpy.data.armatures,
+    ):
+        for idb in coll:
+            trees = [idb, getattr(idb, "node_tree", None)]
+            for t in trees:
+                ad = getattr(t, "animation_data", None) if t is not None else None
+                if ad is not None and (ad.action or len(ad.drivers) or len(ad.nla_tracks)):
+                    return True
+    return False
+
+
+def render_job(frames: list[dict], resolution: int, fov_deg: float, samples: int, on_frame):
+    """Render `frames` (each as `apply_frame` takes it, with "out") as ONE animation job:
+    one render operator call, persistent data, frame k + 1 of the job set up by a
+    frame-change handler, each EXR moved to its "out" by a render-write handler, which
+    also calls on_frame(k, out, seconds) as soon as the frame is on disk. Blender's
+    per-call work (operator, render pipeline set-up, result allocation) is paid once per
+    job instead of once per frame; Cycles still starts a session per frame (its API has
+    no way to render two cameras in one session). Pixels equal `render_frame` per frame:
+    the same camera, samples and seed reach Cycles, nothing depends on the frame number
+    (the caller checks scene_is_animated). Raises the first error a handler met."""
+    scene = bpy.context.scene
+    n = len(frames)
+    if n == 0:
+        return
+    for fr in frames:  # refuse bad input before the job starts
+        apply_frame(fr, resolution, fov_deg, samples)
+    d = os.path.dirname(os.path.abspath(str(frames[0]["out"]))) or "."
+    os.makedirs(d, exist_ok=True)
+    # '#' in a directory would be read as the frame number: stage in a temp dir then.
+    stage = tempfile.mkdtemp(prefix="blurset-job-") if "#" in d else d
+    pattern = os.path.join(stage, f".blurset-{os.getpid()}-job-#########.exr")
+    r = scene.render
+    saved = (scene.frame_start, scene.frame_end, scene.frame_current, scene.frame_step)
+    saved_r = (r.filepath, r.use_overwrite, r.use_placeholder)
+    state: dict = {"error": None, "t": time.perf_counter(), "done": 0}
+
+    def k_of(sc) -> int:
+        return sc.frame_current - 1
+
+    def on_change(sc, *_):
+        k = k_of(sc)
+        if state["error"] is not None or not 0 <= k < n:
+            return
+        try:
+            apply_frame(frames[k], resolution, fov_deg, samples)
+            # Scene settings changed in a handler reach the render's copy of the scene
+            # only when the scene is tagged (the camera object tags itself).
+            sc.update_tag()
+        except Exception as e:
+            state["error"] = e
+
+    def on_write(sc, *_):
+        k = k_of(sc)
+        if state["error"] is not None or not 0 <= k < n:
+            return
+        try:
+            tmp = pattern.replace("#########", f"{k + 1:09d}")
+            out = str(frames[k]["out"])
+            _move(tmp, out)
+            now = time.perf_counter()
+            secs, state["t"] = now - state["t"], now
+            state["done"] += 1
+            on_frame(k, out, secs)
+        except Exception as e:
+            state["error"] = e
+
+    h = bpy.app.handlers
+    h.frame_change_pre.append(on_change)
+    h.render_write.append(on_write)
+    try:
+        scene.frame_start, scene.frame_end, scene.frame_step = 1, n, 1
+        r.filepath = pattern
+        r.use_overwrite, r.use_placeholder = True, False
+        scene.frame_set(1)
+        state["t"] = time.perf_counter()
+        bpy.ops.render.render(animation=True)
+    finally:
+        h.frame_change_pre.remove(on_change)
+        h.render_write.remove(on_write)
+        r.filepath, r.use_overwrite, r.use_placeholder = saved_r
+        scene.frame_start, scene.frame_end, _, scene.frame_step = saved
+        scene.frame_set(saved[2])
+        if stage != d:
+            shutil.rmtree(stage, ignore_errors=True)
+    if state["error"] is not None:
+        raise state["error"]
+    if state["done"] != n:
+        raise RuntimeError(f"Blender wrote {state['done']} of {n} frames")
+
+
+def _move(tmp: str, path: str) -> None:
+    """Rename a finished EXR into place (copy + rename across file systems)."""
+    if not os.path.isfile(tmp):
+        raise RuntimeError(f"Blender wrote no image for {path}")
+    try:
+        os.replace(tmp, path)
+    except OSError:
+        part = path + ".part"
+        shutil.copyfile(tmp, part)
+        os.replace(part, path)
+        os.remove(tmp)
 
 
 def set_exr_codec(codec: str) -> None:

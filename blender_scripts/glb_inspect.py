@@ -256,3 +256,57 @@ def fix_unlit(doc: dict, mode: str = "lit") -> tuple[dict, int]:
                 if not doc[key]:
                     del doc[key]
     return doc, fixed
+
+
+# Material extensions whose light passes through the surface (Cycles transmission paths).
+TRANSMISSION = (
+    "KHR_materials_transmission",
+    "KHR_materials_diffuse_transmission",
+    "KHR_materials_volume",
+)
+
+
+def light_paths(doc: dict) -> dict:
+    """What light transport the materials of a glTF document can produce.
+
+    `transmission`: a material transmits light (KHR_materials_transmission with a
+    non-zero factor or a texture, diffuse transmission, volume). `transparency`: a
+    material is alpha-blended or alpha-masked (glTF `alphaMode` BLEND / MASK; OPAQUE
+    materials ignore alpha, as Blender's importer does). `unlit_only`: every rendered
+    primitive uses a KHR_materials_unlit material, which Blender imports as camera-only
+    emission: nothing it shows depends on light bouncing. A primitive without a material
+    gets glTF's default (lit, opaque) material.
+    """
+    mats = doc.get("materials") or []
+
+    def transmits(m: dict) -> bool:
+        ext = m.get("extensions") or {}
+        for name in TRANSMISSION:
+            e = ext.get(name)
+            if not isinstance(e, dict):
+                continue
+            factor_key = {
+                "KHR_materials_transmission": "transmissionFactor",
+                "KHR_materials_diffuse_transmission": "diffuseTransmissionFactor",
+                "KHR_materials_volume": "thicknessFactor",
+            }[name]
+            texture_key = factor_key.replace("Factor", "Texture")
+            if float(e.get(factor_key, 0.0) or 0.0) > 0.0 or e.get(texture_key) is not None:
+                return True
+        return False
+
+    used: set[int | None] = set()
+    for mesh in doc.get("meshes") or []:
+        for prim in mesh.get("primitives") or []:
+            mi = prim.get("material")
+            used.add(mi if isinstance(mi, int) and 0 <= mi < len(mats) else None)
+    rendered = [mats[i] for i in used if i is not None]
+    return {
+        "transmission": any(transmits(m) for m in rendered),
+        "transparency": any(
+            str(m.get("alphaMode", "OPAQUE")) in ("BLEND", "MASK") for m in rendered
+        ),
+        "unlit_only": bool(used)
+        and None not in used
+        and all("KHR_materials_unlit" in (m.get("extensions") or {}) for m in rendered),
+    }

@@ -1,8 +1,13 @@
 """blurset Blender worker: one process renders one object at a time, driven over JSON lines.
 
 Start with the venv's bpy:   python blender_scripts/worker.py --threads N [--workdir D]
+                                [--device CPU|OPTIX|CUDA|HIP|ONEAPI|METAL] [--gpus 0,2]
 or a Blender binary:        blender -b --factory-startup --disable-autoexec \
                                 --python-exit-code 1 -P blender_scripts/worker.py -- --threads N
+`--probe` prints {"ok":true,"devices":{backend: [device names]},"blender":version} and exits:
+the build asks it which devices exist before it writes anything.
+`--device`/`--gpus` pick the Cycles backend and its devices (indices into that backend's
+list; default all); every object's scene renders on them.
 
 --workdir D keeps the worker's scratch files (rewritten GLBs, QA renders) under D, so a
 killed build leaves them where the next run cleans up, not in /tmp.
@@ -11,15 +16,24 @@ stdin: one JSON command per line. Replies: one JSON object per line on the proce
 original stdout, which this script takes over privately at start-up; fd 1 then points at
 stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protocol.
 
-  {"cmd":"load","glb":P,"vertices_out":NPY[,"unlit":"lit"|"emission"]}
+  {"cmd":"load","glb":P,"vertices_out":NPY[,"unlit":"lit"|"emission"]
+   [,"light_paths":"auto"|"fixed"]}
       -> {"ok":true,"bbox_dims":[..],"n_vertices":N,"n_triangles":T,"scale":s,
-          "center":[..],"warnings":[..],"unlit_fixed":b, ...} | {"ok":false,"reason":..}
-  {"cmd":"render","resolution":R,"fov_deg":F,"samples":S[,"exr_codec":"NONE"|"ZIP"|...],
+          "center":[..],"warnings":[..],"unlit_fixed":b,"light_paths":{..},
+          "device":{"backend":..,"devices":[..],"kernel":..}, ...} | {"ok":false,"reason":..}
+  {"cmd":"render","resolution":R,"fov_deg":F,"samples":S[,"exr_codec":"NONE"|"ZIP"|...]
+   [,"noise_threshold":T][,"batch":true],
    "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR[,"samples":S_i]
+              [,"sample_offset":O,"sample_sequence":Q]
               [,"motion":{"steps":n,"keys":[c2w, ...]}]}, ...]}
-      -> {"frame":i,"out":EXR,"seconds":t} per frame, then {"ok":true,"done":n}
-      A frame's "samples" overrides S; a frame with "motion" is one Cycles motion blur
-      render along its 2^n + 1 keys (blender_scene.render_motion_blur).
+      -> {"frame":i,"out":EXR,"seconds":t} per frame, then {"ok":true,"done":n,"jobs":j}
+      A frame's "samples" overrides S; with "sample_offset" it renders the samples
+      [O, O + S_i) of a Q-sample sequence (Cycles sample subsets). A frame with "motion" is
+      one Cycles motion blur render along its 2^n + 1 keys (blender_scene.render_motion_blur).
+      "noise_threshold" turns Cycles adaptive sampling on for this command (off without).
+      Runs of frames without "motion" render as one animation job each
+      (blender_scene.render_job) unless "batch" is false or the object is animated; "jobs"
+      counts the render operator calls.
   {"cmd":"quit"} -> exit 0
 
 At start-up the worker announces itself with
@@ -91,18 +105,26 @@ def one_line(e: BaseException) -> str:
     return f"{type(e).__name__}: {text}"[:500]
 
 
-def parse_args(argv: list[str]) -> tuple[int, str | None]:
-    """(--threads, --workdir) from our part of argv (after "--" under a Blender binary)."""
+def parse_args(argv: list[str]) -> dict:
+    """--threads, --workdir, --device, --gpus, --probe from our part of argv (after "--"
+    under a Blender binary)."""
     args = argv[argv.index("--") + 1 :] if "--" in argv else argv[1:]
-    threads, workdir = 0, None
+    out: dict = {"threads": 0, "workdir": None, "device": "CPU", "gpus": None, "probe": False}
     for i, a in enumerate(args):
-        if a == "--threads" and i + 1 < len(args):
-            threads = int(args[i + 1])
-        elif a.startswith("--threads="):
-            threads = int(a.split("=", 1)[1])
-        elif a == "--workdir" and i + 1 < len(args):
-            workdir = args[i + 1]
-    return threads, workdir
+        key, _, val = a.partition("=")
+        if not val and i + 1 < len(args):
+            val = args[i + 1]
+        if key == "--threads":
+            out["threads"] = int(val)
+        elif key == "--workdir":
+            out["workdir"] = val
+        elif key == "--device":
+            out["device"] = val.upper()
+        elif key == "--gpus":
+            out["gpus"] = [int(x) for x in val.split(",") if x.strip()]
+        elif key == "--probe":
+            out["probe"] = True
+    return out
 
 
 def inject_fault(glb: str) -> None:
@@ -130,9 +152,11 @@ def save_npy_atomic(path: str, arr: np.ndarray) -> None:
 
 
 class Worker:
-    def __init__(self, threads: int, workdir: str | None):
+    def __init__(self, threads: int, workdir: str | None, device: str, gpus: list[int] | None):
         self.threads = threads
+        self.device = (device, gpus)
         self.loaded = False
+        self.animated = False
         if workdir:
             os.makedirs(workdir, exist_ok=True)
         self.workdir = tempfile.mkdtemp(prefix="blurset-worker-", dir=workdir)
@@ -145,18 +169,24 @@ class Worker:
         t0 = time.perf_counter()
         inject_fault(glb)
         try:
-            warnings, unlit_fixed = blender_scene.import_glb(glb, self.workdir, unlit)
+            warnings, unlit_fixed, doc = blender_scene.import_glb(glb, self.workdir, unlit)
             info = blender_scene.normalize(warnings)
             blender_scene.setup_scene(self.threads)
+            # Preferences are reset with the factory scene: the device goes on every load.
+            device = blender_scene.use_device(*self.device)
+            light_paths = blender_scene.set_light_paths(doc, str(cmd.get("light_paths", "auto")))
         except blender_scene.LoadError as e:
             return {"ok": False, "reason": str(e)}
         save_npy_atomic(vertices_out, info.pop("vertices"))
+        self.animated = blender_scene.scene_is_animated()
         self.loaded = True
         return {
             "ok": True,
             **info,
             "warnings": warnings,
             "unlit_fixed": unlit_fixed,
+            "light_paths": light_paths,
+            "device": device,
             "seconds": time.perf_counter() - t0,
         }
 
@@ -167,9 +197,26 @@ class Worker:
         res, fov, samples = int(cmd["resolution"]), float(cmd["fov_deg"]), int(cmd["samples"])
         if "exr_codec" in cmd:
             blender_scene.set_exr_codec(str(cmd["exr_codec"]))
-        for i, fr in enumerate(frames):
-            blender_scene.set_camera(fr["c2w"], res, fov, int(fr.get("samples", samples)))
+        blender_scene.set_noise_threshold(cmd.get("noise_threshold"))
+        batch = bool(cmd.get("batch", True)) and not self.animated
+        jobs = 0
+        i = 0
+        while i < len(frames):
+            fr = frames[i]
             motion = fr.get("motion")
+            if batch and not motion:
+                j = i
+                while j < len(frames) and not frames[j].get("motion"):
+                    j += 1
+
+                def sent(k: int, out: str, secs: float, base: int = i) -> None:
+                    send({"frame": base + k, "out": out, "seconds": secs})
+
+                blender_scene.render_job(frames[i:j], res, fov, samples, sent)
+                jobs += 1
+                i = j
+                continue
+            blender_scene.apply_frame(fr, res, fov, samples)
             if motion:
                 secs = blender_scene.render_motion_blur(
                     motion["keys"], int(motion["steps"]), str(fr["out"]), int(fr["seed"])
@@ -177,21 +224,35 @@ class Worker:
             else:
                 secs = blender_scene.render_frame(str(fr["out"]), int(fr["seed"]))
             send({"frame": i, "out": str(fr["out"]), "seconds": secs})
-        return {"ok": True, "done": len(frames)}
+            jobs += 1
+            i += 1
+        return {"ok": True, "done": len(frames), "jobs": jobs}
 
     def close(self) -> None:
         shutil.rmtree(self.workdir, ignore_errors=True)
 
 
 def main() -> int:
-    worker = Worker(*parse_args(sys.argv))
+    args = parse_args(sys.argv)
     version = bpy.app.version_string
+    if args["probe"]:
+        send({"ok": True, "devices": blender_scene.list_devices(), "blender": version})
+        return 0
+    worker = Worker(args["threads"], args["workdir"], args["device"], args["gpus"])
+    try:
+        # The device is checked here, before any object: a bad one fails the start.
+        device = blender_scene.use_device(args["device"], args["gpus"])
+    except ValueError as e:
+        send({"ok": False, "reason": one_line(e)})
+        worker.close()
+        return 2
     send(
         {
             "ok": True,
             "ready": True,
             "blender": version,
             "blender_version": version,
+            "device": device,
             "pid": os.getpid(),
         }
     )

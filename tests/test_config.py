@@ -52,6 +52,13 @@ def refused(capsys, out: Path, *argv: str) -> str:
         (["--test-objects", "1.5"], "--test-objects 1.5: must be a number in [0, 1]"),
         (["--licenses", "cc-by-4"], '--licenses "cc-by-4": must be licence ids'),
         (["--licenses", ","], '--licenses ",": must be licence ids'),
+        (["--gpus", "0,0"], "--gpus [0, 0]: must be distinct integers in 0..=1023"),
+        (["--gpus", "0,x"], "--gpus: expected GPU indices like 0,2 or all, got '0,x'"),
+        (["--gpus-per-task", "-1"], "--gpus-per-task -1.0: must be a number in [0, 64]"),
+        (
+            ["--latents", "4096", "--samples", "8192"],
+            "--latent-sampling subsets: 4096 latents × 8192 samples = 33554432 samples",
+        ),
     ],
 )
 def test_flags_out_of_range_name_the_flag_value_and_range(capsys, tmp_path, flags, message):
@@ -88,6 +95,10 @@ def write(tmp_path: Path, text: str | bytes) -> Path:
         ("test-settings = 5\ntest-objects = 0.3\n", "either N random test settings"),
         ('licenses = "cc-by-nc"\n', 'licenses "cc-by-nc": must be licence ids'),
         ("licenses = [4]\n", "licenses [4]: must be licence ids"),
+        ('latent_sampling = "mixed"\n', 'latent_sampling "mixed": must be one of subsets, indep'),
+        ('light_paths = "none"\n', 'light_paths "none": must be one of auto, fixed'),
+        ('device = "tpu"\n', 'device "tpu": must be one of auto, cpu, optix, cuda, hip'),
+        ("gpus = [-1]\n", "gpus [-1]: must be distinct integers in 0..=1023"),
     ],
 )
 def test_toml_is_read_strictly_and_errors_name_the_file_and_key(capsys, tmp_path, text, message):
@@ -155,6 +166,29 @@ def test_licenses_flag_and_toml_key():
     assert make_config({}, {"out": "o", "demo": True}).licenses is None
 
 
+def test_issue_15_16_options_and_their_spellings():
+    """latent_sampling, light_paths (output-shaping) and device, gpus, gpus_per_task
+    (run-only) from flags and TOML; `--gpus 0,2` and `gpus = "all"` spellings; CUDA."""
+    cfg = make_config(
+        {"latent_sampling": "independent", "light_paths": "fixed", "gpus": "all"},
+        {"out": "o", "demo": True, "device": "CUDA", "gpus_per_task": 0.5},
+    )
+    assert (cfg.latent_sampling, cfg.light_paths) == ("independent", "fixed")
+    assert (cfg.device, cfg.gpus, cfg.gpus_per_task) == ("cuda", None, 0.5)
+    assert cfg.cycles_samples is None  # independent frames render their own samples
+    d = make_config({"gpus": [3, 1]}, {"out": "o", "demo": True, "gpus": "0,2"})
+    assert (d.gpus, d.latent_sampling, d.light_paths, d.device) == (
+        [0, 2],
+        "subsets",
+        "auto",
+        "auto",
+    )
+    # Subsets pin every render to the longest sequence (the demo: 6 × 4) or the sharp budget.
+    assert d.cycles_samples == 24
+    assert d.replace(sharp_samples=100).cycles_samples == 100
+    assert BuildConfig(latents_auto=True, latents_max=47, samples_total=100).cycles_samples == 141
+
+
 def test_toml_values_name_their_file_and_key(tmp_path):
     p = write(tmp_path, "[build]\nsettings-per-object = 0\n")
     with pytest.raises(ConfigError) as e:
@@ -172,8 +206,9 @@ def test_the_core_owns_limits_and_derived_numbers():
     assert (mb.max_latents, mb.blur_samples_total, mb.views) == (1, 64, 4)
     assert cfg.replace(latents_auto=True, latents_max=9).record()["latents"] == "auto"
     # One cap for samples, in Rust: 2^20 for per-frame, budget and sharp samples alike.
+    # (16 latents: under sample subsets one sequence of 16 × 2^20 is Cycles' most, 2^24.)
     for option in ("samples", "samples_total", "sharp_samples"):
-        BuildConfig(**{option: 2**20})
+        BuildConfig(**{option: 2**20}, latents=16)
         with pytest.raises(ValueError, match=f"{option} 1048577: must be an integer in 1..="):
             BuildConfig(**{option: 2**20 + 1})
     # Frozen, comparable and picklable (Ray sends it to its tasks).
@@ -201,3 +236,27 @@ def test_tradeoff_refuses_bad_flags_up_front(capsys, tmp_path, flags, message):
     out = tmp_path / "out"
     err = refused(capsys, out, "tradeoff", "--object", str(glb), "--out", str(out), *flags)
     assert message in err, err
+
+
+def test_an_out_built_before_sample_subsets_is_not_resumed_with_them(tmp_path):
+    """An OUT whose dataset.json predates latent_sampling and light_paths was built with
+    independent seeds and fixed bounces: resuming it with today's defaults would mix two
+    noise schemes, so it is refused, naming the option; the old scheme resumes it, and
+    run-only options (device, gpus) never count."""
+    import json
+
+    from blurset.build.dataset import check_same_options
+
+    out = tmp_path / "out"
+    out.mkdir()
+    cfg = make_config({}, {"out": str(out), "demo": True})
+    old = {k: v for k, v in cfg.record().items() if k not in ("latent_sampling", "light_paths")}
+    (out / "dataset.json").write_text(json.dumps({"name": "x", "config": old}))
+    with pytest.raises(ConfigError, match="--latent-sampling 'independent' → 'subsets'"):
+        check_same_options(out, cfg)
+    same = make_config(
+        {},
+        {"out": str(out), "demo": True, "latent_sampling": "independent",
+         "light_paths": "fixed", "device": "cpu", "gpus_per_task": 1},
+    )  # fmt: skip
+    check_same_options(out, same)

@@ -253,6 +253,18 @@ def test_tradeoff_quick_writes_csv_plot_and_a_recommendation(tmp_path, demo_glbs
     for r in cands:
         if r["sampling"] == "auto-stratified":
             assert float(r["max_gap_px"]) <= 1.0  # the 1 px ghost bound, from the plan
+    # Render error (issue 15): against a converged render of the same positions, two
+    # frames' ghosts do not count; their 2 large sample blocks carry about the sharp
+    # image's noise at the same budget.
+    for r in cands:
+        assert 10.0 < float(r["render_psnr"]) < 100.0
+        assert 10.0 < float(r["sharp_render_psnr"]) < 100.0
+        if r["method"] == "average" and int(r["latents"]) == 2:
+            assert float(r["render_psnr"]) > float(r["psnr"]) + 5.0
+            assert float(r["render_psnr"]) > float(r["sharp_render_psnr"]) - 1.0
+    sharp_by_budget = {int(r["budget"]): float(r["sharp_render_psnr"]) for r in cands}
+    assert sharp_by_budget[16] < sharp_by_budget[64]  # one sharp image per budget
+    assert len({(int(r["budget"]), r["sharp_render_psnr"]) for r in cands}) == 2
     png = Image.open(out / "tradeoff.png")
     assert png.size[0] >= 800 and png.size[1] >= 500
     assert json.loads((out / "tradeoff.json").read_text())["recommendation"]["best"]

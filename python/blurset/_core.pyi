@@ -65,6 +65,10 @@ class BuildConfig:
     def effective_sharp_samples(self) -> int:
         """Samples of the sharp render (`sharp_samples`, or the blurry image's budget)."""
     @property
+    def cycles_samples(self) -> int | None:
+        """The Cycles `samples` every render of a subsets build is pinned to (None: each
+        render its own), so a pixel never depends on what the worker rendered before it."""
+    @property
     def frames_per_setting(self) -> int:
         """Renders of one setting (an upper bound with latents auto)."""
     @property
@@ -107,6 +111,16 @@ class BuildConfig:
     def samples_total(self) -> int | None: ...
     @property
     def sharp_samples(self) -> int | None: ...
+    @property
+    def latent_sampling(self) -> str: ...
+    @property
+    def light_paths(self) -> str: ...
+    @property
+    def device(self) -> str: ...
+    @property
+    def gpus(self) -> list[int] | None: ...
+    @property
+    def gpus_per_task(self) -> float | None: ...
     @property
     def resolution(self) -> int: ...
     @property
@@ -508,12 +522,19 @@ class Plan:
     def level(self, view: int, level: int) -> dict[str, Any]:
         """One view's plan of one blur level as a dict (w_l, latents, motion_px, …)."""
     def renders(
-        self, exr_dir: str | PathLike[str], *, sharp_views: list[int] = ...
+        self,
+        exr_dir: str | PathLike[str],
+        pin: int | None = None,
+        *,
+        sharp_views: list[int] = ...,
     ) -> list[dict[str, Any]]:
         """Every render of the setting in stream order (per view: sharp, then each level),
-        as the worker takes them: {view, level, c2w, seed, samples?, out, motion?}; the
-        blur renders of `sharp_views` are left out (their levels get the sharp image)."""
-    def level_renders(self, view: int, level: int, prefix: str) -> list[dict[str, Any]]:
+        as the worker takes them: {view, level, c2w, seed, samples?, sample_offset?,
+        sample_sequence?, out, motion?}; `pin`: BuildConfig.cycles_samples; the blur
+        renders of `sharp_views` are left out (their levels get the sharp image)."""
+    def level_renders(
+        self, view: int, level: int, prefix: str, pin: int | None = None
+    ) -> list[dict[str, Any]]:
         """The renders of one blurry image (view, level), EXRs named `<prefix>_…`."""
     def write_poses(
         self,
@@ -535,10 +556,12 @@ class Plan:
         timings: dict[str, Any],
         qa: list[FrameQa],
         pose_check: dict[str, Any] | None = None,
+        light_paths: dict[str, Any] | None = None,
+        device: dict[str, Any] | None = None,
     ) -> None:
         """Write the setting's meta.json: this plan, the build config, the object as the
         worker reported it, the timings, the QA of every view and, with --check-poses, the
-        COLMAP verdict."""
+        COLMAP verdict; `light_paths` and `device` as the worker reported them."""
 
 def plan_setting(
     config: SamplingConfig | BuildConfig,

@@ -100,6 +100,20 @@ def split_test_objects(value: Any, where: str) -> dict[str, Any]:
     return {"test_objects": value}
 
 
+def parse_gpus(value: Any, where: str = "--gpus") -> Any:
+    """`0,2` → [0, 2], `all`/`` → None (every GPU of the backend); other values go to the
+    core as they are (it checks the list: distinct integers in 0..1023)."""
+    if not isinstance(value, str):
+        return value
+    text = value.strip().lower()
+    if text in ("", "all"):
+        return None
+    try:
+        return [int(x) for x in text.split(",")]
+    except ValueError:
+        raise ConfigError(f"{where}: expected GPU indices like 0,2 or all, got {value!r}") from None
+
+
 def _option(key: str, where: str) -> str:
     name = key.replace("-", "_")
     name = ALIASES.get(name, name)
@@ -143,10 +157,14 @@ def load_toml(path: Path) -> dict[str, Any]:
             raise ConfigError(f"{path}: {key!r} is given twice (as {name})")
         if name == "test_objects":
             out.update(split_test_objects(value, f"{path}: {key}"))
+            continue
+        if name == "levels":
+            value = parse_levels(value, f"{path}: {key}")
         elif name == "downsample":
-            out[name] = parse_downsample(value, f"{path}: {key}")
-        else:
-            out[name] = parse_levels(value, f"{path}: {key}") if name == "levels" else value
+            value = parse_downsample(value, f"{path}: {key}")
+        elif name == "gpus":
+            value = parse_gpus(value, f"{path}: {key}")
+        out[name] = value
     return out
 
 
@@ -183,7 +201,11 @@ def make_config(
     in_file = f"{config_path}: " if config_path else "--config: "
     given = _latents_layer(file_values, f"{in_file}latents")
     origin.update({k: f"{in_file}{k}" for k in given})
+    if isinstance(given.get("gpus"), str):
+        given["gpus"] = parse_gpus(given["gpus"], f"{in_file}gpus")
     flags = _latents_layer(flag_values, "--latents")
+    if isinstance(flags.get("gpus"), str):
+        flags["gpus"] = parse_gpus(flags["gpus"])
     origin.update({k: flag(k) for k in flags})
     if "latents_auto" in flags:
         origin["latents_auto"] = "--latents"
@@ -197,6 +219,8 @@ def make_config(
         raise ConfigError(
             f"{where}: give either N random test settings or --test-objects, not both"
         )
+    if isinstance(values.get("device"), str):  # CUDA, Cuda … name the same backend
+        values["device"] = values["device"].strip().lower()
     for name in AUTO_ONLY:
         if name in given and not values.get("latents_auto"):
             raise ConfigError(f"{flag(name)}: only used with --latents auto")

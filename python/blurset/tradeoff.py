@@ -9,12 +9,21 @@ Rust accumulator), on the same trajectory segment p → p + w_l·δ planned by b
 Writes DIR/tradeoff.csv (one row per candidate and one for the reference),
 DIR/tradeoff.json (the same plus the set-up), DIR/tradeoff.png (seconds vs PSNR, Pareto
 front) and DIR/images/*.png, and prints a short recommendation.
+
+Render error, apart from the blur model (issue 15): `render_psnr` is the PSNR of a
+candidate's blurry image against a converged render of the SAME latent positions (the
+continuous segment for motion blur), so too few positions (ghosts) do not count there;
+`sharp_render_psnr` is the PSNR of the sharp image a build with that candidate's budget
+renders (S samples on the view's seed) against a converged sharp render. Converged means
+RENDER_REFERENCE_FACTOR × the largest budget, on other seeds; a candidate's blurry image
+carries no more render noise than its sharp truth when the two columns agree.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import io
 import json
 import os
@@ -42,6 +51,8 @@ COLUMNS = (
     "seconds",
     "psnr",
     "psnr_linear",
+    "render_psnr",
+    "sharp_render_psnr",
     "cpu_seconds",
     "max_gap_px",
     "pareto",
@@ -97,6 +108,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--reference", type=str, help="reference M,S: M stratified frames of S samples each"
     )
     p.add_argument("--max-ghost-px", type=float, default=1.0, help="for the auto rows (1)")
+    p.add_argument(
+        "--latent-sampling",
+        choices=["subsets", "independent"],
+        default="subsets",
+        help="how the candidates' latent frames share samples (subsets)",
+    )
     p.add_argument("--seed", type=int, default=0, help="setting seed (0)")
     p.add_argument("--theta0-deg", type=float, default=0.0, help="base azimuth (0)")
     p.add_argument("--threads", type=int, default=0, help="Cycles threads (0 = all cores)")
@@ -170,12 +187,15 @@ def candidates(pre: Preset) -> list[Candidate]:
     return out
 
 
-def _config(pre: Preset, view: int, c: Candidate, max_ghost_px: float) -> BuildConfig:
+def _config(
+    pre: Preset, view: int, c: Candidate, max_ghost_px: float, latent_sampling: str = "subsets"
+) -> BuildConfig:
     kw: dict[str, Any] = {
         "views": view + 1,
         "levels": [pre.level],
         "resolution": pre.resolution,
         "samples_total": c.samples_total,
+        "latent_sampling": latent_sampling,
     }
     if c.method == "motion_blur":
         kw["blur_method"] = "motion_blur"
@@ -206,10 +226,14 @@ def _own_cpu() -> float:
 # The reference's frames get other Cycles seeds than the candidates' (which share the
 # plan's seeds frame by frame): render noise common to both would flatter the candidates.
 REFERENCE_SEED_SALT = 0x5BD1E995
+# Converged renders of render_psnr / sharp_render_psnr: this many times the largest
+# budget, so their own noise adds at most 1/8 of a candidate's MSE (≤ 0.5 dB), alike
+# for the blurry and the sharp column.
+RENDER_REFERENCE_FACTOR = 8
 
 
 def _render_image(
-    worker, frames: list[dict], lp: dict, res: int, fov: float, salt: int = 0
+    worker, frames: list[dict], lp: dict, res: int, fov: float, salt: int = 0, **render_kw: Any
 ) -> tuple[Any, dict]:
     """Render and accumulate one blurry image as the build does; (mean, timings)."""
     for f in frames:
@@ -223,12 +247,23 @@ def _render_image(
     pid = worker._proc.pid if worker._proc is not None else None
     c0, o0, t0 = _proc_cpu(pid), _own_cpu(), time.perf_counter()
     worker.render(
-        frames, resolution=res, fov_deg=fov, samples=lp["samples_per_frame"], on_frame=on_frame
+        frames,
+        resolution=res,
+        fov_deg=fov,
+        samples=lp["samples_per_frame"],
+        on_frame=on_frame,
+        **render_kw,
     )
     mean = acc.mean()
     seconds = time.perf_counter() - t0
     cpu = _proc_cpu(pid) - c0 + _own_cpu() - o0
     return mean, {"seconds": seconds, "cpu_seconds": cpu, "frames": len(frames)}
+
+
+def _sharp(view: dict, samples: int, work: Path) -> tuple[list[dict], dict]:
+    """The sharp render of a view at `samples`, as (frames, level) for _render_image."""
+    frame = {"c2w": view["c2w"], "seed": view["sharp_seed"], "out": str(work / "s.exr")}
+    return [frame], {"samples_per_frame": samples}
 
 
 def _save_png(mean: Any, path: Path, res: int) -> None:
@@ -282,6 +317,17 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 plan.level(args.view, pre.level),
             )
 
+        def plan_view(cfg: BuildConfig) -> dict:
+            plan = _core.plan_setting(
+                cfg,
+                uid=uid,
+                theta0_deg=args.theta0_deg,
+                seed=args.seed,
+                bbox_dims=info["bbox_dims"],
+                vertices=verts,
+            )
+            return plan.to_dict()["views"][args.view]
+
         m_ref, s_ref = pre.reference
         ref_cfg = BuildConfig(
             views=args.view + 1,
@@ -312,17 +358,49 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 "seconds": round(t_ref["seconds"], 3),
                 "psnr": "",
                 "psnr_linear": "",
+                "render_psnr": "",
+                "sharp_render_psnr": "",
                 "cpu_seconds": round(t_ref["cpu_seconds"], 3),
                 "max_gap_px": round(ref_lp["max_gap_px"], 4),
                 "pareto": "",
                 "label": f"reference m={m_ref} x {s_ref}",
             }
         )
+        scheme = args.latent_sampling
+        r_samples = RENDER_REFERENCE_FACTOR * max(pre.budgets)
+        view = plan_view(ref_cfg)
+        fov = ref_cfg.fov_deg
+
+        def psnr_of(a: Any, b: Any) -> float:
+            return float(_core.image_error(a, b, background=tuple(ref_cfg.background)).psnr)
+
+        converged: dict[tuple, Any] = {}  # the same positions, r_samples, other seeds
+        sharp_at: dict[int, float] = {}  # sharp_render_psnr per sharp budget
+        sharp_ref, _ = _render_image(
+            w, *_sharp(view, r_samples, work), pre.resolution, fov, REFERENCE_SEED_SALT
+        )
         for i, c in enumerate(cands):
-            cfg = _config(pre, args.view, c, args.max_ghost_px)
+            cfg = _config(pre, args.view, c, args.max_ghost_px, scheme)
             frames, lp = plan_level(cfg)
             mean, t = _render_image(w, frames, lp, pre.resolution, cfg.fov_deg)
             err = _core.image_error(mean, ref, background=tuple(cfg.background))
+            key = (c.method, tuple(f["t"] for f in lp["latent_frames"]))
+            if key not in converged:
+                c_ref = dataclasses.replace(c, samples_total=r_samples)
+                frames_ref, lp_ref = plan_level(
+                    _config(pre, args.view, c_ref, args.max_ghost_px, scheme)
+                )
+                assert [f["c2w"] for f in frames_ref] == [f["c2w"] for f in frames], (
+                    "a budget must not move the latent positions"
+                )
+                converged[key], _ = _render_image(
+                    w, frames_ref, lp_ref, pre.resolution, fov, REFERENCE_SEED_SALT
+                )
+            if c.samples_total not in sharp_at:
+                sharp, _ = _render_image(
+                    w, *_sharp(view, c.samples_total, work), pre.resolution, fov
+                )
+                sharp_at[c.samples_total] = psnr_of(sharp, sharp_ref)
             name = c.label.replace(" ", "_").replace("=", "")
             _save_png(mean, out / "images" / f"{name}.png", pre.resolution)
             row = {
@@ -336,6 +414,8 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 "seconds": round(t["seconds"], 3),
                 "psnr": round(err.psnr, 3),
                 "psnr_linear": round(err.psnr_linear, 3),
+                "render_psnr": round(psnr_of(mean, converged[key]), 3),
+                "sharp_render_psnr": round(sharp_at[c.samples_total], 3),
                 "cpu_seconds": round(t["cpu_seconds"], 3),
                 "max_gap_px": round(lp["max_gap_px"], 4),
                 "pareto": "",
@@ -361,6 +441,11 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         "motion_px": ref_lp["motion_px"],
         "w_l": ref_lp["w_l"],
         "reference": {"latents": m_ref, "samples_per_frame": s_ref, "sampling": "stratified"},
+        "latent_sampling": args.latent_sampling,
+        "render_reference_samples": r_samples,
+        "render_psnr": "blurry image against a converged render of its own latent positions "
+        "(render noise only); sharp_render_psnr: the sharp image at the candidate's budget "
+        "against a converged sharp render",
         "max_ghost_px": args.max_ghost_px,
         "psnr": "sRGB over a white background, peak 1, against the reference",
         "seconds": "wall clock of rendering + accumulating one blurry image (worker running)",

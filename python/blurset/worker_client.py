@@ -77,11 +77,24 @@ class ObjectTimeout(WorkerTimeout):
     transient = False
 
 
-def worker_command(blender: str | None, threads: int, workdir: Path | None = None) -> list[str]:
-    """The argv that starts a worker: the venv's bpy, or a user's Blender binary."""
-    ours = ["--threads", str(threads)]
+def worker_command(
+    blender: str | None,
+    threads: int,
+    workdir: Path | None = None,
+    device: str = "CPU",
+    gpus: list[int] | None = None,
+    probe: bool = False,
+) -> list[str]:
+    """The argv that starts a worker: the venv's bpy, or a user's Blender binary.
+    `device` is a Cycles backend (CPU, OPTIX, CUDA, HIP, ONEAPI, METAL), `gpus` indices
+    into its device list; `probe` makes it report the devices and exit."""
+    ours = ["--threads", str(threads), "--device", device]
+    if gpus is not None:
+        ours += ["--gpus", ",".join(str(g) for g in gpus)]
     if workdir is not None:
         ours += ["--workdir", str(workdir)]
+    if probe:
+        ours.append("--probe")
     script = str(WORKER_SCRIPT)
     if blender is None:
         return [sys.executable, script, *ours]
@@ -112,10 +125,13 @@ class Worker:
         log_path: Path | None = None,
         workdir: Path | None = None,
         deadline: float | None = None,
+        device: str = "CPU",
+        gpus: list[int] | None = None,
     ) -> None:
         """`timeout`: seconds without a reply before the worker counts as hung.
         `deadline`: a time.monotonic() instant after which the object's budget is spent
-        (ObjectTimeout). `workdir`: where the worker keeps its scratch files."""
+        (ObjectTimeout). `workdir`: where the worker keeps its scratch files. `device`,
+        `gpus`: the Cycles backend and device indices it renders on (blurset.devices)."""
         if not WORKER_SCRIPT.is_file():
             raise WorkerError(f"worker script not found: {WORKER_SCRIPT}")
         if timeout <= 0:
@@ -125,6 +141,8 @@ class Worker:
         self.timeout = float(timeout)
         self.deadline = deadline
         self.workdir = workdir
+        self.device = device
+        self.gpus = gpus
         self._own_log = log_path is None
         if log_path is None:
             fd, name = tempfile.mkstemp(prefix="blurset-worker-", suffix=".log")
@@ -148,7 +166,7 @@ class Worker:
         self._log = open(self.log_path, "ab")  # noqa: SIM115 - lives as long as the process
         try:
             self._proc = subprocess.Popen(
-                worker_command(self.blender, self.threads, self.workdir),
+                worker_command(self.blender, self.threads, self.workdir, self.device, self.gpus),
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=self._log,
@@ -164,6 +182,10 @@ class Worker:
         self._lines = queue.Queue(maxsize=QUEUE_LINES)
         threading.Thread(target=_pump, args=(self._proc.stdout, self._lines), daemon=True).start()
         self.info = self._receive(startup=True)
+        if not self.info.get("ok"):
+            reason = self.info.get("reason", "worker refused to start")
+            self._discard()
+            raise WorkerError(f"Blender worker: {reason}")
 
     @property
     def alive(self) -> bool:
@@ -275,9 +297,12 @@ class Worker:
 
     # -- commands -----------------------------------------------------------------------
 
-    def load(self, glb: Path, vertices_out: Path, *, unlit: str = "lit") -> dict[str, Any]:
-        """Import and normalize one GLB, then render its QA views and judge them; the
-        worker's reply (see blender_scripts/worker.py) plus `qa_coverage`, `qa_luminance`.
+    def load(
+        self, glb: Path, vertices_out: Path, *, unlit: str = "lit", light_paths: str = "auto"
+    ) -> dict[str, Any]:
+        """Import and normalize one GLB (light-path bounces from its materials, or fixed),
+        then render its QA views and judge them; the worker's reply (see
+        blender_scripts/worker.py) plus `qa_coverage`, `qa_luminance`.
 
         Raises WorkerError with a one-line reason when the object cannot be rendered
         (missing file, unsupported compression, no mesh, invisible, renders black, ...).
@@ -288,6 +313,7 @@ class Worker:
                 "glb": str(Path(glb).resolve()),
                 "vertices_out": str(Path(vertices_out).resolve()),
                 "unlit": unlit,
+                "light_paths": light_paths,
             }
         )
         reply = self._receive_in_sync()
@@ -328,13 +354,19 @@ class Worker:
         samples: int,
         on_frame: Callable[[int, str], None] | None = None,
         exr_codec: str | None = None,
-    ) -> None:
+        noise_threshold: float | None = None,
+        batch: bool = True,
+    ) -> dict[str, Any]:
         """Render frames ({"c2w": 4x4 row-major, "seed": int, "out": EXR path}) in order.
 
-        A frame may carry its own "samples", and "motion": {"steps": n, "keys": [c2w …]}
-        to be one Cycles motion blur render along 2^n + 1 camera keys.
+        A frame may carry its own "samples", a sample block ("sample_offset",
+        "sample_sequence": Cycles sample subsets), and "motion": {"steps": n, "keys":
+        [c2w …]} to be one Cycles motion blur render along 2^n + 1 camera keys.
         `on_frame(i, out)` runs as soon as frame i is on disk; the timeout applies per frame.
         `exr_codec` sets the codec of the EXRs the worker writes (its default: NONE).
+        `noise_threshold` turns on Cycles adaptive sampling. `batch` False renders every
+        frame with its own render call instead of one animation job per run of frames.
+        Returns the worker's final reply ({"done": n, "jobs": render calls}).
         """
         payload = []
         for f in frames:
@@ -345,6 +377,9 @@ class Worker:
             }
             if f.get("samples") is not None:
                 item["samples"] = int(f["samples"])
+            if f.get("sample_offset") is not None:
+                item["sample_offset"] = int(f["sample_offset"])
+                item["sample_sequence"] = int(f["sample_sequence"])
             if f.get("motion"):
                 m = f["motion"]
                 item["motion"] = {"steps": int(m["steps"]), "keys": [_matrix(k) for k in m["keys"]]}
@@ -358,6 +393,10 @@ class Worker:
         }
         if exr_codec is not None:
             msg["exr_codec"] = str(exr_codec)
+        if noise_threshold is not None:
+            msg["noise_threshold"] = float(noise_threshold)
+        if not batch:
+            msg["batch"] = False
         self._send(msg)
         while True:
             msg = self._receive_in_sync()
@@ -375,7 +414,7 @@ class Worker:
                 raise WorkerError(
                     f"render: worker reported {msg.get('done')} of {len(frames)} frames"
                 )
-            return
+            return msg
 
     def close(self) -> None:
         """Ask the worker to quit; kill it if it does not within a few seconds."""

@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from blurset import layout, publish
+from blurset import devices, layout, publish
 from blurset.build.dataset import (
     append_failures,
     build_lock,
@@ -91,9 +91,10 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # same shared path) write where the driver reads.
     cfg = cfg.replace(out=str(Path(cfg.out).resolve()))
     out = Path(cfg.out)
-    # Bad entries fail before anything is written.
+    # Bad entries and a missing device fail before anything is written.
     resolve_objects(list(cfg.objects), cache=objaverse(cfg))
     check_out(out, cfg)
+    slots = devices.plan_local(cfg) if cfg.executor == "local" else []
     out.mkdir(parents=True, exist_ok=True)
     objs = job_objects(cfg)
     with build_lock(out):
@@ -123,7 +124,7 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
         if cfg.executor == "ray":
             run_ray(objs, cfg, prog, on_result)
         else:
-            run_local(objs, cfg, prog, on_result)
+            run_local(objs, cfg, prog, on_result, slots)
     with build_lock(out):
         summary = finalize(out, cfg, time.time() - t0)
     mine = {o.uid for o in objs}

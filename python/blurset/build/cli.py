@@ -50,6 +50,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="average of latent renders (the paper; default) or one Cycles motion blur render",
     )
     p.add_argument("--sharp-samples", type=int, help="Cycles samples of the sharp image")
+    p.add_argument(
+        "--latent-sampling",
+        choices=["subsets", "independent"],
+        help="subsets: a blurry image's latent frames render the blocks of one sample "
+        "sequence on the view's seed, which the sharp image renders too (default); "
+        "independent: a seed per frame (builds before issue 15)",
+    )
+    p.add_argument(
+        "--light-paths",
+        choices=["auto", "fixed"],
+        help="bounces from the object's materials (auto, default) or the same for every object",
+    )
+    p.add_argument(
+        "--device",
+        choices=["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"],
+        help="Cycles device; auto: the best backend Cycles reports "
+        "(OptiX > CUDA > HIP > oneAPI > Metal > CPU)",
+    )
+    p.add_argument("--gpus", help="GPU indices of the backend, e.g. 0,2 (default: all)")
+    p.add_argument(
+        "--gpus-per-task", type=float, help="GPUs each Ray task reserves (1 with a GPU device)"
+    )
     p.add_argument("--resolution", type=int, help="image side in pixels, square (512)")
     p.add_argument("--seed", type=int, help="build seed (0)")
     p.add_argument("--fov-deg", type=float, help="field of view in degrees (40)")
@@ -157,7 +179,8 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
         k: getattr(args, k)
         for k in (
             "objects out demo settings_per_object views latents latents_max max_ghost_px "
-            "samples samples_total blur_method sharp_samples resolution "
+            "samples samples_total blur_method sharp_samples latent_sampling light_paths "
+            "device gpus gpus_per_task resolution "
             "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "ray_address objaverse_dir objaverse_offline objaverse_count "

@@ -53,10 +53,17 @@ RUN_OPTIONS = frozenset(
     "objects out demo workers threads executor ray_address shard objaverse_dir "
     "objaverse_offline objaverse_count timeout object_timeout retries max_failure_rate "
     "max_triangles max_texture_pixels blender check_poses previews allow_mixed "
-    "test_fraction test_objects test_settings".split()
+    "test_fraction test_objects test_settings device gpus gpus_per_task".split()
 )
-# What a build made before an option existed did: its dataset.json lacks the key.
-LEGACY = {"blurry_test_views": True, "downsample": []}
+# What a recorded config without the key was built with (blurset before the option),
+# not today's defaults: blurry test views, no images_<f>/, independent seeds per latent
+# frame, fixed light paths.
+BEFORE_OPTION = {
+    "blurry_test_views": True,
+    "downsample": [],
+    "latent_sampling": "independent",
+    "light_paths": "fixed",
+}
 
 
 def check_same_options(out: Path, cfg: BuildConfig) -> None:
@@ -77,15 +84,10 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
             f"dataset.json of OUT is unreadable; move it away to rebuild: {path}"
         ) from None
     defaults = BuildConfig(out=cfg.out, objects=cfg.objects).record()
-    differ = [
-        k
-        for k in sorted(now)
-        if k not in RUN_OPTIONS and was.get(k, LEGACY.get(k, defaults.get(k))) != now[k]
-    ]
+    before = {k: was.get(k, BEFORE_OPTION.get(k, defaults.get(k))) for k in now}
+    differ = [k for k in sorted(now) if k not in RUN_OPTIONS and before[k] != now[k]]
     if differ and not cfg.allow_mixed:
-        said = ", ".join(
-            f"{flag(k)} {was.get(k, LEGACY.get(k))!r} → {now[k]!r}" for k in differ[:4]
-        )
+        said = ", ".join(f"{flag(k)} {before[k]!r} → {now[k]!r}" for k in differ[:4])
         raise ConfigError(
             f"--out was built with other options ({said}{' …' if len(differ) > 4 else ''}): "
             f"use a new --out, or --allow-mixed to mix settings: {out}"
@@ -146,6 +148,12 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     )
     splits.write(out / "splits.json")
     checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
+    # What the workers rendered on (backend, device names, Cycles kernel), once each.
+    used: list[dict] = []
+    for _, m in complete:
+        d = (m.get("render") or {}).get("device")
+        if d and d not in used:
+            used.append(d)
     dataset = {
         "name": DATASET_NAME,
         "blurset_version": __version__,
@@ -168,6 +176,7 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
             "images": sum(len(m["views"]) * len(m["levels"]) for _, m in complete),
         },
         "settings": [n for n, _ in complete],
+        "render_devices": used,
         "seconds": round(seconds, 1),
     }
     if checks:

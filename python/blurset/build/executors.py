@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import os
+import queue
 from collections.abc import Callable
 
+from blurset import devices
 from blurset.build.unit import ObjectResult, build_object
 from blurset.config import BuildConfig
+from blurset.devices import Device
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
 from blurset.progress import Progress
@@ -19,15 +22,33 @@ OnResult = Callable[[ObjectResult], None]
 
 
 def run_local(
-    objs: list[ObjectSpec], cfg: BuildConfig, progress: Progress, on_result: OnResult
+    objs: list[ObjectSpec],
+    cfg: BuildConfig,
+    progress: Progress,
+    on_result: OnResult,
+    slots: list[Device] | None = None,
 ) -> None:
+    """`slots`: the device of each worker (blurset.devices.plan_local); an object takes
+    a free slot, so with GPUs worker i stays pinned to its device."""
+    slots = slots or [("AUTO", None)] * cfg.workers
     if cfg.workers == 1:
         for o in objs:
-            on_result(build_object(o, cfg, progress))
+            on_result(build_object(o, cfg, progress, slots[0]))
         return
+    free: queue.Queue[Device] = queue.Queue()
+    for s in slots:
+        free.put(s)
+
+    def unit(o: ObjectSpec) -> ObjectResult:
+        slot = free.get()
+        try:
+            return build_object(o, cfg, progress, slot)
+        finally:
+            free.put(slot)
+
     pool = cf.ThreadPoolExecutor(cfg.workers)
     try:
-        for fut in cf.as_completed([pool.submit(build_object, o, cfg, progress) for o in objs]):
+        for fut in cf.as_completed([pool.submit(unit, o) for o in objs]):
             on_result(fut.result())
     except BaseException:
         # Ctrl-C / SIGTERM (or a bug): queued objects never start, running ones lose
@@ -63,7 +84,8 @@ def run_ray(
         except (ConnectionError, RuntimeError, ValueError) as e:
             raise BlursetError(f"--ray-address {cfg.ray_address}: {_first_line(e)}") from None
     try:
-        remote = ray.remote(num_cpus=max(1, cfg.threads), max_retries=2)(_ray_unit)
+        gpus = devices.ray_gpus_per_task(cfg, ray.cluster_resources().get("GPU", 0))
+        remote = ray.remote(num_cpus=max(1, cfg.threads), num_gpus=gpus, max_retries=2)(_ray_unit)
         pending: list = []
         pending = [remote.remote(o, cfg) for o in objs]
         while pending:
@@ -93,4 +115,4 @@ def _first_line(e: BaseException) -> str:
 
 
 def _ray_unit(obj: ObjectSpec, cfg: BuildConfig) -> ObjectResult:
-    return build_object(obj, cfg, Progress(0, enabled=False))
+    return build_object(obj, cfg, Progress(0, enabled=False), devices.for_ray(cfg))

@@ -102,7 +102,10 @@ def render_setting(
     )
     n_views = plan.n_views
     sharp = cfg.sharp_views(n_views)
-    frames = plan.renders(exr_dir, sharp_views=sharp)
+    # Under sample subsets every render of the build takes a block of one Cycles sequence
+    # length, so no pixel depends on what the worker rendered before (a resume equals an
+    # uninterrupted build).
+    frames = plan.renders(exr_dir, cfg.cycles_samples, sharp_views=sharp)
     keys = [(f["view"], f["level"]) for f in frames]
     need: dict[tuple[int, str], int] = {}
     for k in keys:
@@ -186,6 +189,8 @@ def render_setting(
         "timings": timings,
         "qa": [qa[v] for v in range(n_views)],
     }
+    meta["light_paths"] = info.get("light_paths")
+    meta["device"] = info.get("device")
     plan.write_meta(partial / "meta.json", **meta)
     if cfg.check_poses:
         plan.write_meta(partial / "meta.json", **meta, pose_check=_pose_check(partial))

@@ -26,6 +26,7 @@ import numpy as np
 from blurset import _core, attribution, layout, objaverse_cache, preflight
 from blurset.build.setting import SettingFailed, SettingJob, render_setting
 from blurset.config import BuildConfig
+from blurset.devices import Device
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
 from blurset.progress import Progress
@@ -49,8 +50,16 @@ class ObjectUnit:
     `stage` is where the current attempt is (fetch, preflight, start, load, render): a
     failure is recorded under the stage it happened in."""
 
-    def __init__(self, obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> None:
+    def __init__(
+        self,
+        obj: ObjectSpec,
+        cfg: BuildConfig,
+        progress: Progress,
+        device: Device = ("AUTO", None),
+    ) -> None:
         self.obj, self.cfg, self.progress = obj, cfg, progress
+        # The Cycles backend (or AUTO) and GPU indices the worker renders on.
+        self.device = device
         self.out = Path(cfg.out)
         self.work = self.out / f".work-{obj.uid}"
         self.result = ObjectResult(
@@ -239,9 +248,11 @@ class ObjectUnit:
             log_path=work / "worker.log",
             workdir=work / "scratch",
             deadline=deadline,
+            device=self.device[0],
+            gpus=self.device[1],
         ) as w:
             self.stage = "load"
-            info = w.load(obj.path, work / "vertices.npy")
+            info = w.load(obj.path, work / "vertices.npy", light_paths=cfg.light_paths)
             info["load_s"] = round(time.monotonic() - t0, 3)
             info["provenance"] = self.provenance
             info["blender_version"] = w.info.get("blender_version")
@@ -325,9 +336,12 @@ def disk_full(out: Path, e: BaseException) -> bool:
         return False
 
 
-def build_object(obj: ObjectSpec, cfg: BuildConfig, progress: Progress) -> ObjectResult:
-    """One work unit: every pending setting of one object (see ObjectUnit)."""
-    return ObjectUnit(obj, cfg, progress).run()
+def build_object(
+    obj: ObjectSpec, cfg: BuildConfig, progress: Progress, device: Device = ("AUTO", None)
+) -> ObjectResult:
+    """One work unit: every pending setting of one object (see ObjectUnit), rendered on
+    `device` (blurset.devices)."""
+    return ObjectUnit(obj, cfg, progress, device).run()
 
 
 def failure_record(obj: ObjectSpec, stage: str, reason: str, t0: float, attempts: int) -> dict:

@@ -109,28 +109,32 @@ impl Plan {
     }
 
     /// Every render of the setting in stream order (per view: sharp, then each level),
-    /// as the worker takes them: {view, level, c2w, seed, samples?, out, motion?}.
-    /// The blur renders of `sharp_views` are left out (their levels get the sharp image).
-    #[pyo3(signature = (exr_dir, *, sharp_views = Vec::new()))]
+    /// as the worker takes them: {view, level, c2w, seed, samples?, sample_offset?,
+    /// sample_sequence?, out, motion?}; `pin`: BuildConfig.cycles_samples. The blur
+    /// renders of `sharp_views` are left out (their levels get the sharp image).
+    #[pyo3(signature = (exr_dir, pin = None, *, sharp_views = Vec::new()))]
     fn renders<'py>(
         &self,
         py: Python<'py>,
         exr_dir: PathBuf,
+        pin: Option<u32>,
         sharp_views: Vec<usize>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        to_py(py, &self.0.renders_except(&exr_dir, &sharp_views))
+        to_py(py, &self.0.renders_except(&exr_dir, &sharp_views, pin))
     }
 
     /// The renders of one blurry image (view, level), EXRs named `<prefix>_…`.
+    #[pyo3(signature = (view, level, prefix, pin = None))]
     fn level_renders<'py>(
         &self,
         py: Python<'py>,
         view: usize,
         level: u32,
         prefix: &str,
+        pin: Option<u32>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let lp = self.level_plan(view, level)?;
-        to_py(py, &core::level_renders(view, level, lp, prefix))
+        to_py(py, &core::level_renders(view, level, lp, prefix, pin))
     }
 
     /// Write `<level>/poses_bounds.npy` and `<level>/transforms.json` for each level dir
@@ -158,8 +162,9 @@ impl Plan {
 
     /// Write the setting's meta.json: this plan, the build config, the object as the
     /// worker reported it (dict), the timings (dict), the QA of every view and, with
-    /// --check-poses, the COLMAP verdict (dict).
-    #[pyo3(signature = (path, *, config, object, timings, qa, pose_check = None))]
+    /// --check-poses, the COLMAP verdict (dict); `light_paths` and `device` as the worker
+    /// reported them (dicts).
+    #[pyo3(signature = (path, *, config, object, timings, qa, pose_check = None, light_paths = None, device = None))]
     #[allow(clippy::too_many_arguments)] // keyword arguments of one Python call
     fn write_meta(
         &self,
@@ -170,6 +175,8 @@ impl Plan {
         timings: &Bound<'_, PyAny>,
         qa: Vec<PyRef<'_, FrameQa>>,
         pose_check: Option<&Bound<'_, PyAny>>,
+        light_paths: Option<&Bound<'_, PyAny>>,
+        device: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
         let object: core::ObjectRecord = from_py("object", object)?;
         let timings: core::Timings = from_py("timings", timings)?;
@@ -179,6 +186,13 @@ impl Plan {
         meta.pose_check = pose_check
             .map(|p| from_py::<serde_json::Value>("pose_check", p))
             .transpose()?;
+        let json = |what: &str, v: Option<&Bound<'_, PyAny>>| {
+            v.filter(|x| !x.is_none())
+                .map(|x| from_py::<serde_json::Value>(what, x))
+                .transpose()
+        };
+        meta.render.light_paths = json("light_paths", light_paths)?;
+        meta.render.device = json("device", device)?;
         crate::run_detached(py, || meta.write(&path))
     }
 }

@@ -67,6 +67,20 @@ pub struct RenderRecord {
     /// A number, or "auto".
     pub latents: serde_json::Value,
     pub sharp_samples: u64,
+    /// How a blurry image's latent frames share Cycles samples (issue 15): `subsets` or
+    /// `independent`, in words in `latent_sampling_is`. Per level: `sample_sequence`;
+    /// per latent frame: `seed` and `sample_offset`.
+    pub latent_sampling: String,
+    pub latent_sampling_is: String,
+    /// The Cycles `samples` of every render under subsets (`BuildConfig::cycles_samples`).
+    pub cycles_samples: Option<u32>,
+    /// Cycles adaptive sampling stays off: with it the sharp image stops early while the
+    /// sample blocks do not, and the pair loses its noise parity (issue 15).
+    pub adaptive_sampling: bool,
+    /// Light-path bounces the worker chose from the object's materials (or fixed).
+    pub light_paths: Option<serde_json::Value>,
+    /// What the worker rendered on: backend, device names, Cycles kernel.
+    pub device: Option<serde_json::Value>,
     pub exr_codec: String,
     pub background: [f64; 3],
     pub alpha: String,
@@ -91,6 +105,20 @@ impl RenderRecord {
                 cfg.latents.into()
             },
             sharp_samples: cfg.effective_sharp_samples(),
+            latent_sampling: cfg.latent_sampling.clone(),
+            latent_sampling_is: if cfg.latent_sampling == "subsets" {
+                "latent frame k of a level renders the Cycles samples [sample_offset, \
+                 sample_offset + samples_per_frame) of one sequence on the view's sharp_seed; \
+                 the sharp image renders its first sharp_samples; every render is a block of \
+                 a cycles_samples-sample Cycles sequence"
+            } else {
+                "every latent frame renders the first samples_per_frame samples of its own seed"
+            }
+            .into(),
+            cycles_samples: cfg.cycles_samples(),
+            adaptive_sampling: false,
+            light_paths: None,
+            device: None,
             exr_codec: "NONE (intermediate frames, deleted after accumulation)".into(),
             background: cfg.background,
             alpha: "premultiplied, averaged with colour, composited over background".into(),
@@ -108,6 +136,8 @@ pub struct MetaLatent {
     pub phi_deg: f64,
     pub theta_deg: f64,
     pub seed: u32,
+    /// First sample of the frame's block in its level's sample_sequence (0: independent).
+    pub sample_offset: u32,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -129,6 +159,7 @@ fn meta_level(lp: &LevelPlan) -> MetaLevel {
             phi_deg: f.phi_deg,
             theta_deg: f.theta_deg,
             seed: f.seed,
+            sample_offset: f.sample_offset,
         },
         |k| MetaKey {
             t: k.t,

@@ -43,6 +43,10 @@ pub struct DatasetDoc {
     pub versions: Versions,
     pub counts: DatasetCounts,
     pub settings: Vec<String>,
+    /// What the workers rendered on (meta.json `render.device`: backend, device names,
+    /// Cycles kernel), each once.
+    #[serde(default)]
+    pub render_devices: Vec<serde_json::Value>,
     pub seconds: f64,
     /// The COLMAP verdict per setting, when the build checked poses.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -5,7 +5,9 @@
 //! A value is checked against its field's [`Spec`]; an error names the option, the value
 //! and the range (`views -1: must be an integer in 1..=4096`), never a parser position.
 //! The sampling options form the [`SamplingConfig`] of every setting's plan.
-use super::sampling::{BlurMethod, LatentPositions, SamplingConfig, MAX_COUNT, MAX_SAMPLES};
+use super::sampling::{
+    BlurMethod, LatentPositions, LatentSampling, SamplingConfig, MAX_COUNT, MAX_SAMPLES,
+};
 use super::weights::Guards;
 use crate::dataset::layout::{self, MAX_LEVEL};
 use crate::dataset::license;
@@ -78,6 +80,8 @@ pub enum Spec {
     Levels,
     /// Distinct downsampling factors, integers in 2..=MAX_FACTOR (none: no copies).
     Factors,
+    /// Distinct device indices, integers in 0..=1023 (GPUs of a Cycles backend).
+    Indices,
     /// Three numbers in [0, 1] (a linear RGB colour).
     Rgb,
     /// A string or a list of strings.
@@ -139,6 +143,7 @@ impl Spec {
             Spec::Factors => {
                 format!("must be distinct integers in 2..={MAX_FACTOR} (or none)")
             }
+            Spec::Indices => "must be distinct integers in 0..=1023 (GPU indices)".into(),
             Spec::Rgb => "must be 3 numbers in [0, 1] (linear RGB)".into(),
             Spec::StrList => "must be a string or a list of strings".into(),
             Spec::Licenses => "must be licence ids, comma-separated or a list: SPDX ids such as \
@@ -314,6 +319,7 @@ impl OptionValue for Vec<u32> {
         };
         let level = match spec {
             Spec::Factors => Spec::int(2, MAX_FACTOR as i128),
+            Spec::Indices => Spec::int(0, 1023),
             _ => Spec::int(1, MAX_LEVEL as i128),
         };
         let mut levels: Vec<u32> = items
@@ -381,6 +387,12 @@ pub mod specs {
     pub const LATENT_POSITIONS: Spec = Spec::Choice(&["random", "stratified"]);
     pub const BLUR_METHOD: Spec = Spec::Choice(&["average", "motion_blur"]);
     pub const EXECUTOR: Spec = Spec::Choice(&["local", "ray"]);
+    pub const LATENT_SAMPLING: Spec = Spec::Choice(&["subsets", "independent"]);
+    pub const LIGHT_PATHS: Spec = Spec::Choice(&["auto", "fixed"]);
+    /// `auto`: the best backend Cycles reports (OptiX > CUDA > HIP > oneAPI > Metal > CPU).
+    pub const DEVICE: Spec =
+        Spec::Choice(&["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"]);
+    pub const GPUS_PER_TASK: Spec = Spec::closed(0.0, 64.0);
     pub const SEED: Spec = Spec::int(0, u64::MAX as i128);
     pub const FRACTION: Spec = Spec::closed(0.0, 1.0);
     pub const SECONDS: Spec = Spec::num(0.0, true, f64::INFINITY, false);
@@ -477,6 +489,18 @@ build_config! {
     samples_total: Option<u32> = None, specs::SAMPLES;
     /// Samples of the sharp render; None = the blurry image's budget.
     sharp_samples: Option<u32> = None, specs::SAMPLES;
+    /// `subsets`: a blurry image's latent frames render the blocks of one sample sequence
+    /// on the view's seed, which the sharp image renders too (issue 15); `independent`:
+    /// a seed per frame (builds before it).
+    latent_sampling: String = "subsets".into(), specs::LATENT_SAMPLING;
+    /// `auto`: light-path bounces from the object's materials; `fixed`: the same for all.
+    light_paths: String = "auto".into(), specs::LIGHT_PATHS;
+    /// Cycles device (run-only: the pixels are the plan's on any device, within noise).
+    device: String = "auto".into(), specs::DEVICE;
+    /// GPU indices of the backend; None = all of them.
+    gpus: Option<Vec<u32>> = None, Spec::Indices;
+    /// GPUs each Ray task reserves; None = 1 with a GPU device, else 0.
+    gpus_per_task: Option<f64> = None, specs::GPUS_PER_TASK;
     resolution: u32 = SAMPLING().resolution, specs::RESOLUTION;
     seed: u64 = 0, specs::SEED;
     fov_deg: f64 = SAMPLING().fov_deg, specs::FOV_DEG;
@@ -660,7 +684,25 @@ impl BuildConfig {
             },
             samples: self.samples,
             samples_total: self.samples_total,
+            latent_sampling: if self.latent_sampling == "independent" {
+                LatentSampling::Independent
+            } else {
+                LatentSampling::Subsets
+            },
         }
+    }
+
+    /// The Cycles `samples` every render of a subsets build is pinned to (None: each
+    /// render its own): the longest sequence of the config and at least the sharp
+    /// budget. Cycles sizes its sample pattern from `samples` and never shrinks it within
+    /// a process, so one value for the whole build keeps every pixel independent of what
+    /// the worker rendered before it (a resumed object equals an uninterrupted one).
+    pub fn cycles_samples(&self) -> Option<u32> {
+        let s = self.sampling();
+        (s.latent_sampling == LatentSampling::Subsets).then(|| {
+            let sharp = u32::try_from(self.effective_sharp_samples()).unwrap_or(u32::MAX);
+            s.max_sequence().max(sharp)
+        })
     }
 
     /// The most renders one blurry image can take.
@@ -861,6 +903,17 @@ mod tests {
             .starts_with("licenses \"cc-by-4\": must be licence ids"));
         assert!(err(&[("licenses", Raw::Str(" , ".into()))]).starts_with("licenses"));
         assert!(err(&[("licenses", Raw::List(vec![Raw::Int(1)]))]).starts_with("licenses [1]"));
+        assert!(err(&[("latent_sampling", Raw::Str("mixed".into()))])
+            .contains("one of subsets, independent"));
+        assert!(err(&[("device", Raw::Str("tpu".into()))]).starts_with("device \"tpu\""));
+        assert!(err(&[("gpus", Raw::List(vec![Raw::Int(0), Raw::Int(0)]))]).contains("distinct"));
+        assert!(err(&[("gpus", Raw::List(vec![Raw::Int(-1)]))]).contains("0..=1023"));
+        assert!(err(&[("gpus_per_task", Raw::Float(65.0))]).contains("[0, 64]"));
+        // A sequence Cycles cannot hold is named by the scheme that makes it.
+        assert!(
+            err(&[("latents", Raw::Int(4096)), ("samples", Raw::Int(8192))])
+                .starts_with("latent_sampling subsets")
+        );
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! The render list of a planned setting: what the Blender worker renders, in the order
 //! the driver streams the frames into accumulators (per view: sharp, then each level).
-use super::sampling::{LevelPlan, SettingPlan};
+use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
 use crate::dataset::layout::{level_dir, SHARP};
 use serde::Serialize;
 use std::path::Path;
@@ -25,23 +25,49 @@ pub struct Render {
     /// Cycles samples of this render; None: the caller's (the sharp render's own count).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub samples: Option<u32>,
+    /// Under sample subsets (issue 15): this render takes the samples [sample_offset,
+    /// sample_offset + samples) of a Cycles sequence of `sample_sequence` samples.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sample_offset: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sample_sequence: Option<u32>,
     pub out: String,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion: Option<Motion>,
 }
 
 /// The renders of one blurry image: its latent frames (average method) or its single
-/// motion blur render, writing `<prefix>_<k>.exr` / `<prefix>_mb.exr`.
-pub fn level_renders(view: usize, level: u32, lp: &LevelPlan, prefix: &str) -> Vec<Render> {
+/// motion blur render, writing `<prefix>_<k>.exr` / `<prefix>_mb.exr`. Under sample
+/// subsets frame k renders the block at its `sample_offset` of a sequence of `pin`
+/// samples (the build's [`crate::BuildConfig::cycles_samples`]; None: the level's own
+/// `sample_sequence`); independent frames render their own first samples.
+pub fn level_renders(
+    view: usize,
+    level: u32,
+    lp: &LevelPlan,
+    prefix: &str,
+    pin: Option<u32>,
+) -> Vec<Render> {
     let dir = level_dir(level);
+    let subsets = lp.latent_sampling == LatentSampling::Subsets;
+    let block = |offset: u32| {
+        if subsets {
+            (Some(offset), Some(pin.unwrap_or(lp.sample_sequence)))
+        } else {
+            (None, None)
+        }
+    };
     if let Some(mb) = &lp.motion_blur {
         let keys: Vec<_> = mb.keys.iter().map(|k| k.c2w).collect();
+        let (sample_offset, sample_sequence) = block(0);
         return vec![Render {
             view,
             level: dir,
             c2w: keys[0],
             seed: mb.seed,
             samples: Some(lp.samples_per_frame),
+            sample_offset,
+            sample_sequence,
             out: format!("{prefix}_mb.exr"),
             motion: Some(Motion {
                 steps: mb.motion_steps,
@@ -52,28 +78,40 @@ pub fn level_renders(view: usize, level: u32, lp: &LevelPlan, prefix: &str) -> V
     lp.latent_frames
         .iter()
         .enumerate()
-        .map(|(k, f)| Render {
-            view,
-            level: dir.clone(),
-            c2w: f.c2w,
-            seed: f.seed,
-            samples: Some(lp.samples_per_frame),
-            out: format!("{prefix}_{k:04}.exr"),
-            motion: None,
+        .map(|(k, f)| {
+            let (sample_offset, sample_sequence) = block(f.sample_offset);
+            Render {
+                view,
+                level: dir.clone(),
+                c2w: f.c2w,
+                seed: f.seed,
+                samples: Some(lp.samples_per_frame),
+                sample_offset,
+                sample_sequence,
+                out: format!("{prefix}_{k:04}.exr"),
+                motion: None,
+            }
         })
         .collect()
 }
 
 impl SettingPlan {
     /// Every render of the setting, EXRs under `exr_dir`: per view the sharp render at p
-    /// (`<view>_s.exr`), then each level's renders (`<view>_<level>_…`).
-    pub fn renders(&self, exr_dir: &Path) -> Vec<Render> {
-        self.renders_except(exr_dir, &[])
+    /// (`<view>_s.exr`), then each level's renders (`<view>_<level>_…`). `pin`
+    /// ([`crate::BuildConfig::cycles_samples`]): the sharp image renders the first samples
+    /// of a `pin`-sample sequence and the latent frames their blocks of it.
+    pub fn renders(&self, exr_dir: &Path, pin: Option<u32>) -> Vec<Render> {
+        self.renders_except(exr_dir, &[], pin)
     }
 
     /// [`Self::renders`] without the blur renders of `sharp_views`, whose blur levels
     /// get a copy of the sharp image (Deblur-NeRF's test views).
-    pub fn renders_except(&self, exr_dir: &Path, sharp_views: &[usize]) -> Vec<Render> {
+    pub fn renders_except(
+        &self,
+        exr_dir: &Path,
+        sharp_views: &[usize],
+        pin: Option<u32>,
+    ) -> Vec<Render> {
         let mut out = Vec::new();
         for v in &self.views {
             let i = v.index;
@@ -83,6 +121,8 @@ impl SettingPlan {
                 c2w: v.c2w,
                 seed: v.sharp_seed,
                 samples: None,
+                sample_offset: pin.map(|_| 0),
+                sample_sequence: pin,
                 out: exr_dir.join(format!("{i:04}_s.exr")).display().to_string(),
                 motion: None,
             });
@@ -92,7 +132,8 @@ impl SettingPlan {
             for (key, lp) in &v.levels {
                 let level: u32 = key.parse().unwrap_or(0);
                 let prefix = exr_dir.join(format!("{i:04}_{key}"));
-                out.extend(level_renders(i, level, lp, &prefix.display().to_string()));
+                let prefix = prefix.display().to_string();
+                out.extend(level_renders(i, level, lp, &prefix, pin));
             }
         }
         out
@@ -114,7 +155,7 @@ mod tests {
             ..Default::default()
         };
         let plan = plan_setting(&cfg.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
-        let r = plan.renders(Path::new("/x"));
+        let r = plan.renders(Path::new("/x"), None);
         assert_eq!(r.len(), cfg.frames_per_setting());
         assert_eq!(
             (r[0].level.as_str(), r[0].out.as_str()),
@@ -129,7 +170,7 @@ mod tests {
         assert_eq!(r[7].view, 1);
         assert!(r.iter().skip(1).take(6).all(|f| f.samples == Some(32)));
         // A Deblur-NeRF test view renders only its sharp image.
-        let kept = plan.renders_except(Path::new("/x"), &[0]);
+        let kept = plan.renders_except(Path::new("/x"), &[0], None);
         assert_eq!(kept.len(), r.len() - 6);
         assert_eq!((kept[0].view, kept[1].view), (0, 1));
         assert_eq!(kept[1..], r[7..]);
@@ -138,9 +179,47 @@ mod tests {
             ..cfg
         };
         let plan = plan_setting(&mb.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
-        let r = plan.renders(Path::new("/x"));
+        let r = plan.renders(Path::new("/x"), None);
         assert_eq!(r.len(), 2 * 3);
         assert!(r[1].out.ends_with("0000_1_mb.exr") && r[1].motion.is_some());
+        Ok(())
+    }
+
+    #[test]
+    fn subsets_render_blocks_of_one_pinned_sequence() -> crate::Result<()> {
+        let cfg = BuildConfig {
+            views: 1,
+            levels: vec![2],
+            latents: 7,
+            samples_total: Some(300),
+            sharp_samples: Some(200),
+            ..Default::default()
+        };
+        let plan = plan_setting(&cfg.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
+        // 7 blocks of ⌈300/7⌉ = 43 samples: the sequence is 301 > the sharp 200.
+        let pin = cfg.cycles_samples();
+        assert_eq!(pin, Some(301));
+        let r = plan.renders(Path::new("/x"), pin);
+        assert_eq!((r[0].sample_offset, r[0].sample_sequence), (Some(0), pin));
+        let offsets: Vec<_> = r[1..].iter().map(|f| f.sample_offset).collect();
+        assert_eq!(offsets, (0..7).map(|k| Some(43 * k)).collect::<Vec<_>>());
+        assert!(r[1..]
+            .iter()
+            .all(|f| f.sample_sequence == pin && f.seed == r[0].seed));
+        // Unpinned: each level its own sequence, the sharp render none.
+        let r = plan.renders(Path::new("/x"), None);
+        assert_eq!(r[0].sample_sequence, None);
+        assert!(r[1..].iter().all(|f| f.sample_sequence == Some(301)));
+        // Independent: no blocks and no pin, frame seeds of their own.
+        let ind = BuildConfig {
+            latent_sampling: "independent".into(),
+            ..cfg
+        };
+        assert_eq!(ind.cycles_samples(), None);
+        let plan = plan_setting(&ind.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
+        let r = plan.renders(Path::new("/x"), None);
+        assert!(r.iter().all(|f| f.sample_offset.is_none()));
+        assert!(r[1..].iter().all(|f| f.seed != r[0].seed));
         Ok(())
     }
 }

@@ -32,6 +32,25 @@ pub enum BlurMethod {
     MotionBlur,
 }
 
+/// How the Cycles samples of a blurry image's m latent frames relate (issue 15).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LatentSampling {
+    /// The frames render the m consecutive blocks of ONE sample sequence on the view's
+    /// seed (Cycles `use_sample_subset`): frame i takes samples [i·L, (i + 1)·L) of a
+    /// sequence of m·L, L = `samples_per_frame`. Their mean is a stratified estimator
+    /// over the exposure, and at zero motion it IS the render of that sequence, which
+    /// the sharp image renders too (its first `sharp_samples` samples, same seed).
+    Subsets,
+    /// Every frame its own seed and the first L samples of its own sequence (datasets
+    /// built before issue 15): the mean of m such renders converges like plain Monte
+    /// Carlo, ≈ 2× the error of one render at m·L samples.
+    Independent,
+}
+
+/// Longest Cycles sample sequence (`scene.cycles.samples` tops out at 2^24).
+pub const MAX_SEQUENCE: u64 = 1 << 24;
+
 /// Largest number of views per setting and of latent frames per blurry image.
 pub const MAX_COUNT: usize = 4096;
 
@@ -76,6 +95,7 @@ pub struct SamplingConfig {
     /// motion blur method renders one frame with S).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub samples_total: Option<u32>,
+    pub latent_sampling: LatentSampling,
 }
 
 impl Default for SamplingConfig {
@@ -99,6 +119,7 @@ impl Default for SamplingConfig {
             blur_method: BlurMethod::Average,
             samples: 32,
             samples_total: None,
+            latent_sampling: LatentSampling::Subsets,
         }
     }
 }
@@ -119,6 +140,23 @@ impl SamplingConfig {
         check("radius_margin", &self.radius_margin, &specs::RADIUS_MARGIN)?;
         check("phi0_deg", &self.phi0_deg, &specs::PHI0_DEG)?;
         check("window_deg", &self.window_deg, &specs::WINDOW_DEG)?;
+        if self.latent_sampling == LatentSampling::Subsets
+            && self.blur_method == BlurMethod::Average
+        {
+            let m = self.max_latents();
+            let seq = m as u64 * self.samples_per_frame(m) as u64;
+            if seq > MAX_SEQUENCE {
+                return Err(Error::Config {
+                    option: "latent_sampling".into(),
+                    detail: format!(
+                        "subsets: {m} latents × {} samples = {seq} samples in one sequence, \
+                         more than Cycles' {MAX_SEQUENCE}; use fewer samples or \
+                         latent_sampling independent",
+                        self.samples_per_frame(m)
+                    ),
+                });
+            }
+        }
         let (lo, hi) = (
             self.phi0_deg - self.window_deg,
             self.phi0_deg + self.window_deg,
@@ -166,6 +204,41 @@ impl SamplingConfig {
         }
     }
 
+    /// The sample blocks of a blurry image's `m` latent frames under this config's
+    /// scheme: (Cycles `samples` of each render, sample offset of each frame). Subsets:
+    /// a sequence of m·L samples, frame i from i·L, so every frame keeps L =
+    /// `samples_per_frame(m)` samples (⌈S / m⌉ with a budget S) and the frames weigh
+    /// equally in the mean; when m does not divide S the sequence is m·⌈S / m⌉ > S
+    /// samples, never fewer. Independent: each frame renders its own first L samples.
+    pub fn sample_blocks(&self, m: usize) -> (u32, Vec<u32>) {
+        let len = self.samples_per_frame(m);
+        match self.latent_sampling {
+            LatentSampling::Subsets => (
+                (m as u64 * len as u64).min(MAX_SEQUENCE) as u32,
+                (0..m as u64)
+                    .map(|i| (i * len as u64).min(MAX_SEQUENCE) as u32)
+                    .collect(),
+            ),
+            LatentSampling::Independent => (len, vec![0; m]),
+        }
+    }
+
+    /// The longest sample sequence a blurry image of this config can render: the
+    /// largest `sample_blocks(m).0` over every m the config allows (all of
+    /// 1..=latents_max under `latents_auto`). Cycles sizes its sample-pattern table from
+    /// the `samples` of a render and never shrinks it within a process, so a pixel
+    /// depends on the largest `samples` rendered before it; a build pins every render to
+    /// one sequence length at least this long (and the sharp budget) to keep its pixels
+    /// independent of render order — a resumed object renders what an uninterrupted one did.
+    pub fn max_sequence(&self) -> u32 {
+        let ms = match (self.blur_method, self.latents_auto) {
+            (BlurMethod::MotionBlur, _) => 1..=1,
+            (BlurMethod::Average, true) => 1..=self.latents_max,
+            (BlurMethod::Average, false) => self.latents..=self.latents,
+        };
+        ms.map(|m| self.sample_blocks(m).0).max().unwrap_or(1)
+    }
+
     /// Camera distance for an object of the given box.
     pub fn radius(&self, bbox_dims: [f64; 3]) -> f64 {
         self.radius_margin * bounding_radius(bbox_dims) / libm::sin(0.5 * self.fov_deg.to_radians())
@@ -192,8 +265,12 @@ pub struct LatentFrame {
     pub r: f64,
     pub phi_deg: f64,
     pub theta_deg: f64,
-    /// Cycles seed of this frame's render.
+    /// Cycles seed of this frame's render (the view's `sharp_seed` under subsets).
     pub seed: u32,
+    /// First sample of this frame's block in its level's `sample_sequence` (0 when
+    /// the frames are independent).
+    #[serde(default)]
+    pub sample_offset: u32,
     /// OpenGL camera-to-world, row-major.
     pub c2w: [[f64; 4]; 4],
 }
@@ -238,8 +315,12 @@ pub struct LevelPlan<F = LatentFrame, K = MotionKey> {
     /// motion as its gap; ghosting shows when it exceeds ~1 px. 0 for motion blur.
     pub max_gap_px: f64,
     pub method: BlurMethod,
-    /// Cycles samples of each render of this image.
+    /// Cycles samples of each render of this image (the length of a frame's block).
     pub samples_per_frame: u32,
+    /// How the frames share samples, and the Cycles `samples` of each frame's render:
+    /// the whole sequence m · samples_per_frame under subsets, else samples_per_frame.
+    pub latent_sampling: LatentSampling,
+    pub sample_sequence: u32,
     pub latent_frames: Vec<F>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion_blur: Option<MotionBlurPlan<K>>,
@@ -259,6 +340,8 @@ impl<F, K> LevelPlan<F, K> {
             max_gap_px: self.max_gap_px,
             method: self.method,
             samples_per_frame: self.samples_per_frame,
+            latent_sampling: self.latent_sampling,
+            sample_sequence: self.sample_sequence,
             latent_frames: self.latent_frames.iter().map(f).collect(),
             motion_blur: self.motion_blur.as_ref().map(|mb| MotionBlurPlan {
                 seed: mb.seed,
@@ -325,6 +408,10 @@ pub struct SettingPlan {
     pub bbox_dims: [f64; 3],
     pub radius: f64,
     pub config: SamplingConfig,
+    /// `SamplingConfig::max_sequence`: the longest sequence any blurry image of this
+    /// config renders, the same for every setting of a build.
+    #[serde(default)]
+    pub sample_sequence_max: u32,
     pub views: Vec<ViewPlan>,
 }
 
@@ -627,10 +714,17 @@ pub fn plan_setting(
             let c2w = orbit_c2w(radius, v.phi_deg, v.theta_deg);
             let (near, far) = depth_range(&c2w, vertices);
             let w = scene_weight(near, far, bbox_dims, &cfg.guards);
+            let sharp_seed = frame_seed(seed, index, 0, 0);
             let levels = cfg
                 .levels
                 .iter()
                 .map(|&level| {
+                    // Subsets share the view's seed, so every level's frames and the
+                    // sharp render draw from one sample sequence.
+                    let latent_seed = |k: usize| match cfg.latent_sampling {
+                        LatentSampling::Subsets => sharp_seed,
+                        LatentSampling::Independent => frame_seed(seed, index, level, k),
+                    };
                     let (w_l, _) = sample_level_m(cfg, seed, index, level, w.w_u, 0);
                     let seg = Segment {
                         r: radius,
@@ -646,6 +740,7 @@ pub fn plan_setting(
                             let draw = |m| sample_level_m(cfg, seed, index, level, w.w_u, m).1;
                             let (ts, max_gap_px) =
                                 latent_positions(cfg, draw, &seg, &screen, motion_px);
+                            let (sample_sequence, offsets) = cfg.sample_blocks(ts.len());
                             let latent_frames: Vec<LatentFrame> = ts
                                 .iter()
                                 .enumerate()
@@ -656,7 +751,8 @@ pub fn plan_setting(
                                         r,
                                         phi_deg: phi,
                                         theta_deg: theta,
-                                        seed: frame_seed(seed, index, level, k),
+                                        seed: latent_seed(k),
+                                        sample_offset: offsets[k],
                                         c2w: rows(&m),
                                     }
                                 })
@@ -668,6 +764,8 @@ pub fn plan_setting(
                                 max_gap_px,
                                 method: BlurMethod::Average,
                                 samples_per_frame: cfg.samples_per_frame(ts.len()),
+                                latent_sampling: cfg.latent_sampling,
+                                sample_sequence,
                                 latent_frames,
                                 motion_blur: None,
                             }
@@ -682,9 +780,11 @@ pub fn plan_setting(
                                 max_gap_px: 0.0,
                                 method: BlurMethod::MotionBlur,
                                 samples_per_frame: cfg.samples_per_frame(1),
+                                latent_sampling: cfg.latent_sampling,
+                                sample_sequence: cfg.samples_per_frame(1),
                                 latent_frames: Vec::new(),
                                 motion_blur: Some(MotionBlurPlan {
-                                    seed: frame_seed(seed, index, level, 0),
+                                    seed: latent_seed(0),
                                     motion_steps,
                                     interpolation_error_px,
                                     keys,
@@ -707,7 +807,7 @@ pub fn plan_setting(
                 orientation: w.orientation,
                 w_u: w.w_u,
                 trajectory: v.trajectory,
-                sharp_seed: frame_seed(seed, index, 0, 0),
+                sharp_seed,
                 c2w: rows(&c2w),
                 levels,
             }
@@ -723,6 +823,7 @@ pub fn plan_setting(
         bbox_dims,
         radius,
         config: cfg.clone(),
+        sample_sequence_max: cfg.max_sequence(),
         views,
     })
 }
@@ -1170,6 +1271,127 @@ mod tests {
             let steps = |l: &str| v.levels[l].motion_blur.as_ref().map(|m| m.motion_steps);
             assert!(steps("1") <= steps("4"));
         }
+    }
+
+    #[test]
+    fn subsets_split_one_sequence_on_the_view_seed() {
+        let cfg = SamplingConfig {
+            views: 3,
+            latents: 8,
+            samples_total: Some(32),
+            ..Default::default()
+        };
+        let p = plan(&cfg, 3, [1.0, 0.7, 0.4]);
+        for v in &p.views {
+            for lp in v.levels.values() {
+                assert_eq!(lp.latent_sampling, LatentSampling::Subsets);
+                assert_eq!((lp.samples_per_frame, lp.sample_sequence), (4, 32));
+                let offsets: Vec<u32> = lp.latent_frames.iter().map(|f| f.sample_offset).collect();
+                assert_eq!(offsets, [0, 4, 8, 12, 16, 20, 24, 28]);
+                assert!(lp.latent_frames.iter().all(|f| f.seed == v.sharp_seed));
+            }
+        }
+        // m ∤ S: every frame keeps ⌈S/m⌉ samples; the blocks tile a longer sequence.
+        let odd = SamplingConfig {
+            latents: 5,
+            ..cfg.clone()
+        };
+        assert_eq!(odd.sample_blocks(5), (35, vec![0, 7, 14, 21, 28]));
+        // Independent: the plans before issue 15, frame by frame.
+        let ind = SamplingConfig {
+            latent_sampling: LatentSampling::Independent,
+            ..cfg.clone()
+        };
+        let q = plan(&ind, 3, [1.0, 0.7, 0.4]);
+        for (v, w) in q.views.iter().zip(&p.views) {
+            for (l, lp) in &v.levels {
+                assert_eq!(lp.sample_sequence, lp.samples_per_frame);
+                let lvl: u32 = l.parse().expect("level");
+                for (k, f) in lp.latent_frames.iter().enumerate() {
+                    assert_eq!(
+                        (f.sample_offset, f.seed),
+                        (0, frame_seed(3, v.index, lvl, k))
+                    );
+                    assert_eq!(f.c2w, w.levels[l].latent_frames[k].c2w);
+                }
+            }
+        }
+        // Motion blur under subsets: one render on the view's seed, like the sharp one.
+        let mb = SamplingConfig {
+            blur_method: BlurMethod::MotionBlur,
+            ..cfg.clone()
+        };
+        for v in &plan(&mb, 3, [1.0, 0.7, 0.4]).views {
+            for lp in v.levels.values() {
+                let seed = lp.motion_blur.as_ref().map(|m| m.seed);
+                assert_eq!(seed, Some(v.sharp_seed));
+                assert_eq!(lp.sample_sequence, 32);
+            }
+        }
+    }
+
+    #[test]
+    fn auto_latents_get_their_own_sequence_per_level() {
+        let cfg = SamplingConfig {
+            latents_auto: true,
+            latent_positions: LatentPositions::Stratified,
+            samples_total: Some(100),
+            views: 4,
+            ..Default::default()
+        };
+        for v in &plan(&cfg, 1, [1.0, 1.0, 1.0]).views {
+            for lp in v.levels.values() {
+                let m = lp.latents as u32;
+                assert_eq!(lp.sample_sequence, m * 100u32.div_ceil(m));
+                assert!(lp.sample_sequence >= 100 && lp.sample_sequence < 100 + m);
+                let last = lp.latent_frames.last().expect("frames").sample_offset;
+                assert_eq!(last + lp.samples_per_frame, lp.sample_sequence);
+            }
+        }
+    }
+
+    #[test]
+    fn max_sequence_bounds_every_level() {
+        let auto = SamplingConfig {
+            latents_auto: true,
+            latent_positions: LatentPositions::Stratified,
+            samples_total: Some(100),
+            latents_max: 47,
+            views: 6,
+            ..Default::default()
+        };
+        // m = 34 needs 34·⌈100/34⌉ = 102, m = 47 needs 141; the most is at m = 47.
+        assert_eq!(auto.max_sequence(), 141);
+        let p = plan(&auto, 2, [1.0, 0.6, 0.5]);
+        assert_eq!(p.sample_sequence_max, 141);
+        for v in &p.views {
+            for lp in v.levels.values() {
+                assert!(lp.sample_sequence <= p.sample_sequence_max);
+            }
+        }
+        assert_eq!(SamplingConfig::default().max_sequence(), 34 * 32);
+        let mb = SamplingConfig {
+            blur_method: BlurMethod::MotionBlur,
+            samples_total: Some(128),
+            ..Default::default()
+        };
+        assert_eq!(mb.max_sequence(), 128);
+    }
+
+    #[test]
+    fn a_sequence_longer_than_cycles_allows_is_refused() {
+        let cfg = SamplingConfig {
+            latents: 4096,
+            samples: 8192,
+            ..Default::default()
+        };
+        let e = cfg.validate().expect_err("too long").to_string();
+        assert!(e.contains("latent_sampling"), "{e}");
+        let ind = SamplingConfig {
+            latent_sampling: LatentSampling::Independent,
+            ..cfg
+        };
+        assert!(ind.validate().is_ok());
     }
 
     proptest! {
