@@ -54,6 +54,9 @@ class BuildConfig:
     radius_margin: float = SAMPLING_DEFAULTS["radius_margin"]
     level_spread: float = SAMPLING_DEFAULTS["level_spread"]
     latent_positions: str = SAMPLING_DEFAULTS["latent_positions"]
+    # `start`: latent positions on [p, p + w_l·δ] (the paper); `centered`: on
+    # [p − w_l·δ/2, p + w_l·δ/2], so the written pose is the middle of the exposure.
+    trajectory: str = SAMPLING_DEFAULTS["trajectory"]
     orientation_max: float = SAMPLING_DEFAULTS["guards"]["orientation_max"]
     near_floor: float = SAMPLING_DEFAULTS["guards"]["near_floor"]
     background: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
@@ -106,6 +109,7 @@ class BuildConfig:
                 "level_spread": self.level_spread,
                 "latents": self.latents,
                 "latent_positions": self.latent_positions,
+                "trajectory": self.trajectory,
                 "resolution": self.resolution,
                 "guards": {"orientation_max": self.orientation_max, "near_floor": self.near_floor},
                 "latents_auto": self.latents_auto,
@@ -339,6 +343,7 @@ def validate(cfg: BuildConfig) -> None:
         cfg.latent_positions in ("random", "stratified"), "latent_positions", "random or stratified"
     )
     need(cfg.blur_method in ("average", "motion_blur"), "blur_method", "average or motion_blur")
+    need(cfg.trajectory in ("start", "centered"), "trajectory", "start or centered")
     need(1 <= cfg.latents_max <= 4096, "latents_max", "must be in 1..4096")
     need(
         math.isfinite(cfg.max_ghost_px) and cfg.max_ghost_px >= 0.01,
