@@ -102,6 +102,27 @@ def test_bad_speed_options_one_line(tmp_path, args, option):
     assert not (tmp_path / "o").exists()
 
 
+def test_trajectory_option_from_toml_and_flags(tmp_path):
+    """`trajectory` (issue 18): default start, a TOML value, a flag over it; a bad value
+    names the option and the file; the choice reaches the core's sampling config."""
+    from blurset.config import ConfigError, load_toml, make_config
+
+    base = {"demo": True, "out": tmp_path / "o"}
+    assert make_config({}, base).trajectory == "start"
+    (tmp_path / "c.toml").write_text('trajectory = "centered"\n')
+    toml = load_toml(tmp_path / "c.toml")
+    cfg = make_config(toml, base)
+    assert cfg.trajectory == "centered"
+    assert json.loads(cfg.sampling_json())["trajectory"] == "centered"
+    assert make_config(toml, {**base, "trajectory": "start"}).trajectory == "start"
+    with pytest.raises(ConfigError, match="--trajectory: start or centered"):
+        make_config({"trajectory": "middle"}, base)
+    p = run_cli("build", "--demo", "--out", str(tmp_path / "o"), "--trajectory", "middle",
+                check=False)  # fmt: skip
+    assert p.returncode == 2 and "--trajectory" in p.stderr
+    assert not (tmp_path / "o").exists()
+
+
 # -- builds -----------------------------------------------------------------------------
 
 
