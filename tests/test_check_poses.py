@@ -229,7 +229,7 @@ def test_demo_build_passes_and_level_table(demo_setting, tmp_path, capsys):
     assert code == check_poses.EXIT_PASS
     table = capsys.readouterr().out
     assert "level" in table and "sharp" in table and "blur_1" in table
-    for column in ("SIFT/image", "COLMAP reproj px", "written deg", "start→mean deg"):
+    for column in ("SIFT/image", "COLMAP reproj px", "written deg", "p→mean deg"):
         assert column in table
     for r in reports.values():
         assert r["registered"] >= 12 and r["median_features"] > 0
@@ -245,10 +245,10 @@ def test_demo_build_passes_and_level_table(demo_setting, tmp_path, capsys):
         angle_deg(np.asarray(v["c2w"])[:3, :3], np.asarray(v["levels"]["1"]["mean_pose"]["c2w"])[:3, :3])
         for v in meta["views"]
     ]  # fmt: skip
-    got = [v["start_to_mean_deg"] for v in blur["views"]]
+    got = [v["written_to_mean_deg"] for v in blur["views"]]
     assert got == pytest.approx(want, abs=1e-6)
-    assert blur["median_start_to_mean_deg"] == pytest.approx(np.median(want))
-    assert blur["median_start_to_mean_deg"] > 0.3, "the paper's anchor is off the exposure"
+    assert blur["median_written_to_mean_deg"] == pytest.approx(np.median(want))
+    assert blur["median_written_to_mean_deg"] > 0.3, "the paper's anchor is off the exposure"
     written = blur["written_pose"]
     assert written["median_rot_err_deg"] > blur["median_rot_err_deg"]
     assert all(v["written_rot_err_deg"] is not None for v in blur["views"] if v["registered"])
@@ -277,7 +277,7 @@ def test_blur_level_perturbed_mean_pose_fails_naming_it(demo_setting, tmp_path):
     assert r["pose_reference"] == "mean_latent"
     assert r["verdict"] == "fail" and not r["pass"]
     assert r["failed_views"][0] == r["views"][5]["name"]
-    assert not r["views"][5]["ok"] and r["views"][5]["start_to_mean_deg"] > 3.0
+    assert not r["views"][5]["ok"] and r["views"][5]["written_to_mean_deg"] > 3.0
     # The written poses did not move: their errors still put view 5 with the others.
     assert r["views"][5]["written_rot_err_deg"] < 3.0
 

@@ -9,8 +9,8 @@ A blurry image shows its exposure, whose content is centred on the mean latent p
 on the written pose p (the exposure's start under the paper's `--trajectory start`). A
 blur level of a build setting is therefore checked against the mean latent poses that
 meta.json records per view and level (computed by blurset-core with the plan); the
-written pose's errors and the start-to-mean offset are reported beside them (DESIGN §6,
-§12).
+written pose's errors and its offset to the mean latent pose (under `start`, the
+start-to-mean offset: half the blur) are reported beside them (DESIGN §6, §12).
 
 Conventions: LLFF rows are camera-to-world with columns [down, right, backwards]; COLMAP
 poses are OpenCV world-to-camera (x right, y down, z forward).
@@ -304,7 +304,7 @@ def check_scene(scene_dir: Path, *, factor: int | None = None, workdir: Path | N
     reason, thresholds, seconds, pose_reference ("written" or "mean_latent"). A blur
     level of a build setting is compared with its mean latent poses (meta.json); then
     `written_pose` holds the written pose's errors and verdict, and each view its
-    `written_*` errors and `start_to_mean_deg` / `start_to_mean_rel`.
+    `written_*` errors and `written_to_mean_deg` / `written_to_mean_rel`.
     `workdir` keeps COLMAP's database and sparse model (a temporary directory otherwise).
     Raises InputError / ConfigError for a scene that cannot be read.
     """
@@ -539,8 +539,8 @@ def _beside_written(report: dict, written: dict, ours, mean) -> dict:
             written_rot_err_deg=w["rot_err_deg"],
             written_center_err_rel=w["center_err_rel"],
             written_ok=w["ok"],
-            start_to_mean_deg=float(deg),
-            start_to_mean_rel=float(rel),
+            written_to_mean_deg=float(deg),
+            written_to_mean_rel=float(rel),
         )
     keep = (
         "verdict pass median_rot_err_deg median_center_err_rel median_reproj_px "
@@ -549,14 +549,14 @@ def _beside_written(report: dict, written: dict, ours, mean) -> dict:
     report["written_pose"] = {k: written.get(k) for k in keep}
     report["written_pose"]["ok_views"] = sum(bool(v["ok"]) for v in written["views"])
     report["pose_reference"] = "mean_latent"
-    report["median_start_to_mean_deg"] = float(np.median(offset_deg))
-    report["median_start_to_mean_rel"] = float(np.median(offset_rel))
+    report["median_written_to_mean_deg"] = float(np.median(offset_deg))
+    report["median_written_to_mean_rel"] = float(np.median(offset_rel))
     if report["registered"] >= MIN_REGISTERED_VIEWS:
         report["reason"] += (
             f" (against the mean latent poses; the written poses are "
             f"{_fmt(written.get('median_rot_err_deg'), '.2f')} deg off, "
             f"{report['written_pose']['ok_views']}/{written['registered']} consistent; "
-            f"start-to-mean offset median {report['median_start_to_mean_deg']:.2f} deg)"
+            f"written-to-mean offset median {report['median_written_to_mean_deg']:.2f} deg)"
         )
     return report
 
@@ -665,7 +665,7 @@ TABLE_COLUMNS = [
     ("COLMAP reproj px", ">16"),
     ("rot err deg", ">11"),
     ("written deg", ">11"),
-    ("start→mean deg", ">14"),
+    ("p→mean deg", ">10"),
     ("centre err", ">10"),
 ]
 
@@ -688,7 +688,7 @@ def _table(reports: dict[str, dict]) -> str:
             _fmt(reproj, ".2f") + _change(level, reproj, sharp.get("colmap_mean_reproj_px"), True),
             _fmt(r["median_rot_err_deg"], ".3f"),
             _fmt(written, ".3f"),
-            _fmt(r.get("median_start_to_mean_deg"), ".3f"),
+            _fmt(r.get("median_written_to_mean_deg"), ".3f"),
             _fmt(r["median_center_err_rel"], ".2%"),
         ]
         rows.append(
@@ -698,7 +698,7 @@ def _table(reports: dict[str, dict]) -> str:
     rows.append(
         "rot err: median against each blurry exposure's mean latent pose (the written pose "
         "for sharp); it decides the verdict. written: against the written pose p. "
-        "start→mean: from p to the mean latent pose."
+        "p→mean: from p to the mean latent pose (half the blur under --trajectory start)."
     )
     return "\n".join(rows)
 
