@@ -51,6 +51,7 @@ lint: venv
 	cargo clippy --workspace --all-targets -- -D warnings
 	$(VENV)/bin/ruff check python tests blender_scripts bench
 	$(VENV)/bin/ruff format --check python tests blender_scripts bench
+	$(PY) -m mypy.stubtest blurset._core --allowlist stubtest_allowlist.txt
 
 fmt:
 	cargo fmt --all

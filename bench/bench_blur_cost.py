@@ -70,9 +70,9 @@ class Timed:
         worker._receive_in_sync = receive
 
     def image(self, frames, samples: int, codec: str) -> dict:
-        from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
+        from blurset.image import Accumulator
 
-        acc = _core.Accumulator(self.res, self.res)
+        acc = Accumulator(self.res, self.res)
         acc_s = 0.0
 
         def on_frame(_i: int, path: str) -> None:
@@ -110,9 +110,8 @@ def _med(rows: list[dict], key: str) -> float:
 
 
 def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
-    from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
-    from blurset.config import BuildConfig
     from blurset.demo import make_demo_objects
+    from blurset.plan import BuildConfig, plan_setting
     from blurset.worker_client import Worker
 
     with tempfile.TemporaryDirectory(prefix="blurset-bench-") as tmp:
@@ -128,15 +127,15 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
 
             def plan(**kw) -> dict:
                 cfg = BuildConfig(views=1, levels=[4], resolution=res, **kw)
-                p = _core.plan_setting(
-                    cfg.sampling_json(),
+                p = plan_setting(
+                    cfg,
                     uid="bench",
                     theta0_deg=0.0,
                     seed=7,
                     bbox_dims=info["bbox_dims"],
                     vertices=verts,
                 )
-                return json.loads(p)["views"][0]
+                return p.to_dict()["views"][0]
 
             view = plan(latents=LATENTS, samples_total=SAMPLES_TOTAL)
             lvl = view["levels"]["4"]

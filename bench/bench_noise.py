@@ -2,7 +2,7 @@
 
 Baseline: the same formulas in NumPy float32 (x^2.2, inverse white balance, read + shot
 noise from NumPy's Generator, forward white balance, x^(1/2.2), 8-bit rounding), the
-way NAN's data loader computes them. Contender: `blurset._core.noise_image` (Rust,
+way NAN's data loader computes them. Contender: `blurset.noise.model.noise_image` (Rust,
 rayon, counter-based Philox + ziggurat). Both start from decoded uint8 arrays and
 produce the linear float32 image and the processed uint8 image, so only the noise
 computation is timed; the end-to-end `blurset noise` run (decode, noise, PNG + EXR
@@ -20,7 +20,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from blurset import _core  # noqa: TID251  (the benchmark measures the bindings themselves)
+from blurset.noise.model import (
+    noise_default_levels,
+    noise_image,
+    noise_key,
+    noise_sigmas,
+    noise_white_balance,
+)
 from PIL import Image
 
 FERN = Path(__file__).resolve().parents[2] / "shared" / "data" / "llff" / "fern"
@@ -30,9 +36,9 @@ REPEATS = 5
 
 
 def params():
-    levels = _core.noise_default_levels()
-    wb = _core.noise_white_balance(SEED)
-    return [(g, *_core.noise_sigmas(g, levels)) for g in GAINS], wb
+    levels = noise_default_levels()
+    wb = noise_white_balance(SEED)
+    return [(g, *noise_sigmas(g, levels)) for g in GAINS], wb
 
 
 def baseline(images, gains, wb, rng):
@@ -51,11 +57,9 @@ def baseline(images, gains, wb, rng):
 def contender(images, gains, wb):
     out = None
     for g, sr, ss in gains:
-        key = _core.noise_key(SEED, g)
+        key = noise_key(SEED, g)
         for i, im in enumerate(images):
-            out = _core.noise_image(
-                im, sigma_read=sr, sigma_shot=ss, key=key, view=i, white_balance=wb
-            )
+            out = noise_image(im, sigma_read=sr, sigma_shot=ss, key=key, view=i, white_balance=wb)
     return out
 
 

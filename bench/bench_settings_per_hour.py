@@ -100,8 +100,8 @@ def _build(out: Path, glb: Path, preset: dict) -> dict:
 
 def _reference(glb: Path, work: Path) -> dict:
     """Reference images (premultiplied linear RGBA) per (view, level dir)."""
-    from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
-    from blurset.build.setting import level_renders
+    from blurset.image import Accumulator
+    from blurset.plan import plan_setting, seed_for
     from blurset.worker_client import Worker
 
     cfg = _config(work / "unused", glb, latents=REFERENCE[0], latent_positions="stratified",
@@ -110,29 +110,28 @@ def _reference(glb: Path, work: Path) -> dict:
     with Worker(timeout=3600, workdir=work / "scratch") as w:
         info = w.load(glb, work / "v.npy")
         verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
-        seed = _core.seed_for(cfg.seed, glb.stem, 0)
-        plan = json.loads(
-            _core.plan_setting(
-                cfg.sampling_json(),
-                uid=glb.stem,
-                theta0_deg=0.0,
-                seed=seed,
-                bbox_dims=info["bbox_dims"],
-                vertices=verts,
-            )
+        seed = seed_for(cfg.seed, glb.stem, 0)
+        setting = plan_setting(
+            cfg,
+            uid=glb.stem,
+            theta0_deg=0.0,
+            seed=seed,
+            bbox_dims=info["bbox_dims"],
+            vertices=verts,
         )
-        for v in plan["views"]:
+        for v in setting.to_dict()["views"]:
             # Other Cycles seeds than the builds' (noise they share would flatter them).
             jobs = [("sharp", [{"c2w": v["c2w"], "seed": v["sharp_seed"],
                                 "samples": REFERENCE[0] * REFERENCE[1],
                                 "out": str(work / "s.exr")}])]  # fmt: skip
             jobs += [
-                (f"blur_{lvl}", level_renders(lp, work / "f")) for lvl, lp in v["levels"].items()
+                (f"blur_{lvl}", setting.level_renders(v["index"], int(lvl), str(work / "f")))
+                for lvl in v["levels"]
             ]
             for name, frames in jobs:
                 for f in frames:
                     f["seed"] = (f["seed"] ^ SALT) & 0x7FFFFFFF
-                acc = _core.Accumulator(RES, RES)
+                acc = Accumulator(RES, RES)
 
                 def on_frame(_i: int, path: str, acc=acc) -> None:
                     acc.add_exr(path)
@@ -145,12 +144,12 @@ def _reference(glb: Path, work: Path) -> dict:
 
 
 def _quality(setting: Path, refs: dict) -> dict:
-    from blurset import _core  # noqa: TID251  (the benchmark drives the build's own path)
+    from blurset.image import image_error, read_exr
 
     blur, sharp = [], []
     for (view, level), ref in refs.items():
-        img = _core.read_exr(setting / level / "linear" / f"{view:03d}.exr")
-        q = json.loads(_core.image_error(np.ascontiguousarray(img), ref))["psnr"]
+        img = read_exr(setting / level / "linear" / f"{view:03d}.exr")
+        q = image_error(np.ascontiguousarray(img), ref).psnr
         (sharp if level == "sharp" else blur).append(q)
     return {"psnr_blur": float(np.mean(blur)), "psnr_sharp": float(np.mean(sharp))}
 

@@ -3,8 +3,8 @@
 Files: a synthetic build (tests.conftest.write_synthetic_build) of 10,000 complete
 settings × 34 views × 4 levels with the full meta.json structure `blurset build`
 writes, latent-frame records included (m = 4 per level, ~100 KB per file, ~1 GB in all;
-the paper's m = 34 makes files ~8× larger). Contender: `blurset._core.build_stats`
-(Rust, rayon, serde) plus `json.loads` of its document, i.e. what `blurset stats`
+the paper's m = 34 makes files ~8× larger). Contender: `blurset.stats.build_stats`
+(Rust, rayon, serde) plus `to_dict` of its document, i.e. what `blurset stats`
 holds in Python before drawing. Baseline: the same aggregation in plain Python (json
 per file, the same per-view lists, min / median / max / mean, counts). Medians of
 interleaved runs; both read the same files from the page cache after a warm-up.
@@ -28,7 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from blurset import _core  # noqa: E402,TID251  (the benchmark measures the bindings themselves)
+from blurset.stats import build_stats  # noqa: E402
 
 from tests.conftest import write_synthetic_build  # noqa: E402
 
@@ -79,7 +79,7 @@ def python_aggregate(build: Path) -> dict:
 
 
 def rust_aggregate(build: Path) -> dict:
-    return json.loads(_core.build_stats(build))
+    return build_stats(build).to_dict()
 
 
 def median_times(a, b, repeats: int = REPEATS) -> tuple[float, float]:
@@ -110,7 +110,7 @@ def run() -> list[dict]:
             if s["quantity"] != "scene_dimension":
                 assert py["summary"][s["quantity"]][1] == s["median"], s["quantity"]
         t_rust_only = statistics.median(
-            _timed(lambda: _core.build_stats(build)) for _ in range(REPEATS)
+            _timed(lambda: build_stats(build).to_dict()) for _ in range(REPEATS)
         )
         t_py, t_rs = median_times(lambda: python_aggregate(build), lambda: rust_aggregate(build))
         t0 = time.perf_counter()
@@ -124,7 +124,7 @@ def run() -> list[dict]:
             {
                 "name": "stats_10k_settings_vs_python",
                 "ratio": t_py / t_rs,
-                "contender": f"blurset build_stats + json.loads {t_rs:.2f} s",
+                "contender": f"blurset build_stats + to_dict {t_rs:.2f} s",
                 "baseline": f"plain Python json {t_py:.2f} s",
                 "contender_s": t_rs,
                 "baseline_s": t_py,

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 import os
-import struct
 import tempfile
 import time
 
@@ -23,13 +22,6 @@ ROOT_NAME = "blurset_root"
 DEFAULT_EXR_CODEC = "NONE"
 EXR_CODECS = ("NONE", "ZIP", "ZIPS", "PIZ", "RLE", "PXR24", "B44", "DWAA")
 CAMERA_NAME = "blurset_camera"
-
-# Render QA (a black or invisible object must not ship): tiny and cheap on purpose.
-QA_RESOLUTION = 48
-QA_SAMPLES = 4
-QA_FOV_DEG = 40.0
-QA_MIN_LUMINANCE = 0.003  # linear; unpremultiplied mean over covered pixels
-QA_MIN_COVERAGE = 0.002  # fraction of the image the object's alpha covers
 
 # Fixed world-space lights: (elevation deg, azimuth deg, strength W/m^2, angular size deg).
 # A warm key from above, a cool fill and a rim from behind, so every side of the object
@@ -419,96 +411,3 @@ def render_frame(out: str, seed: int) -> float:
     t0 = time.perf_counter()
     _render_to(out)
     return time.perf_counter() - t0
-
-
-# --------------------------------------------------------------------------------- QA
-
-
-def read_exr_uncompressed(path: str) -> np.ndarray:
-    """(H, W, C) float32 from a scanline EXR with no compression, channels sorted by name."""
-    with open(path, "rb") as f:
-        data = f.read()
-    if struct.unpack_from("<I", data, 0)[0] != 20000630:
-        raise ValueError(f"not an OpenEXR file: {path}")
-    pos = 8
-    attrs = {}
-    while data[pos] != 0:
-        end = data.index(b"\0", pos)
-        name = data[pos:end].decode()
-        tend = data.index(b"\0", end + 1)
-        (size,) = struct.unpack_from("<i", data, tend + 1)
-        attrs[name] = data[tend + 5 : tend + 5 + size]
-        pos = tend + 5 + size
-    pos += 1
-    if attrs["compression"][0] != 0:
-        raise ValueError(f"EXR is compressed (codec {attrs['compression'][0]}): {path}")
-    x0, y0, x1, y1 = struct.unpack("<iiii", attrs["dataWindow"])
-    w, h = x1 - x0 + 1, y1 - y0 + 1
-    chans = []
-    raw = attrs["channels"]
-    p = 0
-    while raw[p] != 0:
-        end = raw.index(b"\0", p)
-        (ptype,) = struct.unpack_from("<i", raw, end + 1)
-        chans.append((raw[p:end].decode(), {0: np.uint32, 1: np.float16, 2: np.float32}[ptype]))
-        p = end + 17
-    offsets = np.frombuffer(data, dtype="<u8", count=h, offset=pos)
-    img = np.zeros((h, w, len(chans)), dtype=np.float32)
-    for off in offsets:
-        y, _size = struct.unpack_from("<ii", data, int(off))
-        q = int(off) + 8
-        for c, (_, dt) in enumerate(chans):
-            n = w * np.dtype(dt).itemsize
-            img[y - y0, :, c] = np.frombuffer(
-                data, dtype=np.dtype(dt).newbyteorder("<"), count=w, offset=q
-            )
-            q += n
-    return img
-
-
-def _look_at(pos: Vector, target: Vector) -> Matrix:
-    forward = (target - pos).normalized()
-    rot = (-forward).to_track_quat("Z", "Y").to_matrix().to_4x4()
-    rot.translation = pos
-    return rot
-
-
-def render_qa(bbox_dims: list[float], workdir: str) -> dict:
-    """Two tiny views from opposite sides; LoadError if the object is black or invisible."""
-    scene = bpy.context.scene
-    img = scene.render.image_settings
-    codec = img.exr_codec
-    img.exr_codec = "NONE"
-    radius = 0.5 * math.sqrt(sum(d * d for d in bbox_dims))
-    dist = radius / math.sin(math.radians(QA_FOV_DEG / 2)) * 1.05
-    lum, cov = [], []
-    try:
-        for k, (phi, theta) in enumerate(((60.0, 45.0), (60.0, 225.0))):
-            p, t = math.radians(phi), math.radians(theta)
-            pos = Vector(
-                (
-                    dist * math.sin(p) * math.cos(t),
-                    dist * math.sin(p) * math.sin(t),
-                    dist * math.cos(p),
-                )
-            )
-            set_camera(_look_at(pos, Vector((0, 0, 0))), QA_RESOLUTION, QA_FOV_DEG, QA_SAMPLES)
-            path = os.path.join(workdir, f"qa_{k}.exr")
-            render_frame(path, seed=k)
-            rgba = read_exr_uncompressed(path)
-            a_ch = rgba[..., 0]  # channels sorted: A, B, G, R
-            b, g, r = rgba[..., 1], rgba[..., 2], rgba[..., 3]
-            alpha = float(a_ch.sum())
-            cov.append(alpha / a_ch.size)
-            # Premultiplied colour / total alpha = mean unpremultiplied colour.
-            y = 0.2126 * r + 0.7152 * g + 0.0722 * b
-            lum.append(float(y.sum()) / alpha if alpha > 0 else 0.0)
-    finally:
-        img.exr_codec = codec
-    if max(cov) < QA_MIN_COVERAGE:
-        raise LoadError(
-            f"render QA: object is invisible (alpha coverage {max(cov):.4f} of the image)"
-        )
-    if max(lum) < QA_MIN_LUMINANCE:
-        raise LoadError(f"render QA: object renders black (mean luminance {max(lum):.5f})")
-    return {"qa_luminance": lum, "qa_coverage": cov}

@@ -148,7 +148,6 @@ class Worker:
             warnings, unlit_fixed = blender_scene.import_glb(glb, self.workdir, unlit)
             info = blender_scene.normalize(warnings)
             blender_scene.setup_scene(self.threads)
-            qa = blender_scene.render_qa(info["bbox_dims"], self.workdir)
         except blender_scene.LoadError as e:
             return {"ok": False, "reason": str(e)}
         save_npy_atomic(vertices_out, info.pop("vertices"))
@@ -158,7 +157,6 @@ class Worker:
             **info,
             "warnings": warnings,
             "unlit_fixed": unlit_fixed,
-            **qa,
             "seconds": time.perf_counter() - t0,
         }
 

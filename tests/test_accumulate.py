@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 import pytest
-from blurset import _core  # noqa: TID251  (the bindings are what this file tests)
 from blurset.exceptions import ImageError
+from blurset.image import Accumulator, read_exr, srgb_encode
 from PIL import Image
 
 W, H = 37, 23  # odd sizes catch row/column mix-ups
@@ -55,7 +55,7 @@ def read_png(path: Path) -> np.ndarray:
 def test_exr_frames_average_to_reference_png(tmp_path, rng, background):
     frames = [premultiplied_frame(rng) for _ in range(5)]
     paths = [write_exr(tmp_path / f"{i:03d}.exr", f) for i, f in enumerate(frames)]
-    acc = _core.Accumulator(W, H)
+    acc = Accumulator(W, H)
     for p in paths:
         acc.add_exr(p)
     assert acc.count == 5
@@ -77,7 +77,7 @@ def test_transparent_pixels_take_the_background_and_opaque_keep_colour(tmp_path)
     frame = np.zeros((2, 2, 4), np.float32)
     frame[1, 1] = (0.5, 0.25, 0.0, 1.0)  # opaque
     frame[0, 1] = (0.25, 0.0, 0.0, 0.5)  # half coverage, premultiplied
-    acc = _core.Accumulator(2, 2)
+    acc = Accumulator(2, 2)
     acc.add(frame)
     acc.write_png(tmp_path / "a.png", background=(1.0, 1.0, 1.0))
     png = read_png(tmp_path / "a.png")
@@ -89,7 +89,7 @@ def test_transparent_pixels_take_the_background_and_opaque_keep_colour(tmp_path)
 def test_sharp_and_blurry_share_one_encoding(tmp_path, rng):
     """One frame through the accumulator gives the same bytes as N copies of it."""
     frame = premultiplied_frame(rng)
-    one, many = _core.Accumulator(W, H), _core.Accumulator(W, H)
+    one, many = Accumulator(W, H), Accumulator(W, H)
     one.add(frame)
     for _ in range(34):
         many.add(frame)
@@ -101,11 +101,11 @@ def test_sharp_and_blurry_share_one_encoding(tmp_path, rng):
 
 def test_linear_mean_exr_roundtrips(tmp_path, rng):
     frames = [premultiplied_frame(rng) for _ in range(3)]
-    acc = _core.Accumulator(W, H)
+    acc = Accumulator(W, H)
     for f in frames:
         acc.add(f)
     acc.write_exr(tmp_path / "mean.exr")
-    np.testing.assert_array_equal(_core.read_exr(tmp_path / "mean.exr"), acc.mean())
+    np.testing.assert_array_equal(read_exr(tmp_path / "mean.exr"), acc.mean())
     with OpenEXR.File(str(tmp_path / "mean.exr")) as f:
         np.testing.assert_array_equal(f.channels()["RGBA"].pixels, acc.mean())
 
@@ -122,7 +122,7 @@ def test_linear_mean_exr_roundtrips(tmp_path, rng):
 def test_read_exr_is_lossless_for_blender_codecs(tmp_path, rng, compression):
     frame = premultiplied_frame(rng)
     path = write_exr(tmp_path / "f.exr", frame, compression)
-    np.testing.assert_array_equal(_core.read_exr(path), frame)
+    np.testing.assert_array_equal(read_exr(path), frame)
 
 
 def test_read_exr_tiled_and_half_float(tmp_path, rng):
@@ -133,26 +133,26 @@ def test_read_exr_tiled_and_half_float(tmp_path, rng):
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.tiledimage, "tiles": tiles}
     with OpenEXR.File(header, {"RGBA": frame}) as f:
         f.write(str(tmp_path / "tiled.exr"))
-    np.testing.assert_array_equal(_core.read_exr(tmp_path / "tiled.exr"), frame)
+    np.testing.assert_array_equal(read_exr(tmp_path / "tiled.exr"), frame)
 
     half = frame.astype(np.float16)
     header = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage}
     with OpenEXR.File(header, {"RGBA": half}) as f:
         f.write(str(tmp_path / "half.exr"))
-    np.testing.assert_array_equal(_core.read_exr(tmp_path / "half.exr"), half.astype(np.float32))
+    np.testing.assert_array_equal(read_exr(tmp_path / "half.exr"), half.astype(np.float32))
 
 
 def test_exr_without_alpha_is_opaque(tmp_path, rng):
     rgb = rng.random((H, W, 3), dtype=np.float32)
     path = write_exr(tmp_path / "rgb.exr", rgb)
-    back = _core.read_exr(path)
+    back = read_exr(path)
     np.testing.assert_array_equal(back[..., :3], rgb)
     assert np.all(back[..., 3] == 1.0)
 
 
 def test_size_mismatch_names_the_file_and_both_sizes(tmp_path, rng):
     path = write_exr(tmp_path / "small_frame.exr", premultiplied_frame(rng, h=H - 1))
-    acc = _core.Accumulator(W, H)
+    acc = Accumulator(W, H)
     with pytest.raises(ValueError, match=r"small_frame\.exr") as e:
         acc.add_exr(path)
     assert f"{W}x{H - 1}" in str(e.value) and f"{W}x{H}" in str(e.value)
@@ -165,7 +165,7 @@ def test_non_finite_exr_is_refused_with_the_file_named(tmp_path, rng, bad):
     frame = good.copy()
     frame[5, 7, 2] = bad
     path = write_exr(tmp_path / "poisoned.exr", frame)
-    acc = _core.Accumulator(W, H)
+    acc = Accumulator(W, H)
     acc.add(good)
     with pytest.raises(ImageError, match=r"poisoned\.exr") as e:
         acc.add_exr(path)
@@ -176,7 +176,7 @@ def test_non_finite_exr_is_refused_with_the_file_named(tmp_path, rng, bad):
 
 
 def test_missing_and_corrupt_files_name_the_file(tmp_path):
-    acc = _core.Accumulator(W, H)
+    acc = Accumulator(W, H)
     with pytest.raises(FileNotFoundError, match=r"nowhere\.exr"):
         acc.add_exr(tmp_path / "nowhere.exr")
     junk = tmp_path / "junk.exr"
@@ -184,18 +184,18 @@ def test_missing_and_corrupt_files_name_the_file(tmp_path):
     with pytest.raises(ImageError, match=r"junk\.exr"):
         acc.add_exr(junk)
     with pytest.raises(FileNotFoundError, match=r"nowhere\.exr"):
-        _core.read_exr(tmp_path / "nowhere.exr")
+        read_exr(tmp_path / "nowhere.exr")
 
 
 def test_empty_accumulator_refuses_to_write(tmp_path):
-    acc = _core.Accumulator(4, 4)
+    acc = Accumulator(4, 4)
     with pytest.raises(ValueError, match="no frames"):
         acc.mean()
     with pytest.raises(ValueError, match="no frames"):
         acc.write_png(tmp_path / "x.png")
     assert not (tmp_path / "x.png").exists()
     with pytest.raises(ValueError, match="positive"):
-        _core.Accumulator(0, 4)
+        Accumulator(0, 4)
 
 
 @pytest.mark.parametrize(
@@ -210,7 +210,7 @@ def test_empty_accumulator_refuses_to_write(tmp_path):
     ],
 )
 def test_add_validates_numpy_input(array, exc, msg):
-    acc = _core.Accumulator(W, H)
+    acc = Accumulator(W, H)
     with pytest.raises(exc, match=msg):
         acc.add(array)
     assert acc.count == 0
@@ -219,7 +219,7 @@ def test_add_validates_numpy_input(array, exc, msg):
 def test_add_refuses_nan_frames():
     frame = np.zeros((H, W, 4), np.float32)
     frame[1, 2, 3] = np.nan
-    acc = _core.Accumulator(W, H)
+    acc = Accumulator(W, H)
     with pytest.raises(ValueError, match=r"\(2, 1\) channel A"):
         acc.add(frame)
     assert acc.count == 0
@@ -232,14 +232,14 @@ def test_srgb_encode_matches_the_standard(rng):
             np.float32([0.0, 0.0031308, 0.0031309, 1.0, -1.0, 2.0, np.nan, np.inf]),
         ]
     ).reshape(4, -1)
-    got = _core.srgb_encode(x)
+    got = srgb_encode(x)
     assert got.shape == x.shape and got.dtype == np.float32
     xd = np.clip(np.nan_to_num(x.astype(np.float64), nan=0.0), 0.0, 1.0)
     want = np.where(xd <= 0.0031308, 12.92 * xd, 1.055 * xd ** (1 / 2.4) - 0.055)
     np.testing.assert_allclose(got, want, rtol=2e-7, atol=1e-9)
     # The two pieces meet at the breakpoint (linear 0.0031308 <-> encoded 0.04045).
-    assert abs(float(_core.srgb_encode(np.float32([0.0031308]))[0]) - 0.04045) < 1e-6
+    assert abs(float(srgb_encode(np.float32([0.0031308]))[0]) - 0.04045) < 1e-6
     # Strided views are read in logical order.
-    np.testing.assert_array_equal(_core.srgb_encode(x[:, ::3]), got[:, ::3])
+    np.testing.assert_array_equal(srgb_encode(x[:, ::3]), got[:, ::3])
     with pytest.raises(TypeError, match="float32"):
-        _core.srgb_encode(x.astype(np.float64))
+        srgb_encode(x.astype(np.float64))

@@ -101,7 +101,7 @@ def test_test_views_every_16th(demo_build):
 
 
 def test_sharp_image_equals_a_render_at_p(demo_build, tmp_path):
-    from blurset import _core  # noqa: TID251
+    from blurset.image import Accumulator
     from blurset.worker_client import Worker
 
     s = settings(demo_build)[0]
@@ -123,7 +123,7 @@ def test_sharp_image_equals_a_render_at_p(demo_build, tmp_path):
             fov_deg=meta["fov_deg"],
             samples=meta["render"]["sharp_samples"],
         )
-    acc = _core.Accumulator(*meta["resolution"])
+    acc = Accumulator(*meta["resolution"])
     acc.add_exr(tmp_path / "f.exr")
     acc.write_png(tmp_path / "f.png")
     ours = np.asarray(Image.open(s / "sharp" / "images" / f"{view:03d}.png"), np.int16)

@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 import pytest
-from blurset import _core  # noqa: TID251  (the bindings are part of what this file tests)
+from blurset.image import read_image
+from blurset.noise.model import noise_default_levels, noise_image, noise_key, noise_sigmas
 from PIL import Image
 
 from tests.conftest import shared
@@ -194,12 +195,12 @@ def test_api_reproduces_cli_bits(fern_out):
     meta = json.loads((out / "gain_4" / "noise.json").read_text())
     wb = meta["white_balance"]
     view = 5
-    img = _core.read_image(fern / "images_8" / meta["files"][view]["source"])
-    lin, proc = _core.noise_image(
+    img = read_image(fern / "images_8" / meta["files"][view]["source"])
+    lin, proc = noise_image(
         img,
         sigma_read=meta["sigma_read"],
         sigma_shot=meta["sigma_shot"],
-        key=_core.noise_key(11, 4.0),
+        key=noise_key(11, 4.0),
         view=view,
         white_balance=(wb["red"], wb["blue"]),
     )
@@ -258,13 +259,11 @@ def test_fern_same_bytes_with_one_and_two_threads(tmp_path):
 
 
 def test_black_has_std_sigma_read():
-    levels = _core.noise_default_levels()
+    levels = noise_default_levels()
     for gain in (1.0, 20.0):
-        sr, ss = _core.noise_sigmas(gain, levels)
+        sr, ss = noise_sigmas(gain, levels)
         black = np.zeros((400, 400, 3), np.uint8)
-        lin, proc = _core.noise_image(
-            black, sigma_read=sr, sigma_shot=ss, key=_core.noise_key(1, gain)
-        )
+        lin, proc = noise_image(black, sigma_read=sr, sigma_shot=ss, key=noise_key(1, gain))
         assert abs(lin.std() / sr - 1) < 0.01
         assert abs(lin.mean()) < 5 * sr / np.sqrt(lin.size)
         assert (lin < 0).mean() == pytest.approx(0.5, abs=0.01)
@@ -272,18 +271,18 @@ def test_black_has_std_sigma_read():
 
 
 def test_white_gain_20_and_tiny_white_level_stay_finite():
-    sr, ss = _core.noise_sigmas(20.0, _core.noise_default_levels())
+    sr, ss = noise_sigmas(20.0, noise_default_levels())
     white = np.full((300, 300, 3), 255, np.uint8)
-    lin, _ = _core.noise_image(white, sigma_read=sr, sigma_shot=ss, key=7)
+    lin, _ = noise_image(white, sigma_read=sr, sigma_shot=ss, key=7)
     assert np.isfinite(lin).all()
     assert lin.var() == pytest.approx(sr**2 + ss**2, rel=0.02)
     for wl in (1e-6, 1e-3):
-        lin, proc = _core.noise_image(
+        lin, proc = noise_image(
             white, sigma_read=sr, sigma_shot=ss, key=7, white_level=wl, white_balance=(2.4, 1.9)
         )
         assert np.isfinite(lin).all() and proc.dtype == np.uint8
     with pytest.raises(ValueError, match="white level"):
-        _core.noise_image(white, sigma_read=sr, sigma_shot=ss, key=7, white_level=0.0)
+        noise_image(white, sigma_read=sr, sigma_shot=ss, key=7, white_level=0.0)
 
 
 def test_tiny_white_level_through_the_cli(small_scene, tmp_path):
@@ -302,7 +301,7 @@ def test_zero_noise_round_trips_every_depth():
     ramp16 = (np.arange(256 * 256, dtype=np.uint32)).astype(np.uint16).reshape(256, 256)
     for img in (ramp8, np.stack([ramp8] * 3, -1), ramp16):
         for gamma in ("2.2", "srgb"):
-            _, proc = _core.noise_image(img, sigma_read=0.0, sigma_shot=0.0, key=0, gamma=gamma)
+            _, proc = noise_image(img, sigma_read=0.0, sigma_shot=0.0, key=0, gamma=gamma)
             np.testing.assert_array_equal(proc.reshape(img.shape), img)
 
 
@@ -334,8 +333,8 @@ def test_input_formats(kind, tmp_path, rng):
     out = tmp_path / "out"
     ok(blurset_noise(scene, "--factor", 2, "--gains", 1, "--out", out))
     d = out / "gain_1"
-    src = _core.read_image(scene / "images_2" / f"img000{ext}")
-    proc = _core.read_image(d / "images" / "img000.png")
+    src = read_image(scene / "images_2" / f"img000{ext}")
+    proc = read_image(d / "images" / "img000.png")
     assert proc.shape == src.shape and proc.dtype == src.dtype
     channels = src.shape[2]
     if channels in (2, 4):

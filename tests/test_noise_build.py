@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 import pytest
-from blurset import _core  # noqa: TID251  (the bindings are part of what this file tests)
+from blurset.noise.model import noise_scene_seed
 from PIL import Image
 
 from tests.conftest import run_cli
@@ -118,7 +118,7 @@ def test_layout_mirrored_poses_and_splits_preserved(noised):
         seeds = set()
         for s in settings(build):
             for lvl in levels(build):
-                seed = _core.noise_scene_seed(int(SEED), s.name, lvl)
+                seed = noise_scene_seed(int(SEED), s.name, lvl)
                 assert doc["seeds"][s.name][lvl] == seed
                 seeds.add(seed)
                 want = sorted(p.name for p in (s / lvl / "images").iterdir())
@@ -227,7 +227,7 @@ def test_png_source_equals_the_single_scene_command(noised, tmp_path):
     """A unit's seed is the single-scene --seed: same bytes as `blurset noise LEVEL`."""
     build, _, png = noised
     s = settings(build)[1].name
-    seed = _core.noise_scene_seed(int(SEED), s, "blur_2")
+    seed = noise_scene_seed(int(SEED), s, "blur_2")
     out = tmp_path / "single"
     run_cli("noise", str(build / s / "blur_2"), "--out", str(out), "--gains", "16",
             "--seed", str(seed), "--gamma", "srgb")  # fmt: skip

@@ -4,15 +4,15 @@ and a config outside the ranges is refused with a message naming the option."""
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
-from blurset import _core  # noqa: TID251  (properties of the core itself)
+from blurset.llff import read_poses_bounds
+from blurset.plan import SamplingConfig, default_sampling_config, plan_setting
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-DEFAULTS = json.loads(_core.default_sampling_config())
+DEFAULTS = default_sampling_config().to_dict()
 
 
 def _finite(x) -> bool:
@@ -23,10 +23,6 @@ def _finite(x) -> bool:
     if isinstance(x, list):
         return all(_finite(v) for v in x)
     return True
-
-
-def _reject_constants(name: str):
-    raise AssertionError(f"non-finite JSON constant {name}")
 
 
 configs = st.fixed_dictionaries(
@@ -78,10 +74,11 @@ def test_plans_and_pose_files_are_finite_everywhere(
     rng = np.random.default_rng(seed % 2**32)
     half = np.asarray(dims) / 2
     verts = (rng.uniform(-1, 1, (n_vertices, 3)) * half).astype(np.float32)
-    plan_json = _core.plan_setting(
-        json.dumps(cfg), uid="obj", theta0_deg=theta0, seed=seed, bbox_dims=dims, vertices=verts
-    )
-    plan = json.loads(plan_json, parse_constant=_reject_constants)
+    setting = plan_setting(
+        SamplingConfig(**cfg), uid="obj", theta0_deg=theta0, seed=seed, bbox_dims=dims,
+        vertices=verts,
+    )  # fmt: skip
+    plan = setting.to_dict()
     assert _finite(plan)
     for v in plan["views"]:
         assert 0 < v["near"] < v["far"]
@@ -106,9 +103,9 @@ def test_plans_and_pose_files_are_finite_everywhere(
                 assert len(lvl["latent_frames"]) == cfg["latents"]
     out = tmp_path_factory.mktemp("poses")
     levels = ["sharp"] + [f"blur_{lvl}" for lvl in cfg["levels"]]
-    _core.write_setting_poses(plan_json, out, levels)
+    setting.write_poses(out, levels)
     for lvl in levels:
-        pb = _core.read_poses_bounds(out / lvl / "poses_bounds.npy")
+        pb = read_poses_bounds(out / lvl / "poses_bounds.npy")
         assert pb.shape == (cfg["views"], 17) and np.isfinite(pb).all()
 
 
@@ -126,12 +123,11 @@ def test_any_config_is_finite_or_refused_naming_the_option(key, value):
     else:
         cfg[key] = value
     try:
-        text = json.dumps(cfg)  # NaN/inf become JSON constants the core must refuse
-        plan = _core.plan_setting(
-            text, uid="o", theta0_deg=0.0, seed=1, bbox_dims=[1.0, 0.5, 0.2],
+        plan = plan_setting(
+            SamplingConfig(**cfg), uid="o", theta0_deg=0.0, seed=1, bbox_dims=[1.0, 0.5, 0.2],
             vertices=np.zeros((0, 3), np.float32),
         )  # fmt: skip
     except ValueError as e:
         assert key.rstrip("s") in str(e) or "sampling config" in str(e), str(e)
         return
-    assert _finite(json.loads(plan, parse_constant=_reject_constants))
+    assert _finite(plan.to_dict())

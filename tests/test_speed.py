@@ -38,22 +38,21 @@ def _check_llff(setting: Path, views: int) -> None:
         assert np.array_equal(pb, poses[0]), f"{lvl}: the pose of every level is p"
 
 
-def _plan_dict(text: str) -> dict:
-    return json.loads(text)
+def _plan_dict(plan) -> dict:
+    return plan.to_dict()
 
 
 # -- the plan, no rendering --------------------------------------------------------------
 
 
 def test_plan_auto_bound_budget_split_and_motion_keys():
-    from blurset import _core  # noqa: TID251
-    from blurset.config import BuildConfig
+    from blurset.plan import BuildConfig, plan_setting
 
     def plan(**kw) -> dict:
         cfg = BuildConfig(views=8, levels=[1, 4], resolution=128, **kw)
         return _plan_dict(
-            _core.plan_setting(
-                cfg.sampling_json(),
+            plan_setting(
+                cfg,
                 uid="box",
                 theta0_deg=90.0,
                 seed=5,
@@ -99,27 +98,6 @@ def test_bad_speed_options_one_line(tmp_path, args, option):
     p = run_cli("build", "--demo", "--out", str(tmp_path / "o"), *args, check=False)
     assert p.returncode == 2, p.stderr
     assert option in p.stderr and len(p.stderr.strip().splitlines()) == 1
-    assert not (tmp_path / "o").exists()
-
-
-def test_trajectory_option_from_toml_and_flags(tmp_path):
-    """`trajectory` (issue 18): default start, a TOML value, a flag over it; a bad value
-    names the option and the file; the choice reaches the core's sampling config."""
-    from blurset.config import ConfigError, load_toml, make_config
-
-    base = {"demo": True, "out": tmp_path / "o"}
-    assert make_config({}, base).trajectory == "start"
-    (tmp_path / "c.toml").write_text('trajectory = "centered"\n')
-    toml = load_toml(tmp_path / "c.toml")
-    cfg = make_config(toml, base)
-    assert cfg.trajectory == "centered"
-    assert json.loads(cfg.sampling_json())["trajectory"] == "centered"
-    assert make_config(toml, {**base, "trajectory": "start"}).trajectory == "start"
-    with pytest.raises(ConfigError, match="--trajectory: start or centered"):
-        make_config({"trajectory": "middle"}, base)
-    p = run_cli("build", "--demo", "--out", str(tmp_path / "o"), "--trajectory", "middle",
-                check=False)  # fmt: skip
-    assert p.returncode == 2 and "--trajectory" in p.stderr
     assert not (tmp_path / "o").exists()
 
 
@@ -178,16 +156,15 @@ def test_build_motion_blur_one_render_per_blurry_image(tmp_path, demo_glbs):
 
 
 def _psnr(a: np.ndarray, b: np.ndarray) -> float:
-    from blurset import _core  # noqa: TID251
+    from blurset.image import image_error
 
-    return json.loads(_core.image_error(a, b))["psnr"]
+    return image_error(a, b).psnr
 
 
 @pytest.mark.blender
 def test_motion_blur_equals_a_high_m_average_of_the_same_segment(tmp_path, demo_glbs):
-    from blurset import _core  # noqa: TID251
-    from blurset.build.setting import level_renders
-    from blurset.config import BuildConfig
+    from blurset.image import Accumulator
+    from blurset.plan import BuildConfig, plan_setting
     from blurset.worker_client import Worker
 
     res, view, level = 64, 2, "4"
@@ -197,24 +174,23 @@ def test_motion_blur_equals_a_high_m_average_of_the_same_segment(tmp_path, demo_
 
         def image(**kw):
             cfg = BuildConfig(views=view + 1, levels=[4], resolution=res, **kw)
-            plan = _plan_dict(
-                _core.plan_setting(
-                    cfg.sampling_json(),
-                    uid="t",
-                    theta0_deg=30.0,
-                    seed=9,
-                    bbox_dims=info["bbox_dims"],
-                    vertices=verts,
-                )  # fmt: skip
-            )["views"][view]
+            setting = plan_setting(
+                cfg,
+                uid="t",
+                theta0_deg=30.0,
+                seed=9,
+                bbox_dims=info["bbox_dims"],
+                vertices=verts,
+            )
+            plan = setting.to_dict()["views"][view]
             lp = plan["levels"][level]
-            frames = level_renders(lp, tmp_path / "f")
+            frames = setting.level_renders(view, int(level), str(tmp_path / "f"))
             if kw.get("latents") == 96:  # the reference: noise independent of the others'
                 for f in frames:
                     f["seed"] = (f["seed"] ^ 0x5BD1E995) & 0x7FFFFFFF
             if kw.get("latents") == 1:  # the sharp image at p, same budget
                 frames = [dict(frames[0], c2w=plan["c2w"])]
-            acc = _core.Accumulator(res, res)
+            acc = Accumulator(res, res)
             n = []
 
             def on_frame(_i, p):

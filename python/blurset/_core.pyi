@@ -4,6 +4,8 @@ One section per binding file; keep each section next to its Rust counterpart's n
 """
 
 from os import PathLike
+from pathlib import Path
+from typing import Any, TypeAlias, final
 
 import numpy as np
 import numpy.typing as npt
@@ -17,8 +19,223 @@ class ImageError(BlursetError): ...
 class InputError(BlursetError):
     """Bad input data (missing file, wrong shape, mismatched sizes); the message names the file."""
 
+class ConfigValueError(ValueError):
+    """An option out of its range; `option` names it, `detail` holds the value and the range."""
+
+    option: str
+    detail: str
+
+# --- build config (rust/py/src/config.rs) ---------------------------------------------
+
+@final
+class BuildConfig:
+    """Every option of `blurset build`, validated (frozen: `replace` makes a new one).
+
+    `BuildConfig(**values)` takes option names (`views=8`, `levels=[1, 4]` …) over the
+    defaults; a value out of range raises ConfigValueError naming the option and range.
+    """
+
+    def __new__(cls, **values: object) -> BuildConfig: ...
+    def replace(self, **values: object) -> BuildConfig:
+        """A copy with these options replaced, validated."""
+    def require_target(self) -> None:
+        """ConfigValueError unless the config names an output and objects (or demo)."""
+    @staticmethod
+    def options() -> list[str]:
+        """The option names, in declaration order."""
+    def record(self) -> dict[str, Any]:
+        """dataset.json's `config` record: every option, `latents` = "auto" under latents
+        auto, and `effective_sharp_samples`."""
+    def sampling(self) -> SamplingConfig:
+        """The sampling sub-config every setting's plan is made with."""
+    def __reduce__(self) -> tuple[Any, tuple[str]]: ...
+    @staticmethod
+    def _from_json(text: str) -> BuildConfig:
+        """The config a `__reduce__` wrote (pickling, e.g. to Ray tasks)."""
+    @property
+    def max_latents(self) -> int:
+        """The most renders one blurry image can take."""
+    @property
+    def blur_samples_total(self) -> int:
+        """Samples one blurry image gets at most (the budget, or samples × its frames)."""
+    @property
+    def effective_sharp_samples(self) -> int:
+        """Samples of the sharp render (`sharp_samples`, or the blurry image's budget)."""
+    @property
+    def frames_per_setting(self) -> int:
+        """Renders of one setting (an upper bound with latents auto)."""
+    @property
+    def level_dirs(self) -> list[str]:
+        """`sharp`, then `blur_<l>` of every level."""
+    @property
+    def theta0s(self) -> list[float]:
+        """The θ0 of each setting of an object."""
+    @property
+    def objects(self) -> list[str]: ...
+    @property
+    def out(self) -> str | None: ...
+    @property
+    def demo(self) -> bool: ...
+    @property
+    def settings_per_object(self) -> int: ...
+    @property
+    def views(self) -> int: ...
+    @property
+    def levels(self) -> list[int]: ...
+    @property
+    def latents(self) -> int: ...
+    @property
+    def latents_auto(self) -> bool: ...
+    @property
+    def latents_max(self) -> int: ...
+    @property
+    def max_ghost_px(self) -> float: ...
+    @property
+    def blur_method(self) -> str: ...
+    @property
+    def samples(self) -> int: ...
+    @property
+    def samples_total(self) -> int | None: ...
+    @property
+    def sharp_samples(self) -> int | None: ...
+    @property
+    def resolution(self) -> int: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def fov_deg(self) -> float: ...
+    @property
+    def phi0_deg(self) -> float: ...
+    @property
+    def window_deg(self) -> float: ...
+    @property
+    def delta0(self) -> float: ...
+    @property
+    def radius_margin(self) -> float: ...
+    @property
+    def level_spread(self) -> float: ...
+    @property
+    def latent_positions(self) -> str: ...
+    @property
+    def trajectory(self) -> str: ...
+    @property
+    def orientation_max(self) -> float: ...
+    @property
+    def near_floor(self) -> float: ...
+    @property
+    def background(self) -> list[float]: ...
+    @property
+    def write_linear(self) -> bool: ...
+    @property
+    def previews(self) -> bool: ...
+    @property
+    def view_stride(self) -> int: ...
+    @property
+    def test_fraction(self) -> float: ...
+    @property
+    def test_objects(self) -> list[str] | None: ...
+    @property
+    def workers(self) -> int: ...
+    @property
+    def threads(self) -> int: ...
+    @property
+    def executor(self) -> str: ...
+    @property
+    def ray_address(self) -> str | None: ...
+    @property
+    def shard(self) -> str | None: ...
+    @property
+    def objaverse_dir(self) -> str | None: ...
+    @property
+    def objaverse_offline(self) -> bool: ...
+    @property
+    def objaverse_count(self) -> int | None: ...
+    @property
+    def timeout(self) -> float: ...
+    @property
+    def object_timeout(self) -> float: ...
+    @property
+    def retries(self) -> int: ...
+    @property
+    def max_failure_rate(self) -> float: ...
+    @property
+    def max_triangles(self) -> int: ...
+    @property
+    def max_texture_pixels(self) -> int: ...
+    @property
+    def blender(self) -> str | None: ...
+    @property
+    def check_poses(self) -> bool: ...
+    @property
+    def allow_mixed(self) -> bool: ...
+
+# --- layout (rust/py/src/layout.rs) --------------------------------------------------
+
+MARKER: str
+PARTIAL_SUFFIX: str
+SHARP: str
+
+def setting_name(uid: str, theta0_deg: float) -> str:
+    """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
+
+def theta0s(n: int) -> list[float]:
+    """The θ0 of each of an object's `n` settings, evenly spaced from 0°."""
+
+def image_name(index: int, n: int) -> str:
+    """The image file name of view `index` of `n` (sorted order is view order)."""
+
+def level_dir(level: int) -> str:
+    """Directory of a blur level (`blur_<l>`); level 0 is `sharp`."""
+
+def level_dirs(levels: list[int]) -> list[str]:
+    """`sharp`, then `blur_<l>` of every level."""
+
+def parse_level_dir(name: str) -> int | None:
+    """The level of a level directory name (`sharp` -> 0, `blur_<l>` -> l), or None."""
+
+def sort_level_dirs(names: list[str]) -> list[str]:
+    """Level directory names in level order; other names are dropped."""
+
+def setting_levels(setting: str | PathLike[str]) -> list[str]:
+    """The level directories a setting holds, in level order."""
+
+def gain_name(gain: float) -> str:
+    """Directory name of a noise gain (`gain_4`, `gain_2.5`)."""
+
+def partial_dir(final_dir: str | PathLike[str]) -> Path:
+    """Where a setting or noise unit is written before it is published."""
+
+def is_complete(dir: str | PathLike[str]) -> bool:
+    """A final (not `*.partial`) directory holding its marker."""
+
+def setting_problem(setting: str | PathLike[str]) -> str | None:
+    """What is missing or damaged in a complete setting (checked cheaply), or None."""
+
+def complete_settings(build: str | PathLike[str]) -> list[str]:
+    """The complete setting directory names of a build, sorted."""
+
+def publish(partial: str | PathLike[str], final_dir: str | PathLike[str], stamp: str) -> None:
+    """Write the marker (holding `stamp`) into `partial` and rename it to `final_dir`."""
+
+def temp_path(path: str | PathLike[str]) -> Path:
+    """The temp path an atomic write of `path` goes through (`.<name>.tmp<pid>`)."""
+
+def parse_temp_name(name: str) -> tuple[str, int] | None:
+    """(target name, pid) of a temp file name `.<name>.tmp<pid>`, or None."""
+
+def write_atomic(path: str | PathLike[str], data: bytes) -> None:
+    """Write `data` through a synced temp file and a rename (parents created)."""
+
+def write_dataset_json(path: str | PathLike[str], doc: dict[str, Any]) -> None:
+    """Write a build's dataset.json; `doc` must match the core's DatasetDoc (unknown or
+    missing fields are errors)."""
+
+def write_noise_json(path: str | PathLike[str], doc: dict[str, Any]) -> None:
+    """Write a noisy scene's noise.json; `doc` must match the core's NoiseDoc."""
+
 # --- accumulate (rust/py/src/accumulate.rs) -----------------------------------------
 
+@final
 class Accumulator:
     """Running mean of premultiplied linear RGBA frames of one size.
 
@@ -47,7 +264,7 @@ class Accumulator:
     def write_png(
         self,
         path: str | PathLike[str],
-        background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        background: tuple[float, float, float] = ...,
     ) -> None:
         """Write the mean as 8-bit sRGB PNG over `background` (linear RGB), atomically."""
     def write_exr(self, path: str | PathLike[str]) -> None:
@@ -61,18 +278,18 @@ def read_exr(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
 
 # --- noise (rust/py/src/noise.rs) ---------------------------------------------------
 
-NoiseLevelTable = tuple[float, float, float, float]
+_NoiseLevelTable: TypeAlias = tuple[float, float, float, float]
 """(log10 sigma_read(1), read step, log10 sigma_shot(1), shot step) per log2 gain."""
 
-def noise_default_levels() -> NoiseLevelTable:
+def noise_default_levels() -> _NoiseLevelTable:
     """blurset's default gain table (derived from KPN's training ranges; not NAN's)."""
 
 def noise_levels_from_kpn(
     sig_read: npt.NDArray[np.float64], sig_shot: npt.NDArray[np.float64]
-) -> NoiseLevelTable:
+) -> _NoiseLevelTable:
     """NAN's mapping: sorted unique values, two lowest dropped, first two used (1-D arrays)."""
 
-def noise_sigmas(gain: float, levels: NoiseLevelTable) -> tuple[float, float]:
+def noise_sigmas(gain: float, levels: _NoiseLevelTable) -> tuple[float, float]:
     """(sigma_read, sigma_shot) at `gain`: log10 sigma(g) = log10 sigma(1) + step * log2 g."""
 
 def noise_white_balance(seed: int) -> tuple[float, float]:
@@ -131,7 +348,7 @@ def noise_scene_seed(seed: int, setting: str, level: str) -> int:
     """The noise seed of one level of one setting of a build (plays `--seed`'s role)."""
 
 def read_linear_composited(
-    path: str | PathLike[str], *, background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    path: str | PathLike[str], *, background: tuple[float, float, float] = ...
 ) -> npt.NDArray[np.float32]:
     """A build's linear RGBA EXR composited over `background`: float32 (H, W, 3), unclipped;
     ImageError names the file on NaN/inf."""
@@ -168,25 +385,40 @@ def noise_write_variants_linear(
     gamma: str = "2.2",
     white_balance: tuple[float, float] | None = None,
     white_level: float = 1.0,
-    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    background: tuple[float, float, float] = ...,
 ) -> None:
     """`noise_write_variants` from a build's linear EXRs (composited over `background`)."""
 
 def thumbnail_qa(
-    image: npt.NDArray[np.uint8], *, background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    image: npt.NDArray[np.uint8], *, background: tuple[float, float, float] = ...
 ) -> tuple[float, float, float]:
     """(object coverage, mean object luma in [0, 1], fraction of the border touched) of an
     RGB8 image over `background` (linear RGB)."""
 
 # --- tradeoff (rust/py/src/tradeoff.rs) ---------------------------------------------
 
+@final
+class ImageMetrics:
+    """Error of an image against a reference (DESIGN §8): PSNR and MSE, sRGB and linear."""
+
+    @property
+    def psnr(self) -> float:
+        """PSNR (dB, peak 1) of the sRGB image composited over the background (≤ 200)."""
+    @property
+    def psnr_linear(self) -> float:
+        """PSNR (dB, peak 1) of the linear premultiplied RGBA."""
+    @property
+    def mse(self) -> float: ...
+    @property
+    def mse_linear(self) -> float: ...
+
 def image_error(
     image: npt.NDArray[np.float32],
     reference: npt.NDArray[np.float32],
     *,
-    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
-) -> str:
-    """JSON {psnr, psnr_linear, mse, mse_linear} of `image` against `reference`, both
+    background: tuple[float, float, float] = ...,
+) -> ImageMetrics:
+    """{psnr, psnr_linear, mse, mse_linear} of `image` against `reference`, both
     float32 (H, W, 4) premultiplied linear RGBA; `psnr` is of the sRGB image composited
     over `background` (peak 1), capped at 200 dB for identical images."""
 
@@ -202,67 +434,199 @@ def read_poses_bounds(path: str | PathLike[str]) -> npt.NDArray[np.float64]:
 def write_poses_bounds(path: str | PathLike[str], rows: npt.NDArray[np.float64]) -> None:
     """Write (N, 17) rows atomically; non-finite values are refused."""
 
-# -- sampling ---------------------------------------------------------------------------
+# -- sampling and the plan (rust/py/src/sampling.rs) ---------------------------------
 
-def default_sampling_config() -> str:
-    """The paper's sampling settings as SamplingConfig JSON."""
+@final
+class SamplingConfig:
+    """The sampling of a setting's plan (views, trajectory, levels, latents, samples).
 
-def validate_sampling_config(config_json: str) -> None:
-    """ValueError naming the option when a SamplingConfig is out of range."""
+    `SamplingConfig(**values)` takes the fields of `to_dict()` over the paper's defaults;
+    ConfigValueError names an option out of range.
+    """
+
+    def __new__(cls, **values: object) -> SamplingConfig: ...
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as a dict (what meta.json records as `sampling`)."""
+    @property
+    def max_latents(self) -> int:
+        """The most latent frames one blurry image can have."""
+
+def default_sampling_config() -> SamplingConfig:
+    """The paper's sampling settings."""
 
 def seed_for(seed: int, uid: str, index: int) -> int:
     """The seed of setting `index` of object `uid` under the build seed."""
 
+def check_theta0_deg(theta0_deg: float) -> None:
+    """ConfigValueError unless θ0 is a finite number of degrees."""
+
+@final
+class Plan:
+    """The plan of one setting: every view, trajectory, level, latent frame and seed."""
+
+    @property
+    def uid(self) -> str: ...
+    @property
+    def n_views(self) -> int: ...
+    @property
+    def resolution(self) -> list[int]: ...
+    @property
+    def fov_deg(self) -> float: ...
+    def to_dict(self) -> dict[str, Any]:
+        """The whole plan as a dict (views[].levels["<l>"].latent_frames …), for reading."""
+    def level(self, view: int, level: int) -> dict[str, Any]:
+        """One view's plan of one blur level as a dict (w_l, latents, motion_px, …)."""
+    def renders(self, exr_dir: str | PathLike[str]) -> list[dict[str, Any]]:
+        """Every render of the setting in stream order (per view: sharp, then each level),
+        as the worker takes them: {view, level, c2w, seed, samples?, out, motion?}."""
+    def level_renders(self, view: int, level: int, prefix: str) -> list[dict[str, Any]]:
+        """The renders of one blurry image (view, level), EXRs named `<prefix>_…`."""
+    def write_poses(self, setting_dir: str | PathLike[str], level_dirs: list[str]) -> None:
+        """Write `<level>/poses_bounds.npy` for each level dir and the setting's transforms.json."""
+    def write_meta(
+        self,
+        path: str | PathLike[str],
+        *,
+        config: BuildConfig,
+        object: dict[str, Any],
+        timings: dict[str, Any],
+        qa: list[FrameQa],
+        pose_check: dict[str, Any] | None = None,
+    ) -> None:
+        """Write the setting's meta.json: this plan, the build config, the object as the
+        worker reported it, the timings, the QA of every view and, with --check-poses, the
+        COLMAP verdict."""
+
 def plan_setting(
-    config_json: str,
+    config: SamplingConfig | BuildConfig,
     *,
     uid: str,
     theta0_deg: float,
     seed: int,
     bbox_dims: list[float] | tuple[float, float, float],
     vertices: npt.NDArray[np.float32],
-) -> str:
-    """A setting's plan (views, trajectories, weights, latent frames, seeds) as JSON."""
-
-def write_setting_poses(
-    plan_json: str, setting_dir: str | PathLike[str], level_dirs: list[str]
-) -> None:
-    """`<level>/poses_bounds.npy` for each level and `transforms.json` of a setting."""
+) -> Plan:
+    """Plan one setting (views, near/far from the vertices, weights, latent frames, seeds)."""
 
 def test_views(views: int, stride: int) -> list[int]:
     """Every `stride`-th view index below `views`."""
 
-def image_name(index: int, n: int) -> str:
-    """The image file name of view `index` of `n` (sorted order is view order)."""
+@final
+class Splits:
+    """The train/test splits of a build (the `splits.json` document)."""
+
+    @property
+    def train(self) -> list[str]: ...
+    @property
+    def test(self) -> list[str]: ...
+    @property
+    def test_objects(self) -> list[str]: ...
+    @property
+    def view_stride(self) -> int: ...
+    @property
+    def test_views(self) -> dict[str, list[int]]:
+        """Held-out view indices per test setting."""
+    def write(self, path: str | PathLike[str]) -> None:
+        """Write splits.json atomically."""
+    def to_dict(self) -> dict[str, Any]:
+        """The document as a dict."""
 
 def make_splits(
-    entries_json: str,
+    entries: list[tuple[str, str, int]],
     *,
     view_stride: int,
     test_fraction: float,
     test_objects: list[str] | None,
     seed: int,
-) -> str:
-    """splits.json (by object) for setting entries `[{setting, object, views}]`."""
+) -> Splits:
+    """Splits by object of setting entries (setting dir, object uid, views)."""
 
 def seeded_subset(ids: list[str], k: int, seed: int) -> list[str]:
     """A seeded random subset of `k` ids, sorted; independent of the ids' order."""
 
-# -- render QA --------------------------------------------------------------------------
+# -- render QA (rust/py/src/qa.rs) ---------------------------------------------------
 
-def frame_qa(rgba: npt.NDArray[np.float32], *, thresholds: str | None = None) -> str:
-    """QA of a premultiplied linear (H, W, 4) image as JSON: coverage, luminance,
-    saturated, border_coverage and failure (the reason, or null)."""
+@final
+class QaThresholds:
+    """When a view fails render QA (the core's defaults unless given)."""
 
-def default_qa_thresholds() -> str:
-    """The default QA thresholds (QaThresholds) as JSON."""
+    def __new__(
+        cls,
+        *,
+        min_coverage: float | None = None,
+        min_luminance: float | None = None,
+        max_saturated: float | None = None,
+    ) -> QaThresholds: ...
+    @property
+    def min_coverage(self) -> float:
+        """Least mean alpha (fraction of the image the object covers)."""
+    @property
+    def min_luminance(self) -> float:
+        """Least mean unpremultiplied luminance of the object."""
+    @property
+    def max_saturated(self) -> float:
+        """Largest fraction of the object's pixels clipped in sRGB."""
+
+@final
+class FrameQa:
+    """What one view looks like in numbers, and its verdict under the thresholds."""
+
+    @property
+    def coverage(self) -> float:
+        """Mean alpha: the fraction of the image the object covers."""
+    @property
+    def luminance(self) -> float:
+        """Mean unpremultiplied luminance of the object (Σ premultiplied Y / Σ alpha)."""
+    @property
+    def saturated(self) -> float:
+        """Fraction of covered pixels with a colour channel at or above 1."""
+    @property
+    def border_coverage(self) -> float:
+        """Fraction of the border pixels the object covers."""
+    @property
+    def failure(self) -> str | None:
+        """The reason the view fails, or None when it passes."""
+
+def frame_qa(rgba_: npt.NDArray[np.float32], *, thresholds: QaThresholds | None = None) -> FrameQa:
+    """QA of a premultiplied linear RGBA image (H, W, 4) under `thresholds`."""
+
+def default_qa_thresholds() -> QaThresholds:
+    """The default QA thresholds (one place for the numbers)."""
+
+OBJECT_QA_RESOLUTION: int
+OBJECT_QA_SAMPLES: int
+OBJECT_QA_FOV_DEG: float
+
+def object_qa_cameras(
+    bbox_dims: list[float] | tuple[float, float, float],
+) -> list[list[list[float]]]:
+    """OpenGL camera-to-world (row-major) of each load-time QA view of an object of this box."""
+
+def object_qa_verdict(
+    views: list[FrameQa], *, thresholds: QaThresholds | None = None
+) -> str | None:
+    """The reason an object fails its load-time QA (invisible or black in every view), or None."""
 
 # --- stats (rust/py/src/stats.rs) ---------------------------------------------------
 
-def build_stats(out: str | PathLike[str]) -> str:
-    """The statistics of the build at `out` as JSON text (the `stats.json` document,
-    schema "blurset-stats/1"): per-view and per-setting numbers of every complete
-    setting's meta.json, min/median/max/mean summaries and counts.
+@final
+class BuildStats:
+    """The statistics of a build (the `stats.json` document, schema "blurset-stats/1")."""
+
+    @property
+    def counts(self) -> dict[str, int | None]:
+        """Objects, settings, views, images, test counts, failures, skipped settings."""
+    @property
+    def settings(self) -> list[dict[str, Any]]:
+        """The complete settings read (name, uid, θ0, views, level dirs, images …)."""
+    def to_dict(self) -> dict[str, Any]:
+        """The whole document as a dict (per-level maps keyed "1" … as in stats.json)."""
+    def write(self, path: str | PathLike[str], generated: str) -> None:
+        """Write stats.json (compact), `generated` and `blurset_version` first, atomically."""
+
+def build_stats(out: str | PathLike[str]) -> BuildStats:
+    """The statistics of the build at `out`: per-view and per-setting numbers of every
+    complete setting's meta.json, min/median/max/mean summaries and counts.
 
     Raises InputError naming the file: no such directory, not a build, unreadable or
     corrupt meta.json of a complete setting, corrupt splits.json or failures.jsonl.
@@ -270,14 +634,8 @@ def build_stats(out: str | PathLike[str]) -> str:
 
 # -- failures.jsonl ---------------------------------------------------------------------
 
-def setting_name(uid: str, theta0_deg: float) -> str:
-    """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
-
-def theta0s(n: int) -> list[float]:
-    """The θ0 of each of an object's `n` settings, evenly spaced from 0°."""
-
 def current_failures(
     path: str | PathLike[str], *, complete: list[str], theta0s: list[float] | None = None
-) -> tuple[str, int]:
-    """(JSON list of the failures now, torn lines skipped): the latest record per
-    (uid, setting) whose work is still not complete."""
+) -> tuple[list[dict[str, Any]], int]:
+    """(the failures now, torn lines skipped): the latest record per (uid, setting)
+    whose work is still not complete."""

@@ -17,9 +17,9 @@ from typing import Any
 
 from blurset import _core
 
-MARKER = ".complete"
-PARTIAL_SUFFIX = ".partial"
-SHARP = "sharp"
+MARKER: str = _core.MARKER
+PARTIAL_SUFFIX: str = _core.PARTIAL_SUFFIX
+SHARP: str = _core.SHARP
 
 
 def setting_name(uid: str, theta0_deg: float) -> str:
@@ -39,114 +39,64 @@ def image_name(view: int, n_views: int) -> str:
 
 def level_dir(level: int) -> str:
     """Directory of a blur level (`blur_<l>`); level 0 is the sharp image."""
-    return SHARP if level == 0 else f"blur_{level}"
+    return _core.level_dir(level)
 
 
 def level_dirs(levels: list[int]) -> list[str]:
     """`sharp` then `blur_<l>` of every blur level, in order."""
-    return [SHARP] + [level_dir(lvl) for lvl in levels]
+    return _core.level_dirs(levels)
 
 
 def is_level_dir(name: str) -> bool:
     """`sharp` or `blur_<l>` with l in 1..64 (what `blurset build` can write)."""
-    if name == SHARP:
-        return True
-    head, _, num = name.partition("_")
-    return head == "blur" and num.isdigit() and not num.startswith("0") and 1 <= int(num) <= 64
+    return _core.parse_level_dir(name) is not None
 
 
-def level_order(name: str) -> int:
-    """Sort key of level directories: sharp first, then blur levels by number."""
-    return 0 if name == SHARP else int(name.partition("_")[2])
+def sort_level_dirs(names: list[str]) -> list[str]:
+    """Level directory names in level order (sharp first, then by number)."""
+    return _core.sort_level_dirs(names)
 
 
 def setting_levels(setting: Path) -> list[str]:
     """The level directories a setting holds (`sharp`, `blur_1` …), in level order."""
-    found = [d.name for d in Path(setting).iterdir() if d.is_dir() and is_level_dir(d.name)]
-    return sorted(found, key=level_order)
+    return _core.setting_levels(setting)
 
 
 def gain_name(g: float) -> str:
     """Directory name of a noise gain: gain_4, gain_2.5."""
-    return f"gain_{int(g)}" if float(g).is_integer() else f"gain_{g:g}"
+    return _core.gain_name(g)
 
 
 def partial_dir(final: Path) -> Path:
     """Where a setting or noise unit is written before it is published."""
-    return final.with_name(final.name + PARTIAL_SUFFIX)
+    return Path(_core.partial_dir(final))
 
 
 def is_complete(d: Path) -> bool:
     """A finished setting or noise unit: a final (not `*.partial`) directory with its marker."""
-    return not d.name.endswith(PARTIAL_SUFFIX) and (d / MARKER).is_file()
+    return _core.is_complete(d)
 
 
 def complete_settings(build: Path) -> list[Path]:
     """The complete setting directories of a build, sorted by name."""
-    return sorted(
-        d
-        for d in Path(build).iterdir()
-        if d.is_dir() and not d.name.startswith(".") and is_complete(d)
-    )
+    return [Path(build) / n for n in _core.complete_settings(build)]
 
 
 def publish(partial: Path, final: Path) -> None:
     """Write the marker into `partial` and rename it to `final` (replacing an old one)."""
-    import shutil
-
-    (partial / MARKER).write_text(f"{time.strftime('%Y-%m-%dT%H:%M:%S')}\n")
-    if final.exists():
-        shutil.rmtree(final)
-    os.replace(partial, final)
+    _core.publish(partial, final, time.strftime("%Y-%m-%dT%H:%M:%S"))
 
 
 def temp_path(path: Path) -> Path:
     """The temp name of an atomic write of `path` (dot-prefixed, per process)."""
-    return path.with_name(f".{path.name}.tmp{os.getpid()}")
-
-
-PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+    return Path(_core.temp_path(path))
 
 
 def setting_problem(setting: Path) -> str | None:
     """What is missing or damaged in a complete setting, checked cheaply (names, sizes,
     headers; `blurset verify` decodes everything): None when it looks whole. A rerun
     redoes a setting with a problem instead of counting it."""
-    try:
-        meta = json.loads((setting / "meta.json").read_text())
-        views, levels = len(meta["views"]), list(meta["levels"])
-    except FileNotFoundError:
-        return "meta.json is missing"
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        return f"meta.json is unreadable ({type(e).__name__})"
-    if not (setting / "transforms.json").is_file():
-        return "transforms.json is missing"
-    # Rows of poses_bounds.npy: a float64 (N, 17) array after an npy header.
-    row_bytes = 17 * 8
-    for lvl in levels:
-        d = setting / lvl
-        if not d.is_dir():
-            return f"level folder {lvl}/ is missing"
-        images = sorted((d / "images").glob("*.png")) if (d / "images").is_dir() else []
-        if len(images) != views:
-            return f"{lvl}/images holds {len(images)} of {views} images"
-        for p in images:
-            with open(p, "rb") as f:
-                head = f.read(8)
-                f.seek(0, os.SEEK_END)
-                size = f.tell()
-            if head != PNG_MAGIC or size < 67:
-                return f"{lvl}/images/{p.name} is not a whole PNG"
-            with open(p, "rb") as f:
-                f.seek(size - 12)
-                if f.read(12)[4:8] != b"IEND":
-                    return f"{lvl}/images/{p.name} is truncated"
-        npy = d / "poses_bounds.npy"
-        if not npy.is_file():
-            return f"{lvl}/poses_bounds.npy is missing"
-        if npy.stat().st_size < views * row_bytes + 16:
-            return f"{lvl}/poses_bounds.npy is truncated"
-    return None
+    return _core.setting_problem(setting)
 
 
 def refuse_overlap(out: Path, inputs: list[Path], option: str = "--out") -> None:
@@ -208,17 +158,14 @@ def _pid_alive(pid: int) -> bool:
 def remove_stale_temps(folder: Path, names: list[str]) -> list[Path]:
     """Remove the temp files or folders (`.<name>.tmp<pid>`) of these names whose process
     is gone (a killed run's); a live process's and anything else are left alone."""
-    import re
     import shutil
 
-    removed = []
+    removed: list[Path] = []
     if not folder.is_dir():
         return removed
-    wanted = {f".{n}" for n in names}
-    pattern = re.compile(r"^(\..+)\.tmp(\d+)$")
     for p in folder.iterdir():
-        m = pattern.match(p.name)
-        if not m or m.group(1) not in wanted or _pid_alive(int(m.group(2))):
+        parsed = _core.parse_temp_name(p.name)
+        if parsed is None or parsed[0] not in names or _pid_alive(parsed[1]):
             continue
         if p.is_dir() and not p.is_symlink():
             shutil.rmtree(p, ignore_errors=True)
@@ -231,16 +178,7 @@ def remove_stale_temps(folder: Path, names: list[str]) -> list[Path]:
 def write_bytes_atomic(path: Path, data: bytes) -> None:
     """Write `data` to `path` through a synced temp file and a rename, so readers see the
     old file or the new one, never a torn one, even after a crash."""
-    tmp = temp_path(path)
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    _core.write_atomic(path, data)
 
 
 def write_text_atomic(path: Path, text: str) -> None:

@@ -191,6 +191,10 @@ def _buffer_length(i: int, b: dict, bin_chunk: bytes | None, base: Path) -> int:
 
 
 def _check_accessor(i: int, a: dict, views: list[dict]) -> None:
+    for key in ("count", "byteOffset"):
+        n = a.get(key, 0)
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise PreflightError(f"accessor {i} has {key} {n!r}, not a count ≥ 0")
     v = a.get("bufferView")
     if v is None:
         return  # all zeros (or sparse only): nothing to read out of bounds

@@ -17,7 +17,6 @@ import argparse
 import csv
 import io
 import json
-import math
 import os
 import shutil
 import sys
@@ -29,8 +28,7 @@ from typing import Any
 import numpy as np
 
 from blurset import _core, layout
-from blurset.build.setting import level_renders
-from blurset.config import BuildConfig
+from blurset.config import BuildConfig, from_flags
 from blurset.exceptions import ConfigError
 
 COLUMNS = (
@@ -107,39 +105,58 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no per-candidate lines")
 
 
-def _ints(text: str | None, option: str, lo: int = 1, hi: int = 4096) -> tuple[int, ...] | None:
+def _ints(text: str | None, option: str, as_option: str) -> tuple[int, ...] | None:
+    """Comma-separated integers, each checked as the build option `as_option` (its range
+    lives in the core's config)."""
     if text is None:
         return None
     try:
         vals = tuple(int(x) for x in text.split(",") if x.strip())
     except ValueError:
         raise ConfigError(f"{option}: expected integers like 2,8,32, got {text!r}") from None
-    if not vals or any(not lo <= v <= hi for v in vals):
-        raise ConfigError(f"{option}: values must be in {lo}..{hi}, got {text!r}")
+    if not vals:
+        raise ConfigError(f"{option}: expected integers like 2,8,32, got {text!r}")
+    for v in vals:
+        try:
+            BuildConfig(**{as_option: v})
+        except ValueError as e:
+            raise ConfigError(f"{option} {text}: value {getattr(e, 'detail', e)}") from None
     return vals
 
 
 def preset_from_args(args: argparse.Namespace) -> Preset:
     base = PRESETS["quick" if args.quick else "full"]
-    ref = _ints(args.reference, "--reference", 1, 65536)
+    ref = _ints(args.reference, "--reference", "latents")
     if ref is not None and len(ref) != 2:
         raise ConfigError(f"--reference: expected M,S (frames, samples), got {args.reference!r}")
+    if ref is not None:
+        from_flags(samples=ref[1])
     pre = Preset(
         resolution=args.resolution or base.resolution,
         level=args.level or base.level,
         reference=ref or base.reference,  # type: ignore[arg-type]
-        budgets=_ints(args.budgets, "--budgets", 1, 2**20) or base.budgets,
-        latents=_ints(args.latents, "--latents") or base.latents,
+        budgets=_ints(args.budgets, "--budgets", "samples_total") or base.budgets,
+        latents=_ints(args.latents, "--latents", "latents") or base.latents,
         samplings=base.samplings,
     )
-    if not 8 <= pre.resolution <= 4096:
-        raise ConfigError(f"--resolution: must be in 8..4096, got {pre.resolution}")
-    if not 1 <= pre.level <= 64:
-        raise ConfigError(f"--level: must be in 1..64, got {pre.level}")
-    if not 0 <= args.view < 4096:
-        raise ConfigError(f"--view: must be in 0..4095, got {args.view}")
-    if not (math.isfinite(args.max_ghost_px) and args.max_ghost_px >= 0.01):
-        raise ConfigError(f"--max-ghost-px: must be ≥ 0.01 px, got {args.max_ghost_px}")
+    if args.view < 0:
+        raise ConfigError(f"--view {args.view}: must be an integer ≥ 0")
+    # The options a build shares are checked by the build config's validator.
+    from_flags(
+        {"levels": "--level", "views": "--view (+1)"},
+        seed=args.seed,
+        timeout=args.timeout,
+        threads=args.threads,
+        max_ghost_px=args.max_ghost_px,
+        resolution=pre.resolution,
+        levels=[pre.level],
+        # the plan holds views 0..view
+        views=args.view + 1,
+    )
+    try:
+        _core.check_theta0_deg(args.theta0_deg)
+    except _core.ConfigValueError as e:
+        raise ConfigError(f"--theta0-deg {e.detail}") from None
     return pre
 
 
@@ -192,10 +209,9 @@ REFERENCE_SEED_SALT = 0x5BD1E995
 
 
 def _render_image(
-    worker, lp: dict, work: Path, res: int, fov: float, salt: int = 0
+    worker, frames: list[dict], lp: dict, res: int, fov: float, salt: int = 0
 ) -> tuple[Any, dict]:
     """Render and accumulate one blurry image as the build does; (mean, timings)."""
-    frames = level_renders(lp, work / "f")
     for f in frames:
         f["seed"] = (f["seed"] ^ salt) & 0x7FFFFFFF
     acc = _core.Accumulator(res, res)
@@ -250,16 +266,21 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
         uid = glb.stem
 
-        def plan_level(cfg: BuildConfig) -> dict:
+        def plan_level(cfg: BuildConfig) -> tuple[list[dict], dict]:
+            """The renders of the measured image and its level plan (w_l, latents …)."""
             plan = _core.plan_setting(
-                cfg.sampling_json(),
+                cfg,
                 uid=uid,
                 theta0_deg=args.theta0_deg,
                 seed=args.seed,
                 bbox_dims=info["bbox_dims"],
                 vertices=verts,
             )
-            return json.loads(plan)["views"][args.view]["levels"][str(pre.level)]
+            prefix = str(work / "f")
+            return (
+                plan.level_renders(args.view, pre.level, prefix),
+                plan.level(args.view, pre.level),
+            )
 
         m_ref, s_ref = pre.reference
         ref_cfg = BuildConfig(
@@ -270,13 +291,13 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
             latent_positions="stratified",
             samples=s_ref,
         )
-        ref_lp = plan_level(ref_cfg)
+        ref_frames, ref_lp = plan_level(ref_cfg)
         say(
             f"reference: {m_ref} stratified frames x {s_ref} samples, "
             f"{ref_lp['motion_px']:.1f} px of motion at {pre.resolution} px"
         )
         ref, t_ref = _render_image(
-            w, ref_lp, work, pre.resolution, ref_cfg.fov_deg, salt=REFERENCE_SEED_SALT
+            w, ref_frames, ref_lp, pre.resolution, ref_cfg.fov_deg, salt=REFERENCE_SEED_SALT
         )
         _save_png(ref, out / "images" / "reference.png", pre.resolution)
         rows.append(
@@ -299,9 +320,9 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         )
         for i, c in enumerate(cands):
             cfg = _config(pre, args.view, c, args.max_ghost_px)
-            lp = plan_level(cfg)
-            mean, t = _render_image(w, lp, work, pre.resolution, cfg.fov_deg)
-            err = json.loads(_core.image_error(mean, ref, background=tuple(cfg.background)))
+            frames, lp = plan_level(cfg)
+            mean, t = _render_image(w, frames, lp, pre.resolution, cfg.fov_deg)
+            err = _core.image_error(mean, ref, background=tuple(cfg.background))
             name = c.label.replace(" ", "_").replace("=", "")
             _save_png(mean, out / "images" / f"{name}.png", pre.resolution)
             row = {
@@ -313,8 +334,8 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 "samples_total": lp["samples_per_frame"] * lp["latents"],
                 "budget": c.samples_total,
                 "seconds": round(t["seconds"], 3),
-                "psnr": round(err["psnr"], 3),
-                "psnr_linear": round(err["psnr_linear"], 3),
+                "psnr": round(err.psnr, 3),
+                "psnr_linear": round(err.psnr_linear, 3),
                 "cpu_seconds": round(t["cpu_seconds"], 3),
                 "max_gap_px": round(lp["max_gap_px"], 4),
                 "pareto": "",

@@ -24,6 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
+from blurset import _core
 from blurset.exceptions import BlursetError
 from blurset.scripts import blender_script
 
@@ -275,10 +276,11 @@ class Worker:
     # -- commands -----------------------------------------------------------------------
 
     def load(self, glb: Path, vertices_out: Path, *, unlit: str = "lit") -> dict[str, Any]:
-        """Import, normalize and QA-render one GLB; its reply (see blender_scripts/worker.py).
+        """Import and normalize one GLB, then render its QA views and judge them; the
+        worker's reply (see blender_scripts/worker.py) plus `qa_coverage`, `qa_luminance`.
 
-        Raises WorkerError with the worker's one-line reason when the object cannot be
-        rendered (missing file, unsupported compression, no mesh, renders black, ...).
+        Raises WorkerError with a one-line reason when the object cannot be rendered
+        (missing file, unsupported compression, no mesh, invisible, renders black, ...).
         """
         self._send(
             {
@@ -291,7 +293,31 @@ class Worker:
         reply = self._receive_in_sync()
         if not reply.get("ok"):
             raise WorkerError(f"{reply.get('reason', 'load failed')} ({glb})")
+        qa = self._object_qa(reply["bbox_dims"])
+        failure = _core.object_qa_verdict(qa)
+        if failure:
+            raise WorkerError(f"{failure} ({glb})")
+        reply["qa_coverage"] = [q.coverage for q in qa]
+        reply["qa_luminance"] = [q.luminance for q in qa]
         return reply
+
+    def _object_qa(self, bbox_dims: list[float]) -> list[Any]:
+        """Render the core's QA views of the loaded object (tiny, few samples) and measure
+        each with the core's frame QA: the worker renders, blurset-core judges."""
+        if self.workdir is not None:
+            self.workdir.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix="blurset-qa-", dir=self.workdir) as d:
+            frames = [
+                {"c2w": c2w, "seed": k, "out": Path(d) / f"qa_{k}.exr"}
+                for k, c2w in enumerate(_core.object_qa_cameras(bbox_dims))
+            ]
+            self.render(
+                frames,
+                resolution=_core.OBJECT_QA_RESOLUTION,
+                fov_deg=_core.OBJECT_QA_FOV_DEG,
+                samples=_core.OBJECT_QA_SAMPLES,
+            )
+            return [_core.frame_qa(_core.read_exr(f["out"])) for f in frames]
 
     def render(
         self,

@@ -10,7 +10,6 @@ under a lock at the end (`dataset`). The flags are in `cli`.
 
 from __future__ import annotations
 
-import dataclasses
 import threading
 import time
 from pathlib import Path
@@ -90,7 +89,7 @@ def _report_missing(objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress) ->
 def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # Absolute, so Ray workers (another working directory, another machine with the
     # same shared path) write where the driver reads.
-    cfg = dataclasses.replace(cfg, out=Path(cfg.out).resolve())
+    cfg = cfg.replace(out=str(Path(cfg.out).resolve()))
     out = Path(cfg.out)
     # Bad entries fail before anything is written.
     resolve_objects(list(cfg.objects), cache=objaverse(cfg))

@@ -130,7 +130,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
     }
     if args.levels is not None:
         flags["levels"] = parse_levels(args.levels)
-    return make_config(file_values, flags)
+    return make_config(file_values, flags, config_path=args.config)
 
 
 def run(args: argparse.Namespace) -> int:

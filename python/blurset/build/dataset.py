@@ -62,7 +62,7 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
     from those OUT was made with, unless --allow-mixed; the first run records them in a
     provisional dataset.json (call under build_lock)."""
     path = out / "dataset.json"
-    now = cfg.to_json()
+    now = cfg.record()
     if not path.is_file():
         layout.write_json(path, {"name": DATASET_NAME, "config": now, "provisional": True})
         return
@@ -74,7 +74,7 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
         raise ConfigError(
             f"dataset.json of OUT is unreadable; move it away to rebuild: {path}"
         ) from None
-    defaults = BuildConfig(out=cfg.out, objects=cfg.objects).to_json()
+    defaults = BuildConfig(out=cfg.out, objects=cfg.objects).record()
     differ = [
         k for k in sorted(now) if k not in RUN_OPTIONS and was.get(k, defaults.get(k)) != now[k]
     ]
@@ -126,26 +126,23 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     QA failures) whose work is still not complete."""
     complete = _complete_settings(out)
     fpath = out / "failures.jsonl"
-    text, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
-    kept = json.loads(text)
+    kept, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
     layout.write_text_atomic(fpath, "".join(json.dumps(r) + "\n" for r in kept))
-    entries = [{"setting": n, "object": m["uid"], "views": len(m["views"])} for n, m in complete]
-    splits = json.loads(
-        _core.make_splits(
-            json.dumps(entries),
-            view_stride=cfg.view_stride,
-            test_fraction=cfg.test_fraction,
-            test_objects=cfg.test_objects,
-            seed=cfg.seed,
-        )
+    entries = [(n, m["uid"], len(m["views"])) for n, m in complete]
+    splits = _core.make_splits(
+        entries,
+        view_stride=cfg.view_stride,
+        test_fraction=cfg.test_fraction,
+        test_objects=cfg.test_objects,
+        seed=cfg.seed,
     )
-    layout.write_json(out / "splits.json", splits)
+    splits.write(out / "splits.json")
     checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
     dataset = {
         "name": DATASET_NAME,
         "blurset_version": __version__,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "config": cfg.to_json(),
+        "config": cfg.record(),
         "seed": cfg.seed,
         "levels": cfg.level_dirs,
         "versions": {
@@ -167,5 +164,5 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     }
     if checks:
         dataset["pose_checks"] = checks
-    layout.write_json(out / "dataset.json", dataset)
+    _core.write_dataset_json(out / "dataset.json", dataset)
     return {"settings_complete": len(complete), "failures": kept}

@@ -8,7 +8,6 @@ partial ones.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import time
@@ -18,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import __version__, _core, layout
+from blurset import _core, layout
 from blurset.config import BuildConfig
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
@@ -46,122 +45,18 @@ class SettingFailed(BlursetError):
 
 def frames_per_setting(cfg: BuildConfig) -> int:
     """Renders of a setting (an upper bound with --latents auto)."""
-    return cfg.views * (1 + len(cfg.levels) * cfg.max_latents)
+    return cfg.frames_per_setting
 
 
-def level_renders(lp: dict, exr_prefix: Path) -> list[dict[str, Any]]:
-    """The renders of one blurry image of a plan: its latent frames (average method)
-    or its single motion blur render, each with its own Cycles samples."""
-    spf = lp["samples_per_frame"]
-    mb = lp.get("motion_blur")
-    if mb:
-        keys = [k["c2w"] for k in mb["keys"]]
-        return [
-            {
-                "c2w": keys[0],
-                "seed": mb["seed"],
-                "samples": spf,
-                "motion": {"steps": mb["motion_steps"], "keys": keys},
-                "out": f"{exr_prefix}_mb.exr",
-            }
-        ]
-    return [
-        {"c2w": f["c2w"], "seed": f["seed"], "samples": spf, "out": f"{exr_prefix}_{k:04d}.exr"}
-        for k, f in enumerate(lp["latent_frames"])
-    ]
-
-
-def _render_frames(plan: dict, exr_dir: Path) -> list[dict[str, Any]]:
-    """The render list of a setting in stream order: per view, sharp then each level."""
-    frames = []
-    for v in plan["views"]:
-        i = v["index"]
-        frames.append(
-            {"c2w": v["c2w"], "seed": v["sharp_seed"], "out": str(exr_dir / f"{i:04d}_s.exr")}
-        )
-        for lvl, lp in v["levels"].items():
-            frames.extend(level_renders(lp, exr_dir / f"{i:04d}_{lvl}"))
-    return frames
-
-
-def _keys(plan: dict) -> list[tuple[int, str]]:
-    """(view, level dir) of each rendered frame, aligned with `_render_frames`."""
-    keys = []
-    for v in plan["views"]:
-        keys.append((v["index"], layout.SHARP))
-        for lvl, lp in v["levels"].items():
-            n = 1 if lp.get("motion_blur") else len(lp["latent_frames"])
-            keys.extend([(v["index"], layout.level_dir(int(lvl)))] * n)
-    return keys
-
-
-def _meta(plan: dict, cfg: BuildConfig, obj: ObjectSpec, info: dict, timings: dict) -> dict:
-    views = []
-    for v in plan["views"]:
-        v = dict(v)
-        v["levels"] = {
-            lvl: {
-                **{k: x for k, x in lp.items() if k != "latent_frames"},
-                "latent_frames": [
-                    {k: x for k, x in f.items() if k != "c2w"} for f in lp["latent_frames"]
-                ],
-                **(
-                    {
-                        "motion_blur": {
-                            **lp["motion_blur"],
-                            "keys": [
-                                {k: x for k, x in key.items() if k != "c2w"}
-                                for key in lp["motion_blur"]["keys"]
-                            ],
-                        }
-                    }
-                    if lp.get("motion_blur")
-                    else {}
-                ),
-            }
-            for lvl, lp in v["levels"].items()
-        }
-        views.append(v)
+def _object_record(obj: ObjectSpec, info: dict) -> dict[str, Any]:
+    """meta.json's `object`: the file and what the worker reported about it."""
+    keys = ("bbox_dims", "scale", "center", "n_vertices", "n_triangles", "unlit_fixed")
     return {
-        "uid": plan["uid"],
-        "theta0_deg": plan["theta0_deg"],
-        "seed": plan["seed"],
-        "resolution": plan["resolution"],
-        "fov_deg": plan["fov_deg"],
-        "focal_px": plan["focal_px"],
-        "bbox_dims": plan["bbox_dims"],
-        "radius": plan["radius"],
-        "views": views,
-        "test_views": _core.test_views(len(views), cfg.view_stride),
-        "levels": cfg.level_dirs,
-        "sampling": plan["config"],
-        "render": {
-            "engine": "CYCLES",
-            # Per level in views[].levels[].samples_per_frame; null when a budget splits.
-            "samples_per_latent": None if cfg.samples_total else cfg.samples,
-            "samples_total": cfg.samples_total,
-            "blur_method": cfg.blur_method,
-            "latents": "auto" if cfg.latents_auto else cfg.latents,
-            "sharp_samples": cfg.effective_sharp_samples,
-            "exr_codec": "NONE (intermediate frames, deleted after accumulation)",
-            "background": cfg.background,
-            "alpha": "premultiplied, averaged with colour, composited over background",
-            "encoding": "sRGB (IEC 61966-2-1) of linear radiance, 8-bit PNG",
-        },
-        "object": {
-            "source": str(obj.path),
-            "sha256": info.get("sha256"),
-            "bbox_dims": info.get("bbox_dims"),
-            "scale": info.get("scale"),
-            "center": info.get("center"),
-            "n_vertices": info.get("n_vertices"),
-            "n_triangles": info.get("n_triangles"),
-            "unlit_fixed": info.get("unlit_fixed"),
-            "blender_version": info.get("blender_version"),
-            "warnings": info.get("warnings", []),
-        },
-        "timings": timings,
-        "blurset_version": __version__,
+        "source": str(obj.path),
+        "sha256": info.get("sha256"),
+        **{k: info.get(k) for k in keys},
+        "blender_version": info.get("blender_version"),
+        "warnings": info.get("warnings", []),
     }
 
 
@@ -182,19 +77,17 @@ def render_setting(
     exr_dir.mkdir(parents=True)
     t0 = time.time()
     seed = _core.seed_for(cfg.seed, job.obj.uid, job.index)
-    plan = json.loads(
-        _core.plan_setting(
-            cfg.sampling_json(),
-            uid=job.obj.uid,
-            theta0_deg=job.theta0_deg,
-            seed=seed,
-            bbox_dims=info["bbox_dims"],
-            vertices=verts,
-        )
+    plan = _core.plan_setting(
+        cfg,
+        uid=job.obj.uid,
+        theta0_deg=job.theta0_deg,
+        seed=seed,
+        bbox_dims=info["bbox_dims"],
+        vertices=verts,
     )
-    n_views = len(plan["views"])
-    frames = _render_frames(plan, exr_dir)
-    keys = _keys(plan)
+    n_views = plan.n_views
+    frames = plan.renders(exr_dir)
+    keys = [(f["view"], f["level"]) for f in frames]
     need: dict[tuple[int, str], int] = {}
     for k in keys:
         need[k] = need.get(k, 0) + 1
@@ -202,7 +95,7 @@ def render_setting(
         (partial / d / "images").mkdir(parents=True)
     acc: dict[tuple[int, str], Any] = {}
     res = cfg.resolution
-    qa: dict[int, dict] = {}
+    qa: dict[int, Any] = {}
 
     def on_frame(i: int, path: str) -> None:
         key = keys[i]
@@ -218,7 +111,7 @@ def render_setting(
             if cfg.write_linear:
                 a.write_exr(partial / level / "linear" / name.replace(".png", ".exr"))
             if level == layout.SHARP:
-                qa[view] = json.loads(_core.frame_qa(a.mean()))
+                qa[view] = _core.frame_qa(a.mean())
             del acc[key]
         progress.frame_done()
 
@@ -236,8 +129,8 @@ def render_setting(
     )
     # QA before the costly blur renders: a bad sharp view fails this setting only.
     for view in sorted(qa):
-        if qa[view]["failure"]:
-            raise SettingFailed("qa", f"render QA: view {view} is {qa[view]['failure']}")
+        if qa[view].failure:
+            raise SettingFailed("qa", f"render QA: view {view} is {qa[view].failure}")
     t_sharp = time.time() - t1
     if blur_idx:
         worker.render(
@@ -252,7 +145,7 @@ def render_setting(
     # --latents auto / motion blur render fewer frames than the bar's per-setting bound.
     progress.frame_done(frames_per_setting(cfg) - len(frames))
     shutil.rmtree(exr_dir)
-    _core.write_setting_poses(json.dumps(plan), partial, cfg.level_dirs)
+    plan.write_poses(partial, cfg.level_dirs)
     timings = {
         "plan_s": round(t_plan, 3),
         "sharp_s": round(t_sharp, 3),
@@ -261,13 +154,15 @@ def render_setting(
         "total_s": round(time.time() - t0, 3),
         "frames": len(frames),
     }
-    meta = _meta(plan, cfg, job.obj, info, timings)
-    for v in meta["views"]:
-        v["qa"] = {k: x for k, x in qa[v["index"]].items() if k != "failure"}
-    layout.write_json(partial / "meta.json", meta)
+    meta = {
+        "config": cfg,
+        "object": _object_record(job.obj, info),
+        "timings": timings,
+        "qa": [qa[v] for v in range(n_views)],
+    }
+    plan.write_meta(partial / "meta.json", **meta)
     if cfg.check_poses:
-        meta["pose_check"] = _pose_check(partial)
-        layout.write_json(partial / "meta.json", meta)
+        plan.write_meta(partial / "meta.json", **meta, pose_check=_pose_check(partial))
     if cfg.previews:
         from blurset.preview import write_build_preview
 

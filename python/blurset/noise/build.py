@@ -37,7 +37,14 @@ import numpy as np
 from blurset import __version__, _core, layout
 from blurset.exceptions import ConfigError, InputError
 from blurset.layout import gain_name
-from blurset.noise.params import files_record, noise_json, noise_table, parse_gains, table_record
+from blurset.noise.params import (
+    check_options,
+    files_record,
+    noise_json,
+    noise_table,
+    parse_gains,
+    table_record,
+)
 from blurset.noise.scene import list_images, output_names
 from blurset.stop import interruptible, remove_tree
 
@@ -259,7 +266,7 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             part = partials[g]
             _core.write_poses_bounds(part / "poses_bounds.npy", rows)
             sr, ss = gains_sigmas[g]
-            layout.write_json(
+            _core.write_noise_json(
                 part / "noise.json", _noise_json(unit, g, sr, ss, wb, params, args, build)
             )
             layout.publish(part, unit.dst / gain_name(g))
@@ -315,12 +322,7 @@ def run(args) -> int:
     out: Path = args.out
     if args.factor is not None:
         raise ConfigError("--factor: a build has no images_<F>/ directories; omit it")
-    if args.frames < 1:
-        raise ConfigError(f"--frames {args.frames}: must be >= 1")
-    if not (1e-6 <= args.white_level <= 1.0):
-        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
-    if not (0 <= args.seed < 2**64):
-        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+    check_options(args)
     gains = parse_gains(args.gains, args.any_gain)
     dataset = layout.read_json(build / "dataset.json", "dataset.json")
     available = dataset.get("levels") or ["sharp"]

@@ -17,6 +17,16 @@ LLFF_N_GAINS = (1.0, 2.0, 4.0, 8.0, 16.0, 20.0)
 NoiseTable = tuple[float, float, float, float]
 
 
+def check_options(args) -> None:
+    """The options both noise modes share: frames, white level, seed."""
+    if args.frames < 1:
+        raise ConfigError(f"--frames {args.frames}: must be >= 1")
+    if not (1e-6 <= args.white_level <= 1.0):
+        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
+    if not (0 <= args.seed < 2**64):
+        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+
+
 def parse_gains(values: list[str], any_gain: bool) -> list[float]:
     gains: list[float] = []
     for v in values:

@@ -16,7 +16,14 @@ import numpy as np
 
 from blurset import _core, layout
 from blurset.exceptions import ConfigError, InputError
-from blurset.noise.params import files_record, noise_json, noise_table, parse_gains, table_record
+from blurset.noise.params import (
+    check_options,
+    files_record,
+    noise_json,
+    noise_table,
+    parse_gains,
+    table_record,
+)
 from blurset.stop import interruptible, remove_tree
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
@@ -64,12 +71,7 @@ def run(args) -> int:
     args.gamma = args.gamma or "2.2"
     if args.factor is not None and args.factor < 1:
         raise ConfigError(f"--factor {args.factor}: must be >= 1")
-    if args.frames < 1:
-        raise ConfigError(f"--frames {args.frames}: must be >= 1")
-    if not (1e-6 <= args.white_level <= 1.0):
-        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
-    if not (0 <= args.seed < 2**64):
-        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+    check_options(args)
     gains = parse_gains(args.gains, args.any_gain)
 
     image_dir = scene / (f"images_{args.factor}" if args.factor else "images")
@@ -161,7 +163,7 @@ def run(args) -> int:
                 "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
                 files=files,
             )
-            layout.write_json(gdir / "noise.json", doc, indent=2)
+            _core.write_noise_json(gdir / "noise.json", doc)
         if out.exists():
             shutil.rmtree(out)
         tmp.rename(out)

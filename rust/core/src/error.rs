@@ -20,6 +20,9 @@ pub enum Error {
     Shape(String),
     #[error("invalid value: {0}")]
     Value(String),
+    /// An option out of its range: the option, then the value and what it must be.
+    #[error("{option} {detail}")]
+    Config { option: String, detail: String },
     /// Bad input data (a build's meta.json, splits.json, …): the reason, then the file.
     #[error("{reason}: {path:?}")]
     Input { reason: String, path: PathBuf },

@@ -19,14 +19,16 @@ pub use crate::error::{Error, Result};
 pub use crate::rng::seed_for;
 
 // What one setting renders: views, trajectories, levels, latent frames.
-pub use crate::plan::sampling::{plan_setting, SamplingConfig, SettingPlan};
+pub use crate::plan::config::{check_theta0, BuildConfig, Raw};
+pub use crate::plan::renders::{level_renders, Motion, Render};
+pub use crate::plan::sampling::{plan_setting, LevelPlan, SamplingConfig, SettingPlan};
 
 // Linear frames in, encoded images out; image files; render QA.
 pub use crate::image::accumulate::Accumulator;
 pub use crate::image::color::srgb_encode_slice;
 pub use crate::image::exr::read::{read_exr, Frame};
 pub use crate::image::io::{image_info, read_image, Image, Samples};
-pub use crate::image::qa::{frame_qa, thumbnail_qa, QaThresholds};
+pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
 
 // Sensor noise, from 8/16-bit images or from a build's linear EXRs.
 pub use crate::noise::kernel::{add_noise, clean_linear};
@@ -38,15 +40,22 @@ pub use crate::noise::model::{
 pub use crate::noise::variants::{write_variants, write_variants_linear, Variant};
 
 // The files of a build.
+pub use crate::dataset::atomic::write_atomic;
 pub use crate::dataset::failures::{
     current as current_failures, read_records as read_failure_records,
 };
-pub use crate::dataset::layout::{image_name, setting_name, theta0s};
+pub use crate::dataset::layout::{
+    complete_settings, gain_name, image_name, is_complete, level_dir, level_dirs, parse_level_dir,
+    parse_temp_name, partial_dir, publish, setting_levels, setting_name, setting_problem,
+    sort_level_dirs, temp_path, theta0s, MARKER, PARTIAL_SUFFIX, SHARP,
+};
 pub use crate::dataset::llff::{
     parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses, PoseRow,
 };
-pub use crate::dataset::splits::{make_splits, seeded_subset, test_views, SettingEntry};
-pub use crate::dataset::stats::build_stats;
+pub use crate::dataset::meta::{write_json, Meta, ObjectRecord, Timings};
+pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
+pub use crate::dataset::splits::{make_splits, seeded_subset, test_views, SettingEntry, Splits};
+pub use crate::dataset::stats::{build_stats, BuildStats};
 
 // Image error against a reference and the speed/quality front.
 pub use crate::metrics::{image_error, pareto_front};

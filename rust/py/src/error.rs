@@ -13,6 +13,13 @@ pyo3::create_exception!(
     "Bad input data (missing file, wrong shape, mismatched sizes); the message names the file."
 );
 
+pyo3::create_exception!(
+    _core,
+    ConfigValueError,
+    PyValueError,
+    "An option out of its range; `option` names it, `detail` holds the value and the range."
+);
+
 pub(crate) fn to_pyerr(e: Error) -> PyErr {
     let msg = e.to_string();
     match e {
@@ -25,6 +32,12 @@ pub(crate) fn to_pyerr(e: Error) -> PyErr {
         Error::Image { .. } => ImageError::new_err(msg),
         Error::Shape(_) | Error::Value(_) => PyValueError::new_err(msg),
         Error::Input { .. } => InputError::new_err(msg),
+        Error::Config { option, detail } => Python::attach(|py| {
+            let err = ConfigValueError::new_err(msg);
+            let v = err.value(py);
+            let set = v.setattr("option", option).and(v.setattr("detail", detail));
+            set.err().unwrap_or(err)
+        }),
     }
 }
 
@@ -34,5 +47,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("PoseFormatError", py.get_type::<PoseFormatError>())?;
     m.add("ImageError", py.get_type::<ImageError>())?;
     m.add("InputError", py.get_type::<InputError>())?;
+    m.add("ConfigValueError", py.get_type::<ConfigValueError>())?;
     Ok(())
 }

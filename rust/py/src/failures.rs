@@ -1,23 +1,10 @@
 //! Bindings of the core's failures and setting names: the rules of failures.jsonl, for `blurset build`.
 use blurset_core as core;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use std::collections::BTreeSet;
 use std::path::PathBuf;
 
-/// `<uid>_<theta0>`, the directory name of one setting.
-#[pyfunction]
-fn setting_name(uid: &str, theta0_deg: f64) -> String {
-    core::setting_name(uid, theta0_deg)
-}
-
-/// The θ0 of each of an object's `n` settings, evenly spaced from 0°.
-#[pyfunction]
-fn theta0s(n: usize) -> Vec<f64> {
-    core::theta0s(n)
-}
-
-/// The current failures of a failures.jsonl as a JSON list, and the number of lines
+/// The current failures of a failures.jsonl (a list of records), and the number of lines
 /// skipped (torn). `complete`: the complete setting names; `theta0s`: an object's
 /// azimuths (None keeps every object record).
 #[pyfunction]
@@ -27,17 +14,14 @@ fn current_failures(
     path: PathBuf,
     complete: Vec<String>,
     theta0s: Option<Vec<f64>>,
-) -> PyResult<(String, usize)> {
+) -> PyResult<(Bound<'_, PyAny>, usize)> {
     let done: BTreeSet<String> = complete.into_iter().collect();
     let (records, skipped) = crate::run_detached(py, || core::read_failure_records(&path))?;
     let now = core::current_failures(&records, &done, theta0s.as_deref());
-    let text = serde_json::to_string(&now).map_err(|e| PyValueError::new_err(e.to_string()))?;
-    Ok((text, skipped))
+    Ok((crate::sampling::to_py(py, &now)?, skipped))
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(setting_name, m)?)?;
-    m.add_function(wrap_pyfunction!(theta0s, m)?)?;
     m.add_function(wrap_pyfunction!(current_failures, m)?)?;
     Ok(())
 }

@@ -3,8 +3,10 @@
 use pyo3::prelude::*;
 
 mod accumulate;
+mod config;
 mod error;
 mod failures;
+mod layout;
 mod llff;
 mod noise;
 mod noise_linear;
@@ -26,7 +28,9 @@ where
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     error::register(m)?;
+    config::register(m)?;
     failures::register(m)?;
+    layout::register(m)?;
     llff::register(m)?;
     sampling::register(m)?;
     accumulate::register(m)?;

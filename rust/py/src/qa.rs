@@ -4,40 +4,148 @@ use numpy::{PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-/// QA of a premultiplied linear RGBA image: a JSON object with `coverage`, `luminance`,
-/// `saturated`, `border_coverage` and `failure` (the reason, or null when it passes).
-/// `thresholds` is a JSON object of `QaThresholds` fields; absent fields take defaults.
-#[pyfunction]
-#[pyo3(signature = (rgba, *, thresholds = None))]
-fn frame_qa(rgba: PyReadonlyArray3<'_, f32>, thresholds: Option<&str>) -> PyResult<String> {
-    let shape = rgba.shape();
-    if shape[2] != 4 {
-        return Err(PyValueError::new_err(format!(
-            "QA needs shape (H, W, 4) premultiplied RGBA, got {shape:?}"
-        )));
-    }
-    let t: core::QaThresholds = match thresholds {
-        Some(s) => serde_json::from_str(s)
-            .map_err(|e| PyValueError::new_err(format!("QA thresholds: {e}")))?,
-        None => core::QaThresholds::default(),
-    };
-    let data = rgba.as_slice()?;
-    let r =
-        core::frame_qa(shape[1] as u32, shape[0] as u32, data).map_err(crate::error::to_pyerr)?;
-    let mut v = serde_json::to_value(r).map_err(|e| PyValueError::new_err(e.to_string()))?;
-    v["failure"] = t.verdict(&r).into();
-    Ok(v.to_string())
+/// When a view fails render QA (the core's defaults unless given).
+#[pyclass(
+    frozen,
+    get_all,
+    from_py_object,
+    name = "QaThresholds",
+    module = "blurset._core"
+)]
+#[derive(Clone, Copy)]
+pub struct QaThresholds {
+    /// Least mean alpha (fraction of the image the object covers).
+    pub min_coverage: f64,
+    /// Least mean unpremultiplied luminance of the object.
+    pub min_luminance: f64,
+    /// Largest fraction of the object's pixels clipped in sRGB.
+    pub max_saturated: f64,
 }
 
-/// The default QA thresholds as JSON (one place for the numbers).
+impl From<QaThresholds> for core::QaThresholds {
+    fn from(t: QaThresholds) -> Self {
+        core::QaThresholds {
+            min_coverage: t.min_coverage,
+            min_luminance: t.min_luminance,
+            max_saturated: t.max_saturated,
+        }
+    }
+}
+
+#[pymethods]
+impl QaThresholds {
+    #[new]
+    #[pyo3(signature = (*, min_coverage = None, min_luminance = None, max_saturated = None))]
+    fn new(
+        min_coverage: Option<f64>,
+        min_luminance: Option<f64>,
+        max_saturated: Option<f64>,
+    ) -> Self {
+        let d = core::QaThresholds::default();
+        QaThresholds {
+            min_coverage: min_coverage.unwrap_or(d.min_coverage),
+            min_luminance: min_luminance.unwrap_or(d.min_luminance),
+            max_saturated: max_saturated.unwrap_or(d.max_saturated),
+        }
+    }
+}
+
+/// What one view looks like in numbers, and its verdict under the thresholds.
+#[pyclass(
+    frozen,
+    skip_from_py_object,
+    name = "FrameQa",
+    module = "blurset._core"
+)]
+#[derive(Clone)]
+pub struct FrameQa(pub core::FrameQa, pub Option<String>);
+
+#[pymethods]
+impl FrameQa {
+    /// Mean alpha: the fraction of the image the object covers.
+    #[getter]
+    fn coverage(&self) -> f64 {
+        self.0.coverage
+    }
+    /// Mean unpremultiplied luminance of the object (Σ premultiplied Y / Σ alpha).
+    #[getter]
+    fn luminance(&self) -> f64 {
+        self.0.luminance
+    }
+    /// Fraction of covered pixels with a colour channel at or above 1.
+    #[getter]
+    fn saturated(&self) -> f64 {
+        self.0.saturated
+    }
+    /// Fraction of the border pixels the object covers.
+    #[getter]
+    fn border_coverage(&self) -> f64 {
+        self.0.border_coverage
+    }
+    /// The reason the view fails, or None when it passes.
+    #[getter]
+    fn failure(&self) -> Option<String> {
+        self.1.clone()
+    }
+}
+
+fn rgba<'a>(a: &'a PyReadonlyArray3<'_, f32>) -> PyResult<&'a [f32]> {
+    if a.shape()[2] != 4 {
+        return Err(PyValueError::new_err(format!(
+            "QA needs shape (H, W, 4) premultiplied RGBA, got {:?}",
+            a.shape()
+        )));
+    }
+    Ok(a.as_slice()?)
+}
+
+/// QA of a premultiplied linear RGBA image (H, W, 4) under `thresholds` (default: the core's).
 #[pyfunction]
-fn default_qa_thresholds() -> PyResult<String> {
-    serde_json::to_string(&core::QaThresholds::default())
-        .map_err(|e| PyValueError::new_err(e.to_string()))
+#[pyo3(signature = (rgba_, *, thresholds = None))]
+fn frame_qa(
+    rgba_: PyReadonlyArray3<'_, f32>,
+    thresholds: Option<QaThresholds>,
+) -> PyResult<FrameQa> {
+    let shape = rgba_.shape();
+    let t: core::QaThresholds = thresholds.map(Into::into).unwrap_or_default();
+    let r = core::frame_qa(shape[1] as u32, shape[0] as u32, rgba(&rgba_)?)
+        .map_err(crate::error::to_pyerr)?;
+    Ok(FrameQa(r, t.verdict(&r)))
+}
+
+/// The default QA thresholds (one place for the numbers).
+#[pyfunction]
+fn default_qa_thresholds() -> QaThresholds {
+    QaThresholds::new(None, None, None)
+}
+
+/// OpenGL camera-to-world (row-major) of each load-time QA view of an object of this box.
+#[pyfunction]
+fn object_qa_cameras(bbox_dims: [f64; 3]) -> Vec<[[f64; 4]; 4]> {
+    core::object_qa::cameras(bbox_dims)
+}
+
+/// The reason an object fails its load-time QA (invisible or black in every view), or None.
+#[pyfunction]
+#[pyo3(signature = (views, *, thresholds = None))]
+fn object_qa_verdict(
+    views: Vec<PyRef<'_, FrameQa>>,
+    thresholds: Option<QaThresholds>,
+) -> Option<String> {
+    let t: core::QaThresholds = thresholds.map(Into::into).unwrap_or_default();
+    let v: Vec<core::FrameQa> = views.iter().map(|q| q.0).collect();
+    core::object_qa::verdict(&v, &t)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<QaThresholds>()?;
+    m.add_class::<FrameQa>()?;
     m.add_function(wrap_pyfunction!(frame_qa, m)?)?;
     m.add_function(wrap_pyfunction!(default_qa_thresholds, m)?)?;
+    m.add_function(wrap_pyfunction!(object_qa_cameras, m)?)?;
+    m.add_function(wrap_pyfunction!(object_qa_verdict, m)?)?;
+    m.add("OBJECT_QA_RESOLUTION", core::object_qa::RESOLUTION)?;
+    m.add("OBJECT_QA_SAMPLES", core::object_qa::SAMPLES)?;
+    m.add("OBJECT_QA_FOV_DEG", core::object_qa::FOV_DEG)?;
     Ok(())
 }

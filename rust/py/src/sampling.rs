@@ -1,30 +1,72 @@
-//! Sampling, setting poses and splits. Structured values cross the boundary as JSON
-//! text (serde on this side, `json` on the other): one schema, defined in blurset-core.
+//! Sampling and the plan of a setting. A plan stays a Rust object: Python asks it for
+//! its render list and has it write the poses and meta.json; `to_dict` is for reading.
+use crate::config::BuildConfig;
+use crate::qa::FrameQa;
 use blurset_core as core;
 use numpy::PyReadonlyArray2;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use pythonize::{depythonize, pythonize};
 use std::path::PathBuf;
 
-fn from_json<T: serde::de::DeserializeOwned>(what: &str, text: &str) -> PyResult<T> {
-    serde_json::from_str(text).map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
+pub(crate) fn to_py<'py, T: serde::Serialize>(
+    py: Python<'py>,
+    value: &T,
+) -> PyResult<Bound<'py, PyAny>> {
+    pythonize(py, value).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
-fn to_json<T: serde::Serialize>(value: &T) -> PyResult<String> {
-    serde_json::to_string(value).map_err(|e| PyValueError::new_err(e.to_string()))
+pub(crate) fn from_py<T: serde::de::DeserializeOwned>(
+    what: &str,
+    obj: &Bound<'_, PyAny>,
+) -> PyResult<T> {
+    depythonize(obj).map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
 }
 
-/// The default sampling configuration (the paper's settings) as JSON.
+/// The sampling of a setting's plan (views, trajectory, levels, latents, samples).
+///
+/// `SamplingConfig(**values)` takes the fields of `to_dict()` over the paper's defaults;
+/// ConfigValueError names an option out of range.
+#[pyclass(
+    frozen,
+    eq,
+    skip_from_py_object,
+    name = "SamplingConfig",
+    module = "blurset._core"
+)]
+#[derive(Clone, PartialEq)]
+pub struct SamplingConfig(pub core::SamplingConfig);
+
+#[pymethods]
+impl SamplingConfig {
+    #[new]
+    #[pyo3(signature = (**values))]
+    fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let cfg: core::SamplingConfig = match values {
+            Some(d) => from_py("sampling config", d.as_any())?,
+            None => core::SamplingConfig::default(),
+        };
+        cfg.validate().map_err(crate::error::to_pyerr)?;
+        Ok(SamplingConfig(cfg))
+    }
+
+    /// The fields as a dict (what meta.json records as `sampling`).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, &self.0)
+    }
+
+    /// The most latent frames one blurry image can have.
+    #[getter]
+    fn max_latents(&self) -> usize {
+        self.0.max_latents()
+    }
+}
+
+/// The paper's sampling settings.
 #[pyfunction]
-fn default_sampling_config() -> PyResult<String> {
-    to_json(&core::SamplingConfig::default())
-}
-
-/// Check a sampling configuration; raises ValueError naming the bad option.
-#[pyfunction]
-fn validate_sampling_config(config_json: &str) -> PyResult<()> {
-    let cfg: core::SamplingConfig = from_json("sampling config", config_json)?;
-    cfg.validate().map_err(crate::error::to_pyerr)
+fn default_sampling_config() -> SamplingConfig {
+    SamplingConfig(core::SamplingConfig::default())
 }
 
 /// The seed of setting `index` of object `uid` under the build seed.
@@ -33,19 +75,126 @@ fn seed_for(seed: u64, uid: &str, index: u64) -> u64 {
     core::seed_for(seed, uid, index)
 }
 
-/// Plan one setting (views, near/far from the vertices, weights, latent frames, seeds) → JSON.
+/// The plan of one setting: every view, trajectory, level, latent frame and seed.
+#[pyclass(frozen, name = "Plan", module = "blurset._core")]
+pub struct Plan(pub core::SettingPlan);
+
+#[pymethods]
+impl Plan {
+    #[getter]
+    fn uid(&self) -> String {
+        self.0.uid.clone()
+    }
+    #[getter]
+    fn n_views(&self) -> usize {
+        self.0.views.len()
+    }
+    #[getter]
+    fn resolution(&self) -> [u32; 2] {
+        self.0.resolution
+    }
+    #[getter]
+    fn fov_deg(&self) -> f64 {
+        self.0.fov_deg
+    }
+
+    /// The whole plan as a dict (views[].levels["<l>"].latent_frames …), for reading.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, &self.0)
+    }
+
+    /// One view's plan of one blur level as a dict (w_l, latents, motion_px, …).
+    fn level<'py>(&self, py: Python<'py>, view: usize, level: u32) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, self.level_plan(view, level)?)
+    }
+
+    /// Every render of the setting in stream order (per view: sharp, then each level),
+    /// as the worker takes them: {view, level, c2w, seed, samples?, out, motion?}.
+    fn renders<'py>(&self, py: Python<'py>, exr_dir: PathBuf) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, &self.0.renders(&exr_dir))
+    }
+
+    /// The renders of one blurry image (view, level), EXRs named `<prefix>_…`.
+    fn level_renders<'py>(
+        &self,
+        py: Python<'py>,
+        view: usize,
+        level: u32,
+        prefix: &str,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let lp = self.level_plan(view, level)?;
+        to_py(py, &core::level_renders(view, level, lp, prefix))
+    }
+
+    /// Write `<level>/poses_bounds.npy` for each level dir and the setting's transforms.json.
+    fn write_poses(
+        &self,
+        py: Python<'_>,
+        setting_dir: PathBuf,
+        level_dirs: Vec<String>,
+    ) -> PyResult<()> {
+        crate::run_detached(py, || {
+            core::write_setting_poses(&self.0, &setting_dir, &level_dirs)
+        })
+    }
+
+    /// Write the setting's meta.json: this plan, the build config, the object as the
+    /// worker reported it (dict), the timings (dict), the QA of every view and, with
+    /// --check-poses, the COLMAP verdict (dict).
+    #[pyo3(signature = (path, *, config, object, timings, qa, pose_check = None))]
+    #[allow(clippy::too_many_arguments)] // keyword arguments of one Python call
+    fn write_meta(
+        &self,
+        py: Python<'_>,
+        path: PathBuf,
+        config: PyRef<'_, BuildConfig>,
+        object: &Bound<'_, PyAny>,
+        timings: &Bound<'_, PyAny>,
+        qa: Vec<PyRef<'_, FrameQa>>,
+        pose_check: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let object: core::ObjectRecord = from_py("object", object)?;
+        let timings: core::Timings = from_py("timings", timings)?;
+        let qa: Vec<core::FrameQa> = qa.iter().map(|q| q.0).collect();
+        let mut meta = core::Meta::new(&self.0, &config.0, object, timings, &qa)
+            .map_err(crate::error::to_pyerr)?;
+        meta.pose_check = pose_check
+            .map(|p| from_py::<serde_json::Value>("pose_check", p))
+            .transpose()?;
+        crate::run_detached(py, || meta.write(&path))
+    }
+}
+
+impl Plan {
+    fn level_plan(&self, view: usize, level: u32) -> PyResult<&core::LevelPlan> {
+        self.0
+            .views
+            .get(view)
+            .and_then(|v| v.levels.get(&level.to_string()))
+            .ok_or_else(|| {
+                PyValueError::new_err(format!("the plan has no view {view} at level {level}"))
+            })
+    }
+}
+
+/// Plan one setting (views, near/far from the vertices, weights, latent frames, seeds).
+/// `config` is a SamplingConfig or a BuildConfig (its sampling).
 #[pyfunction]
-#[pyo3(signature = (config_json, *, uid, theta0_deg, seed, bbox_dims, vertices))]
+#[pyo3(signature = (config, *, uid, theta0_deg, seed, bbox_dims, vertices))]
 fn plan_setting(
     py: Python<'_>,
-    config_json: &str,
+    config: &Bound<'_, PyAny>,
     uid: &str,
     theta0_deg: f64,
     seed: u64,
     bbox_dims: [f64; 3],
     vertices: PyReadonlyArray2<'_, f32>,
-) -> PyResult<String> {
-    let cfg: core::SamplingConfig = from_json("sampling config", config_json)?;
+) -> PyResult<Plan> {
+    let cfg = if let Ok(b) = config.cast::<BuildConfig>() {
+        b.get().0.sampling()
+    } else {
+        config.cast::<SamplingConfig>()?.get().0.clone()
+    };
     let v = vertices.as_array();
     if v.ncols() != 3 {
         return Err(PyValueError::new_err(format!(
@@ -57,21 +206,13 @@ fn plan_setting(
     let plan = crate::run_detached(py, || {
         core::plan_setting(&cfg, uid, theta0_deg, seed, bbox_dims, &pts)
     })?;
-    to_json(&plan)
+    Ok(Plan(plan))
 }
 
-/// Write `<level>/poses_bounds.npy` for each level dir and `transforms.json` of a setting.
+/// ConfigValueError unless θ0 is a finite number of degrees.
 #[pyfunction]
-fn write_setting_poses(
-    py: Python<'_>,
-    plan_json: &str,
-    setting_dir: PathBuf,
-    level_dirs: Vec<String>,
-) -> PyResult<()> {
-    let plan: core::SettingPlan = from_json("setting plan", plan_json)?;
-    crate::run_detached(py, || {
-        core::write_setting_poses(&plan, &setting_dir, &level_dirs)
-    })
+fn check_theta0_deg(theta0_deg: f64) -> PyResult<()> {
+    core::check_theta0(theta0_deg).map_err(crate::error::to_pyerr)
 }
 
 /// Every `stride`-th view index below `views` (the held-out views of a setting).
@@ -80,32 +221,70 @@ fn test_views(views: usize, stride: usize) -> Vec<usize> {
     core::test_views(views, stride)
 }
 
-/// Image file name of view `index` among `n` views.
-#[pyfunction]
-fn image_name(index: usize, n: usize) -> String {
-    core::image_name(index, n)
+/// The train/test splits of a build (the `splits.json` document).
+#[pyclass(frozen, name = "Splits", module = "blurset._core")]
+pub struct Splits(core::Splits);
+
+#[pymethods]
+impl Splits {
+    #[getter]
+    fn train(&self) -> Vec<String> {
+        self.0.train.clone()
+    }
+    #[getter]
+    fn test(&self) -> Vec<String> {
+        self.0.test.clone()
+    }
+    #[getter]
+    fn test_objects(&self) -> Vec<String> {
+        self.0.test_objects.clone()
+    }
+    #[getter]
+    fn view_stride(&self) -> usize {
+        self.0.view_stride
+    }
+    /// Held-out view indices per test setting.
+    #[getter]
+    fn test_views(&self) -> std::collections::BTreeMap<String, Vec<usize>> {
+        self.0.test_views.clone()
+    }
+    /// Write splits.json atomically.
+    fn write(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        crate::run_detached(py, || core::write_json(&path, &self.0))
+    }
+    /// The document as a dict.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, &self.0)
+    }
 }
 
-/// Train/test splits by object → JSON (the `splits.json` document).
+/// Train/test splits by object of setting entries (setting dir, object uid, views).
 #[pyfunction]
-#[pyo3(signature = (entries_json, *, view_stride, test_fraction, test_objects, seed))]
+#[pyo3(signature = (entries, *, view_stride, test_fraction, test_objects, seed))]
 fn make_splits(
-    entries_json: &str,
+    entries: Vec<(String, String, usize)>,
     view_stride: usize,
     test_fraction: f64,
     test_objects: Option<Vec<String>>,
     seed: u64,
-) -> PyResult<String> {
-    let entries: Vec<core::SettingEntry> = from_json("split entries", entries_json)?;
-    let s = core::make_splits(
+) -> PyResult<Splits> {
+    let entries: Vec<core::SettingEntry> = entries
+        .into_iter()
+        .map(|(setting, object, views)| core::SettingEntry {
+            setting,
+            object,
+            views,
+        })
+        .collect();
+    core::make_splits(
         &entries,
         view_stride,
         test_fraction,
         test_objects.as_deref(),
         seed,
     )
-    .map_err(crate::error::to_pyerr)?;
-    to_json(&s)
+    .map(Splits)
+    .map_err(crate::error::to_pyerr)
 }
 
 /// A seeded random subset of `k` ids, sorted (it depends on the set of ids, not their order).
@@ -115,14 +294,15 @@ fn seeded_subset(ids: Vec<String>, k: usize, seed: u64) -> Vec<String> {
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<SamplingConfig>()?;
+    m.add_class::<Plan>()?;
+    m.add_class::<Splits>()?;
     m.add_function(wrap_pyfunction!(seeded_subset, m)?)?;
     m.add_function(wrap_pyfunction!(default_sampling_config, m)?)?;
-    m.add_function(wrap_pyfunction!(validate_sampling_config, m)?)?;
     m.add_function(wrap_pyfunction!(seed_for, m)?)?;
     m.add_function(wrap_pyfunction!(plan_setting, m)?)?;
-    m.add_function(wrap_pyfunction!(write_setting_poses, m)?)?;
-    m.add_function(wrap_pyfunction!(image_name, m)?)?;
     m.add_function(wrap_pyfunction!(test_views, m)?)?;
+    m.add_function(wrap_pyfunction!(check_theta0_deg, m)?)?;
     m.add_function(wrap_pyfunction!(make_splits, m)?)?;
     Ok(())
 }

@@ -1,17 +1,64 @@
-//! Build statistics (`blurset stats`): one core call, the document out as JSON text.
+//! Build statistics (`blurset stats`): one core call, the document as a frozen object.
+use crate::sampling::to_py;
 use blurset_core as core;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
-/// Read every complete setting of the build at `out` → the stats document as JSON.
+/// The statistics of a build (the `stats.json` document, schema "blurset-stats/1").
+#[pyclass(frozen, name = "BuildStats", module = "blurset._core")]
+pub struct BuildStats(core::BuildStats);
+
+#[pymethods]
+impl BuildStats {
+    /// Objects, settings, views, images, test counts, failures, skipped settings.
+    #[getter]
+    fn counts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, &self.0.counts)
+    }
+
+    /// The complete settings read (name, uid, θ0, views, level dirs, images …).
+    #[getter]
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, &self.0.settings)
+    }
+
+    /// The whole document as a dict (per-view arrays, per-level maps keyed "1" … as in
+    /// stats.json, summaries).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let doc =
+            serde_json::to_value(&self.0).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        to_py(py, &doc)
+    }
+
+    /// Write stats.json (compact), `generated` and `blurset_version` first, atomically.
+    fn write(&self, py: Python<'_>, path: PathBuf, generated: &str) -> PyResult<()> {
+        let mut doc = serde_json::Map::new();
+        doc.insert("generated".into(), generated.into());
+        doc.insert("blurset_version".into(), env!("CARGO_PKG_VERSION").into());
+        let body =
+            serde_json::to_value(&self.0).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        if let serde_json::Value::Object(m) = body {
+            doc.extend(m);
+        }
+        let mut text =
+            serde_json::to_vec(&doc).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        text.push(b'\n');
+        crate::run_detached(py, || core::write_atomic(&path, &text))
+    }
+}
+
+/// Read every complete setting of the build at `out` and compute its statistics.
+///
+/// Raises InputError naming the file: no such directory, not a build, unreadable or
+/// corrupt meta.json of a complete setting, corrupt splits.json or failures.jsonl.
 #[pyfunction]
-fn build_stats(py: Python<'_>, out: PathBuf) -> PyResult<String> {
-    let doc = crate::run_detached(py, || core::build_stats(&out))?;
-    serde_json::to_string(&doc).map_err(|e| PyValueError::new_err(e.to_string()))
+fn build_stats(py: Python<'_>, out: PathBuf) -> PyResult<BuildStats> {
+    crate::run_detached(py, || core::build_stats(&out)).map(BuildStats)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<BuildStats>()?;
     m.add_function(wrap_pyfunction!(build_stats, m)?)?;
     Ok(())
 }

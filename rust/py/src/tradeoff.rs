@@ -15,6 +15,17 @@ fn rgba<'a>(a: &'a PyReadonlyArray3<'_, f32>, what: &str) -> PyResult<&'a [f32]>
         .map_err(|_| PyValueError::new_err(format!("{what} must be C-contiguous")))
 }
 
+/// Error of an image against a reference (DESIGN §8): PSNR and MSE, sRGB and linear.
+#[pyclass(frozen, get_all, name = "ImageMetrics", module = "blurset._core")]
+pub struct ImageMetrics {
+    /// PSNR (dB, peak 1) of the sRGB image composited over the background (≤ 200).
+    pub psnr: f64,
+    /// PSNR (dB, peak 1) of the linear premultiplied RGBA.
+    pub psnr_linear: f64,
+    pub mse: f64,
+    pub mse_linear: f64,
+}
+
 /// Error of `image` against `reference` (float32 (H, W, 4), premultiplied linear RGBA):
 /// JSON with `psnr` (sRGB over the background), `psnr_linear`, `mse`, `mse_linear`.
 #[pyfunction]
@@ -24,7 +35,7 @@ fn image_error(
     image: PyReadonlyArray3<'_, f32>,
     reference: PyReadonlyArray3<'_, f32>,
     background: (f64, f64, f64),
-) -> PyResult<String> {
+) -> PyResult<ImageMetrics> {
     if image.shape() != reference.shape() {
         return Err(PyValueError::new_err(format!(
             "image {:?} and reference {:?} differ in shape",
@@ -35,7 +46,12 @@ fn image_error(
     let (a, b) = (rgba(&image, "image")?, rgba(&reference, "reference")?);
     let bg = [background.0, background.1, background.2];
     let e = crate::run_detached(py, || core::image_error(a, b, bg))?;
-    serde_json::to_string(&e).map_err(|e| PyValueError::new_err(e.to_string()))
+    Ok(ImageMetrics {
+        psnr: e.psnr,
+        psnr_linear: e.psnr_linear,
+        mse: e.mse,
+        mse_linear: e.mse_linear,
+    })
 }
 
 /// Which points (seconds, psnr) are Pareto-optimal (faster or better than every other).
@@ -45,6 +61,7 @@ fn pareto_front(seconds: Vec<f64>, psnr: Vec<f64>) -> PyResult<Vec<bool>> {
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<ImageMetrics>()?;
     m.add_function(wrap_pyfunction!(image_error, m)?)?;
     m.add_function(wrap_pyfunction!(pareto_front, m)?)?;
     Ok(())

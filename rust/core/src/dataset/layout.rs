@@ -1,8 +1,24 @@
-//! The names a build gives its parts on disk: setting directories, image files and
-//! the marker of a complete setting.
+//! The names a build (and a noise output) gives its parts on disk, and what "complete"
+//! means — the one owner of these rules (DESIGN §4, §10):
+//!
+//! - a setting directory is `<uid>_<theta0>`; a level directory is `sharp` or
+//!   `blur_<l>` (l in 1..=64); a noise gain directory is `gain_<g>`;
+//! - a setting (or a noise unit) is written under `<name>.partial/`, gets its `.complete`
+//!   marker last and is then renamed into place: it is complete only when its final
+//!   directory (never a `*.partial` one) holds the marker;
+//! - a build's setting directories are scanned once, here ([`scan`]).
+use super::atomic::write_atomic;
+use crate::error::{Error, Result};
+use std::path::{Path, PathBuf};
 
 /// The marker a setting directory gets last, when it is complete.
 pub const MARKER: &str = ".complete";
+/// Suffix of the directory a setting or noise unit is written in before it is published.
+pub const PARTIAL_SUFFIX: &str = ".partial";
+/// The level directory of the sharp image (level 0).
+pub const SHARP: &str = "sharp";
+/// Largest blur level a build can write.
+pub const MAX_LEVEL: u32 = 64;
 
 /// `<uid>_<theta0>`: the directory of one setting, θ0 rounded to whole degrees.
 pub fn setting_name(uid: &str, theta0_deg: f64) -> String {
@@ -22,6 +38,305 @@ pub fn image_name(index: usize, n: usize) -> String {
     format!("{index:0width$}.png")
 }
 
+/// Directory of a blur level (`blur_<l>`); level 0 is the sharp image.
+pub fn level_dir(level: u32) -> String {
+    if level == 0 {
+        SHARP.to_string()
+    } else {
+        format!("blur_{level}")
+    }
+}
+
+/// `sharp`, then `blur_<l>` of every blur level, in the given order.
+pub fn level_dirs(levels: &[u32]) -> Vec<String> {
+    std::iter::once(0)
+        .chain(levels.iter().copied())
+        .map(level_dir)
+        .collect()
+}
+
+/// The level of a level directory name: `sharp` → 0, `blur_<l>` → l for l in
+/// 1..=MAX_LEVEL written without leading zeros; anything else → None.
+pub fn parse_level_dir(name: &str) -> Option<u32> {
+    if name == SHARP {
+        return Some(0);
+    }
+    let num = name.strip_prefix("blur_")?;
+    if num.is_empty() || num.starts_with('0') || !num.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    num.parse::<u32>()
+        .ok()
+        .filter(|l| (1..=MAX_LEVEL).contains(l))
+}
+
+/// Level directories sorted in level order (sharp first, then by number); names that
+/// are not level directories are dropped.
+pub fn sort_level_dirs<S: AsRef<str>>(names: &[S]) -> Vec<String> {
+    let mut v: Vec<(u32, String)> = names
+        .iter()
+        .filter_map(|n| parse_level_dir(n.as_ref()).map(|l| (l, n.as_ref().to_string())))
+        .collect();
+    v.sort();
+    v.into_iter().map(|(_, n)| n).collect()
+}
+
+/// The level directories a setting holds, in level order.
+pub fn setting_levels(setting: &Path) -> Result<Vec<String>> {
+    let rd = std::fs::read_dir(setting).map_err(|e| Error::io("cannot list", setting, e))?;
+    let mut names = Vec::new();
+    for entry in rd {
+        let entry = entry.map_err(|e| Error::io("cannot list", setting, e))?;
+        if entry.path().is_dir() {
+            names.push(entry.file_name().to_string_lossy().into_owned());
+        }
+    }
+    Ok(sort_level_dirs(&names))
+}
+
+/// Directory name of a noise gain: `gain_4`, `gain_2.5` (Python's `%g` for fractions, so
+/// 6 significant digits: two gains closer than that share a name and are refused).
+pub fn gain_name(gain: f64) -> String {
+    if gain.is_finite() && gain.fract() == 0.0 {
+        format!("gain_{gain:.0}")
+    } else {
+        format!("gain_{}", format_g(gain))
+    }
+}
+
+/// C's `%g` (precision 6), as Python's `format(x, "g")` writes it.
+fn format_g(x: f64) -> String {
+    if x.is_nan() {
+        return "nan".into();
+    }
+    if x.is_infinite() {
+        return if x > 0.0 { "inf" } else { "-inf" }.into();
+    }
+    if x == 0.0 {
+        return if x.is_sign_negative() { "-0" } else { "0" }.into();
+    }
+    let sci = format!("{x:.5e}");
+    let (mant, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    let strip = |s: &str| -> String {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    if (-4..6).contains(&exp) {
+        let decimals = (5 - exp) as usize;
+        strip(&format!("{x:.decimals$}"))
+    } else {
+        let sign = if exp < 0 { '-' } else { '+' };
+        format!("{}e{sign}{:02}", strip(mant), exp.abs())
+    }
+}
+
+/// Where a setting or noise unit is written before it is published.
+pub fn partial_dir(final_dir: &Path) -> PathBuf {
+    let name = final_dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    final_dir.with_file_name(format!("{name}{PARTIAL_SUFFIX}"))
+}
+
+/// A finished setting or noise unit: a final (not `*.partial`) directory with its marker.
+pub fn is_complete(dir: &Path) -> bool {
+    let partial = dir
+        .file_name()
+        .is_some_and(|n| n.to_string_lossy().ends_with(PARTIAL_SUFFIX));
+    !partial && dir.join(MARKER).is_file()
+}
+
+/// Write the marker (holding `stamp`) into `partial`, then rename it to `final_dir`,
+/// replacing an older one: the last step of a setting or noise unit.
+pub fn publish(partial: &Path, final_dir: &Path, stamp: &str) -> Result<()> {
+    write_atomic(&partial.join(MARKER), format!("{stamp}\n").as_bytes())?;
+    if final_dir.exists() {
+        std::fs::remove_dir_all(final_dir)
+            .map_err(|e| Error::io("cannot replace", final_dir, e))?;
+    }
+    std::fs::rename(partial, final_dir).map_err(|e| Error::io("cannot publish", final_dir, e))
+}
+
+const PNG_MAGIC: &[u8; 8] = b"\x89PNG\r\n\x1a\n";
+/// Bytes of one `poses_bounds.npy` row (17 float64).
+const POSE_ROW_BYTES: u64 = 17 * 8;
+
+/// What is missing or damaged in a complete setting, checked cheaply (names, sizes, PNG
+/// signatures and IEND chunks, the pose file's size; `blurset verify` decodes
+/// everything): None when it looks whole. A rerun redoes a setting with a problem
+/// instead of counting it.
+pub fn setting_problem(setting: &Path) -> Option<String> {
+    #[derive(serde::Deserialize)]
+    struct Counts {
+        views: Vec<serde::de::IgnoredAny>,
+        levels: Vec<String>,
+    }
+    let meta = setting.join("meta.json");
+    let text = match std::fs::read(&meta) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Some("meta.json is missing".into())
+        }
+        Err(e) => return Some(format!("meta.json is unreadable ({})", e.kind())),
+    };
+    let Counts { views, levels } = match serde_json::from_slice::<Counts>(&text) {
+        Ok(c) => c,
+        Err(e) => return Some(format!("meta.json is unreadable ({e})")),
+    };
+    let views = views.len();
+    if !setting.join("transforms.json").is_file() {
+        return Some("transforms.json is missing".into());
+    }
+    for lvl in &levels {
+        let d = setting.join(lvl);
+        if !d.is_dir() {
+            return Some(format!("level folder {lvl}/ is missing"));
+        }
+        let mut images: Vec<PathBuf> = std::fs::read_dir(d.join("images"))
+            .map(|rd| {
+                rd.filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|p| p.extension().is_some_and(|x| x == "png"))
+                    .collect()
+            })
+            .unwrap_or_default();
+        images.sort();
+        if images.len() != views {
+            return Some(format!(
+                "{lvl}/images holds {} of {views} images",
+                images.len()
+            ));
+        }
+        for p in &images {
+            let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
+            let name = name.unwrap_or_default();
+            match png_state(p) {
+                PngState::Whole => {}
+                PngState::NotPng => return Some(format!("{lvl}/images/{name} is not a whole PNG")),
+                PngState::Truncated => return Some(format!("{lvl}/images/{name} is truncated")),
+            }
+        }
+        let npy = d.join("poses_bounds.npy");
+        match std::fs::metadata(&npy) {
+            Ok(m) if m.is_file() => {
+                if m.len() < views as u64 * POSE_ROW_BYTES + 16 {
+                    return Some(format!("{lvl}/poses_bounds.npy is truncated"));
+                }
+            }
+            _ => return Some(format!("{lvl}/poses_bounds.npy is missing")),
+        }
+    }
+    None
+}
+
+enum PngState {
+    Whole,
+    NotPng,
+    Truncated,
+}
+
+/// A PNG's signature and its last chunk (IEND), read without decoding.
+fn png_state(path: &Path) -> PngState {
+    use std::io::{Read, Seek, SeekFrom};
+    let read = || -> std::io::Result<PngState> {
+        let mut f = std::fs::File::open(path)?;
+        let size = f.metadata()?.len();
+        let mut head = [0u8; 8];
+        if size < 67 || f.read_exact(&mut head).is_err() || &head != PNG_MAGIC {
+            return Ok(PngState::NotPng);
+        }
+        let mut tail = [0u8; 12];
+        f.seek(SeekFrom::Start(size - 12))?;
+        f.read_exact(&mut tail)?;
+        Ok(if &tail[4..8] == b"IEND" {
+            PngState::Whole
+        } else {
+            PngState::Truncated
+        })
+    };
+    read().unwrap_or(PngState::NotPng)
+}
+
+/// Complete and incomplete setting directories of a build, sorted by name.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scan {
+    pub complete: Vec<String>,
+    /// `*.partial` directories, and directories holding `meta.json` or `sharp/` without
+    /// the marker (a build still running, or a killed one).
+    pub incomplete: Vec<String>,
+    /// Whether the directory holds any file only a build writes.
+    pub is_build: bool,
+}
+
+/// The files of a build that are not settings.
+const BUILD_FILES: [&str; 3] = ["dataset.json", "splits.json", "failures.jsonl"];
+
+/// List the setting directories of `out` (hidden directories such as `.work-*` are not
+/// settings). A missing or non-directory `out` is an input error.
+pub fn scan(out: &Path) -> Result<Scan> {
+    let input = |reason: &str| Error::Input {
+        reason: reason.into(),
+        path: out.into(),
+    };
+    if !out.exists() {
+        return Err(input("no such build directory"));
+    }
+    if !out.is_dir() {
+        return Err(input("not a directory (expected a build)"));
+    }
+    let rd = std::fs::read_dir(out).map_err(|e| Error::io("cannot list", out, e))?;
+    let mut s = Scan::default();
+    for entry in rd {
+        let entry = entry.map_err(|e| Error::io("cannot list", out, e))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let path = entry.path();
+        if BUILD_FILES.contains(&name.as_str()) {
+            s.is_build = true;
+        }
+        if name.starts_with('.') || !path.is_dir() {
+            if name.starts_with(".work-") || name == ".demo_objects" {
+                s.is_build = true;
+            }
+            continue;
+        }
+        let partial = name.ends_with(PARTIAL_SUFFIX);
+        if is_complete(&path) {
+            s.complete.push(name);
+        } else if partial || path.join("meta.json").exists() || path.join(SHARP).is_dir() {
+            s.incomplete.push(name);
+        }
+    }
+    s.is_build |= !s.complete.is_empty() || !s.incomplete.is_empty();
+    s.complete.sort();
+    s.incomplete.sort();
+    Ok(s)
+}
+
+/// The complete setting directories of a build, sorted by name.
+pub fn complete_settings(out: &Path) -> Result<Vec<String>> {
+    Ok(scan(out)?.complete)
+}
+
+/// The path an atomic write of `path` goes through: `.<name>.tmp<pid>` beside it.
+pub fn temp_path(path: &Path) -> PathBuf {
+    super::atomic::temp_path(path)
+}
+
+/// The (target name, pid) of a temp name `.<name>.tmp<pid>`, or None.
+pub fn parse_temp_name(name: &str) -> Option<(String, u32)> {
+    let rest = name.strip_prefix('.')?;
+    let at = rest.rfind(".tmp")?;
+    let (target, pid) = (&rest[..at], &rest[at + 4..]);
+    if target.is_empty() || pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    Some((target.to_string(), pid.parse().ok()?))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -38,5 +353,144 @@ mod tests {
     fn image_names_sort_in_view_order() {
         assert_eq!(image_name(7, 34), "007.png");
         assert_eq!(image_name(7, 1500), "0007.png");
+    }
+
+    #[test]
+    fn level_directories() {
+        assert_eq!(level_dirs(&[1, 4]), ["sharp", "blur_1", "blur_4"]);
+        assert_eq!(level_dirs(&[]), ["sharp"]);
+        for (name, level) in [
+            ("sharp", Some(0)),
+            ("blur_1", Some(1)),
+            ("blur_64", Some(64)),
+        ] {
+            assert_eq!(parse_level_dir(name), level);
+        }
+        for bad in [
+            "blur_0", "blur_65", "blur_01", "blur_", "blur_x", "blur_+1", "Sharp",
+        ] {
+            assert_eq!(parse_level_dir(bad), None, "{bad}");
+        }
+        assert_eq!(
+            sort_level_dirs(&["blur_10", "x", "blur_2", "sharp"]),
+            ["sharp", "blur_2", "blur_10"]
+        );
+    }
+
+    #[test]
+    fn gain_names_follow_python_g() {
+        let cases = [
+            (1.0, "gain_1"),
+            (20.0, "gain_20"),
+            (2.5, "gain_2.5"),
+            (1.0000001, "gain_1"),
+            (0.1, "gain_0.1"),
+            (1e-7, "gain_1e-07"),
+            (1234567.5, "gain_1.23457e+06"),
+            (0.00012345678, "gain_0.000123457"),
+            (123456.5, "gain_123456"),
+            (1e20, "gain_100000000000000000000"),
+        ];
+        for (g, name) in cases {
+            assert_eq!(gain_name(g), name, "{g}");
+        }
+    }
+
+    #[test]
+    fn setting_problems_are_named() -> Result<()> {
+        let dir = std::env::temp_dir().join(format!("blurset-problem-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let put = |rel: &str, bytes: &[u8]| write_atomic(&dir.join(rel), bytes);
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("meta.json is missing")
+        );
+        put("meta.json", b"[]")?;
+        let p = setting_problem(&dir).unwrap_or_default();
+        assert!(p.starts_with("meta.json is unreadable"), "{p}");
+        put(
+            "meta.json",
+            br#"{"views": [{}, {}], "levels": ["sharp"], "uid": "x"}"#,
+        )?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("transforms.json is missing")
+        );
+        put("transforms.json", b"{}")?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("level folder sharp/ is missing")
+        );
+        let mut png = PNG_MAGIC.to_vec();
+        png.extend([0u8; 60]);
+        png.extend(b"\0\0\0\0IEND\xaeB`\x82");
+        put("sharp/images/000.png", &png)?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/images holds 1 of 2 images")
+        );
+        put("sharp/images/001.png", &png[..png.len() - 4])?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/images/001.png is truncated")
+        );
+        put("sharp/images/001.png", &png)?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/poses_bounds.npy is missing")
+        );
+        put("sharp/poses_bounds.npy", &[0u8; 100])?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/poses_bounds.npy is truncated")
+        );
+        put("sharp/poses_bounds.npy", &[0u8; 400])?;
+        assert_eq!(setting_problem(&dir), None);
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn temp_names_round_trip() {
+        let p = temp_path(Path::new("/x/dataset.json"));
+        let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
+        let parsed = name.as_deref().and_then(parse_temp_name);
+        assert_eq!(
+            parsed,
+            Some(("dataset.json".to_string(), std::process::id()))
+        );
+        assert_eq!(parse_temp_name(".notes.tmpl"), None);
+        assert_eq!(parse_temp_name("a.tmp1"), None);
+        assert_eq!(parse_temp_name(".a.b.tmp12"), Some(("a.b".into(), 12)));
+    }
+
+    #[test]
+    fn complete_means_final_with_marker() -> Result<()> {
+        let dir = std::env::temp_dir().join(format!("blurset-layout-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mk = |p: &Path| std::fs::create_dir_all(p).map_err(|e| Error::io("mkdir", p, e));
+        let final_dir = dir.join("a_000");
+        let partial = partial_dir(&final_dir);
+        assert_eq!(partial, dir.join("a_000.partial"));
+        mk(&partial.join(SHARP))?;
+        write_atomic(&partial.join(MARKER), b"x")?;
+        // A marker inside a .partial directory never counts.
+        assert!(!is_complete(&partial));
+        std::fs::remove_file(partial.join(MARKER)).map_err(|e| Error::io("rm", &dir, e))?;
+        mk(&dir.join("b_000/sharp"))?;
+        mk(&dir.join(".work-a"))?;
+        mk(&dir.join("notes"))?;
+        let s = scan(&dir)?;
+        assert_eq!((s.complete.len(), s.incomplete.len()), (0, 2));
+        publish(&partial, &final_dir, "2024-01-01T00:00:00")?;
+        assert!(is_complete(&final_dir) && !partial.exists());
+        assert_eq!(complete_settings(&dir)?, ["a_000"]);
+        // Publishing again replaces the older directory.
+        mk(&partial)?;
+        publish(&partial, &final_dir, "later")?;
+        assert!(!final_dir.join(SHARP).exists() && is_complete(&final_dir));
+        assert_eq!(setting_levels(&dir.join("b_000"))?, ["sharp"]);
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
     }
 }

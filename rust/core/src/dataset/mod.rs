@@ -4,5 +4,7 @@ pub mod atomic;
 pub mod failures;
 pub mod layout;
 pub mod llff;
+pub mod meta;
+pub mod records;
 pub mod splits;
 pub mod stats;

@@ -19,14 +19,15 @@
 //! counted as incomplete, so a build still running can be read. Hidden directories
 //! (`.work-*`, `.demo_objects`) and anything else are ignored.
 use super::failures;
-use super::layout::{self, MARKER};
+#[cfg(test)]
+use super::layout::MARKER;
+use super::layout::{self, Scan};
+use super::meta::{ReadLevel as MetaLevel, ReadMeta as Meta};
 use crate::error::{Error, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-
-const PARTIAL_SUFFIX: &str = ".partial";
 
 /// Schema name of the stats document (`stats.json`).
 pub const SCHEMA: &str = "blurset-stats/1";
@@ -81,41 +82,7 @@ pub const QUANTITIES: &[(&str, &str, &str)] = &[
     ),
 ];
 
-// -- what is read from meta.json (other fields are skipped unparsed) -------------------
-
-#[derive(Debug, Deserialize)]
-struct MetaLevel {
-    w_l: f64,
-    latents: u64,
-    #[serde(default)]
-    motion_px: Option<f64>,
-}
-
-#[derive(Debug, Deserialize)]
-struct MetaView {
-    index: u64,
-    near: f64,
-    far: f64,
-    flatness: f64,
-    depth_range: f64,
-    orientation: f64,
-    w_u: f64,
-    #[serde(default)]
-    levels: BTreeMap<String, MetaLevel>,
-}
-
-#[derive(Debug, Deserialize)]
-struct Meta {
-    uid: String,
-    theta0_deg: f64,
-    bbox_dims: [f64; 3],
-    views: Vec<MetaView>,
-    /// Level directories written (`sharp`, `blur_1`, …).
-    #[serde(default)]
-    levels: Option<Vec<String>>,
-    #[serde(default)]
-    test_views: Option<Vec<u64>>,
-}
+// -- what is read besides meta.json (other fields are skipped unparsed) ------------------
 
 #[derive(Debug, Deserialize)]
 struct SplitsDoc {
@@ -297,54 +264,15 @@ fn input_error(reason: impl Into<String>, path: impl Into<PathBuf>) -> Error {
     }
 }
 
-/// Complete and incomplete setting directories of a build, sorted by name.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Scan {
-    pub complete: Vec<String>,
-    pub incomplete: Vec<String>,
-    /// Whether the directory holds any file only a build writes.
-    pub is_build: bool,
-}
-
-/// List the setting directories of `out`; refuse a path that is not a build.
+/// The setting directories of `out` (layout's scan); refuse a path that is not a build.
 pub fn scan(out: &Path) -> Result<Scan> {
-    if !out.exists() {
-        return Err(input_error("no such build directory", out));
-    }
-    if !out.is_dir() {
-        return Err(input_error("not a directory (expected a build)", out));
-    }
-    let rd = std::fs::read_dir(out).map_err(|e| Error::io("cannot list", out, e))?;
-    let mut s = Scan::default();
-    for entry in rd {
-        let entry = entry.map_err(|e| Error::io("cannot list", out, e))?;
-        let name = entry.file_name().to_string_lossy().into_owned();
-        let path = entry.path();
-        if ["dataset.json", "splits.json", "failures.jsonl"].contains(&name.as_str()) {
-            s.is_build = true;
-        }
-        if name.starts_with('.') || !path.is_dir() {
-            if name.starts_with(".work-") || name == ".demo_objects" {
-                s.is_build = true;
-            }
-            continue;
-        }
-        let partial = name.ends_with(PARTIAL_SUFFIX);
-        if !partial && path.join(MARKER).is_file() {
-            s.complete.push(name);
-        } else if partial || path.join("meta.json").exists() || path.join("sharp").is_dir() {
-            s.incomplete.push(name);
-        }
-    }
-    s.is_build |= !s.complete.is_empty() || !s.incomplete.is_empty();
+    let s = layout::scan(out)?;
     if !s.is_build {
         return Err(input_error(
             "not a blurset build (no dataset.json, failures.jsonl or setting directories)",
             out,
         ));
     }
-    s.complete.sort();
-    s.incomplete.sort();
     Ok(s)
 }
 

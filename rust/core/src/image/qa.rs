@@ -26,7 +26,7 @@ pub struct FrameQa {
     pub border_coverage: f64,
 }
 
-/// When a view fails. Defaults match the worker's load-time QA (blender_scripts).
+/// When a view fails (the object QA at load time uses the same numbers).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct QaThresholds {
@@ -117,6 +117,55 @@ pub fn frame_qa(width: u32, height: u32, rgba: &[f32]) -> Result<FrameQa> {
         },
         border_coverage: border as f64 / border_px as f64,
     })
+}
+
+/// Load-time QA of an object (a black or invisible object must not ship): the worker
+/// renders these tiny, cheap views from opposite sides; the driver judges them here.
+pub mod object {
+    use super::{FrameQa, QaThresholds};
+    use crate::plan::camera::orbit_c2w;
+    use crate::plan::sampling::bounding_radius;
+
+    pub const RESOLUTION: u32 = 48;
+    pub const SAMPLES: u32 = 4;
+    pub const FOV_DEG: f64 = 40.0;
+    /// Camera distance = margin · bounding-sphere radius / sin(fov / 2).
+    const MARGIN: f64 = 1.05;
+    /// (φ, θ) of the views, degrees: from above, on opposite sides.
+    const VIEWS: [(f64, f64); 2] = [(60.0, 45.0), (60.0, 225.0)];
+
+    /// OpenGL camera-to-world (row-major) of each QA view of an object of this box.
+    pub fn cameras(bbox_dims: [f64; 3]) -> Vec<[[f64; 4]; 4]> {
+        let r = MARGIN * bounding_radius(bbox_dims) / libm::sin(0.5 * FOV_DEG.to_radians());
+        VIEWS
+            .iter()
+            .map(|&(phi, theta)| orbit_c2w(r, phi, theta).transpose().to_cols_array_2d())
+            .collect()
+    }
+
+    /// The reason an object fails, or None: it fails when no view sees it (coverage) or
+    /// when it is black in every view (luminance), under the frame thresholds.
+    pub fn verdict(views: &[FrameQa], t: &QaThresholds) -> Option<String> {
+        let best = |f: fn(&FrameQa) -> f64| {
+            views
+                .iter()
+                .map(f)
+                .filter(|x| !x.is_nan())
+                .fold(0.0, f64::max)
+        };
+        let (cov, lum) = (best(|q| q.coverage), best(|q| q.luminance));
+        if cov < t.min_coverage {
+            return Some(format!(
+                "render QA: object is invisible (alpha coverage {cov:.4} of the image)"
+            ));
+        }
+        if lum < t.min_luminance {
+            return Some(format!(
+                "render QA: object renders black (mean luminance {lum:.5})"
+            ));
+        }
+        None
+    }
 }
 
 /// What a contact sheet says about one sharp thumbnail (8-bit RGB over a background).
@@ -237,6 +286,31 @@ mod tests {
         assert!(QaThresholds::default().verdict(&qa).is_some());
         assert!(frame_qa(16, 16, &img[..10]).is_err());
         assert!(frame_qa(0, 16, &[]).is_err());
+        Ok(())
+    }
+
+    #[test]
+    fn object_qa_cameras_frame_the_box_and_judge_the_best_view() -> Result<()> {
+        let cams = object::cameras([1.0, 0.5, 0.25]);
+        assert_eq!(cams.len(), 2);
+        for c in &cams {
+            let eye = glam::DVec3::new(c[0][3], c[1][3], c[2][3]);
+            let fwd = -glam::DVec3::new(c[0][2], c[1][2], c[2][2]);
+            assert!(
+                (fwd.dot(-eye.normalize()) - 1.0).abs() < 1e-12,
+                "looks at the centre"
+            );
+            assert!(eye.z > 0.0);
+        }
+        let t = QaThresholds::default();
+        let seen = frame_qa(32, 32, &disc(32, 10.0, 0.3))?;
+        let empty = frame_qa(32, 32, &vec![0.0; 32 * 32 * 4])?;
+        assert_eq!(object::verdict(&[empty, seen], &t), None);
+        let invisible = object::verdict(&[empty, empty], &t).unwrap_or_default();
+        assert!(invisible.starts_with("render QA: object is invisible"));
+        let black = frame_qa(32, 32, &disc(32, 10.0, 0.0))?;
+        let v = object::verdict(&[black, empty], &t).unwrap_or_default();
+        assert!(v.starts_with("render QA: object renders black"), "{v}");
         Ok(())
     }
 

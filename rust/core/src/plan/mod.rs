@@ -1,5 +1,7 @@
 //! The plan of a setting (DESIGN §2): cameras, the scene-dependent blur weight, and the
 //! seeded sampling of views, trajectories, levels and latent frames.
 pub mod camera;
+pub mod config;
+pub mod renders;
 pub mod sampling;
 pub mod weights;

@@ -130,87 +130,43 @@ impl Default for SamplingConfig {
 }
 
 impl SamplingConfig {
-    /// Refuse values that would make a sample meaningless; the message names the option.
+    /// Refuse values that would make a sample meaningless: each option against the
+    /// range the build config states (`config::specs`), then the poles.
     pub fn validate(&self) -> Result<()> {
-        let bad = |m: String| Err(Error::Value(m));
-        // Upper bounds keep a typo from planning billions of renders.
-        if !(1..=MAX_COUNT).contains(&self.views) {
-            return bad(format!("views {} is outside 1..={MAX_COUNT}", self.views));
-        }
-        if !(1..=MAX_COUNT).contains(&self.latents) {
-            return bad(format!(
-                "latents {} is outside 1..={MAX_COUNT}",
-                self.latents
-            ));
-        }
-        if !(1..=MAX_COUNT).contains(&self.latents_max) {
-            return bad(format!(
-                "latents_max {} is outside 1..={MAX_COUNT}",
-                self.latents_max
-            ));
-        }
-        if !(self.max_ghost_px.is_finite() && self.max_ghost_px >= 0.01) {
-            return bad(format!(
-                "max_ghost_px {} must be a number of pixels ≥ 0.01",
-                self.max_ghost_px
-            ));
-        }
-        if !(1..=MAX_SAMPLES).contains(&self.samples) {
-            return bad(format!(
-                "samples {} is outside 1..={MAX_SAMPLES}",
-                self.samples
-            ));
-        }
-        if let Some(t) = self.samples_total {
-            if !(1..=MAX_SAMPLES).contains(&t) {
-                return bad(format!("samples_total {t} is outside 1..={MAX_SAMPLES}"));
-            }
-        }
-        if !(self.resolution >= 8 && self.resolution <= 16384) {
-            return bad(format!(
-                "resolution {} is outside [8, 16384]",
-                self.resolution
-            ));
-        }
-        if !(self.fov_deg > 1.0 && self.fov_deg < 150.0) {
-            return bad(format!("fov_deg {} is outside (1, 150)", self.fov_deg));
-        }
-        if !(self.radius_margin >= 1.0 && self.radius_margin <= 100.0) {
-            return bad(format!(
-                "radius_margin {} is outside [1, 100]",
-                self.radius_margin
-            ));
-        }
-        if !(self.window_deg >= 0.0 && self.window_deg < 90.0) {
-            return bad(format!("window_deg {} is outside [0, 90)", self.window_deg));
-        }
+        use super::config::{check, specs, Spec};
+        check("views", &self.views, &specs::COUNT)?;
+        check("latents", &self.latents, &specs::COUNT)?;
+        check("latents_max", &self.latents_max, &specs::COUNT)?;
+        check("max_ghost_px", &self.max_ghost_px, &specs::MAX_GHOST_PX)?;
+        check("samples", &self.samples, &specs::SAMPLES)?;
+        check("samples_total", &self.samples_total, &specs::SAMPLES)?;
+        check("resolution", &self.resolution, &specs::RESOLUTION)?;
+        check("fov_deg", &self.fov_deg, &specs::FOV_DEG)?;
+        check("radius_margin", &self.radius_margin, &specs::RADIUS_MARGIN)?;
+        check("phi0_deg", &self.phi0_deg, &specs::PHI0_DEG)?;
+        check("window_deg", &self.window_deg, &specs::WINDOW_DEG)?;
         let (lo, hi) = (
             self.phi0_deg - self.window_deg,
             self.phi0_deg + self.window_deg,
         );
         if !(lo > 0.0 && hi < 180.0) {
-            return bad(format!(
-                "phi0_deg ± window_deg = [{lo}, {hi}] must lie inside (0, 180): cameras would pass a pole"
-            ));
+            return Err(Error::Config {
+                option: "phi0_deg".into(),
+                detail: format!(
+                    "{} ± window_deg {} = [{lo}, {hi}] must lie inside (0, 180): cameras would pass a pole",
+                    self.phi0_deg, self.window_deg
+                ),
+            });
         }
-        if !(self.delta0.is_finite() && self.delta0 >= 0.0 && self.delta0 <= 45.0) {
-            return bad(format!("delta0 {} is outside [0, 45]", self.delta0));
-        }
-        if !(self.level_spread >= 0.0 && self.level_spread < 1.0) {
-            return bad(format!(
-                "level_spread {} is outside [0, 1)",
-                self.level_spread
-            ));
-        }
-        if let Some(l) = self.levels.iter().find(|&&l| l == 0 || l > 64) {
-            return bad(format!(
-                "blur level {l} is outside 1..=64 (sharp is always rendered)"
-            ));
-        }
-        if !(self.guards.orientation_max >= 1.0 && self.guards.near_floor > 0.0) {
-            return bad("guards: orientation_max must be ≥ 1 and near_floor > 0".into());
-        }
-        Ok(())
+        check("delta0", &self.delta0, &specs::DELTA0)?;
+        check("level_spread", &self.level_spread, &specs::LEVEL_SPREAD)?;
+        check("levels", &self.levels, &Spec::Levels)?;
+        check(
+            "orientation_max",
+            &self.guards.orientation_max,
+            &specs::ORIENTATION_MAX,
+        )?;
+        check("near_floor", &self.guards.near_floor, &specs::NEAR_FLOOR)
     }
 
     /// The most latent frames one blurry image can have under this config.
@@ -287,13 +243,13 @@ pub struct MotionKey {
 /// Cycles gets `motion_steps` = steps on the camera object, so its motion steps fall
 /// exactly on the keys.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct MotionBlurPlan {
+pub struct MotionBlurPlan<K = MotionKey> {
     pub seed: u32,
     pub motion_steps: u32,
     /// Largest screen error (px) of Cycles' interpolation between keys, estimated at
     /// the middle of every key interval (≤ MOTION_KEY_TOLERANCE_PX unless capped).
     pub interpolation_error_px: f64,
-    pub keys: Vec<MotionKey>,
+    pub keys: Vec<K>,
 }
 
 /// The camera at the mean latent position t̄ of a blurry image: the pose its content is
@@ -310,8 +266,11 @@ pub struct MeanPose {
     pub c2w: [[f64; 4]; 4],
 }
 
+/// One blur level of a view; `F` and `K` are its latent frames and motion keys (the
+/// plan's, or meta.json's records of them, which drop the camera matrices).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct LevelPlan {
+#[serde(bound(deserialize = "F: Deserialize<'de>, K: Deserialize<'de>"))]
+pub struct LevelPlan<F = LatentFrame, K = MotionKey> {
     pub w_l: f64,
     /// m, the number of latent frames averaged (1 for the motion blur method: one render).
     pub latents: usize,
@@ -325,14 +284,44 @@ pub struct LevelPlan {
     pub method: BlurMethod,
     /// Cycles samples of each render of this image.
     pub samples_per_frame: u32,
-    pub latent_frames: Vec<LatentFrame>,
+    pub latent_frames: Vec<F>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub motion_blur: Option<MotionBlurPlan>,
+    pub motion_blur: Option<MotionBlurPlan<K>>,
+    /// The camera at the mean latent position (kept whole in meta.json: check-poses
+    /// compares a blur level's reconstruction with it).
     pub mean_pose: MeanPose,
 }
 
+impl<F, K> LevelPlan<F, K> {
+    /// The same level with its latent frames and motion keys recorded by `f` and `k`.
+    pub fn map_frames<F2, K2>(
+        &self,
+        f: impl Fn(&F) -> F2,
+        k: impl Fn(&K) -> K2,
+    ) -> LevelPlan<F2, K2> {
+        LevelPlan {
+            w_l: self.w_l,
+            latents: self.latents,
+            motion_px: self.motion_px,
+            max_gap_px: self.max_gap_px,
+            method: self.method,
+            samples_per_frame: self.samples_per_frame,
+            latent_frames: self.latent_frames.iter().map(f).collect(),
+            motion_blur: self.motion_blur.as_ref().map(|mb| MotionBlurPlan {
+                seed: mb.seed,
+                motion_steps: mb.motion_steps,
+                interpolation_error_px: mb.interpolation_error_px,
+                keys: mb.keys.iter().map(k).collect(),
+            }),
+            mean_pose: self.mean_pose.clone(),
+        }
+    }
+}
+
+/// One view of a setting; `L` is what each blur level records (the plan's [`LevelPlan`],
+/// or meta.json's record of it, which drops the latent cameras).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct ViewPlan {
+pub struct ViewPlan<L = LevelPlan> {
     pub index: usize,
     pub r: f64,
     pub phi_deg: f64,
@@ -348,7 +337,29 @@ pub struct ViewPlan {
     pub sharp_seed: u32,
     /// OpenGL camera-to-world at p (the pose written for every level), row-major.
     pub c2w: [[f64; 4]; 4],
-    pub levels: BTreeMap<String, LevelPlan>,
+    pub levels: BTreeMap<String, L>,
+}
+
+impl<L> ViewPlan<L> {
+    /// The same view with each level's record made by `f`.
+    pub fn map_levels<M>(&self, f: impl Fn(&L) -> M) -> ViewPlan<M> {
+        ViewPlan {
+            index: self.index,
+            r: self.r,
+            phi_deg: self.phi_deg,
+            theta_deg: self.theta_deg,
+            near: self.near,
+            far: self.far,
+            flatness: self.flatness,
+            depth_range: self.depth_range,
+            orientation: self.orientation,
+            w_u: self.w_u,
+            trajectory: self.trajectory,
+            sharp_seed: self.sharp_seed,
+            c2w: self.c2w,
+            levels: self.levels.iter().map(|(k, l)| (k.clone(), f(l))).collect(),
+        }
+    }
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -654,6 +665,7 @@ pub fn plan_setting(
     vertices: &[[f32; 3]],
 ) -> Result<SettingPlan> {
     cfg.validate()?;
+    super::config::check_theta0(theta0_deg)?;
     if bbox_dims.iter().any(|d| !d.is_finite() || *d < 0.0) || bbox_dims.iter().all(|d| *d <= 0.0) {
         return Err(Error::Value(format!(
             "object {uid:?} has a degenerate bounding box {bbox_dims:?}"

@@ -1,0 +1,39 @@
+"""Images in and out of blurset-core: the running mean of linear frames (Accumulator),
+EXR/PNG/JPEG reading, the sRGB curve, render QA and the error against a reference.
+
+The public face of these bindings for scripts, tests and benchmarks (blurset._core is
+private to the package)."""
+
+from __future__ import annotations
+
+from blurset._core import (
+    Accumulator,
+    FrameQa,
+    ImageMetrics,
+    QaThresholds,
+    default_qa_thresholds,
+    frame_qa,
+    image_error,
+    image_info,
+    pareto_front,
+    read_exr,
+    read_image,
+    srgb_encode,
+    thumbnail_qa,
+)
+
+__all__ = [
+    "Accumulator",
+    "FrameQa",
+    "ImageMetrics",
+    "QaThresholds",
+    "default_qa_thresholds",
+    "frame_qa",
+    "image_error",
+    "image_info",
+    "pareto_front",
+    "read_exr",
+    "read_image",
+    "srgb_encode",
+    "thumbnail_qa",
+]

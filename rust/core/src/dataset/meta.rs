@@ -1,0 +1,311 @@
+//! `meta.json` of one setting (DESIGN §4): every sampled number of its plan, how it was
+//! rendered, the object, the QA of each sharp view. The writer and the reader
+//! (`blurset stats`) share these structs; the reader's subset skips the rest unparsed.
+use super::atomic::write_atomic;
+use super::splits::test_views;
+use crate::error::{Error, Result};
+use crate::image::qa::FrameQa;
+use crate::plan::config::BuildConfig;
+use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan, ViewPlan};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// What the worker reported about the object it loaded (null where it did not say).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct ObjectRecord {
+    /// The model file the setting was rendered from.
+    pub source: String,
+    /// SHA-256 of that file: a rerun reuses a setting made from the same bytes.
+    pub sha256: Option<String>,
+    pub bbox_dims: Option<Vec<f64>>,
+    pub scale: Option<f64>,
+    pub center: Option<Vec<f64>>,
+    pub n_vertices: Option<u64>,
+    pub n_triangles: Option<u64>,
+    pub unlit_fixed: Option<bool>,
+    pub blender_version: Option<String>,
+    pub warnings: Vec<String>,
+}
+
+/// Wall-clock seconds of a setting's stages (not part of the data: they vary per run).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Timings {
+    pub plan_s: Option<f64>,
+    pub sharp_s: Option<f64>,
+    pub blur_s: Option<f64>,
+    pub load_s: Option<f64>,
+    pub total_s: Option<f64>,
+    pub frames: usize,
+}
+
+/// How the images were rendered and encoded.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct RenderRecord {
+    pub engine: String,
+    /// Per level in views[].levels[].samples_per_frame; null when a budget splits.
+    pub samples_per_latent: Option<u32>,
+    pub samples_total: Option<u32>,
+    pub blur_method: String,
+    /// A number, or "auto".
+    pub latents: serde_json::Value,
+    pub sharp_samples: u64,
+    pub exr_codec: String,
+    pub background: [f64; 3],
+    pub alpha: String,
+    pub encoding: String,
+}
+
+impl RenderRecord {
+    pub fn of(cfg: &BuildConfig) -> Self {
+        RenderRecord {
+            engine: "CYCLES".into(),
+            samples_per_latent: cfg.samples_total.is_none().then_some(cfg.samples),
+            samples_total: cfg.samples_total,
+            blur_method: cfg.blur_method.clone(),
+            latents: if cfg.latents_auto {
+                "auto".into()
+            } else {
+                cfg.latents.into()
+            },
+            sharp_samples: cfg.effective_sharp_samples(),
+            exr_codec: "NONE (intermediate frames, deleted after accumulation)".into(),
+            background: cfg.background,
+            alpha: "premultiplied, averaged with colour, composited over background".into(),
+            encoding: "sRGB (IEC 61966-2-1) of linear radiance, 8-bit PNG".into(),
+        }
+    }
+}
+
+/// A latent frame as meta.json records it (its camera matrix follows from r, φ, θ).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MetaLatent {
+    pub t: f64,
+    pub r: f64,
+    pub phi_deg: f64,
+    pub theta_deg: f64,
+    pub seed: u32,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MetaKey {
+    pub t: f64,
+    pub r: f64,
+    pub phi_deg: f64,
+    pub theta_deg: f64,
+}
+
+/// A blur level as meta.json records it: the plan's, without camera matrices.
+pub type MetaLevel = LevelPlan<MetaLatent, MetaKey>;
+
+fn meta_level(lp: &LevelPlan) -> MetaLevel {
+    lp.map_frames(
+        |f| MetaLatent {
+            t: f.t,
+            r: f.r,
+            phi_deg: f.phi_deg,
+            theta_deg: f.theta_deg,
+            seed: f.seed,
+        },
+        |k| MetaKey {
+            t: k.t,
+            r: k.r,
+            phi_deg: k.phi_deg,
+            theta_deg: k.theta_deg,
+        },
+    )
+}
+
+/// A view as meta.json records it: the plan's view with its levels' records and the
+/// render QA of its sharp image.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MetaView {
+    #[serde(flatten)]
+    pub view: ViewPlan<MetaLevel>,
+    /// Render QA of the sharp view.
+    pub qa: FrameQa,
+}
+
+impl MetaView {
+    fn of(v: &ViewPlan, qa: FrameQa) -> Self {
+        MetaView {
+            view: v.map_levels(meta_level),
+            qa,
+        }
+    }
+}
+
+/// The whole meta.json of a setting.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Meta {
+    pub uid: String,
+    pub theta0_deg: f64,
+    pub seed: u64,
+    pub resolution: [u32; 2],
+    pub fov_deg: f64,
+    pub focal_px: f64,
+    pub bbox_dims: [f64; 3],
+    pub radius: f64,
+    pub views: Vec<MetaView>,
+    pub test_views: Vec<usize>,
+    /// Level directories written (`sharp`, `blur_1`, …).
+    pub levels: Vec<String>,
+    pub sampling: SamplingConfig,
+    pub render: RenderRecord,
+    pub object: ObjectRecord,
+    pub timings: Timings,
+    pub blurset_version: String,
+    /// The COLMAP verdict of the sharp level (`--check-poses`), as blurset.check_poses gives it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_check: Option<serde_json::Value>,
+}
+
+impl Meta {
+    /// The record of a planned and rendered setting; `qa` holds one entry per view.
+    pub fn new(
+        plan: &SettingPlan,
+        cfg: &BuildConfig,
+        object: ObjectRecord,
+        timings: Timings,
+        qa: &[FrameQa],
+    ) -> Result<Meta> {
+        if qa.len() != plan.views.len() {
+            return Err(Error::Shape(format!(
+                "{} QA records for {} views",
+                qa.len(),
+                plan.views.len()
+            )));
+        }
+        Ok(Meta {
+            uid: plan.uid.clone(),
+            theta0_deg: plan.theta0_deg,
+            seed: plan.seed,
+            resolution: plan.resolution,
+            fov_deg: plan.fov_deg,
+            focal_px: plan.focal_px,
+            bbox_dims: plan.bbox_dims,
+            radius: plan.radius,
+            views: plan
+                .views
+                .iter()
+                .zip(qa)
+                .map(|(v, q)| MetaView::of(v, *q))
+                .collect(),
+            test_views: test_views(plan.views.len(), cfg.view_stride),
+            levels: cfg.level_dirs(),
+            sampling: plan.config.clone(),
+            render: RenderRecord::of(cfg),
+            object,
+            timings,
+            blurset_version: env!("CARGO_PKG_VERSION").into(),
+            pose_check: None,
+        })
+    }
+
+    /// Write meta.json atomically (one-space indent, like the build's other JSON).
+    pub fn write(&self, path: &Path) -> Result<()> {
+        write_json(path, self)
+    }
+}
+
+/// Serialize `value` as JSON (indent 1, newline at the end) and write it atomically.
+pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let mut buf = Vec::new();
+    let fmt = serde_json::ser::PrettyFormatter::with_indent(b" ");
+    let mut ser = serde_json::Serializer::with_formatter(&mut buf, fmt);
+    value
+        .serialize(&mut ser)
+        .map_err(|e| Error::Value(format!("cannot write JSON ({e}): {}", path.display())))?;
+    buf.push(b'\n');
+    write_atomic(path, &buf)
+}
+
+// -- what `blurset stats` reads of a meta.json (a subset of the above) -----------------
+
+/// One level of a view, as the statistics read it.
+#[derive(Debug, Deserialize)]
+pub struct ReadLevel {
+    pub w_l: f64,
+    pub latents: u64,
+    #[serde(default)]
+    pub motion_px: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+pub struct ReadView {
+    pub index: u64,
+    pub near: f64,
+    pub far: f64,
+    pub flatness: f64,
+    pub depth_range: f64,
+    pub orientation: f64,
+    pub w_u: f64,
+    #[serde(default)]
+    pub levels: BTreeMap<String, ReadLevel>,
+}
+
+/// The fields of [`Meta`] the statistics use (older metas may lack `levels`).
+#[derive(Debug, Deserialize)]
+pub struct ReadMeta {
+    pub uid: String,
+    pub theta0_deg: f64,
+    pub bbox_dims: [f64; 3],
+    pub views: Vec<ReadView>,
+    #[serde(default)]
+    pub levels: Option<Vec<String>>,
+    #[serde(default)]
+    pub test_views: Option<Vec<u64>>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::sampling::plan_setting;
+
+    #[test]
+    fn meta_is_the_plan_without_cameras_and_stats_can_read_it() -> Result<()> {
+        let cfg = BuildConfig {
+            views: 3,
+            levels: vec![1, 3],
+            latents: 2,
+            ..Default::default()
+        };
+        let plan = plan_setting(&cfg.sampling(), "u", 90.0, 5, [1.0, 0.5, 0.5], &[])?;
+        let qa = FrameQa {
+            coverage: 0.5,
+            luminance: 0.2,
+            saturated: 0.0,
+            border_coverage: 0.0,
+        };
+        let meta = Meta::new(
+            &plan,
+            &cfg,
+            ObjectRecord::default(),
+            Timings::default(),
+            &[qa; 3],
+        )?;
+        let v = serde_json::to_value(&meta).map_err(|e| Error::Value(e.to_string()))?;
+        let frame = &v["views"][1]["levels"]["3"]["latent_frames"][0];
+        assert!(frame.get("c2w").is_none() && frame.get("seed").is_some());
+        assert_eq!(v["views"][1]["c2w"], serde_json::json!(plan.views[1].c2w));
+        assert_eq!(
+            v["levels"],
+            serde_json::json!(["sharp", "blur_1", "blur_3"])
+        );
+        assert_eq!(v["render"]["samples_per_latent"], 32);
+        assert!(v.get("pose_check").is_none());
+        let back: ReadMeta = serde_json::from_value(v).map_err(|e| Error::Value(e.to_string()))?;
+        assert_eq!((back.views.len(), back.views[2].levels.len()), (3, 2));
+        assert!(Meta::new(
+            &plan,
+            &cfg,
+            ObjectRecord::default(),
+            Timings::default(),
+            &[qa]
+        )
+        .is_err());
+        Ok(())
+    }
+}

@@ -1,0 +1,209 @@
+//! The documents beside the images (DESIGN §4): `dataset.json` of a build and
+//! `noise.json` of a noisy scene. Their schema lives here; Python supplies the values
+//! (a dict checked against these structs: an unknown or missing field is an error).
+use super::meta::write_json;
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Versions of what made a build.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Versions {
+    pub blurset: String,
+    pub python: String,
+    /// Blender of the first complete setting (None before any).
+    pub blender: Option<String>,
+}
+
+/// What a build holds now.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetCounts {
+    pub objects: usize,
+    pub objects_failed: usize,
+    pub settings: usize,
+    pub settings_failed: usize,
+    pub images: usize,
+}
+
+/// `dataset.json`: the config, versions, seed and counts of a build.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetDoc {
+    pub name: String,
+    pub blurset_version: String,
+    pub created: String,
+    /// `BuildConfig::record()`.
+    pub config: serde_json::Value,
+    pub seed: u64,
+    /// Level directories of every setting (`sharp`, `blur_1`, …).
+    pub levels: Vec<String>,
+    pub versions: Versions,
+    pub counts: DatasetCounts,
+    pub settings: Vec<String>,
+    pub seconds: f64,
+    /// The COLMAP verdict per setting, when the build checked poses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_checks: Option<BTreeMap<String, serde_json::Value>>,
+}
+
+/// The white balance of a noisy scene (one draw per scene).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct WhiteBalanceRecord {
+    pub red: f64,
+    pub blue: f64,
+}
+
+/// The σ(gain) table a noisy scene was made with.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseTableRecord {
+    /// `kpn` (NAN's, from KPN's file) or `blurset-default`.
+    pub source: String,
+    pub log10_sigma_read_1: f64,
+    pub read_step_per_log2_gain: f64,
+    pub log10_sigma_shot_1: f64,
+    pub shot_step_per_log2_gain: f64,
+    /// KPN's file name, when given.
+    pub file: Option<String>,
+}
+
+/// What a noisy scene was made from: one LLFF scene, or one level of a build's setting.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(untagged, deny_unknown_fields)]
+pub enum NoiseSource {
+    Scene {
+        scene: String,
+        images: String,
+        factor: u32,
+        resolution: [u32; 2],
+    },
+    Build {
+        /// `linear` (the build's EXRs) or `png`.
+        kind: String,
+        build: String,
+        setting: String,
+        level: String,
+        background: [f64; 3],
+        resolution: [u32; 2],
+    },
+}
+
+/// Where the seed of one level of a build's setting comes from (build mode).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BuildNoiseRecord {
+    pub seed: u64,
+    pub seed_derivation: String,
+}
+
+/// One written image: its view, frame, clean source and files.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseFile {
+    pub view: usize,
+    pub frame: usize,
+    pub source: String,
+    pub image: String,
+    pub linear: String,
+}
+
+/// `noise.json` of one noisy scene (one gain).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseDoc {
+    /// An integer when the gain is one (`4`, not `4.0`).
+    pub gain: serde_json::Number,
+    pub seed: u64,
+    pub sigma_read: f64,
+    pub sigma_shot: f64,
+    /// 2.2, or "srgb".
+    pub gamma: serde_json::Value,
+    pub white_balance: Option<WhiteBalanceRecord>,
+    pub white_level: f64,
+    pub frames: usize,
+    pub profile: String,
+    pub model: String,
+    /// How the clean image y is made (build mode).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clean: Option<String>,
+    pub levels: NoiseTableRecord,
+    pub source: NoiseSource,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub build_noise: Option<BuildNoiseRecord>,
+    pub rng: String,
+    pub blurset_version: String,
+    pub files: Vec<NoiseFile>,
+}
+
+impl NoiseDoc {
+    /// Refuse a document whose numbers cannot describe a noisy scene.
+    pub fn validate(&self) -> Result<()> {
+        let gain = self.gain.as_f64().unwrap_or(f64::NAN);
+        let finite = [gain, self.sigma_read, self.sigma_shot, self.white_level];
+        if !(finite.iter().all(|x| x.is_finite()) && gain > 0.0) {
+            return Err(Error::Value(format!(
+                "noise.json: gain {gain}, sigmas ({}, {}), white level {} must be finite, gain > 0",
+                self.sigma_read, self.sigma_shot, self.white_level
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Write dataset.json atomically.
+pub fn write_dataset(path: &Path, doc: &DatasetDoc) -> Result<()> {
+    write_json(path, doc)
+}
+
+/// Write noise.json atomically, after checking it.
+pub fn write_noise(path: &Path, doc: &NoiseDoc) -> Result<()> {
+    doc.validate()?;
+    write_json(path, doc)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn noise(source: serde_json::Value) -> serde_json::Value {
+        json!({
+            "gain": 4, "seed": 1, "sigma_read": 0.01, "sigma_shot": 0.02, "gamma": "srgb",
+            "white_balance": {"red": 2.0, "blue": 1.6}, "white_level": 1.0, "frames": 1,
+            "profile": "paper", "model": "m",
+            "levels": {"source": "blurset-default", "log10_sigma_read_1": -3.0,
+                       "read_step_per_log2_gain": 0.3, "log10_sigma_shot_1": -2.0,
+                       "shot_step_per_log2_gain": 0.25, "file": null},
+            "source": source, "rng": "philox", "blurset_version": "0",
+            "files": [{"view": 0, "frame": 0, "source": "a.png", "image": "images/a.png",
+                       "linear": "linear/a.exr"}]
+        })
+    }
+
+    #[test]
+    fn both_noise_sources_and_the_schema_is_strict() -> Result<()> {
+        let e = |e: serde_json::Error| Error::Value(e.to_string());
+        let scene = noise(json!({"scene": "fern", "images": "images_8", "factor": 8,
+                                 "resolution": [504, 378]}));
+        let doc: NoiseDoc = serde_json::from_value(scene.clone()).map_err(e)?;
+        assert!(matches!(doc.source, NoiseSource::Scene { factor: 8, .. }));
+        assert_eq!(serde_json::to_value(&doc).map_err(e)?, scene);
+        let build = noise(json!({"kind": "linear", "build": "/b", "setting": "a_000",
+                                 "level": "blur_1", "background": [1.0, 1.0, 1.0],
+                                 "resolution": [96, 96]}));
+        let doc: NoiseDoc = serde_json::from_value(build).map_err(e)?;
+        assert!(matches!(doc.source, NoiseSource::Build { .. }));
+        let mut extra =
+            noise(json!({"scene": "f", "images": "i", "factor": 1, "resolution": [1, 1]}));
+        extra["colour"] = json!(1);
+        assert!(serde_json::from_value::<NoiseDoc>(extra).is_err());
+        let mut bad = doc.clone();
+        bad.sigma_read = f64::NAN;
+        assert!(bad.validate().is_err());
+        Ok(())
+    }
+}

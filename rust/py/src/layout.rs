@@ -1,0 +1,149 @@
+//! The layout of a build on disk (blurset-core's dataset::layout): names, the marker,
+//! what "complete" means, atomic writes. blurset.layout wraps these.
+use blurset_core as core;
+use pyo3::prelude::*;
+use std::path::PathBuf;
+
+/// `<uid>_<theta0>`, the directory name of one setting.
+#[pyfunction]
+fn setting_name(uid: &str, theta0_deg: f64) -> String {
+    core::setting_name(uid, theta0_deg)
+}
+
+/// The θ0 of each of an object's `n` settings, evenly spaced from 0°.
+#[pyfunction]
+fn theta0s(n: usize) -> Vec<f64> {
+    core::theta0s(n)
+}
+
+/// Image file name of view `index` among `n` views.
+#[pyfunction]
+fn image_name(index: usize, n: usize) -> String {
+    core::image_name(index, n)
+}
+
+/// Directory of a blur level (`blur_<l>`); level 0 is `sharp`.
+#[pyfunction]
+fn level_dir(level: u32) -> String {
+    core::level_dir(level)
+}
+
+/// `sharp`, then `blur_<l>` of every level.
+#[pyfunction]
+fn level_dirs(levels: Vec<u32>) -> Vec<String> {
+    core::level_dirs(&levels)
+}
+
+/// The level of a level directory name (`sharp` → 0, `blur_<l>` → l), or None.
+#[pyfunction]
+fn parse_level_dir(name: &str) -> Option<u32> {
+    core::parse_level_dir(name)
+}
+
+/// Level directory names in level order; other names are dropped.
+#[pyfunction]
+fn sort_level_dirs(names: Vec<String>) -> Vec<String> {
+    core::sort_level_dirs(&names)
+}
+
+/// The level directories a setting holds, in level order.
+#[pyfunction]
+fn setting_levels(py: Python<'_>, setting: PathBuf) -> PyResult<Vec<String>> {
+    crate::run_detached(py, || core::setting_levels(&setting))
+}
+
+/// Directory name of a noise gain (`gain_4`, `gain_2.5`).
+#[pyfunction]
+fn gain_name(gain: f64) -> String {
+    core::gain_name(gain)
+}
+
+/// Where a setting or noise unit is written before it is published.
+#[pyfunction]
+fn partial_dir(final_dir: PathBuf) -> PathBuf {
+    core::partial_dir(&final_dir)
+}
+
+/// A final (not `*.partial`) directory holding its marker.
+#[pyfunction]
+fn is_complete(dir: PathBuf) -> bool {
+    core::is_complete(&dir)
+}
+
+/// What is missing or damaged in a complete setting (checked cheaply), or None.
+#[pyfunction]
+fn setting_problem(py: Python<'_>, setting: PathBuf) -> Option<String> {
+    py.detach(|| core::setting_problem(&setting))
+}
+
+/// The complete setting directory names of a build, sorted.
+#[pyfunction]
+fn complete_settings(py: Python<'_>, build: PathBuf) -> PyResult<Vec<String>> {
+    crate::run_detached(py, || core::complete_settings(&build))
+}
+
+/// Write the marker (holding `stamp`) into `partial` and rename it to `final_dir`.
+#[pyfunction]
+fn publish(py: Python<'_>, partial: PathBuf, final_dir: PathBuf, stamp: &str) -> PyResult<()> {
+    crate::run_detached(py, || core::publish(&partial, &final_dir, stamp))
+}
+
+/// The temp path an atomic write of `path` goes through (`.<name>.tmp<pid>`).
+#[pyfunction]
+fn temp_path(path: PathBuf) -> PathBuf {
+    core::temp_path(&path)
+}
+
+/// (target name, pid) of a temp file name, or None.
+#[pyfunction]
+fn parse_temp_name(name: &str) -> Option<(String, u32)> {
+    core::parse_temp_name(name)
+}
+
+/// Write `data` through a synced temp file and a rename (parents created).
+#[pyfunction]
+fn write_atomic(py: Python<'_>, path: PathBuf, data: &[u8]) -> PyResult<()> {
+    let data = data.to_vec();
+    crate::run_detached(py, || core::write_atomic(&path, &data))
+}
+
+/// Write a build's dataset.json; `doc` must match the core's DatasetDoc (unknown or
+/// missing fields are errors).
+#[pyfunction]
+fn write_dataset_json(py: Python<'_>, path: PathBuf, doc: &Bound<'_, PyAny>) -> PyResult<()> {
+    let doc: core::DatasetDoc = crate::sampling::from_py("dataset.json", doc)?;
+    crate::run_detached(py, || core::write_dataset(&path, &doc))
+}
+
+/// Write a noisy scene's noise.json; `doc` must match the core's NoiseDoc.
+#[pyfunction]
+fn write_noise_json(py: Python<'_>, path: PathBuf, doc: &Bound<'_, PyAny>) -> PyResult<()> {
+    let doc: core::NoiseDoc = crate::sampling::from_py("noise.json", doc)?;
+    crate::run_detached(py, || core::write_noise(&path, &doc))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("MARKER", core::MARKER)?;
+    m.add("PARTIAL_SUFFIX", core::PARTIAL_SUFFIX)?;
+    m.add("SHARP", core::SHARP)?;
+    m.add_function(wrap_pyfunction!(setting_name, m)?)?;
+    m.add_function(wrap_pyfunction!(theta0s, m)?)?;
+    m.add_function(wrap_pyfunction!(image_name, m)?)?;
+    m.add_function(wrap_pyfunction!(level_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(level_dirs, m)?)?;
+    m.add_function(wrap_pyfunction!(parse_level_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(sort_level_dirs, m)?)?;
+    m.add_function(wrap_pyfunction!(setting_levels, m)?)?;
+    m.add_function(wrap_pyfunction!(gain_name, m)?)?;
+    m.add_function(wrap_pyfunction!(partial_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(is_complete, m)?)?;
+    m.add_function(wrap_pyfunction!(complete_settings, m)?)?;
+    m.add_function(wrap_pyfunction!(setting_problem, m)?)?;
+    m.add_function(wrap_pyfunction!(publish, m)?)?;
+    m.add_function(wrap_pyfunction!(temp_path, m)?)?;
+    m.add_function(wrap_pyfunction!(parse_temp_name, m)?)?;
+    m.add_function(wrap_pyfunction!(write_atomic, m)?)?;
+    m.add_function(wrap_pyfunction!(write_dataset_json, m)?)?;
+    m.add_function(wrap_pyfunction!(write_noise_json, m)?)?;
+    Ok(())
+}

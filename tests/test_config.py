@@ -1,0 +1,177 @@
+"""The build config (issue 14 U1, U2, T2–T6; issue 17): one validator in blurset-core,
+whose errors name the option (flag or file and key), the value and the range; TOML
+files are read strictly; every refusal comes before anything is written."""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import pytest
+from blurset.cli import main
+from blurset.config import load_toml, make_config
+from blurset.exceptions import ConfigError
+from blurset.plan import BuildConfig
+
+
+def refused(capsys, out: Path, *argv: str) -> str:
+    """Run `blurset ARGV`; it must exit 2 with one line and leave OUT unwritten."""
+    assert main(list(argv)) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err, err
+    assert not out.exists(), f"{out} was written before the refusal"
+    return err
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--views", "-1"], "--views -1: must be an integer in 1..=4096"),
+        (["--fov-deg", "nan"], "--fov-deg nan: must be a number in (1, 150)"),
+        (
+            ["--seed", str(2**64)],
+            "--seed 18446744073709551616: must be an integer in 0..=18446744073709551615",
+        ),
+        (["--seed", "-1"], "--seed -1: must be an integer in 0..=18446744073709551615"),
+        (["--timeout", "inf"], "--timeout inf: must be a finite number > 0"),
+        (["--timeout", "nan"], "--timeout nan: must be a finite number > 0"),
+        (["--samples", "0"], "--samples 0: must be an integer in 1..=1048576"),
+        (["--sharp-samples", str(2**21)], "--sharp-samples 2097152: must be an integer in 1..="),
+        (["--levels", "1,65"], "--levels [1, 65]: must be distinct integers in 1..=64"),
+        (["--levels", "2,2"], "--levels [2, 2]: must be distinct integers"),
+        (["--threads", "-3"], "--threads -3: must be an integer in 0..=4096"),
+        (["--max-texture-pixels", "-1"], "--max-texture-pixels -1: must be an integer in 0.."),
+        (["--shard", "2/2"], '--shard "2/2": must be i/N with 0 ≤ i < N'),
+        (["--resolution", "4"], "--resolution 4: must be an integer in 8..=16384"),
+    ],
+)
+def test_flags_out_of_range_name_the_flag_value_and_range(capsys, tmp_path, flags, message):
+    out = tmp_path / "out"
+    err = refused(capsys, out, "build", "--demo", "--out", str(out), *flags)
+    assert f"blurset build: error: {message}" in err, err
+    assert "line 1 column" not in err
+
+
+def write(tmp_path: Path, text: str | bytes) -> Path:
+    p = tmp_path / "c.toml"
+    p.write_bytes(text.encode() if isinstance(text, str) else text)
+    return p
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("views = 2\n[build]\nlevels = [1]\n", "'views' beside the [build] table"),
+        ("[build]\nviews = 2\n[render]\nsamples = 4\n", "'render' beside the [build] table"),
+        ("views = 2\n[render]\nsamples = 4\n", "unknown table [render]"),
+        ("build = 5\n", "build must be a table ([build]), got 5"),
+        ("vews = 2\n", "unknown option 'vews'"),
+        ("[build]\nlatents_mx = 3\n", "unknown option 'latents_mx'"),
+        ("levels = [1, 2.5]\n", "levels [1, 2.5]: must be distinct integers in 1..=64"),
+        ("max_texture_pixels = 1e400\n", "max_texture_pixels inf: must be an integer"),
+        ("views = true\n", "views true: must be an integer in 1..=4096"),
+        ("fov_deg = nan\n", "fov_deg nan: must be a number in (1, 150)"),
+        ("background = [1, 1]\n", "background [1, 1]: must be 3 numbers in [0, 1]"),
+        ("views = 2\nviews_ = 3\n", "unknown option 'views_'"),
+        ("keep-linear = true\nkeep_linear = false\n", "given twice"),
+        ('trajectory = "middle"\n', 'trajectory "middle": must be one of start, centered'),
+    ],
+)
+def test_toml_is_read_strictly_and_errors_name_the_file_and_key(capsys, tmp_path, text, message):
+    cfg = write(tmp_path, text)
+    out = tmp_path / "out"
+    err = refused(capsys, out, "build", "--demo", "--config", str(cfg), "--out", str(out))
+    assert message in err, err
+    assert str(cfg) in err, err
+
+
+def test_binary_or_missing_config_names_the_file(capsys, tmp_path):
+    out = tmp_path / "out"
+    cfg = write(tmp_path, b"\x89PNG\r\n\x1a\n\x00\xff\xfe binary")
+    err = refused(capsys, out, "build", "--demo", "--config", str(cfg), "--out", str(out))
+    assert str(cfg) in err and "not UTF-8" in err, err
+    err = refused(
+        capsys, out, "build", "--demo", "--config", str(tmp_path / "nope.toml"), "--out", str(out)
+    )
+    assert "no such file" in err and "nope.toml" in err, err
+    err = refused(capsys, out, "build", "--demo", "--config", str(tmp_path), "--out", str(out))
+    assert "is a directory" in err, err
+
+
+def test_toml_spellings_and_layers():
+    # Flags override the file; the keep_linear alias and latents = "auto" map.
+    cfg = make_config(
+        {"views": 5, "write_linear": True, "latents": "auto", "levels": [4, 1]},
+        {"views": 3, "out": Path("o"), "demo": True},
+    )
+    assert (cfg.views, cfg.write_linear, cfg.latents_auto, cfg.levels) == (3, True, True, [1, 4])
+    assert cfg.out == "o" and cfg.settings_per_object == 1  # the demo's defaults
+    with pytest.raises(ConfigError, match="--latents-max: only used with --latents auto"):
+        make_config({}, {"latents_max": 5, "out": "o", "demo": True})
+
+
+def test_trajectory_from_toml_and_flags_reaches_the_plan(capsys, tmp_path):
+    """`trajectory` (issue 18): default start (the paper), a TOML value, a flag over it;
+    the choice reaches the sampling of every plan and dataset.json's config record."""
+    base = {"demo": True, "out": tmp_path / "o"}
+    assert make_config({}, base).trajectory == "start"
+    toml = load_toml(write(tmp_path, 'trajectory = "centered"\n'))
+    cfg = make_config(toml, base)
+    assert cfg.trajectory == "centered"
+    assert cfg.sampling().to_dict()["trajectory"] == "centered"
+    assert cfg.record()["trajectory"] == "centered"
+    assert make_config(toml, {**base, "trajectory": "start"}).trajectory == "start"
+    out = tmp_path / "o"
+    with pytest.raises(SystemExit) as e:
+        main(["build", "--demo", "--out", str(out), "--trajectory", "middle"])
+    assert e.value.code == 2
+    assert "--trajectory: invalid choice: 'middle'" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_toml_values_name_their_file_and_key(tmp_path):
+    p = write(tmp_path, "[build]\nsettings-per-object = 0\n")
+    with pytest.raises(ConfigError) as e:
+        make_config(load_toml(p), {"out": "o", "demo": True}, config_path=p)
+    assert str(e.value) == f"{p}: settings_per_object 0: must be an integer in 1..=360"
+
+
+def test_the_core_owns_limits_and_derived_numbers():
+    cfg = BuildConfig(views=4, levels=[2], latents=3, samples=5)
+    assert cfg.level_dirs == ["sharp", "blur_2"]
+    assert (cfg.max_latents, cfg.blur_samples_total, cfg.effective_sharp_samples) == (3, 15, 15)
+    assert cfg.frames_per_setting == 4 * (1 + 3)
+    assert cfg.theta0s == [0.0, 90.0, 180.0, 270.0]
+    mb = cfg.replace(blur_method="motion_blur", samples_total=64)
+    assert (mb.max_latents, mb.blur_samples_total, mb.views) == (1, 64, 4)
+    assert cfg.replace(latents_auto=True, latents_max=9).record()["latents"] == "auto"
+    # One cap for samples, in Rust: 2^20 for per-frame, budget and sharp samples alike.
+    for option in ("samples", "samples_total", "sharp_samples"):
+        BuildConfig(**{option: 2**20})
+        with pytest.raises(ValueError, match=f"{option} 1048577: must be an integer in 1..="):
+            BuildConfig(**{option: 2**20 + 1})
+    # Frozen, comparable and picklable (Ray sends it to its tasks).
+    assert pickle.loads(pickle.dumps(mb)) == mb
+    with pytest.raises(AttributeError):
+        cfg.views = 3  # type: ignore[misc]
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--seed", "-1"], "--seed -1: must be an integer in 0.."),
+        (["--theta0-deg", "nan"], "--theta0-deg nan: must be a finite number"),
+        (["--timeout", "inf"], "--timeout inf: must be a finite number > 0"),
+        (["--threads", "-3"], "--threads -3: must be an integer in 0..=4096"),
+        # Its grids are checked against the build's ranges (the core's, not a copy).
+        (["--budgets", "16,0"], "--budgets 16,0: value 0: must be an integer in 1..=1048576"),
+        (["--latents", "2,5000"], "--latents 2,5000: value 5000: must be an integer in 1..=4096"),
+        (["--level", "65"], "--level [65]: must be distinct integers in 1..=64"),
+    ],
+)
+def test_tradeoff_refuses_bad_flags_up_front(capsys, tmp_path, flags, message):
+    glb = tmp_path / "x.glb"
+    glb.write_bytes(b"glTF")
+    out = tmp_path / "out"
+    err = refused(capsys, out, "tradeoff", "--object", str(glb), "--out", str(out), *flags)
+    assert message in err, err
