@@ -19,7 +19,6 @@ poses are OpenCV world-to-camera (x right, y down, z forward).
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import tempfile
 import time
@@ -117,29 +116,23 @@ def _load_scene(scene_dir: Path, factor: int | None):
 
 def mean_latent_poses(scene_dir: Path, n: int):
     """OpenCV camera-to-world rotations and centres of the mean latent poses of a blur
-    level of a build setting (`SETTING/blur_<l>`, from `SETTING/meta.json`), or None for
-    a sharp level, a plain LLFF scene, or a build from before meta.json recorded them."""
+    level of a build setting (`SETTING/blur_<l>`, from `SETTING/meta.json`, read by the
+    core), or None for a sharp level, a plain LLFF scene, or a build from before meta.json
+    recorded them."""
     level = scene_dir.name
     if level == layout.SHARP or not layout.is_level_dir(level):
         return None
-    path = scene_dir.parent / "meta.json"
-    if not path.is_file():
+    if not (scene_dir.parent / "meta.json").is_file():
         return None
-    try:
-        views = json.loads(path.read_text(encoding="utf-8"))["views"]
-        key = str(layout.level_order(level))
-        poses = [v["levels"][key].get("mean_pose") for v in views]
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
-        raise InputError(
-            f"meta.json has no {level} views to check against ({e!r}): {path}"
-        ) from None
-    if any(p is None for p in poses):
+    poses = layout.mean_poses(scene_dir.parent, level)
+    if poses is None:
         return None
     if len(poses) != n:
-        raise InputError(f"{len(poses)} views in meta.json but {n} images in {level}: {path}")
-    c2w = np.asarray([p["c2w"] for p in poses], dtype=np.float64)
-    if c2w.shape != (n, 4, 4) or not np.isfinite(c2w).all():
-        raise InputError(f"meta.json: a {level} mean_pose is not a finite 4x4 matrix: {path}")
+        raise InputError(
+            f"{len(poses)} views in meta.json but {n} images in {level}: "
+            f"{scene_dir.parent / 'meta.json'}"
+        )
+    c2w = np.asarray(poses, dtype=np.float64)
     # OpenGL (right, up, backwards) → OpenCV (right, down, forward).
     return c2w[:, :3, :3] * np.array([1.0, -1.0, -1.0]), c2w[:, :3, 3]
 

@@ -52,7 +52,7 @@ pub use crate::dataset::layout::{
 pub use crate::dataset::llff::{
     parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses, PoseRow,
 };
-pub use crate::dataset::meta::{write_json, Meta, ObjectRecord, Timings};
+pub use crate::dataset::meta::{read_mean_poses, write_json, Meta, ObjectRecord, Timings};
 pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
 pub use crate::dataset::splits::{make_splits, seeded_subset, test_views, SettingEntry, Splits};
 pub use crate::dataset::stats::{build_stats, BuildStats};
