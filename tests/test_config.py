@@ -43,6 +43,13 @@ def refused(capsys, out: Path, *argv: str) -> str:
         (["--max-texture-pixels", "-1"], "--max-texture-pixels -1: must be an integer in 0.."),
         (["--shard", "2/2"], '--shard "2/2": must be i/N with 0 ≤ i < N'),
         (["--resolution", "4"], "--resolution 4: must be an integer in 8..=16384"),
+        (["--downsample", "1"], "--downsample [1]: must be distinct integers in 2..=64 (or none)"),
+        (["--downsample", "4", "4"], "--downsample [4, 4]: must be distinct integers"),
+        (["--downsample", "5"], "--downsample 5: does not divide resolution 96"),
+        (["--downsample", "four"], "--downsample: expected factors like 4 8, or none"),
+        (["--test-settings", "0"], "--test-settings 0: must be an integer in 1..="),
+        (["--test-view-stride", "0"], "--test-view-stride 0: must be an integer in 1..=4096"),
+        (["--test-objects", "1.5"], "--test-objects 1.5: must be a number in [0, 1]"),
     ],
 )
 def test_flags_out_of_range_name_the_flag_value_and_range(capsys, tmp_path, flags, message):
@@ -75,6 +82,9 @@ def write(tmp_path: Path, text: str | bytes) -> Path:
         ("views = 2\nviews_ = 3\n", "unknown option 'views_'"),
         ("keep-linear = true\nkeep_linear = false\n", "given twice"),
         ('trajectory = "middle"\n', 'trajectory "middle": must be one of start, centered'),
+        ("downsample = [5]\n", "downsample 5: does not divide resolution 96"),
+        ("test-view-stride = 0\n", "view_stride 0: must be an integer in 1..=4096"),
+        ("test-settings = 5\ntest-objects = 0.3\n", "either N random test settings"),
     ],
 )
 def test_toml_is_read_strictly_and_errors_name_the_file_and_key(capsys, tmp_path, text, message):
@@ -127,6 +137,27 @@ def test_trajectory_from_toml_and_flags_reaches_the_plan(capsys, tmp_path):
     assert e.value.code == 2
     assert "--trajectory: invalid choice: 'middle'" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_training_options_map_onto_the_core(tmp_path):
+    # Deblur-NeRF test views and images_4/ by default; `none`, fractions and id lists map.
+    cfg = make_config({}, {"out": "o", "demo": True})
+    assert (cfg.downsample, cfg.blurry_test_views, cfg.test_view_images) == ([4], False, "sharp")
+    assert cfg.sharp_views(17) == [0, 16] and cfg.record()["downsample"] == [4]
+    p = write(
+        tmp_path,
+        'downsample = "none"\ntest-view-stride = 8\ntest-objects = "a,b"\n'
+        "blurry-test-views = true\n",
+    )
+    cfg = make_config(load_toml(p), {"out": "o", "demo": True}, config_path=p)
+    assert (cfg.downsample, cfg.view_stride, cfg.test_objects) == ([], 8, ["a", "b"])
+    assert cfg.sharp_views(17) == [] and cfg.test_view_images == "blurry"
+    cfg = make_config(
+        load_toml(write(tmp_path, "test-settings = 52\n")), {"out": "o", "demo": True}
+    )
+    assert (cfg.test_settings, cfg.test_objects) == (52, None)
+    cfg = make_config({}, {"out": "o", "demo": True, "downsample": [8, 4], "test_fraction": 0.5})
+    assert (cfg.downsample, cfg.test_fraction) == ([4, 8], 0.5)
 
 
 def test_toml_values_name_their_file_and_key(tmp_path):

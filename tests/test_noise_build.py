@@ -60,8 +60,16 @@ def files_state(root: Path) -> dict[str, tuple[int, bytes]]:
     }
 
 
-def clean_reference(build: Path, unit: Path, meta: dict, stem: str, source: str) -> np.ndarray:
-    """The clean linear y of one view, computed here in NumPy from the build's files."""
+def block_mean(a: np.ndarray, f: int) -> np.ndarray:
+    h, w = a.shape[:2]
+    return a.reshape(h // f, f, w // f, f, -1).mean(axis=(1, 3))
+
+
+def clean_reference(
+    build: Path, unit: Path, meta: dict, stem: str, source: str, factor: int = 1
+) -> np.ndarray:
+    """The clean linear y of one view, computed here in NumPy from the build's files, at
+    full size or clipped and area-averaged `factor` times in linear light."""
     wb = meta["white_balance"]
     scale = np.array([1 / wb["red"], 1.0, 1 / wb["blue"]]) if wb else np.ones(3)
     level_dir = build / meta["source"]["setting"] / meta["source"]["level"]
@@ -69,9 +77,13 @@ def clean_reference(build: Path, unit: Path, meta: dict, stem: str, source: str)
         rgba = read_exr(level_dir / "linear" / f"{stem}.exr")
         bg = np.array(meta["source"]["background"])
         lin = rgba[..., :3] + (1 - np.clip(rgba[..., 3:], 0, 1)) * bg
-        return np.clip(lin, 0, 1) * scale * meta["white_level"]
-    x = np.asarray(Image.open(level_dir / "images" / f"{stem}.png"), np.float64) / 255
-    return srgb_decode(x) * scale * meta["white_level"]
+    else:
+        x = np.asarray(Image.open(level_dir / "images" / f"{stem}.png"), np.float64) / 255
+        lin = srgb_decode(x)
+    lin = np.clip(lin, 0, 1)
+    if factor > 1:
+        lin = block_mean(lin, factor)
+    return lin * scale * meta["white_level"]
 
 
 @pytest.fixture(scope="module")
@@ -127,9 +139,21 @@ def test_layout_mirrored_poses_and_splits_preserved(noised):
                     assert (d / ".complete").is_file()
                     # What an IBRNet / NAN LLFF loader reads: sorted images, N x 17 poses.
                     assert sorted(p.name for p in (d / "images").iterdir()) == want
-                    assert sorted(p.name for p in (d / "linear").iterdir()) == [
-                        w.replace(".png", ".exr") for w in want
-                    ]
+                    for sub in ("linear", "linear_4"):
+                        assert sorted(p.name for p in (d / sub).iterdir()) == [
+                            w.replace(".png", ".exr") for w in want
+                        ]
+                    assert sorted(p.name for p in (d / "images_4").iterdir()) == want
+                    # NAN's protocol: the held-out views stay clean (the level's files).
+                    for sub in ("images", "images_4"):
+                        for i, name in enumerate(want):
+                            same = (d / sub / name).read_bytes() == (
+                                s / lvl / sub / name
+                            ).read_bytes()
+                            assert same == (i in (0, 16)), (d, sub, name)
+                    tf = json.loads((d / "transforms.json").read_text())
+                    assert tf["test_filenames"] == ["images/000.png", "images/016.png"]
+                    assert all((d / f["file_path"]).is_file() for f in tf["frames"])
                     np.testing.assert_array_equal(
                         np.load(d / "poses_bounds.npy"), np.load(s / lvl / "poses_bounds.npy")
                     )
@@ -161,6 +185,9 @@ def test_noise_statistics_on_own_clean_reference(noised, source):
                 y = clean_reference(build, unit, meta, Path(f["image"]).stem, source)
                 noisy = read_exr(unit / f["linear"])
                 assert noisy.shape == y.shape and np.isfinite(noisy).all()
+                if f.get("clean"):  # a held-out target: no noise at all
+                    np.testing.assert_allclose(noisy, y, rtol=1e-6, atol=1e-7)
+                    continue
                 negative += int((noisy < 0).sum())
                 r, yy = (noisy - y).ravel(), y.ravel()
                 b = np.clip(np.digitize(yy, EDGES) - 1, 0, nb - 1)
@@ -178,6 +205,51 @@ def test_noise_statistics_on_own_clean_reference(noised, source):
         assert tested >= 3, f"too few populated brightness bins: {n}"
         if g == "16":
             assert negative > 0, "negative linear values must survive"
+
+
+@pytest.mark.parametrize("source", ["linear", "png"])
+def test_images_4_noise_has_the_sigma_of_its_own_size(noised, source, record_property):
+    """images_4 / linear_4 of a gain: the residual against the clean image of the same
+    size (area mean in linear light) has the model's variance per brightness bin; noise
+    drawn at full size and then averaged (what a loader's resize does) has ~1/16 of it."""
+    build, lin, png = noised
+    out = lin if source == "linear" else png
+    nb = len(EDGES) - 1
+    for g in GAINS:
+        n, s1, s2, pred = (np.zeros(nb) for _ in range(4))
+        averaged = full_pred = 0.0
+        for unit in units(out, g):
+            meta = json.loads((unit / "noise.json").read_text())
+            sr, ss = meta["sigma_read"], meta["sigma_shot"]
+            for f in meta["files"]:
+                if f.get("clean"):
+                    continue
+                stem = Path(f["image"]).stem
+                y4 = clean_reference(build, unit, meta, stem, source, factor=4)
+                noisy4 = read_exr(unit / "linear_4" / f"{stem}.exr")
+                assert noisy4.shape == (16, 16, 3)
+                r, yy = (noisy4 - y4).ravel(), y4.ravel()
+                b = np.clip(np.digitize(yy, EDGES) - 1, 0, nb - 1)
+                n += np.bincount(b, minlength=nb)
+                s1 += np.bincount(b, r, minlength=nb)
+                s2 += np.bincount(b, r * r, minlength=nb)
+                pred += np.bincount(b, sr**2 + ss**2 * yy, minlength=nb)
+                y = clean_reference(build, unit, meta, stem, source)
+                resized = block_mean(read_exr(unit / f["linear"]) - y, 4)
+                averaged += float((resized**2).sum())
+                full_pred += float((sr**2 + ss**2 * block_mean(y, 4)).sum())
+        tested = 0
+        for i in np.nonzero(n >= 5_000)[0]:
+            mean, want = s1[i] / n[i], pred[i] / n[i]
+            var = s2[i] / n[i] - mean**2
+            assert abs(mean) < 5 * np.sqrt(want / n[i]), (source, g, EDGES[i], mean)
+            assert abs(var / want - 1) < 0.06, (source, g, EDGES[i], var / want)
+            record_property(f"var_ratio_images_4_{source}_gain{g}_bin{EDGES[i]}", var / want)
+            tested += 1
+        assert tested >= 3, f"too few populated brightness bins: {n}"
+        ratio = averaged / full_pred
+        record_property(f"var_ratio_resized_full_{source}_gain{g}", ratio)
+        assert ratio < 0.1, ratio  # a resize of the full-size noise: about 1/16
 
 
 def test_linear_vs_png_source_measured_difference(noised, record_property):
@@ -230,9 +302,10 @@ def test_png_source_equals_the_single_scene_command(noised, tmp_path):
     seed = noise_scene_seed(int(SEED), s, "blur_2")
     out = tmp_path / "single"
     run_cli("noise", str(build / s / "blur_2"), "--out", str(out), "--gains", "16",
-            "--seed", str(seed), "--gamma", "srgb")  # fmt: skip
+            "--seed", str(seed), "--gamma", "srgb", "--clean-views", "16",
+            "--downsample", "4")  # fmt: skip
     mine = png / s / "blur_2" / "gain_16"
-    for sub in ("images", "linear"):
+    for sub in ("images", "linear", "images_4", "linear_4"):
         names = sorted(p.name for p in (mine / sub).iterdir())
         assert names == sorted(p.name for p in (out / "gain_16" / sub).iterdir())
         for name in names:
@@ -383,3 +456,26 @@ def test_nan_in_a_linear_image_fails_cleanly(linear_build, tmp_path):
     assert not (out / "demo_cylinder_000" / "blur_1" / "gain_1").exists()
     done = list(out.glob("*/*/gain_1"))
     assert done and all((d / ".complete").is_file() for d in done)
+
+
+def test_open_scene_gives_noisy_sources_and_clean_pairs(noised):
+    """`blurset.data.open_scene` with a gain: the gain's files at the size asked, the
+    sharp images as `clean`, clean (level) images at the test views."""
+    from blurset.data import open_scene
+
+    build, _, png = noised
+    s = settings(build)[2].name
+    sc = open_scene(build, s, "blur_2", gain=16, noise=png, downsample=4)
+    unit = png / s / "blur_2" / "gain_16"
+    assert sc.noise["gain"] == 16 and sc.images.shape == (17, 16, 16, 3)
+    for v in (0, 3):
+        want = np.asarray(Image.open(unit / "images_4" / f"{v:03d}.png")) / 255
+        np.testing.assert_allclose(sc.images[v], want, atol=1e-6)
+        clean = np.asarray(Image.open(build / s / "sharp" / "images_4" / f"{v:03d}.png")) / 255
+        np.testing.assert_allclose(sc.clean[v], clean, atol=1e-6)
+    np.testing.assert_array_equal(sc.images[sc.test_views], sc.clean[sc.test_views])
+    noise = sc.images[sc.train_views] - sc.clean[sc.train_views]
+    assert noise.std() > 0.05  # gain 16 at 16 px: visibly noisy
+    level = open_scene(build, s, "blur_2", downsample=4)
+    np.testing.assert_array_equal(sc.c2w_opencv, level.c2w_opencv)
+    np.testing.assert_array_equal(sc.intrinsics, level.intrinsics)

@@ -27,6 +27,9 @@ class ConfigValueError(ValueError):
 
 # --- build config (rust/py/src/config.rs) ---------------------------------------------
 
+def check_downsample(factors: list[int]) -> None:
+    """ConfigValueError unless the factors are distinct integers in 2..=64."""
+
 @final
 class BuildConfig:
     """Every option of `blurset build`, validated (frozen: `replace` makes a new one).
@@ -70,6 +73,12 @@ class BuildConfig:
     @property
     def theta0s(self) -> list[float]:
         """The θ0 of each setting of an object."""
+    def sharp_views(self, n_views: int) -> list[int]:
+        """The views whose blur levels hold a copy of the sharp image (none with
+        blurry_test_views)."""
+    @property
+    def test_view_images(self) -> str:
+        """What the blur levels hold at the test views: "sharp" or "blurry"."""
     @property
     def objects(self) -> list[str]: ...
     @property
@@ -134,6 +143,12 @@ class BuildConfig:
     def test_fraction(self) -> float: ...
     @property
     def test_objects(self) -> list[str] | None: ...
+    @property
+    def test_settings(self) -> int | None: ...
+    @property
+    def blurry_test_views(self) -> bool: ...
+    @property
+    def downsample(self) -> list[int]: ...
     @property
     def workers(self) -> int: ...
     @property
@@ -269,8 +284,11 @@ class Accumulator:
         self,
         path: str | PathLike[str],
         background: tuple[float, float, float] = ...,
+        *,
+        downsample: int = 1,
     ) -> None:
-        """Write the mean as 8-bit sRGB PNG over `background` (linear RGB), atomically."""
+        """Write the mean as 8-bit sRGB PNG over `background` (linear RGB), atomically;
+        area-averaged over `downsample` x `downsample` blocks in linear light first."""
     def write_exr(self, path: str | PathLike[str]) -> None:
         """Write the linear mean as a ZIP-compressed RGBA float32 EXR, atomically."""
 
@@ -342,9 +360,13 @@ def noise_write_variants(
     gamma: str = "2.2",
     white_balance: tuple[float, float] | None = None,
     white_level: float = 1.0,
+    downsample: list[int] = ...,
+    clean_views: list[int] = ...,
 ) -> None:
     """Write images/<name>.png and linear/<name>.exr of every (out_dir, sigma_read,
-    sigma_shot, key) variant; `names` holds len(sources) * frames stems, view-major."""
+    sigma_shot, key) variant; `names` holds len(sources) * frames stems, view-major;
+    images_<f>/ and linear_<f>/ for each `downsample` factor (noise drawn at that size);
+    the views in `clean_views` stay clean (sigma 0)."""
 
 # --- noise on a build, from linear light (rust/py/src/noise_linear.rs) ---------------
 
@@ -390,6 +412,8 @@ def noise_write_variants_linear(
     white_balance: tuple[float, float] | None = None,
     white_level: float = 1.0,
     background: tuple[float, float, float] = ...,
+    downsample: list[int] = ...,
+    clean_views: list[int] = ...,
 ) -> None:
     """`noise_write_variants` from a build's linear EXRs (composited over `background`)."""
 
@@ -480,13 +504,25 @@ class Plan:
         """The whole plan as a dict (views[].levels["<l>"].latent_frames …), for reading."""
     def level(self, view: int, level: int) -> dict[str, Any]:
         """One view's plan of one blur level as a dict (w_l, latents, motion_px, …)."""
-    def renders(self, exr_dir: str | PathLike[str]) -> list[dict[str, Any]]:
+    def renders(
+        self, exr_dir: str | PathLike[str], *, sharp_views: list[int] = ...
+    ) -> list[dict[str, Any]]:
         """Every render of the setting in stream order (per view: sharp, then each level),
-        as the worker takes them: {view, level, c2w, seed, samples?, out, motion?}."""
+        as the worker takes them: {view, level, c2w, seed, samples?, out, motion?}; the
+        blur renders of `sharp_views` are left out (their levels get the sharp image)."""
     def level_renders(self, view: int, level: int, prefix: str) -> list[dict[str, Any]]:
         """The renders of one blurry image (view, level), EXRs named `<prefix>_…`."""
-    def write_poses(self, setting_dir: str | PathLike[str], level_dirs: list[str]) -> None:
-        """Write `<level>/poses_bounds.npy` for each level dir and the setting's transforms.json."""
+    def write_poses(
+        self,
+        setting_dir: str | PathLike[str],
+        level_dirs: list[str],
+        *,
+        test_views: list[int] = ...,
+        sharp_test_views: bool = True,
+    ) -> None:
+        """Write `<level>/poses_bounds.npy` and `<level>/transforms.json` for each level dir
+        and the setting's transforms.json; `test_views` hold sharp images in the blur
+        levels when `sharp_test_views`."""
     def write_meta(
         self,
         path: str | PathLike[str],
@@ -511,6 +547,18 @@ def plan_setting(
     vertices: npt.NDArray[np.float32],
 ) -> Plan:
     """Plan one setting (views, near/far from the vertices, weights, latent frames, seeds)."""
+
+def write_scene_transforms(
+    path: str | PathLike[str],
+    setting: dict[str, Any],
+    files: list[tuple[int, str]],
+    *,
+    test_views: list[int],
+    extra: dict[str, Any] | None = None,
+) -> None:
+    """The transforms.json of one scene of a setting: the setting's cameras (its
+    transforms.json as a dict), a frame per (view, file path), train/val/test_filenames,
+    and the fields of `extra`."""
 
 def test_views(views: int, stride: int) -> list[int]:
     """Every `stride`-th view index below `views`."""
@@ -542,8 +590,11 @@ def make_splits(
     test_fraction: float,
     test_objects: list[str] | None,
     seed: int,
+    test_settings: int | None = None,
+    sharp_test_views: bool = True,
 ) -> Splits:
-    """Splits by object of setting entries (setting dir, object uid, views)."""
+    """Splits of setting entries (setting dir, object uid, views): whole objects held
+    out, or `test_settings` random settings."""
 
 def seeded_subset(ids: list[str], k: int, seed: int) -> list[str]:
     """A seeded random subset of `k` ids, sorted; independent of the ids' order."""

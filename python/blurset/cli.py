@@ -27,6 +27,10 @@ COMMANDS = {
         "measure render time against PSNR for latent counts, samples and blur methods",
     ),
     "stats": ("blurset.stats", "histograms, numbers and a report of a build's statistics"),
+    "export": (
+        "blurset.export",
+        "one root of LLFF scenes (IBRNet/NAN/GNT/GeoNeRF) or nerfstudio scenes of a build",
+    ),
 }
 
 

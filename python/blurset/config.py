@@ -28,13 +28,21 @@ DEMO_DEFAULTS: dict[str, Any] = {
 
 OPTIONS: tuple[str, ...] = tuple(BuildConfig.options())
 # Other spellings of option names in TOML files (the issue's name → the option).
-ALIASES = {"keep_linear": "write_linear"}
+ALIASES = {"keep_linear": "write_linear", "test_view_stride": "view_stride"}
 # Options that only mean something with `--latents auto` / the average method.
 AUTO_ONLY = ("latents_max", "max_ghost_px")
 
 
+# Options whose flag is not their name.
+FLAGS = {
+    "view_stride": "--test-view-stride",
+    "test_fraction": "--test-objects",
+    "test_objects": "--test-objects",
+}
+
+
 def flag(option: str) -> str:
-    return f"--{option.replace('_', '-')}"
+    return FLAGS.get(option, f"--{option.replace('_', '-')}")
 
 
 def parse_levels(value: Any, where: str = "--levels") -> Any:
@@ -48,6 +56,48 @@ def parse_levels(value: Any, where: str = "--levels") -> Any:
         return [int(x) for x in items]
     except ValueError:
         raise ConfigError(f"{where}: expected levels like 1,2,3,4 or none, got {value!r}") from None
+
+
+def parse_downsample(value: Any, where: str = "--downsample") -> Any:
+    """`4 8` (flag words), `4,8` or `none` → a list of factors; other values go to the
+    core as they are (it checks them: distinct integers in 2..64 dividing the resolution)."""
+    items = value if isinstance(value, list) else [value]
+    if not all(isinstance(v, str) for v in items):
+        return value
+    words = [w for v in items for w in v.replace(",", " ").split()]
+    if [w.lower() for w in words] in ([], ["none"]):
+        return []
+    try:
+        return [int(w) for w in words]
+    except ValueError:
+        raise ConfigError(f"{where}: expected factors like 4 8, or none, got {value!r}") from None
+
+
+def check_downsample(factors: Any, where: str = "--downsample") -> list[int]:
+    """Factors of `images_<f>/` copies whose image size is not the build's (noise of a
+    scene): the core's range, distinct."""
+    try:
+        _core.check_downsample(factors)
+    except (OverflowError, TypeError):
+        raise ConfigError(f"{where} {factors!r}: expected factors like 4 8, or none") from None
+    except _core.ConfigValueError as e:
+        raise ConfigError(f"{where} {e.detail}") from None
+    return sorted(factors)
+
+
+def split_test_objects(value: Any, where: str) -> dict[str, Any]:
+    """`test-objects`: a fraction of the objects (0.2) → test_fraction, or object ids
+    (`a,b` or a list) → test_objects."""
+    if isinstance(value, bool):
+        raise ConfigError(f"{where} {value!r}: expected a fraction in [0, 1] or object ids")
+    if isinstance(value, int | float):
+        return {"test_fraction": value}
+    if isinstance(value, str):
+        try:
+            return {"test_fraction": float(value)}
+        except ValueError:
+            value = [v.strip() for v in value.split(",") if v.strip()]
+    return {"test_objects": value}
 
 
 def _option(key: str, where: str) -> str:
@@ -91,7 +141,12 @@ def load_toml(path: Path) -> dict[str, Any]:
         name = _option(key, str(path))
         if name in out:
             raise ConfigError(f"{path}: {key!r} is given twice (as {name})")
-        out[name] = parse_levels(value, f"{path}: {key}") if name == "levels" else value
+        if name == "test_objects":
+            out.update(split_test_objects(value, f"{path}: {key}"))
+        elif name == "downsample":
+            out[name] = parse_downsample(value, f"{path}: {key}")
+        else:
+            out[name] = parse_levels(value, f"{path}: {key}") if name == "levels" else value
     return out
 
 
@@ -135,6 +190,13 @@ def make_config(
     given.update(flags)
     values.update(given)
     values["demo"] = demo
+    if given.get("test_settings") is not None and (
+        given.get("test_objects") is not None or "test_fraction" in given
+    ):
+        where = origin.get("test_settings", "--test-settings")
+        raise ConfigError(
+            f"{where}: give either N random test settings or --test-objects, not both"
+        )
     for name in AUTO_ONLY:
         if name in given and not values.get("latents_auto"):
             raise ConfigError(f"{flag(name)}: only used with --latents auto")

@@ -6,7 +6,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from blurset.config import BuildConfig, load_toml, make_config, parse_levels
+from blurset.config import (
+    BuildConfig,
+    load_toml,
+    make_config,
+    parse_downsample,
+    parse_levels,
+    split_test_objects,
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -67,6 +74,35 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--previews", action="store_true", default=None, help="write <setting>/preview.png"
     )
+    p.add_argument(
+        "--downsample",
+        nargs="+",
+        help="images_<f>/ beside images/ in every level, area-averaged in linear light "
+        "(4; e.g. 4 8, or none)",
+    )
+    p.add_argument(
+        "--blurry-test-views",
+        action="store_true",
+        default=None,
+        help="render the held-out views blurry too (default: Deblur-NeRF's convention, "
+        "the blur levels hold the sharp image there)",
+    )
+    p.add_argument(
+        "--test-view-stride",
+        dest="view_stride",
+        type=int,
+        help="every k-th view of a setting is held out (16: LLFF's llffhold)",
+    )
+    split = p.add_mutually_exclusive_group()
+    split.add_argument(
+        "--test-objects",
+        help="test settings: a seeded fraction F of the objects (0.2), or object ids a,b",
+    )
+    split.add_argument(
+        "--test-settings",
+        type=int,
+        help="test settings: N seeded random settings (the paper's 52)",
+    )
     p.add_argument("--workers", type=int, help="objects rendered in parallel (1)")
     p.add_argument("--threads", type=int, help="Cycles threads per worker (0 = all cores)")
     p.add_argument("--executor", choices=["local", "ray"], help="local process pool or Ray")
@@ -125,11 +161,16 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
             "seed fov_deg latent_positions trajectory write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "ray_address objaverse_dir objaverse_offline objaverse_count "
-            "blender check_poses previews allow_mixed"
+            "blender check_poses previews allow_mixed view_stride test_settings "
+            "blurry_test_views downsample"
         ).split()
     }
     if args.levels is not None:
         flags["levels"] = parse_levels(args.levels)
+    if args.downsample is not None:
+        flags["downsample"] = parse_downsample(args.downsample)
+    if args.test_objects is not None:
+        flags.update(split_test_objects(args.test_objects, "--test-objects"))
     return make_config(file_values, flags, config_path=args.config)
 
 

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from blurset import __version__, _core, layout
-from blurset.config import BuildConfig
+from blurset.config import BuildConfig, flag
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec
 
@@ -53,8 +53,10 @@ RUN_OPTIONS = frozenset(
     "objects out demo workers threads executor ray_address shard objaverse_dir "
     "objaverse_offline objaverse_count timeout object_timeout retries max_failure_rate "
     "max_triangles max_texture_pixels blender check_poses previews allow_mixed "
-    "view_stride test_fraction test_objects".split()
+    "test_fraction test_objects test_settings".split()
 )
+# What a build made before an option existed did: its dataset.json lacks the key.
+LEGACY = {"blurry_test_views": True, "downsample": []}
 
 
 def check_same_options(out: Path, cfg: BuildConfig) -> None:
@@ -76,10 +78,14 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
         ) from None
     defaults = BuildConfig(out=cfg.out, objects=cfg.objects).record()
     differ = [
-        k for k in sorted(now) if k not in RUN_OPTIONS and was.get(k, defaults.get(k)) != now[k]
+        k
+        for k in sorted(now)
+        if k not in RUN_OPTIONS and was.get(k, LEGACY.get(k, defaults.get(k))) != now[k]
     ]
     if differ and not cfg.allow_mixed:
-        said = ", ".join(f"--{k.replace('_', '-')} {was.get(k)!r} → {now[k]!r}" for k in differ[:4])
+        said = ", ".join(
+            f"{flag(k)} {was.get(k, LEGACY.get(k))!r} → {now[k]!r}" for k in differ[:4]
+        )
         raise ConfigError(
             f"--out was built with other options ({said}{' …' if len(differ) > 4 else ''}): "
             f"use a new --out, or --allow-mixed to mix settings: {out}"
@@ -135,6 +141,8 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
         test_fraction=cfg.test_fraction,
         test_objects=cfg.test_objects,
         seed=cfg.seed,
+        test_settings=cfg.test_settings,
+        sharp_test_views=not cfg.blurry_test_views,
     )
     splits.write(out / "splits.json")
     checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}

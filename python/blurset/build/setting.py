@@ -48,6 +48,20 @@ def frames_per_setting(cfg: BuildConfig) -> int:
     return cfg.frames_per_setting
 
 
+def _copy_sharp(setting: Path, views: list[int], n_views: int, cfg: BuildConfig) -> None:
+    """The sharp files of `views` into every blur level (byte-identical copies)."""
+    subdirs = ["images", *(f"images_{f}" for f in cfg.downsample)]
+    for view in views:
+        name = layout.image_name(view, n_views)
+        files = [(d, name) for d in subdirs]
+        if cfg.write_linear:
+            files.append(("linear", name.replace(".png", ".exr")))
+        for level in cfg.level_dirs[1:]:
+            for d, f in files:
+                (setting / level / d).mkdir(exist_ok=True)  # linear/: no view rendered
+                shutil.copyfile(setting / layout.SHARP / d / f, setting / level / d / f)
+
+
 def _object_record(obj: ObjectSpec, info: dict) -> dict[str, Any]:
     """meta.json's `object`: the file and what the worker reported about it."""
     keys = ("bbox_dims", "scale", "center", "n_vertices", "n_triangles", "unlit_fixed")
@@ -86,13 +100,15 @@ def render_setting(
         vertices=verts,
     )
     n_views = plan.n_views
-    frames = plan.renders(exr_dir)
+    sharp = cfg.sharp_views(n_views)
+    frames = plan.renders(exr_dir, sharp_views=sharp)
     keys = [(f["view"], f["level"]) for f in frames]
     need: dict[tuple[int, str], int] = {}
     for k in keys:
         need[k] = need.get(k, 0) + 1
     for d in cfg.level_dirs:
-        (partial / d / "images").mkdir(parents=True)
+        for sub in ["images", *(f"images_{f}" for f in cfg.downsample)]:
+            (partial / d / sub).mkdir(parents=True)
     acc: dict[tuple[int, str], Any] = {}
     res = cfg.resolution
     qa: dict[int, Any] = {}
@@ -107,7 +123,10 @@ def render_setting(
         if a.count == need[key]:
             view, level = key
             name = layout.image_name(view, n_views)
-            a.write_png(partial / level / "images" / name, background=tuple(cfg.background))
+            bg = tuple(cfg.background)
+            a.write_png(partial / level / "images" / name, background=bg)
+            for f in cfg.downsample:
+                a.write_png(partial / level / f"images_{f}" / name, background=bg, downsample=f)
             if cfg.write_linear:
                 a.write_exr(partial / level / "linear" / name.replace(".png", ".exr"))
             if level == layout.SHARP:
@@ -145,7 +164,13 @@ def render_setting(
     # --latents auto / motion blur render fewer frames than the bar's per-setting bound.
     progress.frame_done(frames_per_setting(cfg) - len(frames))
     shutil.rmtree(exr_dir)
-    plan.write_poses(partial, cfg.level_dirs)
+    _copy_sharp(partial, sharp, n_views, cfg)
+    plan.write_poses(
+        partial,
+        cfg.level_dirs,
+        test_views=_core.test_views(n_views, cfg.view_stride),
+        sharp_test_views=not cfg.blurry_test_views,
+    )
     timings = {
         "plan_s": round(t_plan, 3),
         "sharp_s": round(t_sharp, 3),

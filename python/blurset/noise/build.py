@@ -26,6 +26,7 @@ inverted (`--source png`). Both share the same draws, so they differ only by wha
 
 from __future__ import annotations
 
+import json
 import shutil
 import sys
 import time
@@ -35,10 +36,12 @@ from pathlib import Path
 import numpy as np
 
 from blurset import __version__, _core, layout
+from blurset.config import check_downsample, parse_downsample
 from blurset.exceptions import ConfigError, InputError
 from blurset.layout import gain_name
 from blurset.noise.params import (
     check_options,
+    copy_clean,
     files_record,
     noise_json,
     noise_table,
@@ -99,10 +102,21 @@ class Unit:
     rows: np.ndarray
     resolution: tuple[int, int]
     pending: list[float]
+    pngs: list[Path]
+    test_views: list[int]
+    clean_views: list[int]
 
 
 def _plan_unit(
-    setting_dir: Path, level: str, out: Path, seed: int, gains: list[float], frames: int, kind: str
+    setting_dir: Path,
+    level: str,
+    out: Path,
+    seed: int,
+    gains: list[float],
+    frames: int,
+    kind: str,
+    clean_policy: str,
+    downsample: list[int],
 ) -> Unit:
     src = setting_dir / level
     meta = layout.read_json(setting_dir / "meta.json", "meta.json")
@@ -120,6 +134,9 @@ def _plan_unit(
     if len(rows) != len(pngs):
         raise InputError(f"{len(pngs)} images in {image_dir} but {len(rows)} pose rows in {poses}")
     w0, h0, _, _ = _core.image_info(pngs[0])
+    bad = next((f for f in downsample if w0 % f or h0 % f), None)
+    if bad is not None:
+        raise ConfigError(f"--downsample {bad}: does not divide the image size {w0}x{h0}: {src}")
     for p in pngs[1:]:
         w, h, _, _ = _core.image_info(p)
         if (w, h) != (w0, h0):
@@ -135,7 +152,11 @@ def _plan_unit(
         sources = pngs
     dst = out / setting_dir.name / level
     pending = [g for g in gains if not layout.is_complete(dst / gain_name(g))]
+    test_views = [int(v) for v in meta.get("test_views", [])]
     return Unit(
+        pngs=pngs,
+        test_views=test_views,
+        clean_views=test_views if clean_policy == "test_views" else [],
         setting=setting_dir.name,
         level=level,
         src=src,
@@ -158,7 +179,7 @@ def _has_linear(level_dir: Path) -> bool:
     return all((lin / f"{p.stem}.exr").is_file() for p in list_images(images))
 
 
-def _params(args, kind: str, gamma: str, table) -> dict:
+def _params(args, kind: str, gamma: str, table, downsample: list[int], clean_policy: str) -> dict:
     """The options a noise build is made with; a rerun into the same DIR must match them."""
     return {
         "seed": args.seed,
@@ -168,6 +189,8 @@ def _params(args, kind: str, gamma: str, table) -> dict:
         "white_level": args.white_level,
         "frames": args.frames,
         "levels_table": table_record(table, args.kpn_levels),
+        "downsample": downsample,
+        "clean_views": clean_policy,
     }
 
 
@@ -227,8 +250,13 @@ def _noise_json(unit: Unit, g: float, sr: float, ss: float, wb, params: dict, ar
         build_noise={"seed": args.seed, "seed_derivation": SEED_DERIVATION},
         rng="philox4x32-10, key noise_key(seed, gain), stream view<<32|frame, "
         "word = pixel*3 + c; ziggurat normals (shared by the png and linear sources)",
+        downsample=params["downsample"],
+        clean_views=unit.clean_views,
         files=files_record(
-            [f"{unit.level}/{subdir}/{p.name}" for p in unit.sources], unit.names, args.frames
+            [f"{unit.level}/{subdir}/{p.name}" for p in unit.sources],
+            unit.names,
+            args.frames,
+            set(unit.clean_views),
         ),
     )
 
@@ -247,6 +275,8 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             "gamma": params["gamma"],
             "white_balance": wb,
             "white_level": args.white_level,
+            "downsample": params["downsample"],
+            "clean_views": unit.clean_views,
         }
         if params["source"] == "linear":
             interruptible(
@@ -262,9 +292,28 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
         # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the
         # build's rows already hold the written resolution and focal length.
         rows = np.repeat(unit.rows, args.frames, axis=0)
+        small = {f: unit.src / f"images_{f}" for f in params["downsample"]}
+        setting_transforms = json.loads((unit.src.parent / "transforms.json").read_text())
+        files = [
+            (v, f"images/{unit.names[v * args.frames + k]}.png")
+            for v in range(len(unit.pngs))
+            for k in range(args.frames)
+        ]
         for g in unit.pending:
             part = partials[g]
+            copy_clean(part, unit.pngs, unit.names, args.frames, unit.clean_views, small)
             _core.write_poses_bounds(part / "poses_bounds.npy", rows)
+            _core.write_scene_transforms(
+                part / "transforms.json",
+                setting_transforms,
+                files,
+                test_views=unit.test_views,
+                extra={
+                    "level": unit.level,
+                    "gain": int(g) if float(g).is_integer() else g,
+                    "test_view_images": "clean" if unit.clean_views else "noisy",
+                },
+            )
             sr, ss = gains_sigmas[g]
             _core.write_noise_json(
                 part / "noise.json", _noise_json(unit, g, sr, ss, wb, params, args, build)
@@ -309,7 +358,8 @@ def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
             lvl for lvl in dataset.get("levels", []) if any(lvl in s for s in seeds.values())
         ],
         "seeds": seeds,
-        "layout": "<setting>/<level>/gain_<g>/ (images/, linear/, poses_bounds.npy, noise.json)",
+        "layout": "<setting>/<level>/gain_<g>/ (images/, linear/, images_<f>/, linear_<f>/, "
+        "poses_bounds.npy, transforms.json, noise.json)",
         "splits": "splits.json (copied from the build)",
         "counts": {"settings": len(seeds), "units": n_units, "images": n_images},
     }
@@ -323,8 +373,18 @@ def run(args) -> int:
     if args.factor is not None:
         raise ConfigError("--factor: a build has no images_<F>/ directories; omit it")
     check_options(args)
+    if args.clean_views is not None:
+        raise ConfigError(
+            "--clean-views applies to a scene: a build keeps its own test views clean "
+            "(splits.json), or none with --noisy-test-views"
+        )
     gains = parse_gains(args.gains, args.any_gain)
     dataset = layout.read_json(build / "dataset.json", "dataset.json")
+    if args.downsample is not None:
+        downsample = check_downsample(parse_downsample(args.downsample))
+    else:  # the build's own images_<f>/ factors (none in a build made before them)
+        downsample = list((dataset.get("config") or {}).get("downsample") or [])
+    clean_policy = "none" if args.noisy_test_views else "test_views"
     available = dataset.get("levels") or ["sharp"]
     levels = parse_levels(args.levels, available)
     settings = layout.complete_settings(build)
@@ -339,11 +399,11 @@ def run(args) -> int:
     gamma = args.gamma or "srgb"
     table = noise_table(args.kpn_levels)
     gains_sigmas = {g: _core.noise_sigmas(g, table) for g in gains}
-    params = _params(args, kind, gamma, table)
+    params = _params(args, kind, gamma, table, downsample, clean_policy)
 
     # Check every unit before writing anything: a bad build fails with nothing written.
     units = [
-        _plan_unit(s, lvl, out, args.seed, gains, args.frames, kind)
+        _plan_unit(s, lvl, out, args.seed, gains, args.frames, kind, clean_policy, downsample)
         for s in settings
         for lvl in levels
     ]

@@ -53,6 +53,21 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--any-gain", action="store_true", help="allow gains outside the LLFF-N levels"
     )
+    parser.add_argument(
+        "--downsample",
+        nargs="+",
+        default=None,
+        help="also images_<f>/ and linear_<f>/ per gain, noise drawn at that size on the clean "
+        "image area-averaged in linear light (a build: its own factors; a scene: none)",
+    )
+    parser.add_argument(
+        "--clean-views",
+        type=int,
+        default=None,
+        metavar="K",
+        help="every K-th view stays clean, as a held-out target (a scene: none; a build: "
+        "its test views, unless --noisy-test-views)",
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     build = parser.add_argument_group("build mode (SCENE is a build directory)")
     build.add_argument(
@@ -64,6 +79,11 @@ def add_arguments(parser) -> None:
         default="auto",
         help="clean image: the build's linear EXRs (--keep-linear) or its PNGs "
         "(auto: linear when every chosen level has them)",
+    )
+    build.add_argument(
+        "--noisy-test-views",
+        action="store_true",
+        help="noise the build's test views too (default: they stay clean, NAN's protocol)",
     )
     build.add_argument("--quiet", action="store_true", help="no progress line")
 

@@ -88,8 +88,13 @@ def table_record(table: NoiseTable, kpn_levels: Path | None) -> dict[str, Any]:
     }
 
 
-def files_record(sources: list[str], names: list[str], frames: int) -> list[dict[str, Any]]:
-    """Per written image: its view, frame, the clean source it came from and its files."""
+def files_record(
+    sources: list[str], names: list[str], frames: int, clean_views: set[int] | None = None
+) -> list[dict[str, Any]]:
+    """Per written image: its view, frame, the clean source it came from, its files, and
+    whether it stayed clean (a held-out target). `images_<f>/` and `linear_<f>/` copies
+    use the same names."""
+    clean = clean_views or set()
     return [
         {
             "view": i,
@@ -97,10 +102,45 @@ def files_record(sources: list[str], names: list[str], frames: int) -> list[dict
             "source": sources[i],
             "image": f"images/{names[i * frames + k]}.png",
             "linear": f"linear/{names[i * frames + k]}.exr",
+            "clean": i in clean,
         }
         for i in range(len(sources))
         for k in range(frames)
     ]
+
+
+def every_kth(n_views: int, k: int | None) -> list[int]:
+    """Views 0, K, 2K … (`--clean-views K`); none when K is None."""
+    if k is None:
+        return []
+    if k < 1:
+        raise ConfigError(f"--clean-views {k}: must be >= 1")
+    return list(range(0, n_views, k))
+
+
+def copy_clean(
+    out: Path,
+    pngs: list[Path],
+    names: list[str],
+    frames: int,
+    clean: list[int],
+    small_dirs: dict[int, Path],
+) -> None:
+    """The clean views of a gain directory as the scene's own files, byte for byte: its
+    PNG at images/ and, where the scene has one, its copy in `small_dirs[f]` at
+    images_<f>/ (the noise kernel at σ = 0 wrote the PNG's pixels, and the area mean of
+    the decoded image where the scene has no copy of that size)."""
+    import shutil
+
+    for i in clean:
+        p = pngs[i]
+        for k in range(frames):
+            name = f"{names[i * frames + k]}.png"
+            if p.suffix.lower() == ".png":
+                shutil.copyfile(p, out / "images" / name)
+            for f, d in small_dirs.items():
+                if (d / p.name).is_file():
+                    shutil.copyfile(d / p.name, out / f"images_{f}" / name)
 
 
 def noise_json(

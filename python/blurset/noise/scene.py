@@ -15,9 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from blurset import _core, layout
+from blurset.config import check_downsample, parse_downsample
 from blurset.exceptions import ConfigError, InputError
 from blurset.noise.params import (
     check_options,
+    copy_clean,
+    every_kth,
     files_record,
     noise_json,
     noise_table,
@@ -66,6 +69,11 @@ def run(args) -> int:
     out: Path = args.out
     if args.levels is not None:
         raise ConfigError(f"--levels applies to a build (no dataset.json in {scene})")
+    if args.noisy_test_views:
+        raise ConfigError(
+            f"--noisy-test-views applies to a build (no dataset.json in {scene}); "
+            "a scene is noised whole unless --clean-views K"
+        )
     if args.source != "auto":
         raise ConfigError(f"--source applies to a build (no dataset.json in {scene})")
     args.gamma = args.gamma or "2.2"
@@ -105,6 +113,11 @@ def run(args) -> int:
     wb = _core.noise_white_balance(args.seed) if args.profile == "paper" else None
     factor = args.factor or 1
     names = output_names(sources, args.frames)
+    clean = every_kth(len(sources), args.clean_views)
+    downsample = check_downsample(parse_downsample(args.downsample)) if args.downsample else []
+    bad = next((f for f in downsample if width % f or height % f), None)
+    if bad is not None:
+        raise ConfigError(f"--downsample {bad}: does not divide the image size {width}x{height}")
 
     layout.refuse_overlap(out, [scene])
     layout.refuse_inside_settings(out)
@@ -129,14 +142,20 @@ def run(args) -> int:
             gamma=args.gamma,
             white_balance=wb,
             white_level=args.white_level,
+            downsample=downsample,
+            clean_views=clean,
         )
+        # The scene's own images_<f>/ are its clean images of that size (not with --factor).
+        small = {} if args.factor else {f: scene / f"images_{f}" for f in downsample}
+        for gdir, *_ in variants:
+            copy_clean(gdir, sources, names, args.frames, clean, small)
         # Every frame of a view shares its pose: the rows repeat, so a burst stays a
         # valid LLFF scene (N * frames images, N * frames rows).
         out_rows = np.repeat(np.asarray(rows, dtype=np.float64), args.frames, axis=0)
         out_rows[:, 4] = height
         out_rows[:, 9] = width
         out_rows[:, 14] = out_rows[:, 14] / factor
-        files = files_record([p.name for p in sources], names, args.frames)
+        files = files_record([p.name for p in sources], names, args.frames, set(clean))
         for g, (gdir, sr, ss, _key) in zip(gains, variants, strict=True):
             _core.write_poses_bounds(gdir / "poses_bounds.npy", out_rows)
             doc = noise_json(
@@ -159,6 +178,8 @@ def run(args) -> int:
                     "factor": factor,
                     "resolution": [width, height],
                 },
+                downsample=downsample,
+                clean_views=clean,
                 rng="philox4x32-10, key derive_seed(seed, [fnv1a64('noise'), gain bits]), "
                 "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
                 files=files,

@@ -19,7 +19,7 @@ pub use crate::error::{Error, Result};
 pub use crate::rng::seed_for;
 
 // What one setting renders: views, trajectories, levels, latent frames.
-pub use crate::plan::config::{check_theta0, BuildConfig, Raw};
+pub use crate::plan::config::{check_downsample, check_theta0, BuildConfig, Raw};
 pub use crate::plan::renders::{level_renders, Motion, Render};
 pub use crate::plan::sampling::{plan_setting, LevelPlan, SamplingConfig, SettingPlan};
 
@@ -37,7 +37,7 @@ pub use crate::noise::model::{
     noise_key, sample_white_balance, scene_seed, stream_id as noise_stream_id, Gamma, NoiseLevels,
     NoiseModel, WhiteBalance,
 };
-pub use crate::noise::variants::{write_variants, write_variants_linear, Variant};
+pub use crate::noise::variants::{write_variants, write_variants_linear, Variant, VariantOptions};
 
 // The files of a build.
 pub use crate::dataset::atomic::write_atomic;
@@ -50,11 +50,14 @@ pub use crate::dataset::layout::{
     sort_level_dirs, temp_path, theta0s, MARKER, PARTIAL_SUFFIX, SHARP,
 };
 pub use crate::dataset::llff::{
-    parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_setting_poses, PoseRow,
+    parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_scene_transforms,
+    write_setting_poses, PoseRow,
 };
 pub use crate::dataset::meta::{read_mean_poses, write_json, Meta, ObjectRecord, Timings};
 pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
-pub use crate::dataset::splits::{make_splits, seeded_subset, test_views, SettingEntry, Splits};
+pub use crate::dataset::splits::{
+    make_splits, seeded_subset, test_views, Holdout, SettingEntry, Splits,
+};
 pub use crate::dataset::stats::{build_stats, BuildStats};
 
 // Image error against a reference and the speed/quality front.

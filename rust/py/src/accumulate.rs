@@ -124,13 +124,15 @@ impl PyAccumulator {
         )
     }
 
-    /// Write the mean as an 8-bit sRGB PNG composited over `background` (linear RGB).
-    #[pyo3(signature = (path, background = (1.0, 1.0, 1.0)))]
+    /// Write the mean as an 8-bit sRGB PNG composited over `background` (linear RGB),
+    /// area-averaged `downsample` times in linear light first (LLFF's `images_<f>/`).
+    #[pyo3(signature = (path, background = (1.0, 1.0, 1.0), *, downsample = 1))]
     fn write_png(
         &self,
         py: Python<'_>,
         path: PathBuf,
         background: (f32, f32, f32),
+        downsample: u32,
     ) -> PyResult<()> {
         let bg = [background.0, background.1, background.2];
         if bg.iter().any(|v| !v.is_finite()) {
@@ -139,7 +141,9 @@ impl PyAccumulator {
             )));
         }
         let inner = &self.inner;
-        run_detached(py, move || inner.write_png(&path, bg))
+        run_detached(py, move || {
+            inner.write_png_downsampled(&path, bg, downsample)
+        })
     }
 
     /// Write the mean as a linear premultiplied RGBA float32 EXR.

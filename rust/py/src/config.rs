@@ -78,7 +78,8 @@ build_config_methods!(fields {
     window_deg: f64, delta0: f64, radius_margin: f64, level_spread: f64,
     latent_positions: String, trajectory: String, orientation_max: f64, near_floor: f64, background: [f64; 3],
     write_linear: bool, previews: bool, view_stride: usize, test_fraction: f64,
-    test_objects: Option<Vec<String>>, workers: usize, threads: usize, executor: String,
+    test_objects: Option<Vec<String>>, test_settings: Option<usize>,
+    blurry_test_views: bool, downsample: Vec<u32>, workers: usize, threads: usize, executor: String,
     ray_address: Option<String>, shard: Option<String>, objaverse_dir: Option<String>,
     objaverse_offline: bool, objaverse_count: Option<usize>, timeout: f64,
     object_timeout: f64, retries: u32, max_failure_rate: f64, max_triangles: u64,
@@ -138,6 +139,18 @@ build_config_methods!(fields {
         self.0.frames_per_setting()
     }
 
+    /// The views whose blur levels hold a copy of the sharp image (none with
+    /// blurry_test_views).
+    fn sharp_views(&self, n_views: usize) -> Vec<usize> {
+        self.0.sharp_views(n_views)
+    }
+
+    /// What the blur levels hold at the test views: "sharp" or "blurry".
+    #[getter]
+    fn test_view_images(&self) -> &'static str {
+        self.0.test_view_images()
+    }
+
     /// `sharp`, then `blur_<l>` of every level.
     #[getter]
     fn level_dirs(&self) -> Vec<String> {
@@ -181,7 +194,14 @@ build_config_methods!(fields {
     }
 );
 
+/// ConfigValueError unless the factors are distinct integers in 2..=64.
+#[pyfunction]
+fn check_downsample(factors: Vec<u32>) -> PyResult<()> {
+    core::check_downsample(&factors).map_err(crate::error::to_pyerr)
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<BuildConfig>()?;
+    m.add_function(wrap_pyfunction!(check_downsample, m)?)?;
     Ok(())
 }

@@ -215,9 +215,10 @@ fn noise_clean_linear(
 }
 
 /// Write every variant of a scene: `variants` holds (out_dir, sigma_read, sigma_shot,
-/// key) per gain; `names` the `len(sources) * frames` output stems, view-major.
+/// key) per gain; `names` the `len(sources) * frames` output stems, view-major;
+/// `downsample` the factors of `images_<f>/` copies; `clean_views` the views left clean.
 #[pyfunction]
-#[pyo3(signature = (sources, names, variants, *, frames=1, gamma="2.2", white_balance=None, white_level=1.0))]
+#[pyo3(signature = (sources, names, variants, *, frames=1, gamma="2.2", white_balance=None, white_level=1.0, downsample=Vec::new(), clean_views=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 fn noise_write_variants(
     py: Python<'_>,
@@ -228,10 +229,16 @@ fn noise_write_variants(
     gamma: &str,
     white_balance: Option<(f64, f64)>,
     white_level: f64,
+    downsample: Vec<u32>,
+    clean_views: Vec<usize>,
 ) -> PyResult<()> {
     let variants = variants_from_py(variants, gamma, white_balance, white_level)?;
+    let opts = core::VariantOptions {
+        downsample,
+        clean_views: clean_views.into_iter().collect(),
+    };
     run_detached(py, || {
-        core::write_variants(&sources, &names, frames, &variants)
+        core::write_variants(&sources, &names, frames, &variants, &opts)
     })
 }
 

@@ -110,7 +110,7 @@ fn noise_image_linear(
 /// Write every variant from linear EXRs: `variants` holds (out_dir, sigma_read,
 /// sigma_shot, key) per gain; `names` the `len(sources) * frames` stems, view-major.
 #[pyfunction]
-#[pyo3(signature = (sources, names, variants, *, frames=1, gamma="2.2", white_balance=None, white_level=1.0, background=(1.0, 1.0, 1.0)))]
+#[pyo3(signature = (sources, names, variants, *, frames=1, gamma="2.2", white_balance=None, white_level=1.0, background=(1.0, 1.0, 1.0), downsample=Vec::new(), clean_views=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 fn noise_write_variants_linear(
     py: Python<'_>,
@@ -122,11 +122,17 @@ fn noise_write_variants_linear(
     white_balance: Option<(f64, f64)>,
     white_level: f64,
     background: (f64, f64, f64),
+    downsample: Vec<u32>,
+    clean_views: Vec<usize>,
 ) -> PyResult<()> {
     let bg = self::background(background)?;
     let variants = variants_from_py(variants, gamma, white_balance, white_level)?;
+    let opts = core::VariantOptions {
+        downsample,
+        clean_views: clean_views.into_iter().collect(),
+    };
     run_detached(py, || {
-        core::write_variants_linear(&sources, &names, frames, &variants, bg)
+        core::write_variants_linear(&sources, &names, frames, &variants, bg, &opts)
     })
 }
 

@@ -110,8 +110,15 @@ impl Plan {
 
     /// Every render of the setting in stream order (per view: sharp, then each level),
     /// as the worker takes them: {view, level, c2w, seed, samples?, out, motion?}.
-    fn renders<'py>(&self, py: Python<'py>, exr_dir: PathBuf) -> PyResult<Bound<'py, PyAny>> {
-        to_py(py, &self.0.renders(&exr_dir))
+    /// The blur renders of `sharp_views` are left out (their levels get the sharp image).
+    #[pyo3(signature = (exr_dir, *, sharp_views = Vec::new()))]
+    fn renders<'py>(
+        &self,
+        py: Python<'py>,
+        exr_dir: PathBuf,
+        sharp_views: Vec<usize>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, &self.0.renders_except(&exr_dir, &sharp_views))
     }
 
     /// The renders of one blurry image (view, level), EXRs named `<prefix>_…`.
@@ -126,15 +133,26 @@ impl Plan {
         to_py(py, &core::level_renders(view, level, lp, prefix))
     }
 
-    /// Write `<level>/poses_bounds.npy` for each level dir and the setting's transforms.json.
+    /// Write `<level>/poses_bounds.npy` and `<level>/transforms.json` for each level dir
+    /// and the setting's transforms.json; `test_views` hold sharp images in the blur
+    /// levels when `sharp_test_views`.
+    #[pyo3(signature = (setting_dir, level_dirs, *, test_views = Vec::new(), sharp_test_views = true))]
     fn write_poses(
         &self,
         py: Python<'_>,
         setting_dir: PathBuf,
         level_dirs: Vec<String>,
+        test_views: Vec<usize>,
+        sharp_test_views: bool,
     ) -> PyResult<()> {
         crate::run_detached(py, || {
-            core::write_setting_poses(&self.0, &setting_dir, &level_dirs)
+            core::write_setting_poses(
+                &self.0,
+                &setting_dir,
+                &level_dirs,
+                &test_views,
+                sharp_test_views,
+            )
         })
     }
 
@@ -209,6 +227,29 @@ fn plan_setting(
     Ok(Plan(plan))
 }
 
+/// Write the `transforms.json` of one scene of a setting (a level, or a gain of one) at
+/// `path`: the cameras of the setting's transforms.json (`setting`, a dict), one frame
+/// per (view, file path), the train/val/test file lists, and the fields of `extra`.
+#[pyfunction]
+#[pyo3(signature = (path, setting, files, *, test_views, extra = None))]
+fn write_scene_transforms(
+    py: Python<'_>,
+    path: PathBuf,
+    setting: &Bound<'_, PyAny>,
+    files: Vec<(usize, String)>,
+    test_views: Vec<usize>,
+    extra: Option<&Bound<'_, PyAny>>,
+) -> PyResult<()> {
+    let setting: serde_json::Value = from_py("setting transforms.json", setting)?;
+    let extra: serde_json::Map<String, serde_json::Value> = match extra {
+        Some(e) => from_py("extra fields", e)?,
+        None => serde_json::Map::new(),
+    };
+    crate::run_detached(py, || {
+        core::write_scene_transforms(&path, &setting, &files, &test_views, extra)
+    })
+}
+
 /// ConfigValueError unless θ0 is a finite number of degrees.
 #[pyfunction]
 fn check_theta0_deg(theta0_deg: f64) -> PyResult<()> {
@@ -258,15 +299,19 @@ impl Splits {
     }
 }
 
-/// Train/test splits by object of setting entries (setting dir, object uid, views).
+/// Train/test splits of setting entries (setting dir, object uid, views): whole
+/// objects, or `test_settings` random settings; `sharp_test_views` records what the
+/// blur levels hold at the held-out views.
 #[pyfunction]
-#[pyo3(signature = (entries, *, view_stride, test_fraction, test_objects, seed))]
+#[pyo3(signature = (entries, *, view_stride, test_fraction, test_objects, seed, test_settings = None, sharp_test_views = true))]
 fn make_splits(
     entries: Vec<(String, String, usize)>,
     view_stride: usize,
     test_fraction: f64,
     test_objects: Option<Vec<String>>,
     seed: u64,
+    test_settings: Option<usize>,
+    sharp_test_views: bool,
 ) -> PyResult<Splits> {
     let entries: Vec<core::SettingEntry> = entries
         .into_iter()
@@ -276,15 +321,16 @@ fn make_splits(
             views,
         })
         .collect();
-    core::make_splits(
-        &entries,
-        view_stride,
-        test_fraction,
-        test_objects.as_deref(),
-        seed,
-    )
-    .map(Splits)
-    .map_err(crate::error::to_pyerr)
+    let holdout = match test_settings {
+        Some(n) => core::Holdout::Settings(n),
+        None => core::Holdout::Objects {
+            fraction: test_fraction,
+            list: test_objects.as_deref(),
+        },
+    };
+    core::make_splits(&entries, view_stride, &holdout, sharp_test_views, seed)
+        .map(Splits)
+        .map_err(crate::error::to_pyerr)
 }
 
 /// A seeded random subset of `k` ids, sorted (it depends on the set of ids, not their order).
@@ -301,6 +347,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(default_sampling_config, m)?)?;
     m.add_function(wrap_pyfunction!(seed_for, m)?)?;
     m.add_function(wrap_pyfunction!(plan_setting, m)?)?;
+    m.add_function(wrap_pyfunction!(write_scene_transforms, m)?)?;
     m.add_function(wrap_pyfunction!(test_views, m)?)?;
     m.add_function(wrap_pyfunction!(check_theta0_deg, m)?)?;
     m.add_function(wrap_pyfunction!(make_splits, m)?)?;

@@ -175,6 +175,9 @@ pub fn setting_problem(setting: &Path) -> Option<String> {
     struct Counts {
         views: Vec<serde::de::IgnoredAny>,
         levels: Vec<String>,
+        /// Factors of the `images_<f>/` copies (none in builds made before them).
+        #[serde(default)]
+        downsample: Vec<u32>,
     }
     let meta = setting.join("meta.json");
     let text = match std::fs::read(&meta) {
@@ -184,7 +187,11 @@ pub fn setting_problem(setting: &Path) -> Option<String> {
         }
         Err(e) => return Some(format!("meta.json is unreadable ({})", e.kind())),
     };
-    let Counts { views, levels } = match serde_json::from_slice::<Counts>(&text) {
+    let Counts {
+        views,
+        levels,
+        downsample,
+    } = match serde_json::from_slice::<Counts>(&text) {
         Ok(c) => c,
         Err(e) => return Some(format!("meta.json is unreadable ({e})")),
     };
@@ -197,27 +204,33 @@ pub fn setting_problem(setting: &Path) -> Option<String> {
         if !d.is_dir() {
             return Some(format!("level folder {lvl}/ is missing"));
         }
-        let mut images: Vec<PathBuf> = std::fs::read_dir(d.join("images"))
-            .map(|rd| {
-                rd.filter_map(|e| e.ok().map(|e| e.path()))
-                    .filter(|p| p.extension().is_some_and(|x| x == "png"))
-                    .collect()
-            })
-            .unwrap_or_default();
-        images.sort();
-        if images.len() != views {
-            return Some(format!(
-                "{lvl}/images holds {} of {views} images",
-                images.len()
-            ));
-        }
-        for p in &images {
-            let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
-            let name = name.unwrap_or_default();
-            match png_state(p) {
-                PngState::Whole => {}
-                PngState::NotPng => return Some(format!("{lvl}/images/{name} is not a whole PNG")),
-                PngState::Truncated => return Some(format!("{lvl}/images/{name} is truncated")),
+        let subdirs = std::iter::once("images".to_string())
+            .chain(downsample.iter().map(|f| format!("images_{f}")));
+        for sub in subdirs {
+            let mut images: Vec<PathBuf> = std::fs::read_dir(d.join(&sub))
+                .map(|rd| {
+                    rd.filter_map(|e| e.ok().map(|e| e.path()))
+                        .filter(|p| p.extension().is_some_and(|x| x == "png"))
+                        .collect()
+                })
+                .unwrap_or_default();
+            images.sort();
+            if images.len() != views {
+                return Some(format!(
+                    "{lvl}/{sub} holds {} of {views} images",
+                    images.len()
+                ));
+            }
+            for p in &images {
+                let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
+                let name = name.unwrap_or_default();
+                match png_state(p) {
+                    PngState::Whole => {}
+                    PngState::NotPng => {
+                        return Some(format!("{lvl}/{sub}/{name} is not a whole PNG"))
+                    }
+                    PngState::Truncated => return Some(format!("{lvl}/{sub}/{name} is truncated")),
+                }
             }
         }
         let npy = d.join("poses_bounds.npy");
@@ -445,6 +458,23 @@ mod tests {
             Some("sharp/poses_bounds.npy is truncated")
         );
         put("sharp/poses_bounds.npy", &[0u8; 400])?;
+        assert_eq!(setting_problem(&dir), None);
+        // A build with `images_<f>/` copies: each must hold every view, whole.
+        put(
+            "meta.json",
+            br#"{"views": [{}, {}], "levels": ["sharp"], "downsample": [4]}"#,
+        )?;
+        put("sharp/images_4/000.png", &png)?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/images_4 holds 1 of 2 images")
+        );
+        put("sharp/images_4/001.png", &png[..png.len() - 4])?;
+        assert_eq!(
+            setting_problem(&dir).as_deref(),
+            Some("sharp/images_4/001.png is truncated")
+        );
+        put("sharp/images_4/001.png", &png)?;
         assert_eq!(setting_problem(&dir), None);
         let _ = std::fs::remove_dir_all(&dir);
         Ok(())

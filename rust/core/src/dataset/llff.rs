@@ -181,12 +181,94 @@ pub fn setting_rows(plan: &SettingPlan) -> Vec<PoseRow> {
         .collect()
 }
 
-/// Write `<level>/poses_bounds.npy` for every level directory of a setting and the
-/// setting's `transforms.json` (OpenGL camera-to-world, intrinsics, per-level paths).
+/// The camera fields of a setting's `transforms.json` that every scene of it shares.
+const CAMERA_KEYS: [&str; 9] = [
+    "convention",
+    "camera_angle_x",
+    "camera_angle_y",
+    "fl_x",
+    "fl_y",
+    "cx",
+    "cy",
+    "w",
+    "h",
+];
+
+/// The `transforms.json` of one LLFF scene of a setting (a level directory, or a gain
+/// of one), as nerfstudio's data parser reads it: the setting's cameras, one frame per
+/// file (`files`: view index and path relative to the scene, e.g. `images/000.png`),
+/// and `train_filenames` / `val_filenames` / `test_filenames` from the test views (val
+/// = test, as nerfstudio's own split makes them). `extra` fields are added at the top.
+pub fn scene_transforms(
+    setting: &serde_json::Value,
+    files: &[(usize, String)],
+    test_views: &[usize],
+    extra: serde_json::Map<String, serde_json::Value>,
+) -> Result<serde_json::Value> {
+    let bad = |what: String| Error::Value(format!("setting transforms.json: {what}"));
+    let mut doc = serde_json::Map::new();
+    for k in CAMERA_KEYS {
+        let v = setting.get(k).ok_or_else(|| bad(format!("no {k:?}")))?;
+        doc.insert(k.into(), v.clone());
+    }
+    let by_view: std::collections::BTreeMap<u64, &serde_json::Value> = setting
+        .get("frames")
+        .and_then(|f| f.as_array())
+        .ok_or_else(|| bad("no frames".into()))?
+        .iter()
+        .filter_map(|f| Some((f.get("index")?.as_u64()?, f)))
+        .collect();
+    let (mut frames, mut train, mut test) = (Vec::new(), Vec::new(), Vec::new());
+    for (view, path) in files {
+        let f = by_view
+            .get(&(*view as u64))
+            .ok_or_else(|| bad(format!("no frame of view {view}")))?;
+        let mut frame = serde_json::Map::new();
+        frame.insert("index".into(), (*view).into());
+        frame.insert("file_path".into(), path.clone().into());
+        for k in ["transform_matrix", "near", "far"] {
+            if let Some(v) = f.get(k) {
+                frame.insert(k.into(), v.clone());
+            }
+        }
+        frames.push(serde_json::Value::Object(frame));
+        if test_views.contains(view) {
+            test.push(path.clone());
+        } else {
+            train.push(path.clone());
+        }
+    }
+    doc.extend(extra);
+    doc.insert("frames".into(), frames.into());
+    doc.insert("train_filenames".into(), train.into());
+    doc.insert("val_filenames".into(), test.clone().into());
+    doc.insert("test_filenames".into(), test.into());
+    Ok(serde_json::Value::Object(doc))
+}
+
+/// [`scene_transforms`] written atomically to `path`.
+pub fn write_scene_transforms(
+    path: &Path,
+    setting: &serde_json::Value,
+    files: &[(usize, String)],
+    test_views: &[usize],
+    extra: serde_json::Map<String, serde_json::Value>,
+) -> Result<()> {
+    let doc = scene_transforms(setting, files, test_views, extra)?;
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::Value(e.to_string()))?;
+    write_atomic(path, text.as_bytes())
+}
+
+/// Write `<level>/poses_bounds.npy` and `<level>/transforms.json` for every level
+/// directory of a setting, and the setting's `transforms.json` (OpenGL camera-to-world,
+/// intrinsics, per-level paths). `test_views` are the held-out views; in the blur levels
+/// their images are the sharp ones when `sharp_test_views` (Deblur-NeRF's convention).
 pub fn write_setting_poses(
     plan: &SettingPlan,
     setting_dir: &Path,
     level_dirs: &[String],
+    test_views: &[usize],
+    sharp_test_views: bool,
 ) -> Result<()> {
     let rows = setting_rows(plan);
     for level in level_dirs {
@@ -228,7 +310,28 @@ pub fn write_setting_poses(
         "frames": frames,
     });
     let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::Value(e.to_string()))?;
-    write_atomic(&setting_dir.join("transforms.json"), text.as_bytes())
+    write_atomic(&setting_dir.join("transforms.json"), text.as_bytes())?;
+    let files: Vec<(usize, String)> = plan
+        .views
+        .iter()
+        .map(|v| (v.index, format!("images/{}", image_name(v.index, n))))
+        .collect();
+    for level in level_dirs {
+        let mut extra = serde_json::Map::new();
+        extra.insert("level".into(), level.clone().into());
+        if level != "sharp" {
+            let kind = if sharp_test_views { "sharp" } else { "blurry" };
+            extra.insert("test_view_images".into(), kind.into());
+        }
+        write_scene_transforms(
+            &setting_dir.join(level).join("transforms.json"),
+            &doc,
+            &files,
+            test_views,
+            extra,
+        )?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -366,6 +469,53 @@ mod tests {
             assert_eq!(hwf, [512.0, 512.0, plan.focal_px]);
             assert!((eye.length() - v.r).abs() < 1e-9);
         }
+        Ok(())
+    }
+
+    #[test]
+    fn level_transforms_name_their_files_and_split_the_views() -> Result<()> {
+        let cfg = crate::plan::sampling::SamplingConfig {
+            views: 5,
+            latents: 2,
+            levels: vec![2],
+            ..Default::default()
+        };
+        let verts: Vec<[f32; 3]> = vec![[-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]];
+        let plan = crate::plan::sampling::plan_setting(&cfg, "u", 0.0, 4, [1.0; 3], &verts)?;
+        let dir = tmp("setting");
+        let levels = ["sharp".to_string(), "blur_2".to_string()];
+        for l in &levels {
+            std::fs::create_dir_all(dir.join(l)).map_err(|e| Error::io("mkdir", &dir, e))?;
+        }
+        write_setting_poses(&plan, &dir, &levels, &[0, 4], true)?;
+        let read = |p: std::path::PathBuf| -> Result<serde_json::Value> {
+            let t = std::fs::read_to_string(&p).map_err(|e| Error::io("read", &p, e))?;
+            serde_json::from_str(&t).map_err(|e| Error::Value(e.to_string()))
+        };
+        let setting = read(dir.join("transforms.json"))?;
+        let blur = read(dir.join("blur_2/transforms.json"))?;
+        assert_eq!(blur["test_view_images"], "sharp");
+        assert!(read(dir.join("sharp/transforms.json"))?
+            .get("test_view_images")
+            .is_none());
+        assert_eq!(blur["fl_x"], setting["fl_x"]);
+        assert_eq!(blur["frames"][1]["file_path"], "images/001.png");
+        assert_eq!(
+            blur["frames"][3]["transform_matrix"],
+            setting["frames"][3]["transform_matrix"]
+        );
+        assert_eq!(
+            blur["test_filenames"],
+            serde_json::json!(["images/000.png", "images/004.png"])
+        );
+        assert_eq!(blur["val_filenames"], blur["test_filenames"]);
+        assert_eq!(blur["train_filenames"].as_array().map(Vec::len), Some(3));
+        let e = scene_transforms(&setting, &[(9, "x".into())], &[], Default::default())
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("view 9"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
         Ok(())
     }
 

@@ -137,6 +137,11 @@ impl MetaView {
     }
 }
 
+/// What a setting made before `test_view_images` existed held at its test views.
+fn blurry() -> String {
+    "blurry".into()
+}
+
 /// The whole meta.json of a setting.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Meta {
@@ -150,8 +155,15 @@ pub struct Meta {
     pub radius: f64,
     pub views: Vec<MetaView>,
     pub test_views: Vec<usize>,
+    /// What the blur levels hold at the test views: `sharp` (copies of the sharp image,
+    /// Deblur-NeRF's convention) or `blurry` (`--blurry-test-views`).
+    #[serde(default = "blurry")]
+    pub test_view_images: String,
     /// Level directories written (`sharp`, `blur_1`, …).
     pub levels: Vec<String>,
+    /// Factors of the `images_<f>/` copies in every level (LLFF's downsampled images).
+    #[serde(default)]
+    pub downsample: Vec<u32>,
     pub sampling: SamplingConfig,
     pub render: RenderRecord,
     pub object: ObjectRecord,
@@ -194,7 +206,9 @@ impl Meta {
                 .map(|(v, q)| MetaView::of(v, *q))
                 .collect(),
             test_views: test_views(plan.views.len(), cfg.view_stride),
+            test_view_images: cfg.test_view_images().into(),
             levels: cfg.level_dirs(),
+            downsample: cfg.downsample.clone(),
             sampling: plan.config.clone(),
             render: RenderRecord::of(cfg),
             object,

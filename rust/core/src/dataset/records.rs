@@ -109,6 +109,10 @@ pub struct NoiseFile {
     pub source: String,
     pub image: String,
     pub linear: String,
+    /// Left clean (σ = 0): a held-out target (`--clean-views`, a build's test views);
+    /// absent when noisy, so a scene noised without clean views keeps its old record.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub clean: bool,
 }
 
 /// `noise.json` of one noisy scene (one gain).
@@ -134,6 +138,12 @@ pub struct NoiseDoc {
     pub source: NoiseSource,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub build_noise: Option<BuildNoiseRecord>,
+    /// Factors of the `images_<f>/` (and `linear_<f>/`) copies, noise drawn at each size.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub downsample: Vec<u32>,
+    /// The views left clean (every file of them has `clean`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clean_views: Vec<usize>,
     pub rng: String,
     pub blurset_version: String,
     pub files: Vec<NoiseFile>,

@@ -1,6 +1,7 @@
 //! Train / test splits (DESIGN §2 "Test split"): whole objects go to test, so no test
-//! object is ever seen in training from another azimuth; inside every setting the
-//! LLFF-style held-out views are every `view_stride`-th view (0, 16, 32 of 34).
+//! object is ever seen in training from another azimuth, or (the paper's protocol)
+//! N random settings do; inside every setting the LLFF-style held-out views are every
+//! `view_stride`-th view (0, 16, 32 of 34), `llffhold` for the LLFF loaders.
 use crate::error::{Error, Result};
 use crate::rng::Stream;
 use serde::{Deserialize, Serialize};
@@ -22,10 +23,31 @@ pub struct Splits {
     pub test_views: BTreeMap<String, Vec<usize>>,
     pub test_objects: Vec<String>,
     pub seed: u64,
+    /// `objects` (whole objects held out) or `settings` (N random settings).
+    pub holdout: String,
+    /// N of `--test-settings` (the settings held out are `test`: fewer when the
+    /// build has fewer, one always left for training).
+    pub test_settings: Option<usize>,
+    /// What the blur levels hold at the test views: `sharp` (Deblur-NeRF's convention,
+    /// copies of the sharp image) or `blurry`.
+    pub test_view_images: String,
+}
+
+/// How the test settings are chosen (the options `--test-objects` / `--test-settings`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Holdout<'a> {
+    /// A seeded fraction of the objects, or the objects listed.
+    Objects {
+        fraction: f64,
+        list: Option<&'a [String]>,
+    },
+    /// N seeded random settings (the paper's 52 of its build).
+    Settings(usize),
 }
 
 const TEST_OBJECTS_STREAM: u64 = 0x5e11_7500;
 const SUBSET_STREAM: u64 = 0x5e11_5b5e;
+const TEST_SETTINGS_STREAM: u64 = 0x5e11_7e57;
 
 /// A seeded permutation of ids (Fisher–Yates over their sorted order): it depends on
 /// the seed and the set of ids only, never on the order they were listed or built in.
@@ -60,57 +82,92 @@ pub fn test_views(views: usize, stride: usize) -> Vec<usize> {
     (0..views).step_by(stride.max(1)).collect()
 }
 
-/// Split settings by object. `test_objects` overrides the seeded choice of
-/// round(test_fraction · objects) objects (at least one, and one left for training,
-/// when there are two or more objects and the fraction is positive).
-pub fn make_splits(
+/// The test settings chosen by `holdout` among `settings`: whole objects (a seeded
+/// round(fraction · objects), at least one and one left for training when there are two
+/// or more objects and the fraction is positive; or the objects listed), or N seeded
+/// random settings (at most all but one).
+fn chosen_settings(
     settings: &[SettingEntry],
-    view_stride: usize,
-    test_fraction: f64,
-    test_objects: Option<&[String]>,
+    holdout: &Holdout,
     seed: u64,
-) -> Result<Splits> {
-    if view_stride == 0 {
-        return Err(Error::Value("view_stride must be at least 1".into()));
-    }
-    if !(0.0..=1.0).contains(&test_fraction) {
-        return Err(Error::Value(format!(
-            "test_fraction {test_fraction} is outside [0, 1]"
-        )));
-    }
+) -> Result<(BTreeSet<String>, Vec<String>)> {
     let objects: Vec<String> = settings
         .iter()
         .map(|s| s.object.clone())
         .collect::<BTreeSet<_>>()
         .into_iter()
         .collect();
-    let chosen: BTreeSet<String> = match test_objects {
-        Some(list) => {
+    let by_object = |chosen: &BTreeSet<String>| {
+        settings
+            .iter()
+            .filter(|s| chosen.contains(&s.object))
+            .map(|s| s.setting.clone())
+            .collect()
+    };
+    match holdout {
+        Holdout::Objects {
+            list: Some(list), ..
+        } => {
             if let Some(o) = list.iter().find(|o| !objects.contains(o)) {
                 return Err(Error::Value(format!(
                     "test object {o:?} is not among the built objects"
                 )));
             }
-            list.iter().cloned().collect()
+            let chosen: BTreeSet<String> = list.iter().cloned().collect();
+            Ok((by_object(&chosen), chosen.into_iter().collect()))
         }
-        None => {
+        Holdout::Objects {
+            fraction,
+            list: None,
+        } => {
+            if !(0.0..=1.0).contains(fraction) {
+                return Err(Error::Value(format!(
+                    "test fraction {fraction} is outside [0, 1]"
+                )));
+            }
             let n = objects.len();
-            let mut k = (test_fraction * n as f64).round() as usize;
-            if n >= 2 && test_fraction > 0.0 {
+            let mut k = (fraction * n as f64).round() as usize;
+            if n >= 2 && *fraction > 0.0 {
                 k = k.clamp(1, n - 1);
             } else if n < 2 {
                 k = 0;
             }
-            seeded_order(&objects, seed, TEST_OBJECTS_STREAM)
+            let chosen: BTreeSet<String> = seeded_order(&objects, seed, TEST_OBJECTS_STREAM)
                 .into_iter()
                 .take(k)
-                .collect()
+                .collect();
+            Ok((by_object(&chosen), chosen.into_iter().collect()))
         }
-    };
+        Holdout::Settings(n) => {
+            let names: Vec<String> = settings.iter().map(|s| s.setting.clone()).collect();
+            let k = (*n).min(names.len().saturating_sub(1));
+            let chosen = seeded_order(&names, seed, TEST_SETTINGS_STREAM)
+                .into_iter()
+                .take(k)
+                .collect();
+            Ok((chosen, Vec::new()))
+        }
+    }
+}
+
+/// Split settings into train and test by `holdout`, and hold out every
+/// `view_stride`-th view of each; `sharp_test_views` records what the blur levels hold
+/// at those views.
+pub fn make_splits(
+    settings: &[SettingEntry],
+    view_stride: usize,
+    holdout: &Holdout,
+    sharp_test_views: bool,
+    seed: u64,
+) -> Result<Splits> {
+    if view_stride == 0 {
+        return Err(Error::Value("view_stride must be at least 1".into()));
+    }
+    let (chosen, test_objects) = chosen_settings(settings, holdout, seed)?;
     let (mut train, mut test) = (Vec::new(), Vec::new());
     let mut tv = BTreeMap::new();
     for s in settings {
-        if chosen.contains(&s.object) {
+        if chosen.contains(&s.setting) {
             test.push(s.setting.clone());
         } else {
             train.push(s.setting.clone());
@@ -119,13 +176,20 @@ pub fn make_splits(
     }
     train.sort();
     test.sort();
+    let (kind, test_settings) = match holdout {
+        Holdout::Settings(n) => ("settings", Some(*n)),
+        Holdout::Objects { .. } => ("objects", None),
+    };
     Ok(Splits {
         view_stride,
         train,
         test,
         test_views: tv,
-        test_objects: chosen.into_iter().collect(),
+        test_objects,
         seed,
+        holdout: kind.into(),
+        test_settings,
+        test_view_images: if sharp_test_views { "sharp" } else { "blurry" }.into(),
     })
 }
 
@@ -146,6 +210,63 @@ mod tests {
         assert!(a.iter().all(|x| b.contains(x)));
         assert_eq!(seeded_subset(&ids, 99, 7).len(), 50);
         assert!(seeded_subset(&[], 3, 7).is_empty());
+    }
+
+    fn frac(fraction: f64) -> Holdout<'static> {
+        Holdout::Objects {
+            fraction,
+            list: None,
+        }
+    }
+
+    fn listed(list: &[String]) -> Holdout<'_> {
+        Holdout::Objects {
+            fraction: 0.2,
+            list: Some(list),
+        }
+    }
+
+    #[test]
+    fn n_random_settings_seeded_nested_and_one_left_for_training() -> Result<()> {
+        let e = entries(30, 4);
+        let s = make_splits(&e, 16, &Holdout::Settings(52), true, 3)?;
+        assert_eq!((s.test.len(), s.train.len()), (52, 68));
+        assert_eq!(
+            (s.holdout.as_str(), s.test_settings),
+            ("settings", Some(52))
+        );
+        assert!(s.test_objects.is_empty());
+        // Settings of one object may straddle (the paper picks settings, not objects).
+        let straddle = s.test.iter().any(|t| {
+            let obj = t.rsplit_once('_').map(|x| x.0).unwrap_or_default();
+            s.train.iter().any(|x| x.starts_with(&format!("{obj}_")))
+        });
+        assert!(straddle);
+        let mut shuffled = e.clone();
+        shuffled.reverse();
+        assert_eq!(
+            s,
+            make_splits(&shuffled, 16, &Holdout::Settings(52), true, 3)?
+        );
+        assert_ne!(
+            s.test,
+            make_splits(&e, 16, &Holdout::Settings(52), true, 4)?.test
+        );
+        let fewer = make_splits(&e, 16, &Holdout::Settings(10), true, 3)?;
+        assert!(
+            fewer.test.iter().all(|t| s.test.contains(t)),
+            "N grows the same order"
+        );
+        let few = make_splits(&entries(2, 1), 16, &Holdout::Settings(52), false, 3)?;
+        assert_eq!((few.test.len(), few.train.len()), (1, 1));
+        assert_eq!(few.test_view_images, "blurry");
+        assert!(
+            make_splits(&entries(1, 1), 16, &Holdout::Settings(5), true, 3)?
+                .test
+                .is_empty()
+        );
+        assert!(make_splits(&e, 16, &frac(1.5), true, 3).is_err());
+        Ok(())
     }
 
     fn entries(objects: usize, per: usize) -> Vec<SettingEntry> {
@@ -169,7 +290,7 @@ mod tests {
     #[test]
     fn objects_never_straddle_and_choice_is_seeded() -> Result<()> {
         let e = entries(10, 4);
-        let s = make_splits(&e, 16, 0.2, None, 1)?;
+        let s = make_splits(&e, 16, &frac(0.2), true, 1)?;
         assert_eq!(s.test_objects.len(), 2);
         assert_eq!(s.test.len(), 8);
         assert_eq!(s.train.len() + s.test.len(), 40);
@@ -177,28 +298,28 @@ mod tests {
             let obj = t.rsplit_once('_').map(|x| x.0).unwrap_or_default();
             assert!(!s.train.iter().any(|x| x.starts_with(&format!("{obj}_"))));
         }
-        assert_eq!(s, make_splits(&e, 16, 0.2, None, 1)?);
+        assert_eq!(s, make_splits(&e, 16, &frac(0.2), true, 1)?);
         let mut shuffled = e.clone();
         shuffled.reverse();
         assert_eq!(
             s.test_objects,
-            make_splits(&shuffled, 16, 0.2, None, 1)?.test_objects
+            make_splits(&shuffled, 16, &frac(0.2), true, 1)?.test_objects
         );
         Ok(())
     }
 
     #[test]
     fn small_builds_and_explicit_lists() -> Result<()> {
-        assert!(make_splits(&entries(1, 4), 16, 0.2, None, 0)?
+        assert!(make_splits(&entries(1, 4), 16, &frac(0.2), true, 0)?
             .test
             .is_empty());
-        let two = make_splits(&entries(2, 1), 16, 0.2, None, 0)?;
+        let two = make_splits(&entries(2, 1), 16, &frac(0.2), true, 0)?;
         assert_eq!((two.train.len(), two.test.len()), (1, 1));
         let list = vec!["obj1".to_string()];
-        let s = make_splits(&entries(3, 2), 16, 0.2, Some(&list), 0)?;
+        let s = make_splits(&entries(3, 2), 16, &listed(&list), true, 0)?;
         assert_eq!(s.test, vec!["obj1_0", "obj1_90"]);
         let bad = vec!["nope".to_string()];
-        assert!(make_splits(&entries(3, 2), 16, 0.2, Some(&bad), 0).is_err());
+        assert!(make_splits(&entries(3, 2), 16, &listed(&bad), true, 0).is_err());
         Ok(())
     }
 }

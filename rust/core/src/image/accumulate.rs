@@ -10,6 +10,7 @@ use super::color::{composite_over, srgb_encode_u8};
 use super::exr::read::{decode_rgba, first_non_finite, read_into};
 use super::exr::write::write_exr;
 use super::io::write_png_rgb8;
+use super::resample::area_mean;
 use super::{check_rgba_len, CH};
 use crate::error::{Error, Result};
 use rayon::prelude::*;
@@ -165,10 +166,43 @@ impl Accumulator {
         Ok(out)
     }
 
+    /// The mean composited over `background` and clipped to the PNG's [0, 1] (as
+    /// `images/` shows it), area-averaged over `factor × factor` blocks in linear light,
+    /// then sRGB-encoded as RGB8 (LLFF's `images_<f>/`: `images/` downsampled, from the
+    /// float image); factor 1 is [`Self::encode_rgb8`]. The factor must divide both sides.
+    pub fn encode_rgb8_downsampled(&self, background: [f32; 3], factor: u32) -> Result<Vec<u8>> {
+        if factor == 1 {
+            return self.encode_rgb8(background);
+        }
+        self.require_frames()?;
+        let inv = 1.0 / f64::from(self.count);
+        let bg = background.map(f64::from);
+        let rgb: Vec<f64> = self
+            .sum
+            .par_chunks_exact(CH)
+            .flat_map_iter(|p| {
+                composite_over([p[0] * inv, p[1] * inv, p[2] * inv, p[3] * inv], bg)
+                    .map(|v| v.clamp(0.0, 1.0))
+            })
+            .collect();
+        let small = area_mean(self.width, self.height, 3, &rgb, factor)?;
+        Ok(small.par_iter().map(|&v| srgb_encode_u8(v)).collect())
+    }
+
     /// Write the mean as an 8-bit sRGB PNG over `background` (linear RGB; white is [1, 1, 1]).
     pub fn write_png(&self, path: &Path, background: [f32; 3]) -> Result<()> {
-        let rgb = self.encode_rgb8(background)?;
-        write_png_rgb8(path, self.width, self.height, &rgb)
+        self.write_png_downsampled(path, background, 1)
+    }
+
+    /// [`Self::write_png`] of the image downsampled `factor` times (area, linear light).
+    pub fn write_png_downsampled(
+        &self,
+        path: &Path,
+        background: [f32; 3],
+        factor: u32,
+    ) -> Result<()> {
+        let rgb = self.encode_rgb8_downsampled(background, factor)?;
+        write_png_rgb8(path, self.width / factor, self.height / factor, &rgb)
     }
 
     /// Write the mean as a linear, premultiplied RGBA f32 EXR.
@@ -319,6 +353,40 @@ mod tests {
             assert_eq!(&px[..3], c);
             assert_eq!(px[3], 1.0);
         }
+        Ok(())
+    }
+
+    #[test]
+    fn downsampled_png_is_the_area_mean_in_linear_light() -> Result<()> {
+        let (w, h) = (8, 4);
+        let f = frame(w, h, 11);
+        let mut acc = Accumulator::new(w, h);
+        acc.add_frame(&f)?;
+        let bg = [1.0f32, 0.5, 0.0];
+        let small = acc.encode_rgb8_downsampled(bg, 4)?;
+        assert_eq!(small.len(), 2 * 3);
+        // Reference: composite and clip every pixel, average 4 x 4 blocks, encode once.
+        for (ox, px) in small.chunks_exact(3).enumerate() {
+            let mut sum = [0.0f64; 3];
+            for y in 0..4 {
+                for x in ox * 4..ox * 4 + 4 {
+                    let p = &f[(y * w as usize + x) * 4..][..4];
+                    let c =
+                        composite_over([p[0], p[1], p[2], p[3]].map(f64::from), bg.map(f64::from));
+                    for k in 0..3 {
+                        sum[k] += c[k].clamp(0.0, 1.0);
+                    }
+                }
+            }
+            let want: Vec<u8> = sum.iter().map(|s| srgb_encode_u8(s / 16.0)).collect();
+            assert_eq!(px, &want[..]);
+        }
+        assert_eq!(acc.encode_rgb8_downsampled(bg, 1)?, acc.encode_rgb8(bg)?);
+        assert!(acc.encode_rgb8_downsampled(bg, 3).is_err());
+        let p = tmp("small/000.png");
+        acc.write_png_downsampled(&p, bg, 2)?;
+        let img = image::open(&p).map_err(|e| Error::Value(e.to_string()))?;
+        assert_eq!((img.width(), img.height()), (4, 2));
         Ok(())
     }
 

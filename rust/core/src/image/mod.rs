@@ -7,6 +7,7 @@ pub mod color;
 pub mod exr;
 pub mod io;
 pub mod qa;
+pub mod resample;
 
 /// Channels per pixel of a linear frame: premultiplied RGBA, f32.
 pub(crate) const CH: usize = 4;

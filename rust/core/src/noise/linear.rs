@@ -14,6 +14,7 @@ use crate::error::{Error, Result};
 use crate::image::color::composite_over;
 use crate::image::exr::read::read_exr;
 use crate::image::io::{Image, Samples};
+use crate::image::resample::area_mean;
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -44,6 +45,48 @@ impl LinearRgb {
         }
         Ok(LinearRgb { width, height, rgb })
     }
+}
+
+impl LinearRgb {
+    /// The image clipped to [0, 1] per pixel (the white point its PNG shows) and
+    /// area-averaged over `factor × factor` blocks in linear light, as the build's
+    /// `images_<f>/`: the clean image noise is drawn on at that size.
+    pub fn downsample(&self, factor: u32) -> Result<LinearRgb> {
+        let data: Vec<f64> = self
+            .rgb
+            .iter()
+            .map(|&v| f64::from(v).clamp(0.0, 1.0))
+            .collect();
+        let small = area_mean(self.width, self.height, 3, &data, factor)?;
+        LinearRgb::new(
+            self.width / factor,
+            self.height / factor,
+            small.into_iter().map(|v| v as f32).collect(),
+        )
+    }
+}
+
+/// The linear RGB of an 8/16-bit RGB image through `gamma` (no white balance: the
+/// noise applies it), as the PNG path's kernel decodes each code.
+pub fn linear_from_codes(img: &Image, gamma: Gamma) -> Result<LinearRgb> {
+    if img.channels != 3 {
+        return Err(Error::Shape(format!(
+            "{} channels; downsampled noise needs RGB images",
+            img.channels
+        )));
+    }
+    let max = f64::from(img.samples.max_code());
+    let rgb = match &img.samples {
+        Samples::U8(s) => s
+            .iter()
+            .map(|&c| gamma.decode(f64::from(c) / max) as f32)
+            .collect(),
+        Samples::U16(s) => s
+            .iter()
+            .map(|&c| gamma.decode(f64::from(c) / max) as f32)
+            .collect(),
+    };
+    LinearRgb::new(img.width, img.height, rgb)
 }
 
 /// Premultiplied linear RGBA composited over `background` (linear RGB), as the build's
@@ -235,6 +278,42 @@ mod tests {
                 assert!(noisy.linear.iter().any(|&v| v < 0.0));
             }
         }
+        Ok(())
+    }
+
+    #[test]
+    fn downsampled_noise_keeps_sigma_at_the_smaller_size() -> Result<()> {
+        // Noise drawn at full size and then averaged over 4 x 4 blocks has 1/4 of its
+        // std; noise drawn on the averaged image has the model's std.
+        let (w, h) = (256u32, 256u32);
+        let img = LinearRgb::new(w, h, vec![0.25; (w * h * 3) as usize])?;
+        let m = model(0.02, 0.04, None, Gamma::Srgb);
+        let want = (0.02f64 * 0.02 + 0.04 * 0.04 * 0.25).sqrt();
+        let std = |v: &[f32]| {
+            let n = v.len() as f64;
+            (v.iter()
+                .map(|&x| (f64::from(x) - 0.25).powi(2))
+                .sum::<f64>()
+                / n)
+                .sqrt()
+        };
+        let full = add_noise_linear(&img, &m, 3, 0)?;
+        let averaged = LinearRgb::new(w, h, full.linear)?.downsample(4)?;
+        assert!((std(&averaged.rgb) / want - 0.25).abs() < 0.02);
+        let small = add_noise_linear(&img.downsample(4)?, &m, 3, 0)?;
+        assert!((std(&small.linear) / want - 1.0).abs() < 0.03);
+        Ok(())
+    }
+
+    #[test]
+    fn codes_decode_through_the_curve() -> Result<()> {
+        let img = Image::new(1, 1, 3, Samples::U8(vec![0, 128, 255]))?;
+        let lin = linear_from_codes(&img, Gamma::Srgb)?;
+        assert_eq!(lin.rgb[0], 0.0);
+        assert!((lin.rgb[1] - 0.215_860_5).abs() < 1e-6);
+        assert_eq!(lin.rgb[2], 1.0);
+        let gray = Image::new(1, 1, 1, Samples::U8(vec![3]))?;
+        assert!(linear_from_codes(&gray, Gamma::Srgb).is_err());
         Ok(())
     }
 

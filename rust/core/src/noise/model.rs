@@ -198,6 +198,16 @@ pub fn noise_key(seed: u64, gain: f64) -> u64 {
     rng::derive_seed(seed, &[rng::fnv1a64(b"noise"), gain.to_bits()])
 }
 
+/// The Philox key of a variant's `images_<factor>/` copy: the variant's own key at
+/// factor 1 (so full-size files do not change), else one derived from it, so the
+/// smaller noise is drawn afresh rather than reusing the full-size draws.
+pub fn factor_key(key: u64, factor: u32) -> u64 {
+    if factor == 1 {
+        return key;
+    }
+    rng::derive_seed(key, &[rng::fnv1a64(b"downsample"), u64::from(factor)])
+}
+
 /// The Philox stream of one frame of one view.
 pub fn stream_id(view: u32, frame: u32) -> u64 {
     ((view as u64) << 32) | frame as u64

@@ -1,12 +1,14 @@
 //! The files of a scene's noise variants: per gain and frame, the processed PNG and
 //! the linear EXR, from 8/16-bit images or from a build's linear EXRs.
 use super::kernel::{apply_plan, Noisy, Plan};
-use super::linear::{add_noise_linear, read_linear};
-use super::model::{stream_id, NoiseModel};
+use super::linear::{add_noise_linear, linear_from_codes, read_linear, LinearRgb};
+use super::model::{factor_key, stream_id, NoiseModel};
 use crate::error::{Error, Result};
 use crate::image::exr::write::exr_bytes;
 use crate::image::io as image_io;
+use crate::image::resample::check_factor;
 use rayon::prelude::*;
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -18,8 +20,34 @@ pub struct Variant {
     pub key: u64,
 }
 
+/// What every variant of a scene writes besides full-size noisy images.
+#[derive(Clone, Debug, Default)]
+pub struct VariantOptions {
+    /// `images_<f>/` and `linear_<f>/` per factor: the clean image area-averaged in linear
+    /// light, then noised at that size (key [`factor_key`]), so σ(gain) holds there too.
+    pub downsample: Vec<u32>,
+    /// Views that stay clean (σ = 0) in every variant: the held-out targets of NAN's
+    /// protocol (noisy sources, clean target).
+    pub clean_views: BTreeSet<usize>,
+}
+
+impl VariantOptions {
+    fn model(&self, v: &Variant, view: usize) -> NoiseModel {
+        if self.clean_views.contains(&view) {
+            NoiseModel {
+                sigma_read: 0.0,
+                sigma_shot: 0.0,
+                ..v.model
+            }
+        } else {
+            v.model
+        }
+    }
+}
+
 /// Read every source image once and write, for each variant and frame,
-/// `out_dir/images/<name>.png` and `out_dir/linear/<name>.exr`; `names` holds
+/// `out_dir/images/<name>.png` and `out_dir/linear/<name>.exr` (and the
+/// `images_<f>/`, `linear_<f>/` copies of `opts.downsample`); `names` holds
 /// `sources.len() · frames` stems, view-major. All images must share one size.
 /// Files are written in place: callers make the whole tree atomic by writing into a
 /// temporary directory and renaming it.
@@ -28,14 +56,21 @@ pub fn write_variants(
     names: &[String],
     frames: u32,
     variants: &[Variant],
+    opts: &VariantOptions,
 ) -> Result<()> {
-    prepare(sources, names, frames, variants)?;
+    prepare(sources, names, frames, variants, opts)?;
     let Some(first) = sources.first() else {
         return Ok(());
     };
     let (w0, h0, _, _) = image_io::image_info(first)?;
-    // Plans depend on (variant, depth, colour layout); built once, on first use.
-    let plans: Vec<[OnceLock<Plan>; 4]> = variants.iter().map(|_| Default::default()).collect();
+    for &f in &opts.downsample {
+        check_factor(w0, h0, f).map_err(|e| Error::Image {
+            reason: e.to_string(),
+            path: first.clone(),
+        })?;
+    }
+    // Plans depend on (variant, clean, depth, colour layout); built once, on first use.
+    let plans: Vec<[OnceLock<Plan>; 8]> = variants.iter().map(|_| Default::default()).collect();
     sources.par_iter().enumerate().try_for_each(|(i, path)| {
         let img = image_io::read_image(path)?;
         if (img.width, img.height) != (w0, h0) {
@@ -47,15 +82,27 @@ pub fn write_variants(
                 path: path.clone(),
             });
         }
-        let slot = usize::from(img.samples.max_code() > 255) * 2 + usize::from(img.channels >= 3);
+        let clean = opts.clean_views.contains(&i);
+        let slot = usize::from(clean) * 4
+            + usize::from(img.samples.max_code() > 255) * 2
+            + usize::from(img.channels >= 3);
         for (v, plan) in variants.iter().zip(&plans) {
+            let model = opts.model(v, i);
             let plan = plan[slot]
-                .get_or_init(|| Plan::new(&v.model, img.samples.max_code(), img.color_channels()));
+                .get_or_init(|| Plan::new(&model, img.samples.max_code(), img.color_channels()));
             for k in 0..frames {
                 let noisy = apply_plan(&img, plan, v.key, stream_id(i as u32, k))?;
                 let name = &names[i * frames as usize + k as usize];
-                write_frame(v, name, img.width, img.height, &noisy)?;
+                write_frame(v, "", name, img.width, img.height, &noisy)?;
             }
+        }
+        if !opts.downsample.is_empty() {
+            let lin =
+                linear_from_codes(&img, variants[0].model.gamma).map_err(|e| Error::Image {
+                    reason: e.to_string(),
+                    path: path.clone(),
+                })?;
+            write_downsampled(&lin, i, names, frames, variants, opts)?;
         }
         Ok(())
     })
@@ -63,17 +110,19 @@ pub fn write_variants(
 
 /// The linear-path counterpart of [`write_variants`]: read every linear EXR once
 /// (composited over `background`) and write, per variant and frame,
-/// `out_dir/images/<name>.png` (8-bit RGB) and `out_dir/linear/<name>.exr` (RGB float).
-/// Keys and streams are those of the PNG path (`stream_id(view, frame)`). All images
-/// must share one size. Files are written in place; callers make the tree atomic.
+/// `out_dir/images/<name>.png` (8-bit RGB) and `out_dir/linear/<name>.exr` (RGB float),
+/// and their downsampled copies. Keys and streams are those of the PNG path
+/// (`stream_id(view, frame)`). All images must share one size. Files are written in
+/// place; callers make the tree atomic.
 pub fn write_variants_linear(
     sources: &[PathBuf],
     names: &[String],
     frames: u32,
     variants: &[Variant],
     background: [f64; 3],
+    opts: &VariantOptions,
 ) -> Result<()> {
-    prepare(sources, names, frames, variants)?;
+    prepare(sources, names, frames, variants, opts)?;
     let size = std::sync::OnceLock::new();
     sources.par_iter().enumerate().try_for_each(|(i, path)| {
         let img = read_linear(path, background)?;
@@ -88,19 +137,57 @@ pub fn write_variants_linear(
             });
         }
         for v in variants {
+            let model = opts.model(v, i);
             for k in 0..frames {
-                let noisy = add_noise_linear(&img, &v.model, v.key, stream_id(i as u32, k))?;
+                let noisy = add_noise_linear(&img, &model, v.key, stream_id(i as u32, k))?;
                 let name = &names[i * frames as usize + k as usize];
-                write_frame(v, name, img.width, img.height, &noisy)?;
+                write_frame(v, "", name, img.width, img.height, &noisy)?;
             }
         }
-        Ok(())
+        write_downsampled(&img, i, names, frames, variants, opts).map_err(|e| match e {
+            Error::Value(reason) => Error::Image {
+                reason,
+                path: path.clone(),
+            },
+            e => e,
+        })
     })
 }
 
+/// The `images_<f>/` and `linear_<f>/` files of view `i` from its clean linear image.
+fn write_downsampled(
+    img: &LinearRgb,
+    i: usize,
+    names: &[String],
+    frames: u32,
+    variants: &[Variant],
+    opts: &VariantOptions,
+) -> Result<()> {
+    for &f in &opts.downsample {
+        let small = img.downsample(f)?;
+        let suffix = format!("_{f}");
+        for v in variants {
+            let model = opts.model(v, i);
+            for k in 0..frames {
+                let noisy =
+                    add_noise_linear(&small, &model, factor_key(v.key, f), stream_id(i as u32, k))?;
+                let name = &names[i * frames as usize + k as usize];
+                write_frame(v, &suffix, name, small.width, small.height, &noisy)?;
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Refuse a call whose names do not match its sources and frames, or whose model is
-/// invalid; then create every variant's `images/` and `linear/` directories.
-fn prepare(sources: &[PathBuf], names: &[String], frames: u32, variants: &[Variant]) -> Result<()> {
+/// invalid; then create every variant's `images*/` and `linear*/` directories.
+fn prepare(
+    sources: &[PathBuf],
+    names: &[String],
+    frames: u32,
+    variants: &[Variant],
+    opts: &VariantOptions,
+) -> Result<()> {
     if frames == 0 {
         return Err(Error::Value("frames must be at least 1".into()));
     }
@@ -111,24 +198,46 @@ fn prepare(sources: &[PathBuf], names: &[String], frames: u32, variants: &[Varia
             sources.len()
         )));
     }
+    if let Some(f) = opts.downsample.iter().find(|&&f| f < 2) {
+        return Err(Error::Value(format!(
+            "downsample factor {f}: must be at least 2 (images/ is factor 1)"
+        )));
+    }
+    let suffixes: Vec<String> = std::iter::once(String::new())
+        .chain(opts.downsample.iter().map(|f| format!("_{f}")))
+        .collect();
     for v in variants {
         v.model.validate()?;
-        for sub in ["images", "linear"] {
-            let d = v.out_dir.join(sub);
-            std::fs::create_dir_all(&d).map_err(|e| Error::io("cannot create directory", &d, e))?;
+        for suffix in &suffixes {
+            for sub in ["images", "linear"] {
+                let d = v.out_dir.join(format!("{sub}{suffix}"));
+                std::fs::create_dir_all(&d)
+                    .map_err(|e| Error::io("cannot create directory", &d, e))?;
+            }
         }
     }
     Ok(())
 }
 
-/// One noisy frame of a variant: `images/<name>.png` and `linear/<name>.exr`.
-fn write_frame(v: &Variant, name: &str, width: u32, height: u32, noisy: &Noisy) -> Result<()> {
+/// One noisy frame of a variant: `images<suffix>/<name>.png` and `linear<suffix>/<name>.exr`.
+fn write_frame(
+    v: &Variant,
+    suffix: &str,
+    name: &str,
+    width: u32,
+    height: u32,
+    noisy: &Noisy,
+) -> Result<()> {
     write_file(
-        &v.out_dir.join("images").join(format!("{name}.png")),
+        &v.out_dir
+            .join(format!("images{suffix}"))
+            .join(format!("{name}.png")),
         &image_io::png_bytes(&noisy.processed)?,
     )?;
     write_file(
-        &v.out_dir.join("linear").join(format!("{name}.exr")),
+        &v.out_dir
+            .join(format!("linear{suffix}"))
+            .join(format!("{name}.exr")),
         &exr_bytes(width, height, noisy.linear_channels, &noisy.linear)?,
     )
 }
@@ -142,6 +251,67 @@ mod tests {
     use super::*;
     use crate::image::exr::read::read_exr;
     use crate::noise::model::Gamma;
+
+    #[test]
+    fn clean_views_and_downsampled_copies() -> Result<()> {
+        let dir = std::env::temp_dir().join(format!("blurset-noise-opts-{}", std::process::id()));
+        let (w, h) = (16u32, 8u32);
+        let src = dir.join("src");
+        std::fs::create_dir_all(&src).map_err(|e| Error::io("mkdir", &src, e))?;
+        let paths: Vec<PathBuf> = (0..2).map(|i| src.join(format!("{i:03}.png"))).collect();
+        let codes: Vec<u8> = (0..w * h * 3).map(|i| (i * 11 % 256) as u8).collect();
+        let img = image_io::Image::new(w, h, 3, image_io::Samples::U8(codes.clone()))?;
+        for p in &paths {
+            write_file(p, &image_io::png_bytes(&img)?)?;
+        }
+        let m = NoiseModel {
+            sigma_read: 0.05,
+            sigma_shot: 0.05,
+            gamma: Gamma::Srgb,
+            white_balance: None,
+            white_level: 1.0,
+        };
+        let v = Variant {
+            out_dir: dir.join("out"),
+            model: m,
+            key: 9,
+        };
+        let names = vec!["000".to_string(), "001".to_string()];
+        let opts = VariantOptions {
+            downsample: vec![2, 4],
+            clean_views: [0].into(),
+        };
+        write_variants(&paths, &names, 1, std::slice::from_ref(&v), &opts)?;
+        let out = |sub: &str, name: &str| dir.join("out").join(sub).join(name);
+        // The clean view keeps its pixels; the other one is noisy.
+        assert_eq!(image_io::read_image(&out("images", "000.png"))?, img);
+        assert_ne!(image_io::read_image(&out("images", "001.png"))?, img);
+        for (f, sub) in [(2, "images_2"), (4, "images_4")] {
+            let small = image_io::read_image(&out(sub, "001.png"))?;
+            assert_eq!((small.width, small.height), (w / f, h / f));
+            let lin = read_exr(&out(&format!("linear_{f}"), "000.exr"))?;
+            // A clean view's small linear image is the area mean of the decoded codes.
+            let want = linear_from_codes(&img, Gamma::Srgb)?.downsample(f)?;
+            let got: Vec<f32> = lin
+                .rgba
+                .chunks_exact(4)
+                .flat_map(|p| [p[0], p[1], p[2]])
+                .collect();
+            assert_eq!(got, want.rgb);
+        }
+        // A factor that does not divide the size names the file.
+        let bad = VariantOptions {
+            downsample: vec![3],
+            ..Default::default()
+        };
+        let e = write_variants(&paths, &names, 1, &[v], &bad)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("factor 3") && e.contains("000.png"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
 
     #[test]
     fn exr_files_round_trip_through_the_writer() -> Result<()> {
@@ -166,7 +336,14 @@ mod tests {
             key: 4,
         };
         let names = vec!["000".to_string(), "001".to_string()];
-        write_variants_linear(&paths, &names, 1, std::slice::from_ref(&v), [1.0; 3])?;
+        write_variants_linear(
+            &paths,
+            &names,
+            1,
+            std::slice::from_ref(&v),
+            [1.0; 3],
+            &VariantOptions::default(),
+        )?;
         let back = read_exr(&dir.join("out/linear/001.exr"))?;
         let img = read_linear(&paths[1], [1.0; 3])?;
         let want = add_noise_linear(&img, &m, 4, stream_id(1, 0))?;
@@ -182,10 +359,17 @@ mod tests {
         let mut bad = rgba.clone();
         bad[5] = f32::NAN;
         crate::image::exr::write::write_exr(&paths[0], w, h, &bad)?;
-        let e = write_variants_linear(&paths, &names, 1, &[v], [1.0; 3])
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        let e = write_variants_linear(
+            &paths,
+            &names,
+            1,
+            &[v],
+            [1.0; 3],
+            &VariantOptions::default(),
+        )
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
         assert!(e.contains("000.exr") && e.contains("non-finite"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
         Ok(())

@@ -10,6 +10,7 @@ use super::sampling::{
 };
 use super::weights::Guards;
 use crate::dataset::layout::{self, MAX_LEVEL};
+use crate::dataset::splits::test_views;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -76,6 +77,8 @@ pub enum Spec {
     Choice(&'static [&'static str]),
     /// Distinct blur levels, integers in 1..=MAX_LEVEL.
     Levels,
+    /// Distinct downsampling factors, integers in 2..=MAX_FACTOR (none: no copies).
+    Factors,
     /// Three numbers in [0, 1] (a linear RGB colour).
     Rgb,
     /// A string or a list of strings.
@@ -131,6 +134,9 @@ impl Spec {
             Spec::Choice(c) => format!("must be one of {}", c.join(", ")),
             Spec::Levels => {
                 format!("must be distinct integers in 1..={MAX_LEVEL} (or none: sharp only)")
+            }
+            Spec::Factors => {
+                format!("must be distinct integers in 2..={MAX_FACTOR} (or none)")
             }
             Spec::Rgb => "must be 3 numbers in [0, 1] (linear RGB)".into(),
             Spec::StrList => "must be a string or a list of strings".into(),
@@ -269,13 +275,16 @@ impl OptionValue for Vec<String> {
 }
 
 impl OptionValue for Vec<u32> {
-    fn from_raw(raw: &Raw, _: &Spec) -> Option<Self> {
+    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
         let items: Vec<Raw> = match raw {
             Raw::List(v) => v.clone(),
             Raw::Int(_) => vec![raw.clone()],
             _ => return None,
         };
-        let level = Spec::int(1, MAX_LEVEL as i128);
+        let level = match spec {
+            Spec::Factors => Spec::int(2, MAX_FACTOR as i128),
+            _ => Spec::int(1, MAX_LEVEL as i128),
+        };
         let mut levels: Vec<u32> = items
             .iter()
             .map(|x| match x {
@@ -356,6 +365,18 @@ pub fn check<T: OptionValue>(option: &str, value: &T, spec: &Spec) -> Result<()>
     T::from_raw(&raw, spec)
         .map(|_| ())
         .ok_or_else(|| config_error(option, format!("{raw}: {}", spec.expected())))
+}
+
+/// The largest factor of an `images_<f>/` copy.
+pub const MAX_FACTOR: u32 = 64;
+
+/// Refuse downsampling factors outside 2..=MAX_FACTOR or repeated (`blurset noise
+/// --downsample`, whose image size is the scene's own; the build checks them as a field).
+pub fn check_downsample(factors: &[u32]) -> Result<()> {
+    let raw = factors.to_vec().to_raw();
+    Vec::<u32>::from_raw(&raw, &Spec::Factors)
+        .map(|_| ())
+        .ok_or_else(|| config_error("downsample", format!("{raw}: {}", Spec::Factors.expected())))
 }
 
 /// θ0 of a setting: any finite azimuth in degrees.
@@ -446,9 +467,19 @@ build_config! {
     write_linear: bool = false, Spec::Bool;
     /// <setting>/preview.png, written before the marker.
     previews: bool = false, Spec::Bool;
+    /// Every k-th view of a setting is held out (`--test-view-stride`, LLFF's llffhold).
     view_stride: usize = 16, specs::COUNT;
+    /// Test settings: a seeded fraction of the objects, or the objects listed
+    /// (`--test-objects`), or N random settings (`test_settings`), not both.
     test_fraction: f64 = 0.2, specs::FRACTION;
     test_objects: Option<Vec<String>> = None, Spec::StrList;
+    /// N seeded random test settings (the paper's 52).
+    test_settings: Option<usize> = None, Spec::int(1, u32::MAX as i128);
+    /// Render the held-out views blurry too; by default the blur levels hold the sharp
+    /// image there (Deblur-NeRF's convention; those blur renders are skipped).
+    blurry_test_views: bool = false, Spec::Bool;
+    /// `images_<f>/` beside `images/` in every level: area mean in linear light, sRGB.
+    downsample: Vec<u32> = vec![4], Spec::Factors;
     workers: usize = 1, specs::WORKERS;
     /// Cycles threads per worker (0 = all cores).
     threads: usize = 0, specs::THREADS;
@@ -519,6 +550,26 @@ impl BuildConfig {
                     format!("{s:?}: must be i/N with 0 ≤ i < N"),
                 ));
             }
+        }
+        if let Some(f) = self
+            .downsample
+            .iter()
+            .find(|f| !self.resolution.is_multiple_of(**f))
+        {
+            return Err(config_error(
+                "downsample",
+                format!(
+                    "{f}: does not divide resolution {} (LLFF loaders scale the focal \
+                     length by exactly 1/factor)",
+                    self.resolution
+                ),
+            ));
+        }
+        if self.test_settings.is_some() && self.test_objects.is_some() {
+            return Err(config_error(
+                "test_settings",
+                "and test_objects: give either N random test settings or test objects".into(),
+            ));
         }
         if self.latents_auto && self.blur_method == "motion_blur" {
             return Err(config_error(
@@ -617,6 +668,25 @@ impl BuildConfig {
         self.views * (1 + self.levels.len() * self.max_latents())
     }
 
+    /// The views whose blur levels hold a copy of the sharp image (the held-out views,
+    /// Deblur-NeRF's convention); none with `blurry_test_views`.
+    pub fn sharp_views(&self, n_views: usize) -> Vec<usize> {
+        if self.blurry_test_views {
+            Vec::new()
+        } else {
+            test_views(n_views, self.view_stride)
+        }
+    }
+
+    /// What the blur levels hold at the test views (meta.json, splits.json).
+    pub fn test_view_images(&self) -> &'static str {
+        if self.blurry_test_views {
+            "blurry"
+        } else {
+            "sharp"
+        }
+    }
+
     pub fn level_dirs(&self) -> Vec<String> {
         layout::level_dirs(&self.levels)
     }
@@ -671,6 +741,16 @@ mod tests {
         );
         assert_eq!((c.max_latents(), c.blur_samples_total()), (34, 32 * 34));
         assert_eq!(c.frames_per_setting(), 34 * (1 + 4 * 34));
+        assert_eq!(c.downsample, [4]);
+        assert_eq!(
+            (c.sharp_views(34), c.test_view_images()),
+            (vec![0, 16, 32], "sharp")
+        );
+        let blurry = BuildConfig {
+            blurry_test_views: true,
+            ..c
+        };
+        assert!(blurry.sharp_views(34).is_empty());
         Ok(())
     }
 
@@ -711,6 +791,20 @@ mod tests {
         assert!(err(&[("phi0_deg", Raw::Float(5.0))]).contains("pole"));
         assert!(err(&[("ray_address", Raw::Str("auto".into()))]).contains("executor ray"));
         assert!(err(&[("background", Raw::List(vec![Raw::Int(1)]))]).starts_with("background [1]"));
+        assert!(err(&[("downsample", Raw::List(vec![Raw::Int(1)]))]).contains("2..=64"));
+        assert!(
+            err(&[("downsample", Raw::List(vec![Raw::Int(4), Raw::Int(4)]))]).contains("distinct")
+        );
+        assert!(err(&[("downsample", Raw::List(vec![Raw::Int(3)]))])
+            .starts_with("downsample 3: does not divide resolution 512"));
+        assert!(err(&[("test_settings", Raw::Int(0))]).starts_with("test_settings 0"));
+        assert!(check_downsample(&[4, 8]).is_ok() && check_downsample(&[]).is_ok());
+        assert!(check_downsample(&[8, 8]).is_err() && check_downsample(&[65]).is_err());
+        assert!(err(&[
+            ("test_settings", Raw::Int(5)),
+            ("test_objects", Raw::Str("a".into()))
+        ])
+        .starts_with("test_settings and test_objects"));
     }
 
     #[test]

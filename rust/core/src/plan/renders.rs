@@ -68,6 +68,12 @@ impl SettingPlan {
     /// Every render of the setting, EXRs under `exr_dir`: per view the sharp render at p
     /// (`<view>_s.exr`), then each level's renders (`<view>_<level>_…`).
     pub fn renders(&self, exr_dir: &Path) -> Vec<Render> {
+        self.renders_except(exr_dir, &[])
+    }
+
+    /// [`Self::renders`] without the blur renders of `sharp_views`, whose blur levels
+    /// get a copy of the sharp image (Deblur-NeRF's test views).
+    pub fn renders_except(&self, exr_dir: &Path, sharp_views: &[usize]) -> Vec<Render> {
         let mut out = Vec::new();
         for v in &self.views {
             let i = v.index;
@@ -80,6 +86,9 @@ impl SettingPlan {
                 out: exr_dir.join(format!("{i:04}_s.exr")).display().to_string(),
                 motion: None,
             });
+            if sharp_views.contains(&i) {
+                continue;
+            }
             for (key, lp) in &v.levels {
                 let level: u32 = key.parse().unwrap_or(0);
                 let prefix = exr_dir.join(format!("{i:04}_{key}"));
@@ -119,6 +128,11 @@ mod tests {
         );
         assert_eq!(r[7].view, 1);
         assert!(r.iter().skip(1).take(6).all(|f| f.samples == Some(32)));
+        // A Deblur-NeRF test view renders only its sharp image.
+        let kept = plan.renders_except(Path::new("/x"), &[0]);
+        assert_eq!(kept.len(), r.len() - 6);
+        assert_eq!((kept[0].view, kept[1].view), (0, 1));
+        assert_eq!(kept[1..], r[7..]);
         let mb = BuildConfig {
             blur_method: "motion_blur".into(),
             ..cfg

@@ -1,0 +1,163 @@
+"""A build's scenes as NumPy arrays, for training code (issue 13; no framework needed).
+
+    from blurset.data import open_scene
+    s = open_scene("OUT", "chair_090", "blur_4", downsample=4)
+    s.images[s.train_views]   # blurry sources, (n, H, W, 3) float32 in [0, 1] (sRGB)
+    s.clean[s.train_views]    # their sharp versions: the restoration head's supervision
+    s.images[s.test_views]    # the targets: sharp (Deblur-NeRF's convention)
+    s.c2w_opencv, s.intrinsics, s.near, s.far
+
+With `gain=` and `noise=` (a `blurset noise BUILD` output) the degraded images are that
+gain's noisy copies of the level (drawn at the size read). `clean` is always the sharp
+level at the same size: the undegraded truth of every degradation. The cameras come
+from the level's `poses_bounds.npy` (LLFF columns down, right, backwards), exactly as
+the LLFF loaders read them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from blurset import _core, layout
+from blurset.exceptions import InputError
+
+__all__ = ["Scene", "open_scene", "list_scenes"]
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One (setting, level[, gain]) of a build at one size (see `open_scene`)."""
+
+    setting: str
+    level: str
+    gain: float | None
+    downsample: int
+    #: Degraded images (N, H, W, 3) float32 in [0, 1], sRGB as stored, view order.
+    images: np.ndarray
+    #: The sharp images of the same views and size.
+    clean: np.ndarray
+    image_files: list[Path]
+    clean_files: list[Path]
+    #: Camera to world, OpenCV axes (x right, y down, z forward), (N, 4, 4) float64.
+    c2w_opencv: np.ndarray
+    #: Camera to world, OpenGL axes (x right, y up, z backwards), as transforms.json.
+    c2w_opengl: np.ndarray
+    #: Pinhole intrinsics at this size (focal / downsample, principal point centred).
+    intrinsics: np.ndarray
+    near: np.ndarray
+    far: np.ndarray
+    train_views: np.ndarray
+    test_views: np.ndarray
+    #: The gain's noise.json (sigmas, white balance, seed), or None.
+    noise: dict | None = None
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(height, width) of the images."""
+        return int(self.images.shape[1]), int(self.images.shape[2])
+
+
+def _subdir(downsample: int) -> str:
+    return "images" if downsample == 1 else f"images_{downsample}"
+
+
+def _read(files: list[Path]) -> np.ndarray:
+    return np.stack([_core.read_image(p)[..., :3] for p in files]).astype(np.float32) / 255.0
+
+
+def _cameras(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV and OpenGL camera-to-world matrices of LLFF pose rows."""
+    m = rows[:, :15].reshape(-1, 3, 5)
+    down, right, back, t = m[:, :, 0], m[:, :, 1], m[:, :, 2], m[:, :, 3]
+    gl = np.tile(np.eye(4), (len(rows), 1, 1))
+    cv = gl.copy()
+    gl[:, :3, 0], gl[:, :3, 1], gl[:, :3, 2], gl[:, :3, 3] = right, -down, back, t
+    cv[:, :3, 0], cv[:, :3, 1], cv[:, :3, 2], cv[:, :3, 3] = right, down, -back, t
+    return cv, gl
+
+
+def open_scene(
+    build: str | Path,
+    setting: str,
+    level: str = layout.SHARP,
+    gain: float | None = None,
+    *,
+    noise: str | Path | None = None,
+    downsample: int = 1,
+) -> Scene:
+    """Read one scene of a build: `level` (`sharp`, `blur_<l>`) of `setting`, or with
+    `gain` the noisy copy of it in `noise` (a `blurset noise BUILD` output), at full
+    size or from `images_<downsample>/`. Raises InputError naming a missing file."""
+    build = Path(build)
+    sdir = build / setting
+    if not layout.is_complete(sdir):
+        raise InputError(f"no complete setting {setting!r} in the build: {sdir}")
+    if not (sdir / level).is_dir():
+        raise InputError(f"setting {setting!r} has no level {level!r}: {sdir / level}")
+    sub = _subdir(downsample)
+    n = len(np.asarray(_core.read_poses_bounds(sdir / level / "poses_bounds.npy")))
+    names = [layout.image_name(i, n) for i in range(n)]
+    meta = None
+    if gain is None:
+        scene_dir = sdir / level
+    else:
+        if noise is None:
+            raise InputError("gain needs noise= (a `blurset noise BUILD` output folder)")
+        scene_dir = Path(noise) / setting / level / layout.gain_name(gain)
+        if not layout.is_complete(scene_dir):
+            raise InputError(f"no complete noisy scene of gain {gain:g}: {scene_dir}")
+        meta = layout.read_json(scene_dir / "noise.json", "noise.json")
+        # One file per view: frame 0 of a burst.
+        by_view = {f["view"]: Path(f["image"]).name for f in meta["files"] if f["frame"] == 0}
+        names = [by_view[i] for i in range(n)]
+    image_files = [scene_dir / sub / name for name in names]
+    clean_files = [sdir / layout.SHARP / sub / layout.image_name(i, n) for i in range(n)]
+    for p in (*image_files, *clean_files):
+        if not p.is_file():
+            raise InputError(f"image not found (downsample {downsample}?): {p}")
+    rows = np.asarray(_core.read_poses_bounds(scene_dir / "poses_bounds.npy"), np.float64)
+    rows = rows[:: len(rows) // n] if len(rows) != n else rows
+    cv, gl = _cameras(rows)
+    images, clean = _read(image_files), _read(clean_files)
+    h, w = images.shape[1:3]
+    # hwf holds the full size (LLFF); the focal length scales with the size read.
+    focal = rows[0, 14] * w / rows[0, 9]
+    k = np.array([[focal, 0, w / 2], [0, focal, h / 2], [0, 0, 1]], dtype=np.float64)
+    splits = build / "splits.json"
+    held = None
+    if splits.is_file():
+        held = layout.read_json(splits, "splits.json").get("test_views", {}).get(setting)
+    if held is None:
+        held = layout.read_json(sdir / "meta.json", "meta.json").get("test_views", [])
+    test = np.array(sorted(held), dtype=np.int64)
+    train = np.array([i for i in range(n) if i not in set(held)], dtype=np.int64)
+    return Scene(
+        setting=setting,
+        level=level,
+        gain=gain,
+        downsample=downsample,
+        images=images,
+        clean=clean,
+        image_files=image_files,
+        clean_files=clean_files,
+        c2w_opencv=cv,
+        c2w_opengl=gl,
+        intrinsics=k,
+        near=rows[:, 15].copy(),
+        far=rows[:, 16].copy(),
+        train_views=train,
+        test_views=test,
+        noise=meta,
+    )
+
+
+def list_scenes(build: str | Path) -> list[tuple[str, str]]:
+    """(setting, level) of every complete setting of a build, in order."""
+    return [
+        (s.name, lvl)
+        for s in layout.complete_settings(Path(build))
+        for lvl in layout.setting_levels(s)
+    ]
