@@ -175,3 +175,70 @@ def test_shared_glbs_build_or_fail_cleanly(tmp_path):
         a = np.asarray(Image.open(s / "sharp" / "images" / "000.png").convert("RGB"), float)
         obj = (a < 250).any(axis=2)
         assert obj.mean() > 0.01 and a[obj].mean() > 20, s.name
+
+
+def test_centered_trajectory_puts_p_mid_exposure_with_the_same_draws(tmp_path):
+    """`--trajectory centered` (issue 18): every latent position of every view and level
+    lies on p + t·w_l·δ with t ∈ [−½, ½] (meta.json), drawn with the same seeds as the
+    default `start` (t − ½), so the sharp images and all pose files are the same bytes,
+    and the mean latent pose recorded per view and level is the camera at the mean t."""
+    from blurset.demo import make_demo_objects
+
+    glb = make_demo_objects(tmp_path / "objects")[0]
+    args = ("--objects", str(glb), "--views", "3", "--levels", "1,4", "--latents", "3",
+            "--resolution", "32", "--samples", "2", "--sharp-samples", "2",
+            "--settings-per-object", "1", "--quiet")  # fmt: skip
+    out = {a: tmp_path / a for a in ("start", "centered")}
+    run_cli("build", *args, "--out", str(out["start"]))
+    run_cli("build", *args, "--trajectory", "centered", "--out", str(out["centered"]))
+    (s_start,), (s_cent,) = settings(out["start"]), settings(out["centered"])
+    meta = {
+        "start": json.loads((s_start / "meta.json").read_text()),
+        "centered": json.loads((s_cent / "meta.json").read_text()),
+    }
+    assert meta["start"]["sampling"]["trajectory"] == "start"
+    assert meta["centered"]["sampling"]["trajectory"] == "centered"
+    r_min = 1.05 * 0.5 * float(np.linalg.norm(meta["centered"]["bbox_dims"]))
+    for vs, vc in zip(meta["start"]["views"], meta["centered"]["views"], strict=True):
+        assert (vs["trajectory"], vs["c2w"]) == (vc["trajectory"], vc["c2w"])
+        d = vc["trajectory"]
+        for lvl, lc in vc["levels"].items():
+            ls = vs["levels"][lvl]
+            assert lc["w_l"] == ls["w_l"] and len(lc["latent_frames"]) == 3
+            for fs, fc in zip(ls["latent_frames"], lc["latent_frames"], strict=True):
+                assert (fc["t"], fc["seed"]) == (fs["t"] - 0.5, fs["seed"])
+                assert -0.5 <= fc["t"] <= 0.5 and 0.0 <= fs["t"] <= 1.0
+                s = fc["t"] * lc["w_l"]
+                want = (
+                    max(vc["r"] * (1 + s * d["dr"] / 100), r_min),
+                    vc["phi_deg"] + s * d["dphi_deg"],
+                    vc["theta_deg"] + s * d["dtheta_deg"],
+                )
+                got = (fc["r"], fc["phi_deg"], fc["theta_deg"])
+                assert got == pytest.approx(want, rel=1e-12, abs=1e-12)
+            for lp in (ls, lc):
+                mp = lp["mean_pose"]
+                assert mp["t"] == pytest.approx(np.mean([f["t"] for f in lp["latent_frames"]]))
+                # The camera at the mean t: its centre at (r, φ, θ) of that t.
+                phi, theta = math.radians(mp["phi_deg"]), math.radians(mp["theta_deg"])
+                eye = mp["r"] * np.array(
+                    [
+                        math.sin(phi) * math.cos(theta),
+                        math.sin(phi) * math.sin(theta),
+                        math.cos(phi),
+                    ]
+                )
+                assert np.asarray(mp["c2w"])[:3, 3] == pytest.approx(eye, abs=1e-9)
+            # Centred, the segment's ends t = ∓½ are symmetric about p.
+            assert abs(lc["mean_pose"]["t"]) < 0.5 and 0.0 < ls["mean_pose"]["t"] < 1.0
+    # Same sharp images, same poses in every level; the blurry exposures moved.
+    for rel in ["transforms.json", *(f"{lv}/poses_bounds.npy" for lv in ("sharp", "blur_1"))]:
+        assert (s_start / rel).read_bytes() == (s_cent / rel).read_bytes(), rel
+    for name in ("000.png", "001.png", "002.png"):
+        assert (s_start / "sharp/images" / name).read_bytes() == (
+            s_cent / "sharp/images" / name
+        ).read_bytes()
+    assert any(
+        (s_start / "blur_4/images" / n).read_bytes() != (s_cent / "blur_4/images" / n).read_bytes()
+        for n in ("000.png", "001.png", "002.png")
+    )

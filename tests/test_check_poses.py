@@ -229,8 +229,57 @@ def test_demo_build_passes_and_level_table(demo_setting, tmp_path, capsys):
     assert code == check_poses.EXIT_PASS
     table = capsys.readouterr().out
     assert "level" in table and "sharp" in table and "blur_1" in table
+    for column in ("SIFT/image", "COLMAP reproj px", "written deg", "p→mean deg"):
+        assert column in table
+    for r in reports.values():
+        assert r["registered"] >= 12 and r["median_features"] > 0
+        assert r["colmap_mean_reproj_px"] > 0
+    # The blur level is measured against its exposure's mean latent pose (meta.json),
+    # passes there, and reports the written pose's error and the start-to-mean offset.
+    blur = reports["blur_1"]
+    assert reports["sharp"]["pose_reference"] == "written"
+    assert blur["pose_reference"] == "mean_latent"
+    assert blur["verdict"] == "pass" and blur["pass"], blur["reason"]
+    meta = json.loads((demo_setting / "meta.json").read_text())
+    want = [
+        angle_deg(np.asarray(v["c2w"])[:3, :3], np.asarray(v["levels"]["1"]["mean_pose"]["c2w"])[:3, :3])
+        for v in meta["views"]
+    ]  # fmt: skip
+    got = [v["written_to_mean_deg"] for v in blur["views"]]
+    assert got == pytest.approx(want, abs=1e-6)
+    assert blur["median_written_to_mean_deg"] == pytest.approx(np.median(want))
+    assert blur["median_written_to_mean_deg"] > 0.3, "the paper's anchor is off the exposure"
+    written = blur["written_pose"]
+    assert written["median_rot_err_deg"] > blur["median_rot_err_deg"]
+    assert all(v["written_rot_err_deg"] is not None for v in blur["views"] if v["registered"])
     library = check_poses.check_setting(demo_setting, levels=["sharp"])
     assert library["sharp"]["pass"]
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1, 1))))
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_blur_level_perturbed_mean_pose_fails_naming_it(demo_setting, tmp_path):
+    """The mean latent pose decides a blur level, so one rotated 5° in meta.json fails
+    that view (the written poses in poses_bounds.npy are untouched)."""
+    setting = tmp_path / "setting"
+    shutil.copytree(demo_setting / "blur_1", setting / "blur_1")
+    meta = json.loads((demo_setting / "meta.json").read_text())
+    mp = meta["views"][5]["levels"]["1"]["mean_pose"]
+    c2w = np.asarray(mp["c2w"])
+    c2w[:3, :3] = _rot(5.0, [1.0, 0.3, 0.2]) @ c2w[:3, :3]
+    mp["c2w"] = c2w.tolist()
+    (setting / "meta.json").write_text(json.dumps(meta))
+    r = check_poses.check_scene(setting / "blur_1")
+    assert r["pose_reference"] == "mean_latent"
+    assert r["verdict"] == "fail" and not r["pass"]
+    assert r["failed_views"][0] == r["views"][5]["name"]
+    assert not r["views"][5]["ok"] and r["views"][5]["written_to_mean_deg"] > 3.0
+    # The written poses did not move: their errors still put view 5 with the others.
+    assert r["views"][5]["written_rot_err_deg"] < 3.0
 
 
 @pytest.mark.blender

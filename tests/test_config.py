@@ -90,6 +90,7 @@ def write(tmp_path: Path, text: str | bytes) -> Path:
         ("background = [1, 1]\n", "background [1, 1]: must be 3 numbers in [0, 1]"),
         ("views = 2\nviews_ = 3\n", "unknown option 'views_'"),
         ("keep-linear = true\nkeep_linear = false\n", "given twice"),
+        ('trajectory = "middle"\n', 'trajectory "middle": must be one of start, centered'),
         ("downsample = [5]\n", "downsample 5: does not divide resolution 96"),
         ("test-view-stride = 0\n", "view_stride 0: must be an integer in 1..=4096"),
         ("test-settings = 5\ntest-objects = 0.3\n", "either N random test settings"),
@@ -132,6 +133,25 @@ def test_toml_spellings_and_layers():
     assert cfg.out == "o" and cfg.settings_per_object == 1  # the demo's defaults
     with pytest.raises(ConfigError, match="--latents-max: only used with --latents auto"):
         make_config({}, {"latents_max": 5, "out": "o", "demo": True})
+
+
+def test_trajectory_from_toml_and_flags_reaches_the_plan(capsys, tmp_path):
+    """`trajectory` (issue 18): default start (the paper), a TOML value, a flag over it;
+    the choice reaches the sampling of every plan and dataset.json's config record."""
+    base = {"demo": True, "out": tmp_path / "o"}
+    assert make_config({}, base).trajectory == "start"
+    toml = load_toml(write(tmp_path, 'trajectory = "centered"\n'))
+    cfg = make_config(toml, base)
+    assert cfg.trajectory == "centered"
+    assert cfg.sampling().to_dict()["trajectory"] == "centered"
+    assert cfg.record()["trajectory"] == "centered"
+    assert make_config(toml, {**base, "trajectory": "start"}).trajectory == "start"
+    out = tmp_path / "o"
+    with pytest.raises(SystemExit) as e:
+        main(["build", "--demo", "--out", str(out), "--trajectory", "middle"])
+    assert e.value.code == 2
+    assert "--trajectory: invalid choice: 'middle'" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_training_options_map_onto_the_core(tmp_path):

@@ -37,6 +37,7 @@ configs = st.fixed_dictionaries(
         "level_spread": st.floats(0.0, 0.99),
         "latents": st.integers(1, 12),
         "latent_positions": st.sampled_from(["random", "stratified"]),
+        "trajectory": st.sampled_from(["start", "centered"]),
         "resolution": st.integers(8, 4096),
         "guards": st.fixed_dictionaries(
             {"orientation_max": st.floats(1.0, 1e6), "near_floor": st.floats(1e-9, 1.0)}
@@ -84,6 +85,11 @@ def test_plans_and_pose_files_are_finite_everywhere(
         assert v["w_u"] >= 0 and v["depth_range"] >= 1 and v["orientation"] >= 1
         for lvl in v["levels"].values():
             assert lvl["w_l"] >= 0 and lvl["samples_per_frame"] >= 1
+            # Every latent position, motion key and the mean pose on the anchored segment.
+            lo = -0.5 if cfg["trajectory"] == "centered" else 0.0
+            keys = (lvl.get("motion_blur") or {}).get("keys", [])
+            for x in [*lvl["latent_frames"], *keys, lvl["mean_pose"]]:
+                assert lo <= x["t"] <= lo + 1.0
             if cfg["blur_method"] == "motion_blur":
                 keys = lvl["motion_blur"]["keys"]
                 assert lvl["latents"] == 1 and not lvl["latent_frames"]
@@ -112,7 +118,7 @@ def test_any_config_is_finite_or_refused_naming_the_option(key, value):
     cfg = dict(DEFAULTS, views=3, latents=2)
     if key == "levels":
         cfg[key] = [value] if isinstance(value, int) else value
-    elif key == "latent_positions":
+    elif key in ("latent_positions", "trajectory"):
         cfg[key] = str(value)
     else:
         cfg[key] = value

@@ -140,6 +140,8 @@ class BuildConfig:
     @property
     def latent_positions(self) -> str: ...
     @property
+    def trajectory(self) -> str: ...
+    @property
     def orientation_max(self) -> float: ...
     @property
     def near_floor(self) -> float: ...
@@ -227,6 +229,10 @@ def sort_level_dirs(names: list[str]) -> list[str]:
 
 def setting_levels(setting: str | PathLike[str]) -> list[str]:
     """The level directories a setting holds, in level order."""
+
+def read_mean_poses(meta: str | PathLike[str], level: int) -> list[list[list[float]]] | None:
+    """The mean latent pose (OpenGL c2w rows) of blur level `level` of every view of a
+    setting's meta.json, or None for a meta.json from before mean poses."""
 
 def gain_name(gain: float) -> str:
     """Directory name of a noise gain (`gain_4`, `gain_2.5`)."""

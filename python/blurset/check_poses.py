@@ -5,6 +5,13 @@ its own poses, which are aligned to ours by a similarity and compared view by vi
 view whose rotation or centre disagrees beyond the thresholds fails the scene; too
 little texture for SfM is "not checkable", a verdict of its own.
 
+A blurry image shows its exposure, whose content is centred on the mean latent pose, not
+on the written pose p (the exposure's start under the paper's `--trajectory start`). A
+blur level of a build setting is therefore checked against the mean latent poses that
+meta.json records per view and level (computed by blurset-core with the plan); the
+written pose's errors and its offset to the mean latent pose (under `start`, the
+start-to-mean offset: half the blur) are reported beside them (DESIGN §6, §12).
+
 Conventions: LLFF rows are camera-to-world with columns [down, right, backwards]; COLMAP
 poses are OpenCV world-to-camera (x right, y down, z forward).
 """
@@ -105,6 +112,29 @@ def _load_scene(scene_dir: Path, factor: int | None):
     rot_c2w = np.stack([mats[:, :, 1], mats[:, :, 0], -mats[:, :, 2]], axis=2)
     centers = mats[:, :, 3]
     return image_dir, names, (w, h, focal), rot_c2w, centers
+
+
+def mean_latent_poses(scene_dir: Path, n: int):
+    """OpenCV camera-to-world rotations and centres of the mean latent poses of a blur
+    level of a build setting (`SETTING/blur_<l>`, from `SETTING/meta.json`, read by the
+    core), or None for a sharp level, a plain LLFF scene, or a build from before meta.json
+    recorded them."""
+    level = scene_dir.name
+    if level == layout.SHARP or not layout.is_level_dir(level):
+        return None
+    if not (scene_dir.parent / "meta.json").is_file():
+        return None
+    poses = layout.mean_poses(scene_dir.parent, level)
+    if poses is None:
+        return None
+    if len(poses) != n:
+        raise InputError(
+            f"{len(poses)} views in meta.json but {n} images in {level}: "
+            f"{scene_dir.parent / 'meta.json'}"
+        )
+    c2w = np.asarray(poses, dtype=np.float64)
+    # OpenGL (right, up, backwards) → OpenCV (right, down, forward).
+    return c2w[:, :3, :3] * np.array([1.0, -1.0, -1.0]), c2w[:, :3, 3]
 
 
 # --------------------------------------------------------------------------- COLMAP
@@ -261,21 +291,31 @@ def _thresholds() -> dict:
 def check_scene(scene_dir: Path, *, factor: int | None = None, workdir: Path | None = None) -> dict:
     """Run COLMAP on one LLFF scene and compare its poses with `poses_bounds.npy`.
 
-    Returns the JSON report: registered, total, views [{index, name, registered,
-    rot_err_deg, center_err_rel, reproj_px, ok, ...}], median errors, pass, verdict
-    ("pass", "fail" or "not checkable: N features"), reason, thresholds, seconds.
+    Returns the JSON report: registered, total, median_features, colmap_mean_reproj_px,
+    views [{index, name, registered, rot_err_deg, center_err_rel, reproj_px, ok, ...}],
+    median errors, pass, verdict ("pass", "fail" or "not checkable: N features"),
+    reason, thresholds, seconds, pose_reference ("written" or "mean_latent"). A blur
+    level of a build setting is compared with its mean latent poses (meta.json); then
+    `written_pose` holds the written pose's errors and verdict, and each view its
+    `written_*` errors and `written_to_mean_deg` / `written_to_mean_rel`.
     `workdir` keeps COLMAP's database and sparse model (a temporary directory otherwise).
     Raises InputError / ConfigError for a scene that cannot be read.
     """
     scene_dir = Path(scene_dir)
     t0 = time.perf_counter()
     image_dir, names, intr, rot_ours, c_ours = _load_scene(scene_dir, factor)
+    mean = mean_latent_poses(scene_dir, len(names))
     with tempfile.TemporaryDirectory(prefix="blurset-colmap-") as tmp:
         wd = Path(workdir) if workdir is not None else Path(tmp)
         wd.mkdir(parents=True, exist_ok=True)
         features, rec = _run_colmap(image_dir, names, intr, wd)
         t1 = time.perf_counter()
         report = _report(names, features, rec, rot_ours, c_ours)
+        if mean is not None:
+            at_mean = _report(names, features, rec, *mean)
+            report = _beside_written(at_mean, report, (rot_ours, c_ours), mean)
+        else:
+            report["pose_reference"] = "written"
     report["scene"] = str(scene_dir)
     report["image_dir"] = image_dir.name
     report["intrinsics"] = {"w": intr[0], "h": intr[1], "focal": intr[2]}
@@ -391,6 +431,11 @@ def _report(names, features, rec, rot_ours, c_ours) -> dict:
         "total": n,
         "registered_fraction": len(reg_idx) / n,
         "median_features": median_feats,
+        # COLMAP's own mean reprojection error over all its observations: how well its
+        # reconstruction explains the features, independent of our poses.
+        "colmap_mean_reproj_px": (
+            float(rec.compute_mean_reprojection_error()) if reg_idx else None
+        ),
         "views": views,
         "median_rot_err_deg": None,
         "median_center_err_rel": None,
@@ -472,6 +517,43 @@ def _report(names, features, rec, rot_ours, c_ours) -> dict:
     return report
 
 
+def _beside_written(report: dict, written: dict, ours, mean) -> dict:
+    """The mean-pose report (it decides), with the written pose's errors and the offset
+    from the written pose to the mean latent pose beside it, per view and as medians."""
+    (rot_w, c_w), (rot_m, c_m) = ours, mean
+    offset_deg = _angle_deg(np.einsum("nji,njk->nik", rot_w, rot_m))
+    # Relative to the camera distance from the object centre (the world origin).
+    distance = float(np.mean(np.linalg.norm(c_w, axis=1))) or 1.0
+    offset_rel = np.linalg.norm(c_m - c_w, axis=1) / distance
+    for v, w, deg, rel in zip(
+        report["views"], written["views"], offset_deg, offset_rel, strict=True
+    ):
+        v.update(
+            written_rot_err_deg=w["rot_err_deg"],
+            written_center_err_rel=w["center_err_rel"],
+            written_ok=w["ok"],
+            written_to_mean_deg=float(deg),
+            written_to_mean_rel=float(rel),
+        )
+    keep = (
+        "verdict pass median_rot_err_deg median_center_err_rel median_reproj_px "
+        "agree_with_colmap failed_views reason"
+    ).split()
+    report["written_pose"] = {k: written.get(k) for k in keep}
+    report["written_pose"]["ok_views"] = sum(bool(v["ok"]) for v in written["views"])
+    report["pose_reference"] = "mean_latent"
+    report["median_written_to_mean_deg"] = float(np.median(offset_deg))
+    report["median_written_to_mean_rel"] = float(np.median(offset_rel))
+    if report["registered"] >= MIN_REGISTERED_VIEWS:
+        report["reason"] += (
+            f" (against the mean latent poses; the written poses are "
+            f"{_fmt(written.get('median_rot_err_deg'), '.2f')} deg off, "
+            f"{report['written_pose']['ok_views']}/{written['registered']} consistent; "
+            f"written-to-mean offset median {report['median_written_to_mean_deg']:.2f} deg)"
+        )
+    return report
+
+
 def _finite(x):
     """JSON has no inf or NaN: a value that is not finite is reported as null."""
     if isinstance(x, float):
@@ -529,7 +611,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--level",
         default="sharp",
-        help="level directory of a build setting to check: sharp, blur_<l> (default sharp); `all` checks "
+        help="level directory of a build setting to check: sharp, blur_<l> (default sharp; a "
+        "blur level is compared with its mean latent poses from meta.json); `all` checks "
         "every level and prints how blur degrades SfM (the exit code follows sharp)",
     )
     parser.add_argument(
@@ -551,28 +634,65 @@ def _fmt(x, spec: str) -> str:
 
 def _summary(label: str, r: dict) -> str:
     secs = sum(r["seconds"].values())
+    against = " (vs mean latent pose)" if r.get("pose_reference") == "mean_latent" else ""
     return (
         f"{label}: {r['verdict']} — {r['registered']}/{r['total']} registered, "
-        f"median rotation error {_fmt(r['median_rot_err_deg'], '.3f')} deg, "
+        f"median rotation error{against} {_fmt(r['median_rot_err_deg'], '.3f')} deg, "
         f"median centre error {_fmt(r['median_center_err_rel'], '.2%')}, "
         f"median reprojection {_fmt(r.get('median_reproj_px'), '.2f')} px "
         f"({secs:.1f} s)\n  {r['reason']}"
     )
 
 
+def _change(level: str, x, ref, ratio: bool) -> str:
+    """A blur level's value against the sharp level's: a percentage, or a factor."""
+    if level == layout.SHARP or x is None or not ref:
+        return ""
+    return f" (×{x / ref:.1f})" if ratio else f" ({x / ref - 1:+.0%})"
+
+
+TABLE_COLUMNS = [
+    ("level", "<8"),
+    ("registered", ">10"),
+    ("SIFT/image", ">13"),
+    ("COLMAP reproj px", ">16"),
+    ("rot err deg", ">11"),
+    ("written deg", ">11"),
+    ("p→mean deg", ">10"),
+    ("centre err", ">10"),
+]
+
+
 def _table(reports: dict[str, dict]) -> str:
-    head = (
-        f"{'level':<8} {'registered':>10} {'median rot (deg)':>17} {'median centre':>14} "
-        f"{'features':>9}  verdict"
-    )
+    """What blur changes in SfM first (registered views, SIFT features per image, COLMAP's
+    own reprojection error, each against sharp), then the pose errors: against the mean
+    latent pose (which decides a blur level), against the written pose, and the offset
+    from the one to the other."""
+    head = " ".join(format(name, spec) for name, spec in TABLE_COLUMNS) + "  verdict"
     rows = [head, "-" * len(head)]
+    sharp = reports.get(layout.SHARP, {})
     for level, r in reports.items():
+        written = r.get("written_pose", {}).get("median_rot_err_deg", r["median_rot_err_deg"])
+        feats, reproj = r["median_features"], r.get("colmap_mean_reproj_px")
+        cells = [
+            level,
+            f"{r['registered']}/{r['total']}",
+            f"{feats}{_change(level, feats, sharp.get('median_features'), False)}",
+            _fmt(reproj, ".2f") + _change(level, reproj, sharp.get("colmap_mean_reproj_px"), True),
+            _fmt(r["median_rot_err_deg"], ".3f"),
+            _fmt(written, ".3f"),
+            _fmt(r.get("median_written_to_mean_deg"), ".3f"),
+            _fmt(r["median_center_err_rel"], ".2%"),
+        ]
         rows.append(
-            f"{level:<8} {r['registered_fraction']:>10.0%} "
-            f"{_fmt(r['median_rot_err_deg'], '.3f'):>17} "
-            f"{_fmt(r['median_center_err_rel'], '.2%'):>14} "
-            f"{r['median_features']:>9}  {r['verdict']}"
+            " ".join(format(c, spec) for c, (_, spec) in zip(cells, TABLE_COLUMNS, strict=True))
+            + f"  {r['verdict']}"
         )
+    rows.append(
+        "rot err: median against each blurry exposure's mean latent pose (the written pose "
+        "for sharp); it decides the verdict. written: against the written pose p. "
+        "p→mean: from p to the mean latent pose (half the blur under --trajectory start)."
+    )
     return "\n".join(rows)
 
 

@@ -62,6 +62,13 @@ def setting_levels(setting: Path) -> list[str]:
     return _core.setting_levels(setting)
 
 
+def mean_poses(setting: Path, level: str) -> list[list[list[float]]] | None:
+    """The mean latent pose (OpenGL c2w rows) of every view of blur level `level`
+    (`blur_<l>`) from the setting's meta.json; None for a meta.json from before mean
+    poses. InputError naming the file when it lacks the level or a pose is not finite."""
+    return _core.read_mean_poses(Path(setting) / "meta.json", _core.parse_level_dir(level))
+
+
 def gain_name(g: float) -> str:
     """Directory name of a noise gain: gain_4, gain_2.5."""
     return _core.gain_name(g)

@@ -79,6 +79,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--latent-positions", choices=["random", "stratified"], help="latent positions (random)"
     )
     p.add_argument(
+        "--trajectory",
+        choices=["start", "centered"],
+        help="where the written pose p sits on each blurry image's camera path: its start "
+        "(the paper; default) or its middle, so sharp image, pose and exposure coincide",
+    )
+    p.add_argument(
         "--keep-linear",
         "--write-linear",
         dest="write_linear",
@@ -180,8 +186,8 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
         for k in (
             "objects out demo settings_per_object views latents latents_max max_ghost_px "
             "samples samples_total blur_method sharp_samples latent_sampling light_paths "
-            "device gpus gpus_per_task resolution "
-            "seed fov_deg latent_positions write_linear workers threads executor shard timeout "
+            "device gpus gpus_per_task resolution seed fov_deg latent_positions trajectory "
+            "write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "
             "ray_address objaverse_dir objaverse_offline objaverse_count "
             "blender check_poses previews allow_mixed view_stride test_settings "

@@ -61,7 +61,7 @@ pub use crate::dataset::manifest::{
     check_manifest, list_files as manifest_files, sha256_file, update_manifest, write_manifest,
     ManifestProblem, MANIFEST,
 };
-pub use crate::dataset::meta::{write_json, Meta, ObjectRecord, Timings};
+pub use crate::dataset::meta::{read_mean_poses, write_json, Meta, ObjectRecord, Timings};
 pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
 pub use crate::dataset::splits::{
     make_splits, seeded_subset, test_views, Holdout, SettingEntry, Splits,

@@ -52,6 +52,17 @@ fn setting_levels(py: Python<'_>, setting: PathBuf) -> PyResult<Vec<String>> {
     crate::run_detached(py, || core::setting_levels(&setting))
 }
 
+/// The mean latent pose (OpenGL c2w rows) of blur level `level` of every view of a
+/// setting's meta.json, or None for a meta.json from before mean poses.
+#[pyfunction]
+fn read_mean_poses(
+    py: Python<'_>,
+    meta: PathBuf,
+    level: u32,
+) -> PyResult<Option<Vec<[[f64; 4]; 4]>>> {
+    crate::run_detached(py, || core::read_mean_poses(&meta, level))
+}
+
 /// Directory name of a noise gain (`gain_4`, `gain_2.5`).
 #[pyfunction]
 fn gain_name(gain: f64) -> String {
@@ -150,6 +161,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(parse_level_dir, m)?)?;
     m.add_function(wrap_pyfunction!(sort_level_dirs, m)?)?;
     m.add_function(wrap_pyfunction!(setting_levels, m)?)?;
+    m.add_function(wrap_pyfunction!(read_mean_poses, m)?)?;
     m.add_function(wrap_pyfunction!(gain_name, m)?)?;
     m.add_function(wrap_pyfunction!(partial_dir, m)?)?;
     m.add_function(wrap_pyfunction!(is_complete, m)?)?;

@@ -325,6 +325,71 @@ pub struct ReadMeta {
     pub test_views: Option<Vec<u64>>,
 }
 
+// -- what `blurset check-poses` reads: the mean latent poses of a blur level -----------
+
+#[derive(Deserialize)]
+struct PoseRead {
+    c2w: [[f64; 4]; 4],
+}
+
+#[derive(Deserialize)]
+struct LevelPoseRead {
+    #[serde(default)]
+    mean_pose: Option<PoseRead>,
+}
+
+#[derive(Deserialize)]
+struct ViewPoseRead {
+    c2w: [[f64; 4]; 4],
+    #[serde(default)]
+    levels: BTreeMap<String, LevelPoseRead>,
+}
+
+#[derive(Deserialize)]
+struct MetaPoseRead {
+    views: Vec<ViewPoseRead>,
+    #[serde(default)]
+    test_views: Vec<usize>,
+    #[serde(default = "blurry")]
+    test_view_images: String,
+}
+
+/// The mean latent pose (OpenGL camera-to-world, row-major) of blur level `level` of every
+/// view of a setting's meta.json, in view order: the pose a blurry image's content is
+/// centred on, which check-poses compares SfM with. A test view whose blur levels hold the
+/// sharp image (`test_view_images` sharp) gets its written pose: that image was rendered
+/// there. None when the meta.json predates mean poses; an error naming the file when it is unreadable, lacks the level, or a pose
+/// is not finite.
+pub fn read_mean_poses(path: &Path, level: u32) -> Result<Option<Vec<[[f64; 4]; 4]>>> {
+    let bad = |reason: String| Error::Input {
+        reason,
+        path: path.to_path_buf(),
+    };
+    let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read meta.json", path, e))?;
+    let meta: MetaPoseRead =
+        serde_json::from_slice(&bytes).map_err(|e| bad(format!("corrupt meta.json ({e})")))?;
+    let key = level.to_string();
+    let mut poses = Vec::with_capacity(meta.views.len());
+    for (i, v) in meta.views.iter().enumerate() {
+        let lp = v
+            .levels
+            .get(&key)
+            .ok_or_else(|| bad(format!("view {i} of meta.json has no blur level {level}")))?;
+        let Some(mp) = &lp.mean_pose else {
+            return Ok(None);
+        };
+        let sharp_copy = meta.test_view_images == "sharp" && meta.test_views.contains(&i);
+        let c2w = if sharp_copy { v.c2w } else { mp.c2w };
+        if !c2w.iter().flatten().all(|x| x.is_finite()) {
+            return Err(bad(format!(
+                "view {i}: the mean pose of blur level {level} is not finite"
+            )));
+        }
+        poses.push(c2w);
+    }
+    Ok(Some(poses))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -381,8 +446,57 @@ mod tests {
         );
         assert!(serde_json::from_str::<ObjectRecord>(r#"{"source": "/home/u/a.glb"}"#).is_err());
         assert!(v.get("pose_check").is_none());
-        let back: ReadMeta = serde_json::from_value(v).map_err(|e| Error::Value(e.to_string()))?;
+        let back: ReadMeta =
+            serde_json::from_value(v.clone()).map_err(|e| Error::Value(e.to_string()))?;
         assert_eq!((back.views.len(), back.views[2].levels.len()), (3, 2));
+        // check-poses reads each view's mean latent pose of a level back whole.
+        let dir = std::env::temp_dir().join(format!("blurset-meta-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io("mkdir", &dir, e))?;
+        let path = dir.join("meta.json");
+        meta.write(&path)?;
+        let poses = read_mean_poses(&path, 3)?.expect("mean poses");
+        // A test view holds the sharp image in its blur levels: its pose is the written one.
+        assert_eq!(
+            (meta.test_views.as_slice(), meta.test_view_images.as_str()),
+            (&[0][..], "sharp")
+        );
+        let want: Vec<_> = plan
+            .views
+            .iter()
+            .map(|v| match v.index {
+                0 => v.c2w,
+                _ => v.levels["3"].mean_pose.c2w,
+            })
+            .collect();
+        assert_eq!(poses, want);
+        assert_ne!(plan.views[0].c2w, plan.views[0].levels["3"].mean_pose.c2w);
+        let mut blurry = v.clone();
+        blurry["test_view_images"] = "blurry".into();
+        write_json(&path, &blurry)?;
+        let poses = read_mean_poses(&path, 3)?.expect("mean poses");
+        assert_eq!(poses[0], plan.views[0].levels["3"].mean_pose.c2w);
+        assert!(matches!(
+            read_mean_poses(&path, 2),
+            Err(Error::Input { .. })
+        ));
+        let mut old = v.clone();
+        for view in old["views"].as_array_mut().expect("views") {
+            for lvl in view["levels"].as_object_mut().expect("levels").values_mut() {
+                lvl.as_object_mut().expect("level").remove("mean_pose");
+            }
+        }
+        write_json(&path, &old)?;
+        assert_eq!(
+            read_mean_poses(&path, 1)?,
+            None,
+            "a meta.json from before mean poses"
+        );
+        std::fs::write(&path, b"{").map_err(|e| Error::io("write", &path, e))?;
+        assert!(matches!(
+            read_mean_poses(&path, 1),
+            Err(Error::Input { .. })
+        ));
+        std::fs::remove_dir_all(&dir).map_err(|e| Error::io("rm", &dir, e))?;
         assert!(Meta::new(
             &plan,
             &cfg,

@@ -6,7 +6,8 @@
 //! and the range (`views -1: must be an integer in 1..=4096`), never a parser position.
 //! The sampling options form the [`SamplingConfig`] of every setting's plan.
 use super::sampling::{
-    BlurMethod, LatentPositions, LatentSampling, SamplingConfig, MAX_COUNT, MAX_SAMPLES,
+    BlurMethod, LatentPositions, LatentSampling, SamplingConfig, TrajectoryAnchor, MAX_COUNT,
+    MAX_SAMPLES,
 };
 use super::weights::Guards;
 use crate::dataset::layout::{self, MAX_LEVEL};
@@ -385,6 +386,7 @@ pub mod specs {
     pub const ORIENTATION_MAX: Spec = Spec::num(1.0, false, f64::INFINITY, false);
     pub const NEAR_FLOOR: Spec = Spec::num(0.0, true, f64::INFINITY, false);
     pub const LATENT_POSITIONS: Spec = Spec::Choice(&["random", "stratified"]);
+    pub const TRAJECTORY: Spec = Spec::Choice(&["start", "centered"]);
     pub const BLUR_METHOD: Spec = Spec::Choice(&["average", "motion_blur"]);
     pub const EXECUTOR: Spec = Spec::Choice(&["local", "ray"]);
     pub const LATENT_SAMPLING: Spec = Spec::Choice(&["subsets", "independent"]);
@@ -510,6 +512,9 @@ build_config! {
     radius_margin: f64 = SAMPLING().radius_margin, specs::RADIUS_MARGIN;
     level_spread: f64 = SAMPLING().level_spread, specs::LEVEL_SPREAD;
     latent_positions: String = "random".into(), specs::LATENT_POSITIONS;
+    /// Where the written pose p sits on a blurry image's segment: `start` (the paper's
+    /// U(p, p + w_l·δ)) or `centered` (U(p − w_l·δ/2, p + w_l·δ/2)).
+    trajectory: String = "start".into(), specs::TRAJECTORY;
     orientation_max: f64 = SAMPLING().guards.orientation_max, specs::ORIENTATION_MAX;
     near_floor: f64 = SAMPLING().guards.near_floor, specs::NEAR_FLOOR;
     /// Linear RGB the transparent film is composited over.
@@ -668,6 +673,11 @@ impl BuildConfig {
                 LatentPositions::Stratified
             } else {
                 LatentPositions::Random
+            },
+            trajectory: if self.trajectory == "centered" {
+                TrajectoryAnchor::Centered
+            } else {
+                TrajectoryAnchor::Start
             },
             resolution: self.resolution,
             guards: Guards {

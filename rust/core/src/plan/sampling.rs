@@ -21,6 +21,29 @@ pub enum LatentPositions {
     Stratified,
 }
 
+/// Where the written pose p sits on a blurry image's segment (DESIGN §2, §12). The same
+/// seeded draws, δ and w_l either way; only the latent positions t move by ½.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum TrajectoryAnchor {
+    /// The paper's U(p, p + w_l·δ): the exposure starts at p, t ∈ [0, 1].
+    #[default]
+    Start,
+    /// U(p − w_l·δ/2, p + w_l·δ/2), t ∈ [−½, ½]: the sharp image, the written pose and
+    /// the exposure's middle coincide, which is what SfM recovers from a blurry image.
+    Centered,
+}
+
+impl TrajectoryAnchor {
+    /// The latent position t at which the exposure opens; it closes at `t_open() + 1`.
+    pub fn t_open(self) -> f64 {
+        match self {
+            TrajectoryAnchor::Start => 0.0,
+            TrajectoryAnchor::Centered => -0.5,
+        }
+    }
+}
+
 /// How a blurry image is made from its trajectory segment.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -81,6 +104,8 @@ pub struct SamplingConfig {
     /// m of every blurry image (the paper's 34), unless `latents_auto`.
     pub latents: usize,
     pub latent_positions: LatentPositions,
+    /// Where p sits on the segment: its start (the paper) or its middle.
+    pub trajectory: TrajectoryAnchor,
     pub resolution: u32,
     pub guards: Guards,
     /// Choose m per view and level: the smallest m whose latent frames leave no gap
@@ -111,6 +136,7 @@ impl Default for SamplingConfig {
             level_spread: 0.1,
             latents: 34,
             latent_positions: LatentPositions::Random,
+            trajectory: TrajectoryAnchor::Start,
             resolution: 512,
             guards: Guards::default(),
             latents_auto: false,
@@ -260,7 +286,8 @@ pub struct Trajectory {
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct LatentFrame {
-    /// Position on the segment, 0 = p, 1 = p + w_l · δ.
+    /// Position on the segment: the camera at p + t · w_l · δ, with t ∈ [0, 1] when the
+    /// trajectory starts at p and t ∈ [−½, ½] when it is centred on p.
     pub t: f64,
     pub r: f64,
     pub phi_deg: f64,
@@ -275,7 +302,8 @@ pub struct LatentFrame {
     pub c2w: [[f64; 4]; 4],
 }
 
-/// One camera keyframe of the motion blur method: position t on the segment.
+/// One camera keyframe of the motion blur method: position t on the segment (as in
+/// `LatentFrame`).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct MotionKey {
     pub t: f64,
@@ -287,9 +315,10 @@ pub struct MotionKey {
 }
 
 /// The single render of a blurry image made by Cycles motion blur: the camera is
-/// keyframed at t_k = k / 2^steps (k = 0..=2^steps) over a shutter of one frame that
-/// opens at t = 0, and Cycles gets `motion_steps` = steps on the camera object, so its
-/// motion steps fall exactly on the keys.
+/// keyframed at t_k = t_open + k / 2^steps (k = 0..=2^steps; t_open = 0, or −½ for a
+/// centred trajectory) over a shutter of one frame that opens at the first key, and
+/// Cycles gets `motion_steps` = steps on the camera object, so its motion steps fall
+/// exactly on the keys.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct MotionBlurPlan<K = MotionKey> {
     pub seed: u32,
@@ -300,6 +329,20 @@ pub struct MotionBlurPlan<K = MotionKey> {
     pub keys: Vec<K>,
 }
 
+/// The camera at the mean latent position t̄ of a blurry image: the pose its content is
+/// centred on, which SfM recovers from it (DESIGN §12). The average method's t̄ is the
+/// mean of its drawn t; the motion blur method's exposure is uniform over the segment,
+/// so its t̄ is the segment's middle.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MeanPose {
+    pub t: f64,
+    pub r: f64,
+    pub phi_deg: f64,
+    pub theta_deg: f64,
+    /// OpenGL camera-to-world, row-major.
+    pub c2w: [[f64; 4]; 4],
+}
+
 /// One blur level of a view; `F` and `K` are its latent frames and motion keys (the
 /// plan's, or meta.json's records of them, which drop the camera matrices).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -308,11 +351,12 @@ pub struct LevelPlan<F = LatentFrame, K = MotionKey> {
     pub w_l: f64,
     /// m, the number of latent frames averaged (1 for the motion blur method: one render).
     pub latents: usize,
-    /// Largest screen motion (px) of a bounding-box corner from p to p + w_l · δ.
+    /// Largest screen motion (px) of a bounding-box corner from the segment's start to
+    /// its end (p to p + w_l · δ, or p ∓ w_l · δ / 2 when centred).
     pub motion_px: f64,
     /// Largest screen motion (px) between consecutive latent frames, the ends of the
-    /// segment counted as one gap (0 → t_1 plus t_m → 1), so one frame has the whole
-    /// motion as its gap; ghosting shows when it exceeds ~1 px. 0 for motion blur.
+    /// segment counted as one gap (start → t_1 plus t_m → end), so one frame has the
+    /// whole motion as its gap; ghosting shows when it exceeds ~1 px. 0 for motion blur.
     pub max_gap_px: f64,
     pub method: BlurMethod,
     /// Cycles samples of each render of this image (the length of a frame's block).
@@ -324,6 +368,9 @@ pub struct LevelPlan<F = LatentFrame, K = MotionKey> {
     pub latent_frames: Vec<F>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion_blur: Option<MotionBlurPlan<K>>,
+    /// The camera at the mean latent position (kept whole in meta.json: check-poses
+    /// compares a blur level's reconstruction with it).
+    pub mean_pose: MeanPose,
 }
 
 impl<F, K> LevelPlan<F, K> {
@@ -349,6 +396,7 @@ impl<F, K> LevelPlan<F, K> {
                 interpolation_error_px: mb.interpolation_error_px,
                 keys: mb.keys.iter().map(k).collect(),
             }),
+            mean_pose: self.mean_pose.clone(),
         }
     }
 }
@@ -450,8 +498,10 @@ pub fn sample_view(cfg: &SamplingConfig, seed: u64, theta0_deg: f64, index: usiz
     }
 }
 
-/// w_l and m latent positions of one level. w_l is the stream's first draw, so it does
-/// not depend on m, and a given m always gets the same positions.
+/// w_l and m latent positions of one level, sorted, on the anchored segment (t ∈ [0, 1)
+/// from p, or shifted by −½ when centred on p). w_l is the stream's first draw, so it
+/// does not depend on m, and a given m always gets the same positions under either
+/// anchor.
 pub fn sample_level_m(
     cfg: &SamplingConfig,
     seed: u64,
@@ -463,10 +513,11 @@ pub fn sample_level_m(
     let mut s = Stream::new(seed, stream_id(index, level as u64));
     let (lo, hi) = level_interval(w_u, level, cfg.level_spread);
     let w_l = s.uniform_in(lo, hi);
+    let open = cfg.trajectory.t_open();
     let mut t: Vec<f64> = match cfg.latent_positions {
-        LatentPositions::Random => (0..m).map(|_| s.uniform()).collect(),
+        LatentPositions::Random => (0..m).map(|_| open + s.uniform()).collect(),
         LatentPositions::Stratified => (0..m)
-            .map(|i| (i as f64 + s.uniform()) / m as f64)
+            .map(|i| open + (i as f64 + s.uniform()) / m as f64)
             .collect(),
     };
     t.sort_by(|a, b| a.total_cmp(b));
@@ -536,7 +587,7 @@ fn motion(a: &CornerPoints, b: &CornerPoints) -> f64 {
 }
 
 /// Largest gap (px) between consecutive latent frames `pts` (sorted by t) on the path
-/// from `start` (t = 0) to `end` (t = 1). The two uncovered ends of the segment count
+/// from `start` to `end`, the segment's ends. The two uncovered ends of the segment count
 /// together as one more gap, so the gaps always add up to at least the whole motion:
 /// one frame has the whole motion as its gap, and m frames leave a gap ≥ motion / m.
 fn max_gap(pts: &[CornerPoints], start: &CornerPoints, end: &CornerPoints) -> f64 {
@@ -549,8 +600,10 @@ fn max_gap(pts: &[CornerPoints], start: &CornerPoints, end: &CornerPoints) -> f6
         .fold(ends, f64::max)
 }
 
-/// The camera of position t ∈ [0, 1] on one level's segment, p → p + w_l · δ.
+/// The camera of position t on one level's segment, p + t · w_l · δ for t from `open`
+/// to `open + 1`.
 struct Segment<'a> {
+    open: f64,
     r: f64,
     phi_deg: f64,
     theta_deg: f64,
@@ -571,6 +624,22 @@ impl Segment<'_> {
         );
         ((r, phi, theta), orbit_c2w(r, phi, theta))
     }
+
+    /// The cameras where the exposure opens and closes.
+    fn ends(&self) -> (DMat4, DMat4) {
+        (self.at(self.open).1, self.at(self.open + 1.0).1)
+    }
+
+    fn mean_pose(&self, t: f64) -> MeanPose {
+        let ((r, phi_deg, theta_deg), m) = self.at(t);
+        MeanPose {
+            t,
+            r,
+            phi_deg,
+            theta_deg,
+            c2w: rows(&m),
+        }
+    }
 }
 
 /// The latent positions of one level and their screen gap: `cfg.latents` of them, or
@@ -588,8 +657,8 @@ fn latent_positions(
     screen: &Screen,
     motion_px: f64,
 ) -> (Vec<f64>, f64) {
-    let start = screen.points(&seg.at(0.0).1);
-    let end = screen.points(&seg.at(1.0).1);
+    let (open, close) = seg.ends();
+    let (start, end) = (screen.points(&open), screen.points(&close));
     let gap_of = |ts: &[f64]| {
         let pts: Vec<CornerPoints> = ts.iter().map(|&t| screen.points(&seg.at(t).1)).collect();
         max_gap(&pts, &start, &end)
@@ -613,7 +682,7 @@ fn latent_positions(
     best
 }
 
-/// Keys of the motion blur method: 2^n + 1 cameras at t_k = k / 2^n, with the smallest
+/// Keys of the motion blur method: 2^n + 1 cameras at t_k = open + k / 2^n, with the smallest
 /// n in MOTION_STEPS_RANGE for which Cycles' interpolation between keys (linear in
 /// position, slerp in rotation) stays within MOTION_KEY_TOLERANCE_PX of the true
 /// camera at the middle of every interval. Returns (n, error px, keys).
@@ -622,16 +691,16 @@ fn motion_keys(seg: &Segment, screen: &Screen) -> (u32, f64, Vec<MotionKey>) {
     let mut out = (hi, f64::INFINITY, Vec::new());
     for n in lo..=hi {
         let intervals = 1usize << n;
-        let cams: Vec<((f64, f64, f64), DMat4)> = (0..=intervals)
-            .map(|k| seg.at(k as f64 / intervals as f64))
-            .collect();
+        let t_of = |k: f64| seg.open + k / intervals as f64;
+        let cams: Vec<((f64, f64, f64), DMat4)> =
+            (0..=intervals).map(|k| seg.at(t_of(k as f64))).collect();
         let err = (0..intervals)
             .map(|k| {
                 let (a, b) = (&cams[k].1, &cams[k + 1].1);
                 let (_, qa, ta) = a.to_scale_rotation_translation();
                 let (_, qb, tb) = b.to_scale_rotation_translation();
                 let mid = DMat4::from_rotation_translation(qa.slerp(qb, 0.5), ta.lerp(tb, 0.5));
-                let exact = seg.at((k as f64 + 0.5) / intervals as f64).1;
+                let exact = seg.at(t_of(k as f64 + 0.5)).1;
                 motion(&screen.points(&mid), &screen.points(&exact))
             })
             .fold(0.0, f64::max);
@@ -639,7 +708,7 @@ fn motion_keys(seg: &Segment, screen: &Screen) -> (u32, f64, Vec<MotionKey>) {
             .iter()
             .enumerate()
             .map(|(k, ((r, phi, theta), m))| MotionKey {
-                t: k as f64 / intervals as f64,
+                t: t_of(k as f64),
                 r: *r,
                 phi_deg: *phi,
                 theta_deg: *theta,
@@ -727,6 +796,7 @@ pub fn plan_setting(
                     };
                     let (w_l, _) = sample_level_m(cfg, seed, index, level, w.w_u, 0);
                     let seg = Segment {
+                        open: cfg.trajectory.t_open(),
                         r: radius,
                         phi_deg: v.phi_deg,
                         theta_deg: v.theta_deg,
@@ -734,7 +804,8 @@ pub fn plan_setting(
                         w_l,
                         r_min,
                     };
-                    let motion_px = motion(&screen.points(&c2w), &screen.points(&seg.at(1.0).1));
+                    let (open, close) = seg.ends();
+                    let motion_px = motion(&screen.points(&open), &screen.points(&close));
                     let plan = match cfg.blur_method {
                         BlurMethod::Average => {
                             let draw = |m| sample_level_m(cfg, seed, index, level, w.w_u, m).1;
@@ -757,6 +828,7 @@ pub fn plan_setting(
                                     }
                                 })
                                 .collect();
+                            let mean_t = ts.iter().sum::<f64>() / ts.len().max(1) as f64;
                             LevelPlan {
                                 w_l,
                                 latents: ts.len(),
@@ -768,6 +840,7 @@ pub fn plan_setting(
                                 sample_sequence,
                                 latent_frames,
                                 motion_blur: None,
+                                mean_pose: seg.mean_pose(mean_t),
                             }
                         }
                         BlurMethod::MotionBlur => {
@@ -789,6 +862,7 @@ pub fn plan_setting(
                                     interpolation_error_px,
                                     keys,
                                 }),
+                                mean_pose: seg.mean_pose(seg.open + 0.5),
                             }
                         }
                     };
@@ -1084,11 +1158,15 @@ mod tests {
 
     #[test]
     fn auto_latents_meet_the_ghost_bound_and_follow_the_motion() {
-        for positions in [LatentPositions::Stratified, LatentPositions::Random] {
+        let cases = [LatentPositions::Stratified, LatentPositions::Random]
+            .into_iter()
+            .flat_map(|p| ANCHORS.map(|a| (p, a)));
+        for (positions, trajectory) in cases {
             let cfg = SamplingConfig {
                 latents_auto: true,
                 latents_max: MAX_COUNT,
                 latent_positions: positions,
+                trajectory,
                 views: 8,
                 ..Default::default()
             };
@@ -1147,9 +1225,16 @@ mod tests {
 
     #[test]
     fn auto_is_the_fixed_plan_at_its_m_and_capped() {
+        for trajectory in ANCHORS {
+            auto_is_the_fixed_plan(trajectory);
+        }
+    }
+
+    fn auto_is_the_fixed_plan(trajectory: TrajectoryAnchor) {
         let auto = SamplingConfig {
             latents_auto: true,
             latent_positions: LatentPositions::Stratified,
+            trajectory,
             views: 6,
             ..Default::default()
         };
@@ -1176,8 +1261,15 @@ mod tests {
 
     #[test]
     fn gaps_add_up_to_at_least_the_motion() {
+        for trajectory in ANCHORS {
+            gaps_add_up(trajectory);
+        }
+    }
+
+    fn gaps_add_up(trajectory: TrajectoryAnchor) {
         let cfg = SamplingConfig {
             latents: 7,
+            trajectory,
             ..Default::default()
         };
         let p = plan(&cfg, 5, [1.0, 0.5, 0.5]);
@@ -1233,13 +1325,21 @@ mod tests {
 
     #[test]
     fn motion_blur_keys_follow_the_segment() {
+        for trajectory in ANCHORS {
+            motion_blur_keys(trajectory);
+        }
+    }
+
+    fn motion_blur_keys(trajectory: TrajectoryAnchor) {
         let cfg = SamplingConfig {
             blur_method: BlurMethod::MotionBlur,
+            trajectory,
             views: 8,
             ..Default::default()
         };
         let avg = SamplingConfig {
             latents: 3,
+            trajectory,
             views: 8,
             ..Default::default()
         };
@@ -1253,8 +1353,17 @@ mod tests {
                 assert_eq!((lp.latents, lp.latent_frames.len()), (1, 0));
                 assert_eq!(mb.keys.len(), (1 << mb.motion_steps) + 1);
                 assert!(mb.interpolation_error_px <= MOTION_KEY_TOLERANCE_PX);
-                assert_eq!(mb.keys[0].c2w, v.c2w, "the shutter opens at p");
-                assert_eq!(mb.keys.last().map(|k| k.t), Some(1.0));
+                // The shutter opens at p (start), or p is the middle key (centred).
+                let (open, at_p) = match trajectory {
+                    TrajectoryAnchor::Start => (0.0, 0),
+                    TrajectoryAnchor::Centered => (-0.5, mb.keys.len() / 2),
+                };
+                assert_eq!(mb.keys[0].t, open);
+                assert_eq!(mb.keys.last().map(|k| k.t), Some(open + 1.0));
+                assert_eq!((mb.keys[at_p].t, &mb.keys[at_p].c2w), (0.0, &v.c2w));
+                // A uniform exposure over the segment: its mean pose is the middle key.
+                let mid = &mb.keys[mb.keys.len() / 2];
+                assert_eq!((lp.mean_pose.t, &lp.mean_pose.c2w), (mid.t, &mid.c2w));
                 // Same segment as the average method: the same w_l and motion.
                 assert_eq!(lp.w_l, va.levels[l].w_l);
                 assert_eq!(lp.motion_px, va.levels[l].motion_px);
@@ -1394,16 +1503,176 @@ mod tests {
         assert!(ind.validate().is_ok());
     }
 
+    const ANCHORS: [TrajectoryAnchor; 2] = [TrajectoryAnchor::Start, TrajectoryAnchor::Centered];
+
+    #[test]
+    fn centered_latents_lie_on_p_plus_t_w_delta_around_p() {
+        let d = [1.0, 0.7, 0.4];
+        let r_min = 1.05 * bounding_radius(d);
+        for positions in [LatentPositions::Random, LatentPositions::Stratified] {
+            let start = SamplingConfig {
+                latents: 9,
+                views: 6,
+                latent_positions: positions,
+                ..Default::default()
+            };
+            let centered = SamplingConfig {
+                trajectory: TrajectoryAnchor::Centered,
+                ..start.clone()
+            };
+            let (a, b) = (plan(&start, 21, d), plan(&centered, 21, d));
+            for (va, vb) in a.views.iter().zip(&b.views) {
+                // Same seeds: the same views, δ, sharp image and written pose.
+                assert_eq!(
+                    (
+                        va.phi_deg,
+                        va.theta_deg,
+                        va.trajectory,
+                        va.c2w,
+                        va.sharp_seed
+                    ),
+                    (
+                        vb.phi_deg,
+                        vb.theta_deg,
+                        vb.trajectory,
+                        vb.c2w,
+                        vb.sharp_seed
+                    )
+                );
+                for (l, lb) in &vb.levels {
+                    let la = &va.levels[l];
+                    assert_eq!(lb.w_l, la.w_l);
+                    for (fa, fb) in la.latent_frames.iter().zip(&lb.latent_frames) {
+                        // The same draw, half a segment earlier, with the same Cycles seed.
+                        assert_eq!((fb.t, fb.seed), (fa.t - 0.5, fa.seed));
+                        assert!((-0.5..=0.5).contains(&fb.t), "{}", fb.t);
+                        assert!((0.0..=1.0).contains(&fa.t), "{}", fa.t);
+                        // On p + t · w_l · δ, p the view's own pose.
+                        for (v, lp, f) in [(va, la, fa), (vb, lb, fb)] {
+                            let want = along(
+                                v.r,
+                                v.phi_deg,
+                                v.theta_deg,
+                                &v.trajectory,
+                                f.t * lp.w_l,
+                                r_min,
+                            );
+                            assert_eq!((f.r, f.phi_deg, f.theta_deg), want);
+                            assert_eq!(f.c2w, rows(&orbit_c2w(want.0, want.1, want.2)));
+                        }
+                    }
+                    // The mean latent pose: the camera at the mean t.
+                    for (v, lp) in [(va, la), (vb, lb)] {
+                        let ts: Vec<f64> = lp.latent_frames.iter().map(|f| f.t).collect();
+                        let mean = ts.iter().sum::<f64>() / ts.len() as f64;
+                        let mp = &lp.mean_pose;
+                        assert_eq!(mp.t, mean);
+                        let want = along(
+                            v.r,
+                            v.phi_deg,
+                            v.theta_deg,
+                            &v.trajectory,
+                            mean * lp.w_l,
+                            r_min,
+                        );
+                        assert_eq!((mp.r, mp.phi_deg, mp.theta_deg), want);
+                    }
+                    // Centred, the mean pose is about p: nine draws of U(−½, ½) average
+                    // within ±½ and, stratified, within ±1/(2·9) of 0.
+                    let bound = match positions {
+                        LatentPositions::Random => 0.5,
+                        LatentPositions::Stratified => 0.5 / 9.0 + 1e-12,
+                    };
+                    assert!(lb.mean_pose.t.abs() <= bound, "{}", lb.mean_pose.t);
+                    assert!((la.mean_pose.t - 0.5).abs() <= bound);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn centered_segment_has_p_in_its_middle_and_measures_its_own_ends() {
+        let d = [1.0, 0.5, 0.8];
+        let r_min = 1.05 * bounding_radius(d);
+        let cfg = SamplingConfig {
+            trajectory: TrajectoryAnchor::Centered,
+            latents: 5,
+            views: 6,
+            ..Default::default()
+        };
+        let p = plan(&cfg, 13, d);
+        let screen = Screen {
+            corners: corners(d),
+            focal: p.focal_px,
+            size: cfg.resolution as f64,
+        };
+        for v in &p.views {
+            for lp in v.levels.values() {
+                let end = |s: f64| {
+                    let (r, phi, theta) = along(
+                        v.r,
+                        v.phi_deg,
+                        v.theta_deg,
+                        &v.trajectory,
+                        s * lp.w_l,
+                        r_min,
+                    );
+                    ((r, phi, theta), orbit_c2w(r, phi, theta))
+                };
+                let ((r0, phi0, theta0), c0) = end(-0.5);
+                let ((r1, phi1, theta1), c1) = end(0.5);
+                // p is the middle of the segment in (r, φ, θ).
+                let mid = [
+                    (r0 + r1) / 2.0,
+                    (phi0 + phi1) / 2.0,
+                    (theta0 + theta1) / 2.0,
+                ];
+                for (m, want) in mid.iter().zip([v.r, v.phi_deg, v.theta_deg]) {
+                    assert!((m - want).abs() < 1e-9 * want.abs().max(1.0), "{m} {want}");
+                }
+                // Motion and gaps are measured between the centred segment's own ends.
+                let (a, b) = (screen.points(&c0), screen.points(&c1));
+                assert_eq!(lp.motion_px, motion(&a, &b));
+                let pts: Vec<CornerPoints> = lp
+                    .latent_frames
+                    .iter()
+                    .map(|f| screen.points(&c2w_of(&f.c2w)))
+                    .collect();
+                let gap = max_gap(&pts, &a, &b);
+                assert!(
+                    (lp.max_gap_px - gap).abs() < 1e-9,
+                    "{} {gap}",
+                    lp.max_gap_px
+                );
+            }
+        }
+    }
+
+    fn c2w_of(rows: &[[f64; 4]; 4]) -> DMat4 {
+        DMat4::from_cols_array_2d(rows).transpose()
+    }
+
+    #[test]
+    fn trajectory_anchor_defaults_to_start_and_reads_old_configs() {
+        let old: SamplingConfig = serde_json::from_str(r#"{"views": 3}"#).expect("json");
+        assert_eq!(old.trajectory, TrajectoryAnchor::Start);
+        let c: SamplingConfig =
+            serde_json::from_str(r#"{"trajectory": "centered"}"#).expect("json");
+        assert_eq!(c.trajectory, TrajectoryAnchor::Centered);
+        assert!(serde_json::from_str::<SamplingConfig>(r#"{"trajectory": "middle"}"#).is_err());
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(48))]
         #[test]
         fn plans_are_finite_and_in_range(
             seed in any::<u64>(), theta0 in 0.0f64..360.0,
             phi0 in 10.0f64..170.0, window in 0.0f64..9.0, delta0 in 0.0f64..10.0,
-            dx in 0.0f64..1.0, dy in 0.0f64..1.0, fov in 10.0f64..120.0,
+            dx in 0.0f64..1.0, dy in 0.0f64..1.0, fov in 10.0f64..120.0, centered in any::<bool>(),
         ) {
+            let trajectory = ANCHORS[usize::from(centered)];
             let cfg = SamplingConfig { views: 4, latents: 4, phi0_deg: phi0, window_deg: window,
-                delta0, fov_deg: fov, resolution: 64, ..Default::default() };
+                delta0, fov_deg: fov, resolution: 64, trajectory, ..Default::default() };
             prop_assume!(cfg.validate().is_ok());
             let d = [1.0, dx, dy];
             let p = plan_setting(&cfg, "p", theta0, seed, d, &cube_vertices(d)).expect("plan");
@@ -1418,6 +1687,11 @@ mod tests {
                     let l: f64 = l.parse().expect("level");
                     prop_assert!(lp.w_l >= 0.9 * v.w_u * l - 1e-12 && lp.w_l <= 1.1 * v.w_u * l + 1e-12);
                     prop_assert!(lp.motion_px.is_finite() && lp.max_gap_px.is_finite());
+                    let open = trajectory.t_open();
+                    for t in lp.latent_frames.iter().map(|f| f.t).chain([lp.mean_pose.t]) {
+                        prop_assert!(t >= open && t <= open + 1.0, "{t}");
+                    }
+                    prop_assert!(lp.mean_pose.c2w.iter().flatten().all(|x| x.is_finite()));
                 }
             }
         }
