@@ -319,9 +319,13 @@ def test_verify_compares_counts_and_meta(published, tmp_path):
     (build / "dataset.json").write_text(json.dumps(ds))
     (build / "sketchfab_MapPin_000" / "sharp" / "images" / "004.png").write_bytes(b"x")
     (build / "khronos_BoxTextured_000" / "meta.json").write_text("[]")
+    # An images_4/ file of the wrong size (a full-size image where a 1/4 copy belongs).
+    mazda = build / "sketchfab_MazdaRX7Stylised_000" / "blur_1"
+    shutil.copyfile(mazda / "images" / "002.png", mazda / "images_4" / "002.png")
     proc = run_cli("verify", str(build), check=False)
     assert proc.returncode == 1
     out = proc.stdout
+    assert f"{mazda}/images_4/002.png: is " in out and ", expected " in out, out
     assert f"{build}/dataset.json: counts.images is {ds['counts']['images']}" in out
     assert f"{build}/sketchfab_MapPin_000/sharp/images/004.png: not a file of this" in out
     assert f"{build}/khronos_BoxTextured_000/meta.json: unreadable (" in out
@@ -343,6 +347,11 @@ def test_noise_output_has_a_manifest_and_verifies(published, tmp_path):
     rel = f"{noisy}/sketchfab_MapPin_000/blur_2/gain_4/images/000.png"
     assert f"{rel}: missing" in proc.stdout
     assert f"{rel}: missing (MANIFEST.sha256)" in proc.stdout
+    # The noise drawn at 1/4 size (images_4/, linear_4/) is checked file by file too.
+    small = noisy / "sketchfab_MapPin_000" / "blur_2" / "gain_1" / "linear_4" / "001.exr"
+    small.unlink()
+    proc = run_cli("verify", str(noisy), check=False)
+    assert f"{small}: missing" in proc.stdout, proc.stdout
 
 
 # -- without rendering ------------------------------------------------------------------

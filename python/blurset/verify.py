@@ -1,14 +1,16 @@
 """`blurset verify BUILD` (issue 14 D6, issue 19): is a build, or a noise output, whole?
 
 For a build, every complete setting must hold every file its meta.json promises: per
-level one image per view and a poses_bounds.npy with one row per view, linear/ EXRs
+level one image per view (in images/ and, at 1/f of the size, in each images_<f>/)
+and a poses_bounds.npy with one row per view, linear/ EXRs
 when the build kept them, transforms.json naming those images; every image must decode
 whole at the setting's resolution (decoded in blurset-core, in parallel); dataset.json's
 counts and settings must be what is on disk; splits.json must name only settings that
 are there; and when MANIFEST.sha256 is present every file it lists must match it.
 
 For a noise output (`blurset noise BUILD --out DIR`): every complete unit holds the
-images and linear EXRs its noise.json lists, decoding at its resolution, and a
+images and linear EXRs its noise.json lists (and their images_<f>/, linear_<f>/
+copies), decoding at their resolution, and a
 poses_bounds.npy with one row per image; noise_dataset.json's counts match; and the
 manifest, as above.
 
@@ -132,21 +134,24 @@ def setting_problems(
         return rep.problems, []
     n = len(indices)
     render = meta.get("render") if isinstance(meta.get("render"), dict) else {}
+    factors = meta.get("downsample") or []
     images = [layout.image_name(i, n) for i in indices]
+    exrs = [i.replace(".png", ".exr") for i in images]
     to_decode: list[tuple[Path, int, int]] = []
     for level in levels:
         d = setting / level
         if level in flagged:  # the level folder is missing
             continue
-        for sub, names, on in (
-            ("images", images, True),
-            ("linear", [i.replace(".png", ".exr") for i in images], bool(render.get("linear"))),
-        ):
-            if not on:
-                continue
+        # images/ at full size, images_<f>/ at 1/f (the core checked f divides the size).
+        subs = [("images", images, w, h)] + [
+            (f"images_{f}", images, w // int(f), h // int(f)) for f in factors
+        ]
+        if render.get("linear"):
+            subs.append(("linear", exrs, w, h))
+        for sub, names, sw, sh in subs:
             for p in _expect_files(root, d / sub, names, rep, sub):
                 if f"{level}/{sub}/{p.name}" not in flagged:
-                    to_decode.append((p, w, h))
+                    to_decode.append((p, sw, sh))
         if f"{level}/poses_bounds.npy" in flagged:
             continue
         rows = _rows(d / "poses_bounds.npy")
@@ -304,10 +309,13 @@ def verify_noise(root: Path, *, decode: bool = True) -> Report:
             continue
         settings.add(rel.parts[0])
         n_images += len(files)
-        for sub, names in (("images", images), ("linear", linears)):
-            base = [n.split("/", 1)[1] if n.startswith(f"{sub}/") else n for n in names]
+        subs = [("images", images, 1), ("linear", linears, 1)]
+        for f in meta.get("downsample") or []:
+            subs += [(f"images_{f}", images, int(f)), (f"linear_{f}", linears, int(f))]
+        for sub, names, f in subs:
+            base = [n.split("/", 1)[-1] for n in names]
             for p in _expect_files(root, u / sub, base, rep, sub):
-                todo.append((p, w, h))
+                todo.append((p, w // f, h // f))
         rows = _rows(u / "poses_bounds.npy")
         if isinstance(rows, str):
             rep.bad(rel / "poses_bounds.npy", rows)
