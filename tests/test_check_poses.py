@@ -318,3 +318,30 @@ def test_build_check_poses_records_verdicts_untextured_is_not_checkable(tmp_path
     for name, verdict in checks.items():
         meta = json.loads((out / name / "meta.json").read_text())
         assert meta["pose_check"] == verdict
+
+
+def test_table_gives_no_reprojection_ratio_for_a_level_of_few_registered_views():
+    """COLMAP's mean reprojection error of a model of 2 views is small by construction, so
+    the table gives no '×' against sharp for a level below the registration threshold."""
+
+    def report(registered: int, reproj: float, verdict: str) -> dict:
+        return {
+            "registered": registered,
+            "total": 16,
+            "median_features": 900,
+            "colmap_mean_reproj_px": reproj,
+            "median_rot_err_deg": 0.5,
+            "median_center_err_rel": 0.01,
+            "verdict": verdict,
+        }
+
+    table = check_poses._table(
+        {
+            "sharp": report(16, 0.4, "pass"),
+            "blur_1": report(16, 0.5, "pass"),
+            "blur_4": report(2, 0.1, "not checkable: 2 of 16 views registered"),
+        }
+    )
+    rows = {line.split()[0]: line for line in table.splitlines()[2:5]}
+    assert "0.50 (×1.2)" in rows["blur_1"], table
+    assert "0.10" in rows["blur_4"] and "×" not in rows["blur_4"], table

@@ -674,11 +674,14 @@ def _table(reports: dict[str, dict]) -> str:
     for level, r in reports.items():
         written = r.get("written_pose", {}).get("median_rot_err_deg", r["median_rot_err_deg"])
         feats, reproj = r["median_features"], r.get("colmap_mean_reproj_px")
+        enough = r["registered"] >= MIN_REGISTERED_FRACTION * r["total"]
         cells = [
             level,
             f"{r['registered']}/{r['total']}",
             f"{feats}{_change(level, feats, sharp.get('median_features'), False)}",
-            _fmt(reproj, ".2f") + _change(level, reproj, sharp.get("colmap_mean_reproj_px"), True),
+            _fmt(reproj, ".2f")
+            # A model of a few registered views has a small error of its own: no ratio.
+            + (_change(level, reproj, sharp.get("colmap_mean_reproj_px"), True) if enough else ""),
             _fmt(r["median_rot_err_deg"], ".3f"),
             _fmt(written, ".3f"),
             _fmt(r.get("median_written_to_mean_deg"), ".3f"),
