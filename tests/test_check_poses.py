@@ -241,12 +241,17 @@ def test_demo_build_passes_and_level_table(demo_setting, tmp_path, capsys):
     assert blur["pose_reference"] == "mean_latent"
     assert blur["verdict"] == "pass" and blur["pass"], blur["reason"]
     meta = json.loads((demo_setting / "meta.json").read_text())
+    # A test view holds the sharp image in blur_1 (Deblur-NeRF's convention): its pose is
+    # the written one, no offset.
+    assert meta["test_view_images"] == "sharp" and meta["test_views"] == [0]
     want = [
+        0.0 if v["index"] in meta["test_views"] else
         angle_deg(np.asarray(v["c2w"])[:3, :3], np.asarray(v["levels"]["1"]["mean_pose"]["c2w"])[:3, :3])
         for v in meta["views"]
     ]  # fmt: skip
     got = [v["written_to_mean_deg"] for v in blur["views"]]
-    assert got == pytest.approx(want, abs=1e-6)
+    # poses_bounds.npy is float32: a written pose read back is ~1e-6 deg off meta.json's.
+    assert got == pytest.approx(want, abs=1e-4)
     assert blur["median_written_to_mean_deg"] == pytest.approx(np.median(want))
     assert blur["median_written_to_mean_deg"] > 0.3, "the paper's anchor is off the exposure"
     written = blur["written_pose"]

@@ -123,7 +123,8 @@ def test_build_latents_auto_with_sample_budget(tmp_path, demo_glbs):
             assert lp["max_gap_px"] <= 1.0 or lp["latents"] == 40
             assert lp["latents"] == len(lp["latent_frames"])
             assert lp["samples_per_frame"] == math.ceil(12 / lp["latents"])
-            frames += lp["latents"]
+            # A test view's blur levels are copies of its sharp image: nothing rendered.
+            frames += 0 if v["index"] in meta["test_views"] else lp["latents"]
         assert v["levels"]["1"]["latents"] < v["levels"]["4"]["latents"]
     assert meta["timings"]["frames"] == 3 + frames
     cfg = json.loads((out / "dataset.json").read_text())["config"]
@@ -139,7 +140,9 @@ def test_build_motion_blur_one_render_per_blurry_image(tmp_path, demo_glbs):
     (s,) = _settings(out)
     _check_llff(s, 2)
     meta = json.loads((s / "meta.json").read_text())
-    assert meta["timings"]["frames"] == 2 * 3  # sharp + one render per level, per view
+    # Sharp + one render per level per view, but test view 0 renders only its sharp image.
+    assert meta["test_views"] == [0]
+    assert meta["timings"]["frames"] == 2 * 3 - 2
     assert meta["render"]["blur_method"] == "motion_blur"
     for v in meta["views"]:
         for lp in v["levels"].values():
@@ -147,8 +150,9 @@ def test_build_motion_blur_one_render_per_blurry_image(tmp_path, demo_glbs):
             mb = lp["motion_blur"]
             assert len(mb["keys"]) == 2 ** mb["motion_steps"] + 1
             assert "c2w" not in mb["keys"][0] and mb["interpolation_error_px"] <= 0.02
-    sharp = np.asarray(Image.open(s / "sharp" / "images" / "000.png"), float)
-    blur4 = np.asarray(Image.open(s / "blur_4" / "images" / "000.png"), float)
+    # View 1: view 0 is a test view, whose blur levels hold the sharp image.
+    sharp = np.asarray(Image.open(s / "sharp" / "images" / "001.png"), float)
+    blur4 = np.asarray(Image.open(s / "blur_4" / "images" / "001.png"), float)
     assert np.abs(sharp - blur4).mean() > 1.0  # the camera moved during the shutter
 
 

@@ -157,7 +157,8 @@ def test_export_refuses_the_build_and_bad_options(demo_build, tmp_path):
 @pytest.mark.blender
 def test_export_for_nerfstudio_has_transforms_per_scene(demo_build, tmp_path):
     out = tmp_path / "ns"
-    export(demo_build, out, "--for", "nerfstudio", "--levels", "blur_1")
+    p = export(demo_build, out, "--for", "nerfstudio", "--levels", "blur_1")
+    assert "splits in each transforms.json" in p.stdout and "llffhold" not in p.stdout
     scenes = sorted(d for d in out.iterdir() if d.is_dir())
     assert len(scenes) == 3
     doc = json.loads((scenes[0] / "transforms.json").read_text())

@@ -198,9 +198,15 @@ def run(args) -> int:
 def _say(doc: dict, out: Path, what: str) -> None:
     root = out / doc["scenes_dir"] if doc["scenes_dir"] != "." else out
     factors = ", ".join(f"images_{f}/" for f in doc["factors"]) or "images/ only"
+    # nerfstudio reads the split from each scene's transforms.json; LLFF loaders need llffhold.
+    hint = (
+        "splits in each transforms.json"
+        if doc["for"] == "nerfstudio"
+        else f"use llffhold {doc['llffhold']}"
+    )
     print(
         f"blurset export: {len(doc['scenes'])} scenes ({len(doc['train'])} train, "
-        f"{len(doc['test'])} test) {what} -> {root}; use llffhold {doc['llffhold']} "
+        f"{len(doc['test'])} test) {what} -> {root}; {hint} "
         f"({factors}; test views hold {doc['test_view_images']} images)",
         file=sys.stdout,
     )
