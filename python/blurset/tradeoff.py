@@ -301,9 +301,8 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
         uid = glb.stem
 
-        def plan_level(cfg: BuildConfig) -> tuple[list[dict], dict]:
-            """The renders of the measured image and its level plan (w_l, latents …)."""
-            plan = _core.plan_setting(
+        def plan_of(cfg: BuildConfig):
+            return _core.plan_setting(
                 cfg,
                 uid=uid,
                 theta0_deg=args.theta0_deg,
@@ -311,6 +310,10 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 bbox_dims=info["bbox_dims"],
                 vertices=verts,
             )
+
+        def plan_level(cfg: BuildConfig) -> tuple[list[dict], dict]:
+            """The renders of the measured image and its level plan (w_l, latents …)."""
+            plan = plan_of(cfg)
             prefix = str(work / "f")
             return (
                 plan.level_renders(args.view, pre.level, prefix),
@@ -318,15 +321,7 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
             )
 
         def plan_view(cfg: BuildConfig) -> dict:
-            plan = _core.plan_setting(
-                cfg,
-                uid=uid,
-                theta0_deg=args.theta0_deg,
-                seed=args.seed,
-                bbox_dims=info["bbox_dims"],
-                vertices=verts,
-            )
-            return plan.to_dict()["views"][args.view]
+            return plan_of(cfg).to_dict()["views"][args.view]
 
         m_ref, s_ref = pre.reference
         ref_cfg = BuildConfig(
