@@ -122,7 +122,7 @@ def _option(key: str, where: str) -> str:
     return name
 
 
-def load_toml(path: Path) -> dict[str, Any]:
+def load_toml(path: Path) -> TomlValues:
     """Read a TOML config. Keys are option names (`latents`, `settings-per-object` …),
     either all at top level or all under one `[build]` table; anything else is an error."""
     path = Path(path)
@@ -148,7 +148,7 @@ def load_toml(path: Path) -> dict[str, Any]:
                 "option under [build] (or none)"
             )
         data = data["build"]
-    out: dict[str, Any] = {}
+    out = TomlValues()
     for key, value in data.items():
         if isinstance(value, dict):
             raise ConfigError(f"{path}: unknown table [{key}] (only [build] is read)")
@@ -156,8 +156,11 @@ def load_toml(path: Path) -> dict[str, Any]:
         if name in out:
             raise ConfigError(f"{path}: {key!r} is given twice (as {name})")
         if name == "test_objects":
-            out.update(split_test_objects(value, f"{path}: {key}"))
+            split = split_test_objects(value, f"{path}: {key}")
+            out.update(split)
+            out.written.update(dict.fromkeys(split, key))
             continue
+        out.written[name] = key
         if name == "levels":
             value = parse_levels(value, f"{path}: {key}")
         elif name == "downsample":
@@ -166,6 +169,15 @@ def load_toml(path: Path) -> dict[str, Any]:
             value = parse_gpus(value, f"{path}: {key}")
         out[name] = value
     return out
+
+
+class TomlValues(dict):
+    """The options of a TOML file by name, and `written`: each option's key as the file
+    spells it (`test-view-stride` for view_stride), so an error names what the user wrote."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.written: dict[str, str] = {}
 
 
 def _latents_layer(layer: dict[str, Any], where: str) -> dict[str, Any]:
@@ -200,7 +212,8 @@ def make_config(
     values: dict[str, Any] = dict(DEMO_DEFAULTS) if demo else {}
     in_file = f"{config_path}: " if config_path else "--config: "
     given = _latents_layer(file_values, f"{in_file}latents")
-    origin.update({k: f"{in_file}{k}" for k in given})
+    written = getattr(file_values, "written", {})
+    origin.update({k: f"{in_file}{written.get(k, k)}" for k in given})
     if isinstance(given.get("gpus"), str):
         given["gpus"] = parse_gpus(given["gpus"], f"{in_file}gpus")
     flags = _latents_layer(flag_values, "--latents")
