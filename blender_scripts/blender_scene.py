@@ -547,6 +547,7 @@ def render_job(frames: list[dict], resolution: int, fov_deg: float, samples: int
         return
     for fr in frames:  # refuse bad input before the job starts
         apply_frame(fr, resolution, fov_deg, samples)
+    set_region(job_region(frames), resolution)
     d = os.path.dirname(os.path.abspath(str(frames[0]["out"]))) or "."
     os.makedirs(d, exist_ok=True)
     # '#' in a directory would be read as the frame number: stage in a temp dir then.
@@ -673,6 +674,40 @@ def render_motion_blur(keys, motion_steps: int, out: str, seed: int) -> float:
         cam.animation_data_clear()
         scene.render.use_motion_blur = False
         scene.frame_set(1)
+
+
+def set_region(region, resolution: int) -> None:
+    """Render only the pixel rectangle `region` = [x0, y0, x1, y1) (y down from the top
+    row), the rest of the image transparent 0 (the core's plan/region.rs says why those
+    pixels are exactly what a full render gives); None renders the whole image. Blender
+    reads the border once per render call, so a job's frames share one region."""
+    r = bpy.context.scene.render
+    if region is None:
+        r.use_border = False
+        return
+    x0, y0, x1, y1 = (int(v) for v in region)
+    n = int(resolution)
+    if not (0 <= x0 < x1 <= n and 0 <= y0 < y1 <= n):
+        raise ValueError(f"region {list(region)} does not fit a {n}x{n} image")
+    r.use_border = True
+    r.use_crop_to_border = False  # full-size EXRs, the rest transparent 0
+    # Blender's border is fractions from the bottom-left corner.
+    r.border_min_x, r.border_max_x = x0 / n, x1 / n
+    r.border_min_y, r.border_max_y = (n - y1) / n, (n - y0) / n
+
+
+def job_region(frames: list[dict]):
+    """The region one render call of `frames` needs: all their regions together, or None
+    (the whole image) when any frame needs the whole image."""
+    regions = [fr.get("region") for fr in frames]
+    if not regions or any(g is None for g in regions):
+        return None
+    return [
+        min(g[0] for g in regions),
+        min(g[1] for g in regions),
+        max(g[2] for g in regions),
+        max(g[3] for g in regions),
+    ]
 
 
 def render_frame(out: str, seed: int) -> float:

@@ -25,15 +25,18 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
    [,"noise_threshold":T][,"batch":true],
    "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR[,"samples":S_i]
               [,"sample_offset":O,"sample_sequence":Q]
-              [,"motion":{"steps":n,"keys":[c2w, ...]}]}, ...]}
+              [,"motion":{"steps":n,"keys":[c2w, ...]}][,"region":[x0,y0,x1,y1]]
+              [,"view":V,"level":L]}, ...]}
       -> {"frame":i,"out":EXR,"seconds":t} per frame, then {"ok":true,"done":n,"jobs":j}
       A frame's "samples" overrides S; with "sample_offset" it renders the samples
       [O, O + S_i) of a Q-sample sequence (Cycles sample subsets). A frame with "motion" is
       one Cycles motion blur render along its 2^n + 1 keys (blender_scene.render_motion_blur).
       "noise_threshold" turns Cycles adaptive sampling on for this command (off without).
-      Runs of frames without "motion" render as one animation job each
-      (blender_scene.render_job) unless "batch" is false or the object is animated; "jobs"
-      counts the render operator calls.
+      "region" (the core's plan/region.rs) restricts Cycles to the pixels that can see
+      the object; the pixels are those of a whole render. Runs of frames of one image
+      (same "view" and "level") without "motion" render as one animation job each, in
+      their regions together (blender_scene.render_job), unless "batch" is false or the
+      object is animated; "jobs" counts the render operator calls.
   {"cmd":"quit"} -> exit 0
 
 At start-up the worker announces itself with
@@ -143,6 +146,11 @@ def inject_fault(glb: str) -> None:
         os.kill(os.getpid(), signal.SIGKILL)
 
 
+def _image_of(frame: dict):
+    """Which image a frame belongs to (frames without the keys: one image)."""
+    return frame.get("view"), frame.get("level")
+
+
 def save_npy_atomic(path: str, arr: np.ndarray) -> None:
     os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
     tmp = f"{path}.part"
@@ -205,8 +213,13 @@ class Worker:
             fr = frames[i]
             motion = fr.get("motion")
             if batch and not motion:
+                # One job per image (view and level): its frames share one region.
                 j = i
-                while j < len(frames) and not frames[j].get("motion"):
+                while (
+                    j < len(frames)
+                    and not frames[j].get("motion")
+                    and _image_of(frames[j]) == _image_of(fr)
+                ):
                     j += 1
 
                 def sent(k: int, out: str, secs: float, base: int = i) -> None:
@@ -217,6 +230,7 @@ class Worker:
                 i = j
                 continue
             blender_scene.apply_frame(fr, res, fov, samples)
+            blender_scene.set_region(None if motion else fr.get("region"), res)
             if motion:
                 secs = blender_scene.render_motion_blur(
                     motion["keys"], int(motion["steps"]), str(fr["out"]), int(fr["seed"])

@@ -75,7 +75,10 @@ def test_one_animation_job_gives_the_pixels_of_one_call_per_frame(loaded, tmp_pa
         reply = w.render(frames, resolution=24, fov_deg=40.0, samples=3, batch=batch,
                          on_frame=lambda i, _o, seen=seen: seen.append(i))  # fmt: skip
         assert seen == list(range(len(frames)))
-        assert reply["jobs"] == (1 if batch else len(frames))
+        # One job per image (consecutive frames of one view and level).
+        images = [(f["view"], f["level"]) for f in frames]
+        runs = 1 + sum(a != b for a, b in zip(images, images[1:]))
+        assert reply["jobs"] == (runs if batch else len(frames))
         out[batch] = [read_exr(f["out"]) for f in frames]
     for k, (a, b) in enumerate(zip(out[False], out[True], strict=True)):
         assert np.array_equal(a, b), f"frame {k}: max diff {np.abs(a - b).max()}"

@@ -134,7 +134,12 @@ impl Plan {
         pin: Option<u32>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let lp = self.level_plan(view, level)?;
-        to_py(py, &core::level_renders(view, level, lp, prefix, pin))
+        to_py(
+            py,
+            &self
+                .0
+                .with_regions(core::level_renders(view, level, lp, prefix, pin)),
+        )
     }
 
     /// Write `<level>/poses_bounds.npy` and `<level>/transforms.json` for each level dir

@@ -1,7 +1,9 @@
 //! The render list of a planned setting: what the Blender worker renders, in the order
 //! the driver streams the frames into accumulators (per view: sharp, then each level).
+use super::region::{object_region, Region};
 use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
 use crate::dataset::layout::{level_dir, SHARP};
+use glam::{DMat4, DVec3};
 use serde::Serialize;
 use std::path::Path;
 
@@ -34,6 +36,9 @@ pub struct Render {
     pub out: String,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion: Option<Motion>,
+    /// The pixels that can see the object ([`super::region`]); None: the whole image.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub region: Option<Region>,
 }
 
 /// The renders of one blurry image: its latent frames (average method) or its single
@@ -73,6 +78,8 @@ pub fn level_renders(
                 steps: mb.motion_steps,
                 keys,
             }),
+            // The camera moves during the render, between its keys too: whole image.
+            region: None,
         }];
     }
     lp.latent_frames
@@ -90,6 +97,7 @@ pub fn level_renders(
                 sample_sequence,
                 out: format!("{prefix}_{k:04}.exr"),
                 motion: None,
+                region: None,
             }
         })
         .collect()
@@ -125,6 +133,7 @@ impl SettingPlan {
                 sample_sequence: pin,
                 out: exr_dir.join(format!("{i:04}_s.exr")).display().to_string(),
                 motion: None,
+                region: None,
             });
             if sharp_views.contains(&i) {
                 continue;
@@ -136,7 +145,20 @@ impl SettingPlan {
                 out.extend(level_renders(i, level, lp, &prefix, pin));
             }
         }
-        out
+        self.with_regions(out)
+    }
+
+    /// `renders` with each still camera's [`Region`] (motion blur renders keep None).
+    pub fn with_regions(&self, mut renders: Vec<Render>) -> Vec<Render> {
+        let Some([lo, hi]) = self.object_box else {
+            return renders;
+        };
+        let (lo, hi) = (DVec3::from_array(lo), DVec3::from_array(hi));
+        for r in renders.iter_mut().filter(|r| r.motion.is_none()) {
+            let c2w = DMat4::from_cols_array_2d(&r.c2w).transpose();
+            r.region = object_region(&c2w, lo, hi, self.focal_px, self.resolution[0]);
+        }
+        renders
     }
 }
 

@@ -461,6 +461,10 @@ pub struct SettingPlan {
     #[serde(default)]
     pub sample_sequence_max: u32,
     pub views: Vec<ViewPlan>,
+    /// The axis-aligned box (min, max) of the object's vertices, which bounds what a
+    /// render can see ([`super::region`]); None (a plan read back): render whole images.
+    #[serde(skip)]
+    pub object_box: Option<[[f64; 3]; 2]>,
 }
 
 /// What one view draws before the object's depth is known.
@@ -741,6 +745,18 @@ fn corners(d: [f64; 3]) -> [DVec3; 8] {
     })
 }
 
+/// The (min, max) corners of the points' axis-aligned box; `points` is not empty.
+fn vertex_box(points: &[[f32; 3]]) -> [[f64; 3]; 2] {
+    let mut b = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+    for p in points {
+        for a in 0..3 {
+            b[0][a] = b[0][a].min(p[a] as f64);
+            b[1][a] = b[1][a].max(p[a] as f64);
+        }
+    }
+    b
+}
+
 /// Plan one setting: views, depth ranges from the object's vertices, weights, levels,
 /// latent frames and every Cycles seed.
 pub fn plan_setting(
@@ -899,6 +915,7 @@ pub fn plan_setting(
         config: cfg.clone(),
         sample_sequence_max: cfg.max_sequence(),
         views,
+        object_box: Some(vertex_box(vertices)),
     })
 }
 
