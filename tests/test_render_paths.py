@@ -77,7 +77,7 @@ def test_one_animation_job_gives_the_pixels_of_one_call_per_frame(loaded, tmp_pa
         assert seen == list(range(len(frames)))
         # One job per image (consecutive frames of one view and level).
         images = [(f["view"], f["level"]) for f in frames]
-        runs = 1 + sum(a != b for a, b in zip(images, images[1:]))
+        runs = 1 + sum(a != b for a, b in zip(images, images[1:], strict=False))
         assert reply["jobs"] == (runs if batch else len(frames))
         out[batch] = [read_exr(f["out"]) for f in frames]
     for k, (a, b) in enumerate(zip(out[False], out[True], strict=True)):

@@ -54,7 +54,9 @@ def test_a_render_in_its_region_has_the_pixels_of_a_whole_render(name, tmp_path)
                 assert x0 <= xs.min() and xs.max() < x1 and y0 <= ys.min() and ys.max() < y1
         assert max(abs(r[1] - (RES - r[3])) for r in cut) >= 4, cut
         for k, (x, y) in enumerate(zip(a, b, strict=True)):
-            assert np.array_equal(x, y), f"frame {k} ({frames[k]['level']}): max {np.abs(x - y).max()}"
+            assert np.array_equal(x, y), (
+                f"frame {k} ({frames[k]['level']}): max {np.abs(x - y).max()}"
+            )
         # Can fail: a region one pixel inside the object's own pixels loses some.
         sharp = next(k for k, f in enumerate(frames) if f["level"] == "sharp" and f.get("region"))
         ys, xs = np.nonzero(b[sharp][..., 3] > 0)
