@@ -47,6 +47,7 @@ SAMPLES_TOTAL = int(os.environ.get("BLURSET_BENCH_SAMPLES", "136"))
 REPEATS = int(os.environ.get("BLURSET_BENCH_REPEATS", "3"))
 THREADS = int(os.environ.get("BLURSET_BENCH_THREADS", "0"))  # Cycles threads, 0 = all
 DEVICE = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")  # a Cycles backend, or AUTO
+CONTENT_FRAMES = (0, 11, 22, 33)  # latent frames rendered as sharp images (content cost)
 
 
 def _proc_cpu(pid: int) -> float:
@@ -112,6 +113,10 @@ class Timed:
         }
 
 
+def _mean_of(rows: list[dict]) -> dict:
+    return {k: statistics.fmean(r[k] for r in rows) for k in rows[0]}
+
+
 def _med(rows: list[dict], key: str) -> float:
     return statistics.median(r[key] for r in rows)
 
@@ -150,7 +155,9 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
             independent = plan(
                 latents=LATENTS, samples_total=SAMPLES_TOTAL, latent_sampling="independent"
             ).level_renders(0, 4, str(work / "i"))
-            sharp = [{"c2w": view["c2w"], "seed": view["sharp_seed"], "out": str(work / "s.exr")}]
+            # The plan's sharp render (first samples of the view's seed, its region).
+            sharp = [dict(subsets.renders(str(work / "r"), None)[0], out=str(work / "s.exr"))]
+            region = sharp[0].get("region")
             mb = plan(blur_method="motion_blur", samples_total=SAMPLES_TOTAL).to_dict()["views"][0][
                 "levels"
             ]["4"]
@@ -164,11 +171,31 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
                 }
             ]
             at_p = [
-                dict(f, c2w=view["c2w"], out=str(work / f"p{k}.exr")) for k, f in enumerate(latent)
+                dict(f, c2w=view["c2w"], region=region, out=str(work / f"p{k}.exr"))
+                for k, f in enumerate(latent)
+            ]
+            whole = [{k: v for k, v in f.items() if k != "region"} for f in latent]
+            # Sharp images at latent positions spread over the exposure: what the pixels
+            # the blurry image covers cost without any splitting.
+            at_latents = [
+                dict(
+                    sharp[0],
+                    c2w=latent[k]["c2w"],
+                    region=latent[k].get("region"),
+                    out=str(work / f"q{k}.exr"),
+                )  # fmt: skip
+                for k in CONTENT_FRAMES
             ]
             timed = Timed(w, work, res)
             cases = {
                 "sharp": lambda: timed.image(sharp, SAMPLES_TOTAL, "NONE"),
+                "sharp_whole": lambda: timed.image(
+                    [{k: v for k, v in sharp[0].items() if k != "region"}], SAMPLES_TOTAL, "NONE"
+                ),
+                "sharp_at_latents": lambda: _mean_of(
+                    [timed.image([f], SAMPLES_TOTAL, "NONE") for f in at_latents]
+                ),
+                "blur_whole": lambda: timed.image(whole, spf, "NONE"),
                 "split_at_p": lambda: timed.image(at_p, spf, "NONE"),
                 "blur": lambda: timed.image(latent, spf, "NONE"),
                 "blur_per_call": lambda: timed.image(latent, spf, "NONE", batch=False),
@@ -202,7 +229,13 @@ def run() -> list[dict]:
     med = m["medians"]
     sharp, blur, mb = med["sharp"], med["blur"], med["motion_blur"]
     per_call, ind, split = med["blur_per_call"], med["blur_independent"], med["split_at_p"]
+    whole, sharp_whole, at_lat = med["blur_whole"], med["sharp_whole"], med["sharp_at_latents"]
     where = {
+        "sharp_at_latents_s": at_lat["wall"],
+        "content_vs_sharp_cpu": at_lat["cpu"] / sharp["cpu"],
+        "blur_vs_sharp_at_latents_cpu": blur["cpu"] / at_lat["cpu"],
+        "blur_whole_cpu_s": whole["cpu"],
+        "sharp_whole_cpu_s": sharp_whole["cpu"],
         "split_at_p_s": split["wall"],
         "split_cost_ratio": split["wall"] / sharp["wall"],
         "split_cost_ratio_cpu": split["cpu"] / sharp["cpu"],
@@ -241,6 +274,28 @@ def run() -> list[dict]:
             "blur_s": blur["wall"],
             "sharp_s": sharp["wall"],
             **where,
+            **common,
+        },
+        {
+            "name": "blur_cost_vs_sharp_same_content",
+            "ratio": blur["wall"] / at_lat["wall"],
+            "ratio_is": "contender time / baseline time",
+            "cpu_ratio": blur["cpu"] / at_lat["cpu"],
+            "contender": f"blurry image, {spec}: {blur['wall']:.2f} s",
+            "baseline": f"sharp images at latent frames {list(CONTENT_FRAMES)}, "
+            f"{m['samples_total']} samples each, their mean: {at_lat['wall']:.2f} s",
+            **common,
+        },
+        {
+            "name": "render_region_saving",
+            "ratio": (sharp_whole["cpu"] + whole["cpu"]) / (sharp["cpu"] + blur["cpu"]),
+            "ratio_is": "baseline CPU time / contender CPU time",
+            "sharp_cpu_ratio": sharp_whole["cpu"] / sharp["cpu"],
+            "blur_cpu_ratio": whole["cpu"] / blur["cpu"],
+            "contender": f"sharp + blurry image in their object regions: "
+            f"{sharp['cpu'] + blur['cpu']:.1f} s CPU",
+            "baseline": f"the same renders over the whole image: "
+            f"{sharp_whole['cpu'] + whole['cpu']:.1f} s CPU",
             **common,
         },
         {
