@@ -21,7 +21,13 @@ Where the extra time of the blurry image goes, measured in the same run:
   `accumulate_s` is our Rust accumulator's time (read + add + delete), which runs in this
   process while the worker renders the next frame;
 - `worker_start_s`, `load_s`: process start and object load, paid once per object.
-Also `motion_blur_cost_vs_sharp`: the same budget as one Cycles motion blur render.
+Also `motion_blur_cost_vs_sharp`: the same budget as one Cycles motion blur render;
+`blur_cost_vs_sharp_same_content`: the blurry image against sharp images (S samples) at
+latent positions spread over the exposure, their mean cost: what its pixels cost without
+any splitting, since the moving camera sees more of the object than the camera at p
+(`content_vs_sharp_cpu`); `blur_cost_vs_sharp_centered`: with p mid-exposure
+(`--trajectory centered`); `render_region_saving`: the sharp and blurry image traced in
+the plan's regions (plan/region.rs) against the same renders over the whole image.
 
 Wall-clock medians of interleaved repeats, and CPU-time medians (the worker process's and
 ours): the machine is shared, and CPU time is what contention disturbs least.
@@ -152,6 +158,9 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
             view = subsets.to_dict()["views"][0]
             spf = view["levels"]["4"]["samples_per_frame"]
             latent = subsets.level_renders(0, 4, str(work / "l"))
+            centered = plan(
+                latents=LATENTS, samples_total=SAMPLES_TOTAL, trajectory="centered"
+            ).level_renders(0, 4, str(work / "c"))
             independent = plan(
                 latents=LATENTS, samples_total=SAMPLES_TOTAL, latent_sampling="independent"
             ).level_renders(0, 4, str(work / "i"))
@@ -196,6 +205,7 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
                     [timed.image([f], SAMPLES_TOTAL, "NONE") for f in at_latents]
                 ),
                 "blur_whole": lambda: timed.image(whole, spf, "NONE"),
+                "blur_centered": lambda: timed.image(centered, spf, "NONE"),
                 "split_at_p": lambda: timed.image(at_p, spf, "NONE"),
                 "blur": lambda: timed.image(latent, spf, "NONE"),
                 "blur_per_call": lambda: timed.image(latent, spf, "NONE", batch=False),
@@ -284,6 +294,16 @@ def run() -> list[dict]:
             "contender": f"blurry image, {spec}: {blur['wall']:.2f} s",
             "baseline": f"sharp images at latent frames {list(CONTENT_FRAMES)}, "
             f"{m['samples_total']} samples each, their mean: {at_lat['wall']:.2f} s",
+            **common,
+        },
+        {
+            "name": "blur_cost_vs_sharp_centered",
+            "ratio": med["blur_centered"]["wall"] / sharp["wall"],
+            "ratio_is": "contender time / baseline time",
+            "cpu_ratio": med["blur_centered"]["cpu"] / sharp["cpu"],
+            "contender": f"blurry image, {spec}, --trajectory centered (p mid-exposure): "
+            f"{med['blur_centered']['wall']:.2f} s",
+            "baseline": f"sharp image: {sharp['wall']:.2f} s",
             **common,
         },
         {

@@ -26,17 +26,17 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
    "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR[,"samples":S_i]
               [,"sample_offset":O,"sample_sequence":Q]
               [,"motion":{"steps":n,"keys":[c2w, ...]}][,"region":[x0,y0,x1,y1]]
-              [,"view":V,"level":L]}, ...]}
+              [,"call":C][,"view":V,"level":L]}, ...]}
       -> {"frame":i,"out":EXR,"seconds":t} per frame, then {"ok":true,"done":n,"jobs":j}
       A frame's "samples" overrides S; with "sample_offset" it renders the samples
       [O, O + S_i) of a Q-sample sequence (Cycles sample subsets). A frame with "motion" is
       one Cycles motion blur render along its 2^n + 1 keys (blender_scene.render_motion_blur).
       "noise_threshold" turns Cycles adaptive sampling on for this command (off without).
       "region" (the core's plan/region.rs) restricts Cycles to the pixels that can see
-      the object; the pixels are those of a whole render. Runs of frames of one image
-      (same "view" and "level") without "motion" render as one animation job each, in
-      their regions together (blender_scene.render_job), unless "batch" is false or the
-      object is animated; "jobs" counts the render operator calls.
+      the object; the pixels are those of a whole render. Runs of frames of one render
+      "call" (without it: of one "view" and "level") and without "motion" render as one
+      animation job each, in their regions together (blender_scene.render_job), unless
+      "batch" is false or the object is animated; "jobs" counts the render operator calls.
   {"cmd":"quit"} -> exit 0
 
 At start-up the worker announces itself with
@@ -146,8 +146,11 @@ def inject_fault(glb: str) -> None:
         os.kill(os.getpid(), signal.SIGKILL)
 
 
-def _image_of(frame: dict):
-    """Which image a frame belongs to (frames without the keys: one image)."""
+def _call_of(frame: dict):
+    """Which render call a frame belongs to: its plan's "call" (the core's
+    plan/region.rs splits an image's frames into calls), else its image."""
+    if frame.get("call") is not None:
+        return ("call", frame["call"])
     return frame.get("view"), frame.get("level")
 
 
@@ -213,12 +216,12 @@ class Worker:
             fr = frames[i]
             motion = fr.get("motion")
             if batch and not motion:
-                # One job per image (view and level): its frames share one region.
+                # One job per render call: its frames share one region.
                 j = i
                 while (
                     j < len(frames)
                     and not frames[j].get("motion")
-                    and _image_of(frames[j]) == _image_of(fr)
+                    and _call_of(frames[j]) == _call_of(fr)
                 ):
                     j += 1
 

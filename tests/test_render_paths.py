@@ -75,8 +75,8 @@ def test_one_animation_job_gives_the_pixels_of_one_call_per_frame(loaded, tmp_pa
         reply = w.render(frames, resolution=24, fov_deg=40.0, samples=3, batch=batch,
                          on_frame=lambda i, _o, seen=seen: seen.append(i))  # fmt: skip
         assert seen == list(range(len(frames)))
-        # One job per image (consecutive frames of one view and level).
-        images = [(f["view"], f["level"]) for f in frames]
+        # One job per render call of the plan.
+        images = [f["call"] for f in frames]
         runs = 1 + sum(a != b for a, b in zip(images, images[1:], strict=False))
         assert reply["jobs"] == (runs if batch else len(frames))
         out[batch] = [read_exr(f["out"]) for f in frames]

@@ -363,8 +363,8 @@ class Worker:
         "sample_sequence": Cycles sample subsets), and "motion": {"steps": n, "keys":
         [c2w …]} to be one Cycles motion blur render along 2^n + 1 camera keys, a
         "region" [x0, y0, x1, y1) of pixels that can see the object (the plan's; the rest
-        of the image is transparent 0, as in a whole render), and its "view" and "level":
-        the frames of one image render as one job.
+        of the image is transparent 0, as in a whole render), and its render "call" (or
+        its "view" and "level"): consecutive frames of one call render as one job.
         `on_frame(i, out)` runs as soon as frame i is on disk; the timeout applies per frame.
         `exr_codec` sets the codec of the EXRs the worker writes (its default: NONE).
         `noise_threshold` turns on Cycles adaptive sampling. `batch` False renders every
@@ -388,7 +388,7 @@ class Worker:
                 item["motion"] = {"steps": int(m["steps"]), "keys": [_matrix(k) for k in m["keys"]]}
             if f.get("region") is not None:
                 item["region"] = [int(x) for x in f["region"]]
-            for key in ("view", "level"):  # which image: one render call per image
+            for key in ("call", "view", "level"):  # which render call renders it
                 if f.get(key) is not None:
                     item[key] = f[key]
             payload.append(item)

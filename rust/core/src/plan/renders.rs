@@ -1,6 +1,6 @@
 //! The render list of a planned setting: what the Blender worker renders, in the order
 //! the driver streams the frames into accumulators (per view: sharp, then each level).
-use super::region::{object_region, Region};
+use super::region::{call_cost_px, object_region, render_calls, Region};
 use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
 use crate::dataset::layout::{level_dir, SHARP};
 use glam::{DMat4, DVec3};
@@ -36,9 +36,14 @@ pub struct Render {
     pub out: String,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion: Option<Motion>,
-    /// The pixels that can see the object ([`super::region`]); None: the whole image.
+    /// The pixels this render traces: those of its render call, which contain every
+    /// pixel that can see the object ([`super::region`]); None: the whole image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub region: Option<Region>,
+    /// Which Blender render call renders it: consecutive renders with one `call` are one
+    /// animation job ([`super::region::render_calls`]); None: a call of its own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub call: Option<usize>,
 }
 
 /// The renders of one blurry image: its latent frames (average method) or its single
@@ -80,6 +85,7 @@ pub fn level_renders(
             }),
             // The camera moves during the render, between its keys too: whole image.
             region: None,
+            call: None,
         }];
     }
     lp.latent_frames
@@ -98,6 +104,7 @@ pub fn level_renders(
                 out: format!("{prefix}_{k:04}.exr"),
                 motion: None,
                 region: None,
+                call: None,
             }
         })
         .collect()
@@ -134,6 +141,7 @@ impl SettingPlan {
                 out: exr_dir.join(format!("{i:04}_s.exr")).display().to_string(),
                 motion: None,
                 region: None,
+                call: None,
             });
             if sharp_views.contains(&i) {
                 continue;
@@ -148,15 +156,52 @@ impl SettingPlan {
         self.with_regions(out)
     }
 
-    /// `renders` with each still camera's [`Region`] (motion blur renders keep None).
+    /// `renders` with their render calls and regions: the still frames of one image
+    /// (view and level) split into calls by [`render_calls`], each frame traced in its
+    /// call's region; a motion blur render is a whole-image call of its own.
     pub fn with_regions(&self, mut renders: Vec<Render>) -> Vec<Render> {
-        let Some([lo, hi]) = self.object_box else {
-            return renders;
+        let size = self.resolution[0];
+        let own: Vec<Option<Region>> = match self.object_box {
+            Some([lo, hi]) => {
+                let (lo, hi) = (DVec3::from_array(lo), DVec3::from_array(hi));
+                renders
+                    .iter()
+                    .map(|r| {
+                        let c2w = DMat4::from_cols_array_2d(&r.c2w).transpose();
+                        object_region(&c2w, lo, hi, self.focal_px, size)
+                    })
+                    .collect()
+            }
+            None => vec![None; renders.len()],
         };
-        let (lo, hi) = (DVec3::from_array(lo), DVec3::from_array(hi));
-        for r in renders.iter_mut().filter(|r| r.motion.is_none()) {
-            let c2w = DMat4::from_cols_array_2d(&r.c2w).transpose();
-            r.region = object_region(&c2w, lo, hi, self.focal_px, self.resolution[0]);
+        let mut call = 0;
+        let mut i = 0;
+        while i < renders.len() {
+            let image = (renders[i].view, renders[i].level.clone());
+            let mut j = i + 1;
+            while j < renders.len()
+                && renders[i].motion.is_none()
+                && renders[j].motion.is_none()
+                && (renders[j].view, &renders[j].level) == (image.0, &image.1)
+            {
+                j += 1;
+            }
+            let samples = renders[i].samples.unwrap_or(1);
+            let calls = if renders[i].motion.is_some() {
+                vec![(i..j, None)]
+            } else {
+                render_calls(&own[i..j], size, call_cost_px(samples))
+                    .into_iter()
+                    .map(|(r, u)| (r.start + i..r.end + i, u))
+                    .collect()
+            };
+            for (range, region) in calls {
+                for r in &mut renders[range] {
+                    (r.region, r.call) = (region, Some(call));
+                }
+                call += 1;
+            }
+            i = j;
         }
         renders
     }
@@ -195,7 +240,29 @@ mod tests {
         let kept = plan.renders_except(Path::new("/x"), &[0], None);
         assert_eq!(kept.len(), r.len() - 6);
         assert_eq!((kept[0].view, kept[1].view), (0, 1));
-        assert_eq!(kept[1..], r[7..]);
+        let uncalled = |v: &[Render]| -> Vec<Render> {
+            v.iter()
+                .map(|f| Render {
+                    call: None,
+                    ..f.clone()
+                })
+                .collect()
+        };
+        assert_eq!(uncalled(&kept[1..]), uncalled(&r[7..]));
+        // Render calls: consecutive, never across images; each sharp render its own.
+        let calls: Vec<usize> = r.iter().map(|f| f.call.expect("call")).collect();
+        assert!(calls.windows(2).all(|w| w[1] == w[0] || w[1] == w[0] + 1));
+        for w in r.windows(2) {
+            if w[0].call == w[1].call {
+                assert_eq!((w[0].view, &w[0].level), (w[1].view, &w[1].level));
+                assert_eq!(w[0].region, w[1].region);
+            }
+        }
+        assert!(r.iter().filter(|f| f.level == "sharp").all(|f| calls
+            .iter()
+            .filter(|c| Some(**c) == f.call)
+            .count()
+            == 1));
         let mb = BuildConfig {
             blur_method: "motion_blur".into(),
             ..cfg
