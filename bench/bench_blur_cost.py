@@ -25,7 +25,9 @@ Also `motion_blur_cost_vs_sharp`: the same budget as one Cycles motion blur rend
 `blur_cost_vs_sharp_same_content`: the blurry image against sharp images (S samples) at
 latent positions spread over the exposure, their mean cost: what its pixels cost without
 any splitting, since the moving camera sees more of the object than the camera at p
-(`content_vs_sharp_cpu`); `blur_cost_vs_sharp_centered`: with p mid-exposure
+(`content_vs_sharp_cpu`); `blur_cost_vs_sharp_views`: the blur_4 images of a setting's VIEWS views against their
+sharp images, CPU time (trajectories point every way, so the content's cost averages out
+over a dataset); `blur_cost_vs_sharp_centered`: with p mid-exposure
 (`--trajectory centered`); `render_region_saving`: the sharp and blurry image traced in
 the plan's regions (plan/region.rs) against the same renders over the whole image.
 
@@ -54,6 +56,8 @@ REPEATS = int(os.environ.get("BLURSET_BENCH_REPEATS", "3"))
 THREADS = int(os.environ.get("BLURSET_BENCH_THREADS", "0"))  # Cycles threads, 0 = all
 DEVICE = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")  # a Cycles backend, or AUTO
 CONTENT_FRAMES = (0, 11, 22, 33)  # latent frames rendered as sharp images (content cost)
+VIEWS = int(os.environ.get("BLURSET_BENCH_VIEWS", "6"))  # blurry vs sharp over a setting
+VIEW_REPEATS = 2
 
 
 def _proc_cpu(pid: int) -> float:
@@ -143,8 +147,8 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
             t_load = time.perf_counter() - t1
             verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
 
-            def plan(**kw):
-                cfg = BuildConfig(views=1, levels=[4], resolution=res, **kw)
+            def plan(views: int = 1, **kw):
+                cfg = BuildConfig(views=views, levels=[4], resolution=res, **kw)
                 return plan_setting(
                     cfg,
                     uid="bench",
@@ -179,8 +183,9 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
                     "motion": {"steps": mb["motion_blur"]["motion_steps"], "keys": keys},
                 }
             ]
+            # One render call, like the blurry image's frames before issue 16.
             at_p = [
-                dict(f, c2w=view["c2w"], region=region, out=str(work / f"p{k}.exr"))
+                dict(f, c2w=view["c2w"], region=region, call=None, out=str(work / f"p{k}.exr"))
                 for k, f in enumerate(latent)
             ]
             whole = [{k: v for k, v in f.items() if k != "region"} for f in latent]
@@ -217,6 +222,24 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
             for _ in range(repeats):
                 for name, f in cases.items():
                     runs[name].append(f())
+            # A setting's views: their trajectories point every way, so what the moving
+            # camera's content costs averages out over a dataset.
+            many = plan(latents=LATENTS, samples_total=SAMPLES_TOTAL, views=VIEWS)
+            all_renders = many.renders(str(work / "v"), None)
+            per_view = [
+                (
+                    [f for f in all_renders if f["view"] == v and f["level"] == "sharp"],
+                    [f for f in all_renders if f["view"] == v and f["level"] == "blur_4"],
+                )
+                for v in range(VIEWS)
+            ]
+            views_runs = []
+            for _ in range(VIEW_REPEATS):
+                s_cpu = b_cpu = 0.0
+                for s_frames, b_frames in per_view:
+                    s_cpu += timed.image(s_frames, SAMPLES_TOTAL, "NONE")["cpu"]
+                    b_cpu += timed.image(b_frames, spf, "NONE")["cpu"]
+                views_runs.append((s_cpu, b_cpu))
             load = os.getloadavg()
             device = w.info.get("device")
     med = {k: {m: _med(v, m) for m in v[0]} for k, v in runs.items()}
@@ -228,6 +251,7 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
         "samples_per_frame": spf,
         "repeats": repeats,
         "medians": med,
+        "views_cpu": views_runs,
         "worker_start_s": t_start,
         "load_s": t_load,
         "load_average": load,
@@ -284,6 +308,19 @@ def run() -> list[dict]:
             "blur_s": blur["wall"],
             "sharp_s": sharp["wall"],
             **where,
+            **common,
+        },
+        {
+            "name": "blur_cost_vs_sharp_views",
+            "ratio": statistics.median(b / s for s, b in m["views_cpu"]),
+            "ratio_is": "contender CPU time / baseline CPU time",
+            "cpu_ratio": statistics.median(b / s for s, b in m["views_cpu"]),
+            "contender": f"the blur_4 images of {VIEWS} views of one setting, {spec} each: "
+            f"{statistics.median(b for _, b in m['views_cpu']):.1f} s CPU",
+            "baseline": f"their sharp images, {m['samples_total']} samples: "
+            f"{statistics.median(s for s, _ in m['views_cpu']):.1f} s CPU",
+            "views": VIEWS,
+            "view_repeats": VIEW_REPEATS,
             **common,
         },
         {

@@ -1,0 +1,132 @@
+"""render_parity_<preset>_level<l>_x<F>: what parity of render noise costs (issue 15).
+
+With sample subsets a blurry image at zero motion carries exactly the sharp image's
+render noise (bench_render_noise). With motion it does not: each latent frame sees other
+content at a pixel, so the frames' blocks no longer add up to one stratified sequence,
+and every frame's error is that of its own L samples. This measures, for one view of a
+demo object (96 px, levels 1 and 4, the paper and balanced presets), the blurry image's
+render-noise MSE (against a converged render of the same latent positions, REF× the
+budget, other seeds) over the sharp image's (against its own converged render), when
+the blurry image gets F times the preset's budget (`--samples-total F·S`). Parity is 1;
+the issue's bound is 1.12 (0.5 dB). `cpu_s`: the blurry image's CPU seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+RESOLUTION = int(os.environ.get("BLURSET_BENCH_NOISE_RES", "96"))
+REF = 32  # converged renders: REF × the preset's own budget
+FACTORS = (1, 2, 4)
+LEVELS = (1, 4)
+DEVICE = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")
+PRESETS = {
+    # name: (build options of the blurry image at budget factor F, sharp samples)
+    "paper": (lambda f: {"latents": 34, "samples": 32 * f}, 1088),
+    "balanced": (
+        lambda f: {
+            "latents_auto": True,
+            "latent_positions": "stratified",
+            "samples_total": 256 * f,
+        },
+        256,
+    ),
+}
+
+
+def _mse(a, b) -> float:
+    return float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
+
+
+def measure(res: int = RESOLUTION) -> dict:
+    from blurset.demo import make_demo_objects
+    from blurset.plan import BuildConfig, plan_setting
+    from blurset.tradeoff import REFERENCE_SEED_SALT, _render_image, _sharp
+    from blurset.worker_client import Worker
+
+    out: dict = {"resolution": res, "reference_factor": REF, "rows": {}}
+    with tempfile.TemporaryDirectory(prefix="blurset-bench-") as tmp:
+        work = Path(tmp)
+        glb = make_demo_objects(work / "objects")[0]
+        with Worker(threads=0, timeout=7200, workdir=work / "scratch", device=DEVICE) as w:
+            info = w.load(glb, work / "v.npy")
+            verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
+
+            def plan(level: int, **kw):
+                cfg = BuildConfig(views=1, levels=[level], resolution=res, **kw)
+                return plan_setting(cfg, uid="bench", theta0_deg=0.0, seed=11,
+                                    bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
+
+            def image(p, level: int, salt: int = 0):
+                frames = p.level_renders(0, level, str(work / "f"))
+                return _render_image(w, frames, p.level(0, level), res, 40.0, salt)
+
+            for name, (options, sharp_n) in PRESETS.items():
+                for level in LEVELS:
+                    p1 = plan(level, **options(1))
+                    v = p1.to_dict()["views"][0]
+                    sharp, _ = _render_image(w, *_sharp(v, sharp_n, work), res, 40.0)
+                    sharp_ref, _ = _render_image(
+                        w, *_sharp(v, REF * sharp_n, work), res, 40.0, REFERENCE_SEED_SALT
+                    )
+                    lp = p1.level(0, level)
+                    conv_kw = {k: x for k, x in options(1).items() if k != "samples"}
+                    conv_kw["samples_total"] = REF * lp["samples_per_frame"] * lp["latents"]
+                    if "latents_auto" not in conv_kw:
+                        conv_kw["latents"] = lp["latents"]
+                    pc = plan(level, **conv_kw)
+                    assert pc.level(0, level)["latents"] == lp["latents"]
+                    conv, _ = image(pc, level, REFERENCE_SEED_SALT)
+                    row = {
+                        "motion_px": lp["motion_px"],
+                        "latents": lp["latents"],
+                        "sharp_samples": sharp_n,
+                        "sharp_mse": _mse(sharp, sharp_ref),
+                    }
+                    for f in FACTORS:
+                        pf = plan(level, **options(f))
+                        blur, t = image(pf, level)
+                        row[f"x{f}"] = {
+                            "samples_per_frame": pf.level(0, level)["samples_per_frame"],
+                            "mse_vs_sharp": _mse(blur, conv) / row["sharp_mse"],
+                            "cpu_s": t["cpu_seconds"],
+                        }
+                    out["rows"][f"{name}_level{level}"] = row
+            out["device"] = w.info.get("device")
+            out["load_average"] = os.getloadavg()
+    return out
+
+
+def run() -> list[dict]:
+    m = measure()
+    rows = []
+    for key, row in m["rows"].items():
+        for f in FACTORS:
+            e = row[f"x{f}"]
+            rows.append(
+                {
+                    "name": f"render_parity_{key}_x{f}",
+                    "ratio": e["mse_vs_sharp"],
+                    "ratio_is": "blurry render-noise MSE / sharp render-noise MSE",
+                    "contender": f"blurry, {row['latents']} x {e['samples_per_frame']} "
+                    f"samples (subsets, {f}x the preset's budget): {e['cpu_s']:.1f} s CPU",
+                    "baseline": f"sharp, {row['sharp_samples']} samples",
+                    "motion_px": row["motion_px"],
+                    "resolution": m["resolution"],
+                    "reference_factor": m["reference_factor"],
+                    "device": m["device"],
+                    "load_average": m["load_average"],
+                }
+            )
+    return rows
+
+
+if __name__ == "__main__":
+    json.dump(measure(), sys.stdout, indent=1)
+    print()
