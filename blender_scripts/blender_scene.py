@@ -305,6 +305,10 @@ def setup_scene(threads: int) -> None:
     c.caustics_reflective = False
     c.caustics_refractive = False
     c.sample_clamp_indirect = 10.0  # fireflies would survive averaging of latent frames
+    # Render regions (the core's plan/region.rs) assume rays land at most this far from
+    # their pixel: 1.5 px wide, i.e. 0.75 px around the pixel centre.
+    c.pixel_filter_type = "BLACKMAN_HARRIS"
+    c.filter_width = 1.5
 
 
 # The light paths of every object before issue 15 (`--light-paths fixed`).

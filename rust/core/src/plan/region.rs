@@ -7,9 +7,9 @@
 use glam::{DMat4, DVec3};
 
 /// How far outside its own square a pixel's camera rays can land: Cycles samples the
-/// pixel filter (Blackman-Harris, 1.5 px wide) around the pixel centre, i.e. up to 0.75 px
-/// past the pixel's edge. Rounded up, with one more pixel for Blender turning the border
-/// into whole pixels.
+/// pixel filter (Blackman-Harris, 1.5 px wide, set by the worker's scene set-up) around
+/// the pixel centre, i.e. up to 0.25 px past the pixel's edge. Rounded up, with one more
+/// pixel for Blender turning the border into whole pixels.
 pub const FILTER_REACH_PX: f64 = 2.0;
 
 /// A half-open pixel rectangle `[x0, x1) × [y0, y1)`, y down from the top row.
