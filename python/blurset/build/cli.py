@@ -58,6 +58,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "independent: a seed per frame (builds before issue 15)",
     )
     p.add_argument(
+        "--blur-budget",
+        choices=["parity", "flat"],
+        help="parity (default): a blurry image gets the sample budget times a factor of "
+        "its latent frames and motion, so it is no noisier than its sharp image; flat: the "
+        "budget as given, m frames at S/m samples (builds before it)",
+    )
+    p.add_argument(
         "--light-paths",
         choices=["auto", "fixed"],
         help="bounces from the object's materials (auto, default) or the same for every object",
@@ -185,7 +192,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
         k: getattr(args, k)
         for k in (
             "objects out demo settings_per_object views latents latents_max max_ghost_px "
-            "samples samples_total blur_method sharp_samples latent_sampling light_paths "
+            "samples samples_total blur_method sharp_samples latent_sampling blur_budget light_paths "
             "device gpus gpus_per_task resolution seed fov_deg latent_positions trajectory "
             "write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "

@@ -57,11 +57,12 @@ RUN_OPTIONS = frozenset(
 )
 # What a recorded config without the key was built with (blurset before the option),
 # not today's defaults: blurry test views, no images_<f>/, independent seeds per latent
-# frame, fixed light paths.
+# frame, a flat sample budget, fixed light paths.
 BEFORE_OPTION = {
     "blurry_test_views": True,
     "downsample": [],
     "latent_sampling": "independent",
+    "blur_budget": "flat",
     "light_paths": "fixed",
 }
 

@@ -6,7 +6,7 @@ use super::splits::test_views;
 use crate::error::{Error, Result};
 use crate::image::qa::FrameQa;
 use crate::plan::config::BuildConfig;
-use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan, ViewPlan};
+use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan, ViewPlan, PARITY_EXPONENT};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -72,6 +72,12 @@ pub struct RenderRecord {
     /// per latent frame: `seed` and `sample_offset`.
     pub latent_sampling: String,
     pub latent_sampling_is: String,
+    /// `parity` or `flat` (issue 15), in words in `blur_budget_is`; per level the result
+    /// is `samples_per_frame`.
+    #[serde(default)]
+    pub blur_budget: String,
+    #[serde(default)]
+    pub blur_budget_is: String,
     /// The Cycles `samples` of every render under subsets (`BuildConfig::cycles_samples`).
     pub cycles_samples: Option<u32>,
     /// Cycles adaptive sampling stays off: with it the sharp image stops early while the
@@ -115,6 +121,16 @@ impl RenderRecord {
                 "every latent frame renders the first samples_per_frame samples of its own seed"
             }
             .into(),
+            blur_budget: cfg.blur_budget.clone(),
+            blur_budget_is: if cfg.blur_budget == "parity" {
+                format!(
+                    "a blurry image of m >= 2 latent frames renders the sample budget times \
+                     m^{PARITY_EXPONENT} (rounded up per frame), so it carries no more render \
+                     noise than its sharp image; sharp_samples is the budget itself"
+                )
+            } else {
+                "a blurry image of m latent frames renders the sample budget split over them".into()
+            },
             cycles_samples: cfg.cycles_samples(),
             adaptive_sampling: false,
             light_paths: None,

@@ -6,8 +6,8 @@
 //! and the range (`views -1: must be an integer in 1..=4096`), never a parser position.
 //! The sampling options form the [`SamplingConfig`] of every setting's plan.
 use super::sampling::{
-    BlurMethod, LatentPositions, LatentSampling, SamplingConfig, TrajectoryAnchor, MAX_COUNT,
-    MAX_SAMPLES,
+    BlurBudget, BlurMethod, LatentPositions, LatentSampling, SamplingConfig, TrajectoryAnchor,
+    MAX_COUNT, MAX_SAMPLES,
 };
 use super::weights::Guards;
 use crate::dataset::layout::{self, MAX_LEVEL};
@@ -391,6 +391,7 @@ pub mod specs {
     pub const EXECUTOR: Spec = Spec::Choice(&["local", "ray"]);
     pub const LATENT_SAMPLING: Spec = Spec::Choice(&["subsets", "independent"]);
     pub const LIGHT_PATHS: Spec = Spec::Choice(&["auto", "fixed"]);
+    pub const BLUR_BUDGET: Spec = Spec::Choice(&["parity", "flat"]);
     /// `auto`: the best backend Cycles reports (OptiX > CUDA > HIP > oneAPI > Metal > CPU).
     pub const DEVICE: Spec =
         Spec::Choice(&["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"]);
@@ -495,6 +496,10 @@ build_config! {
     /// on the view's seed, which the sharp image renders too (issue 15); `independent`:
     /// a seed per frame (builds before it).
     latent_sampling: String = "subsets".into(), specs::LATENT_SAMPLING;
+    /// `parity`: a blurry image gets the budget times a factor of its m and motion, so
+    /// it carries no more render noise than its sharp image (issue 15); `flat`: the
+    /// budget as given (builds before it).
+    blur_budget: String = "parity".into(), specs::BLUR_BUDGET;
     /// `auto`: light-path bounces from the object's materials; `fixed`: the same for all.
     light_paths: String = "auto".into(), specs::LIGHT_PATHS;
     /// Cycles device (run-only: the pixels are the plan's on any device, within noise).
@@ -699,6 +704,11 @@ impl BuildConfig {
             } else {
                 LatentSampling::Subsets
             },
+            blur_budget: if self.blur_budget == "flat" {
+                BlurBudget::Flat
+            } else {
+                BlurBudget::Parity
+            },
         }
     }
 
@@ -720,7 +730,8 @@ impl BuildConfig {
         self.sampling().max_latents()
     }
 
-    /// Samples one blurry image gets at most (the budget, or samples × its frames).
+    /// The sample budget S of one blurry image (`samples_total`, or samples × its most
+    /// frames); under `blur_budget` parity the image renders S times its parity factor.
     pub fn blur_samples_total(&self) -> u64 {
         if let Some(t) = self.samples_total {
             return u64::from(t);
@@ -733,8 +744,8 @@ impl BuildConfig {
         u64::from(self.samples) * m as u64
     }
 
-    /// Samples of the sharp render: `sharp_samples`, or the blurry image's budget, so
-    /// ground truth is at least as clean as the blurry images.
+    /// Samples of the sharp render: `sharp_samples`, or the budget S (whose render noise
+    /// the parity factor gives the blurry images too).
     pub fn effective_sharp_samples(&self) -> u64 {
         self.sharp_samples
             .map_or_else(|| self.blur_samples_total(), u64::from)

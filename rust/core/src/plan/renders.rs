@@ -219,6 +219,7 @@ mod tests {
             views: 2,
             levels: vec![1, 10],
             latents: 3,
+            blur_budget: "flat".into(),
             ..Default::default()
         };
         let plan = plan_setting(&cfg.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
@@ -282,6 +283,7 @@ mod tests {
             latents: 7,
             samples_total: Some(300),
             sharp_samples: Some(200),
+            blur_budget: "flat".into(),
             ..Default::default()
         };
         let plan = plan_setting(&cfg.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;

@@ -71,6 +71,32 @@ pub enum LatentSampling {
     Independent,
 }
 
+/// How many samples a blurry image gets against the sharp image's budget (issue 15).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum BlurBudget {
+    /// The budget times [`parity_factor`] of the image's m and motion: a moving camera
+    /// shows a pixel other content in every latent frame, so the frames' sample blocks
+    /// stop adding up to one stratified sequence and m frames at S/m samples carry more
+    /// render noise than one frame at S. The factor buys that back, so the blurry image
+    /// is no noisier than its sharp truth (measured: bench/bench_render_parity.py).
+    Parity,
+    /// The budget as given: m frames at S/m samples (builds before this option).
+    Flat,
+}
+
+/// The parity factor is m^PARITY_EXPONENT: measured on the demo box
+/// (bench/bench_render_parity.py), m = 34 frames at S/m samples need ≈ 4 S to carry the
+/// render noise of one S-sample frame once the camera moves ≳ 0.5 px per frame (their
+/// blocks then sample unrelated content), and fewer frames need less (m = 1 needs none).
+pub const PARITY_EXPONENT: f64 = 0.4;
+
+/// How many times the budget an average of m latent frames gets under
+/// [`BlurBudget::Parity`]: 1 for one frame, m^[`PARITY_EXPONENT`] (≈ 4.1 at the paper's 34).
+pub fn parity_factor(m: usize) -> f64 {
+    libm::pow(m.max(1) as f64, PARITY_EXPONENT)
+}
+
 /// Longest Cycles sample sequence (`scene.cycles.samples` tops out at 2^24).
 pub const MAX_SEQUENCE: u64 = 1 << 24;
 
@@ -121,6 +147,7 @@ pub struct SamplingConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub samples_total: Option<u32>,
     pub latent_sampling: LatentSampling,
+    pub blur_budget: BlurBudget,
 }
 
 impl Default for SamplingConfig {
@@ -146,6 +173,7 @@ impl Default for SamplingConfig {
             samples: 32,
             samples_total: None,
             latent_sampling: LatentSampling::Subsets,
+            blur_budget: BlurBudget::Parity,
         }
     }
 }
@@ -220,14 +248,20 @@ impl SamplingConfig {
     /// With a budget S: ⌈S / m⌉ (averaging m frames averages their noise too);
     /// without one, `samples` per latent frame, and for the motion blur method one
     /// render with the budget the average method would spend (`samples · latents`).
+    /// Under [`BlurBudget::Parity`] an average of m ≥ 2 frames gets [`parity_factor`]`(m)`
+    /// times that, rounded up per frame.
     pub fn samples_per_frame(&self, m: usize) -> u32 {
-        match (self.blur_method, self.samples_total) {
-            (_, Some(total)) => total.div_ceil(m.max(1) as u32),
-            (BlurMethod::Average, None) => self.samples,
-            (BlurMethod::MotionBlur, None) => {
-                (self.samples as u64 * self.latents as u64).min(MAX_SAMPLES as u64) as u32
-            }
-        }
+        let m = m.max(1);
+        let budget = match (self.blur_method, self.samples_total) {
+            (_, Some(total)) => total as f64 / m as f64,
+            (BlurMethod::Average, None) => self.samples as f64,
+            (BlurMethod::MotionBlur, None) => self.samples as f64 * self.latents as f64,
+        };
+        let factor = match (self.blur_method, self.blur_budget) {
+            (BlurMethod::Average, BlurBudget::Parity) => parity_factor(m),
+            _ => 1.0,
+        };
+        (budget * factor).ceil().min(MAX_SAMPLES as f64) as u32
     }
 
     /// The sample blocks of a blurry image's `m` latent frames under this config's
@@ -1309,15 +1343,21 @@ mod tests {
         let cfg = SamplingConfig {
             samples_total: Some(136),
             latents: 34,
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         };
         assert_eq!(cfg.samples_per_frame(34), 4);
         assert_eq!(cfg.samples_per_frame(5), 28);
         assert_eq!(cfg.samples_per_frame(1), 136);
-        assert_eq!(SamplingConfig::default().samples_per_frame(10), 32);
+        let flat = SamplingConfig {
+            blur_budget: BlurBudget::Flat,
+            ..Default::default()
+        };
+        assert_eq!(flat.samples_per_frame(10), 32);
         let mb = SamplingConfig {
             blur_method: BlurMethod::MotionBlur,
             samples: 4,
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         };
         assert_eq!(mb.samples_per_frame(1), 4 * 34);
@@ -1325,6 +1365,7 @@ mod tests {
             latents_auto: true,
             samples_total: Some(100),
             views: 4,
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         };
         for v in &plan(&auto, 1, [1.0, 1.0, 1.0]).views {
@@ -1334,6 +1375,7 @@ mod tests {
         }
         assert!(SamplingConfig {
             samples_total: Some(0),
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         }
         .validate()
@@ -1405,6 +1447,7 @@ mod tests {
             views: 3,
             latents: 8,
             samples_total: Some(32),
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         };
         let p = plan(&cfg, 3, [1.0, 0.7, 0.4]);
@@ -1463,6 +1506,7 @@ mod tests {
             latent_positions: LatentPositions::Stratified,
             samples_total: Some(100),
             views: 4,
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         };
         for v in &plan(&cfg, 1, [1.0, 1.0, 1.0]).views {
@@ -1484,6 +1528,7 @@ mod tests {
             samples_total: Some(100),
             latents_max: 47,
             views: 6,
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         };
         // m = 34 needs 34·⌈100/34⌉ = 102, m = 47 needs 141; the most is at m = 47.
@@ -1495,13 +1540,84 @@ mod tests {
                 assert!(lp.sample_sequence <= p.sample_sequence_max);
             }
         }
-        assert_eq!(SamplingConfig::default().max_sequence(), 34 * 32);
+        // The paper's 34 × 32 under parity: ⌈32 · 34^0.4⌉ = 132 per frame.
+        assert_eq!(SamplingConfig::default().max_sequence(), 34 * 132);
         let mb = SamplingConfig {
             blur_method: BlurMethod::MotionBlur,
             samples_total: Some(128),
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         };
         assert_eq!(mb.max_sequence(), 128);
+    }
+
+    #[test]
+    fn parity_buys_the_blurry_image_more_samples_by_its_frames() {
+        let flat = SamplingConfig {
+            blur_budget: BlurBudget::Flat,
+            ..Default::default()
+        };
+        let parity = SamplingConfig::default();
+        assert_eq!(parity.blur_budget, BlurBudget::Parity);
+        // One frame renders the budget as is; more frames get m^0.4 times it, rounded up.
+        assert_eq!(parity_factor(1), 1.0);
+        assert!((parity_factor(34) - 4.0982).abs() < 1e-4);
+        assert_eq!(parity.samples_per_frame(1), 32);
+        assert_eq!(parity.samples_per_frame(34), 132);
+        let budget = |c: &SamplingConfig| SamplingConfig {
+            samples_total: Some(256),
+            ..c.clone()
+        };
+        assert_eq!(budget(&flat).samples_per_frame(34), 8);
+        assert_eq!(budget(&parity).samples_per_frame(34), 31); // ⌈256 · 34^0.4 / 34⌉
+        assert_eq!(budget(&parity).samples_per_frame(1), 256);
+        for m in 1..=300usize {
+            let (f, p) = (budget(&flat), budget(&parity));
+            // Never fewer than flat, never more than one frame's rounding above m^0.4 · S.
+            assert!(p.samples_per_frame(m) >= f.samples_per_frame(m));
+            let spent = (m as u64 * p.samples_per_frame(m) as u64) as f64;
+            assert!(
+                spent >= 256.0 * parity_factor(m) && spent < 256.0 * parity_factor(m) + m as f64
+            );
+            // The factor grows with m, so longer averages never get fewer samples in all.
+            if m > 1 {
+                assert!(parity_factor(m) > parity_factor(m - 1));
+            }
+        }
+        // Motion blur is one render: its budget stays as given.
+        for b in [BlurBudget::Flat, BlurBudget::Parity] {
+            let mb = SamplingConfig {
+                blur_method: BlurMethod::MotionBlur,
+                samples_total: Some(128),
+                blur_budget: b,
+                ..Default::default()
+            };
+            assert_eq!(mb.samples_per_frame(1), 128);
+        }
+        // The plan follows: every level's frames carry the parity samples, and the
+        // sequences stay within what the build pins Cycles to.
+        let auto = SamplingConfig {
+            latents_auto: true,
+            latent_positions: LatentPositions::Stratified,
+            samples_total: Some(100),
+            views: 4,
+            ..Default::default()
+        };
+        let p = plan(&auto, 1, [1.0, 1.0, 1.0]);
+        for v in &p.views {
+            for lp in v.levels.values() {
+                assert_eq!(lp.samples_per_frame, auto.samples_per_frame(lp.latents));
+                assert!(lp.sample_sequence <= p.sample_sequence_max);
+            }
+        }
+        // At the sample cap the factor cannot overflow a frame's count.
+        let huge = SamplingConfig {
+            samples: MAX_SAMPLES,
+            latents: 2,
+            latent_sampling: LatentSampling::Independent,
+            ..Default::default()
+        };
+        assert_eq!(huge.samples_per_frame(2), MAX_SAMPLES);
     }
 
     #[test]
