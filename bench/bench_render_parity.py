@@ -9,6 +9,9 @@ render-noise MSE (against a converged render of the same latent positions, REF×
 budget, other seeds) over the sharp image's (against its own converged render), when
 the blurry image gets F times the preset's budget (`--samples-total F·S`). Parity is 1;
 the issue's bound is 1.12 (0.5 dB). `cpu_s`: the blurry image's CPU seconds.
+
+`x<F>` rows split the budget flat (`--blur-budget flat`, F times it); the `parity` rows
+are the default build (`--blur-budget parity`: m^0.4 times the budget), at every level.
 """
 
 from __future__ import annotations
@@ -24,20 +27,27 @@ import numpy as np
 RESOLUTION = int(os.environ.get("BLURSET_BENCH_NOISE_RES", "96"))
 REF = 32  # converged renders: REF × the preset's own budget
 FACTORS = (1, 2, 4)
-LEVELS = (1, 4)
+LEVELS = (1, 2, 3, 4)
+FLAT_LEVELS = (1, 4)  # the x<F> rows
 DEVICE = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")
 PRESETS = {
     # name: (build options of the blurry image at budget factor F, sharp samples)
-    "paper": (lambda f: {"latents": 34, "samples": 32 * f}, 1088),
+    # f = None: the default parity budget; else f times the budget, split flat.
+    "paper": (lambda f: {"latents": 34, "samples": 32 * (f or 1), **_budget(f)}, 1088),
     "balanced": (
         lambda f: {
             "latents_auto": True,
             "latent_positions": "stratified",
-            "samples_total": 256 * f,
+            "samples_total": 256 * (f or 1),
+            **_budget(f),
         },
         256,
     ),
 }
+
+
+def _budget(f: int | None) -> dict:
+    return {} if f is None else {"blur_budget": "flat"}
 
 
 def _mse(a, b) -> float:
@@ -68,14 +78,13 @@ def measure(res: int = RESOLUTION) -> dict:
                 return _render_image(w, frames, p.level(0, level), res, 40.0, salt)
 
             for name, (options, sharp_n) in PRESETS.items():
+                v = plan(1, **options(1)).to_dict()["views"][0]  # the view is the levels'
+                sharp, _ = _render_image(w, *_sharp(v, sharp_n, work), res, 40.0)
+                sharp_ref, _ = _render_image(
+                    w, *_sharp(v, REF * sharp_n, work), res, 40.0, REFERENCE_SEED_SALT
+                )
                 for level in LEVELS:
-                    p1 = plan(level, **options(1))
-                    v = p1.to_dict()["views"][0]
-                    sharp, _ = _render_image(w, *_sharp(v, sharp_n, work), res, 40.0)
-                    sharp_ref, _ = _render_image(
-                        w, *_sharp(v, REF * sharp_n, work), res, 40.0, REFERENCE_SEED_SALT
-                    )
-                    lp = p1.level(0, level)
+                    lp = plan(level, **options(1)).level(0, level)
                     conv_kw = {k: x for k, x in options(1).items() if k != "samples"}
                     conv_kw["samples_total"] = REF * lp["samples_per_frame"] * lp["latents"]
                     if "latents_auto" not in conv_kw:
@@ -89,10 +98,10 @@ def measure(res: int = RESOLUTION) -> dict:
                         "sharp_samples": sharp_n,
                         "sharp_mse": _mse(sharp, sharp_ref),
                     }
-                    for f in FACTORS:
+                    for f in (*(FACTORS if level in FLAT_LEVELS else ()), None):
                         pf = plan(level, **options(f))
                         blur, t = image(pf, level)
-                        row[f"x{f}"] = {
+                        row["parity" if f is None else f"x{f}"] = {
                             "samples_per_frame": pf.level(0, level)["samples_per_frame"],
                             "mse_vs_sharp": _mse(blur, conv) / row["sharp_mse"],
                             "cpu_s": t["cpu_seconds"],
@@ -107,15 +116,18 @@ def run() -> list[dict]:
     m = measure()
     rows = []
     for key, row in m["rows"].items():
-        for f in FACTORS:
-            e = row[f"x{f}"]
+        for case in (k for k in row if k == "parity" or k.startswith("x")):
+            e = row[case]
+            how = (
+                "the default parity budget" if case == "parity" else f"{case[1:]}x the budget, flat"
+            )
             rows.append(
                 {
-                    "name": f"render_parity_{key}_x{f}",
+                    "name": f"render_parity_{key}_{case}",
                     "ratio": e["mse_vs_sharp"],
                     "ratio_is": "blurry render-noise MSE / sharp render-noise MSE",
                     "contender": f"blurry, {row['latents']} x {e['samples_per_frame']} "
-                    f"samples (subsets, {f}x the preset's budget): {e['cpu_s']:.1f} s CPU",
+                    f"samples (subsets, {how}): {e['cpu_s']:.1f} s CPU",
                     "baseline": f"sharp, {row['sharp_samples']} samples",
                     "motion_px": row["motion_px"],
                     "resolution": m["resolution"],

@@ -56,7 +56,7 @@ def refused(capsys, out: Path, *argv: str) -> str:
         (["--gpus", "0,x"], "--gpus: expected GPU indices like 0,2 or all, got '0,x'"),
         (["--gpus-per-task", "-1"], "--gpus-per-task -1.0: must be a number in [0, 64]"),
         (
-            ["--latents", "4096", "--samples", "8192"],
+            ["--latents", "4096", "--samples", "8192", "--blur-budget", "flat"],
             "--latent-sampling subsets: 4096 latents × 8192 samples = 33554432 samples",
         ),
     ],
@@ -204,10 +204,18 @@ def test_issue_15_16_options_and_their_spellings():
         "auto",
         "auto",
     )
-    # Subsets pin every render to the longest sequence (the demo: 6 × 4) or the sharp budget.
-    assert d.cycles_samples == 24
+    # Subsets pin every render to the longest sequence or the sharp budget. The demo's
+    # 6 frames × 4 samples under parity: 6 × ⌈4 · 6^0.4⌉ = 54; flat: 6 × 4.
+    assert (d.blur_budget, d.cycles_samples) == ("parity", 54)
+    assert d.replace(blur_budget="flat").cycles_samples == 24
     assert d.replace(sharp_samples=100).cycles_samples == 100
-    assert BuildConfig(latents_auto=True, latents_max=47, samples_total=100).cycles_samples == 141
+    assert d.replace(sharp_samples=100, blur_budget="flat").cycles_samples == 100
+    auto = BuildConfig(latents_auto=True, latents_max=47, samples_total=100, blur_budget="flat")
+    assert auto.cycles_samples == 141
+    assert auto.replace(blur_budget="parity").cycles_samples == 506  # 47 × ⌈100 · 47^0.4 / 47⌉
+    assert make_config({"blur_budget": "flat"}, {"out": "o", "demo": True}).blur_budget == "flat"
+    with pytest.raises(ConfigError, match='blur_budget "even": must be one of parity, flat'):
+        make_config({"blur_budget": "even"}, {"out": "o", "demo": True})
 
 
 def test_toml_values_name_their_file_and_key(tmp_path):

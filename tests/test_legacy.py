@@ -1,5 +1,6 @@
 """The flags that reproduce a dataset built before this round's new defaults (sample
-subsets, light paths from materials, Deblur-NeRF test views, images_4/): with them, the
+subsets, the parity sample budget, light paths from materials, Deblur-NeRF test views,
+images_4/): with them, the
 demo build's images and poses are the bytes blurset wrote before (e6029c3, the commit
 before the redesign), so a researcher can extend or re-make an existing dataset.
 
@@ -17,7 +18,7 @@ from tests.conftest import run_cli
 
 LEGACY_FLAGS = (
     "--latent-sampling", "independent", "--light-paths", "fixed", "--blurry-test-views",
-    "--downsample", "none", "--trajectory", "start",
+    "--downsample", "none", "--trajectory", "start", "--blur-budget", "flat",
 )  # fmt: skip
 
 # `find . -name '*.png' -o -name '*.npy' | LC_ALL=C sort | xargs sha256sum | sha256sum`

@@ -62,8 +62,11 @@ def test_plan_auto_bound_budget_split_and_motion_keys():
         )
 
     auto = plan(latents_auto=True, latent_positions="stratified", max_ghost_px=0.5,
-                latents_max=200, samples_total=100)  # fmt: skip
-    fixed = plan(latents=7, samples_total=100)
+                latents_max=200, samples_total=100, blur_budget="flat")  # fmt: skip
+    fixed = plan(latents=7, samples_total=100, blur_budget="flat")
+    # Under parity (the default) the same budget buys every level ⌈100 · m^0.4 / m⌉.
+    for v in plan(latents=7, samples_total=100)["views"]:
+        assert {lp["samples_per_frame"] for lp in v["levels"].values()} == {32}
     for va, vf in zip(auto["views"], fixed["views"], strict=True):
         for lvl in ("1", "4"):
             a, f = va["levels"][lvl], vf["levels"][lvl]
