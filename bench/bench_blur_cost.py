@@ -148,7 +148,8 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
             verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
 
             def plan(views: int = 1, **kw):
-                cfg = BuildConfig(views=views, levels=[4], resolution=res, **kw)
+                # Equal total samples is what this compares: the budget split flat.
+                cfg = BuildConfig(views=views, levels=[4], resolution=res, blur_budget="flat", **kw)
                 return plan_setting(
                     cfg,
                     uid="bench",

@@ -60,7 +60,8 @@ def measure(res: int = RESOLUTION) -> dict:
             verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
 
             def plan_of(**kw):
-                cfg = BuildConfig(views=1, levels=[LEVEL], resolution=res, **kw)
+                # The schemes at one budget, split flat (bench_render_parity: the factor).
+                cfg = BuildConfig(views=1, levels=[LEVEL], resolution=res, blur_budget="flat", **kw)
                 return plan_setting(
                     cfg,
                     uid="bench",

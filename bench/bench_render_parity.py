@@ -55,6 +55,11 @@ def _mse(a, b) -> float:
 
 
 def measure(res: int = RESOLUTION) -> dict:
+    """The images as a build renders them: per preset and budget a fresh worker renders
+    the sharp image and the blurry ones with every render pinned to that build's Cycles
+    `samples` (BuildConfig.cycles_samples: Cycles sizes its sample pattern from the
+    largest `samples` a process has rendered, so the pin shapes the sharp image's noise
+    too). The converged references come from another worker."""
     from blurset.demo import make_demo_objects
     from blurset.plan import BuildConfig, plan_setting
     from blurset.tradeoff import REFERENCE_SEED_SALT, _render_image, _sharp
@@ -64,50 +69,67 @@ def measure(res: int = RESOLUTION) -> dict:
     with tempfile.TemporaryDirectory(prefix="blurset-bench-") as tmp:
         work = Path(tmp)
         glb = make_demo_objects(work / "objects")[0]
-        with Worker(threads=0, timeout=7200, workdir=work / "scratch", device=DEVICE) as w:
-            info = w.load(glb, work / "v.npy")
+
+        def worker() -> Worker:
+            return Worker(threads=0, timeout=7200, workdir=work / "scratch", device=DEVICE)
+
+        with worker() as ref_w:
+            info = ref_w.load(glb, work / "v.npy")
             verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
 
-            def plan(level: int, **kw):
-                cfg = BuildConfig(views=1, levels=[level], resolution=res, **kw)
+            def config(levels, **kw) -> BuildConfig:
+                return BuildConfig(views=1, levels=list(levels), resolution=res, **kw)
+
+            def plan(cfg: BuildConfig):
                 return plan_setting(cfg, uid="bench", theta0_deg=0.0, seed=11,
                                     bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
 
-            def image(p, level: int, salt: int = 0):
-                frames = p.level_renders(0, level, str(work / "f"))
+            def image(w, p, level: int, salt: int = 0, pin=None):
+                frames = p.level_renders(0, level, str(work / "f"), pin)
                 return _render_image(w, frames, p.level(0, level), res, 40.0, salt)
 
             for name, (options, sharp_n) in PRESETS.items():
-                v = plan(1, **options(1)).to_dict()["views"][0]  # the view is the levels'
-                sharp, _ = _render_image(w, *_sharp(v, sharp_n, work), res, 40.0)
+                base = plan(config(LEVELS, **options(1)))
+                v = base.to_dict()["views"][0]  # the view is every budget's
                 sharp_ref, _ = _render_image(
-                    w, *_sharp(v, REF * sharp_n, work), res, 40.0, REFERENCE_SEED_SALT
+                    ref_w, *_sharp(v, REF * sharp_n, work), res, 40.0, REFERENCE_SEED_SALT
                 )
+                conv = {}
                 for level in LEVELS:
-                    lp = plan(level, **options(1)).level(0, level)
+                    lp = base.level(0, level)
                     conv_kw = {k: x for k, x in options(1).items() if k != "samples"}
                     conv_kw["samples_total"] = REF * lp["samples_per_frame"] * lp["latents"]
                     if "latents_auto" not in conv_kw:
                         conv_kw["latents"] = lp["latents"]
-                    pc = plan(level, **conv_kw)
+                    pc = plan(config([level], **conv_kw))
                     assert pc.level(0, level)["latents"] == lp["latents"]
-                    conv, _ = image(pc, level, REFERENCE_SEED_SALT)
-                    row = {
+                    conv[level], _ = image(ref_w, pc, level, REFERENCE_SEED_SALT)
+                    out["rows"][f"{name}_level{level}"] = {
                         "motion_px": lp["motion_px"],
                         "latents": lp["latents"],
                         "sharp_samples": sharp_n,
-                        "sharp_mse": _mse(sharp, sharp_ref),
                     }
-                    for f in (*(FACTORS if level in FLAT_LEVELS else ()), None):
-                        pf = plan(level, **options(f))
-                        blur, t = image(pf, level)
-                        row["parity" if f is None else f"x{f}"] = {
-                            "samples_per_frame": pf.level(0, level)["samples_per_frame"],
-                            "mse_vs_sharp": _mse(blur, conv) / row["sharp_mse"],
-                            "cpu_s": t["cpu_seconds"],
-                        }
-                    out["rows"][f"{name}_level{level}"] = row
-            out["device"] = w.info.get("device")
+                for f in (*FACTORS, None):
+                    case = "parity" if f is None else f"x{f}"
+                    cfg = config(LEVELS if f is None else FLAT_LEVELS, **options(f))
+                    p, pin = plan(cfg), cfg.cycles_samples
+                    with worker() as w:
+                        w.load(glb, work / "v2.npy")
+                        frames, lvl = _sharp(v, sharp_n, work)
+                        frames[0].update(sample_offset=0, sample_sequence=pin)
+                        sharp, _ = _render_image(w, frames, lvl, res, 40.0)
+                        for level in cfg.levels:
+                            row = out["rows"][f"{name}_level{level}"]
+                            blur, t = image(w, p, level, pin=pin)
+                            sharp_mse = _mse(sharp, sharp_ref)
+                            row[case] = {
+                                "samples_per_frame": p.level(0, level)["samples_per_frame"],
+                                "cycles_samples": pin,
+                                "sharp_mse": sharp_mse,
+                                "mse_vs_sharp": _mse(blur, conv[level]) / sharp_mse,
+                                "cpu_s": t["cpu_seconds"],
+                            }
+            out["device"] = ref_w.info.get("device")
             out["load_average"] = os.getloadavg()
     return out
 
@@ -127,7 +149,8 @@ def run() -> list[dict]:
                     "ratio": e["mse_vs_sharp"],
                     "ratio_is": "blurry render-noise MSE / sharp render-noise MSE",
                     "contender": f"blurry, {row['latents']} x {e['samples_per_frame']} "
-                    f"samples (subsets, {how}): {e['cpu_s']:.1f} s CPU",
+                    f"samples (subsets, {how}; every render pinned to {e['cycles_samples']} "
+                    f"Cycles samples, as the build): {e['cpu_s']:.1f} s CPU",
                     "baseline": f"sharp, {row['sharp_samples']} samples",
                     "motion_px": row["motion_px"],
                     "resolution": m["resolution"],

@@ -334,6 +334,7 @@ def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> 
         ("field of view (°)", cfg.get("fov_deg", sampling.get("fov_deg"))),
         ("blur method", render.get("blur_method", cfg.get("blur_method"))),
         ("Cycles samples per latent frame", render.get("samples_per_latent")),
+        ("blurry sample budget", render.get("blur_budget")),
         ("Cycles samples of a sharp image", render.get("sharp_samples")),
         ("background", _fmt(render.get("background", cfg.get("background")))),
         ("seed", cfg.get("seed")),

@@ -60,7 +60,8 @@ pub struct Timings {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct RenderRecord {
     pub engine: String,
-    /// Per level in views[].levels[].samples_per_frame; null when a budget splits.
+    /// Per level in views[].levels[].samples_per_frame; null when it differs between
+    /// images (a budget split over m frames, or parity under `--latents auto`).
     pub samples_per_latent: Option<u32>,
     pub samples_total: Option<u32>,
     pub blur_method: String,
@@ -102,7 +103,14 @@ impl RenderRecord {
     pub fn of(cfg: &BuildConfig) -> Self {
         RenderRecord {
             engine: "CYCLES".into(),
-            samples_per_latent: cfg.samples_total.is_none().then_some(cfg.samples),
+            // The count every latent frame renders, where one count holds for all of them.
+            samples_per_latent: match cfg.samples_total {
+                Some(_) => None,
+                None if cfg.blur_budget == "parity" && cfg.blur_method == "average" => {
+                    (!cfg.latents_auto).then(|| cfg.sampling().samples_per_frame(cfg.latents))
+                }
+                None => Some(cfg.samples),
+            },
             samples_total: cfg.samples_total,
             blur_method: cfg.blur_method.clone(),
             latents: if cfg.latents_auto {
