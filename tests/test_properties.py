@@ -49,6 +49,7 @@ configs = st.fixed_dictionaries(
         "blur_method": st.sampled_from(["average", "motion_blur"]),
         "samples": st.integers(1, 4096),
         "samples_total": st.one_of(st.none(), st.integers(1, 2**20)),
+        "blur_budget": st.sampled_from(["parity", "flat"]),  # issue 15
     }
 )
 
