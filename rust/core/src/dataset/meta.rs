@@ -449,7 +449,20 @@ mod tests {
             v["levels"],
             serde_json::json!(["sharp", "blur_1", "blur_3"])
         );
-        assert_eq!(v["render"]["samples_per_latent"], 32);
+        // What every latent frame renders: 32 × 2^0.4 = 42.2 → 43 under parity.
+        assert_eq!(v["render"]["samples_per_latent"], 43);
+        assert_eq!(v["render"]["blur_budget"], "parity");
+        assert_eq!(v["views"][1]["levels"]["3"]["samples_per_frame"], 43);
+        let flat = BuildConfig {
+            blur_budget: "flat".into(),
+            ..cfg.clone()
+        };
+        assert_eq!(RenderRecord::of(&flat).samples_per_latent, Some(32));
+        let auto = BuildConfig {
+            latents_auto: true,
+            ..cfg.clone()
+        };
+        assert_eq!(RenderRecord::of(&auto).samples_per_latent, None);
         // A default build's render record is unchanged; --keep-linear says so.
         assert!(v["render"].get("linear").is_none());
         let linear = BuildConfig {
