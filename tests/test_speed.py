@@ -119,13 +119,15 @@ def test_build_latents_auto_with_sample_budget(tmp_path, demo_glbs):
     meta = json.loads((s / "meta.json").read_text())
     assert meta["sampling"]["latents_auto"] and meta["sampling"]["max_ghost_px"] == 1.0
     assert meta["render"]["samples_total"] == 12 and meta["render"]["latents"] == "auto"
-    assert meta["render"]["sharp_samples"] == 12
+    assert meta["render"]["sharp_samples"] == 12 and meta["render"]["blur_budget"] == "parity"
     frames = 0
     for v in meta["views"]:
         for lp in v["levels"].values():
             assert lp["max_gap_px"] <= 1.0 or lp["latents"] == 40
             assert lp["latents"] == len(lp["latent_frames"])
-            assert lp["samples_per_frame"] == math.ceil(12 / lp["latents"])
+            # The default parity budget: each level's own m gets m^0.4 times the budget.
+            m = lp["latents"]
+            assert lp["samples_per_frame"] == math.ceil(12 * m**0.4 / m)
             # A test view's blur levels are copies of its sharp image: nothing rendered.
             frames += 0 if v["index"] in meta["test_views"] else lp["latents"]
         assert v["levels"]["1"]["latents"] < v["levels"]["4"]["latents"]
