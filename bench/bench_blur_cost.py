@@ -29,7 +29,9 @@ any splitting, since the moving camera sees more of the object than the camera a
 sharp images, CPU time (trajectories point every way, so the content's cost averages out
 over a dataset); `blur_cost_vs_sharp_centered`: with p mid-exposure
 (`--trajectory centered`); `render_region_saving`: the sharp and blurry image traced in
-the plan's regions (plan/region.rs) against the same renders over the whole image.
+the plan's regions (plan/region.rs) against the same renders over the whole image;
+`exr_crop_saving`: the blurry image with its EXRs cropped to their call's region (as a
+build writes them) against full-size EXRs (the worker before), CPU time and EXR bytes.
 
 Wall-clock medians of interleaved repeats, and CPU-time medians (the worker process's and
 ours): the machine is shared, and CPU time is what contention disturbs least.
@@ -86,16 +88,19 @@ class Timed:
 
         worker._receive_in_sync = receive
 
-    def image(self, frames, samples: int, codec: str, batch: bool = True) -> dict:
+    def image(self, frames, samples: int, codec: str, batch: bool = True, crop: bool = True) -> dict:
+        """crop: as a build renders, each EXR cropped to its render call's region."""
         from blurset.image import Accumulator
 
         acc = Accumulator(self.res, self.res)
         acc_s = 0.0
+        exr_bytes = 0
 
-        def on_frame(_i: int, path: str) -> None:
-            nonlocal acc_s
+        def on_frame(_i: int, path: str, origin) -> None:
+            nonlocal acc_s, exr_bytes
             t = time.perf_counter()
-            acc.add_exr(path)
+            exr_bytes += os.path.getsize(path)
+            acc.add_exr(path, origin)
             os.unlink(path)
             acc_s += time.perf_counter() - t
 
@@ -109,6 +114,7 @@ class Timed:
             on_frame=on_frame,
             exr_codec=codec,
             batch=batch,
+            crop=crop,
         )
         acc.write_png(self.work / "out.png")
         wall = time.perf_counter() - t0
@@ -120,6 +126,7 @@ class Timed:
             "render_s": render,
             "accumulate_s": acc_s,
             "outside_render_s": wall - render,
+            "exr_mb": exr_bytes / 1e6,
         }
 
 
@@ -215,6 +222,7 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
                 "split_at_p": lambda: timed.image(at_p, spf, "NONE"),
                 "blur": lambda: timed.image(latent, spf, "NONE"),
                 "blur_per_call": lambda: timed.image(latent, spf, "NONE", batch=False),
+                "blur_uncropped": lambda: timed.image(latent, spf, "NONE", crop=False),
                 "blur_independent": lambda: timed.image(independent, spf, "NONE"),
                 "motion_blur": lambda: timed.image(motion, SAMPLES_TOTAL, "NONE"),
             }
@@ -354,6 +362,19 @@ def run() -> list[dict]:
             f"{sharp['cpu'] + blur['cpu']:.1f} s CPU",
             "baseline": f"the same renders over the whole image: "
             f"{sharp_whole['cpu'] + whole['cpu']:.1f} s CPU",
+            **common,
+        },
+        {
+            "name": "exr_crop_saving",
+            "ratio": med["blur_uncropped"]["cpu"] / blur["cpu"],
+            "ratio_is": "baseline CPU time / contender CPU time",
+            "contender": f"blurry image, {spec}, EXRs cropped to their call's region: "
+            f"{blur['cpu']:.1f} s CPU, {blur['exr_mb']:.0f} MB of EXR",
+            "baseline": f"the same, full-size EXRs: {med['blur_uncropped']['cpu']:.1f} s CPU, "
+            f"{med['blur_uncropped']['exr_mb']:.0f} MB of EXR",
+            "exr_mb_ratio": med["blur_uncropped"]["exr_mb"] / blur["exr_mb"],
+            "accumulate_s": blur["accumulate_s"],
+            "accumulate_uncropped_s": med["blur_uncropped"]["accumulate_s"],
             **common,
         },
         {

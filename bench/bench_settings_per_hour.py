@@ -138,12 +138,12 @@ def _reference(glb: Path, work: Path) -> dict:
                     f["seed"] = (f["seed"] ^ SALT) & 0x7FFFFFFF
                 acc = Accumulator(RES, RES)
 
-                def on_frame(_i: int, path: str, acc=acc) -> None:
-                    acc.add_exr(path)
+                def on_frame(_i: int, path: str, origin, acc=acc) -> None:
+                    acc.add_exr(path, origin)
                     os.unlink(path)
 
                 w.render(frames, resolution=RES, fov_deg=cfg.fov_deg, samples=1,
-                         on_frame=on_frame)  # fmt: skip
+                         on_frame=on_frame, crop=True)  # fmt: skip
                 refs[(v["index"], name)] = acc.mean()
     return refs
 

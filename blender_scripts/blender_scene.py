@@ -535,11 +535,14 @@ def scene_is_animated() -> bool:
     return False
 
 
-def render_job(frames: list[dict], resolution: int, fov_deg: float, samples: int, on_frame):
+def render_job(
+    frames: list[dict], resolution: int, fov_deg: float, samples: int, on_frame, crop: bool = False
+):
     """Render `frames` (each as `apply_frame` takes it, with "out") as ONE animation job:
     one render operator call, persistent data, frame k + 1 of the job set up by a
     frame-change handler, each EXR moved to its "out" by a render-write handler, which
-    also calls on_frame(k, out, seconds) as soon as the frame is on disk. Blender's
+    also calls on_frame(k, out, seconds, origin) as soon as the frame is on disk (origin:
+    see set_region; `crop` writes each EXR cropped to the job's region). Blender's
     per-call work (operator, render pipeline set-up, result allocation) is paid once per
     job instead of once per frame; Cycles still starts a session per frame (its API has
     no way to render two cameras in one session). Pixels equal `render_frame` per frame:
@@ -551,7 +554,7 @@ def render_job(frames: list[dict], resolution: int, fov_deg: float, samples: int
         return
     for fr in frames:  # refuse bad input before the job starts
         apply_frame(fr, resolution, fov_deg, samples)
-    set_region(job_region(frames), resolution)
+    origin = set_region(job_region(frames), resolution, crop)
     d = os.path.dirname(os.path.abspath(str(frames[0]["out"]))) or "."
     os.makedirs(d, exist_ok=True)
     # '#' in a directory would be read as the frame number: stage in a temp dir then.
@@ -588,7 +591,7 @@ def render_job(frames: list[dict], resolution: int, fov_deg: float, samples: int
             now = time.perf_counter()
             secs, state["t"] = now - state["t"], now
             state["done"] += 1
-            on_frame(k, out, secs)
+            on_frame(k, out, secs, origin)
         except Exception as e:
             state["error"] = e
 
@@ -680,24 +683,29 @@ def render_motion_blur(keys, motion_steps: int, out: str, seed: int) -> float:
         scene.frame_set(1)
 
 
-def set_region(region, resolution: int) -> None:
+def set_region(region, resolution: int, crop: bool = False):
     """Render only the pixel rectangle `region` = [x0, y0, x1, y1) (y down from the top
     row), the rest of the image transparent 0 (the core's plan/region.rs says why those
     pixels are exactly what a full render gives); None renders the whole image. Blender
-    reads the border once per render call, so a job's frames share one region."""
+    reads the border once per render call, so a job's frames share one region.
+    `crop` writes only the region's pixels (the same values: Cycles samples a pixel by
+    its place in the whole image) and returns where they sit, [x0, y0]; None when the
+    EXR is the whole image."""
     r = bpy.context.scene.render
     if region is None:
         r.use_border = False
-        return
+        return None
     x0, y0, x1, y1 = (int(v) for v in region)
     n = int(resolution)
     if not (0 <= x0 < x1 <= n and 0 <= y0 < y1 <= n):
         raise ValueError(f"region {list(region)} does not fit a {n}x{n} image")
     r.use_border = True
-    r.use_crop_to_border = False  # full-size EXRs, the rest transparent 0
+    # Cropped EXRs save the write, the read and the disk space of pixels known to be 0.
+    r.use_crop_to_border = bool(crop)
     # Blender's border is fractions from the bottom-left corner.
     r.border_min_x, r.border_max_x = x0 / n, x1 / n
     r.border_min_y, r.border_max_y = (n - y1) / n, (n - y0) / n
+    return [x0, y0] if crop else None
 
 
 def job_region(frames: list[dict]):

@@ -22,18 +22,21 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
           "center":[..],"warnings":[..],"unlit_fixed":b,"light_paths":{..},
           "device":{"backend":..,"devices":[..],"kernel":..}, ...} | {"ok":false,"reason":..}
   {"cmd":"render","resolution":R,"fov_deg":F,"samples":S[,"exr_codec":"NONE"|"ZIP"|...]
-   [,"noise_threshold":T][,"batch":true],
+   [,"noise_threshold":T][,"batch":true][,"crop":true],
    "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR[,"samples":S_i]
               [,"sample_offset":O,"sample_sequence":Q]
               [,"motion":{"steps":n,"keys":[c2w, ...]}][,"region":[x0,y0,x1,y1]]
               [,"call":C][,"view":V,"level":L]}, ...]}
-      -> {"frame":i,"out":EXR,"seconds":t} per frame, then {"ok":true,"done":n,"jobs":j}
+      -> {"frame":i,"out":EXR,"seconds":t,"origin":[x0,y0]|null} per frame, then
+         {"ok":true,"done":n,"jobs":j}
       A frame's "samples" overrides S; with "sample_offset" it renders the samples
       [O, O + S_i) of a Q-sample sequence (Cycles sample subsets). A frame with "motion" is
       one Cycles motion blur render along its 2^n + 1 keys (blender_scene.render_motion_blur).
       "noise_threshold" turns Cycles adaptive sampling on for this command (off without).
       "region" (the core's plan/region.rs) restricts Cycles to the pixels that can see
-      the object; the pixels are those of a whole render. Runs of frames of one render
+      the object; the pixels are those of a whole render. With "crop", a frame rendered
+      in a region writes only that region's pixels (those of the whole render, bit for
+      bit), and its reply's "origin" says where they sit (null: a whole image). Runs of frames of one render
       "call" (without it: of one "view" and "level") and without "motion" render as one
       animation job each, in their regions together (blender_scene.render_job), unless
       "batch" is false or the object is animated; "jobs" counts the render operator calls.
@@ -210,6 +213,7 @@ class Worker:
             blender_scene.set_exr_codec(str(cmd["exr_codec"]))
         blender_scene.set_noise_threshold(cmd.get("noise_threshold"))
         batch = bool(cmd.get("batch", True)) and not self.animated
+        crop = bool(cmd.get("crop", False))
         jobs = 0
         i = 0
         while i < len(frames):
@@ -225,22 +229,22 @@ class Worker:
                 ):
                     j += 1
 
-                def sent(k: int, out: str, secs: float, base: int = i) -> None:
-                    send({"frame": base + k, "out": out, "seconds": secs})
+                def sent(k: int, out: str, secs: float, origin, base: int = i) -> None:
+                    send({"frame": base + k, "out": out, "seconds": secs, "origin": origin})
 
-                blender_scene.render_job(frames[i:j], res, fov, samples, sent)
+                blender_scene.render_job(frames[i:j], res, fov, samples, sent, crop)
                 jobs += 1
                 i = j
                 continue
             blender_scene.apply_frame(fr, res, fov, samples)
-            blender_scene.set_region(None if motion else fr.get("region"), res)
+            origin = blender_scene.set_region(None if motion else fr.get("region"), res, crop)
             if motion:
                 secs = blender_scene.render_motion_blur(
                     motion["keys"], int(motion["steps"]), str(fr["out"]), int(fr["seed"])
                 )
             else:
                 secs = blender_scene.render_frame(str(fr["out"]), int(fr["seed"]))
-            send({"frame": i, "out": str(fr["out"]), "seconds": secs})
+            send({"frame": i, "out": str(fr["out"]), "seconds": secs, "origin": origin})
             jobs += 1
             i += 1
         return {"ok": True, "done": len(frames), "jobs": jobs}

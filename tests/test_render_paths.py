@@ -73,7 +73,7 @@ def test_one_animation_job_gives_the_pixels_of_one_call_per_frame(loaded, tmp_pa
             f["out"] = Path(str(f["out"]).rsplit(".", 1)[0].rsplit("@", 1)[0] + f"@{batch}.exr")
         seen: list[int] = []
         reply = w.render(frames, resolution=24, fov_deg=40.0, samples=3, batch=batch,
-                         on_frame=lambda i, _o, seen=seen: seen.append(i))  # fmt: skip
+                         on_frame=lambda i, _o, _g, seen=seen: seen.append(i))  # fmt: skip
         assert seen == list(range(len(frames)))
         # One job per render call of the plan.
         images = [f["call"] for f in frames]
@@ -95,7 +95,7 @@ def mse(a: np.ndarray, b: np.ndarray) -> float:
 def render_mean(w, frames, res: int) -> np.ndarray:
     acc = Accumulator(res, res)
     w.render(frames, resolution=res, fov_deg=40.0, samples=1,
-             on_frame=lambda _i, path: acc.add_exr(path))  # fmt: skip
+             on_frame=lambda _i, path, origin: acc.add_exr(path, origin))  # fmt: skip
     return np.asarray(acc.mean())
 
 

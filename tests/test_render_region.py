@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from blurset.image import Accumulator
 from blurset.plan import BuildConfig, plan_setting
 from blurset.worker_client import Worker
 
@@ -63,3 +64,37 @@ def test_a_render_in_its_region_has_the_pixels_of_a_whole_render(name, tmp_path)
         tight = dict(frames[sharp], region=[xs.min() + 1, ys.min() + 1, xs.max(), ys.max()])
         (t,) = render(w, [tight], tmp_path, "tight")
         assert not np.array_equal(t, b[sharp])
+
+        # Cropped to its call's region, as a build writes them: only that rectangle's
+        # pixels cross the disk, and placed at the reply's origin they are the whole
+        # render, bit for bit; so is the blurry image the accumulator makes of them.
+        crop = [dict(f, out=str(tmp_path / f"{k:03d}_crop.exr")) for k, f in enumerate(frames)]
+        got: list[tuple] = []
+        w.render(crop, resolution=RES, fov_deg=40.0, samples=2, crop=True,
+                 on_frame=lambda *a: got.append(a))  # fmt: skip
+        assert [g[0] for g in got] == list(range(len(frames)))
+        sizes = []
+        images: dict[tuple, list] = {}
+        for (k, path, origin), y in zip(got, b, strict=True):
+            x = read_exr(path)
+            if frames[k].get("region") is None:
+                assert origin is None and x.shape == y.shape
+                placed = x
+            else:
+                x0, y0 = origin
+                h, wd = x.shape[:2]
+                sizes.append(h * wd)
+                placed = np.zeros_like(y)
+                placed[y0 : y0 + h, x0 : x0 + wd] = x
+            assert np.array_equal(placed, y), f"frame {k}: max {np.abs(placed - y).max()}"
+            images.setdefault((frames[k]["view"], frames[k]["level"]), []).append(
+                (path, origin, tmp_path / f"{k:03d}_whole.exr")
+            )
+        # The test means something only if the crops are smaller than the image.
+        assert sizes and max(sizes) < RES * RES, sizes
+        for key, parts in images.items():
+            a_crop, a_whole = Accumulator(RES, RES), Accumulator(RES, RES)
+            for path, origin, whole_path in parts:
+                a_crop.add_exr(path, origin)
+                a_whole.add_exr(whole_path)
+            assert np.array_equal(a_crop.mean(), a_whole.mean()), key

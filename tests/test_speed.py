@@ -202,8 +202,8 @@ def test_motion_blur_equals_a_high_m_average_of_the_same_segment(tmp_path, demo_
             acc = Accumulator(res, res)
             n = []
 
-            def on_frame(_i, p):
-                acc.add_exr(p)
+            def on_frame(_i, p, origin):
+                acc.add_exr(p, origin)
                 Path(p).unlink()
                 n.append(p)
 

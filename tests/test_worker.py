@@ -96,9 +96,10 @@ def test_demo_object_load_and_render(worker, demo_glbs, tmp_path):
     ]
     seen = []
     worker.render(
-        frames, resolution=48, fov_deg=FOV, samples=4, on_frame=lambda i, o: seen.append((i, o))
+        frames, resolution=48, fov_deg=FOV, samples=4, on_frame=lambda *a: seen.append(a)
     )
-    assert seen == [(k, str(f["out"])) for k, f in enumerate(frames)]
+    # No region: whole images, so no origin.
+    assert seen == [(k, str(f["out"]), None) for k, f in enumerate(frames)]
     a, b, c = (read_exr(f["out"]) for f in frames)
     assert a.dtype == np.float32 and a.shape == (48, 48, 4)
     assert np.all(np.isfinite(a))
@@ -352,7 +353,7 @@ def test_failing_on_frame_callback_does_not_desync_the_protocol(worker, demo_glb
     c2w = look_at(60.0, 30.0, fit_distance(info["bbox_dims"]))
     frames = [{"c2w": c2w, "seed": k, "out": tmp_path / f"f{k}.exr"} for k in range(3)]
 
-    def boom(i, out):
+    def boom(i, out, origin):
         raise RuntimeError("callback failed")
 
     with pytest.raises(RuntimeError, match="callback failed"):

@@ -295,11 +295,18 @@ class Accumulator:
     @property
     def count(self) -> int:
         """Number of frames added so far."""
-    def add_exr(self, path: str | PathLike[str]) -> None:
+    def add_exr(
+        self, path: str | PathLike[str], origin: tuple[int, int] | None = None
+    ) -> None:
         """Read an RGBA float EXR (alpha 1 when absent) and add it.
 
-        Raises ValueError when its size differs, ImageError (naming the file) when it
-        holds NaN/inf or cannot be decoded, FileNotFoundError when it is missing.
+        With `origin` = (x0, y0) the file is a render cropped to its region: its pixel
+        (0, 0) is pixel (x0, y0) of the image (rows from the top), it must fit inside, and
+        every pixel outside adds 0 (what a full render holds there).
+
+        Raises ValueError when its size differs (or it does not fit at `origin`),
+        ImageError (naming the file) when it holds NaN/inf or cannot be decoded,
+        FileNotFoundError when it is missing.
         """
     def add(self, frame: npt.NDArray[np.float32]) -> None:
         """Add a float32 (H, W, 4) C-contiguous premultiplied linear RGBA frame."""

@@ -243,8 +243,8 @@ def _render_image(
         f["seed"] = (f["seed"] ^ salt) & 0x7FFFFFFF
     acc = _core.Accumulator(res, res)
 
-    def on_frame(_i: int, path: str) -> None:
-        acc.add_exr(path)
+    def on_frame(_i: int, path: str, origin: tuple[int, int] | None) -> None:
+        acc.add_exr(path, origin)
         os.unlink(path)
 
     pid = worker._proc.pid if worker._proc is not None else None
@@ -255,6 +255,7 @@ def _render_image(
         fov_deg=fov,
         samples=lp["samples_per_frame"],
         on_frame=on_frame,
+        crop=True,
         **render_kw,
     )
     mean = acc.mean()

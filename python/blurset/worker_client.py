@@ -352,10 +352,11 @@ class Worker:
         resolution: int,
         fov_deg: float,
         samples: int,
-        on_frame: Callable[[int, str], None] | None = None,
+        on_frame: Callable[[int, str, tuple[int, int] | None], None] | None = None,
         exr_codec: str | None = None,
         noise_threshold: float | None = None,
         batch: bool = True,
+        crop: bool = False,
     ) -> dict[str, Any]:
         """Render frames ({"c2w": 4x4 row-major, "seed": int, "out": EXR path}) in order.
 
@@ -365,7 +366,10 @@ class Worker:
         "region" [x0, y0, x1, y1) of pixels that can see the object (the plan's; the rest
         of the image is transparent 0, as in a whole render), and its render "call" (or
         its "view" and "level"): consecutive frames of one call render as one job.
-        `on_frame(i, out)` runs as soon as frame i is on disk; the timeout applies per frame.
+        `on_frame(i, out, origin)` runs as soon as frame i is on disk; the timeout applies
+        per frame. `crop` writes a frame rendered in a region as that region's pixels
+        only; `origin` is then its (x0, y0) in the image (Accumulator.add_exr takes it),
+        None for an EXR of the whole image.
         `exr_codec` sets the codec of the EXRs the worker writes (its default: NONE).
         `noise_threshold` turns on Cycles adaptive sampling. `batch` False renders every
         frame with its own render call instead of one animation job per run of frames.
@@ -405,13 +409,17 @@ class Worker:
             msg["noise_threshold"] = float(noise_threshold)
         if not batch:
             msg["batch"] = False
+        if crop:
+            msg["crop"] = True
         self._send(msg)
         while True:
             msg = self._receive_in_sync()
             if "frame" in msg:
                 if on_frame is not None:
                     try:
-                        on_frame(int(msg["frame"]), str(msg["out"]))
+                        origin = msg.get("origin")
+                        at = None if origin is None else (int(origin[0]), int(origin[1]))
+                        on_frame(int(msg["frame"]), str(msg["out"]), at)
                     except BaseException:
                         self._discard()  # it is still rendering: its replies would desync
                         raise

@@ -117,12 +117,12 @@ def render_setting(
     res = cfg.resolution
     qa: dict[int, Any] = {}
 
-    def on_frame(i: int, path: str) -> None:
+    def on_frame(i: int, path: str, origin: tuple[int, int] | None) -> None:
         key = keys[i]
         a = acc.get(key)
         if a is None:
             a = acc[key] = _core.Accumulator(res, res)
-        a.add_exr(path)
+        a.add_exr(path, origin)
         os.unlink(path)
         if a.count == need[key]:
             view, level = key
@@ -143,11 +143,12 @@ def render_setting(
     sharp_idx = [i for i, k in enumerate(keys) if k[1] == layout.SHARP]
     blur_idx = [i for i, k in enumerate(keys) if k[1] != layout.SHARP]
     t1 = time.time()
-    common = {"resolution": res, "fov_deg": cfg.fov_deg}
+    # Cropped EXRs: only the pixels the region traced cross the disk.
+    common = {"resolution": res, "fov_deg": cfg.fov_deg, "crop": True}
     worker.render(
         [frames[i] for i in sharp_idx],
         samples=cfg.effective_sharp_samples,
-        on_frame=lambda j, p: on_frame(sharp_idx[j], p),
+        on_frame=lambda j, p, o: on_frame(sharp_idx[j], p, o),
         **common,
     )
     # QA before the costly blur renders: a bad sharp view fails this setting only.
@@ -159,7 +160,7 @@ def render_setting(
         worker.render(
             [frames[i] for i in blur_idx],
             samples=cfg.samples,
-            on_frame=lambda j, p: on_frame(blur_idx[j], p),
+            on_frame=lambda j, p, o: on_frame(blur_idx[j], p, o),
             **common,
         )
     t_blur = time.time() - t1 - t_sharp

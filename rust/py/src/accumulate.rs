@@ -96,10 +96,17 @@ impl PyAccumulator {
         self.inner.count()
     }
 
-    /// Read a linear RGBA float EXR and add it (alpha 1 when the file has none).
-    fn add_exr(&mut self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+    /// Read a linear RGBA float EXR and add it (alpha 1 when the file has none); with
+    /// `origin` = (x0, y0), a render cropped to its region, placed there.
+    #[pyo3(signature = (path, origin=None))]
+    fn add_exr(
+        &mut self,
+        py: Python<'_>,
+        path: PathBuf,
+        origin: Option<(u32, u32)>,
+    ) -> PyResult<()> {
         let inner = &mut self.inner;
-        run_detached(py, move || inner.add_exr(&path))
+        run_detached(py, move || inner.add_exr_at(&path, origin))
     }
 
     /// Add a premultiplied linear RGBA frame, float32 (H, W, 4) C-contiguous.

@@ -91,26 +91,44 @@ impl Accumulator {
     /// Read an RGBA f32 EXR (alpha 1 when absent) and add it; the file must match the
     /// accumulator size and hold only finite values.
     pub fn add_exr(&mut self, path: &Path) -> Result<()> {
+        self.add_exr_at(path, None)
+    }
+
+    /// [`Self::add_exr`] for a render cropped to its region: with `origin` = (x0, y0), the
+    /// file's pixel (0, 0) is the accumulator's pixel (x0, y0) (rows from the top), and
+    /// it must fit inside; every pixel outside adds 0, which is what a full render holds
+    /// there (plan/region.rs), so the sum is the same bit for bit. `None`: the file
+    /// must be the accumulator's size.
+    pub fn add_exr_at(&mut self, path: &Path, origin: Option<(u32, u32)>) -> Result<()> {
         let mut file = std::mem::take(&mut self.file);
         let mut staging = std::mem::take(&mut self.staging);
         let res = read_into(path, &mut file).and_then(|()| {
             let d = decode_rgba(&file, path, &mut staging)?;
-            if (d.width, d.height) != (self.width as usize, self.height as usize) {
+            let (w, h) = (self.width as usize, self.height as usize);
+            let (x0, y0) = origin.map_or((0, 0), |(x, y)| (x as usize, y as usize));
+            let fits = match origin {
+                None => (d.width, d.height) == (w, h),
+                Some(_) => x0 + d.width <= w && y0 + d.height <= h,
+            };
+            if !fits {
+                let at = origin.map_or(String::new(), |o| format!(" at {o:?}"));
                 return Err(Error::Shape(format!(
-                    "EXR is {}x{} but the accumulator is {}x{}: {path:?}",
+                    "EXR is {}x{}{at} but the accumulator is {}x{}: {path:?}",
                     d.width, d.height, self.width, self.height
                 )));
             }
             if let Some((x, y, c, v)) = d.non_finite {
                 return Err(Error::Image {
                     reason: format!(
-                        "non-finite value {v} at pixel ({x}, {y}) channel {}; a render must not poison the average",
+                        "non-finite value {v} at pixel ({}, {}) channel {}; a render must not poison the average",
+                        x0 + x,
+                        y0 + y,
                         "RGBA".as_bytes()[c] as char
                     ),
                     path: path.to_path_buf(),
                 });
             }
-            self.add_unchecked(&staging);
+            self.add_tile_unchecked(&staging, d.width, x0, y0);
             Ok(())
         });
         self.file = file;
@@ -118,9 +136,37 @@ impl Accumulator {
         res
     }
 
+    /// Add rows of `tile_width` pixels at (x0, y0); the caller checked that they fit.
+    fn add_tile_unchecked(&mut self, rgba: &[f32], tile_width: usize, x0: usize, y0: usize) {
+        if tile_width == self.width as usize {
+            let start = y0 * tile_width * CH;
+            return self.add_rows(start, rgba);
+        }
+        let row = self.width as usize * CH;
+        let tile_row = tile_width * CH;
+        if tile_row == 0 {
+            self.count += 1;
+            return;
+        }
+        self.sum[y0 * row..]
+            .par_chunks_mut(row)
+            .zip(rgba.par_chunks(tile_row))
+            .for_each(|(s, f)| {
+                for (s, &f) in s[x0 * CH..x0 * CH + tile_row].iter_mut().zip(f) {
+                    *s += f64::from(f);
+                }
+            });
+        self.count += 1;
+    }
+
     fn add_unchecked(&mut self, rgba: &[f32]) {
+        self.add_rows(0, rgba);
+    }
+
+    /// Add whole rows starting at sum index `start`.
+    fn add_rows(&mut self, start: usize, rgba: &[f32]) {
         let row = (self.width as usize * CH).max(1);
-        self.sum
+        self.sum[start..start + rgba.len()]
             .par_chunks_mut(row)
             .zip(rgba.par_chunks(row))
             .for_each(|(s, f)| {
@@ -333,6 +379,71 @@ mod tests {
         write_atomic(&junk, b"not an exr")?;
         let e = acc.add_exr(&junk).unwrap_err().to_string();
         assert!(e.contains("junk.exr"), "{e}");
+        Ok(())
+    }
+
+    #[test]
+    fn a_cropped_exr_at_its_origin_adds_what_the_full_frame_adds() -> Result<()> {
+        // A full render: zeros except the region [2, 1) .. [6, 4) (x, then y from the top).
+        let (w, h) = (8, 5);
+        let (x0, y0, tw, th) = (2usize, 1usize, 4usize, 3usize);
+        let tile = frame(tw as u32, th as u32, 9);
+        let mut full = vec![0.0f32; w * h * 4];
+        for y in 0..th {
+            for x in 0..tw {
+                let (d, s) = (4 * ((y0 + y) * w + x0 + x), 4 * (y * tw + x));
+                full[d..d + 4].copy_from_slice(&tile[s..s + 4]);
+            }
+        }
+        let (pf, pt) = (tmp("crop_full.exr"), tmp("crop_tile.exr"));
+        write_exr(&pf, w as u32, h as u32, &full)?;
+        write_exr(&pt, tw as u32, th as u32, &tile)?;
+        let other = frame(w as u32, h as u32, 4);
+        let (mut a, mut b) = (Accumulator::new(8, 5), Accumulator::new(8, 5));
+        for (acc, cropped) in [(&mut a, false), (&mut b, true)] {
+            acc.add_frame(&other)?;
+            if cropped {
+                acc.add_exr_at(&pt, Some((x0 as u32, y0 as u32)))?;
+            } else {
+                acc.add_exr(&pf)?;
+            }
+        }
+        assert_eq!(a.count(), b.count());
+        assert!(a
+            .sum
+            .iter()
+            .zip(&b.sum)
+            .all(|(x, y)| x.to_bits() == y.to_bits()));
+        // A full-width tile takes the row path.
+        let row = frame(8, 2, 5);
+        let pr = tmp("crop_rows.exr");
+        write_exr(&pr, 8, 2, &row)?;
+        let mut c = Accumulator::new(8, 5);
+        c.add_exr_at(&pr, Some((0, 3)))?;
+        assert_eq!(&c.mean()?[8 * 3 * 4..], &row[..]);
+        assert!(c.mean()?[..8 * 3 * 4].iter().all(|&v| v == 0.0));
+
+        // It must fit; an error names the file, its size and the origin.
+        for origin in [(5, 1), (2, 3), (9, 0)] {
+            let e = b.add_exr_at(&pt, Some(origin)).unwrap_err().to_string();
+            assert!(
+                e.contains("crop_tile.exr") && e.contains("4x3") && e.contains("8x5"),
+                "{e}"
+            );
+        }
+        // Without an origin the file must be the accumulator's size, as before.
+        assert!(b.add_exr_at(&pt, None).is_err());
+        // A non-finite value is named at its pixel in the whole image.
+        let mut bad = tile.clone();
+        bad[4 * (tw + 1)] = f32::NAN;
+        let pn = tmp("crop_nan.exr");
+        write_exr(&pn, tw as u32, th as u32, &bad)?;
+        let e = b
+            .add_exr_at(&pn, Some((x0 as u32, y0 as u32)))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("(3, 2)") && e.contains("crop_nan.exr"), "{e}");
+        assert_eq!(b.count(), 2);
         Ok(())
     }
 
