@@ -88,7 +88,9 @@ class Timed:
 
         worker._receive_in_sync = receive
 
-    def image(self, frames, samples: int, codec: str, batch: bool = True, crop: bool = True) -> dict:
+    def image(
+        self, frames, samples: int, codec: str, batch: bool = True, crop: bool = True
+    ) -> dict:
         """crop: as a build renders, each EXR cropped to its render call's region."""
         from blurset.image import Accumulator
 

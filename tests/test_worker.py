@@ -95,9 +95,7 @@ def test_demo_object_load_and_render(worker, demo_glbs, tmp_path):
         {"c2w": c2w, "seed": s, "out": tmp_path / f"f{k}.exr"} for k, s in enumerate((7, 7, 8))
     ]
     seen = []
-    worker.render(
-        frames, resolution=48, fov_deg=FOV, samples=4, on_frame=lambda *a: seen.append(a)
-    )
+    worker.render(frames, resolution=48, fov_deg=FOV, samples=4, on_frame=lambda *a: seen.append(a))
     # No region: whole images, so no origin.
     assert seen == [(k, str(f["out"]), None) for k, f in enumerate(frames)]
     a, b, c = (read_exr(f["out"]) for f in frames)

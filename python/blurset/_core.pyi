@@ -295,9 +295,7 @@ class Accumulator:
     @property
     def count(self) -> int:
         """Number of frames added so far."""
-    def add_exr(
-        self, path: str | PathLike[str], origin: tuple[int, int] | None = None
-    ) -> None:
+    def add_exr(self, path: str | PathLike[str], origin: tuple[int, int] | None = None) -> None:
         """Read an RGBA float EXR (alpha 1 when absent) and add it.
 
         With `origin` = (x0, y0) the file is a render cropped to its region: its pixel
