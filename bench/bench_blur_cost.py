@@ -33,6 +33,10 @@ the plan's regions (plan/region.rs) against the same renders over the whole imag
 `exr_crop_saving`: the blurry image with its EXRs cropped to their call's region (as a
 build writes them) against full-size EXRs (the worker before), CPU time and EXR bytes.
 
+`traced_px_ratio`: the pixels Cycles traces per frame, blurry over sharp (each frame's
+render-call region), and `cpu_ratio_per_traced_px` the CPU ratio divided by it: what the
+blurry image costs per pixel it traces; the rest of the ratio is where the object is.
+
 Wall-clock medians of interleaved repeats, and CPU-time medians (the worker process's and
 ours): the machine is shared, and CPU time is what contention disturbs least.
 `--device` (bench/run.py) or BLURSET_BENCH_DEVICE picks the Cycles device (default CPU).
@@ -140,6 +144,15 @@ def _med(rows: list[dict], key: str) -> float:
     return statistics.median(r[key] for r in rows)
 
 
+def traced_px(frames, res: int) -> float:
+    """Pixels Cycles traces per frame, on average: each frame's render-call region (the
+    whole image without one). A moving camera's frames trace more than the camera at p
+    when the object grows in them, or when a call's union spans its motion."""
+    area = [res * res if (g := f.get("region")) is None else (g[2] - g[0]) * (g[3] - g[1])
+            for f in frames]  # fmt: skip
+    return statistics.fmean(area)
+
+
 def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
     from blurset.demo import make_demo_objects
     from blurset.plan import BuildConfig, plan_setting
@@ -244,6 +257,10 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
                 )
                 for v in range(VIEWS)
             ]
+            views_px = (
+                sum(traced_px(s, res) for s, _ in per_view),
+                sum(traced_px(b, res) for _, b in per_view),
+            )
             views_runs = []
             for _ in range(VIEW_REPEATS):
                 s_cpu = b_cpu = 0.0
@@ -263,6 +280,12 @@ def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
         "repeats": repeats,
         "medians": med,
         "views_cpu": views_runs,
+        "views_traced_px": views_px,
+        "traced_px": {
+            "sharp": traced_px(sharp, res),
+            "blur": traced_px(latent, res),
+            "centered": traced_px(centered, res),
+        },  # fmt: skip
         "worker_start_s": t_start,
         "load_s": t_load,
         "load_average": load,
@@ -318,6 +341,12 @@ def run() -> list[dict]:
             "baseline": f"sharp image, {m['samples_total']} samples: {sharp['wall']:.2f} s",
             "blur_s": blur["wall"],
             "sharp_s": sharp["wall"],
+            # The pixels traced decide most of the cost: per traced pixel-frame the
+            # blurry image costs this much more than the sharp one.
+            "traced_px_ratio": m["traced_px"]["blur"] / m["traced_px"]["sharp"],
+            "cpu_ratio_per_traced_px": blur["cpu"]
+            / sharp["cpu"]
+            / (m["traced_px"]["blur"] / m["traced_px"]["sharp"]),
             **where,
             **common,
         },
@@ -332,6 +361,9 @@ def run() -> list[dict]:
             f"{statistics.median(s for s, _ in m['views_cpu']):.1f} s CPU",
             "views": VIEWS,
             "view_repeats": VIEW_REPEATS,
+            "traced_px_ratio": m["views_traced_px"][1] / m["views_traced_px"][0],
+            "cpu_ratio_per_traced_px": statistics.median(b / s for s, b in m["views_cpu"])
+            / (m["views_traced_px"][1] / m["views_traced_px"][0]),
             **common,
         },
         {
@@ -349,6 +381,7 @@ def run() -> list[dict]:
             "ratio": med["blur_centered"]["wall"] / sharp["wall"],
             "ratio_is": "contender time / baseline time",
             "cpu_ratio": med["blur_centered"]["cpu"] / sharp["cpu"],
+            "traced_px_ratio": m["traced_px"]["centered"] / m["traced_px"]["sharp"],
             "contender": f"blurry image, {spec}, --trajectory centered (p mid-exposure): "
             f"{med['blur_centered']['wall']:.2f} s",
             "baseline": f"sharp image: {sharp['wall']:.2f} s",
