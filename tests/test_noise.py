@@ -456,4 +456,4 @@ def test_existing_out_is_refused_unless_overwrite(small_scene, tmp_path):
     proc = blurset_noise(small_scene, "--factor", 2, "--gains", 2, "--out", out)
     assert proc.returncode == 2 and "--overwrite" in proc.stderr
     ok(blurset_noise(small_scene, "--factor", 2, "--gains", 2, "--out", out, "--overwrite"))
-    assert sorted(p.name for p in out.iterdir()) == ["gain_2"]
+    assert sorted(p.name for p in out.iterdir()) == ["gain_2", "noise_scene.json"]

@@ -5,23 +5,31 @@ Every (setting, level[, gain]) of a build (and of a `blurset noise BUILD` output
 one scene folder `<setting>__<level>[__gain_<g>]` holding `images/`, `images_<f>/`,
 `poses_bounds.npy` and `transforms.json` (symlinks into the build, or copies with
 `--copy`); `train.txt` and `test.txt` list the scenes of the build's train and test
-settings, `export.json` says what was exported and the `llffhold` to use. The export
-is written whole into a temp folder and renamed into place; a rerun that would write
-the same export changes nothing.
+settings, `export.json` says what was exported and the `llffhold` to use.
+
+The export lives beside whatever else `--out` holds (IBRNet's and NAN's `data/` keep
+other datasets next to `nerf_llff_data/`): it writes and replaces only its own entries,
+the ones its export.json names, and refuses to write over anything else. The scenes
+are staged in a temp folder and moved into place one rename each; a rerun that would
+write the same export changes nothing. The build must be finished (see
+blurset.outputs.finished_build); a damaged setting is refused, never passed on.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import sys
 from pathlib import Path
 
-from blurset import __version__, layout
+from blurset import __version__, _core, layout, outputs
 from blurset.exceptions import ConfigError, InputError
 
-EXPORT_FILE = "export.json"
+EXPORT = outputs.OutputKind.EXPORT
+EXPORT_FILE = EXPORT.record
+NOISE_DATASET = outputs.OutputKind.NOISE.record
+# Temp names (`.<name>.tmp<pid>`) of the staged scenes and of what makes way.
+STAGE, TRASH = "export", "export.old"
 # What each target reads: IBRNet's `<rootdir>/data/nerf_llff_data/<scene>` and NAN's
 # `DATA_DIR/nerf_llff_data/<scene>` list every entry of that folder as a scene, so
 # nothing else may lie there; nerfstudio takes any scene folder (`--data`).
@@ -43,6 +51,12 @@ def add_arguments(p) -> None:
     p.add_argument("--noise", type=Path, help="a `blurset noise BUILD` output: export its gains")
     p.add_argument("--gains", nargs="+", help="gains of --noise to export (default: all)")
     p.add_argument("--copy", action="store_true", help="copy the files instead of symlinking")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an export of another build in --out (a re-export of the same build "
+        "replaces its own scenes without it)",
+    )
 
 
 def _levels(value: str | None, available: list[str]) -> list[str]:
@@ -55,9 +69,8 @@ def _levels(value: str | None, available: list[str]) -> list[str]:
     return [lvl for lvl in available if lvl in names]
 
 
-def _gains(noise: Path, value: list[str] | None) -> list[str]:
-    doc = layout.read_json(noise / "noise_dataset.json", "noise_dataset.json")
-    have = [layout.gain_name(g["gain"]) for g in doc.get("gains", [])]
+def _gains(noise: Path, doc: dict, value: list[str] | None) -> list[str]:
+    have = [layout.gain_name(g["gain"]) for g in doc["gains"]]
     if value is None:
         return have
     names = []
@@ -72,55 +85,97 @@ def _gains(noise: Path, value: list[str] | None) -> list[str]:
     return names
 
 
-def plan(args) -> dict:
-    """What the export holds: scene name → its source folder, and the lists."""
+def _noise_output(noise: Path, build: Path) -> dict:
+    """noise_dataset.json of a finished `blurset noise BUILD` output made from `build`."""
+    if outputs.kind_of(noise) is not outputs.OutputKind.NOISE:
+        raise InputError(
+            f"--noise is not a `blurset noise BUILD` output (noise_dataset.json): {noise}"
+        )
+    doc = outputs.read_record(noise / NOISE_DATASET)
+    if doc["build"] != build.name:
+        raise InputError(
+            f"--noise was made from the build {doc['build']!r}, not from {build.name!r}: {noise}"
+        )
+    if doc.get("counts") is None:
+        raise InputError(
+            f"--noise is not finished (a noise run is writing or was stopped): {noise}"
+        )
+    return doc
+
+
+def _scene_problem(src: Path, noise: bool) -> str | None:
+    """What is wrong with a noise unit on the cheap (a build's settings get the rerun's own
+    check, layout.setting_problem): its images against its pose rows."""
+    if not noise:
+        return None
+    images = src / "images"
+    n = len([p for p in images.iterdir() if p.suffix == ".png"]) if images.is_dir() else 0
+    try:
+        rows = len(_core.read_poses_bounds(src / "poses_bounds.npy"))
+    except (OSError, ValueError) as e:
+        return f"poses_bounds.npy does not read ({e.__class__.__name__})"
+    return None if n == rows else f"{n} images for {rows} pose rows"
+
+
+def plan(args) -> tuple[dict, dict[str, Path]]:
+    """What the export holds (export.json: scene name → its source, relative to the
+    build or the noise output, and the lists), and each scene's source folder."""
     build: Path = args.build.resolve()
-    if not (build / "dataset.json").is_file():
-        raise InputError(f"not a build (no dataset.json): {args.build}")
-    dataset = layout.read_json(build / "dataset.json", "dataset.json")
-    splits = layout.read_json(build / "splits.json", "splits.json")
-    config = dataset.get("config") or {}
+    state = outputs.finished_build(build)
+    dataset = outputs.read_record(build / "dataset.json")
+    splits = outputs.read_record(build / "splits.json")
+    config = dataset["config"]
     noise = args.noise.resolve() if args.noise else None
     if args.gains and noise is None:
         raise ConfigError("--gains needs --noise (a `blurset noise BUILD` output)")
     available = dataset.get("levels") or [layout.SHARP]
-    factors = config.get("downsample", [])
-    held = splits.get("test_view_images", "blurry")
+    factors = config.get("downsample") or []
+    held = splits.get("test_view_images") or "blurry"
+    gains: list[str] = []
     if noise:  # the levels, factors and test views of the noise output
-        noised = layout.read_json(noise / "noise_dataset.json", "noise_dataset.json")
-        available = [lvl for lvl in available if lvl in noised.get("levels", [])]
-        params = noised.get("params", {})
-        factors = params.get("downsample", [])
+        noised = _noise_output(noise, build)
+        available = [lvl for lvl in available if lvl in noised["levels"]]
+        params = noised["params"]
+        factors = params.get("downsample") or []
         held = held if params.get("clean_views") == "test_views" else "noisy"
+        gains = _gains(noise, noised, args.gains)
     levels = _levels(args.levels, available)
-    gains = _gains(noise, args.gains) if noise else []
-    test = set(splits.get("test", []))
+    test = set(splits["test"])
+    sources: dict[str, Path] = {}
     scenes: dict[str, str] = {}
     train_list, test_list = [], []
-    for setting in layout.complete_settings(build):
-        for level in levels:
-            srcs = (
-                [(f"{setting.name}__{level}__{g}", noise / setting.name / level / g) for g in gains]
-                if noise
-                else [(f"{setting.name}__{level}", setting / level)]
+    for name in state.complete:
+        setting = build / name
+        if problem := layout.setting_problem(setting):
+            raise InputError(
+                f"the build's setting {name} is damaged ({problem}): `blurset verify` lists "
+                f"what is wrong, a rerun of the build redoes it: {setting}"
             )
-            for name, src in srcs:
-                if not layout.is_complete(src) and src.parent != setting:
+        for level in levels:
+            rels = [f"{name}/{level}/{g}" for g in gains] if noise else [f"{name}/{level}"]
+            for rel in rels:
+                scene = rel.replace("/", "__")
+                src = (noise or build) / rel
+                if noise and not layout.is_complete(src):
                     raise InputError(f"--noise has no complete {src.name} here: {src}")
-                scenes[name] = str(src)
-                (test_list if setting.name in test else train_list).append(name)
+                if problem := _scene_problem(src, noise is not None):
+                    raise InputError(f"--noise scene {rel} is damaged ({problem}): {src}")
+                sources[scene] = src
+                scenes[scene] = rel
+                (test_list if name in test else train_list).append(scene)
     if not scenes:
         raise InputError(f"nothing to export (no complete setting with {levels}): {args.build}")
-    return {
+    doc = {
         "kind": "blurset export",
         "blurset_version": __version__,
         "for": args.target,
-        "build": str(build),
-        "noise": str(noise) if noise else None,
+        # Outputs by their folder's name, sources relative to them: no builder paths.
+        "build": build.name,
+        "noise": noise.name if noise else None,
         "levels": levels,
         "gains": gains,
         "copy": bool(args.copy),
-        "llffhold": splits.get("view_stride", 16),
+        "llffhold": splits["view_stride"],
         "factors": factors,
         "test_view_images": held,
         "scenes_dir": SCENES_DIR[args.target],
@@ -128,69 +183,104 @@ def plan(args) -> dict:
         "train": sorted(train_list),
         "test": sorted(test_list),
     }
+    return doc, sources
 
 
-def _write(tmp: Path, doc: dict) -> None:
-    scenes_dir = tmp / doc["scenes_dir"]
-    scenes_dir.mkdir(parents=True, exist_ok=True)
-    for name, src in doc["scenes"].items():
-        d = scenes_dir / name
-        d.mkdir()
-        src = Path(src)
-        parts = ["images", *(f"images_{f}" for f in doc["factors"])]
-        parts += ["poses_bounds.npy", "transforms.json"]
-        for part in parts:
-            s = src / part
-            if not s.exists():
-                if part == "transforms.json" and doc["for"] == "llff":
-                    continue  # a build from before per-level transforms.json
-                raise InputError(f"missing {part} in the scene to export: {src}")
-            if doc["copy"]:
-                (shutil.copytree if s.is_dir() else shutil.copyfile)(s, d / part)
-            else:
-                # Relative links: the export and the build may move together.
-                os.symlink(os.path.relpath(s, d), d / part)
-    for split in ("train", "test"):
-        (tmp / f"{split}.txt").write_text("".join(f"{n}\n" for n in doc[split]))
-    (tmp / EXPORT_FILE).write_text(json.dumps(doc, indent=1) + "\n")
+def _write_scene(d: Path, src: Path, doc: dict) -> None:
+    d.mkdir(parents=True)
+    parts = ["images", *(f"images_{f}" for f in doc["factors"])]
+    parts += ["poses_bounds.npy", "transforms.json"]
+    for part in parts:
+        s = src / part
+        if not s.exists():
+            if part == "transforms.json" and doc["for"] == "llff":
+                continue  # a build from before per-level transforms.json
+            raise InputError(f"missing {part} in the scene to export: {src}")
+        if doc["copy"]:
+            (shutil.copytree if s.is_dir() else shutil.copyfile)(s, d / part)
+        else:
+            # Relative links: the export and the build may move together.
+            os.symlink(os.path.relpath(s, d), d / part)
+
+
+def _entry(doc: dict, scene: str) -> str:
+    return scene if doc["scenes_dir"] == "." else f"{doc['scenes_dir']}/{scene}"
 
 
 def run(args) -> int:
     out: Path = args.out
-    doc = plan(args)
-    inputs = [Path(doc["build"])] + ([Path(doc["noise"])] if doc["noise"] else [])
-    layout.refuse_overlap(out, inputs)
+    doc, sources = plan(args)
+    layout.refuse_overlap(out, [args.build] + ([args.noise] if args.noise else []))
     layout.refuse_inside_settings(out)
-    if layout.is_build_dir(out) or (out / "noise_dataset.json").is_file():
-        raise ConfigError(f"--out is a build or a noise output, not an export: {out}")
-    old = out / EXPORT_FILE
-    if out.exists():
-        if not out.is_dir():
-            raise ConfigError(f"--out exists and is not a directory: {out}")
-        if old.is_file():
-            if layout.read_json(old, EXPORT_FILE) == doc:
-                _say(doc, out, "up to date")
-                return 0
-        elif any(out.iterdir()):
-            raise ConfigError(f"--out is a folder with other files, not an export: {out}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    layout.remove_stale_temps(out.parent, [out.name, f"{out.name}.old"])
-    tmp = layout.temp_path(out)
-    shutil.rmtree(tmp, ignore_errors=True)
+    how = outputs.claim(out, EXPORT, "--out")
+    with outputs.lock(out, EXPORT):
+        return _replace(out, doc, sources, how, overwrite=args.overwrite)
+
+
+def _replace(out: Path, doc: dict, sources: dict[str, Path], how: str, overwrite: bool) -> int:
+    """Put the export's entries in place, replacing only what the previous export here
+    wrote; everything else in OUT stays as it is."""
+    old: dict | None = None
+    if how == "same":
+        old = outputs.read_record(out / EXPORT_FILE)
+        if old == doc:
+            _say(doc, out, "up to date")
+            return 0
+        # (an export.json of an older blurset names the build by its absolute path)
+        was_of = Path(str(old.get("build"))).name if old.get("build") else doc["build"]
+        if was_of != doc["build"] and not overwrite:
+            raise ConfigError(
+                f"--out holds an export of the build {was_of!r}: give another --out, "
+                f"or --overwrite to replace that export: {out}"
+            )
+    owned = set(outputs.owned_entries(out, EXPORT)) if old is not None else set()
+    new = [_entry(doc, s) for s in doc["scenes"]] + ["train.txt", "test.txt", EXPORT_FILE]
+    for rel in new:
+        p = out / rel
+        if (p.exists() or p.is_symlink()) and rel not in owned:
+            raise ConfigError(
+                f"--out already holds {rel}, which no earlier export here wrote: move it, or "
+                f"give another --out: {out}"
+            )
+    if doc["scenes_dir"] != "." and (out / doc["scenes_dir"]).is_file():
+        raise ConfigError(f"--out holds a file {doc['scenes_dir']}: {out}")
+    layout.remove_stale_temps(out, [STAGE, TRASH])
+    stage, trash = layout.temp_path(out / STAGE), layout.temp_path(out / TRASH)
+    for t in (stage, trash):
+        shutil.rmtree(t, ignore_errors=True)
     try:
-        _write(tmp, doc)
-        if out.exists():
-            # The old export (ours: export.json, or an empty folder) makes way in one
-            # rename each; a reader sees the old or the new export, never a mix.
-            gone = layout.temp_path(out.with_name(f"{out.name}.old"))
-            os.replace(out, gone)
-            os.replace(tmp, out)
-            shutil.rmtree(gone, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        for scene, src in sources.items():
+            _write_scene(stage / scene, src, doc)
+        # What this run may put in place is recorded first: an export stopped half-way
+        # still owns every entry it wrote, and its rerun replaces them.
+        layout.write_json(
+            out / EXPORT_FILE,
+            {
+                "kind": "blurset export",
+                "state": "replacing",
+                "build": doc["build"],
+                "scenes_dir": doc["scenes_dir"],
+                "scenes": {},
+                "owns": sorted(owned | set(new)),
+            },
+        )
+        trash.mkdir()
+        # Old scenes (and a scene folder of another target) make way, one rename each.
+        for k, rel in enumerate(sorted(owned - set(new))):
+            os.replace(out / rel, trash / str(k))
+        if doc["scenes_dir"] != ".":
+            (out / doc["scenes_dir"]).mkdir(exist_ok=True)
+        for k, scene in enumerate(doc["scenes"]):
+            dst = out / _entry(doc, scene)
+            if dst.exists() or dst.is_symlink():
+                os.replace(dst, trash / f"new{k}")
+            os.replace(stage / scene, dst)
+        for split in ("train", "test"):
+            layout.write_text_atomic(out / f"{split}.txt", "".join(f"{n}\n" for n in doc[split]))
+        layout.write_json(out / EXPORT_FILE, doc)
+    finally:
+        for t in (stage, trash):
+            shutil.rmtree(t, ignore_errors=True)
     _say(doc, out, "written")
     return 0
 

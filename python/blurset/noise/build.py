@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from blurset import __version__, _core, layout, publish
+from blurset import __version__, _core, layout, outputs, publish
 from blurset.config import check_downsample, parse_downsample
 from blurset.exceptions import ConfigError, InputError
 from blurset.layout import gain_name
@@ -51,7 +51,8 @@ from blurset.noise.params import (
 from blurset.noise.scene import list_images, output_names
 from blurset.stop import interruptible, remove_tree
 
-DATASET_FILE = "noise_dataset.json"
+NOISE = outputs.OutputKind.NOISE
+DATASET_FILE = NOISE.record
 SEED_DERIVATION = (
     "noise_scene_seed(seed, setting, level) = derive_seed(seed, [fnv1a64('build_noise'), "
     "fnv1a64(setting), fnv1a64(level)]); per gain key noise_key(scene seed, gain) and white "
@@ -67,7 +68,7 @@ CLEAN = {
 
 def is_build(path: Path) -> bool:
     """A build directory (as `blurset build` writes it) rather than one LLFF scene."""
-    return (path / "dataset.json").is_file()
+    return outputs.kind_of(path) is outputs.OutputKind.BUILD
 
 
 def parse_levels(value: str | None, available: list[str]) -> list[str]:
@@ -119,8 +120,8 @@ def _plan_unit(
     downsample: list[int],
 ) -> Unit:
     src = setting_dir / level
-    meta = layout.read_json(setting_dir / "meta.json", "meta.json")
-    bg = meta.get("render", {}).get("background", [1.0, 1.0, 1.0])
+    meta = outputs.read_record(setting_dir / "meta.json")
+    bg = (meta.get("render") or {}).get("background") or [1.0, 1.0, 1.0]
     image_dir = src / "images"
     if not image_dir.is_dir():
         raise InputError(f"level {level!r} has no images/ directory: {image_dir}")
@@ -195,24 +196,25 @@ def _params(args, kind: str, gamma: str, table, downsample: list[int], clean_pol
 
 
 def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
-    layout.refuse_overlap(out, [build])
-    if out.exists():
-        if not out.is_dir():
-            raise ConfigError(f"--out exists and is not a directory: {out}")
-        if overwrite:
-            shutil.rmtree(out)
-        elif (out / DATASET_FILE).is_file():
-            old = layout.read_json(out / DATASET_FILE, DATASET_FILE).get("params", {})
-            for k, v in params.items():
-                if old.get(k) != v:
-                    raise ConfigError(
-                        f"--out was written with {k} = {old.get(k)!r}, not {v!r}: use another "
-                        f"--out or --overwrite: {out / DATASET_FILE}"
-                    )
-        elif any(out.iterdir()):
+    """Claim OUT for this noise run (call under its lock): a new or empty folder, or a
+    noise output made with the same options; `--overwrite` replaces a noise output's own
+    units and records, nothing else in the folder, and never a build or a foreign folder."""
+    if outputs.claim(out, NOISE, "--out") == "same":
+        old = outputs.read_record(out / DATASET_FILE)
+        if old["build"] != build.resolve().name and not overwrite:
             raise ConfigError(
-                f"--out exists and is not a noise build (pass --overwrite to replace it): {out}"
+                f"--out holds the noise of the build {old['build']!r}: use another --out, or "
+                f"--overwrite to replace it: {out}"
             )
+        if overwrite:
+            outputs.remove_owned(out, NOISE)
+        else:
+            for k, v in params.items():
+                if old["params"].get(k) != v:
+                    raise ConfigError(
+                        f"--out was written with {k} = {old['params'].get(k)!r}, not {v!r}: use "
+                        f"another --out, or --overwrite to replace it: {out / DATASET_FILE}"
+                    )
     out.mkdir(parents=True, exist_ok=True)
     if not (out / DATASET_FILE).is_file():
         # Written first (options only) so that a run killed before its end resumes;
@@ -332,7 +334,7 @@ def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
     gains_on_disk: dict[str, dict] = {}
     n_units = n_images = 0
     for unit in sorted(u for u in out.glob("*/*/gain_*") if layout.is_complete(u)):
-        meta = layout.read_json(unit / "noise.json", "noise.json")
+        meta = outputs.read_record(unit / "noise.json")
         setting, level = unit.parent.parent.name, unit.parent.name
         seeds.setdefault(setting, {})[level] = meta["seed"]
         gains_on_disk[unit.name] = {
@@ -380,7 +382,9 @@ def run(args) -> int:
             "(splits.json), or none with --noisy-test-views"
         )
     gains = parse_gains(args.gains, args.any_gain)
-    dataset = layout.read_json(build / "dataset.json", "dataset.json")
+    # A build still being written (or stopped) would be noised half, with stale splits.
+    settings = outputs.finished_build(build, "SCENE").complete
+    dataset = outputs.read_record(build / "dataset.json")
     if args.downsample is not None:
         downsample = check_downsample(parse_downsample(args.downsample))
     else:  # the build's own images_<f>/ factors (none in a build made before them)
@@ -388,11 +392,9 @@ def run(args) -> int:
     clean_policy = "none" if args.noisy_test_views else "test_views"
     available = dataset.get("levels") or ["sharp"]
     levels = parse_levels(args.levels, available)
-    settings = layout.complete_settings(build)
+    settings = [build / name for name in settings]
     if not settings:
         raise InputError(f"no complete setting (<setting>/{layout.MARKER}) in build: {build}")
-    if not (build / "splits.json").is_file():
-        raise InputError(f"splits.json not found: {build / 'splits.json'}")
 
     source = args.source or "auto"
     with_linear = all(_has_linear(s / lvl) for s in settings for lvl in levels)
@@ -408,26 +410,29 @@ def run(args) -> int:
         for s in settings
         for lvl in levels
     ]
-    _prepare_out(out, build, params, args.overwrite)
-    # The next lines re-plan pending gains: --overwrite may just have removed units.
-    for u in units:
-        u.pending = [g for g in gains if not layout.is_complete(u.dst / gain_name(g))]
-    layout.write_text_atomic(out / "splits.json", (build / "splits.json").read_text())
-
-    written = 0
-    todo = [u for u in units if u.pending]
-    skipped = sum(len(gains) - len(u.pending) for u in units)
-    show = not getattr(args, "quiet", False) and sys.stderr.isatty()
-    for n, u in enumerate(todo, 1):
-        wb = _core.noise_white_balance(u.seed) if args.profile == "paper" else None
-        _write_unit(u, gains_sigmas, wb, params, args, build)
-        written += len(u.pending)
-        if show:
-            print(f"\r{n}/{len(todo)} levels noised", end="", file=sys.stderr, flush=True)
-    if show and todo:
-        print(file=sys.stderr)
-    doc = _finalize(out, build, params, dataset)
-    publish.write_manifest(out)
+    layout.refuse_overlap(out, [build])
+    layout.refuse_inside_settings(out)
+    outputs.claim(out, NOISE, "--out")  # refused before the lock creates anything
+    with outputs.lock(out, NOISE):
+        _prepare_out(out, build, params, args.overwrite)
+        # Pending gains once more: --overwrite may just have removed units.
+        for u in units:
+            u.pending = [g for g in gains if not layout.is_complete(u.dst / gain_name(g))]
+        layout.write_text_atomic(out / "splits.json", (build / "splits.json").read_text())
+        written = 0
+        todo = [u for u in units if u.pending]
+        skipped = sum(len(gains) - len(u.pending) for u in units)
+        show = not getattr(args, "quiet", False) and sys.stderr.isatty()
+        for n, u in enumerate(todo, 1):
+            wb = _core.noise_white_balance(u.seed) if args.profile == "paper" else None
+            _write_unit(u, gains_sigmas, wb, params, args, build)
+            written += len(u.pending)
+            if show:
+                print(f"\r{n}/{len(todo)} levels noised", end="", file=sys.stderr, flush=True)
+        if show and todo:
+            print(file=sys.stderr)
+        doc = _finalize(out, build, params, dataset)
+        publish.write_manifest(out)
     print(
         f"blurset noise: {written} scene(s) written, {skipped} complete skipped "
         f"({len(settings)} settings x {len(levels)} levels x {len(gains)} gains, "

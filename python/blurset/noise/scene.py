@@ -2,19 +2,21 @@
 
 Per gain g, OUT/gain_<g>/ is a complete LLFF scene: images/ (processed sRGB PNG),
 linear/ (float EXR of the unclipped linear noisy image, same stems),
-poses_bounds.npy (hwf of the written resolution) and noise.json. The whole OUT tree
-is written into a temporary sibling directory and renamed at the end, so OUT either
-appears complete or not at all.
+poses_bounds.npy (hwf of the written resolution) and noise.json; OUT/noise_scene.json
+says what OUT is. The gains are written into a staging folder inside OUT and each moves
+into place whole; the record comes last. `--overwrite` replaces the gains and the record
+of an earlier noise output, nothing else in OUT, and never a build or a foreign folder.
 """
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
 import numpy as np
 
-from blurset import _core, layout
+from blurset import __version__, _core, layout, outputs
 from blurset.config import check_downsample, parse_downsample
 from blurset.exceptions import ConfigError, InputError
 from blurset.noise.params import (
@@ -30,6 +32,8 @@ from blurset.noise.params import (
 from blurset.stop import interruptible, remove_tree
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
+NOISE_SCENE = outputs.OutputKind.NOISE_SCENE
+STAGE = "noise"  # `.noise.tmp<pid>` in OUT: the gains before they move in
 MODEL = "y' = y + sqrt(sigma_read^2 + sigma_shot^2 * y) * N(0, 1), y = white_level * decode(x) / wb"
 
 
@@ -121,76 +125,93 @@ def run(args) -> int:
 
     layout.refuse_overlap(out, [scene])
     layout.refuse_inside_settings(out)
-    if out.exists() and not args.overwrite:
-        raise ConfigError(f"--out exists (pass --overwrite to replace it): {out}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    # A killed run's temp tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
-    layout.remove_stale_temps(out.parent, [out.name])
-    tmp = layout.temp_path(out)
-    shutil.rmtree(tmp, ignore_errors=True)
-    try:
-        variants = []
-        for g in gains:
-            sr, ss = _core.noise_sigmas(g, levels)
-            variants.append((tmp / layout.gain_name(g), sr, ss, _core.noise_key(args.seed, g)))
-        interruptible(
-            _core.noise_write_variants,
-            sources,
-            names,
-            variants,
-            frames=args.frames,
-            gamma=args.gamma,
-            white_balance=wb,
-            white_level=args.white_level,
-            downsample=downsample,
-            clean_views=clean,
+    if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not args.overwrite:
+        raise ConfigError(
+            f"--out is a noise output already (pass --overwrite to replace it): {out}"
         )
-        # The scene's own images_<f>/ are its clean images of that size (not with --factor).
-        small = {} if args.factor else {f: scene / f"images_{f}" for f in downsample}
-        for gdir, *_ in variants:
-            copy_clean(gdir, sources, names, args.frames, clean, small)
-        # Every frame of a view shares its pose: the rows repeat, so a burst stays a
-        # valid LLFF scene (N * frames images, N * frames rows).
-        out_rows = np.repeat(np.asarray(rows, dtype=np.float64), args.frames, axis=0)
-        out_rows[:, 4] = height
-        out_rows[:, 9] = width
-        out_rows[:, 14] = out_rows[:, 14] / factor
-        files = files_record([p.name for p in sources], names, args.frames, set(clean))
-        for g, (gdir, sr, ss, _key) in zip(gains, variants, strict=True):
-            _core.write_poses_bounds(gdir / "poses_bounds.npy", out_rows)
-            doc = noise_json(
-                gain=g,
-                seed=args.seed,
-                sigmas=(sr, ss),
+    with outputs.lock(out, NOISE_SCENE):
+        # Claimed again under the lock: another run may have written it meanwhile.
+        if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not args.overwrite:
+            raise ConfigError(f"--out is a noise output already (pass --overwrite): {out}")
+        # A killed run's staging tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
+        layout.remove_stale_temps(out, [STAGE])
+        tmp = layout.temp_path(out / STAGE)
+        shutil.rmtree(tmp, ignore_errors=True)
+        try:
+            variants = []
+            for g in gains:
+                sr, ss = _core.noise_sigmas(g, levels)
+                variants.append((tmp / layout.gain_name(g), sr, ss, _core.noise_key(args.seed, g)))
+            interruptible(
+                _core.noise_write_variants,
+                sources,
+                names,
+                variants,
+                frames=args.frames,
                 gamma=args.gamma,
                 white_balance=wb,
                 white_level=args.white_level,
-                frames=args.frames,
-                profile=args.profile,
-                model=MODEL,
-                levels={
-                    **table_record(levels, args.kpn_levels),
-                    "file": args.kpn_levels.name if args.kpn_levels else None,
-                },
-                source={
-                    "scene": scene.resolve().name,
-                    "images": image_dir.name,
-                    "factor": factor,
-                    "resolution": [width, height],
-                },
                 downsample=downsample,
                 clean_views=clean,
-                rng="philox4x32-10, key derive_seed(seed, [fnv1a64('noise'), gain bits]), "
-                "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
-                files=files,
             )
-            _core.write_noise_json(gdir / "noise.json", doc)
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.rename(out)
-    except BaseException:
-        remove_tree(tmp)
-        raise
+            # The scene's own images_<f>/ are its clean images of that size (not with --factor).
+            small = {} if args.factor else {f: scene / f"images_{f}" for f in downsample}
+            for gdir, *_ in variants:
+                copy_clean(gdir, sources, names, args.frames, clean, small)
+            # Every frame of a view shares its pose: the rows repeat, so a burst stays a
+            # valid LLFF scene (N * frames images, N * frames rows).
+            out_rows = np.repeat(np.asarray(rows, dtype=np.float64), args.frames, axis=0)
+            out_rows[:, 4] = height
+            out_rows[:, 9] = width
+            out_rows[:, 14] = out_rows[:, 14] / factor
+            files = files_record([p.name for p in sources], names, args.frames, set(clean))
+            for g, (gdir, sr, ss, _key) in zip(gains, variants, strict=True):
+                _core.write_poses_bounds(gdir / "poses_bounds.npy", out_rows)
+                doc = noise_json(
+                    gain=g,
+                    seed=args.seed,
+                    sigmas=(sr, ss),
+                    gamma=args.gamma,
+                    white_balance=wb,
+                    white_level=args.white_level,
+                    frames=args.frames,
+                    profile=args.profile,
+                    model=MODEL,
+                    levels={
+                        **table_record(levels, args.kpn_levels),
+                        "file": args.kpn_levels.name if args.kpn_levels else None,
+                    },
+                    source={
+                        "scene": scene.resolve().name,
+                        "images": image_dir.name,
+                        "factor": factor,
+                        "resolution": [width, height],
+                    },
+                    downsample=downsample,
+                    clean_views=clean,
+                    rng="philox4x32-10, key derive_seed(seed, [fnv1a64('noise'), gain bits]), "
+                    "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
+                    files=files,
+                )
+                _core.write_noise_json(gdir / "noise.json", doc)
+            # The previous output's own entries make way (nothing else in OUT), then each
+            # gain moves in whole; the record comes last.
+            outputs.remove_owned(out, NOISE_SCENE)
+            for gdir, *_ in variants:
+                os.replace(gdir, out / gdir.name)
+            layout.write_json(
+                out / NOISE_SCENE.record,
+                {
+                    "kind": "blurset noise scene",
+                    "blurset_version": __version__,
+                    "scene": scene.resolve().name,
+                    "gains": [gdir.name for gdir, *_ in variants],
+                    "seed": args.seed,
+                    "profile": args.profile,
+                },
+            )
+        finally:
+            remove_tree(tmp)
     print(
         f"blurset noise: wrote {len(gains)} scene(s) x {len(files)} images to {out} "
         f"({', '.join(layout.gain_name(g) for g in gains)})"

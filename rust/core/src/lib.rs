@@ -62,6 +62,11 @@ pub use crate::dataset::manifest::{
     ManifestProblem, MANIFEST,
 };
 pub use crate::dataset::meta::{read_mean_poses, write_json, Meta, ObjectRecord, Timings};
+pub use crate::dataset::outputs::{
+    build_state, claim, mark_text, output_kind, owned_entries, remove_owned, superseded_settings,
+    text_owner, BuildState, Claim, OutputKind, TextOwner,
+};
+pub use crate::dataset::read::{check_shape, read_record, Record};
 pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
 pub use crate::dataset::splits::{
     make_splits, seeded_subset, test_views, Holdout, SettingEntry, Splits,

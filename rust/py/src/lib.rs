@@ -10,6 +10,7 @@ mod layout;
 mod llff;
 mod noise;
 mod noise_linear;
+mod outputs;
 mod publish;
 mod qa;
 mod sampling;
@@ -37,6 +38,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     accumulate::register(m)?;
     noise::register(m)?;
     noise_linear::register(m)?;
+    outputs::register(m)?;
     publish::register(m)?;
     qa::register(m)?;
     tradeoff::register(m)?;

@@ -156,6 +156,13 @@ pub fn parse_poses_bounds(bytes: &[u8]) -> std::result::Result<Vec<PoseRow>, Str
         if let Some(j) = row.iter().position(|v| !v.is_finite()) {
             return Err(format!("row {i} column {j} is not finite"));
         }
+        // hwf: a camera of no size or no focal length is no camera (loaders divide by f).
+        if let Some((name, v)) = [("height", row[4]), ("width", row[9]), ("focal", row[14])]
+            .into_iter()
+            .find(|(_, v)| *v <= 0.0)
+        {
+            return Err(format!("row {i}: {name} {v} (hwf must be positive)"));
+        }
         rows.push(row);
     }
     Ok(rows)
@@ -416,7 +423,7 @@ mod tests {
             .map(|i| {
                 let mut r = [0.0; 17];
                 for (j, v) in r.iter_mut().enumerate() {
-                    *v = (i * 17 + j) as f64 * 0.5 - 3.0;
+                    *v = (i * 17 + j) as f64 * 0.5 + 1.0;
                 }
                 r
             })
@@ -429,6 +436,18 @@ mod tests {
         assert_eq!(read_poses_bounds(&p)?, rows);
         let _ = std::fs::remove_file(&p);
         Ok(())
+    }
+
+    #[test]
+    fn a_camera_without_focal_length_is_refused_by_row() {
+        let mut rows = vec![[1.0; 17]; 3];
+        rows[2][14] = 0.0;
+        let err = parse_poses_bounds(&npy_bytes(&rows)).unwrap_err();
+        assert_eq!(err, "row 2: focal 0 (hwf must be positive)");
+        rows[2][14] = 1.0;
+        rows[1][9] = -4.0;
+        let err = parse_poses_bounds(&npy_bytes(&rows)).unwrap_err();
+        assert!(err.starts_with("row 1: width -4"), "{err}");
     }
 
     #[test]

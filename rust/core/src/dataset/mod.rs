@@ -7,6 +7,8 @@ pub mod license;
 pub mod llff;
 pub mod manifest;
 pub mod meta;
+pub mod outputs;
+pub mod read;
 pub mod records;
 pub mod splits;
 pub mod stats;

@@ -1,0 +1,156 @@
+"""What blurset writes and what a command may touch: the Python face of the core's one
+owner (blurset-core `dataset::outputs`, DESIGN §10).
+
+- Every output names its kind in a record (`OutputKind.record`): a build's
+  dataset.json, a noise output's noise_dataset.json or noise_scene.json, an export's
+  export.json, a statistics folder's stats.json. `kind_of` reads it.
+- `claim` says whether a command may write into a folder; `owned_entries` /
+  `remove_owned` are the only entries its re-run or `--overwrite` replaces.
+- `lock` is the lock a writer of a kind holds in its folder for the whole run.
+- `build_state` says whether a build is finished; `finished_build` refuses a provisional
+  one for the readers that describe or pass on a build (export, card, noise).
+- `write_marked_text` writes a text file (a dataset card) that a later run tells from an
+  edited or foreign one: those are replaced only with `force`, the old kept as `.bak`.
+- `read_record` reads a record checked against its shape.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import socket
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from blurset import _core
+from blurset.exceptions import ConfigError, InputError
+
+OutputKind = _core.OutputKind
+BuildState = _core.BuildState
+
+
+def kind_of(path: Path) -> _core.OutputKind | None:
+    """The kind of blurset output `path` is, from its record (None: not an output)."""
+    return _core.output_kind(Path(path))
+
+
+def claim(path: Path, kind: _core.OutputKind, option: str = "--out") -> str:
+    """`new`, `empty`, `same` (an output of this kind: the caller compares records) or
+    `beside` (an export among other things); ConfigError naming `option` and the folder
+    when the command may not write there (a file, another kind's output, a foreign
+    folder)."""
+    return _core.claim(Path(path), kind, option)
+
+
+def owned_entries(path: Path, kind: _core.OutputKind) -> list[str]:
+    """The entries (relative paths) the output of `kind` in `path` wrote."""
+    return _core.owned_entries(Path(path), kind)
+
+
+def remove_owned(path: Path, kind: _core.OutputKind) -> list[str]:
+    """Remove only what the output of `kind` in `path` wrote (`--overwrite`)."""
+    return _core.remove_owned(Path(path), kind)
+
+
+def read_record(path: Path, record: str | None = None) -> Any:
+    """A record blurset wrote, checked against its shape (InputError names the file and
+    the field); `record` names it when the file is named otherwise."""
+    return _core.read_record(Path(path), record)
+
+
+def build_state(build: Path) -> _core.BuildState:
+    """The complete settings of a build and why it is provisional (empty: finished)."""
+    return _core.build_state(Path(build))
+
+
+def finished_build(build: Path, option: str = "BUILD") -> _core.BuildState:
+    """The state of a build that must be finished to be read (export, card, noise):
+    InputError naming it, and how to finish it, when it is provisional."""
+    if kind_of(build) is not OutputKind.BUILD:
+        raise InputError(f"not a blurset build (no dataset.json): {build}")
+    state = build_state(build)
+    if state.provisional:
+        raise InputError(
+            f"{option} is a build that is not finished ({state.provisional[0]}"
+            f"{'; …' if len(state.provisional) > 1 else ''}): let its run end, or rerun "
+            f"`blurset build` with the same options to finish it: {build}"
+        )
+    return state
+
+
+@contextlib.contextmanager
+def lock(path: Path, kind: _core.OutputKind, option: str = "--out") -> Iterator[None]:
+    """Hold `kind`'s lock in the folder `path` (created if needed) for a whole run: a
+    second writer of the same output is refused at once, naming who holds it. The lock
+    file is removed on release (a waiter that then holds the removed file retries)."""
+    path = Path(path)
+    created = not path.exists()
+    path.mkdir(parents=True, exist_ok=True)
+    lock_path = path / kind.lock_name
+    while True:
+        f = open(lock_path, "a+")  # noqa: SIM115 - held across the yield
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            holder = f.read().strip() or "another process"
+            f.close()
+            raise ConfigError(
+                f"{option} is being written by another blurset run ({holder}): wait for it "
+                f"to end, or give another {option}: {path}"
+            ) from None
+        try:
+            same = os.fstat(f.fileno()).st_ino == os.stat(lock_path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        f.close()
+    try:
+        f.seek(0)
+        f.truncate()
+        f.write(f"pid {os.getpid()} on host {socket.gethostname()}\n")
+        f.flush()
+        yield
+    finally:
+        lock_path.unlink(missing_ok=True)
+        f.close()
+        if created:
+            # A run that wrote nothing leaves nothing, not even the folder it made.
+            with contextlib.suppress(OSError):
+                path.rmdir()
+
+
+def write_marked_text(
+    path: Path, text: str, *, command: str, force: bool = False, option: str = "--out"
+) -> Path | None:
+    """Write `text` to `path` with blurset's mark (atomically). A file there that
+    `command` did not write, or that someone edited since, is replaced only with
+    `force`, and then kept beside it as `<name>.bak`, whose path is returned;
+    otherwise ConfigError names the file."""
+    from blurset import layout
+
+    path = Path(path)
+    owner = _core.text_owner(path, command)
+    backup = None
+    if owner in ("edited", "foreign"):
+        what = (
+            "was edited since blurset wrote it"
+            if owner == "edited"
+            else (f"was not written by blurset {command}")
+        )
+        if not force:
+            raise ConfigError(
+                f"{option} {path.name} {what}: keep it (give another {option}), or pass "
+                f"--force to replace it (the old one is then kept beside it as {path.name}.bak): {path}"
+            )
+        backup = path.with_name(path.name + ".bak")
+        n = 1
+        while backup.exists():  # an older backup is the user's too
+            backup = path.with_name(f"{path.name}.bak{n}")
+            n += 1
+        layout.write_bytes_atomic(backup, path.read_bytes())
+    layout.write_text_atomic(path, _core.mark_text(text, command))
+    return backup

@@ -1,0 +1,741 @@
+//! What blurset writes, and what each command may touch (DESIGN §10): the one owner.
+//!
+//! - Every output names its kind in a record it writes: a build its `dataset.json`, a
+//!   noise output its `noise_dataset.json` (a build's levels) or `noise_scene.json` (one
+//!   scene), an export its `export.json`, a statistics folder its `stats.json`.
+//!   [`output_kind`] recognises an output from that record and nothing else.
+//! - [`claim`] says whether a command may write into a folder: a new or empty folder,
+//!   or an output of its own kind; an export may also live beside other things (IBRNet's
+//!   `data/` holds many datasets). Any other folder is refused by name.
+//! - [`owned_entries`] are the entries an output of a kind wrote: the only ones a
+//!   re-run or `--overwrite` may replace. A build's are never replaced by another
+//!   command.
+//! - [`build_state`] says whether a build is finished or provisional (a run writing or
+//!   interrupted, files that disagree with each other): readers refuse a provisional
+//!   build or say what they skipped.
+//! - A file blurset writes among a user's files (a dataset card) carries a mark of its
+//!   own content ([`mark_text`]); [`text_owner`] tells an unedited one from one a person
+//!   edited or wrote, which is replaced only when asked.
+use super::layout::{scan, PARTIAL_SUFFIX};
+use super::read::{check_shape, read_record, Record};
+use crate::error::{Error, Result};
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+
+/// The kinds of output blurset writes into a folder of their own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputKind {
+    Build,
+    Noise,
+    NoiseScene,
+    Export,
+    Stats,
+}
+
+impl OutputKind {
+    pub const ALL: [OutputKind; 5] = [
+        OutputKind::Build,
+        OutputKind::Noise,
+        OutputKind::NoiseScene,
+        OutputKind::Export,
+        OutputKind::Stats,
+    ];
+
+    /// How messages name the kind.
+    pub fn name(self) -> &'static str {
+        match self {
+            OutputKind::Build => "build",
+            OutputKind::Noise => "noise output",
+            OutputKind::NoiseScene => "noise output (one scene)",
+            OutputKind::Export => "export",
+            OutputKind::Stats => "statistics folder",
+        }
+    }
+
+    /// The record that says what the folder is.
+    pub fn record(self) -> Record {
+        match self {
+            OutputKind::Build => Record::Dataset,
+            OutputKind::Noise => Record::NoiseDataset,
+            OutputKind::NoiseScene => Record::NoiseScene,
+            OutputKind::Export => Record::Export,
+            OutputKind::Stats => Record::Stats,
+        }
+    }
+
+    /// The lock file a writer of this kind holds in the folder (a build's is `.lock`,
+    /// shared by every process building into it).
+    pub fn lock_name(self) -> &'static str {
+        match self {
+            OutputKind::Build => ".lock",
+            OutputKind::Noise | OutputKind::NoiseScene => ".noise.lock",
+            OutputKind::Export => ".export.lock",
+            OutputKind::Stats => ".stats.lock",
+        }
+    }
+
+    /// The `kind` field of the record, for the kinds whose record carries one.
+    fn kind_field(self) -> Option<&'static str> {
+        match self {
+            OutputKind::NoiseScene => Some("blurset noise scene"),
+            OutputKind::Export => Some("blurset export"),
+            _ => None,
+        }
+    }
+
+    /// Whether `doc`, the kind's record file, is one blurset wrote: the right shape and,
+    /// for the kinds that carry it, the right `kind` (a user's own `dataset.json` or
+    /// `stats.json` is not ours).
+    fn recognises(self, doc: &serde_json::Value) -> bool {
+        if check_shape(doc, self.record()).is_err() {
+            return false;
+        }
+        match self.kind_field() {
+            Some(k) => doc.get("kind").and_then(|v| v.as_str()) == Some(k),
+            None if self == OutputKind::Build => doc
+                .get("name")
+                .and_then(|v| v.as_str())
+                .is_some_and(|n| n.starts_with("blurset")),
+            None => true,
+        }
+    }
+
+    /// The kind by its `name()`.
+    pub fn of_name(name: &str) -> Option<OutputKind> {
+        OutputKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+fn list(dir: &Path) -> Result<Vec<(String, PathBuf)>> {
+    let rd = std::fs::read_dir(dir).map_err(|e| Error::io("cannot list", dir, e))?;
+    let mut v = Vec::new();
+    for entry in rd {
+        let entry = entry.map_err(|e| Error::io("cannot list", dir, e))?;
+        v.push((
+            entry.file_name().to_string_lossy().into_owned(),
+            entry.path(),
+        ));
+    }
+    v.sort();
+    Ok(v)
+}
+
+/// A noise output of one scene written before its record existed: every visible entry a
+/// `gain_<g>` folder holding a noise.json (or a `gain_<g>.partial` one).
+fn legacy_scene_noise(dir: &Path) -> Result<bool> {
+    let entries = list(dir)?;
+    let visible: Vec<_> = entries
+        .iter()
+        .filter(|(n, _)| !n.starts_with('.'))
+        .collect();
+    Ok(!visible.is_empty()
+        && visible.iter().all(|(n, p)| {
+            n.starts_with("gain_")
+                && p.is_dir()
+                && (p.join("noise.json").is_file() || n.ends_with(PARTIAL_SUFFIX))
+        }))
+}
+
+/// What blurset output `dir` is, from the record it holds: None for a folder that holds
+/// none (new, empty or a user's). Two kinds' records in one folder is an input error.
+pub fn output_kind(dir: &Path) -> Result<Option<OutputKind>> {
+    if !dir.is_dir() {
+        return Ok(None);
+    }
+    let mut found = Vec::new();
+    for kind in OutputKind::ALL {
+        let p = dir.join(kind.record().file_name());
+        if !p.is_file() {
+            continue;
+        }
+        let doc = std::fs::read(&p)
+            .ok()
+            .and_then(|t| serde_json::from_slice::<serde_json::Value>(&t).ok());
+        if doc.is_some_and(|d| kind.recognises(&d)) {
+            found.push(kind);
+        }
+    }
+    match found.as_slice() {
+        [] => {
+            // A build's first moments: its lock exists before its provisional record.
+            if dir.join(OutputKind::Build.lock_name()).exists() {
+                return Ok(Some(OutputKind::Build));
+            }
+            Ok(legacy_scene_noise(dir)?.then_some(OutputKind::NoiseScene))
+        }
+        [one] => Ok(Some(*one)),
+        many => Err(Error::Input {
+            reason: format!(
+                "holds the records of {} outputs ({})",
+                many.len(),
+                many.iter()
+                    .map(|k| k.record().file_name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            path: dir.into(),
+        }),
+    }
+}
+
+/// What a command may do with the folder it was asked to write into.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Claim {
+    /// It does not exist: the command creates it.
+    New,
+    /// It exists and holds nothing visible (dot files are not counted).
+    Empty,
+    /// It is an output of the command's own kind: the command may replace its own
+    /// entries (a re-run, or `--overwrite`; the caller compares the records).
+    Same,
+    /// It holds other things and the kind lives beside them (an export): the command
+    /// writes its entries and touches nothing else.
+    Beside,
+}
+
+/// May a command writing an output of `kind` write into `dir`? `option` names the
+/// command's option in a refusal. Refused: a file, a dangling link, another kind's
+/// output, and (but for an export) a folder holding anything else.
+pub fn claim(dir: &Path, kind: OutputKind, option: &str) -> Result<Claim> {
+    let refuse = |detail: String| Error::Config {
+        option: option.into(),
+        detail,
+    };
+    match std::fs::symlink_metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Claim::New),
+        Err(e) => return Err(Error::io("cannot read", dir, e)),
+        Ok(m) if m.file_type().is_symlink() && !dir.exists() => {
+            return Err(refuse(format!("is a link to nothing: {}", dir.display())))
+        }
+        Ok(_) => {}
+    }
+    if !dir.is_dir() {
+        return Err(refuse(format!(
+            "exists and is not a directory: {}",
+            dir.display()
+        )));
+    }
+    match output_kind(dir)? {
+        Some(k) if k == kind => Ok(Claim::Same),
+        // The two noise kinds share a command: still not each other's.
+        Some(k) => Err(refuse(format!(
+            "is a blurset {} ({}), not a {}: {}",
+            k.name(),
+            k.record().file_name(),
+            kind.name(),
+            dir.display()
+        ))),
+        None => {
+            let visible = list(dir)?.into_iter().any(|(n, _)| !n.starts_with('.'));
+            if !visible {
+                Ok(Claim::Empty)
+            } else if kind == OutputKind::Export {
+                Ok(Claim::Beside)
+            } else {
+                Err(refuse(format!(
+                    "is a folder with other files, not a blurset {}: {} (give a new or \
+                     empty folder)",
+                    kind.name(),
+                    dir.display()
+                )))
+            }
+        }
+    }
+}
+
+/// The entries (relative paths) an output of `kind` in `dir` wrote: the only ones its
+/// re-run or `--overwrite` may remove. Dot-prefixed temp names of a dead process are
+/// not listed here (`layout.remove_stale_temps` removes those).
+pub fn owned_entries(dir: &Path, kind: OutputKind) -> Result<Vec<String>> {
+    let exists = |rel: &str| dir.join(rel).exists();
+    let mut out: Vec<String> = Vec::new();
+    match kind {
+        OutputKind::Build => {
+            return Err(Error::Input {
+                reason: "a build is never replaced by another command".into(),
+                path: dir.into(),
+            })
+        }
+        OutputKind::Noise => {
+            for f in [
+                Record::NoiseDataset.file_name(),
+                Record::Splits.file_name(),
+                super::manifest::MANIFEST,
+            ] {
+                if exists(f) {
+                    out.push(f.into());
+                }
+            }
+            // <setting>/<level>/gain_<g>[.partial]: the units, nothing else of those folders.
+            for (s, sp) in list(dir)? {
+                if s.starts_with('.') || !sp.is_dir() {
+                    continue;
+                }
+                for (l, lp) in list(&sp)? {
+                    if !lp.is_dir() {
+                        continue;
+                    }
+                    for (g, gp) in list(&lp)? {
+                        if g.starts_with("gain_") && gp.is_dir() {
+                            out.push(format!("{s}/{l}/{g}"));
+                        }
+                    }
+                }
+            }
+        }
+        OutputKind::NoiseScene => {
+            if exists(Record::NoiseScene.file_name()) {
+                out.push(Record::NoiseScene.file_name().into());
+            }
+            for (g, gp) in list(dir)? {
+                if g.starts_with("gain_") && gp.is_dir() {
+                    out.push(g);
+                }
+            }
+        }
+        OutputKind::Export => {
+            let rec = dir.join(Record::Export.file_name());
+            if !rec.is_file() {
+                return Ok(out);
+            }
+            let doc = read_record(&rec, Record::Export)?;
+            let scenes_dir = doc
+                .get("scenes_dir")
+                .and_then(|v| v.as_str())
+                .unwrap_or(".")
+                .to_string();
+            let names: Vec<String> = doc
+                .get("scenes")
+                .and_then(|v| v.as_object())
+                .map(|m| m.keys().cloned().collect())
+                .unwrap_or_default();
+            let mut rels = Vec::new();
+            for n in names {
+                if !safe_name(&n) {
+                    return Err(Error::Input {
+                        reason: format!(
+                            "export.json names a scene that is not a plain name: {n:?}"
+                        ),
+                        path: rec,
+                    });
+                }
+                rels.push(if scenes_dir == "." {
+                    n
+                } else {
+                    format!("{scenes_dir}/{n}")
+                });
+            }
+            // An export stopped while replacing: the entries it was about to own as well.
+            for v in doc
+                .get("owns")
+                .and_then(|v| v.as_array())
+                .into_iter()
+                .flatten()
+            {
+                let rel = v.as_str().unwrap_or_default();
+                if rel.is_empty() || !rel.split('/').all(safe_name) {
+                    return Err(Error::Input {
+                        reason: format!("export.json owns an entry outside its folder: {rel:?}"),
+                        path: rec,
+                    });
+                }
+                rels.push(rel.to_string());
+            }
+            rels.sort();
+            rels.dedup();
+            out.extend(rels.into_iter().filter(|r| exists(r)));
+            for f in ["train.txt", "test.txt", Record::Export.file_name()] {
+                if exists(f) {
+                    out.push(f.into());
+                }
+            }
+        }
+        OutputKind::Stats => {
+            // Statistics rewrite their own files in place and never remove any.
+        }
+    }
+    Ok(out)
+}
+
+/// A single path component that stays inside its folder.
+fn safe_name(n: &str) -> bool {
+    !n.is_empty() && n != "." && n != ".." && !n.contains('/') && !n.contains('\\')
+}
+
+/// Remove the entries `owned_entries` lists (then the folders a noise output's units
+/// leave empty): what `--overwrite` does, and nothing else. Returns what was removed.
+pub fn remove_owned(dir: &Path, kind: OutputKind) -> Result<Vec<String>> {
+    let entries = owned_entries(dir, kind)?;
+    for rel in &entries {
+        let p = dir.join(rel);
+        let m = std::fs::symlink_metadata(&p).map_err(|e| Error::io("cannot read", &p, e))?;
+        if m.is_dir() {
+            std::fs::remove_dir_all(&p).map_err(|e| Error::io("cannot remove", &p, e))?;
+        } else {
+            std::fs::remove_file(&p).map_err(|e| Error::io("cannot remove", &p, e))?;
+        }
+        // A unit's level and setting folders, when nothing else is left in them.
+        let mut parent = p.parent();
+        while let Some(d) = parent {
+            if d == dir || std::fs::remove_dir(d).is_err() {
+                break;
+            }
+            parent = d.parent();
+        }
+    }
+    Ok(entries)
+}
+
+// -- is a build finished? ----------------------------------------------------------------
+
+/// A build as its readers see it: its complete settings, and why it is provisional
+/// (empty when it is finished: every record agrees with the disk and nothing is running
+/// or interrupted).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BuildState {
+    pub complete: Vec<String>,
+    pub provisional: Vec<String>,
+}
+
+/// Whether `out` is a finished build (see [`BuildState`]). Provisional: no run has
+/// finished (`dataset.json` missing or provisional), a setting is being written or was
+/// left by a killed run (`*.partial`, an object's `.lock-<uid>`), splits.json or
+/// dataset.json disagree with the complete settings on disk.
+pub fn build_state(out: &Path) -> Result<BuildState> {
+    let s = scan(out)?;
+    let mut why = Vec::new();
+    let running: Vec<String> = list(out)?
+        .into_iter()
+        .filter_map(|(n, _)| n.strip_prefix(".lock-").map(String::from))
+        .filter(|uid| !uid.is_empty())
+        .collect();
+    if !running.is_empty() {
+        why.push(format!(
+            "objects being built, or left by a killed run: {}",
+            first(&running)
+        ));
+    }
+    if !s.incomplete.is_empty() {
+        why.push(format!("incomplete settings: {}", first(&s.incomplete)));
+    }
+    let dataset = out.join(Record::Dataset.file_name());
+    match read_record(&dataset, Record::Dataset) {
+        Err(e) => why.push(short(&e, "dataset.json")),
+        Ok(doc) => {
+            if doc.get("provisional").and_then(|v| v.as_bool()) == Some(true) {
+                why.push("dataset.json is provisional: no run of the build has finished".into());
+            } else {
+                let listed = strings(doc.get("settings"));
+                let (gone, new) = differ(&listed, &s.complete);
+                if !new.is_empty() {
+                    why.push(format!(
+                        "dataset.json does not list complete settings: {}",
+                        first(&new)
+                    ));
+                }
+                if !gone.is_empty() {
+                    why.push(format!(
+                        "dataset.json lists settings that are not complete: {}",
+                        first(&gone)
+                    ));
+                }
+            }
+        }
+    }
+    let splits = out.join(Record::Splits.file_name());
+    match read_record(&splits, Record::Splits) {
+        Err(e) => why.push(short(&e, "splits.json")),
+        Ok(doc) => {
+            let mut listed = strings(doc.get("train"));
+            listed.extend(strings(doc.get("test")));
+            listed.sort();
+            let (gone, new) = differ(&listed, &s.complete);
+            if !new.is_empty() {
+                why.push(format!(
+                    "splits.json does not list complete settings: {}",
+                    first(&new)
+                ));
+            }
+            if !gone.is_empty() {
+                why.push(format!(
+                    "splits.json lists settings that are not complete: {}",
+                    first(&gone)
+                ));
+            }
+        }
+    }
+    Ok(BuildState {
+        complete: s.complete,
+        provisional: why,
+    })
+}
+
+fn strings(v: Option<&serde_json::Value>) -> Vec<String> {
+    let mut out: Vec<String> = v
+        .and_then(|v| v.as_array())
+        .map(|a| {
+            a.iter()
+                .filter_map(|x| x.as_str().map(String::from))
+                .collect()
+        })
+        .unwrap_or_default();
+    out.sort();
+    out
+}
+
+/// (in `listed` only, in `disk` only), both sorted.
+fn differ(listed: &[String], disk: &[String]) -> (Vec<String>, Vec<String>) {
+    let gone = listed
+        .iter()
+        .filter(|x| !disk.contains(x))
+        .cloned()
+        .collect();
+    let new = disk
+        .iter()
+        .filter(|x| !listed.contains(x))
+        .cloned()
+        .collect();
+    (gone, new)
+}
+
+fn first(names: &[String]) -> String {
+    let shown: Vec<&str> = names.iter().take(3).map(String::as_str).collect();
+    let more = names.len().saturating_sub(3);
+    if more > 0 {
+        format!("{} and {more} more", shown.join(", "))
+    } else {
+        shown.join(", ")
+    }
+}
+
+fn short(e: &Error, name: &str) -> String {
+    match e {
+        Error::Input { reason, .. } => reason.clone(),
+        _ => format!("{name} is unreadable"),
+    }
+}
+
+// -- settings whose source file now has another id ----------------------------------------
+
+/// Complete settings of `out` made from one of this build's source files under an id
+/// that file no longer has (a name collision that appeared on a rerun: `with_space.glb`,
+/// then `with space.glb` beside it, and both get hashed ids). `current` holds (uid,
+/// source path as meta.json records it) of every object of the build. Returned:
+/// (setting, its source path, the source's id now).
+pub fn superseded_settings(
+    out: &Path,
+    current: &[(String, String)],
+) -> Result<Vec<(String, String, String)>> {
+    let mut found = Vec::new();
+    for name in scan(out)?.complete {
+        let meta = out.join(&name).join(Record::Meta.file_name());
+        // A setting whose meta.json does not read is redone by its object's run.
+        let Ok(doc) = read_record(&meta, Record::Meta) else {
+            continue;
+        };
+        let uid = doc.get("uid").and_then(|v| v.as_str()).unwrap_or_default();
+        let path = doc
+            .get("object")
+            .and_then(|o| o.get("path"))
+            .and_then(|v| v.as_str())
+            .unwrap_or_default();
+        if path.is_empty() || current.iter().any(|(u, _)| u == uid) {
+            continue;
+        }
+        if let Some((now, _)) = current.iter().find(|(_, p)| p == path) {
+            found.push((name, path.to_string(), now.clone()));
+        }
+    }
+    Ok(found)
+}
+
+// -- files blurset writes among a user's files ----------------------------------------------
+
+const MARK_OPEN: &str = "<!-- written by blurset ";
+const MARK_SHA: &str = "; sha256 ";
+
+/// `text` with a last line that marks it as written by `command` and holds the sha256
+/// of everything before it: a later run tells an unedited file from an edited one.
+pub fn mark_text(text: &str, command: &str) -> String {
+    let body = if text.ends_with('\n') {
+        text.to_string()
+    } else {
+        format!("{text}\n")
+    };
+    let digest = hex(&Sha256::digest(body.as_bytes()));
+    format!("{body}{MARK_OPEN}{command}{MARK_SHA}{digest} -->\n")
+}
+
+/// Who a text file at `path` belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TextOwner {
+    /// No such file.
+    Absent,
+    /// Written by this command and unchanged since.
+    Ours,
+    /// Written by this command, then edited.
+    Edited,
+    /// Not written by this command.
+    Foreign,
+}
+
+/// Whether the file at `path` is one `command` wrote with [`mark_text`], unedited.
+pub fn text_owner(path: &Path, command: &str) -> Result<TextOwner> {
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(TextOwner::Absent),
+        Err(e) => return Err(Error::io("cannot read", path, e)),
+    };
+    let Ok(text) = std::str::from_utf8(&bytes) else {
+        return Ok(TextOwner::Foreign);
+    };
+    let trimmed = text.strip_suffix('\n').unwrap_or(text);
+    let (body, last) = match trimmed.rfind('\n') {
+        Some(i) => (&text[..=i], &trimmed[i + 1..]),
+        None => return Ok(TextOwner::Foreign),
+    };
+    let Some(rest) = last.strip_prefix(MARK_OPEN) else {
+        return Ok(TextOwner::Foreign);
+    };
+    let Some((cmd, digest)) = rest
+        .strip_suffix(" -->")
+        .and_then(|r| r.split_once(MARK_SHA))
+    else {
+        return Ok(TextOwner::Foreign);
+    };
+    if cmd != command {
+        return Ok(TextOwner::Foreign);
+    }
+    Ok(if hex(&Sha256::digest(body.as_bytes())) == digest {
+        TextOwner::Ours
+    } else {
+        TextOwner::Edited
+    })
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("blurset-outputs-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    fn write(p: &Path, text: &str) {
+        if let Some(d) = p.parent() {
+            std::fs::create_dir_all(d).expect("mkdir");
+        }
+        std::fs::write(p, text).expect("write");
+    }
+
+    #[test]
+    fn kinds_come_from_their_records_only() -> Result<()> {
+        let d = tmp("kinds");
+        std::fs::create_dir_all(&d).map_err(|e| Error::io("mkdir", &d, e))?;
+        assert_eq!(output_kind(&d)?, None);
+        assert_eq!(claim(&d, OutputKind::Noise, "--out")?, Claim::Empty);
+        // A user's own dataset.json is not a build.
+        write(&d.join("dataset.json"), r#"{"images": 3}"#);
+        assert_eq!(output_kind(&d)?, None);
+        let e = claim(&d, OutputKind::Noise, "--out")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("--out is a folder with other files"), "{e}");
+        assert_eq!(claim(&d, OutputKind::Export, "--out")?, Claim::Beside);
+        write(
+            &d.join("dataset.json"),
+            r#"{"name": "blurset Objaverse-Blur", "config": {}, "provisional": true}"#,
+        );
+        assert_eq!(output_kind(&d)?, Some(OutputKind::Build));
+        for kind in [OutputKind::Noise, OutputKind::Export, OutputKind::Stats] {
+            let e = claim(&d, kind, "--out").unwrap_err().to_string();
+            assert!(
+                e.starts_with("--out is a blurset build (dataset.json)"),
+                "{e}"
+            );
+        }
+        write(&d.join("export.json"), r#"{"kind": "blurset export"}"#);
+        assert!(output_kind(&d).is_err());
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn an_export_owns_only_what_its_record_names() -> Result<()> {
+        let d = tmp("export");
+        write(
+            &d.join("export.json"),
+            r#"{"kind": "blurset export", "scenes_dir": "nerf_llff_data",
+                "scenes": {"a_000__sharp": "a_000/sharp"}, "owns": ["nerf_llff_data/b_000__sharp"]}"#,
+        );
+        write(&d.join("nerf_llff_data/a_000__sharp/poses_bounds.npy"), "x");
+        write(&d.join("nerf_llff_data/fern/poses_bounds.npy"), "keep");
+        write(&d.join("model.pth"), "keep");
+        write(&d.join("train.txt"), "a_000__sharp\n");
+        let owned = owned_entries(&d, OutputKind::Export)?;
+        assert_eq!(
+            owned,
+            ["nerf_llff_data/a_000__sharp", "train.txt", "export.json"]
+        );
+        remove_owned(&d, OutputKind::Export)?;
+        assert!(d.join("nerf_llff_data/fern/poses_bounds.npy").is_file());
+        assert!(d.join("model.pth").is_file());
+        assert!(!d.join("export.json").exists());
+        write(
+            &d.join("export.json"),
+            r#"{"kind": "blurset export", "scenes_dir": "nerf_llff_data", "scenes": {"..": "x"}}"#,
+        );
+        assert!(owned_entries(&d, OutputKind::Export).is_err());
+        write(
+            &d.join("export.json"),
+            r#"{"kind": "blurset export", "scenes": {}, "owns": ["nerf_llff_data/../../x"]}"#,
+        );
+        assert!(owned_entries(&d, OutputKind::Export).is_err());
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn noise_overwrite_keeps_what_it_did_not_write() -> Result<()> {
+        let d = tmp("noise");
+        write(
+            &d.join("noise_dataset.json"),
+            r#"{"build": "b", "params": {}}"#,
+        );
+        write(&d.join("a_000/sharp/gain_1/noise.json"), "{}");
+        write(&d.join("a_000/notes.txt"), "mine");
+        write(&d.join("thesis.tex"), "mine");
+        assert_eq!(output_kind(&d)?, Some(OutputKind::Noise));
+        remove_owned(&d, OutputKind::Noise)?;
+        assert!(d.join("a_000/notes.txt").is_file() && d.join("thesis.tex").is_file());
+        assert!(!d.join("a_000/sharp").exists());
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn a_marked_text_knows_when_it_was_edited() -> Result<()> {
+        let d = tmp("mark");
+        std::fs::create_dir_all(&d).map_err(|e| Error::io("mkdir", &d, e))?;
+        let p = d.join("README.md");
+        assert_eq!(text_owner(&p, "card")?, TextOwner::Absent);
+        std::fs::write(&p, mark_text("# card\nbody", "card")).map_err(|e| Error::io("w", &p, e))?;
+        assert_eq!(text_owner(&p, "card")?, TextOwner::Ours);
+        assert_eq!(text_owner(&p, "stats")?, TextOwner::Foreign);
+        let edited = std::fs::read_to_string(&p)
+            .map_err(|e| Error::io("r", &p, e))?
+            .replace("body", "my notes");
+        std::fs::write(&p, edited).map_err(|e| Error::io("w", &p, e))?;
+        assert_eq!(text_owner(&p, "card")?, TextOwner::Edited);
+        std::fs::write(&p, "# my own README\n").map_err(|e| Error::io("w", &p, e))?;
+        assert_eq!(text_owner(&p, "card")?, TextOwner::Foreign);
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+}
