@@ -29,7 +29,12 @@ BLACK = 1e-6
 
 
 class GlbError(ValueError):
-    """The file is not a GLB this tool can read; the message is one line."""
+    """The file is not a GLB this tool can read; the message is one line: `reason`, then
+    the file (`path`), both kept as fields so no caller parses the message."""
+
+    def __init__(self, reason: str, path: str) -> None:
+        super().__init__(f"{reason}: {path}")
+        self.reason, self.path = reason, path
 
 
 def read_glb(path: str) -> tuple[dict, bytes | None]:
@@ -37,12 +42,12 @@ def read_glb(path: str) -> tuple[dict, bytes | None]:
     with open(path, "rb") as f:
         data = f.read()
     if len(data) < 20 or data[:4] != GLB_MAGIC:
-        raise GlbError(f"not a binary glTF (GLB) file: {path}")
+        raise GlbError("not a binary glTF (GLB) file", path)
     version, total = struct.unpack_from("<II", data, 4)
     if version != 2:
-        raise GlbError(f"glTF version {version} is not supported (need 2): {path}")
+        raise GlbError(f"glTF version {version} is not supported (need 2)", path)
     if total > len(data):
-        raise GlbError(f"truncated GLB ({len(data)} of {total} bytes): {path}")
+        raise GlbError(f"truncated GLB ({len(data)} of {total} bytes)", path)
     offset = 12
     doc = None
     bin_chunk = None
@@ -50,23 +55,23 @@ def read_glb(path: str) -> tuple[dict, bytes | None]:
         length, ctype = struct.unpack_from("<II", data, offset)
         body = data[offset + 8 : offset + 8 + length]
         if len(body) != length:
-            raise GlbError(f"truncated GLB chunk at byte {offset}: {path}")
+            raise GlbError(f"truncated GLB chunk at byte {offset}", path)
         if ctype == CHUNK_JSON and doc is None:
             try:
                 text = body.decode("utf-8")
             except UnicodeDecodeError as e:
                 raise GlbError(
-                    f"the JSON chunk is not UTF-8 (glTF requires UTF-8; byte {e.start}): {path}"
+                    f"the JSON chunk is not UTF-8 (glTF requires UTF-8; byte {e.start})", path
                 ) from None
             try:
                 doc = json.loads(text)
             except ValueError as e:
-                raise GlbError(f"GLB JSON chunk is not valid JSON ({e}): {path}") from None
+                raise GlbError(f"GLB JSON chunk is not valid JSON ({e})", path) from None
         elif ctype == CHUNK_BIN and bin_chunk is None:
             bin_chunk = body
         offset += 8 + length
     if not isinstance(doc, dict):
-        raise GlbError(f"GLB has no JSON chunk: {path}")
+        raise GlbError("GLB has no JSON chunk", path)
     return doc, bin_chunk
 
 
@@ -79,12 +84,12 @@ def read_model(path: str) -> tuple[dict, bytes | None]:
             doc = json.load(f)
     except UnicodeDecodeError as e:
         raise GlbError(
-            f"the glTF JSON is not UTF-8 (glTF requires UTF-8; byte {e.start}): {path}"
+            f"the glTF JSON is not UTF-8 (glTF requires UTF-8; byte {e.start})", path
         ) from None
     except ValueError as e:
-        raise GlbError(f"glTF JSON does not parse ({e}): {path}") from None
+        raise GlbError(f"glTF JSON does not parse ({e})", path) from None
     if not isinstance(doc, dict):
-        raise GlbError(f"glTF JSON is not an object: {path}")
+        raise GlbError("glTF JSON is not an object", path)
     return doc, None
 
 

@@ -139,12 +139,8 @@ def test_each_broken_class_fails_with_its_reason_good_objects_complete(broken_bu
     n_failed = len(BROKEN)
     assert f"{n_failed} of " in proc.stderr and "objects failed" in proc.stderr
     assert "hangs: load: Blender worker did not reply within 15 s" in proc.stderr
-    # .local/ is no leftover: it keeps the builder's absolute paths (issue 19).
-    leftovers = [
-        p.name
-        for p in out.iterdir()
-        if p.name.startswith(".") and p.name not in (".lock", ".local")
-    ]
+    # Nothing of the builder's machine under OUT: its absolute paths live elsewhere.
+    leftovers = [p.name for p in out.iterdir() if p.name.startswith(".") and p.name != ".lock"]
     assert leftovers == [], leftovers
 
 
@@ -247,11 +243,7 @@ def tree(out: Path) -> dict[str, bytes]:
     return {
         str(p.relative_to(out)): p.read_bytes()
         for p in sorted(out.rglob("*"))
-        # .local/ keeps the builder's paths, one record per object and run
-        if p.is_file()
-        and p.name != ".lock"
-        and ".locks" not in p.parts
-        and ".local" not in p.relative_to(out).parts
+        if p.is_file() and p.name != ".lock" and ".locks" not in p.parts
     }
 
 

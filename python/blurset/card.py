@@ -18,7 +18,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from blurset import __version__, attribution, layout, publish
+from blurset import __version__, attribution, layout, outputs, publish
 from blurset.exceptions import ConfigError, InputError
 
 PAPER = (
@@ -74,6 +74,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="show the build's pictures (contact_sheet.png, <setting>/preview.png) when present",
     )
     p.add_argument("--pretty-name", help="the card's title (default: from the build's name)")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace a card that was edited, or a README blurset did not write (the old "
+        "one is kept beside it as README.md.bak)",
+    )
 
 
 # -- reading the build ------------------------------------------------------------------
@@ -84,7 +90,7 @@ def _objects(build: Path, settings: list[Path]) -> tuple[dict[str, dict], list[d
     objects: dict[str, dict] = {}
     metas = []
     for s in settings:
-        meta = layout.read_json(s / "meta.json", "meta.json")
+        meta = outputs.read_record(s / "meta.json")
         metas.append(meta)
         rec = meta.get("object") if isinstance(meta.get("object"), dict) else {}
         objects.setdefault(str(meta.get("uid", s.name)), rec)
@@ -92,25 +98,35 @@ def _objects(build: Path, settings: list[Path]) -> tuple[dict[str, dict], list[d
 
 
 def _noise_outputs(build: Path, given: list[Path] | None) -> list[tuple[Path, dict]]:
-    """The noise outputs to describe: those given, or the folders beside the build whose
-    noise_dataset.json names it."""
+    """The noise outputs to describe: those given (each must be a finished noise output
+    of this build), or the folders beside the build whose noise_dataset.json names it."""
+    name = build.resolve().name
     if given:
         out = []
         for p in given:
-            doc = layout.read_json(p / "noise_dataset.json", "noise_dataset.json")
+            if outputs.kind_of(p) is not outputs.OutputKind.NOISE:
+                raise InputError(f"--noise is not a `blurset noise BUILD` output: {p}")
+            doc = outputs.read_record(p / "noise_dataset.json")
+            if doc["build"] != name:
+                raise InputError(
+                    f"--noise was made from the build {doc['build']!r}, not from {name!r}: {p}"
+                )
+            if doc.get("counts") is None:
+                raise InputError(
+                    f"--noise is not finished (a noise run is writing or stopped): {p}"
+                )
             out.append((p, doc))
         return out
     found = []
-    name = build.resolve().name
     for d in sorted(build.resolve().parent.iterdir()):
-        f = d / "noise_dataset.json"
-        if d.is_dir() and f.is_file():
-            try:
-                doc = json.loads(f.read_text())
-            except (OSError, ValueError):
+        try:
+            if outputs.kind_of(d) is not outputs.OutputKind.NOISE:
                 continue
-            if isinstance(doc, dict) and Path(str(doc.get("build", ""))).name == name:
-                found.append((d, doc))
+            doc = outputs.read_record(d / "noise_dataset.json")
+        except (OSError, ValueError, InputError):
+            continue  # a damaged folder beside the build is not described
+        if doc["build"] == name and doc.get("counts") is not None:
+            found.append((d, doc))
     return found
 
 
@@ -222,13 +238,11 @@ def make_card(
     """The card's text. `card_dir` is where it will be written (picture links are
     relative to it)."""
     build = Path(build)
-    dataset = layout.read_json(build / "dataset.json", "dataset.json")
-    if dataset.get("provisional"):
-        raise InputError(
-            f"the build has not finished (dataset.json is provisional): rerun it to the end: {build}"
-        )
-    splits = layout.read_json(build / "splits.json", "splits.json")
-    settings = layout.complete_settings(build)
+    # A card describes a finished build: a provisional one would publish wrong counts.
+    state = outputs.finished_build(build)
+    dataset = outputs.read_record(build / "dataset.json")
+    splits = outputs.read_record(build / "splits.json")
+    settings = [build / n for n in state.complete]
     if not settings:
         raise InputError(f"no complete setting in build: {build}")
     objects, metas = _objects(build, settings)
@@ -479,12 +493,14 @@ def _attribution(objects: dict[str, dict], licences: Counter) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     build: Path = args.build
-    if not (build / "dataset.json").is_file():
+    if outputs.kind_of(build) is not outputs.OutputKind.BUILD:
         raise InputError(f"not a blurset build (no dataset.json): {build}")
     out: Path = args.out or build / "README.md"
     if out.suffix.lower() != ".md":
         raise ConfigError(f"--out {out}: a dataset card is a Markdown file (.md)")
     layout.refuse_inside_settings(out)
+    if out.is_dir():
+        raise ConfigError(f"--out is a folder, not a card file: {out}")
     text = make_card(
         build,
         noise=args.noise,
@@ -493,7 +509,10 @@ def run(args: argparse.Namespace) -> int:
         card_dir=out.resolve().parent,
     )
     out.parent.mkdir(parents=True, exist_ok=True)
-    layout.write_text_atomic(out, text)
-    publish.refresh_manifest([out])
+    # A README that blurset did not write, or that someone edited, is theirs.
+    backup = outputs.write_marked_text(out, text, command="card", force=args.force)
+    publish.refresh_manifest([out] + ([backup] if backup else []))
+    if backup is not None:
+        print(f"blurset card: kept the previous {out.name} as {backup}", file=sys.stderr)
     print(f"blurset card: {out}", file=sys.stderr)
     return 0

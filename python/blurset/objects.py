@@ -36,7 +36,9 @@ class ObjectSpec:
 
 
 def sanitize(stem: str) -> str:
-    uid = _UNSAFE.sub("_", stem).strip("_")[:64]
+    # No leading '-' or '.': an id names folders that users pass to commands (a `-x_000`
+    # reads as an option) and that must not be hidden.
+    uid = _UNSAFE.sub("_", stem).strip("_").lstrip("-.")[:64]
     return uid or "object"
 
 
@@ -123,9 +125,12 @@ def _read_list(p: Path, refs: list[str], warn) -> list[tuple[Path, str]]:
     out: list[tuple[Path, str]] = []
     named = 0
     for n, line in enumerate(lines, 1):
-        line = line.split("#", 1)[0].strip()
-        if not line:
+        line = line.strip()
+        if not line or line.startswith("#"):
             continue
+        # A comment after an entry starts with whitespace and '#': `a#b.glb` is a name.
+        if not (p.parent / line).exists():
+            line = re.split(r"\s#", line, maxsplit=1)[0].strip()
         named += 1
         if objaverse_cache.is_entry(line):
             refs.append(line)

@@ -75,7 +75,7 @@ def check(path: Path, budget: Budget = Budget()) -> Report:
         try:
             doc, bin_chunk = glb_inspect.read_glb(str(path))
         except glb_inspect.GlbError as e:
-            raise PreflightError(str(e).rsplit(": ", 1)[0]) from None
+            raise PreflightError(e.reason) from None
         except (OSError, MemoryError) as e:
             raise PreflightError(f"cannot read: {e}") from None
     elif head.lstrip()[:1] == b"{":

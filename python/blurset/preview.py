@@ -20,7 +20,6 @@ geometry so tests and users can crop the tiles back out.
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from dataclasses import dataclass, field
@@ -29,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from blurset import _core, layout, publish
+from blurset import _core, layout, outputs, publish
 from blurset.exceptions import ConfigError, InputError
 
 # The file types a figure is written as, by the suffix of --out.
@@ -74,6 +73,9 @@ def add_arguments(parser) -> None:
         "--tile", type=int, default=None, help="thumbnail width in px (default: 128..256)"
     )
     parser.add_argument("--columns", type=int, default=None, help="contact sheet columns")
+    parser.add_argument(
+        "--force", action="store_true", help="replace an image at --out that preview did not write"
+    )
 
 
 # -- drawing helpers ---------------------------------------------------------------------
@@ -124,11 +126,35 @@ def _frame(draw: ImageDraw.ImageDraw, x: int, y: int, tile: tuple[int, int]) -> 
     draw.rectangle([x - 1, y - 1, x + tile[0], y + tile[1]], outline=FRAME, width=1)
 
 
+# Every figure says who wrote it (a PNG text chunk, a JPEG comment): a later run tells
+# its own figure from a user's image at --out, which it does not replace unasked.
+MARK = "blurset preview"
+
+
 def _save(img: Image.Image, out: Path) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     fmt = IMAGE_FORMATS.get(out.suffix.lower(), "PNG")
     rgb = img.convert("RGB") if fmt == "JPEG" else img
-    layout.write_figure(out, lambda f: rgb.save(f, format=fmt))
+    extra: dict = {}
+    if fmt == "PNG":
+        from PIL.PngImagePlugin import PngInfo
+
+        info = PngInfo()
+        info.add_text("Software", MARK)
+        extra["pnginfo"] = info
+    elif fmt == "JPEG":
+        extra["comment"] = MARK.encode()
+    layout.write_figure(out, lambda f: rgb.save(f, format=fmt, **extra))
+
+
+def is_our_figure(path: Path) -> bool:
+    """Whether the image at `path` is a figure `blurset preview` wrote."""
+    try:
+        with Image.open(path) as im:
+            said = im.info.get("Software") or im.info.get("comment") or b""
+    except (OSError, ValueError):
+        return False
+    return (said.decode("utf-8", "replace") if isinstance(said, bytes) else str(said)) == MARK
 
 
 # -- setting figure ------------------------------------------------------------------------
@@ -161,14 +187,9 @@ class Figure:
 
 def _read_meta(setting: Path) -> dict:
     p = setting / "meta.json"
-    try:
-        return json.loads(p.read_text())
-    except FileNotFoundError:
-        raise InputError(
-            f"not a setting or a build (no meta.json or dataset.json): {setting}"
-        ) from None
-    except ValueError as e:
-        raise InputError(f"meta.json is not readable JSON ({e}): {p}") from None
+    if not p.is_file():
+        raise InputError(f"not a setting or a build (no meta.json or dataset.json): {setting}")
+    return outputs.read_record(p)
 
 
 def choose_views(n: int, test_views: list[int], rows: int) -> list[int]:
@@ -209,7 +230,7 @@ def _noise_columns(
 
 
 def _noisy_files(gain_dir: Path) -> dict[int, Path]:
-    meta = json.loads((gain_dir / "noise.json").read_text())
+    meta = outputs.read_record(gain_dir / "noise.json")
     return {f["view"]: gain_dir / f["image"] for f in meta["files"] if f.get("frame", 0) == 0}
 
 
@@ -226,7 +247,14 @@ def setting_figure(
     setting = Path(setting)
     meta = _read_meta(setting)
     n = len(meta.get("views", []))
-    levels = [lvl for lvl in meta.get("levels", ["sharp"]) if (setting / lvl / "images").is_dir()]
+    levels = list(meta["levels"])
+    gone = [lvl for lvl in levels if not (setting / lvl / "images").is_dir()]
+    if gone and not setting.name.endswith(layout.PARTIAL_SUFFIX):
+        raise InputError(
+            f"level {gone[0]} has no images/ folder (a damaged setting: `blurset verify` "
+            f"lists what is wrong): {setting / gone[0]}"
+        )
+    levels = [lvl for lvl in levels if lvl not in gone]  # a setting still being written
     if not n or not levels:
         raise InputError(f"setting has no views or no level directories: {setting}")
     if rows < 1:
@@ -378,11 +406,8 @@ def contact_sheet(
 def _failed_objects(build: Path) -> int:
     """Objects failing now, as the build counted them in dataset.json (failures.jsonl keeps
     every attempt, also of objects a later run built)."""
-    try:
-        counts = json.loads((build / "dataset.json").read_text())["counts"]
-        return int(counts["objects_failed"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return 0
+    counts = outputs.read_record(build / "dataset.json").get("counts") or {}
+    return int(counts.get("objects_failed", 0))
 
 
 # -- command ---------------------------------------------------------------------------------
@@ -399,7 +424,14 @@ def run(args) -> int:
             raise ConfigError(f"--out {args.out}: the figure is an image: .png, .jpg or .webp")
         # A figure never replaces a dataset image or lands in a level folder.
         layout.refuse_inside_settings(args.out, allow=("preview.png",))
-    if (path / "dataset.json").is_file():
+        if args.out.is_dir():
+            raise ConfigError(f"--out is a folder, not an image file: {args.out}")
+        if args.out.exists() and not args.force and not is_our_figure(args.out):
+            raise ConfigError(
+                f"--out {args.out.name} is an image blurset preview did not write: keep it "
+                f"(give another --out), or --force to replace it: {args.out}"
+            )
+    if outputs.kind_of(path) is outputs.OutputKind.BUILD:
         if args.noise is not None or args.gain is not None:
             raise ConfigError("--noise/--gain apply to a setting figure, not to a contact sheet")
         fig = contact_sheet(

@@ -2,8 +2,8 @@
 checksum manifest of every file.
 
 - Absolute paths (the input files, OUT, a cache or a Blender binary) stay on the build
-  machine, in `OUT/.local/paths.jsonl`: dot-prefixed, so never in the manifest, the card
-  or an upload that skips dot files. Outputs name inputs by their path relative to the
+  machine, in the user's state directory (`local_paths_file`), never under OUT: an
+  upload takes dot folders too. Outputs name inputs by their path relative to the
   folder or list they came from (blurset.objects) and a build by its folder's name;
   dataset.json's config record drops the paths in the core (BuildConfig.record()).
 - `MANIFEST.sha256` (sha256sum format) is hashed in blurset-core, which also owns the
@@ -13,6 +13,7 @@ checksum manifest of every file.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from pathlib import Path
@@ -21,21 +22,60 @@ from typing import Any
 from blurset import _core
 
 MANIFEST = "MANIFEST.sha256"
-LOCAL_DIR = ".local"
+# Where builds of older blurset versions kept their absolute paths, under OUT.
+LEGACY_LOCAL_DIR = ".local"
 LOCAL_PATHS = "paths.jsonl"
 
 
+def state_dir() -> Path:
+    """blurset's state on this machine (never under an output): $BLURSET_STATE_DIR, or
+    $XDG_STATE_HOME/blurset, or ~/.local/state/blurset."""
+    if os.environ.get("BLURSET_STATE_DIR"):
+        return Path(os.environ["BLURSET_STATE_DIR"])
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "blurset"
+
+
+def local_paths_file(out: Path) -> Path:
+    """Where the absolute paths of the build at `out` are kept: the user's state
+    directory, keyed by the build folder's name and its absolute path's hash."""
+    import hashlib
+
+    real = Path(out).resolve()
+    key = hashlib.sha256(str(real).encode()).hexdigest()[:16]
+    return state_dir() / "builds" / f"{real.name}-{key}" / LOCAL_PATHS
+
+
 def log_local(out: Path, records: list[dict[str, Any]]) -> None:
-    """Append records naming absolute paths to OUT/.local/paths.jsonl (call under the
-    build lock): the one place a build keeps them."""
+    """Append records naming absolute paths to the build's local paths file (call under
+    the build lock): the one place a build keeps them, outside OUT, so no upload of the
+    build can take them."""
     if not records:
         return
-    d = Path(out) / LOCAL_DIR
-    d.mkdir(exist_ok=True)
-    with open(d / LOCAL_PATHS, "a") as f:
+    path = local_paths_file(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as f:
         f.write("".join(json.dumps(r) + "\n" for r in records))
         f.flush()
         os.fsync(f.fileno())
+
+
+def move_local_paths(out: Path) -> None:
+    """A build made by an older blurset kept them in OUT/.local/paths.jsonl: move them to
+    the state directory (call under the build lock)."""
+    old = Path(out) / LEGACY_LOCAL_DIR / LOCAL_PATHS
+    if not old.is_file():
+        return
+    text = old.read_text()
+    path = local_paths_file(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as f:
+        f.write(text if text.endswith("\n") or not text else text + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+    old.unlink()
+    with contextlib.suppress(OSError):
+        old.parent.rmdir()
 
 
 def manifest_files(root: Path) -> list[str]:
@@ -50,9 +90,12 @@ def write_manifest(root: Path) -> int:
 
 def _manifest_root(path: Path) -> Path | None:
     """The build or noise output holding `path` that has a manifest, or None."""
+    from blurset import outputs
+
     for d in Path(path).resolve().parents:
-        if (d / MANIFEST).is_file() and (
-            (d / "dataset.json").is_file() or (d / "noise_dataset.json").is_file()
+        if (d / MANIFEST).is_file() and outputs.kind_of(d) in (
+            outputs.OutputKind.BUILD,
+            outputs.OutputKind.NOISE,
         ):
             return d
     return None

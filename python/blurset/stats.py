@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from blurset import __version__, _core, layout, publish
+from blurset import __version__, _core, layout, outputs, publish
+from blurset.exceptions import InputError
 
 BAR = "#3b6ea8"  # histogram bars (tests look for this colour in the PNGs)
 MEDIAN = "#c8553d"
@@ -83,6 +84,9 @@ COUNTS = [
     ("failure_lines_skipped", "failures.jsonl lines that do not parse (torn by a kill)"),
     ("incomplete_settings", "setting directories skipped: `*.partial` or no `.complete` marker"),
 ]
+
+
+STATS = outputs.OutputKind.STATS
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -326,6 +330,15 @@ def report_markdown(stats: dict, figures: list[Path]) -> str:
         f"of {c['settings']} complete settings. Numbers: `stats.json` (and CSV); every one "
         "traces back to a meta.json field.",
         "",
+        *(
+            [
+                "**The build is not finished**: " + "; ".join(stats["provisional"]) + ". These "
+                "numbers describe the complete settings found when they were made.",
+                "",
+            ]
+            if stats.get("provisional")
+            else []
+        ),
         "## Counts",
         "",
         "| count | value | definition |",
@@ -378,7 +391,12 @@ def terminal_summary(stats: dict, report: Path) -> str:
         else "no splits.json yet"
     )
     lines = [
-        f"blurset stats: {stats['build']}",
+        f"blurset stats: {stats['build']}"
+        + (
+            " (not finished: " + "; ".join(stats["provisional"]) + ")"
+            if stats.get("provisional")
+            else ""
+        ),
         f"  {c['settings']} settings, {c['objects']} objects, {c['views']} views, "
         f"{c['images']} images; {test}",
         f"  skipped: {c['incomplete_settings']} incomplete settings; "
@@ -425,15 +443,25 @@ def run(args: argparse.Namespace) -> int:
     if args.bins < 1:
         raise ValueError(f"--bins {args.bins} must be at least 1")
     build = args.build.expanduser().absolute()
+    if outputs.kind_of(build) is not outputs.OutputKind.BUILD:
+        raise InputError(f"not a blurset build (no dataset.json): {args.build}")
     out_dir = (args.out or build / "stats").expanduser().absolute()
     layout.refuse_inside_settings(out_dir)
+    outputs.claim(out_dir, STATS, "--out")  # refused before the lock creates anything
     t0 = time.perf_counter()
-    document = build_stats(build)
-    stats = document.to_dict()
-    t_read = time.perf_counter() - t0
-    report = write_stats(stats, out_dir, max_bins=args.bins, document=document)
-    # Statistics written into a published build keep its manifest whole.
-    publish.refresh_manifest([p for p in out_dir.rglob("*") if p.is_file()])
+    with outputs.lock(out_dir, STATS):
+        outputs.claim(out_dir, STATS, "--out")
+        # Stats may read a running build: they say what they describe.
+        provisional = outputs.build_state(build).provisional
+        document = build_stats(build)
+        stats = document.to_dict()
+        stats["provisional"] = provisional
+        t_read = time.perf_counter() - t0
+        report = write_stats(stats, out_dir, max_bins=args.bins, document=document)
+        # Statistics written into a published build keep its manifest whole.
+        publish.refresh_manifest(
+            [p for p in out_dir.rglob("*") if p.is_file() and not p.name.startswith(".")]
+        )
     if args.quiet:
         print(report)
     else:

@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from blurset import _core, layout, publish
-from blurset.exceptions import InputError
+from blurset import _core, layout, outputs, publish
+from blurset.exceptions import InputError, reason_of
 
 NOISE_DATASET = "noise_dataset.json"
 
@@ -65,12 +65,18 @@ class Report:
 
 
 def _read_json(root: Path, rel: str, report: Report) -> Any:
-    try:
-        return json.loads((root / rel).read_text())
-    except FileNotFoundError:
+    """A record read through the core's shapes (blurset.outputs.read_record), or None
+    with the problem reported; transforms.json has no record shape and is read as JSON."""
+    p = root / rel
+    if not p.is_file():
         report.bad(rel, "missing")
-    except (OSError, ValueError) as e:
-        report.bad(rel, f"not readable JSON ({' '.join(str(e).split())[:120]})")
+        return None
+    try:
+        if p.name == "transforms.json":
+            return json.loads(p.read_text())
+        return outputs.read_record(p)
+    except (OSError, ValueError, InputError) as e:
+        report.bad(rel, reason_of(e)[:200])
     return None
 
 
@@ -81,7 +87,7 @@ def _rows(path: Path) -> int | str:
     except FileNotFoundError:
         return "missing"
     except (OSError, ValueError) as e:
-        return f"does not parse ({str(e).rsplit(': ', 1)[0]})"
+        return f"does not parse ({reason_of(e)})"
 
 
 def _expect_files(
@@ -212,7 +218,7 @@ def _header(p: Path, w: int, h: int) -> str | None:
     try:
         iw, ih, _, _ = _core.image_info(p)
     except (OSError, ValueError) as e:
-        return f"does not decode ({str(e).rsplit(': ', 1)[0]})"
+        return f"does not decode ({reason_of(e)})"
     return None if (iw, ih) == (w, h) else f"is {iw}x{ih}, expected {w}x{h}"
 
 
@@ -231,16 +237,29 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
     n_images = 0
     uids: set[str] = set()
     todo: list[tuple[Path, int, int]] = []
+    # One source file, one set of settings: two ids made from one file is a build that
+    # kept a setting its source file no longer has.
+    made_from: dict[str, set[str]] = {}
     for s in complete:
         problems, images = setting_problems(s, root=root)
         rep.problems.extend(problems)
         todo.extend(images)
         try:
-            meta = json.loads((s / "meta.json").read_text())
-            n_images += len(meta["views"]) * len(meta["levels"])
-            uids.add(str(meta["uid"]))
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
+            meta = outputs.read_record(s / "meta.json")
+        except (OSError, InputError):
+            continue  # named by setting_problems
+        n_images += len(meta["views"]) * len(meta["levels"])
+        uids.add(str(meta["uid"]))
+        source = (meta.get("object") or {}).get("path")
+        if source:
+            made_from.setdefault(source, set()).add(str(meta["uid"]))
+    for source, ids in sorted(made_from.items()):
+        if len(ids) > 1:
+            rep.bad(
+                source,
+                f"one source file made the settings of {len(ids)} ids ({', '.join(sorted(ids))}): "
+                "a rerun of the build removes the stale ones",
+            )
     rep.settings = len(complete)
     _decode(todo, root, rep, decode)
     if dataset.get("provisional"):
@@ -274,7 +293,8 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
                 rep.bad(
                     "splits.json", f"{part} names settings not on disk: {', '.join(missing[:5])}"
                 )
-    _check_manifest(root, rep)
+    finished = not outputs.build_state(root).provisional
+    _check_manifest(root, rep, finished=finished)
     return rep
 
 
@@ -329,18 +349,24 @@ def verify_noise(root: Path, *, decode: bool = True) -> Report:
         for key, have in on_disk.items():
             if counts.get(key) != have:
                 rep.bad(NOISE_DATASET, f"counts.{key} is {counts.get(key)}, {have} on disk")
-    _check_manifest(root, rep)
+    finished = counts is not None and not any(u.name.endswith(".partial") for u in units)
+    _check_manifest(root, rep, finished=finished)
     return rep
 
 
-def _check_manifest(root: Path, rep: Report) -> None:
+def _check_manifest(root: Path, rep: Report, *, finished: bool) -> None:
     if not (root / publish.MANIFEST).is_file():
-        rep.note(publish.MANIFEST, "absent: file checksums not checked")
+        if finished:
+            # A finished run always writes it last: without it nothing vouches for the
+            # bytes (two images swapped would pass every other check).
+            rep.bad(publish.MANIFEST, "missing (every finished run writes it)")
+        else:
+            rep.note(publish.MANIFEST, "absent: the run has not finished")
         return
     try:
         found = publish.check_manifest(root)
     except (OSError, ValueError) as e:
-        rep.bad(publish.MANIFEST, str(e).rsplit(": ", 1)[0])
+        rep.bad(publish.MANIFEST, reason_of(e))
         return
     rep.manifest_files = len(publish.manifest_files(root))
     for rel, what in found:
@@ -355,9 +381,10 @@ def verify(path: Path, *, decode: bool = True) -> Report:
     root = Path(path)
     if not root.is_dir():
         raise InputError(f"no such build or noise output: {path}")
-    if (root / NOISE_DATASET).is_file():
+    kind = outputs.kind_of(root)
+    if kind is outputs.OutputKind.NOISE:
         return verify_noise(root, decode=decode)
-    if (root / "dataset.json").is_file() or layout.is_build_dir(root):
+    if kind is outputs.OutputKind.BUILD:
         return verify_build(root, decode=decode)
     raise InputError(
         f"not a blurset build (dataset.json) or noise output ({NOISE_DATASET}): {path}"

@@ -47,10 +47,11 @@ def check_out(out: Path, cfg: BuildConfig) -> None:
     layout.refuse_overlap(out, [p for p in inputs if p.exists()])
 
 
-def job_objects(cfg: BuildConfig) -> list[ObjectSpec]:
-    """This job's objects: every entry resolved, sorted by id, then its shard. The
-    partition depends on the set of objects only, so the shards of one config are
-    disjoint and together are the whole build, however the entries were listed."""
+def job_objects(cfg: BuildConfig) -> tuple[list[ObjectSpec], list[ObjectSpec]]:
+    """Every object of the build (all entries resolved, sorted by id) and this job's
+    share of them, its shard. The partition depends on the set of objects only, so the
+    shards of one config are disjoint and together are the whole build, however the
+    entries were listed."""
     entries = list(cfg.objects)
     if cfg.demo:
         from blurset.demo import make_demo_objects
@@ -65,8 +66,8 @@ def job_objects(cfg: BuildConfig) -> list[ObjectSpec]:
     )
     if cfg.shard:
         i, n = (int(x) for x in cfg.shard.split("/"))
-        objs = objs[i::n]
-    return objs
+        return objs, objs[i::n]
+    return objs, objs
 
 
 def _report_missing(objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress) -> None:
@@ -96,12 +97,12 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     check_out(out, cfg)
     slots = devices.plan_local(cfg) if cfg.executor == "local" else []
     out.mkdir(parents=True, exist_ok=True)
-    objs = job_objects(cfg)
-    with build_lock(out):
-        check_same_options(out, cfg)
-        sweep(out, objs, cfg)
+    every, objs = job_objects(cfg)
     n_settings = len(objs) * len(cfg.theta0s)
     prog = Progress(n_settings, frames_per_setting=frames_per_setting(cfg), enabled=progress)
+    with build_lock(out):
+        check_same_options(out, cfg)
+        sweep(out, every, cfg, prog)
     _report_missing(objs, cfg, prog)
     new_settings = 0
     lock = threading.Lock()
@@ -115,7 +116,7 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
                 with build_lock(out):
                     if res.failures:
                         append_failures(out, res.failures)
-                    # The absolute path stays here, unpublished (issue 19).
+                    # The absolute path stays on this machine, outside OUT.
                     publish.log_local(out, [res.local] if res.local else [])
         for r in res.failures:
             prog.write(f"failed: {r.get('setting') or r['uid']}: {r['stage']}: {r['reason']}")
@@ -130,7 +131,10 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     mine = {o.uid for o in objs}
     failed = [r for r in summary["failures"] if r["uid"] in mine]
     summary["objects"] = len(objs)
-    summary["objects_failed"] = len({r["uid"] for r in failed})
+    # An object --licenses leaves out is skipped by request, not a failure of the build.
+    skipped = {r["uid"] for r in failed if r.get("stage") == "license"}
+    summary["objects_skipped"] = len(skipped)
+    summary["objects_failed"] = len({r["uid"] for r in failed} - skipped)
     summary["settings_failed"] = sum(1 for r in failed if r.get("setting"))
     summary["settings_new"] = new_settings
     summary["failures"] = failed

@@ -215,12 +215,15 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = config_from_args(args)
     summary = build(cfg, progress=not args.quiet)
-    n, bad = summary["objects"], summary["objects_failed"]
+    skipped = summary.get("objects_skipped", 0)
+    n, bad = summary["objects"] - skipped, summary["objects_failed"]
     rate = bad / n if n else 0.0
     line = (
         f"blurset build: {summary['settings_complete']} settings complete "
         f"({summary['settings_new']} new), {bad} of {n} objects failed ({100 * rate:.0f}%)"
     )
+    if skipped:
+        line += f", {skipped} skipped by --licenses"
     if summary["settings_failed"]:
         line += f", {summary['settings_failed']} settings failed QA"
     print(f"{line} -> {cfg.out}", file=sys.stderr)

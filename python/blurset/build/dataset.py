@@ -35,16 +35,20 @@ def build_lock(out: Path):
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
-def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> None:
-    """What a killed run of these objects left behind: partial settings, scratch
-    directories, temp files of the shared writes. Other shards' objects are left alone."""
-    for o in objs:
-        shutil.rmtree(out / f".work-{o.uid}", ignore_errors=True)
-        for t in cfg.theta0s:
-            final = out / layout.setting_name(o.uid, t)
-            shutil.rmtree(layout.partial_dir(final), ignore_errors=True)
+def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig, prog=None) -> None:
+    """What a killed run left behind that no object owns: temp files of the shared
+    writes (a partial setting and an object's scratch folder are its object's, cleaned
+    under that object's lock: another process may be writing them now). And settings
+    whose source file now has another id (`objs` is every object of the build, all
+    shards): one source file, one set of settings. Call under build_lock."""
     # Only blurset's own temp names: a user's `.notes.tmp1` in OUT is not ours to delete.
     layout.remove_stale_temps(out, list(SHARED_FILES))
+    current = [(o.uid, o.rel or o.path.name) for o in objs]
+    for setting, source, now in _core.superseded_settings(out, current):
+        shutil.rmtree(out / setting)
+        say = prog.write if prog is not None else print
+        say(f"removed {setting}: its source file {source} now has the id {now} (a name it shares)")
+    publish.move_local_paths(out)
 
 
 # Options that decide where and how a build runs, not what it writes: a rerun may change

@@ -40,7 +40,8 @@ class ObjectResult:
     # Failure records (failures.jsonl): the object's, or one per setting that failed QA.
     failures: list[dict[str, Any]] = field(default_factory=list)
     new_settings: int = 0
-    # For OUT/.local/paths.jsonl (never published): where this object came from.
+    # For the local paths file (publish.local_paths_file, never under OUT): where this
+    # object came from.
     local: dict[str, Any] = field(default_factory=dict)
 
 
@@ -110,7 +111,11 @@ class ObjectUnit:
             for name in result.settings:
                 if not (self.out / name / "preview.png").exists():
                     write_build_preview(self.out / name, warn=progress.write)
-        shutil.rmtree(self.work, ignore_errors=True)  # a killed run's scratch: log, frames
+        # A killed run's scratch (log, frames) and partial settings: this object's, and
+        # its lock is held, so no other process is writing them.
+        shutil.rmtree(self.work, ignore_errors=True)
+        for j in jobs:
+            shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
         if not pending:
             return result
         t0 = time.monotonic()
@@ -346,7 +351,7 @@ def build_object(
 
 def failure_record(obj: ObjectSpec, stage: str, reason: str, t0: float, attempts: int) -> dict:
     """A failures.jsonl record: uid, path (relative to its root: the absolute one goes to
-    OUT/.local only), stage, reason, seconds (+ attempts, time)."""
+    local paths file only), stage, reason, seconds (+ attempts, time)."""
     return {
         "uid": obj.uid,
         "path": obj.rel or obj.path.name,

@@ -20,24 +20,52 @@ pyo3::create_exception!(
     "An option out of its range; `option` names it, `detail` holds the value and the range."
 );
 
+/// Attach fields to an exception, so callers read `e.path` / `e.reason` instead of
+/// parsing the message.
+fn with_fields(err: PyErr, fields: &[(&str, String)]) -> PyErr {
+    Python::attach(|py| {
+        let v = err.value(py);
+        for (k, val) in fields {
+            if v.setattr(*k, val.as_str()).is_err() {
+                return err.clone_ref(py);
+            }
+        }
+        err.clone_ref(py)
+    })
+}
+
 pub(crate) fn to_pyerr(e: Error) -> PyErr {
     let msg = e.to_string();
     match e {
-        Error::Io { source, .. } => match source.kind() {
-            std::io::ErrorKind::NotFound => PyFileNotFoundError::new_err(msg),
-            std::io::ErrorKind::PermissionDenied => PyPermissionError::new_err(msg),
-            _ => BlursetError::new_err(msg),
-        },
-        Error::PoseFormat { .. } => PoseFormatError::new_err(msg),
-        Error::Image { .. } => ImageError::new_err(msg),
+        Error::Io { source, path, what } => {
+            let err = match source.kind() {
+                std::io::ErrorKind::NotFound => PyFileNotFoundError::new_err(msg),
+                std::io::ErrorKind::PermissionDenied => PyPermissionError::new_err(msg),
+                _ => BlursetError::new_err(msg),
+            };
+            let reason = format!("{what}: {source}");
+            with_fields(
+                err,
+                &[("reason", reason), ("path", path.display().to_string())],
+            )
+        }
+        Error::PoseFormat { reason, path } => with_fields(
+            PoseFormatError::new_err(msg),
+            &[("reason", reason), ("path", path.display().to_string())],
+        ),
+        Error::Image { reason, path } => with_fields(
+            ImageError::new_err(msg),
+            &[("reason", reason), ("path", path.display().to_string())],
+        ),
         Error::Shape(_) | Error::Value(_) => PyValueError::new_err(msg),
-        Error::Input { .. } => InputError::new_err(msg),
-        Error::Config { option, detail } => Python::attach(|py| {
-            let err = ConfigValueError::new_err(msg);
-            let v = err.value(py);
-            let set = v.setattr("option", option).and(v.setattr("detail", detail));
-            set.err().unwrap_or(err)
-        }),
+        Error::Input { reason, path } => with_fields(
+            InputError::new_err(msg),
+            &[("reason", reason), ("path", path.display().to_string())],
+        ),
+        Error::Config { option, detail } => with_fields(
+            ConfigValueError::new_err(msg),
+            &[("option", option), ("detail", detail)],
+        ),
     }
 }
 

@@ -589,16 +589,20 @@ pub fn text_owner(path: &Path, command: &str) -> Result<TextOwner> {
     let Ok(text) = std::str::from_utf8(&bytes) else {
         return Ok(TextOwner::Foreign);
     };
-    let trimmed = text.strip_suffix('\n').unwrap_or(text);
-    let (body, last) = match trimmed.rfind('\n') {
-        Some(i) => (&text[..=i], &trimmed[i + 1..]),
-        None => return Ok(TextOwner::Foreign),
+    // The last mark line; text added after it is an edit as much as a changed body.
+    let at = if text.starts_with(MARK_OPEN) {
+        Some(0)
+    } else {
+        text.rfind(&format!("\n{MARK_OPEN}")).map(|i| i + 1)
     };
-    let Some(rest) = last.strip_prefix(MARK_OPEN) else {
+    let Some(at) = at else {
         return Ok(TextOwner::Foreign);
     };
-    let Some((cmd, digest)) = rest
-        .strip_suffix(" -->")
+    let (body, rest) = text.split_at(at);
+    let (line, after) = rest.split_once('\n').unwrap_or((rest, ""));
+    let Some((cmd, digest)) = line
+        .strip_prefix(MARK_OPEN)
+        .and_then(|r| r.strip_suffix(" -->"))
         .and_then(|r| r.split_once(MARK_SHA))
     else {
         return Ok(TextOwner::Foreign);
@@ -606,11 +610,13 @@ pub fn text_owner(path: &Path, command: &str) -> Result<TextOwner> {
     if cmd != command {
         return Ok(TextOwner::Foreign);
     }
-    Ok(if hex(&Sha256::digest(body.as_bytes())) == digest {
-        TextOwner::Ours
-    } else {
-        TextOwner::Edited
-    })
+    Ok(
+        if after.trim().is_empty() && hex(&Sha256::digest(body.as_bytes())) == digest {
+            TextOwner::Ours
+        } else {
+            TextOwner::Edited
+        },
+    )
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -732,6 +738,9 @@ mod tests {
             .map_err(|e| Error::io("r", &p, e))?
             .replace("body", "my notes");
         std::fs::write(&p, edited).map_err(|e| Error::io("w", &p, e))?;
+        assert_eq!(text_owner(&p, "card")?, TextOwner::Edited);
+        let appended = format!("{}more notes\n", mark_text("# card\nbody", "card"));
+        std::fs::write(&p, appended).map_err(|e| Error::io("w", &p, e))?;
         assert_eq!(text_owner(&p, "card")?, TextOwner::Edited);
         std::fs::write(&p, "# my own README\n").map_err(|e| Error::io("w", &p, e))?;
         assert_eq!(text_owner(&p, "card")?, TextOwner::Foreign);
