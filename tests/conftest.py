@@ -218,3 +218,49 @@ def write_synthetic_build(
     (out / "failures.jsonl").write_text(
         json.dumps({"uid": "broken", "stage": "load", "reason": "synthetic failure"}) + "\n"
     )
+
+
+# -- the stand-in worker: real orchestration, analytic renders (tests/standin_worker.py) --
+
+STANDIN_ARGS = (
+    "--demo", "--views", "4", "--levels", "1,2", "--latents", "2", "--samples", "2",
+    "--resolution", "32", "--settings-per-object", "2", "--quiet",
+)  # fmt: skip
+
+
+@pytest.fixture(scope="session")
+def standin_blender(tmp_path_factory) -> Path:
+    """A "Blender binary" that is the stand-in worker: `blurset build --blender` it."""
+    import shlex
+    import sys
+
+    d = tmp_path_factory.mktemp("standin")
+    wrapper = d / "blender"
+    script = ROOT / "tests" / "standin_worker.py"
+    wrapper.write_text(
+        f'#!/bin/sh\nexec {shlex.quote(sys.executable)} {shlex.quote(str(script))} "$@"\n'
+    )
+    wrapper.chmod(0o755)
+    return wrapper
+
+
+def standin_build(out: Path, blender: Path, *args: str, check: bool = True):
+    """`blurset build` of the demo objects (or `args`) with the stand-in worker."""
+    return run_cli("build", *STANDIN_ARGS, *args, "--blender", str(blender), "--out", str(out),
+                   check=check)  # fmt: skip
+
+
+@pytest.fixture(scope="session")
+def standin_build_dir(tmp_path_factory, standin_blender) -> Path:
+    """A finished build of the three demo objects (6 settings) by the stand-in worker;
+    tests that change it work on a copy (`copy_build`)."""
+    out = tmp_path_factory.mktemp("standin_build") / "b"
+    standin_build(out, standin_blender)
+    return out
+
+
+def copy_build(src: Path, dst: Path) -> Path:
+    import shutil
+
+    shutil.copytree(src, dst, symlinks=True)
+    return dst

@@ -14,7 +14,9 @@ elsewhere; a frame's sample count and seed do not change it. Regions and crops f
 the real worker's rules: pixels outside a region are 0, a crop writes only the region.
 
 BLURSET_STANDIN_FAULT="hang:S" or "crash:S" makes the load of a GLB whose path
-contains S hang or die (SIGKILL), as the real worker's fault injection does.
+contains S hang or die (SIGKILL), as the real worker's fault injection does;
+"hang_render:S" loads it, renders its QA and sharp views, and hangs at its first render
+of a blur level (a setting half-written).
 """
 
 from __future__ import annotations
@@ -79,11 +81,13 @@ def glb_box(path: str) -> tuple[np.ndarray, np.ndarray, int]:
 class StandIn:
     def __init__(self) -> None:
         self.half: np.ndarray | None = None
+        self.hang_blur = False
 
     def load(self, cmd: dict) -> dict:
         glb = str(cmd["glb"])
         fault = os.environ.get("BLURSET_STANDIN_FAULT", "")
         kind, _, needle = fault.partition(":")
+        self.hang_blur = kind == "hang_render" and bool(needle) and needle in glb
         if needle and needle in glb:
             if kind == "hang":
                 while True:
@@ -149,6 +153,9 @@ class StandIn:
         res, fov = int(cmd["resolution"]), float(cmd["fov_deg"])
         crop = bool(cmd.get("crop", False))
         frames = cmd["frames"]
+        if self.hang_blur and any(str(f.get("level", "")).startswith("blur") for f in frames):
+            while True:
+                time.sleep(3600)
         calls: set = set()
         for i, fr in enumerate(frames):
             t_start = time.perf_counter()

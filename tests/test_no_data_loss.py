@@ -68,13 +68,15 @@ def test_a_killed_noise_runs_temp_tree_is_removed_by_the_next_run(fern_copy, tmp
     out = tmp_path / "n"
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()  # a pid that is no longer alive, as a SIGKILLed run's
-    stale = tmp_path / f".n.tmp{dead.pid}"
+    # What SIGKILL leaves: OUT with the run's lock file and its staging tree.
+    stale = out / f".noise.tmp{dead.pid}"
     (stale / "gain_1" / "images").mkdir(parents=True)
-    mine = tmp_path / ".notes.tmp1"  # the user's, not ours: kept
+    (out / ".noise.lock").write_text(f"pid {dead.pid}")
+    mine = out / ".notes.tmp1"  # the user's, not ours: kept
     mine.write_text("keep me")
     run_cli("noise", str(fern_copy), "--factor", "8", "--gains", "1", "--out", str(out))
     assert not stale.exists() and mine.read_text() == "keep me"
-    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".n.")] == []
+    assert sorted(p.name for p in out.iterdir()) == [".notes.tmp1", "gain_1", "noise_scene.json"]
 
 
 def test_sigterm_during_noise_leaves_nothing(fern_copy, tmp_path):

@@ -43,6 +43,7 @@ from blurset.noise.params import (
     check_options,
     copy_clean,
     files_record,
+    gain_sigmas,
     noise_json,
     noise_table,
     parse_gains,
@@ -401,7 +402,7 @@ def run(args) -> int:
     kind = ("linear" if with_linear else "png") if source == "auto" else source
     gamma = args.gamma or "srgb"
     table = noise_table(args.kpn_levels)
-    gains_sigmas = {g: _core.noise_sigmas(g, table) for g in gains}
+    gains_sigmas = gain_sigmas(gains, table)
     params = _params(args, kind, gamma, table, downsample, clean_policy)
 
     # Check every unit before writing anything: a bad build fails with nothing written.

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from blurset import __version__, _core, layout
-from blurset.exceptions import ConfigError, InputError
+from blurset.exceptions import ConfigError, InputError, reason_of
 
 # The gain levels of the LLFF-N benchmark (NAN, Pearl et al. 2022).
 LLFF_N_GAINS = (1.0, 2.0, 4.0, 8.0, 16.0, 20.0)
@@ -51,6 +51,23 @@ def parse_gains(values: list[str], any_gain: bool) -> list[float]:
             )
         gains.append(g)
     return gains
+
+
+def gain_sigmas(gains: list[float], table) -> dict[float, tuple[float, float]]:
+    """(σ_read, σ_shot) of every gain under `table`; a gain whose σ is out of range (a
+    huge `--any-gain`) is refused naming --gains, before anything is written."""
+    out = {}
+    for g in gains:
+        try:
+            sr, ss = _core.noise_sigmas(g, table)
+        except ValueError as e:
+            raise ConfigError(f"--gains {g:g}: {reason_of(e)}") from None
+        if not (math.isfinite(sr) and math.isfinite(ss)):
+            raise ConfigError(
+                f"--gains {g:g}: its noise sigma is not a finite number (read {sr}, shot {ss})"
+            )
+        out[g] = (sr, ss)
+    return out
 
 
 def read_kpn_levels(path: Path) -> NoiseTable:

@@ -24,6 +24,7 @@ from blurset.noise.params import (
     copy_clean,
     every_kth,
     files_record,
+    gain_sigmas,
     noise_json,
     noise_table,
     parse_gains,
@@ -114,6 +115,7 @@ def run(args) -> int:
     width, height = sizes[sources[0]]
 
     levels = noise_table(args.kpn_levels)
+    sigmas = gain_sigmas(gains, levels)
     wb = _core.noise_white_balance(args.seed) if args.profile == "paper" else None
     factor = args.factor or 1
     names = output_names(sources, args.frames)
@@ -140,7 +142,7 @@ def run(args) -> int:
         try:
             variants = []
             for g in gains:
-                sr, ss = _core.noise_sigmas(g, levels)
+                sr, ss = sigmas[g]
                 variants.append((tmp / layout.gain_name(g), sr, ss, _core.noise_key(args.seed, g)))
             interruptible(
                 _core.noise_write_variants,
