@@ -114,7 +114,9 @@ def fern_out(tmp_path_factory):
 def test_fern_is_an_llff_scene_per_gain(fern_out):
     fern, out = fern_out
     src = np.load(fern / "poses_bounds.npy")
-    assert sorted(p.name for p in out.iterdir()) == sorted(f"gain_{g}" for g in ALL_GAINS)
+    assert sorted(p.name for p in out.iterdir()) == sorted(f"gain_{g}" for g in ALL_GAINS) + [
+        "noise_scene.json"
+    ]
     for g in ALL_GAINS:
         d = out / f"gain_{g}"
         # What an IBRNet / NAN LLFF loader does: sorted png/jpg files, N x 17 poses.

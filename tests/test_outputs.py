@@ -618,3 +618,27 @@ def test_an_id_never_starts_with_a_dash(tmp_path, standin_blender):
     names = [s.name for s in layout.complete_settings(out)]
     assert names == ["chair_000", "chair_180"]
     run_cli("preview", str(out))
+
+
+def test_ctrl_c_while_the_command_starts_is_no_traceback(tmp_path):
+    """The first second of a command imports every command module; Ctrl-C there used to
+    print a traceback. The event: blurset's native module is mapped (the package is
+    importing), then the signal."""
+    for k in range(3):
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "blurset.cli", "build", "--demo", "--out", str(tmp_path / f"o{k}")],
+            stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+
+        def importing(pid: int = proc.pid) -> bool:
+            try:
+                return "_core" in Path(f"/proc/{pid}/maps").read_text()
+            except OSError:
+                return False
+
+        wait_for(importing, proc)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=600)
+        assert "Traceback" not in err, err
+        assert proc.returncode == 130, err
+        assert "interrupted" in err

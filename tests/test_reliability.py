@@ -60,6 +60,9 @@ def assert_complete_means_whole(out: Path) -> None:
 
     names = setting_dirs(out)
     assert not any(n.endswith(".partial") for n in names), names
+    # The marker is written last: a setting cut short never holds one.
+    marked = [p.name for p in out.glob("*.partial") if (p / layout.MARKER).exists()]
+    assert marked == [], marked
     for n in names:
         assert layout.setting_problem(out / n) is None, (n, layout.setting_problem(out / n))
     if (out / "dataset.json").exists() or names:

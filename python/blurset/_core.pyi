@@ -773,3 +773,69 @@ def license_allowed(id: str, licenses: list[str] | None) -> bool:
     """Whether an object under licence `id` passes a `--licenses` filter (None: all)."""
 
 SPDX_IDS: list[str]
+
+# -- what blurset writes and what a command may touch (dataset::outputs, dataset::read) --
+
+@final
+class OutputKind:
+    """The kinds of output blurset writes into a folder of their own."""
+
+    BUILD: OutputKind
+    NOISE: OutputKind
+    NOISE_SCENE: OutputKind
+    EXPORT: OutputKind
+    STATS: OutputKind
+    @property
+    def label(self) -> str:
+        """How messages name the kind (`build`, `noise output`, `export` …)."""
+    @property
+    def record(self) -> str:
+        """The file name of the record that says what the folder is."""
+    @property
+    def lock_name(self) -> str:
+        """The lock file a writer of this kind holds in its folder."""
+    def __eq__(self, value: object, /) -> bool: ...
+    def __int__(self) -> int: ...
+
+@final
+class BuildState:
+    """A build as its readers see it."""
+
+    @property
+    def complete(self) -> list[str]:
+        """Complete setting directory names, sorted."""
+    @property
+    def provisional(self) -> list[str]:
+        """Why the build is provisional; empty when it is finished."""
+
+def output_kind(dir: str | PathLike[str]) -> OutputKind | None:
+    """The kind of blurset output `dir` is, from its record; None for none."""
+
+def claim(dir: str | PathLike[str], kind: OutputKind, option: str) -> str:
+    """`new`, `empty`, `same` or `beside`: what a command writing `kind` may do with
+    `dir`; ConfigValueError naming `option` when it may not write there."""
+
+def owned_entries(dir: str | PathLike[str], kind: OutputKind) -> list[str]:
+    """The entries (relative paths) an output of `kind` in `dir` wrote."""
+
+def remove_owned(dir: str | PathLike[str], kind: OutputKind) -> list[str]:
+    """Remove what `owned_entries` lists; returns it."""
+
+def build_state(out: str | PathLike[str]) -> BuildState:
+    """Whether `out` is a finished build, and its complete settings."""
+
+def superseded_settings(
+    out: str | PathLike[str], current: list[tuple[str, str]]
+) -> list[tuple[str, str, str]]:
+    """(setting, source path, the source's id now) of complete settings whose source
+    file now has another id; `current` holds (uid, source path) of every object."""
+
+def mark_text(text: str, command: str) -> str:
+    """`text` with its last line marking it as written by `command` (and its checksum)."""
+
+def text_owner(path: str | PathLike[str], command: str) -> str:
+    """`absent`, `ours`, `edited` or `foreign`: who the text file at `path` belongs to."""
+
+def read_record(path: str | PathLike[str], record: str | None = None) -> Any:
+    """A record blurset wrote, checked against its shape: the parsed JSON. InputError
+    naming the file and the field when the shape is wrong."""

@@ -63,7 +63,13 @@ def make_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = make_parser().parse_args(argv)
+    try:
+        # Building the parser imports every command (numpy, matplotlib …): a Ctrl-C in
+        # that first second is a stop like any other, not a traceback.
+        args = make_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        print("blurset: interrupted", file=sys.stderr)
+        return 130
     from blurset import stop
 
     stop.install()

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path, PureWindowsPath
 from urllib.parse import unquote
 
+from blurset import _core
 from blurset.exceptions import BlursetError
 from blurset.scripts import blender_script
 
@@ -40,10 +41,14 @@ class PreflightError(BlursetError):
     """The file cannot be rendered; the message is the one-line reason."""
 
 
+_CORE_DEFAULTS = _core.BuildConfig()
+
+
 @dataclass(frozen=True)
 class Budget:
-    max_triangles: int = 5_000_000
-    max_texture_pixels: int = 256 * 2**20
+    # The core's BuildConfig owns the defaults (--max-triangles, --max-texture-pixels).
+    max_triangles: int = _CORE_DEFAULTS.max_triangles
+    max_texture_pixels: int = _CORE_DEFAULTS.max_texture_pixels
 
 
 @dataclass(frozen=True)

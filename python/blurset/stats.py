@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 
 from blurset import __version__, _core, layout, outputs, publish
-from blurset.exceptions import InputError
 
 BAR = "#3b6ea8"  # histogram bars (tests look for this colour in the PNGs)
 MEDIAN = "#c8553d"
@@ -443,20 +442,18 @@ def run(args: argparse.Namespace) -> int:
     if args.bins < 1:
         raise ValueError(f"--bins {args.bins} must be at least 1")
     build = args.build.expanduser().absolute()
-    if outputs.kind_of(build) is not outputs.OutputKind.BUILD:
-        raise InputError(f"not a blurset build (no dataset.json): {args.build}")
     out_dir = (args.out or build / "stats").expanduser().absolute()
     layout.refuse_inside_settings(out_dir)
-    outputs.claim(out_dir, STATS, "--out")  # refused before the lock creates anything
     t0 = time.perf_counter()
+    document = build_stats(build)  # names what is not a build, before anything is written
+    # Stats may read a running build: they say what they describe.
+    provisional = outputs.build_state(build).provisional
+    stats = document.to_dict()
+    stats["provisional"] = provisional
+    t_read = time.perf_counter() - t0
+    outputs.claim(out_dir, STATS, "--out")  # refused before the lock creates anything
     with outputs.lock(out_dir, STATS):
         outputs.claim(out_dir, STATS, "--out")
-        # Stats may read a running build: they say what they describe.
-        provisional = outputs.build_state(build).provisional
-        document = build_stats(build)
-        stats = document.to_dict()
-        stats["provisional"] = provisional
-        t_read = time.perf_counter() - t0
         report = write_stats(stats, out_dir, max_bins=args.bins, document=document)
         # Statistics written into a published build keep its manifest whole.
         publish.refresh_manifest(

@@ -341,6 +341,7 @@ pub fn write_setting_poses(
     Ok(())
 }
 
+#[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -623,6 +623,7 @@ fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
+#[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
 #[cfg(test)]
 mod tests {
     use super::*;

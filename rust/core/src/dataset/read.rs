@@ -306,6 +306,7 @@ pub fn read_record(path: &Path, record: Record) -> Result<serde_json::Value> {
     Ok(value)
 }
 
+#[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
 #[cfg(test)]
 mod tests {
     use super::*;
