@@ -642,3 +642,20 @@ def test_ctrl_c_while_the_command_starts_is_no_traceback(tmp_path):
         assert "Traceback" not in err, err
         assert proc.returncode == 130, err
         assert "interrupted" in err
+
+
+def test_export_beside_its_build_in_one_data_folder(standin_build_dir, tmp_path):
+    data = tmp_path / "data"
+    data.mkdir()
+    b = copy_build(standin_build_dir, data / "b")
+    before = tree(b)
+    run_cli("export", str(b), "--out", str(data), "--levels", "sharp")
+    assert tree(b) == before
+    assert {p.name for p in data.iterdir()} == {
+        "b", "nerf_llff_data", "train.txt", "test.txt", "export.json"
+    }  # fmt: skip
+    # But never where a loader would take the build for a scene, nor into the build.
+    inside = copy_build(standin_build_dir, tmp_path / "d2" / "nerf_llff_data" / "b")
+    one_error_line(run_cli("export", str(inside), "--out", str(tmp_path / "d2"), check=False),
+                   "nerf_llff_data")  # fmt: skip
+    one_error_line(run_cli("export", str(b), "--out", str(b / "x"), check=False), "--out")

@@ -203,6 +203,22 @@ def _write_scene(d: Path, src: Path, doc: dict) -> None:
             os.symlink(os.path.relpath(s, d), d / part)
 
 
+def _refuse_overlap(out: Path, doc: dict, inputs: list[Path]) -> None:
+    """--out may hold the build (IBRNet's `data/` may keep it beside the export), but it
+    may not be or lie in an input, and no entry the export writes may touch one."""
+    o = out.resolve()
+    for i in inputs:
+        r = Path(i).resolve()
+        if o == r or o.is_relative_to(r):
+            layout.refuse_overlap(out, [i])
+        if r.is_relative_to(o):
+            top = doc["scenes_dir"] if doc["scenes_dir"] != "." else None
+            mine = [top] if top else list(doc["scenes"])
+            for e in [*mine, "train.txt", "test.txt", EXPORT_FILE]:
+                if r == o / e or r.is_relative_to(o / e):
+                    raise ConfigError(f"--out/{e} would hold the input {str(i)!r}: {out}")
+
+
 def _entry(doc: dict, scene: str) -> str:
     return scene if doc["scenes_dir"] == "." else f"{doc['scenes_dir']}/{scene}"
 
@@ -210,7 +226,8 @@ def _entry(doc: dict, scene: str) -> str:
 def run(args) -> int:
     out: Path = args.out
     doc, sources = plan(args)
-    layout.refuse_overlap(out, [args.build] + ([args.noise] if args.noise else []))
+    inputs = [args.build] + ([args.noise] if args.noise else [])
+    _refuse_overlap(out, doc, inputs)
     layout.refuse_inside_settings(out)
     how = outputs.claim(out, EXPORT, "--out")
     with outputs.lock(out, EXPORT):
