@@ -659,3 +659,17 @@ def test_export_beside_its_build_in_one_data_folder(standin_build_dir, tmp_path)
     one_error_line(run_cli("export", str(inside), "--out", str(tmp_path / "d2"), check=False),
                    "nerf_llff_data")  # fmt: skip
     one_error_line(run_cli("export", str(b), "--out", str(b / "x"), check=False), "--out")
+
+
+def test_objects_left_out_by_licenses_are_not_failures(tmp_path, standin_blender):
+    models = tmp_path / "models"
+    models.mkdir()
+    shutil.copy(shared("glb", "sketchfab_MapPin.glb"), models)  # CC-BY-4.0 in asset.extras
+    shutil.copy(shared("glb", "khronos_BoxTextured.glb"), models)  # names no licence
+    out = tmp_path / "b"
+    p = run_cli("build", "--objects", str(models), *STANDIN_REST, "--licenses", "cc-by-4.0",
+                "--max-failure-rate", "0", "--blender", str(standin_blender), "--out", str(out))  # fmt: skip
+    assert "0 of 1 objects failed" in p.stderr and "1 skipped by --licenses" in p.stderr, p.stderr
+    assert [s.name for s in layout.complete_settings(out)] == [
+        "sketchfab_MapPin_000", "sketchfab_MapPin_180"
+    ]  # fmt: skip
