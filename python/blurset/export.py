@@ -229,8 +229,10 @@ def run(args) -> int:
     inputs = [args.build] + ([args.noise] if args.noise else [])
     _refuse_overlap(out, doc, inputs)
     layout.refuse_inside_settings(out)
-    how = outputs.claim(out, EXPORT, "--out")
+    outputs.claim(out, EXPORT, "--out")  # refused before the lock creates anything
     with outputs.lock(out, EXPORT):
+        # Claimed again under the lock: another export may have finished meanwhile.
+        how = outputs.claim(out, EXPORT, "--out")
         return _replace(out, doc, sources, how, overwrite=args.overwrite)
 
 

@@ -136,12 +136,12 @@ def refuse_overlap(out: Path, inputs: list[Path], option: str = "--out") -> None
 
 def setting_of(path: Path) -> Path | None:
     """The build setting directory `path` lies in (a folder with meta.json whose parent
-    holds dataset.json or .lock), or None."""
+    is a build, by the output owner's one rule), or None."""
+    from blurset import outputs
+
     p = Path(path).resolve()
     for d in [p, *p.parents]:
-        if (d / "meta.json").is_file() and (
-            (d.parent / "dataset.json").is_file() or (d.parent / ".lock").exists()
-        ):
+        if (d / "meta.json").is_file() and outputs.kind_of(d.parent) is outputs.OutputKind.BUILD:
             return d
     return None
 
@@ -157,11 +157,6 @@ def refuse_inside_settings(out: Path, option: str = "--out", allow: tuple[str, .
     if s is None or (o.parent == s and o.name in allow):
         return
     raise ConfigError(f"{option} lies inside the build setting {str(s)!r}: {out}")
-
-
-def is_build_dir(path: Path) -> bool:
-    """A directory `blurset build` has written into (its lock or dataset.json)."""
-    return (path / "dataset.json").is_file() or (path / ".lock").exists()
 
 
 def _pid_alive(pid: int) -> bool:

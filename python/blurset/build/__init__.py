@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from blurset import devices, layout, publish
+from blurset import devices, layout, outputs, publish
 from blurset.build.dataset import (
     append_failures,
     build_lock,
@@ -34,15 +34,9 @@ __all__ = ["build", "BuildConfig"]
 
 
 def check_out(out: Path, cfg: BuildConfig) -> None:
-    """OUT is new, empty, or a blurset build; it never is, holds or lies in an input."""
-    if out.exists():
-        if not out.is_dir():
-            raise ConfigError(f"--out exists and is not a directory: {out}")
-        if not layout.is_build_dir(out) and any(out.iterdir()):
-            raise ConfigError(
-                f"--out is a folder with other files, not a blurset build: {out} "
-                "(give a new or empty folder)"
-            )
+    """OUT is new, empty, or a blurset build (the output owner's rule: never another
+    kind of output or a folder of other files); it never is, holds or lies in an input."""
+    outputs.claim(out, outputs.OutputKind.BUILD, "--out")
     inputs = [Path(e[1:] if e.startswith("@") else e) for e in cfg.objects]
     layout.refuse_overlap(out, [p for p in inputs if p.exists()])
 
