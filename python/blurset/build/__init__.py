@@ -26,7 +26,6 @@ from blurset.build.executors import run_local, run_ray
 from blurset.build.setting import frames_per_setting
 from blurset.build.unit import ObjectResult, objaverse
 from blurset.config import BuildConfig
-from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec, resolve_objects
 from blurset.progress import Progress
 
