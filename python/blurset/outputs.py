@@ -20,7 +20,7 @@ import contextlib
 import fcntl
 import os
 import socket
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -81,14 +81,11 @@ def finished_build(build: Path, option: str = "BUILD") -> _core.BuildState:
 
 
 @contextlib.contextmanager
-def lock(path: Path, kind: _core.OutputKind, option: str = "--out") -> Iterator[None]:
-    """Hold `kind`'s lock in the folder `path` (created if needed) for a whole run: a
-    second writer of the same output is refused at once, naming who holds it. The lock
-    file is removed on release (a waiter that then holds the removed file retries)."""
-    path = Path(path)
-    created = not path.exists()
-    path.mkdir(parents=True, exist_ok=True)
-    lock_path = path / kind.lock_name
+def flock_file(lock_path: Path, on_busy: Callable[[str], None] | None = None) -> Iterator[None]:
+    """Hold an exclusive flock on `lock_path`, writing who holds it into the file. When
+    another process holds it, `on_busy(holder)` runs first: it raises to refuse, or
+    returns to wait. The file is removed on release; a waiter that then holds the
+    removed file sees another inode and tries again."""
     while True:
         f = open(lock_path, "a+")  # noqa: SIM115 - held across the yield
         try:
@@ -96,11 +93,13 @@ def lock(path: Path, kind: _core.OutputKind, option: str = "--out") -> Iterator[
         except BlockingIOError:
             f.seek(0)
             holder = f.read().strip() or "another process"
-            f.close()
-            raise ConfigError(
-                f"{option} is being written by another blurset run ({holder}): wait for it "
-                f"to end, or give another {option}: {path}"
-            ) from None
+            try:
+                if on_busy is not None:
+                    on_busy(holder)
+                fcntl.flock(f, fcntl.LOCK_EX)
+            except BaseException:
+                f.close()
+                raise
         try:
             same = os.fstat(f.fileno()).st_ino == os.stat(lock_path).st_ino
         except FileNotFoundError:
@@ -117,6 +116,26 @@ def lock(path: Path, kind: _core.OutputKind, option: str = "--out") -> Iterator[
     finally:
         lock_path.unlink(missing_ok=True)
         f.close()
+
+
+@contextlib.contextmanager
+def lock(path: Path, kind: _core.OutputKind, option: str = "--out") -> Iterator[None]:
+    """Hold `kind`'s lock in the folder `path` (created if needed) for a whole run: a
+    second writer of the same output is refused at once, naming who holds it."""
+    path = Path(path)
+    created = not path.exists()
+    path.mkdir(parents=True, exist_ok=True)
+
+    def refuse(holder: str) -> None:
+        raise ConfigError(
+            f"{option} is being written by another blurset run ({holder}): wait for it "
+            f"to end, or give another {option}: {path}"
+        )
+
+    try:
+        with flock_file(path / kind.lock_name, refuse):
+            yield
+    finally:
         if created:
             # A run that wrote nothing leaves nothing, not even the folder it made.
             with contextlib.suppress(OSError):

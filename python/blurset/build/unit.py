@@ -10,11 +10,8 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import fcntl
 import json
-import os
 import shutil
-import socket
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -23,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import _core, attribution, layout, objaverse_cache, preflight
+from blurset import _core, attribution, layout, objaverse_cache, outputs, preflight
 from blurset.build.setting import SettingFailed, SettingJob, render_setting
 from blurset.config import BuildConfig
 from blurset.devices import Device
@@ -283,38 +280,17 @@ class ObjectUnit:
 
 @contextlib.contextmanager
 def object_lock(out: Path, uid: str, say):
-    """Hold OUT/.lock-<uid> (flock) while an object is built; a process that finds it
-    held says who holds it and waits. The file is removed on release: a waiter that
-    then holds a lock on the removed file sees it is stale (another inode) and retries."""
-    path = out / f".lock-{uid}"
-    said = False
-    while True:
-        f = open(path, "a+")  # noqa: SIM115 - held across the yield
-        try:
-            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            f.seek(0)
-            holder = f.read().strip() or "another process"
-            if not said:
-                say(f"waiting: {out / uid}_* is being built by {holder}")
-                said = True
-            fcntl.flock(f, fcntl.LOCK_EX)
-        try:
-            same = os.fstat(f.fileno()).st_ino == os.stat(path).st_ino
-        except FileNotFoundError:
-            same = False
-        if same:
-            break
-        f.close()
-    try:
-        f.seek(0)
-        f.truncate()
-        f.write(f"pid {os.getpid()} on host {socket.gethostname()}\n")
-        f.flush()
+    """Hold OUT/.lock-<uid> while an object is built; a process that finds it held says
+    who holds it (once) and waits."""
+    said = []
+
+    def wait(holder: str) -> None:
+        if not said:
+            say(f"waiting: {out / uid}_* is being built by {holder}")
+            said.append(True)
+
+    with outputs.flock_file(out / f".lock-{uid}", wait):
         yield
-    finally:
-        path.unlink(missing_ok=True)
-        f.close()
 
 
 # Below this much free space an object's failure is taken for a full disk: Blender then
