@@ -425,20 +425,12 @@ pub fn build_state(out: &Path) -> Result<BuildState> {
             if doc.get("provisional").and_then(|v| v.as_bool()) == Some(true) {
                 why.push("dataset.json is provisional: no run of the build has finished".into());
             } else {
-                let listed = strings(doc.get("settings"));
-                let (gone, new) = differ(&listed, &s.complete);
-                if !new.is_empty() {
-                    why.push(format!(
-                        "dataset.json does not list complete settings: {}",
-                        first(&new)
-                    ));
-                }
-                if !gone.is_empty() {
-                    why.push(format!(
-                        "dataset.json lists settings that are not complete: {}",
-                        first(&gone)
-                    ));
-                }
+                disagree(
+                    "dataset.json",
+                    &strings(doc.get("settings")),
+                    &s.complete,
+                    &mut why,
+                );
             }
         }
     }
@@ -449,19 +441,7 @@ pub fn build_state(out: &Path) -> Result<BuildState> {
             let mut listed = strings(doc.get("train"));
             listed.extend(strings(doc.get("test")));
             listed.sort();
-            let (gone, new) = differ(&listed, &s.complete);
-            if !new.is_empty() {
-                why.push(format!(
-                    "splits.json does not list complete settings: {}",
-                    first(&new)
-                ));
-            }
-            if !gone.is_empty() {
-                why.push(format!(
-                    "splits.json lists settings that are not complete: {}",
-                    first(&gone)
-                ));
-            }
+            disagree("splits.json", &listed, &s.complete, &mut why);
         }
     }
     Ok(BuildState {
