@@ -463,19 +463,31 @@ fn strings(v: Option<&serde_json::Value>) -> Vec<String> {
     out
 }
 
-/// (in `listed` only, in `disk` only), both sorted.
-fn differ(listed: &[String], disk: &[String]) -> (Vec<String>, Vec<String>) {
-    let gone = listed
-        .iter()
-        .filter(|x| !disk.contains(x))
-        .cloned()
-        .collect();
-    let new = disk
+/// Why a record that lists settings (`listed`) disagrees with the complete settings on
+/// disk, pushed onto `why`.
+fn disagree(record: &str, listed: &[String], disk: &[String], why: &mut Vec<String>) {
+    let new: Vec<String> = disk
         .iter()
         .filter(|x| !listed.contains(x))
         .cloned()
         .collect();
-    (gone, new)
+    let gone: Vec<String> = listed
+        .iter()
+        .filter(|x| !disk.contains(x))
+        .cloned()
+        .collect();
+    if !new.is_empty() {
+        why.push(format!(
+            "{record} does not list complete settings: {}",
+            first(&new)
+        ));
+    }
+    if !gone.is_empty() {
+        why.push(format!(
+            "{record} lists settings that are not complete: {}",
+            first(&gone)
+        ));
+    }
 }
 
 fn first(names: &[String]) -> String {
