@@ -718,6 +718,69 @@ mod tests {
         Ok(())
     }
 
+    fn setting(d: &Path, name: &str, uid: &str, source: &str) {
+        write(
+            &d.join(name).join("meta.json"),
+            &format!(
+                r#"{{"uid": "{uid}", "theta0_deg": 0.0, "resolution": [8, 8], "levels": ["sharp"],
+                    "views": [], "object": {{"path": "{source}"}}}}"#
+            ),
+        );
+        write(&d.join(name).join(".complete"), "x");
+    }
+
+    #[test]
+    fn a_build_is_finished_only_when_its_records_agree_with_the_disk() -> Result<()> {
+        let d = tmp("state");
+        setting(&d, "a_000", "a", "a.glb");
+        setting(&d, "b_000", "b", "b.glb");
+        write(
+            &d.join("dataset.json"),
+            r#"{"name": "blurset Objaverse-Blur", "config": {}, "settings": ["a_000", "b_000"]}"#,
+        );
+        write(
+            &d.join("splits.json"),
+            r#"{"view_stride": 16, "train": ["a_000"], "test": ["b_000"], "test_views": {}}"#,
+        );
+        assert_eq!(build_state(&d)?.provisional, Vec::<String>::new());
+        setting(&d, "c_000", "c", "c.glb");
+        let why = build_state(&d)?.provisional;
+        assert_eq!(why.len(), 2, "{why:?}");
+        assert!(why[1].starts_with("splits.json does not list complete settings: c_000"));
+        std::fs::remove_dir_all(d.join("c_000")).map_err(|e| Error::io("rm", &d, e))?;
+        write(&d.join(".lock-c"), "pid 1");
+        std::fs::create_dir_all(d.join("c_000.partial")).map_err(|e| Error::io("mk", &d, e))?;
+        let why = build_state(&d)?.provisional;
+        assert!(
+            why[0].contains("killed run: c") && why[1].contains("c_000.partial"),
+            "{why:?}"
+        );
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn a_source_that_changed_id_supersedes_its_old_settings() -> Result<()> {
+        let d = tmp("superseded");
+        setting(&d, "with_space_000", "with_space", "with_space.glb");
+        setting(&d, "other_000", "other", "elsewhere/other.glb");
+        let now = [
+            ("with_space_1a2b".to_string(), "with_space.glb".to_string()),
+            ("with_space_3c4d".to_string(), "with space.glb".to_string()),
+        ];
+        let found = superseded_settings(&d, &now)?;
+        assert_eq!(
+            found,
+            [(
+                "with_space_000".to_string(),
+                "with_space.glb".to_string(),
+                "with_space_1a2b".to_string()
+            )]
+        );
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
     #[test]
     fn a_marked_text_knows_when_it_was_edited() -> Result<()> {
         let d = tmp("mark");
