@@ -310,12 +310,18 @@ pub fn owned_entries(dir: &Path, kind: OutputKind) -> Result<Vec<String>> {
                 .map(|m| m.keys().cloned().collect())
                 .unwrap_or_default();
             let mut rels = Vec::new();
+            if scenes_dir != "." && !safe_rel(&scenes_dir) {
+                return Err(Error::Input {
+                    reason: format!(
+                        "export.json has a scenes_dir outside its folder: {scenes_dir:?}"
+                    ),
+                    path: rec,
+                });
+            }
             for n in names {
-                if !safe_name(&n) {
+                if !safe_rel(&n) {
                     return Err(Error::Input {
-                        reason: format!(
-                            "export.json names a scene that is not a plain name: {n:?}"
-                        ),
+                        reason: format!("export.json names a scene outside its folder: {n:?}"),
                         path: rec,
                     });
                 }
@@ -333,7 +339,7 @@ pub fn owned_entries(dir: &Path, kind: OutputKind) -> Result<Vec<String>> {
                 .flatten()
             {
                 let rel = v.as_str().unwrap_or_default();
-                if rel.is_empty() || !rel.split('/').all(safe_name) {
+                if !safe_rel(rel) {
                     return Err(Error::Input {
                         reason: format!("export.json owns an entry outside its folder: {rel:?}"),
                         path: rec,
@@ -360,6 +366,11 @@ pub fn owned_entries(dir: &Path, kind: OutputKind) -> Result<Vec<String>> {
 /// A single path component that stays inside its folder.
 fn safe_name(n: &str) -> bool {
     !n.is_empty() && n != "." && n != ".." && !n.contains('/') && !n.contains('\\')
+}
+
+/// A relative path of such components (`nerf_llff_data/a_000__sharp`).
+fn safe_rel(rel: &str) -> bool {
+    !rel.is_empty() && rel.split('/').all(safe_name)
 }
 
 /// Remove the entries `owned_entries` lists (then the folders a noise output's units
@@ -689,6 +700,11 @@ mod tests {
         write(
             &d.join("export.json"),
             r#"{"kind": "blurset export", "scenes_dir": "nerf_llff_data", "scenes": {"..": "x"}}"#,
+        );
+        assert!(owned_entries(&d, OutputKind::Export).is_err());
+        write(
+            &d.join("export.json"),
+            r#"{"kind": "blurset export", "scenes_dir": "../..", "scenes": {"a": "x"}}"#,
         );
         assert!(owned_entries(&d, OutputKind::Export).is_err());
         write(
