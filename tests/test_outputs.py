@@ -673,3 +673,39 @@ def test_objects_left_out_by_licenses_are_not_failures(tmp_path, standin_blender
     assert [s.name for s in layout.complete_settings(out)] == [
         "sketchfab_MapPin_000", "sketchfab_MapPin_180"
     ]  # fmt: skip
+
+
+def test_geonerf_export_draws_no_sharp_source(standin_blender, tmp_path):
+    """GeoNeRF (data/llff.py) holds out every 8th image of a scene and draws a target's
+    sources from its nearest other images by camera centre. Its rule, restated here
+    (its code needs torch): in the GeoNeRF export a degraded scene's sources are never a
+    sharp image, and a test scene's only held-out image is the sharp target."""
+    out = tmp_path / "b"
+    standin_build(out, standin_blender, "--views", "17")
+    data = tmp_path / "g"
+    p = run_cli("export", str(out), "--out", str(data), "--for", "geonerf")
+    assert "--llff_test_path" in p.stdout
+    sharp_bytes = {
+        q.read_bytes()
+        for s in layout.complete_settings(out)
+        for q in (s / "sharp" / "images_4").iterdir()
+    }
+    root = data / "geonerf"
+    scenes = sorted(root.glob("*/*"))
+    assert scenes
+    for scene in scenes:
+        if scene.name.rsplit("__", 1)[-1].startswith("sharp") or "__sharp" in scene.name:
+            continue
+        images = sorted((scene / "images_4").iterdir())
+        rows = np.load(scene / "poses_bounds.npy")
+        assert len(rows) == len(images)
+        val_ids = list(range(0, len(images), 8))  # GeoNeRF's hold-out, hard-coded
+        centres = rows[:, [3, 8, 13]]
+        targets = val_ids if scene.parent.name == "test" else range(len(images))
+        for t in targets:
+            d = np.linalg.norm(centres - centres[t], axis=1)
+            sources = [i for i in np.argsort(d, kind="stable") if i != t][:6]
+            for s in sources:
+                assert images[s].read_bytes() not in sharp_bytes, (scene.name, t, s)
+        if scene.parent.name == "test":
+            assert val_ids == [0] and images[0].read_bytes() in sharp_bytes

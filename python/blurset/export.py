@@ -22,6 +22,8 @@ import shutil
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from blurset import __version__, _core, layout, outputs
 from blurset.exceptions import ConfigError, InputError
 
@@ -33,7 +35,12 @@ STAGE, TRASH = "export", "export.old"
 # What each target reads: IBRNet's `<rootdir>/data/nerf_llff_data/<scene>` and NAN's
 # `DATA_DIR/nerf_llff_data/<scene>` list every entry of that folder as a scene, so
 # nothing else may lie there; nerfstudio takes any scene folder (`--data`).
-SCENES_DIR = {"llff": "nerf_llff_data", "nerfstudio": "."}
+SCENES_DIR = {"llff": "nerf_llff_data", "nerfstudio": ".", "geonerf": "geonerf"}
+# GeoNeRF (data/llff.py) holds out every 8th image of a scene (hard-coded) and draws a
+# target's sources from all the others: a test scene is its target and the 7 nearest
+# train views, so the target is its only held-out view and every source is degraded.
+GEONERF_IMAGES = 8
+GEONERF_DIR = "images_4"  # what GeoNeRF's LLFF dataset reads
 
 
 def add_arguments(p) -> None:
@@ -44,8 +51,9 @@ def add_arguments(p) -> None:
         dest="target",
         choices=sorted(SCENES_DIR),
         default="llff",
-        help="llff: OUT/nerf_llff_data/<scene>/ (IBRNet, NAN, GNT, GeoNeRF); "
-        "nerfstudio: OUT/<scene>/ with transforms.json",
+        help="llff: OUT/nerf_llff_data/<scene>/ (IBRNet, NAN, GNT); nerfstudio: OUT/<scene>/ "
+        "with transforms.json; geonerf: OUT/geonerf/train/<scene>/ (train views only) and "
+        "OUT/geonerf/test/<scene>__v<view>/ (one sharp target, 7 nearest degraded sources)",
     )
     p.add_argument("--levels", help="levels to export, e.g. blur_4,sharp (default: all)")
     p.add_argument("--noise", type=Path, help="a `blurset noise BUILD` output: export its gains")
@@ -141,8 +149,14 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
         gains = _gains(noise, noised, args.gains)
     levels = _levels(args.levels, available)
     test = set(splits["test"])
+    if args.target == "geonerf" and 4 not in factors:
+        raise ConfigError(
+            "--for geonerf: GeoNeRF reads images_4/, which this build has not: build with "
+            "--downsample 4"
+        )
     sources: dict[str, Path] = {}
     scenes: dict[str, str] = {}
+    views: dict[str, list[int]] = {}
     train_list, test_list = [], []
     for name in state.complete:
         setting = build / name
@@ -151,6 +165,7 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
                 f"the build's setting {name} is damaged ({problem}): `blurset verify` lists "
                 f"what is wrong, a rerun of the build redoes it: {setting}"
             )
+        held_out = [int(v) for v in splits["test_views"].get(name, [])]
         for level in levels:
             rels = [f"{name}/{level}/{g}" for g in gains] if noise else [f"{name}/{level}"]
             for rel in rels:
@@ -160,9 +175,19 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
                     raise InputError(f"--noise has no complete {src.name} here: {src}")
                 if problem := _scene_problem(src, noise is not None):
                     raise InputError(f"--noise scene {rel} is damaged ({problem}): {src}")
-                sources[scene] = src
-                scenes[scene] = rel
-                (test_list if name in test else train_list).append(scene)
+                if args.target != "geonerf":
+                    sources[scene] = src
+                    scenes[scene] = rel
+                    (test_list if name in test else train_list).append(scene)
+                    continue
+                # Held-out views of a degraded scene hold clean copies (unless the build
+                # rendered them blurry): GeoNeRF must never draw one as a source.
+                clean_held = level != layout.SHARP and held in ("sharp", "clean")
+                for sc, vs in _geonerf_scenes(scene, src, held_out, clean_held, name in test):
+                    sources[sc] = src
+                    scenes[sc] = rel
+                    views[sc] = vs
+                    (test_list if name in test else train_list).append(sc)
     if not scenes:
         raise InputError(f"nothing to export (no complete setting with {levels}): {args.build}")
     doc = {
@@ -183,7 +208,63 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
         "train": sorted(train_list),
         "test": sorted(test_list),
     }
+    if views:
+        # Which views each GeoNeRF scene holds, in its order; a test scene's first is its
+        # target, whose image is the sharp level's (the clean ground truth).
+        doc["views"] = views
+        doc["target_images"] = layout.SHARP
     return doc, sources
+
+
+def _geonerf_scenes(
+    scene: str, src: Path, held_out: list[int], clean_held: bool, is_test: bool
+) -> list[tuple[str, list[int]]]:
+    """GeoNeRF scenes of one level: a train setting's train views (its held-out views too
+    when they are degraded), or per held-out view of a test setting, that view and its 7
+    nearest train views by camera centre (GeoNeRF's own `dist`)."""
+    rows = np.asarray(_core.read_poses_bounds(src / "poses_bounds.npy"), dtype=np.float64)
+    n = len(rows)
+    train = [v for v in range(n) if v not in held_out]
+    if not is_test:
+        return [(f"train/{scene}", train if clean_held else list(range(n)))]
+    centres = rows[:, [3, 8, 13]]
+    out = []
+    for v in held_out:
+        d = np.linalg.norm(centres[train] - centres[v], axis=1)
+        near = [train[i] for i in np.argsort(d, kind="stable")[: GEONERF_IMAGES - 1]]
+        if len(near) < GEONERF_IMAGES - 1:
+            raise InputError(
+                f"--for geonerf: {scene} has {len(train)} train views, a test scene needs "
+                f"{GEONERF_IMAGES - 1}: {src}"
+            )
+        out.append((f"test/{scene}__v{v:03d}", [v, *near]))
+    return out
+
+
+def _link(s: Path, dst: Path, copy: bool) -> None:
+    if copy:
+        (shutil.copytree if s.is_dir() else shutil.copyfile)(s, dst)
+    else:
+        # Relative links: the export and the build may move together.
+        os.symlink(os.path.relpath(s, dst.parent), dst)
+
+
+def _write_geonerf_scene(d: Path, src: Path, doc: dict, scene: str, build: Path) -> None:
+    """A GeoNeRF scene: its views' images_4/ files (renamed 000.png … in its order) and
+    their poses_bounds.npy rows; a test scene's target image is the sharp level's."""
+    vs = doc["views"][scene]
+    rows = np.asarray(_core.read_poses_bounds(src / "poses_bounds.npy"), dtype=np.float64)
+    images = sorted(p for p in (src / GEONERF_DIR).iterdir() if p.suffix == ".png")
+    if len(images) != len(rows):
+        raise InputError(f"{len(images)} images for {len(rows)} pose rows: {src / GEONERF_DIR}")
+    setting = doc["scenes"][scene].split("/", 1)[0]
+    sharp = build / setting / layout.SHARP / GEONERF_DIR
+    (d / GEONERF_DIR).mkdir(parents=True)
+    for k, v in enumerate(vs):
+        test_target = k == 0 and scene.startswith("test/")
+        image = sharp / layout.image_name(v, len(rows)) if test_target else images[v]
+        _link(image, d / GEONERF_DIR / f"{k:03d}.png", doc["copy"])
+    _core.write_poses_bounds(d / "poses_bounds.npy", rows[vs])
 
 
 def _write_scene(d: Path, src: Path, doc: dict) -> None:
@@ -196,11 +277,7 @@ def _write_scene(d: Path, src: Path, doc: dict) -> None:
             if part == "transforms.json" and doc["for"] == "llff":
                 continue  # a build from before per-level transforms.json
             raise InputError(f"missing {part} in the scene to export: {src}")
-        if doc["copy"]:
-            (shutil.copytree if s.is_dir() else shutil.copyfile)(s, d / part)
-        else:
-            # Relative links: the export and the build may move together.
-            os.symlink(os.path.relpath(s, d), d / part)
+        _link(s, d / part, doc["copy"])
 
 
 def _refuse_overlap(out: Path, doc: dict, inputs: list[Path]) -> None:
@@ -233,10 +310,12 @@ def run(args) -> int:
     with outputs.lock(out, EXPORT):
         # Claimed again under the lock: another export may have finished meanwhile.
         how = outputs.claim(out, EXPORT, "--out")
-        return _replace(out, doc, sources, how, overwrite=args.overwrite)
+        return _replace(out, doc, sources, how, args.build.resolve(), overwrite=args.overwrite)
 
 
-def _replace(out: Path, doc: dict, sources: dict[str, Path], how: str, overwrite: bool) -> int:
+def _replace(
+    out: Path, doc: dict, sources: dict[str, Path], how: str, build_root: Path, overwrite: bool
+) -> int:
     """Put the export's entries in place, replacing only what the previous export here
     wrote; everything else in OUT stays as it is."""
     old: dict | None = None
@@ -269,7 +348,10 @@ def _replace(out: Path, doc: dict, sources: dict[str, Path], how: str, overwrite
         shutil.rmtree(t, ignore_errors=True)
     try:
         for scene, src in sources.items():
-            _write_scene(stage / scene, src, doc)
+            if doc["for"] == "geonerf":
+                _write_geonerf_scene(stage / scene, src, doc, scene, build_root)
+            else:
+                _write_scene(stage / scene, src, doc)
         # What this run may put in place is recorded first: an export stopped half-way
         # still owns every entry it wrote, and its rerun replaces them.
         layout.write_json(
@@ -287,10 +369,9 @@ def _replace(out: Path, doc: dict, sources: dict[str, Path], how: str, overwrite
         # Old scenes (and a scene folder of another target) make way, one rename each.
         for k, rel in enumerate(sorted(owned - set(new))):
             os.replace(out / rel, trash / str(k))
-        if doc["scenes_dir"] != ".":
-            (out / doc["scenes_dir"]).mkdir(exist_ok=True)
         for k, scene in enumerate(doc["scenes"]):
             dst = out / _entry(doc, scene)
+            dst.parent.mkdir(parents=True, exist_ok=True)
             if dst.exists() or dst.is_symlink():
                 os.replace(dst, trash / f"new{k}")
             os.replace(stage / scene, dst)
@@ -308,11 +389,11 @@ def _say(doc: dict, out: Path, what: str) -> None:
     root = out / doc["scenes_dir"] if doc["scenes_dir"] != "." else out
     factors = ", ".join(f"images_{f}/" for f in doc["factors"]) or "images/ only"
     # nerfstudio reads the split from each scene's transforms.json; LLFF loaders need llffhold.
-    hint = (
-        "splits in each transforms.json"
-        if doc["for"] == "nerfstudio"
-        else f"use llffhold {doc['llffhold']}"
-    )
+    hint = {
+        "nerfstudio": "splits in each transforms.json",
+        "geonerf": f"GeoNeRF: --llff_path {root / 'train'} --llff_test_path {root / 'test'}, "
+        "--nb_views 6 at most",
+    }.get(doc["for"], f"use llffhold {doc['llffhold']}")
     print(
         f"blurset export: {len(doc['scenes'])} scenes ({len(doc['train'])} train, "
         f"{len(doc['test'])} test) {what} -> {root}; {hint} "
