@@ -709,3 +709,18 @@ def test_geonerf_export_draws_no_sharp_source(standin_blender, tmp_path):
                 assert images[s].read_bytes() not in sharp_bytes, (scene.name, t, s)
         if scene.parent.name == "test":
             assert val_ids == [0] and images[0].read_bytes() in sharp_bytes
+
+
+@pytest.mark.parametrize("target", ["llff", "nerfstudio", "geonerf"])
+def test_every_exported_link_resolves(standin_blender, tmp_path, target):
+    """Links are relative to where they end up (the scenes are staged elsewhere)."""
+    out = tmp_path / "b"
+    standin_build(out, standin_blender, "--views", "17")
+    data = tmp_path / "data"
+    run_cli("export", str(out), "--out", str(data), "--for", target)
+    links = [p for p in data.rglob("*") if p.is_symlink()]
+    assert links and all(p.exists() for p in links), [p for p in links if not p.exists()][:3]
+    if target == "nerfstudio":
+        doc = json.loads(next(data.glob("*__blur_1/transforms.json")).read_text())
+        scene = next(data.glob("*__blur_1"))
+        assert all((scene / f["file_path"]).is_file() for f in doc["frames"])

@@ -274,7 +274,11 @@ def test_verify_finds_damage_without_a_manifest(published, tmp_path):
     build = tmp_path / "build"
     shutil.copytree(published, build)
     (build / "MANIFEST.sha256").unlink()
-    assert run_cli("verify", str(build)).returncode == 0
+    # A finished build always has its manifest: without it, that is the one problem.
+    proc = run_cli("verify", str(build), check=False)
+    assert proc.returncode == 1 and proc.stdout.strip().splitlines() == [
+        f"{build}/MANIFEST.sha256: missing (every finished run writes it)"
+    ], proc.stdout
     cut = build / "sketchfab_MazdaRX7Stylised_000" / "sharp" / "images" / "001.png"
     cut.write_bytes(cut.read_bytes()[: cut.stat().st_size // 2])
     (build / "sketchfab_MapPin_000" / "blur_2" / "poses_bounds.npy").unlink()
@@ -284,6 +288,7 @@ def test_verify_finds_damage_without_a_manifest(published, tmp_path):
     proc = run_cli("verify", str(build), check=False)
     assert proc.returncode == 1
     found = dict(line.split(": ", 1) for line in proc.stdout.splitlines())
+    found.pop(f"{build}/MANIFEST.sha256")
     assert sorted(found) == sorted(
         f"{build}/{rel}"
         for rel in (

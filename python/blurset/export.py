@@ -241,15 +241,19 @@ def _geonerf_scenes(
     return out
 
 
-def _link(s: Path, dst: Path, copy: bool) -> None:
+def _link(s: Path, dst: Path, final: Path, copy: bool) -> None:
+    """`dst` (staged) links to or copies `s`; `final` is where `dst` will end up."""
     if copy:
         (shutil.copytree if s.is_dir() else shutil.copyfile)(s, dst)
     else:
-        # Relative links: the export and the build may move together.
-        os.symlink(os.path.relpath(s, dst.parent), dst)
+        # Relative to where the link will live: the export and the build may move
+        # together.
+        os.symlink(os.path.relpath(s, final.parent), dst)
 
 
-def _write_geonerf_scene(d: Path, src: Path, doc: dict, scene: str, build: Path) -> None:
+def _write_geonerf_scene(
+    d: Path, final: Path, src: Path, doc: dict, scene: str, build: Path
+) -> None:
     """A GeoNeRF scene: its views' images_4/ files (renamed 000.png … in its order) and
     their poses_bounds.npy rows; a test scene's target image is the sharp level's."""
     vs = doc["views"][scene]
@@ -263,11 +267,12 @@ def _write_geonerf_scene(d: Path, src: Path, doc: dict, scene: str, build: Path)
     for k, v in enumerate(vs):
         test_target = k == 0 and scene.startswith("test/")
         image = sharp / layout.image_name(v, len(rows)) if test_target else images[v]
-        _link(image, d / GEONERF_DIR / f"{k:03d}.png", doc["copy"])
+        name = f"{k:03d}.png"
+        _link(image, d / GEONERF_DIR / name, final / GEONERF_DIR / name, doc["copy"])
     _core.write_poses_bounds(d / "poses_bounds.npy", rows[vs])
 
 
-def _write_scene(d: Path, src: Path, doc: dict) -> None:
+def _write_scene(d: Path, final: Path, src: Path, doc: dict) -> None:
     d.mkdir(parents=True)
     parts = ["images", *(f"images_{f}" for f in doc["factors"])]
     parts += ["poses_bounds.npy", "transforms.json"]
@@ -277,7 +282,7 @@ def _write_scene(d: Path, src: Path, doc: dict) -> None:
             if part == "transforms.json" and doc["for"] == "llff":
                 continue  # a build from before per-level transforms.json
             raise InputError(f"missing {part} in the scene to export: {src}")
-        _link(s, d / part, doc["copy"])
+        _link(s, d / part, final / part, doc["copy"])
 
 
 def _refuse_overlap(out: Path, doc: dict, inputs: list[Path]) -> None:
@@ -348,10 +353,11 @@ def _replace(
         shutil.rmtree(t, ignore_errors=True)
     try:
         for scene, src in sources.items():
+            final = out / _entry(doc, scene)
             if doc["for"] == "geonerf":
-                _write_geonerf_scene(stage / scene, src, doc, scene, build_root)
+                _write_geonerf_scene(stage / scene, final, src, doc, scene, build_root)
             else:
-                _write_scene(stage / scene, src, doc)
+                _write_scene(stage / scene, final, src, doc)
         # What this run may put in place is recorded first: an export stopped half-way
         # still owns every entry it wrote, and its rerun replaces them.
         layout.write_json(

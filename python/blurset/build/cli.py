@@ -232,8 +232,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {where}: {f['stage']}: {f['reason']}", file=sys.stderr)
     if len(summary["failures"]) > 5:
         print(f"  … see {Path(cfg.out) / 'failures.jsonl'}", file=sys.stderr)
-    if n and summary["settings_complete"] == 0:
-        return 1
+    if summary["objects"] and summary["settings_complete"] == 0:
+        return 1  # nothing built (every object failed, or --licenses left none)
     if rate > cfg.max_failure_rate:
         print(
             f"blurset build: error: {100 * rate:.0f}% of objects failed, more than "
