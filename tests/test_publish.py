@@ -306,7 +306,7 @@ def test_verify_finds_damage_without_a_manifest(published, tmp_path):
     assert found[png] == "truncated (no PNG end chunk)", found
     exr = f"{build}/khronos_BoxTextured_000/sharp/linear/003.exr"
     assert found[exr].startswith("does not decode"), found
-    assert "4 problem(s)" in proc.stderr
+    assert "5 problem(s)" in proc.stderr  # the four, and the missing manifest
     # The cheap check (headers, PNG end chunks, files, pose rows) catches the cut PNG
     # too; only the full decode sees inside the EXR.
     cheap = run_cli("verify", "--no-decode", str(build), check=False)
