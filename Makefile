@@ -8,7 +8,7 @@ RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pypro
 
 PYTEST := $(PY) -m pytest -q
 
-.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint fmt bench bench-gpu clean
+.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint fmt schemas bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -57,6 +57,11 @@ fmt:
 	cargo fmt --all
 	$(VENV)/bin/ruff format python tests blender_scripts bench
 	$(VENV)/bin/ruff check --fix python tests blender_scripts bench
+
+# The JSON Schema of every record blurset writes, from the core's serde types (a test
+# fails when schemas/ differs from them).
+schemas: venv
+	$(PY) -c "from blurset import outputs; outputs.write_schemas('schemas')"
 
 bench: venv
 	$(PY) bench/run.py

@@ -839,3 +839,10 @@ def text_owner(path: str | PathLike[str], command: str) -> str:
 def read_record(path: str | PathLike[str], record: str | None = None) -> Any:
     """A record blurset wrote, checked against its shape: the parsed JSON. InputError
     naming the file and the field when the shape is wrong."""
+
+def write_record(path: str | PathLike[str], record: str, value: Any) -> None:
+    """Write a record assembled in Python (`record` its file name) through the core's
+    type: an unknown, missing or wrongly typed field is a ValueError, nothing written."""
+
+def record_schemas() -> list[tuple[str, Any]]:
+    """(schema file name, JSON Schema) of every record blurset writes."""

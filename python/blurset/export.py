@@ -360,7 +360,7 @@ def _replace(
                 _write_scene(stage / scene, final, src, doc)
         # What this run may put in place is recorded first: an export stopped half-way
         # still owns every entry it wrote, and its rerun replaces them.
-        layout.write_json(
+        outputs.write_record(
             out / EXPORT_FILE,
             {
                 "kind": "blurset export",
@@ -383,7 +383,7 @@ def _replace(
             os.replace(stage / scene, dst)
         for split in ("train", "test"):
             layout.write_text_atomic(out / f"{split}.txt", "".join(f"{n}\n" for n in doc[split]))
-        layout.write_json(out / EXPORT_FILE, doc)
+        outputs.write_record(out / EXPORT_FILE, doc)
     finally:
         for t in (stage, trash):
             shutil.rmtree(t, ignore_errors=True)

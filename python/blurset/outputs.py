@@ -60,6 +60,33 @@ def read_record(path: Path, record: str | None = None) -> Any:
     return _core.read_record(Path(path), record)
 
 
+def write_record(path: Path, value: dict, record: str | None = None) -> None:
+    """Write a record assembled here (dataset.json's start, noise_dataset.json,
+    noise_scene.json, export.json, noise.json) through the core's type and schema,
+    atomically; `record` names it when the file is named otherwise."""
+    _core.write_record(Path(path), record or Path(path).name, value)
+
+
+def record_schemas() -> dict[str, Any]:
+    """The JSON Schema of every record blurset writes, by schema file name
+    (`meta.schema.json` …): what `schemas/` in the repository holds."""
+    return dict(_core.record_schemas())
+
+
+def write_schemas(folder: Path) -> list[Path]:
+    """Write every record's JSON Schema into `folder` (`make schemas`: the repository's
+    schemas/ folder); returns the files."""
+    import json
+
+    from blurset import layout
+
+    out = []
+    for name, schema in record_schemas().items():
+        layout.write_text_atomic(Path(folder) / name, json.dumps(schema, indent=2) + "\n")
+        out.append(Path(folder) / name)
+    return out
+
+
 def build_state(build: Path) -> _core.BuildState:
     """The complete settings of a build and why it is provisional (empty: finished)."""
     return _core.build_state(Path(build))

@@ -14,7 +14,7 @@ import sys
 import time
 from pathlib import Path
 
-from blurset import __version__, _core, layout, publish
+from blurset import __version__, _core, layout, outputs, publish
 from blurset.config import BuildConfig, flag
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec
@@ -78,7 +78,7 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
     path = out / "dataset.json"
     now = cfg.record()
     if not path.is_file():
-        layout.write_json(path, {"name": DATASET_NAME, "config": now, "provisional": True})
+        outputs.write_record(path, {"name": DATASET_NAME, "config": now, "provisional": True})
         return
     try:
         was = json.loads(path.read_text())["config"]

@@ -220,7 +220,7 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
     if not (out / DATASET_FILE).is_file():
         # Written first (options only) so that a run killed before its end resumes;
         # rewritten with the seeds and counts at the end.
-        layout.write_json(out / DATASET_FILE, {"build": build.resolve().name, "params": params})
+        outputs.write_record(out / DATASET_FILE, {"build": build.resolve().name, "params": params})
     for stale in out.glob("*/*/gain_*.partial"):
         shutil.rmtree(stale, ignore_errors=True)
 
@@ -367,7 +367,7 @@ def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
         "splits": "splits.json (copied from the build)",
         "counts": {"settings": len(seeds), "units": n_units, "images": n_images},
     }
-    layout.write_json(out / DATASET_FILE, doc)
+    outputs.write_record(out / DATASET_FILE, doc)
     return doc
 
 

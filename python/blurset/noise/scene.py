@@ -201,7 +201,7 @@ def run(args) -> int:
             outputs.remove_owned(out, NOISE_SCENE)
             for gdir, *_ in variants:
                 os.replace(gdir, out / gdir.name)
-            layout.write_json(
+            outputs.write_record(
                 out / NOISE_SCENE.record,
                 {
                     "kind": "blurset noise scene",

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Error of an image against a reference, both premultiplied linear RGBA.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct ImageError {
     /// PSNR (dB, peak 1) of the sRGB-encoded RGB composited over the background: the
     /// image a PNG of the build holds, before 8-bit quantization.

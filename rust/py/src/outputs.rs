@@ -182,7 +182,43 @@ fn read_record<'py>(
     pythonize(py, &value).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
+fn record_of(name: &str) -> PyResult<core::Record> {
+    core::Record::of_name(name)
+        .ok_or_else(|| PyValueError::new_err(format!("not a blurset record: {name:?}")))
+}
+
+/// Write a record assembled in Python (`record` its file name: dataset.json,
+/// noise_dataset.json, noise_scene.json, export.json, noise.json) through the core's
+/// type: a field it does not know, a missing one or a wrong type is a ValueError before
+/// anything is written.
+#[pyfunction]
+fn write_record(
+    py: Python<'_>,
+    path: PathBuf,
+    record: &str,
+    value: &Bound<'_, PyAny>,
+) -> PyResult<()> {
+    let kind = record_of(record)?;
+    let value: serde_json::Value = crate::sampling::from_py(record, value)?;
+    crate::run_detached(py, || core::write_record(&path, kind, value))
+}
+
+/// (schema file name, JSON Schema) of every record blurset writes.
+#[pyfunction]
+fn record_schemas(py: Python<'_>) -> PyResult<Vec<(String, Bound<'_, PyAny>)>> {
+    core::SCHEMA_RECORDS
+        .iter()
+        .map(|r| {
+            let s = pythonize(py, &core::schema(*r))
+                .map_err(|e| PyValueError::new_err(e.to_string()))?;
+            Ok((core::schema_file(*r), s))
+        })
+        .collect()
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(write_record, m)?)?;
+    m.add_function(wrap_pyfunction!(record_schemas, m)?)?;
     m.add_class::<PyOutputKind>()?;
     m.add_class::<PyBuildState>()?;
     m.add_function(wrap_pyfunction!(output_kind, m)?)?;

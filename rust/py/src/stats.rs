@@ -33,18 +33,12 @@ impl BuildStats {
 
     /// Write stats.json (compact), `generated` and `blurset_version` first, atomically.
     fn write(&self, py: Python<'_>, path: PathBuf, generated: &str) -> PyResult<()> {
-        let mut doc = serde_json::Map::new();
-        doc.insert("generated".into(), generated.into());
-        doc.insert("blurset_version".into(), env!("CARGO_PKG_VERSION").into());
-        let body =
-            serde_json::to_value(&self.0).map_err(|e| PyValueError::new_err(e.to_string()))?;
-        if let serde_json::Value::Object(m) = body {
-            doc.extend(m);
-        }
-        let mut text =
-            serde_json::to_vec(&doc).map_err(|e| PyValueError::new_err(e.to_string()))?;
-        text.push(b'\n');
-        crate::run_detached(py, || core::write_atomic(&path, &text))
+        let file = core::StatsFile {
+            generated: generated.into(),
+            blurset_version: env!("CARGO_PKG_VERSION").into(),
+            stats: self.0.clone(),
+        };
+        crate::run_detached(py, || file.write(&path))
     }
 }
 

@@ -14,7 +14,7 @@ use std::path::Path;
 /// Where the object came from, who made it and under which licence (issue 19: no path
 /// of the build machine), and what the worker reported about it (null where it did not
 /// say).
-#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct ObjectRecord {
     /// The model file, relative to the folder or list it was found in (or
@@ -45,7 +45,7 @@ pub struct ObjectRecord {
 }
 
 /// Wall-clock seconds of a setting's stages (not part of the data: they vary per run).
-#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Timings {
     pub plan_s: Option<f64>,
@@ -57,7 +57,7 @@ pub struct Timings {
 }
 
 /// How the images were rendered and encoded.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct RenderRecord {
     pub engine: String,
     /// Per level in views[].levels[].samples_per_frame; null when it differs between
@@ -153,7 +153,7 @@ impl RenderRecord {
 }
 
 /// A latent frame as meta.json records it (its camera matrix follows from r, φ, θ).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct MetaLatent {
     pub t: f64,
     pub r: f64,
@@ -164,7 +164,7 @@ pub struct MetaLatent {
     pub sample_offset: u32,
 }
 
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct MetaKey {
     pub t: f64,
     pub r: f64,
@@ -196,7 +196,7 @@ fn meta_level(lp: &LevelPlan) -> MetaLevel {
 
 /// A view as meta.json records it: the plan's view with its levels' records and the
 /// render QA of its sharp image.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct MetaView {
     #[serde(flatten)]
     pub view: ViewPlan<MetaLevel>,
@@ -219,7 +219,7 @@ fn blurry() -> String {
 }
 
 /// The whole meta.json of a setting.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct Meta {
     pub uid: String,
     pub theta0_deg: f64,

@@ -10,6 +10,7 @@ pub mod meta;
 pub mod outputs;
 pub mod read;
 pub mod records;
+pub mod schema;
 pub mod splits;
 pub mod stats;
 pub mod verify;

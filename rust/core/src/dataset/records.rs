@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Versions of what made a build.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Versions {
     pub blurset: String,
@@ -18,7 +18,7 @@ pub struct Versions {
 }
 
 /// What a build holds now.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DatasetCounts {
     pub objects: usize,
@@ -29,7 +29,7 @@ pub struct DatasetCounts {
 }
 
 /// `dataset.json`: the config, versions, seed and counts of a build.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DatasetDoc {
     pub name: String,
@@ -54,7 +54,7 @@ pub struct DatasetDoc {
 }
 
 /// The white balance of a noisy scene (one draw per scene).
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WhiteBalanceRecord {
     pub red: f64,
@@ -62,7 +62,7 @@ pub struct WhiteBalanceRecord {
 }
 
 /// The σ(gain) table a noisy scene was made with.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseTableRecord {
     /// `kpn` (NAN's, from KPN's file) or `blurset-default`.
@@ -76,7 +76,7 @@ pub struct NoiseTableRecord {
 }
 
 /// What a noisy scene was made from: one LLFF scene, or one level of a build's setting.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(untagged, deny_unknown_fields)]
 pub enum NoiseSource {
     Scene {
@@ -97,7 +97,7 @@ pub enum NoiseSource {
 }
 
 /// Where the seed of one level of a build's setting comes from (build mode).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BuildNoiseRecord {
     pub seed: u64,
@@ -105,7 +105,7 @@ pub struct BuildNoiseRecord {
 }
 
 /// One written image: its view, frame, clean source and files.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseFile {
     pub view: usize,
@@ -120,7 +120,7 @@ pub struct NoiseFile {
 }
 
 /// `noise.json` of one noisy scene (one gain).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseDoc {
     /// An integer when the gain is one (`4`, not `4.0`).
@@ -171,6 +171,173 @@ impl NoiseDoc {
 /// Write dataset.json atomically.
 pub fn write_dataset(path: &Path, doc: &DatasetDoc) -> Result<()> {
     write_json(path, doc)
+}
+
+/// The dataset.json a build's first run writes under its lock before any setting: the
+/// options it is made with (a rerun must keep those that shape outputs).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetStart {
+    pub name: String,
+    /// `BuildConfig::record()`.
+    pub config: serde_json::Value,
+    /// Always true: no run has finished.
+    pub provisional: bool,
+}
+
+/// dataset.json: a finished run's document, or the first run's start.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(untagged)]
+pub enum DatasetRecord {
+    Done(Box<DatasetDoc>),
+    Start(DatasetStart),
+}
+
+/// The options a noise output is made with; a rerun into it must match them.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseParams {
+    pub seed: u64,
+    /// `linear` (the build's EXRs) or `png`.
+    pub source: String,
+    /// `paper` or `nan`.
+    pub profile: String,
+    /// `2.2` or `srgb`.
+    pub gamma: String,
+    pub white_level: f64,
+    pub frames: usize,
+    pub levels_table: serde_json::Value,
+    pub downsample: Vec<u32>,
+    /// `test_views` (the build's test views stay clean) or `none`.
+    pub clean_views: String,
+}
+
+/// One gain of a noise output.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GainRecord {
+    pub gain: serde_json::Number,
+    pub sigma_read: f64,
+    pub sigma_shot: f64,
+}
+
+/// What a noise output holds.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseCounts {
+    pub settings: usize,
+    pub units: usize,
+    pub images: usize,
+}
+
+/// `noise_dataset.json` of `blurset noise BUILD` once its run has finished.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseDatasetDoc {
+    pub name: String,
+    pub blurset_version: String,
+    pub created: String,
+    /// The build by its folder's name.
+    pub build: String,
+    pub build_seed: Option<u64>,
+    pub params: NoiseParams,
+    pub seed_derivation: String,
+    pub gains: Vec<GainRecord>,
+    pub levels: Vec<String>,
+    /// The seed of every (setting, level).
+    pub seeds: BTreeMap<String, BTreeMap<String, u64>>,
+    pub layout: String,
+    pub splits: String,
+    pub counts: NoiseCounts,
+}
+
+/// The noise_dataset.json a noise run writes first (the options only), so that a run
+/// killed before its end resumes.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseDatasetStart {
+    pub build: String,
+    pub params: NoiseParams,
+}
+
+/// noise_dataset.json: a finished run's document, or the start of one.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(untagged)]
+pub enum NoiseDatasetRecord {
+    Done(Box<NoiseDatasetDoc>),
+    Start(NoiseDatasetStart),
+}
+
+/// `noise_scene.json` of `blurset noise SCENE`: what the folder is, written last.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseSceneDoc {
+    /// Always `blurset noise scene`.
+    pub kind: String,
+    pub blurset_version: String,
+    /// The scene by its folder's name.
+    pub scene: String,
+    /// The gain folders (`gain_4` …); each holds its noise.json.
+    pub gains: Vec<String>,
+    pub seed: u64,
+    pub profile: String,
+}
+
+/// `export.json` of `blurset export`: what was exported and how to read it.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ExportDoc {
+    /// Always `blurset export`.
+    pub kind: String,
+    pub blurset_version: String,
+    /// `llff`, `nerfstudio` or `geonerf`.
+    #[serde(rename = "for")]
+    pub target: String,
+    /// The build, and the noise output, by their folders' names.
+    pub build: String,
+    pub noise: Option<String>,
+    pub levels: Vec<String>,
+    pub gains: Vec<String>,
+    pub copy: bool,
+    pub llffhold: usize,
+    pub factors: Vec<u32>,
+    pub test_view_images: String,
+    /// The folder of the scenes, relative to the export (`.` for nerfstudio).
+    pub scenes_dir: String,
+    /// Scene (a path relative to scenes_dir) → its source, relative to the build or the
+    /// noise output.
+    pub scenes: BTreeMap<String, String>,
+    pub train: Vec<String>,
+    pub test: Vec<String>,
+    /// GeoNeRF scenes: the views each holds, in order (a test scene's first is its target).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub views: Option<BTreeMap<String, Vec<usize>>>,
+    /// Where a GeoNeRF test scene's target image comes from (`sharp`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_images: Option<String>,
+}
+
+/// The export.json an export writes before it moves its scenes into place: everything
+/// it may own by then, so a rerun after a stop replaces those entries.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ExportReplacing {
+    pub kind: String,
+    /// Always `replacing`.
+    pub state: String,
+    pub build: String,
+    pub scenes_dir: String,
+    pub scenes: BTreeMap<String, String>,
+    /// Entries (relative paths) the export owns while it replaces them.
+    pub owns: Vec<String>,
+}
+
+/// export.json: a finished export, or one replacing its entries.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(untagged)]
+pub enum ExportRecord {
+    Done(Box<ExportDoc>),
+    Replacing(ExportReplacing),
 }
 
 /// Write noise.json atomically, after checking it.

@@ -7,7 +7,7 @@ use crate::rng::Stream;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct SettingEntry {
     /// The setting directory name, `<uid>_<theta0>`.
     pub setting: String,
@@ -15,7 +15,7 @@ pub struct SettingEntry {
     pub views: usize,
 }
 
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct Splits {
     pub view_stride: usize,
     pub train: Vec<String>,

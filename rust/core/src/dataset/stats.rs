@@ -108,7 +108,7 @@ struct DatasetConfig {
 // -- the stats document ---------------------------------------------------------------
 
 /// One complete setting.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct SettingInfo {
     /// Directory name, `<uid>_<theta0>`.
     pub name: String,
@@ -124,7 +124,7 @@ pub struct SettingInfo {
 
 /// Minimum, median (mean of the two middle values for an even count), maximum and
 /// mean (left-to-right sum in document order / n) of one quantity.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct Summary {
     pub quantity: String,
     pub unit: String,
@@ -135,7 +135,7 @@ pub struct Summary {
     pub mean: Option<f64>,
 }
 
-#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct Counts {
     /// Distinct uids among complete settings.
     pub objects: usize,
@@ -165,7 +165,7 @@ pub struct Counts {
     pub incomplete_settings: usize,
 }
 
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct Failure {
     pub uid: String,
     pub setting: Option<String>,
@@ -173,7 +173,7 @@ pub struct Failure {
     pub reason: Option<String>,
 }
 
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct Quantity {
     pub name: String,
     pub unit: String,
@@ -184,7 +184,7 @@ pub struct Quantity {
 /// view `view_index[k]` of setting `settings[view_setting[k]]`, settings sorted by
 /// name, views in meta.json order. Per-level maps are keyed by level ("1" … "4") and
 /// hold one entry per view, `null` where a view has no such level.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct BuildStats {
     pub schema: String,
     pub build: PathBuf,

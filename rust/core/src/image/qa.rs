@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 const COVERED_ALPHA: f32 = 0.5;
 
 /// What one view looks like, in numbers.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct FrameQa {
     /// Mean alpha: the fraction of the image the object covers.
     pub coverage: f64,
@@ -27,7 +27,7 @@ pub struct FrameQa {
 }
 
 /// When a view fails (the object QA at load time uses the same numbers).
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct QaThresholds {
     pub min_coverage: f64,

@@ -8,7 +8,7 @@ use serde::Serialize;
 use std::path::Path;
 
 /// The camera path of one Cycles motion blur render.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, PartialEq, schemars::JsonSchema)]
 pub struct Motion {
     pub steps: u32,
     /// OpenGL camera-to-world matrices (row-major) at t_k = k / 2^steps.
@@ -17,7 +17,7 @@ pub struct Motion {
 
 /// One render: the camera, its Cycles seed and samples, the EXR it writes, and the
 /// view and level directory it is accumulated into.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, PartialEq, schemars::JsonSchema)]
 pub struct Render {
     pub view: usize,
     pub level: String,

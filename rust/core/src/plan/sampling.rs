@@ -12,7 +12,7 @@ use glam::{DMat4, DVec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum LatentPositions {
     /// t_i ~ U[0, 1], as in the paper.
@@ -23,7 +23,9 @@ pub enum LatentPositions {
 
 /// Where the written pose p sits on a blurry image's segment (DESIGN §2, §12). The same
 /// seeded draws, δ and w_l either way; only the latent positions t move by ½.
-#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum TrajectoryAnchor {
     /// The paper's U(p, p + w_l·δ): the exposure starts at p, t ∈ [0, 1].
@@ -45,7 +47,7 @@ impl TrajectoryAnchor {
 }
 
 /// How a blurry image is made from its trajectory segment.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum BlurMethod {
     /// The mean of m latent frames rendered at positions t_1..t_m (the paper).
@@ -56,7 +58,7 @@ pub enum BlurMethod {
 }
 
 /// How the Cycles samples of a blurry image's m latent frames relate (issue 15).
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum LatentSampling {
     /// The frames render the m consecutive blocks of ONE sample sequence on the view's
@@ -72,7 +74,7 @@ pub enum LatentSampling {
 }
 
 /// How many samples a blurry image gets against the sharp image's budget (issue 15).
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum BlurBudget {
     /// The budget times [`parity_factor`] of the image's m and motion: a moving camera
@@ -114,7 +116,7 @@ pub const MOTION_KEY_TOLERANCE_PX: f64 = 0.02;
 pub const MOTION_STEPS_RANGE: (u32, u32) = (1, 7);
 
 /// Everything that shapes the sampling of a setting. Units: degrees, Δr in percent of r.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct SamplingConfig {
     pub views: usize,
@@ -310,7 +312,7 @@ pub fn bounding_radius(bbox_dims: [f64; 3]) -> f64 {
     0.5 * DVec3::from_array(bbox_dims).length()
 }
 
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct Trajectory {
     /// Δr in percent of r.
     pub dr: f64,
@@ -318,7 +320,7 @@ pub struct Trajectory {
     pub dtheta_deg: f64,
 }
 
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct LatentFrame {
     /// Position on the segment: the camera at p + t · w_l · δ, with t ∈ [0, 1] when the
     /// trajectory starts at p and t ∈ [−½, ½] when it is centred on p.
@@ -338,7 +340,7 @@ pub struct LatentFrame {
 
 /// One camera keyframe of the motion blur method: position t on the segment (as in
 /// `LatentFrame`).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct MotionKey {
     pub t: f64,
     pub r: f64,
@@ -353,7 +355,7 @@ pub struct MotionKey {
 /// centred trajectory) over a shutter of one frame that opens at the first key, and
 /// Cycles gets `motion_steps` = steps on the camera object, so its motion steps fall
 /// exactly on the keys.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct MotionBlurPlan<K = MotionKey> {
     pub seed: u32,
     pub motion_steps: u32,
@@ -367,7 +369,7 @@ pub struct MotionBlurPlan<K = MotionKey> {
 /// centred on, which SfM recovers from it (DESIGN §12). The average method's t̄ is the
 /// mean of its drawn t; the motion blur method's exposure is uniform over the segment,
 /// so its t̄ is the segment's middle.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct MeanPose {
     pub t: f64,
     pub r: f64,
@@ -379,7 +381,7 @@ pub struct MeanPose {
 
 /// One blur level of a view; `F` and `K` are its latent frames and motion keys (the
 /// plan's, or meta.json's records of them, which drop the camera matrices).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(bound(deserialize = "F: Deserialize<'de>, K: Deserialize<'de>"))]
 pub struct LevelPlan<F = LatentFrame, K = MotionKey> {
     pub w_l: f64,
@@ -437,7 +439,7 @@ impl<F, K> LevelPlan<F, K> {
 
 /// One view of a setting; `L` is what each blur level records (the plan's [`LevelPlan`],
 /// or meta.json's record of it, which drops the latent cameras).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct ViewPlan<L = LevelPlan> {
     pub index: usize,
     pub r: f64,
@@ -479,7 +481,7 @@ impl<L> ViewPlan<L> {
     }
 }
 
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct SettingPlan {
     pub uid: String,
     pub theta0_deg: f64,

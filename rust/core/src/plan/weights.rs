@@ -12,7 +12,7 @@
 //!   rejects empty objects before this point).
 use serde::{Deserialize, Serialize};
 
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct Guards {
     pub orientation_max: f64,
     pub near_floor: f64,
@@ -28,7 +28,7 @@ impl Default for Guards {
 }
 
 /// F, R, O and w_u of one view.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 pub struct SceneWeight {
     pub flatness: f64,
     pub depth_range: f64,
