@@ -31,6 +31,21 @@ import time
 
 import numpy as np
 
+
+def _die_with_parent() -> None:
+    """SIGKILL this process when its parent dies, as the real worker does: a killed build
+    leaves no stand-in behind (PR_SET_PDEATHSIG)."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    parent = os.getppid()
+    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)
+    if os.getppid() != parent:
+        os._exit(1)
+
+
+_die_with_parent()
 # The protocol stream is the process's stdout; nothing else may print on it.
 PROTO = os.fdopen(os.dup(1), "w", buffering=1, encoding="utf-8")
 os.dup2(2, 1)

@@ -270,6 +270,8 @@ def test_a_killed_rerun_is_provisional_until_a_rerun_finishes(tmp_path, standin_
         proc.kill()
         proc.wait()
     assert (out / ".lock-late").exists()  # SIGKILL leaves it: the build is interrupted
+    # The worker dies with its build (PR_SET_PDEATHSIG), the stand-in as the real one.
+    assert wait_until(lambda: not workers_in(out)), workers_in(out)
     one_error_line(run_cli("export", str(out), "--out", str(tmp_path / "e"), check=False),
                    "not finished")  # fmt: skip
     run_cli("build", "--demo", "--objects", str(extra), *STANDIN_REST,
@@ -282,6 +284,27 @@ def test_a_killed_rerun_is_provisional_until_a_rerun_finishes(tmp_path, standin_
 
 STANDIN_REST = ("--views", "4", "--levels", "1,2", "--latents", "2", "--samples", "2",
                 "--resolution", "32", "--settings-per-object", "2", "--quiet")  # fmt: skip
+
+
+def workers_in(out: Path) -> list[int]:
+    """Pids of live worker processes (real or stand-in) working for the build at `out`."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        try:
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+            state = (d / "stat").read_text().split(")")[-1].split()[0]
+        except OSError:
+            continue
+        if "worker.py" in cmd and str(out) in cmd and state != "Z":
+            pids.append(int(d.name))
+    return pids
+
+
+def wait_until(cond, deadline_s: float = 300.0) -> bool:
+    end = time.monotonic() + deadline_s
+    while not cond() and time.monotonic() < end:
+        time.sleep(0.05)
+    return bool(cond())
 
 
 def wait_for(cond, proc: subprocess.Popen, deadline_s: float = 300.0) -> None:
