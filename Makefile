@@ -71,7 +71,7 @@ docs: venv
 	$(PY) docs/gen/formats.py
 	$(PY) docs/gen/bench.py
 	$(PY) docs/gen/check.py
-	$(VENV)/bin/mkdocs build --strict --quiet
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
 
 bench: venv
 	$(PY) bench/run.py

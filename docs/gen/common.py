@@ -12,6 +12,7 @@ import re
 _RULES = [
     (re.compile(r"\b(built|made|rendered) before issue \d+"), r"\1 by earlier versions"),
     (re.compile(r"\((?:before|since|after) issue \d+\)"), "(earlier versions)"),
+    (re.compile(r"\bbuilds before (?:this option|this|it)\b"), "earlier versions"),
     (re.compile(r"\s*\(issues? \d+[^()]*\)"), ""),
     (re.compile(r",?\s*\bissues? #?\d+(?:\s*[A-Z]\d+(?:/[A-Z]\d+)*)?:?"), ""),
     (re.compile(r"\s*\(?\b20\d\d-\d\d-\d\d\b\)?"), ""),
