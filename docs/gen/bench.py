@@ -31,7 +31,9 @@ OUT = ROOT / "docs" / "benchmarks"
 PNG_FLOOR_DB = 58.9  # PSNR of 8-bit quantization alone: 1 / (255² · 12) in MSE
 
 PRESETS = re.compile(r"^settings_per_hour_(?P<preset>[a-z][a-z0-9_]*)$")
-PARITY = re.compile(r"^render_parity_(?P<preset>[a-z0-9]+)_level(?P<level>\d)_(?P<budget>x\d+|\w+)$")
+PARITY = re.compile(
+    r"^render_parity_(?P<preset>[a-z0-9]+)_level(?P<level>\d)_(?P<budget>x\d+|\w+)$"
+)
 NOISE = re.compile(
     r"^render_noise_(?P<preset>[a-z0-9]+)_(?P<motion>moving|zero_trajectory)_(?P<scheme>\w+)$"
 )
@@ -189,9 +191,7 @@ def render_noise_page(parity: list[dict], noise: list[dict]) -> list[str]:
         axes = [axes] if len(presets) == 1 else list(axes)
         for ax, preset in zip(axes, presets, strict=True):
             levels = by_preset[preset]
-            xmax = max(
-                (_budget_factor(b) or 1 for lv in levels.values() for b in lv), default=1
-            )
+            xmax = max((_budget_factor(b) or 1 for lv in levels.values() for b in lv), default=1)
             for level in sorted(levels):
                 flat = sorted(
                     (_budget_factor(b), r["ratio"])
@@ -289,15 +289,23 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
     if cost:
         cost = sorted(cost, key=lambda r: (r["name"].endswith("_saving"), r["name"]))
         kinds = [
-            ([r for r in cost if not r["name"].endswith("_saving")],
-             "blurry / sharp cost (CPU time where measured)", "#009688"),
-            ([r for r in cost if r["name"].endswith("_saving")],
-             "saving: baseline / contender CPU time", "#607d8b"),
+            (
+                [r for r in cost if not r["name"].endswith("_saving")],
+                "blurry / sharp cost (CPU time where measured)",
+                "#009688",
+            ),
+            (
+                [r for r in cost if r["name"].endswith("_saving")],
+                "saving: baseline / contender CPU time",
+                "#607d8b",
+            ),
         ]
         kinds = [k for k in kinds if k[0]]
         n = sum(len(k[0]) for k in kinds)
         fig, axes = plt.subplots(
-            len(kinds), 1, figsize=(8, 0.42 * n + 1.2 * len(kinds)),
+            len(kinds),
+            1,
+            figsize=(8, 0.42 * n + 1.2 * len(kinds)),
             gridspec_kw={"height_ratios": [len(k[0]) for k in kinds]},
         )
         axes = [axes] if len(kinds) == 1 else list(axes)
@@ -310,7 +318,10 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
             ax.set_xlim(0, max(vals) * 1.2)
             ax.set_xlabel(label)
         out += ["## Blurry against sharp, regions, crops", "", _save(fig, "render_cost.png"), ""]
-        out += ["| result | ratio | ratio is | contender | baseline |", "| --- | --- | --- | --- | --- |"]
+        out += [
+            "| result | ratio | ratio is | contender | baseline |",
+            "| --- | --- | --- | --- | --- |",
+        ]
         for r in cost:
             ratio = f"{r['ratio']:.2f}×"
             if "cpu_ratio" in r:
@@ -345,7 +356,10 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
         ax.axvline(1.0, color="grey", lw=0.8)
         ax.set_xlabel("auto / fixed CPU time")
         out += [_save(fig, "light_paths.png"), ""]
-        out += ["| GLB | CPU ratio | identical pixels | bounces (auto) |", "| --- | --- | --- | --- |"]
+        out += [
+            "| GLB | CPU ratio | identical pixels | bounces (auto) |",
+            "| --- | --- | --- | --- |",
+        ]
         for n, r in zip(names, light, strict=True):
             out.append(
                 f"| {n} | {r.get('cpu_ratio', r['ratio']):.2f}× | "
@@ -358,7 +372,9 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
 # ---------------------------------------------------------------------------------- index
 
 
-def index_page(results: list[dict], other: list[dict], pages: list[tuple[str, str, int]]) -> list[str]:
+def index_page(
+    results: list[dict], other: list[dict], pages: list[tuple[str, str, int]]
+) -> list[str]:
     out = [
         "# Benchmarks",
         "",
@@ -421,15 +437,19 @@ def main() -> int:
             other.append(r)
     pages = [
         ("presets.md", "Presets", presets_page(presets), len(presets)),
-        ("render-noise.md", "Render noise of a pair", render_noise_page(parity, noise),
-         len(parity) + len(noise)),
+        (
+            "render-noise.md",
+            "Render noise of a pair",
+            render_noise_page(parity, noise),
+            len(parity) + len(noise),
+        ),
         ("render-cost.md", "Render cost", render_cost_page(cost, light), len(cost) + len(light)),
     ]
     for name, _, lines, _ in pages:
         (OUT / name).write_text("\n".join(lines).rstrip() + "\n")
     index = index_page(results, other, [(p, t, n) for p, t, _, n in pages])
     (OUT / "index.md").write_text("\n".join(index).rstrip() + "\n")
-    print(f"wrote {len(pages) + 1} benchmark pages in {OUT.relative_to(ROOT)}", file=sys.stderr)
+    print(f"wrote {len(pages) + 1} benchmark pages in {OUT}", file=sys.stderr)
     return 0
 
 

@@ -117,7 +117,9 @@ def main() -> int:
         print(f"docs check: {p}", file=sys.stderr)
     if not problems:
         n = sum(len(v) for v in cited_sections().values())
-        print(f"docs check: {n} DESIGN § citations resolve; README and pages clean", file=sys.stderr)
+        print(
+            f"docs check: {n} DESIGN § citations resolve; README and pages clean", file=sys.stderr
+        )
     return 1 if problems else 0
 
 

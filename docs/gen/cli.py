@@ -60,9 +60,7 @@ def _default(action: argparse.Action, help_text: str) -> str:
 
 
 def _options_table(parser: argparse.ArgumentParser) -> list[str]:
-    exclusive = {
-        id(a): g for g in parser._mutually_exclusive_groups for a in g._group_actions
-    }
+    exclusive = {id(a): g for g in parser._mutually_exclusive_groups for a in g._group_actions}
     lines: list[str] = []
     for group in parser._action_groups:
         actions = [
@@ -159,7 +157,7 @@ def reference() -> str:
 def main() -> int:
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(reference())
-    print(f"wrote {OUT.relative_to(DOCS.parent)}", file=sys.stderr)
+    print(f"wrote {OUT}", file=sys.stderr)
     return 0
 
 

@@ -276,7 +276,7 @@ def main() -> int:
             file=sys.stderr,
         )
         return 1
-    print(f"wrote {len(stems)} record pages in {OUT.relative_to(ROOT)}", file=sys.stderr)
+    print(f"wrote {len(stems)} record pages in {OUT}", file=sys.stderr)
     return 0
 
 
