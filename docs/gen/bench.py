@@ -75,6 +75,11 @@ def _save(fig, name: str) -> str:
     return f"![{name}]({name})"
 
 
+def _collapsed(title: str, lines: list[str]) -> list[str]:
+    """A table folded under a title (pymdownx.details), so the plot leads the page."""
+    return [f'??? info "{title}"', ""] + [f"    {line}" if line else "" for line in lines] + [""]
+
+
 def _fmt(x: object, digits: int = 2) -> str:
     if isinstance(x, float):
         return f"{x:.{digits}f}"
@@ -226,14 +231,14 @@ def render_noise_page(parity: list[dict], noise: list[dict]) -> list[str]:
             ax.legend(fontsize=7)
         axes[0].set_ylabel("blurry / sharp render-noise MSE")
         out += [_save(fig, "parity.png"), ""]
-        out += ["| result | blurry / sharp MSE | motion, px | what was rendered |"]
-        out += ["| --- | --- | --- | --- |"]
+        table = ["| result | blurry / sharp MSE | motion, px | what was rendered |"]
+        table += ["| --- | --- | --- | --- |"]
         for r in parity:
-            out.append(
+            table.append(
                 f"| `{r['name']}` | {r['ratio']:.2f}× | {_fmt(r.get('motion_px'), 1)} | "
                 f"{_cell(r.get('contender', ''))} |"
             )
-        out.append("")
+        out += _collapsed("Every result of the plot", table)
     if noise:
         out += [
             "## Sample subsets or a seed per frame",
@@ -264,9 +269,10 @@ def render_noise_page(parity: list[dict], noise: list[dict]) -> list[str]:
         ax.set_ylabel("blurry / sharp render-noise MSE")
         ax.legend(fontsize=7)
         out += [_save(fig, "render_noise.png"), ""]
-        out += ["| result | blurry / sharp MSE | what was rendered |", "| --- | --- | --- |"]
+        table = ["| result | blurry / sharp MSE | what was rendered |", "| --- | --- | --- |"]
         for r in noise:
-            out.append(f"| `{r['name']}` | {r['ratio']:.2f}× | {_cell(r.get('contender', ''))} |")
+            table.append(f"| `{r['name']}` | {r['ratio']:.2f}× | {_cell(r.get('contender', ''))} |")
+        out += _collapsed("Every result of the plot", table)
     if not parity and not noise:
         out.append("No `render_parity_*` or `render_noise_*` result in bench/results.json yet.")
     return out

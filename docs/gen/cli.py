@@ -17,7 +17,7 @@ from common import sanitize  # noqa: E402
 
 DOCS = Path(__file__).resolve().parents[1]
 OUT = DOCS / "reference" / "cli.md"
-WIDTH = 100
+WIDTH = 88
 
 
 def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
@@ -79,8 +79,7 @@ def _options_table(parser: argparse.ArgumentParser) -> list[str]:
         lines.append(f"\n**{title.capitalize()}**\n")
         if group.description:
             lines.append(f"{_cell(group.description)}\n")
-        lines.append("| option | value | default | what it does |")
-        lines.append("| --- | --- | --- | --- |")
+        rows = []
         for a in actions:
             help_text = _help_text(parser, a)
             names = ", ".join(f"`{s}`" for s in a.option_strings) or f"`{a.metavar or a.dest}`"
@@ -97,9 +96,13 @@ def _options_table(parser: argparse.ArgumentParser) -> list[str]:
                     note = " (not with " + ", ".join(f"`{o}`" for o in others) + ")"
             if a.required and a.option_strings:
                 note += " (required)"
-            lines.append(
-                f"| {names} | {value} | {_default(a, help_text)} | {_cell(help_text)}{note} |"
-            )
+            rows.append((names, value, _default(a, help_text), f"{_cell(help_text)}{note}"))
+        if any(r[2] for r in rows):
+            lines += ["| option | value | default | what it does |", "| --- | --- | --- | --- |"]
+            lines += [f"| {n} | {v} | {d} | {h} |" for n, v, d, h in rows]
+        else:
+            lines += ["| option | value | what it does |", "| --- | --- | --- |"]
+            lines += [f"| {n} | {v} | {h} |" for n, v, _, h in rows]
     return lines
 
 
