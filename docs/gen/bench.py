@@ -324,7 +324,7 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
             ax.set_xlim(0, max(vals) * 1.2)
             ax.set_xlabel(label)
         out += ["## Blurry against sharp, regions, crops", "", _save(fig, "render_cost.png"), ""]
-        out += [
+        table = [
             "| result | ratio | ratio is | contender | baseline |",
             "| --- | --- | --- | --- | --- |",
         ]
@@ -332,10 +332,11 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
             ratio = f"{r['ratio']:.2f}×"
             if "cpu_ratio" in r:
                 ratio += f" (CPU {r['cpu_ratio']:.2f}×)"
-            out.append(
+            table.append(
                 f"| `{r['name']}` | {ratio} | {_cell(r.get('ratio_is', ''))} | "
                 f"{_cell(r.get('contender', ''))} | {_cell(r.get('baseline', ''))} |"
             )
+        out += _collapsed("Every result of the plot", table)
         extra = [
             (r["name"], k, r[k])
             for r in cost
