@@ -65,13 +65,13 @@ schemas: venv
 
 # The docs site into site/: the pages generated from the parsers, schemas/ and
 # bench/results.json (docs/gen/), the checks mkdocs cannot make, then a strict build
-# (a warning or a broken link fails it).
+# (a warning or a broken link fails it; no --quiet: it hides warnings from --strict).
 docs: venv
 	$(PY) docs/gen/cli.py
 	$(PY) docs/gen/formats.py
 	$(PY) docs/gen/bench.py
 	$(PY) docs/gen/check.py
-	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 bench: venv
 	$(PY) bench/run.py
