@@ -65,6 +65,8 @@ def _machine(results: list[dict]) -> str:
             continue
         if text not in seen:
             seen.append(text)
+    # A bare backend name ("CPU") says less than an entry that names the device too.
+    seen = [t for t in seen if not any(o != t and o.startswith(f"{t}:") for o in seen)]
     return "; ".join(seen) or "not recorded"
 
 
