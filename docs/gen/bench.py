@@ -9,6 +9,7 @@ listed on the index page, so nothing measured goes missing.
 
 from __future__ import annotations
 
+import ast
 import json
 import re
 import shutil
@@ -77,6 +78,30 @@ def _save(fig, name: str) -> str:
     return f"![{name}]({name})"
 
 
+def _flags(contender: str) -> str:
+    """`fast preset {'blur_method': 'motion_blur', …}: …` as the build flags it used."""
+    m = re.search(r"\{.*\}", contender)
+    if not m:
+        return (
+            "`blurset build …` (the defaults)"
+            if contender.startswith("paper")
+            else _cell(contender)
+        )
+    try:
+        options = ast.literal_eval(m.group(0))
+    except (ValueError, SyntaxError):
+        return _cell(contender)
+    flags = []
+    for k, v in options.items():
+        if k == "latents_auto" and v is True:
+            flags.append("--latents auto")
+        elif v is True:
+            flags.append(f"--{k.replace('_', '-')}")
+        else:
+            flags.append(f"--{k.replace('_', '-')} {v}")
+    return f"`blurset build … {' '.join(flags)}`"
+
+
 def _collapsed(title: str, lines: list[str]) -> list[str]:
     """A table folded under a title (pymdownx.details), so the plot leads the page."""
     return [f'??? info "{title}"', ""] + [f"    {line}" if line else "" for line in lines] + [""]
@@ -100,8 +125,9 @@ def presets_page(rs: list[dict]) -> list[str]:
         "`bench/bench_settings_per_hour.py`; settings per hour are extrapolated from the",
         "views measured, and PSNR is measured over every blurry and sharp image against",
         "converged references (the guide [Speed or accuracy](../guide/speed.md) says what each",
-        "preset is for). The dotted line is the 8-bit floor: a PNG's own rounding is",
-        f"{PNG_FLOOR_DB} dB, so render noise far above it cannot change what you train on.",
+        "preset is for). The dotted line is the 8-bit floor: a PNG's own rounding alone is",
+        f"{PNG_FLOOR_DB} dB, so an image well above the line differs from its reference by",
+        "less than the PNG format itself does.",
         "",
     ]
     if not rows:
@@ -118,22 +144,29 @@ def presets_page(rs: list[dict]) -> list[str]:
         ax.text(v, y, f" {v:.2f}", va="center", fontsize=8)
     ax.set_xlim(right=max(sph) * 4)
     ax = axes[1]
-    for key, label, marker in (
-        ("psnr_blur_db", "blurry images", "o"),
-        ("psnr_sharp_db", "sharp images", "s"),
-    ):
-        pts = [(rows[p].get("settings_per_hour"), rows[p].get(key), p) for p in names]
-        pts = [t for t in pts if t[0] is not None and t[1] is not None]
-        if pts:
-            ax.scatter([t[0] for t in pts], [t[1] for t in pts], marker=marker, label=label)
-            for x, y, p in pts:
-                ax.annotate(p, (x, y), fontsize=7, xytext=(3, 2), textcoords="offset points")
+    for i, p in enumerate(names):
+        r = rows[p]
+        x, yb, ys = r.get("settings_per_hour"), r.get("psnr_blur_db"), r.get("psnr_sharp_db")
+        if x is None:
+            continue
+        color = f"C{i % 10}"
+        ys_ = [y for y in (yb, ys) if y is not None]
+        if len(ys_) == 2:
+            ax.plot([x, x], ys_, color=color, lw=1, alpha=0.5)
+        if yb is not None:
+            ax.scatter([x], [yb], marker="o", color=color)
+        if ys is not None:
+            ax.scatter([x], [ys], marker="s", color=color)
+        if ys_:
+            ax.annotate(p, (x, max(ys_)), fontsize=8, xytext=(4, 4), textcoords="offset points")
+    ax.scatter([], [], marker="o", color="grey", label="blurry images")
+    ax.scatter([], [], marker="s", color="grey", label="sharp images")
     ax.axhline(PNG_FLOOR_DB, ls=":", color="grey", label="8-bit floor")
     ax.set_xscale("log")
     ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     ax.set_xlabel("settings per hour (log)")
     ax.set_ylabel("PSNR against the reference, dB")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3)
     out += [_save(fig, "presets.png"), ""]
     extra = [
         ("psnr_blur_db", "blurry PSNR, dB"),
@@ -155,9 +188,9 @@ def presets_page(rs: list[dict]) -> list[str]:
             cells.append(f"{r.get('settings_per_hour', 0) / paper:.1f}×")
         cells += [_fmt(r.get(k), 1 if "db" in k else 2) for k, _ in cols]
         out.append("| " + " | ".join(cells) + " |")
-    out += ["", "What each preset ran (as the benchmark records it):", ""]
+    out += ["", "What each preset ran:", ""]
     for p in names:
-        out.append(f"- `{p}`: {_cell(rows[p].get('contender', ''))}")
+        out.append(f"- `{p}`: {_flags(rows[p].get('contender', ''))}")
     return out
 
 
