@@ -8,7 +8,7 @@ RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pypro
 
 PYTEST := $(PY) -m pytest -q
 
-.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint fmt schemas bench bench-gpu clean
+.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint fmt schemas docs bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -63,6 +63,16 @@ fmt:
 schemas: venv
 	$(PY) -c "from blurset import outputs; outputs.write_schemas('schemas')"
 
+# The docs site into site/: the pages generated from the parsers, schemas/ and
+# bench/results.json (docs/gen/), the checks mkdocs cannot make, then a strict build
+# (a warning or a broken link fails it; no --quiet: it hides warnings from --strict).
+docs: venv
+	$(PY) docs/gen/cli.py
+	$(PY) docs/gen/formats.py
+	$(PY) docs/gen/bench.py
+	$(PY) docs/gen/check.py
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
+
 bench: venv
 	$(PY) bench/run.py
 
@@ -72,4 +82,4 @@ bench-gpu: venv
 	$(PY) bench/run.py --device gpu
 
 clean:
-	rm -rf target $(VENV) demo_out
+	rm -rf target $(VENV) demo_out site

@@ -1,0 +1,499 @@
+"""Write the benchmark pages (docs/benchmarks/) from bench/results.json, with plots.
+
+Run by `make docs`. Every number and figure on these pages comes from the results file
+that `make bench` writes; nothing is kept by hand. Results are grouped by their names
+(`settings_per_hour_<preset>`, `render_parity_<preset>_level<l>_<budget>`, …); a preset
+or benchmark added later lands in its group's plots, and a result no group knows is
+listed on the index page, so nothing measured goes missing.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import re
+import shutil
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import sanitize  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "bench" / "results.json"
+OUT = ROOT / "docs" / "benchmarks"
+PNG_FLOOR_DB = 58.9  # PSNR of 8-bit quantization alone: 1 / (255² · 12) in MSE
+
+PRESETS = re.compile(r"^settings_per_hour_(?P<preset>[a-z][a-z0-9_]*)$")
+PARITY = re.compile(
+    r"^render_parity_(?P<preset>[a-z0-9]+)_level(?P<level>\d)_(?P<budget>x\d+|\w+)$"
+)
+NOISE = re.compile(
+    r"^render_noise_(?P<preset>[a-z0-9]+)_(?P<motion>moving|zero_trajectory)_(?P<scheme>\w+)$"
+)
+COST = re.compile(
+    r"^(blur_cost_vs_sharp\w*|motion_blur_cost_vs_sharp|render_region_saving|exr_crop_saving)$"
+)
+LIGHT = re.compile(r"^light_paths_(?P<glb>.+)$")
+NOT_PRESETS = {"settings_per_hour_2_vs_1_workers"}
+
+plt.rcParams.update({"figure.dpi": 110, "font.size": 9, "axes.grid": True, "grid.alpha": 0.3})
+
+
+def _cell(text: object) -> str:
+    return sanitize(" ".join(str(text).split())).replace("|", "\\|")
+
+
+def _machine(results: list[dict]) -> str:
+    """What the results were measured on, from their `device` fields."""
+    seen = []
+    for r in results:
+        d = r.get("device")
+        if isinstance(d, dict):
+            text = f"{d.get('backend', '?')}: {', '.join(d.get('devices', []))}"
+            if d.get("kernel"):
+                text += f" (Cycles kernel {d['kernel']})"
+        elif isinstance(d, str):
+            text = d
+        else:
+            continue
+        if text not in seen:
+            seen.append(text)
+    # A bare backend name ("CPU") says less than an entry that names the device too.
+    seen = [t for t in seen if not any(o != t and o.startswith(f"{t}:") for o in seen)]
+    return "; ".join(seen) or "not recorded"
+
+
+def _save(fig, name: str) -> str:
+    fig.tight_layout()
+    fig.savefig(OUT / name)
+    plt.close(fig)
+    return f"![{name}]({name})"
+
+
+def _flags(contender: str) -> str:
+    """`fast preset {'blur_method': 'motion_blur', …}: …` as the build flags it used."""
+    m = re.search(r"\{.*\}", contender)
+    if not m:
+        return (
+            "`blurset build …` (the defaults)"
+            if contender.startswith("paper")
+            else _cell(contender)
+        )
+    try:
+        options = ast.literal_eval(m.group(0))
+    except (ValueError, SyntaxError):
+        return _cell(contender)
+    flags = []
+    for k, v in options.items():
+        if k == "latents_auto" and v is True:
+            flags.append("--latents auto")
+        elif v is True:
+            flags.append(f"--{k.replace('_', '-')}")
+        else:
+            flags.append(f"--{k.replace('_', '-')} {v}")
+    return f"`blurset build … {' '.join(flags)}`"
+
+
+def _collapsed(title: str, lines: list[str]) -> list[str]:
+    """A table folded under a title (pymdownx.details), so the plot leads the page."""
+    return [f'??? info "{title}"', ""] + [f"    {line}" if line else "" for line in lines] + [""]
+
+
+def _fmt(x: object, digits: int = 2) -> str:
+    if isinstance(x, float):
+        return f"{x:.{digits}f}"
+    return "" if x is None else str(x)
+
+
+# ----------------------------------------------------------------------------- presets
+
+
+def presets_page(rs: list[dict]) -> list[str]:
+    rows = {PRESETS.match(r["name"])["preset"]: r for r in rs}
+    out = [
+        "# Presets: settings per hour and accuracy",
+        "",
+        "Each preset builds the same demo setting side by side in one run of",
+        "`bench/bench_settings_per_hour.py`; settings per hour are extrapolated from the",
+        "views measured, and PSNR is measured over every blurry and sharp image against",
+        "converged references (the guide [Speed or accuracy](../guide/speed.md) says what each",
+        "preset is for). The dotted line is the 8-bit floor: a PNG's own rounding alone is",
+        f"{PNG_FLOOR_DB} dB, so an image well above the line differs from its reference by",
+        "less than the PNG format itself does.",
+        "",
+    ]
+    if not rows:
+        return out + ["No `settings_per_hour_<preset>` result in bench/results.json yet."]
+    names = sorted(rows, key=lambda p: (p != "paper", -rows[p].get("settings_per_hour", 0)))
+    sph = [rows[p].get("settings_per_hour", rows[p].get("ratio")) for p in names]
+    fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.6))
+    ax = axes[0]
+    ax.barh(names[::-1], sph[::-1], color="#3f51b5")
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.set_xlabel("settings per hour (log)")
+    for y, v in enumerate(sph[::-1]):
+        ax.text(v, y, f" {v:.2f}", va="center", fontsize=8)
+    ax.set_xlim(right=max(sph) * 4)
+    ax = axes[1]
+    for i, p in enumerate(names):
+        r = rows[p]
+        x, yb, ys = r.get("settings_per_hour"), r.get("psnr_blur_db"), r.get("psnr_sharp_db")
+        if x is None:
+            continue
+        color = f"C{i % 10}"
+        ys_ = [y for y in (yb, ys) if y is not None]
+        if len(ys_) == 2:
+            ax.plot([x, x], ys_, color=color, lw=1, alpha=0.5)
+        if yb is not None:
+            ax.scatter([x], [yb], marker="o", color=color)
+        if ys is not None:
+            ax.scatter([x], [ys], marker="s", color=color)
+        if ys_:
+            ax.annotate(p, (x, max(ys_)), fontsize=8, xytext=(4, 4), textcoords="offset points")
+    ax.scatter([], [], marker="o", color="grey", label="blurry images")
+    ax.scatter([], [], marker="s", color="grey", label="sharp images")
+    ax.axhline(PNG_FLOOR_DB, ls=":", color="grey", label="8-bit floor")
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.set_xlabel("settings per hour (log)")
+    ax.set_ylabel("PSNR against the reference, dB")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3)
+    out += [_save(fig, "presets.png"), ""]
+    extra = [
+        ("psnr_blur_db", "blurry PSNR, dB"),
+        ("psnr_sharp_db", "sharp PSNR, dB"),
+        ("render_psnr_blur_db", "blurry render PSNR, dB"),
+        ("render_psnr_sharp_db", "sharp render PSNR, dB"),
+        ("detail_ratio_blur", "blurry detail ratio"),
+        ("detail_ratio_sharp", "sharp detail ratio"),
+        ("resolution", "px"),
+    ]
+    cols = [(k, t) for k, t in extra if any(k in rows[p] for p in names)]
+    paper = rows.get("paper", {}).get("settings_per_hour")
+    head = ["preset", "settings / hour"] + (["× paper"] if paper else []) + [t for _, t in cols]
+    out += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    for p in names:
+        r = rows[p]
+        cells = [f"`{p}`", _fmt(r.get("settings_per_hour"))]
+        if paper:
+            cells.append(f"{r.get('settings_per_hour', 0) / paper:.1f}×")
+        cells += [_fmt(r.get(k), 1 if "db" in k else 2) for k, _ in cols]
+        out.append("| " + " | ".join(cells) + " |")
+    out += ["", "What each preset ran:", ""]
+    for p in names:
+        out.append(f"- `{p}`: {_flags(rows[p].get('contender', ''))}")
+    return out
+
+
+# -------------------------------------------------------------------------- render noise
+
+
+def _budget_factor(b: str) -> float | None:
+    return float(b[1:]) if b.startswith("x") and b[1:].isdigit() else None
+
+
+def render_noise_page(parity: list[dict], noise: list[dict]) -> list[str]:
+    out = [
+        "# Render noise of a blurry/sharp pair",
+        "",
+        "A blurry image should differ from its sharp truth by the blur, not by Monte Carlo",
+        "noise. These benchmarks render one view of a demo object as a build renders it and",
+        "measure the render-noise MSE of the blurry image over the sharp image's, against",
+        "references rendered with many times the samples on other seeds: 1× is a pair at",
+        "parity, and 1.12× is 0.5 dB. The guide [Speed or accuracy](../guide/speed.md)",
+        "explains the sample budget these numbers chose.",
+        "",
+    ]
+    if parity:
+        out += [
+            "## The parity budget",
+            "",
+            "Blurry over sharp render-noise MSE with the budget split flat at F times the",
+            "preset's samples (`--samples-total F·S --blur-budget flat`, lines), and with the",
+            "default parity budget (markers at the right).",
+            "",
+        ]
+        by_preset: dict[str, dict] = defaultdict(lambda: defaultdict(dict))
+        for r in parity:
+            m = PARITY.match(r["name"])
+            by_preset[m["preset"]][int(m["level"])][m["budget"]] = r
+        presets = sorted(by_preset, key=lambda p: (p != "paper", p))
+        fig, axes = plt.subplots(1, len(presets), figsize=(4.6 * len(presets), 3.4), sharey=True)
+        axes = [axes] if len(presets) == 1 else list(axes)
+        for ax, preset in zip(axes, presets, strict=True):
+            levels = by_preset[preset]
+            xmax = max((_budget_factor(b) or 1 for lv in levels.values() for b in lv), default=1)
+            for level in sorted(levels):
+                flat = sorted(
+                    (_budget_factor(b), r["ratio"])
+                    for b, r in levels[level].items()
+                    if _budget_factor(b)
+                )
+                line = None
+                if flat:
+                    (line,) = ax.plot(
+                        [f for f, _ in flat], [v for _, v in flat], "o-", label=f"level {level}"
+                    )
+                other = [(b, r) for b, r in levels[level].items() if not _budget_factor(b)]
+                for b, r in other:
+                    ax.plot(
+                        [xmax * 1.6],
+                        [r["ratio"]],
+                        "D",
+                        color=line.get_color() if line else None,
+                        label=f"level {level}, {b}" if not line else None,
+                    )
+            ax.axhline(1.0, color="grey", lw=0.8)
+            ax.axhline(1.12, color="grey", lw=0.8, ls=":")
+            ax.set_xscale("log", base=2)
+            ax.set_yscale("log")
+            ticks = [2**k for k in range(int(xmax).bit_length())] + [xmax * 1.6]
+            ax.set_xticks(ticks, [f"{t:g}" for t in ticks[:-1]] + ["parity"])
+            ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+            ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+            ax.set_yticks([0.25, 0.5, 1, 2, 4, 8])
+            ax.set_title(f"{preset} preset")
+            ax.set_xlabel("F: the budget split flat at F times the preset's")
+            ax.legend(fontsize=7)
+        axes[0].set_ylabel("blurry / sharp render-noise MSE")
+        out += [_save(fig, "parity.png"), ""]
+        table = ["| result | blurry / sharp MSE | motion, px | what was rendered |"]
+        table += ["| --- | --- | --- | --- |"]
+        for r in parity:
+            table.append(
+                f"| `{r['name']}` | {r['ratio']:.2f}× | {_fmt(r.get('motion_px'), 1)} | "
+                f"{_cell(r.get('contender', ''))} |"
+            )
+        out += _collapsed("Every result of the plot", table)
+    if noise:
+        out += [
+            "## Sample subsets or a seed per frame",
+            "",
+            "The same ratio with the preset's budget split flat: the latent frames as sample",
+            "subsets of one sequence (`--latent-sampling subsets`, the default) or on a seed",
+            "each (`independent`); at zero motion and along a moving level-4 trajectory.",
+            "`adaptive` is Cycles' adaptive sampling (noise threshold 0.01), which blurset",
+            "leaves off: it stops the sharp image's pixels early and breaks the pair.",
+            "",
+        ]
+        groups: dict[tuple[str, str], dict[str, float]] = defaultdict(dict)
+        for r in noise:
+            m = NOISE.match(r["name"])
+            groups[(m["preset"], m["motion"].replace("_trajectory", ""))][m["scheme"]] = r["ratio"]
+        schemes = sorted({s for g in groups.values() for s in g})
+        keys = sorted(groups, key=lambda k: (k[0] != "paper", k))
+        fig, ax = plt.subplots(figsize=(9, 3.4))
+        width = 0.8 / max(1, len(schemes))
+        for i, s in enumerate(schemes):
+            xs = [j + i * width for j in range(len(keys))]
+            ax.bar(xs, [groups[k].get(s, float("nan")) for k in keys], width, label=s)
+        ax.set_xticks([j + width * (len(schemes) - 1) / 2 for j in range(len(keys))])
+        ax.set_xticklabels([f"{p}\n{m}" for p, m in keys])
+        ax.axhline(1.0, color="grey", lw=0.8)
+        ax.set_yscale("log")
+        ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        ax.set_ylabel("blurry / sharp render-noise MSE")
+        ax.legend(fontsize=7)
+        out += [_save(fig, "render_noise.png"), ""]
+        table = ["| result | blurry / sharp MSE | what was rendered |", "| --- | --- | --- |"]
+        for r in noise:
+            table.append(f"| `{r['name']}` | {r['ratio']:.2f}× | {_cell(r.get('contender', ''))} |")
+        out += _collapsed("Every result of the plot", table)
+    if not parity and not noise:
+        out.append("No `render_parity_*` or `render_noise_*` result in bench/results.json yet.")
+    return out
+
+
+# --------------------------------------------------------------------------- render cost
+
+
+def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
+    out = [
+        "# Render cost",
+        "",
+        "What a blurry image costs against its sharp image at equal total samples (the",
+        "design's limit is 1.0), what render regions and cropped EXRs save, and what the",
+        "light-path choice costs. Ratios are of CPU time (Blender worker and blurset's own",
+        "process) where the benchmark measured it, since wall time swings on a shared",
+        "machine.",
+        "",
+    ]
+    if cost:
+        cost = sorted(cost, key=lambda r: (r["name"].endswith("_saving"), r["name"]))
+        kinds = [
+            (
+                [r for r in cost if not r["name"].endswith("_saving")],
+                "blurry / sharp cost (CPU time where measured)",
+                "#009688",
+            ),
+            (
+                [r for r in cost if r["name"].endswith("_saving")],
+                "saving: baseline / contender CPU time",
+                "#607d8b",
+            ),
+        ]
+        kinds = [k for k in kinds if k[0]]
+        n = sum(len(k[0]) for k in kinds)
+        fig, axes = plt.subplots(
+            len(kinds),
+            1,
+            figsize=(8, 0.42 * n + 1.2 * len(kinds)),
+            gridspec_kw={"height_ratios": [len(k[0]) for k in kinds]},
+        )
+        axes = [axes] if len(kinds) == 1 else list(axes)
+        for ax, (rs, label, color) in zip(axes, kinds, strict=True):
+            vals = [r.get("cpu_ratio", r["ratio"]) for r in rs]
+            ax.barh([r["name"] for r in rs][::-1], vals[::-1], color=color)
+            ax.axvline(1.0, color="grey", lw=0.8)
+            for y, v in enumerate(vals[::-1]):
+                ax.text(v, y, f" {v:.2f}×", va="center", fontsize=8)
+            ax.set_xlim(0, max(vals) * 1.2)
+            ax.set_xlabel(label)
+        out += ["## Blurry against sharp, regions, crops", "", _save(fig, "render_cost.png"), ""]
+        table = [
+            "| result | ratio | ratio is | contender | baseline |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        for r in cost:
+            ratio = f"{r['ratio']:.2f}×"
+            if "cpu_ratio" in r:
+                ratio += f" (CPU {r['cpu_ratio']:.2f}×)"
+            table.append(
+                f"| `{r['name']}` | {ratio} | {_cell(r.get('ratio_is', ''))} | "
+                f"{_cell(r.get('contender', ''))} | {_cell(r.get('baseline', ''))} |"
+            )
+        out += _collapsed("Every result of the plot", table)
+        extra = [
+            (r["name"], k, r[k])
+            for r in cost
+            for k in ("traced_px_ratio", "cpu_ratio_per_traced_px", "exr_mb_ratio")
+            if k in r
+        ]
+        if extra:
+            out += ["", "Where the time goes:", ""]
+            out += [f"- `{n}`: {k.replace('_', ' ')} {v:.2f}×" for n, k, v in extra]
+        out.append("")
+    if light:
+        out += [
+            "## Light paths",
+            "",
+            "`--light-paths auto` takes Cycles' bounces from the object's materials;",
+            "`fixed` uses the same bounces for every object. Auto over fixed time per GLB, and",
+            "whether the pixels came out identical:",
+            "",
+        ]
+        names = [LIGHT.match(r["name"])["glb"] for r in light]
+        fig, ax = plt.subplots(figsize=(8, 0.4 * len(light) + 1))
+        cpu = [r.get("cpu_ratio", r["ratio"]) for r in light]
+        ax.barh(names[::-1], cpu[::-1], color="#795548")
+        ax.axvline(1.0, color="grey", lw=0.8)
+        ax.set_xlabel("auto / fixed CPU time")
+        out += [_save(fig, "light_paths.png"), ""]
+        out += [
+            "| GLB | CPU ratio | identical pixels | bounces (auto) |",
+            "| --- | --- | --- | --- |",
+        ]
+        for n, r in zip(names, light, strict=True):
+            out.append(
+                f"| {n} | {r.get('cpu_ratio', r['ratio']):.2f}× | "
+                f"{'yes' if r.get('identical_pixels') else 'no'} | "
+                f"{_cell(r.get('contender', '').split(':')[0])} |"
+            )
+    return out
+
+
+# ---------------------------------------------------------------------------------- index
+
+
+def index_page(
+    results: list[dict], other: list[dict], pages: list[tuple[str, str, int]]
+) -> list[str]:
+    out = [
+        "# Benchmarks",
+        "",
+        "`make bench` runs every `bench/bench_*.py` and writes `bench/results.json`; these",
+        "pages are generated from that file by `make docs` (`docs/gen/bench.py`). Each",
+        "benchmark measures its ratios side by side in one run, from medians of repeats,",
+        "so a ratio holds on a busy machine where absolute times do not. Tests never assert",
+        "timings.",
+        "",
+        f"Measured on: {_machine(results)}. The development machine has 2 CPU cores (AMD EPYC,",
+        "AVX2), shared with other jobs, and no GPU. `make bench-gpu` runs the rendering",
+        "benchmarks on a GPU into `bench/results_gpu.json`.",
+        "",
+        "| page | results |",
+        "| --- | --- |",
+    ]
+    out += [f"| [{title}]({page}) | {n} |" for page, title, n in pages]
+    out += [
+        "",
+        "Run one benchmark again with `.venv/bin/python bench/run.py bench_noise` (it replaces",
+        "its own entries in results.json only), then `make docs`.",
+        "",
+    ]
+    if other:
+        out += [
+            "## Other measurements",
+            "",
+            "| result | ratio | ratio is | contender | baseline |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        for r in sorted(other, key=lambda r: r["name"]):
+            ratio = r.get("ratio")
+            ratio = f"{ratio:.3g}" if isinstance(ratio, (int, float)) else _cell(ratio)
+            out.append(
+                f"| `{r['name']}` | {ratio} | {_cell(r.get('ratio_is', ''))} | "
+                f"{_cell(r.get('contender', ''))} | {_cell(r.get('baseline', ''))} |"
+            )
+    return out
+
+
+def main() -> int:
+    results = json.loads(RESULTS.read_text())
+    if OUT.exists():
+        shutil.rmtree(OUT)
+    OUT.mkdir(parents=True)
+    presets, parity, noise, cost, light, other = [], [], [], [], [], []
+    for r in results:
+        n = r["name"]
+        if PRESETS.match(n) and n not in NOT_PRESETS:
+            presets.append(r)
+        elif PARITY.match(n):
+            parity.append(r)
+        elif NOISE.match(n):
+            noise.append(r)
+        elif COST.match(n):
+            cost.append(r)
+        elif LIGHT.match(n):
+            light.append(r)
+        else:
+            other.append(r)
+    pages = [
+        ("presets.md", "Presets", presets_page(presets), len(presets)),
+        (
+            "render-noise.md",
+            "Render noise of a pair",
+            render_noise_page(parity, noise),
+            len(parity) + len(noise),
+        ),
+        ("render-cost.md", "Render cost", render_cost_page(cost, light), len(cost) + len(light)),
+    ]
+    for name, _, lines, _ in pages:
+        (OUT / name).write_text("\n".join(lines).rstrip() + "\n")
+    index = index_page(results, other, [(p, t, n) for p, t, _, n in pages])
+    (OUT / "index.md").write_text("\n".join(index).rstrip() + "\n")
+    print(f"wrote {len(pages) + 1} benchmark pages in {OUT}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

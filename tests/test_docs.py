@@ -1,0 +1,109 @@
+"""The docs: every `DESIGN §n` the code cites exists in docs/design.md, the README stays a
+short first read, user pages carry no project history, and the generators of the CLI
+reference, the file-format pages and the benchmark pages work on the real parser,
+schemas/ and bench/results.json (`make docs` runs them, then `mkdocs build --strict`)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+GEN = ROOT / "docs" / "gen"
+
+
+def _gen(name: str):
+    sys.path.insert(0, str(GEN))
+    try:
+        spec = importlib.util.spec_from_file_location(f"docs_gen_{name}", GEN / f"{name}.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+    finally:
+        sys.path.remove(str(GEN))
+
+
+def test_every_cited_design_section_exists() -> None:
+    check = _gen("check")
+    cited = check.cited_sections()
+    assert len(cited) >= 10, "the code cites the design: the scan found too little"
+    assert check.missing_sections() == []
+
+
+def test_a_citation_of_a_missing_section_is_found(tmp_path, monkeypatch) -> None:
+    check = _gen("check")
+    assert [m.group(1) for m in check.CITE.finditer("DESIGN §2, §12 and DESIGN §1–4")] == [
+        "§2, §12",
+        "§1–4",
+    ]
+    design = tmp_path / "design.md"
+    design.write_text("# d\n\n## 1. One\n\n## 2. Two\n")
+    monkeypatch.setattr(check, "DESIGN", design)
+    monkeypatch.setattr(check, "cited_sections", lambda: {1: ["a.py:1"], 3: ["b.rs:7"]})
+    assert check.missing_sections() == [
+        "DESIGN §3 (cited at b.rs:7) is not a section of docs/design.md"
+    ]
+
+
+def test_readme_is_short_and_its_links_resolve() -> None:
+    assert _gen("check").readme_problems() == []
+
+
+def test_user_pages_name_no_issue_date_load_or_commit() -> None:
+    check = _gen("check")
+    assert check.history_problems() == []
+    common = _gen("common")
+    text = "one render call per frame (before issue 16), measured 2026-11-30 (issue 19: x)"
+    clean = common.sanitize(text)
+    assert not [p for p, _ in common.FORBIDDEN if p.search(clean)], clean
+
+
+def test_cli_reference_covers_every_command_and_option(tmp_path, monkeypatch) -> None:
+    cli_gen = _gen("cli")
+    monkeypatch.setattr(cli_gen, "OUT", tmp_path / "cli.md")
+    assert cli_gen.main() == 0
+    page = (tmp_path / "cli.md").read_text()
+    from blurset.cli import make_parser
+
+    parser = make_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    for name, p in sub.choices.items():
+        assert f"## `blurset {name}`" in page
+        for action in p._actions:
+            if isinstance(action, argparse._HelpAction) or "--debug" in action.option_strings:
+                continue
+            for flag in action.option_strings:
+                assert f"`{flag}`" in page, (name, flag)
+
+
+def test_a_page_per_schema_listing_every_field(tmp_path, monkeypatch) -> None:
+    formats = _gen("formats")
+    monkeypatch.setattr(formats, "OUT", tmp_path / "records")
+    assert formats.main() == 0
+    for path in sorted((ROOT / "schemas").glob("*.schema.json")):
+        stem = path.name.removesuffix(".schema.json")
+        page = (tmp_path / "records" / f"{stem}.md").read_text()
+        schema = json.loads(path.read_text())
+        nodes = [schema, *(schema.get("$defs") or {}).values()]
+        for node in nodes:
+            for field in node.get("properties") or {}:
+                assert f"| `{field}` |" in page, (stem, field)
+        assert (tmp_path / "records" / path.name).exists()
+
+
+def test_benchmark_pages_plot_every_result(tmp_path, monkeypatch) -> None:
+    pytest.importorskip("matplotlib")
+    bench = _gen("bench")
+    monkeypatch.setattr(bench, "OUT", tmp_path / "bench")
+    assert bench.main() == 0
+    pages = "".join(p.read_text() for p in (tmp_path / "bench").glob("*.md"))
+    for r in json.loads((ROOT / "bench" / "results.json").read_text()):
+        light = bench.LIGHT.match(r["name"])
+        shown = r["name"] in pages or (light and f"| {light['glb']} |" in pages)
+        assert shown or bench.PRESETS.match(r["name"]), r["name"]
+    assert list((tmp_path / "bench").glob("*.png"))
