@@ -256,6 +256,13 @@ def make_config(
     return cfg
 
 
+def out_dir(cfg: BuildConfig) -> Path:
+    """The output directory of a build's config (`require_target` has checked it)."""
+    if cfg.out is None:
+        raise ConfigError("--out is required: an output directory")
+    return Path(cfg.out)
+
+
 def from_flags(names: dict[str, str] | None = None, **values: Any) -> BuildConfig:
     """A config of these options over the defaults, for commands whose flags are options
     (tradeoff); an error names the flag (`names` maps an option to another flag)."""

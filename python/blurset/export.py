@@ -96,7 +96,8 @@ def plan(args) -> dict:
     gains = _gains(noise, args.gains) if noise else []
     test = set(splits.get("test", []))
     scenes: dict[str, str] = {}
-    train_list, test_list = [], []
+    train_list: list[str] = []
+    test_list: list[str] = []
     for setting in layout.complete_settings(build):
         for level in levels:
             srcs = (

@@ -146,12 +146,14 @@ def preset_from_args(args: argparse.Namespace) -> Preset:
     ref = _ints(args.reference, "--reference", "latents")
     if ref is not None and len(ref) != 2:
         raise ConfigError(f"--reference: expected M,S (frames, samples), got {args.reference!r}")
+    reference = base.reference
     if ref is not None:
         from_flags(samples=ref[1])
+        reference = (ref[0], ref[1])
     pre = Preset(
         resolution=args.resolution or base.resolution,
         level=args.level or base.level,
-        reference=ref or base.reference,  # type: ignore[arg-type]
+        reference=reference,
         budgets=_ints(args.budgets, "--budgets", "samples_total") or base.budgets,
         latents=_ints(args.latents, "--latents", "latents") or base.latents,
         samplings=base.samplings,
@@ -178,7 +180,7 @@ def preset_from_args(args: argparse.Namespace) -> Preset:
 
 
 def candidates(pre: Preset) -> list[Candidate]:
-    out = []
+    out: list[Candidate] = []
     for s in pre.budgets:
         for sampling in pre.samplings:
             out.extend(Candidate("average", sampling, m, s) for m in pre.latents)
@@ -371,7 +373,7 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         fov = ref_cfg.fov_deg
 
         def psnr_of(a: Any, b: Any) -> float:
-            return float(_core.image_error(a, b, background=tuple(ref_cfg.background)).psnr)
+            return float(_core.image_error(a, b, background=ref_cfg.background).psnr)
 
         converged: dict[tuple, Any] = {}  # the same positions, r_samples, other seeds
         sharp_at: dict[int, float] = {}  # sharp_render_psnr per sharp budget
@@ -382,7 +384,7 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
             cfg = _config(pre, args.view, c, args.max_ghost_px, scheme)
             frames, lp = plan_level(cfg)
             mean, t = _render_image(w, frames, lp, pre.resolution, cfg.fov_deg)
-            err = _core.image_error(mean, ref, background=tuple(cfg.background))
+            err = _core.image_error(mean, ref, background=cfg.background)
             key = (c.method, tuple(f["t"] for f in lp["latent_frames"]))
             if key not in converged:
                 c_ref = dataclasses.replace(c, samples_total=r_samples)

@@ -25,7 +25,7 @@ from blurset.build.dataset import (
 from blurset.build.executors import run_local, run_ray
 from blurset.build.setting import frames_per_setting
 from blurset.build.unit import ObjectResult, objaverse
-from blurset.config import BuildConfig
+from blurset.config import BuildConfig, out_dir
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec, resolve_objects
 from blurset.progress import Progress
@@ -55,7 +55,7 @@ def job_objects(cfg: BuildConfig) -> list[ObjectSpec]:
     if cfg.demo:
         from blurset.demo import make_demo_objects
 
-        demo_dir = Path(cfg.out) / ".demo_objects"
+        demo_dir = out_dir(cfg) / ".demo_objects"
         entries += [str(p) for p in make_demo_objects(demo_dir, seed=cfg.seed)]
     objs = sorted(
         resolve_objects(
@@ -89,8 +89,8 @@ def _report_missing(objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress) ->
 def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # Absolute, so Ray workers (another working directory, another machine with the
     # same shared path) write where the driver reads.
-    cfg = cfg.replace(out=str(Path(cfg.out).resolve()))
-    out = Path(cfg.out)
+    cfg = cfg.replace(out=str(out_dir(cfg).resolve()))
+    out = out_dir(cfg)
     # Bad entries and a missing device fail before anything is written.
     resolve_objects(list(cfg.objects), cache=objaverse(cfg))
     check_out(out, cfg)

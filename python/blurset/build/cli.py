@@ -10,6 +10,7 @@ from blurset.config import (
     BuildConfig,
     load_toml,
     make_config,
+    out_dir,
     parse_downsample,
     parse_levels,
     split_test_objects,
@@ -228,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
         where = f.get("setting") or f["uid"]
         print(f"  {where}: {f['stage']}: {f['reason']}", file=sys.stderr)
     if len(summary["failures"]) > 5:
-        print(f"  … see {Path(cfg.out) / 'failures.jsonl'}", file=sys.stderr)
+        print(f"  … see {out_dir(cfg) / 'failures.jsonl'}", file=sys.stderr)
     if n and summary["settings_complete"] == 0:
         return 1
     if rate > cfg.max_failure_rate:
