@@ -30,7 +30,9 @@ SCENES_DIR = {"llff": "nerf_llff_data", "nerfstudio": "."}
 
 def add_arguments(p) -> None:
     p.add_argument("build", type=Path, help="a build directory (dataset.json, splits.json)")
-    p.add_argument("--out", type=Path, required=True, help="the export root (outside the build)")
+    p.add_argument(
+        "--out", type=Path, required=True, help="the export root (outside the build; required)"
+    )
     p.add_argument(
         "--for",
         dest="target",
@@ -40,7 +42,11 @@ def add_arguments(p) -> None:
         "nerfstudio: OUT/<scene>/ with transforms.json",
     )
     p.add_argument("--levels", help="levels to export, e.g. blur_4,sharp (default: all)")
-    p.add_argument("--noise", type=Path, help="a `blurset noise BUILD` output: export its gains")
+    p.add_argument(
+        "--noise",
+        type=Path,
+        help="a `blurset noise BUILD` output: export its gains (default: none)",
+    )
     p.add_argument("--gains", nargs="+", help="gains of --noise to export (default: all)")
     p.add_argument("--copy", action="store_true", help="copy the files instead of symlinking")
 

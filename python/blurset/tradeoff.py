@@ -94,30 +94,36 @@ class Candidate:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--object", required=True, type=Path, help="a GLB file")
-    p.add_argument("--out", required=True, type=Path, help="output directory")
-    p.add_argument("--quick", action="store_true", help="small grid, 96 px: a few minutes")
-    p.add_argument("--level", type=int, help="blur level of the measured image (4)")
-    p.add_argument("--view", type=int, default=0, help="view index in the setting (0)")
-    p.add_argument("--resolution", type=int, help="image side, px (96 quick, 256 full)")
+    p.add_argument("--object", required=True, type=Path, help="a GLB file (required)")
+    p.add_argument("--out", required=True, type=Path, help="output directory (required)")
+    p.add_argument("--quick", action="store_true", help="small grid, 96 px: under a minute")
+    p.add_argument("--level", type=int, help="blur level of the measured image (default: 4)")
+    p.add_argument("--view", type=int, default=0, help="view index in the setting")
     p.add_argument(
-        "--budgets", type=str, help="samples per blurry image, e.g. 16,64 (the preset's)"
+        "--resolution", type=int, help="image side, px (default: 96 with --quick, else 256)"
     )
-    p.add_argument("--latents", type=str, help="latent counts, e.g. 2,8,32 (the preset's)")
     p.add_argument(
-        "--reference", type=str, help="reference M,S: M stratified frames of S samples each"
+        "--budgets", type=str, help="samples per blurry image, e.g. 16,64 (default: the preset's)"
     )
-    p.add_argument("--max-ghost-px", type=float, default=1.0, help="for the auto rows (1)")
+    p.add_argument("--latents", type=str, help="latent counts, e.g. 2,8,32 (default: the preset's)")
+    p.add_argument(
+        "--reference",
+        type=str,
+        help="reference M,S: M stratified frames of S samples each (default: the preset's)",
+    )
+    p.add_argument("--max-ghost-px", type=float, default=1.0, help="for the auto rows")
     p.add_argument(
         "--latent-sampling",
         choices=["subsets", "independent"],
         default="subsets",
-        help="how the candidates' latent frames share samples (subsets)",
+        help="how the candidates' latent frames share samples",
     )
-    p.add_argument("--seed", type=int, default=0, help="setting seed (0)")
-    p.add_argument("--theta0-deg", type=float, default=0.0, help="base azimuth (0)")
-    p.add_argument("--threads", type=int, default=0, help="Cycles threads (0 = all cores)")
-    p.add_argument("--blender", help="a Blender binary instead of the bpy module")
+    p.add_argument("--seed", type=int, default=0, help="setting seed")
+    p.add_argument("--theta0-deg", type=float, default=0.0, help="base azimuth, degrees")
+    p.add_argument("--threads", type=int, default=0, help="Cycles threads (0: all cores)")
+    p.add_argument(
+        "--blender", help="a Blender binary instead of the bpy module (default: the bpy module)"
+    )
     p.add_argument("--timeout", type=float, default=1800.0, help="worker reply timeout, s")
     p.add_argument("--quiet", action="store_true", help="no per-candidate lines")
 
