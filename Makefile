@@ -37,8 +37,9 @@ test: test-rust test-py
 test-fast: test-rust venv
 	$(PYTEST) -m "not blender and not packaging" tests
 
+# --release: the dependencies maturin compiled for the extension module are reused.
 test-rust:
-	cargo test -p blurset-core --quiet
+	cargo test --release -p blurset-core --quiet
 
 test-py: venv
 	$(PYTEST) -m "not packaging" tests
