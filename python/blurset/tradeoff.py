@@ -172,6 +172,8 @@ def preset_from_args(args: argparse.Namespace) -> Preset:
         seed=args.seed,
         timeout=args.timeout,
         threads=args.threads,
+        # --max-ghost-px is the auto rows' (latents auto), checked as they use it.
+        latents_auto=True,
         max_ghost_px=args.max_ghost_px,
         resolution=pre.resolution,
         levels=[pre.level],

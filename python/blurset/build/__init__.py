@@ -10,11 +10,12 @@ under a lock at the end (`dataset`). The flags are in `cli`.
 
 from __future__ import annotations
 
+import shutil
 import threading
 import time
 from pathlib import Path
 
-from blurset import devices, layout, publish
+from blurset import _core, devices, layout, publish
 from blurset.build.dataset import (
     append_failures,
     build_lock,
@@ -25,7 +26,7 @@ from blurset.build.dataset import (
 from blurset.build.executors import run_local, run_ray
 from blurset.build.setting import frames_per_setting
 from blurset.build.unit import ObjectResult, objaverse
-from blurset.config import BuildConfig, out_dir
+from blurset.config import BuildConfig, flag, out_dir
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec, resolve_objects
 from blurset.progress import Progress
@@ -47,10 +48,10 @@ def check_out(out: Path, cfg: BuildConfig) -> None:
     layout.refuse_overlap(out, [p for p in inputs if p.exists()])
 
 
-def job_objects(cfg: BuildConfig) -> list[ObjectSpec]:
-    """This job's objects: every entry resolved, sorted by id, then its shard. The
-    partition depends on the set of objects only, so the shards of one config are
-    disjoint and together are the whole build, however the entries were listed."""
+def all_objects(cfg: BuildConfig) -> list[ObjectSpec]:
+    """Every object of the build (all shards): every entry resolved, sorted by id; with
+    demo, the demo objects are written into OUT first. Refuses test objects that are
+    not among them (ConfigError naming the option), so that fails before any render."""
     entries = list(cfg.objects)
     if cfg.demo:
         from blurset.demo import make_demo_objects
@@ -63,8 +64,30 @@ def job_objects(cfg: BuildConfig) -> list[ObjectSpec]:
         ),
         key=lambda o: o.uid,
     )
-    if cfg.shard:
-        i, n = (int(x) for x in cfg.shard.split("/"))
+    try:
+        cfg.check_test_objects([o.uid for o in objs])
+    except _core.ConfigValueError as e:
+        raise ConfigError(f"{flag(e.option)} {e.detail}") from None
+    return objs
+
+
+def check_blender(cfg: BuildConfig) -> None:
+    """`--blender` names an executable file (else every object would fail to start)."""
+    if cfg.blender is None:
+        return
+    exe = shutil.which(cfg.blender)
+    if exe is None:
+        what = "is not executable" if Path(cfg.blender).is_file() else "does not exist"
+        raise ConfigError(f"--blender {cfg.blender!r}: {what} (a Blender binary, or none: bpy)")
+
+
+def job_objects(cfg: BuildConfig, objs: list[ObjectSpec] | None = None) -> list[ObjectSpec]:
+    """This job's objects: its shard of `objs` (default: all_objects). The partition
+    depends on the set of objects only, so the shards of one config are disjoint and
+    together are the whole build, however the entries were listed."""
+    objs = all_objects(cfg) if objs is None else objs
+    if cfg.shard_index is not None:
+        i, n = cfg.shard_index
         objs = objs[i::n]
     return objs
 
@@ -91,12 +114,18 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # same shared path) write where the driver reads.
     cfg = cfg.replace(out=str(out_dir(cfg).resolve()))
     out = out_dir(cfg)
-    # Bad entries and a missing device fail before anything is written.
-    resolve_objects(list(cfg.objects), cache=objaverse(cfg))
+    # Bad entries, unknown test objects, a missing Blender or device fail before anything
+    # is written (the demo's objects, written into OUT, are checked once they are).
+    if cfg.demo:
+        resolve_objects(list(cfg.objects), cache=objaverse(cfg))
+        everything = None
+    else:
+        everything = all_objects(cfg)
+    check_blender(cfg)
     check_out(out, cfg)
     slots = devices.plan_local(cfg) if cfg.executor == "local" else []
     out.mkdir(parents=True, exist_ok=True)
-    objs = job_objects(cfg)
+    objs = job_objects(cfg, everything)
     with build_lock(out):
         check_same_options(out, cfg)
         sweep(out, objs, cfg)

@@ -111,6 +111,20 @@ build_config_methods!(fields {
         self.0.require_target().map_err(crate::error::to_pyerr)
     }
 
+    /// This job's share of the objects, `(i, N)` of `shard` (None: every object).
+    #[getter]
+    fn shard_index(&self) -> Option<(u64, u64)> {
+        self.0.shard_index()
+    }
+
+    /// ConfigValueError (option test_objects) naming the listed test objects that are
+    /// not among `uids`, every object of the build.
+    fn check_test_objects(&self, uids: Vec<String>) -> PyResult<()> {
+        self.0
+            .check_test_objects(&uids)
+            .map_err(crate::error::to_pyerr)
+    }
+
     /// The option names, in declaration order.
     #[staticmethod]
     fn options() -> Vec<&'static str> {
