@@ -93,7 +93,6 @@ def test_the_stub_types_every_option_as_the_core_gives_it() -> None:
         objects=["a.glb"],
         samples_total=64,
         sharp_samples=8,
-        gpus=[0, 1],
         gpus_per_task=0.5,
         executor="ray",
         ray_address="auto",
@@ -104,10 +103,11 @@ def test_the_stub_types_every_option_as_the_core_gives_it() -> None:
         test_objects=["a"],
         licenses="cc0-1.0",
     )
+    local = BuildConfig(gpus=[0, 1], workers=2)
     wrong = []
     for o in OPTIONS:
         hint = eval(props[o], {"list": list, "tuple": tuple})  # noqa: S307 - our own stub
-        for cfg in (BuildConfig(), demo):
+        for cfg in (BuildConfig(), demo, local):
             if not _conforms(getattr(cfg, o), hint):
                 wrong.append(f"{o}: {getattr(cfg, o)!r} is not {props[o]}")
     assert not wrong, wrong

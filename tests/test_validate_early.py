@@ -85,6 +85,8 @@ def test_an_unknown_test_object_in_toml_fails_early(capsys, tmp_path, glbs, no_r
         (["--timeout", "1e308"], "--timeout 1e308: must be a number in (0, 31536000]"),
         (["--object-timeout", "1e308"], "--object-timeout 1e308: must be a number in [0, 315"),
         (["--gpus-per-task", "1"], "--gpus-per-task 1.0: only with executor ray"),
+        (["--executor", "ray", "--gpus", "0"], "--gpus [0]: only with executor local"),
+        (["--executor", "ray", "--workers", "4"], "--workers 4: only with executor local"),
         (["--licenses", "cc-by-4"], '--licenses "cc-by-4": must be licence ids'),
         (["--licenses", "cc0-1.0,mit-ish"], '--licenses "cc0-1.0,mit-ish": must be licence ids'),
         (["--gpus", "0,0"], "--gpus [0, 0]: must be distinct integers"),

@@ -8,7 +8,7 @@
 use super::sampling::{
     BlurBudget, BlurMethod, LatentPositions, LatentSampling, SamplingConfig, TrajectoryAnchor,
 };
-use super::spec::{check, specs, Raw, Spec};
+use super::spec::{check, specs, OptionValue, Raw, Spec};
 use super::spec::{config_error, convert};
 use super::weights::Guards;
 use crate::error::Result;
@@ -230,6 +230,29 @@ impl BuildConfig {
                 return Err(config_error(
                     "shard",
                     format!("{s:?}: must be i/N with 0 ≤ i < N"),
+                ));
+            }
+        }
+        if self.executor == "ray" {
+            // Ray places the tasks: it hands each its GPUs and runs as many as fit.
+            if let Some(g) = &self.gpus {
+                return Err(config_error(
+                    "gpus",
+                    format!(
+                        "{}: only with executor local (Ray gives each task its GPUs: \
+                         gpus_per_task)",
+                        g.to_raw()
+                    ),
+                ));
+            }
+            if self.workers != 1 {
+                return Err(config_error(
+                    "workers",
+                    format!(
+                        "{}: only with executor local (Ray runs as many tasks as the \
+                         cluster holds)",
+                        self.workers
+                    ),
                 ));
             }
         }
@@ -594,6 +617,10 @@ mod tests {
         assert!(err(&[("object_timeout", Raw::Float(1e308))]).starts_with("object_timeout"));
         assert!(err(&[("gpus_per_task", Raw::Float(1.0))])
             .starts_with("gpus_per_task 1.0: only with executor ray"));
+        let ray = ("executor", Raw::Str("ray".into()));
+        assert!(err(&[ray.clone(), ("gpus", Raw::List(vec![Raw::Int(0)]))])
+            .starts_with("gpus [0]: only with executor local"));
+        assert!(err(&[ray, ("workers", Raw::Int(4))]).starts_with("workers 4: only with"));
         assert!(err(&[("phi0_deg", Raw::Float(5.0))]).contains("pole"));
         assert!(err(&[("ray_address", Raw::Str("auto".into()))]).contains("executor ray"));
         assert!(err(&[("background", Raw::List(vec![Raw::Int(1)]))]).starts_with("background [1]"));
