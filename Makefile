@@ -8,7 +8,7 @@ RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pypro
 
 PYTEST := $(PY) -m pytest -q
 
-.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint typecheck fmt bench bench-gpu clean
+.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint typecheck cli-reference fmt bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -54,6 +54,10 @@ lint: venv
 	$(VENV)/bin/ruff format --check python tests blender_scripts bench
 	$(PY) -m mypy.stubtest blurset._core --allowlist stubtest_allowlist.txt
 	$(MAKE) typecheck
+
+# CLI.md: every subcommand's help (tests/test_cli_help.py keeps it equal to the parsers).
+cli-reference: venv
+	$(PY) -c "from blurset.cli import reference; open('CLI.md', 'w').write(reference())"
 
 # mypy on python/blurset ([tool.mypy] in pyproject.toml): zero errors.
 typecheck: venv

@@ -109,3 +109,12 @@ def test_build_help_defaults_come_from_the_core() -> None:
 def test_stats_input_and_out_have_distinct_metavars() -> None:
     usage = SUBPARSERS["stats"].format_usage()
     assert "BUILD" in usage and "--out DIR" in usage
+
+
+def test_the_cli_reference_is_the_parsers_help() -> None:
+    """CLI.md is generated from the parsers (`make cli-reference`): a flag, help text or
+    default changed without regenerating it fails here."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "CLI.md"
+    assert path.read_text() == cli.reference(), "CLI.md is stale: run make cli-reference"

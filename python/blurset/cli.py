@@ -103,6 +103,22 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def reference(width: int = 100) -> str:
+    """The CLI reference (CLI.md): every subcommand's help, as `blurset CMD --help`
+    prints it at `width` columns. `make cli-reference` writes it; a test keeps it equal."""
+    parser = make_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    parsers = {"blurset": parser, **{f"blurset {n}": p for n, p in sub.choices.items()}}
+    out = [
+        "# blurset command-line reference\n\n",
+        "Generated from the parsers (`make cli-reference`); build defaults are the core's.\n",
+    ]
+    for name, p in parsers.items():
+        p.formatter_class = lambda prog: HelpFormatter(prog, width=width)
+        out.append(f"\n## `{name}`\n\n```text\n{p.format_help().rstrip()}\n```\n")
+    return "".join(out)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
     from blurset import stop
