@@ -132,3 +132,22 @@ def test_help_states_the_core_default_of_every_flagged_option() -> None:
 
 def _takes_value(option: str) -> bool:
     return not isinstance(getattr(BuildConfig(), option), bool)
+
+
+def test_the_readme_synopsis_names_real_flags_with_the_core_defaults() -> None:
+    """README's `blurset build` synopsis: every flag it names is a flag of the parser, and
+    a number it shows as the value of an option that has one is the core's default."""
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    start = readme.index("```sh\nblurset build --objects")
+    synopsis = readme[start : readme.index("```", start + 5)]
+    flags = {s for a in _build_parser()._actions for s in a.option_strings}
+    named = re.findall(r"(--[a-z][a-z-]*)", synopsis)
+    assert named and not [f for f in named if f not in flags], named
+    dest = {s: a.dest for a in _build_parser()._actions for s in a.option_strings}
+    core = BuildConfig()
+    shown = re.findall(r"\[(--[a-z-]+) (\d+)[\]|]", synopsis)
+    assert shown
+    for f, value in shown:
+        default = getattr(core, dest[f])
+        if default is not None:  # a None default shows an example (`--gpus-per-task 1`)
+            assert default == int(value), (f, value, default)
