@@ -8,7 +8,7 @@ RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pypro
 
 PYTEST := $(PY) -m pytest -q
 
-.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint fmt schemas docs bench bench-gpu clean
+.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint typecheck fmt schemas docs bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -37,8 +37,9 @@ test: test-rust test-py
 test-fast: test-rust venv
 	$(PYTEST) -m "not blender and not packaging" tests
 
+# --release: the dependencies maturin compiled for the extension module are reused.
 test-rust:
-	cargo test -p blurset-core --quiet
+	cargo test --release -p blurset-core --quiet
 
 test-py: venv
 	$(PYTEST) -m "not packaging" tests
@@ -52,6 +53,11 @@ lint: venv
 	$(VENV)/bin/ruff check python tests blender_scripts bench
 	$(VENV)/bin/ruff format --check python tests blender_scripts bench
 	$(PY) -m mypy.stubtest blurset._core --allowlist stubtest_allowlist.txt
+	$(MAKE) typecheck
+
+# mypy on python/blurset ([tool.mypy] in pyproject.toml): zero errors.
+typecheck: venv
+	$(PY) -m mypy
 
 fmt:
 	cargo fmt --all

@@ -49,7 +49,7 @@ def test_device_options_and_ray_gpus(tmp_path):
     auto = make_config({}, {"demo": True, "out": tmp_path})
     assert (auto.device, auto.gpus) == ("auto", None)
     assert devices.ray_gpus_per_task(auto, 8) == 1.0 and devices.ray_gpus_per_task(auto, 0) == 0
-    half = make_config({"gpus_per_task": 0.5}, {"demo": True, "out": tmp_path})
+    half = make_config({"gpus_per_task": 0.5, "executor": "ray"}, {"demo": True, "out": tmp_path})
     assert devices.ray_gpus_per_task(half, 8) == 0.5
     for bad in ({"gpus": "0,x"}, {"gpus": "1,1"}, {"device": "tpu"}, {"gpus_per_task": -1}):
         with pytest.raises(ConfigError):

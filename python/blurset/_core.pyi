@@ -43,6 +43,12 @@ class BuildConfig:
         """A copy with these options replaced, validated."""
     def require_target(self) -> None:
         """ConfigValueError unless the config names an output and objects (or demo)."""
+    @property
+    def shard_index(self) -> tuple[int, int] | None:
+        """This job's share of the objects, `(i, N)` of `shard` (None: every object)."""
+    def check_test_objects(self, uids: list[str]) -> None:
+        """ConfigValueError (option test_objects) naming the listed test objects that are
+        not among `uids`, every object of the build."""
     @staticmethod
     def options() -> list[str]:
         """The option names, in declaration order."""
@@ -148,7 +154,7 @@ class BuildConfig:
     @property
     def near_floor(self) -> float: ...
     @property
-    def background(self) -> list[float]: ...
+    def background(self) -> tuple[float, float, float]: ...
     @property
     def write_linear(self) -> bool: ...
     @property

@@ -55,7 +55,9 @@ def from_asset(asset: Any) -> dict[str, Any]:
     if not isinstance(asset, dict):
         return {}
     out: dict[str, Any] = {}
-    extras = asset.get("extras") if isinstance(asset.get("extras"), dict) else {}
+    extras = asset.get("extras")
+    if not isinstance(extras, dict):
+        extras = {}
     if title := _text(extras.get("title")):
         out["title"] = title
     if author := _text(extras.get("author")):
@@ -78,7 +80,9 @@ def from_objaverse_annotation(ann: Any) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if title := _text(ann.get("name")):
         out["title"] = title
-    user = ann.get("user") if isinstance(ann.get("user"), dict) else {}
+    user = ann.get("user")
+    if not isinstance(user, dict):
+        user = {}
     if author := _text(user.get("displayName")) or _text(user.get("username")):
         out["author"] = author
     if url := _text(user.get("profileUrl")):

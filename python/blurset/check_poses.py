@@ -339,11 +339,11 @@ def _camera_poses(rec, image_ids):
         pts = [rec.point3D(p.point3D_id).xyz for p in image.points2D if p.has_point3D()]
         z = (np.asarray(pts) @ r.T + tvec)[:, 2] if pts else np.array([np.nan])
         depths.append(float(np.median(z)))
-    depths = np.asarray(depths)
-    if not np.isfinite(depths).any():
-        depths[:] = 1.0
-    depths = np.where(np.isfinite(depths), depths, np.nanmedian(depths))
-    return np.asarray(rots), np.asarray(centers), depths
+    depth = np.asarray(depths)
+    if not np.isfinite(depth).any():
+        depth[:] = 1.0
+    depth = np.where(np.isfinite(depth), depth, np.nanmedian(depth))
+    return np.asarray(rots), np.asarray(centers), depth
 
 
 def _reproject(proj, x, xy) -> float:
@@ -381,8 +381,8 @@ def _track_residuals(rec, image_ids, rot_ours, c_ours):
         r_w2c = rot_ours[index[image_id]].T
         ours[image_id] = k_mat @ np.hstack([r_w2c, (-r_w2c @ c_ours[index[image_id]])[:, None]])
         theirs[image_id] = k_mat @ image.cam_from_world().matrix()
-    res_ours = [[] for _ in image_ids]
-    res_theirs = [[] for _ in image_ids]
+    res_ours: list[list[float]] = [[] for _ in image_ids]
+    res_theirs: list[list[float]] = [[] for _ in image_ids]
     for point_id in rec.point3D_ids():
         point = rec.point3D(point_id)
         obs = [
@@ -611,7 +611,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--level",
         default="sharp",
-        help="level directory of a build setting to check: sharp, blur_<l> (default sharp; a "
+        help="level directory of a build setting to check: sharp, blur_<l> (default: sharp; a "
         "blur level is compared with its mean latent poses from meta.json); `all` checks "
         "every level and prints how blur degrades SfM (the exit code follows sharp)",
     )
@@ -619,11 +619,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--factor",
         type=int,
         default=None,
-        help="use images_<F>/ and divide the focal length by F, as the LLFF loaders do",
+        help="use images_<F>/ and divide the focal length by F, as the LLFF loaders do "
+        "(default: images/)",
     )
-    parser.add_argument("--json", type=Path, default=None, help="write the JSON report here")
     parser.add_argument(
-        "--workdir", type=Path, default=None, help="keep COLMAP's database and model here"
+        "--json", type=Path, default=None, help="write the JSON report here (default: none)"
+    )
+    parser.add_argument(
+        "--workdir",
+        type=Path,
+        default=None,
+        help="keep COLMAP's database and model here (default: a temporary directory)",
     )
     parser.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
 

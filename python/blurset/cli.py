@@ -7,6 +7,7 @@ import argparse
 import importlib
 import os
 import sys
+from typing import Any
 
 from blurset.exceptions import BlursetError
 
@@ -44,8 +45,42 @@ COMMANDS = {
 }
 
 
+# What `blurset --help` opens with.
+DESCRIPTION = (
+    "Make multi-view datasets with realistic degradations for generalizable NeRF research: "
+    "motion blur rendered with Blender from GLB objects (Objaverse-Blur style), sensor "
+    "noise (LLFF-N style), and the tools to check, export and describe them."
+)
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Help that states the default of every option with a value: argparse's own default
+    is appended as `(default: X)` unless the text already says it (an option whose default
+    argparse does not hold, such as a build option taken from the core, says it in its
+    help). Flags (on or off) and positionals have none to state."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if (
+            not action.option_strings
+            or action.nargs == 0
+            or action.default in (None, argparse.SUPPRESS)
+            or "default" in text
+        ):
+            return text
+        d = action.default
+        shown = " ".join(map(str, d)) if isinstance(d, list | tuple) else str(d)
+        return f"{text} (default: {shown.replace('%', '%%')})"
+
+
+def new_parser(**kwargs: Any) -> argparse.ArgumentParser:
+    """A parser of blurset's kind: no abbreviated options (`--resol` is not
+    `--resolution`), help that shows the defaults."""
+    return argparse.ArgumentParser(allow_abbrev=False, formatter_class=HelpFormatter, **kwargs)
+
+
 def make_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="blurset", description=__doc__.split("\n")[0])
+    parser = new_parser(prog="blurset", description=DESCRIPTION)
     from blurset import __version__
 
     parser.add_argument("--version", action="version", version=f"blurset {__version__}")
@@ -54,7 +89,13 @@ def make_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     for name, (module, help_) in COMMANDS.items():
-        p = sub.add_parser(name, help=help_, description=help_)
+        p = sub.add_parser(
+            name,
+            help=help_,
+            description=help_,
+            allow_abbrev=False,
+            formatter_class=HelpFormatter,
+        )
         p.set_defaults(_module=module)
         # Also after the subcommand; SUPPRESS keeps it from resetting the top-level flag.
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="traceback")

@@ -29,8 +29,6 @@ DEMO_DEFAULTS: dict[str, Any] = {
 OPTIONS: tuple[str, ...] = tuple(BuildConfig.options())
 # Other spellings of option names in TOML files (the issue's name → the option).
 ALIASES = {"keep_linear": "write_linear", "test_view_stride": "view_stride"}
-# Options that only mean something with `--latents auto` / the average method.
-AUTO_ONLY = ("latents_max", "max_ghost_px")
 
 
 # Options whose flag is not their name.
@@ -207,7 +205,10 @@ def make_config(
     file_values: dict[str, Any], flag_values: dict[str, Any], *, config_path: Path | None = None
 ) -> BuildConfig:
     """Combine the layers, validate in the core, and name the flag or file key of a bad value."""
-    demo = bool(flag_values.get("demo") or file_values.get("demo"))
+    # Only true is the demo: another value (`demo = "no"`) goes to the core, which refuses it.
+    demo = flag_values.get("demo") is True or (
+        flag_values.get("demo") is None and file_values.get("demo") is True
+    )
     origin: dict[str, str] = {}
     values: dict[str, Any] = dict(DEMO_DEFAULTS) if demo else {}
     in_file = f"{config_path}: " if config_path else "--config: "
@@ -224,29 +225,10 @@ def make_config(
         origin["latents_auto"] = "--latents"
     given.update(flags)
     values.update(given)
-    values["demo"] = demo
-    if given.get("test_settings") is not None and (
-        given.get("test_objects") is not None or "test_fraction" in given
-    ):
-        where = origin.get("test_settings", "--test-settings")
-        raise ConfigError(
-            f"{where}: give either N random test settings or --test-objects, not both"
-        )
+    values.setdefault("demo", False)
     if isinstance(values.get("device"), str):  # CUDA, Cuda … name the same backend
         values["device"] = values["device"].strip().lower()
-    for name in AUTO_ONLY:
-        if name in given and not values.get("latents_auto"):
-            raise ConfigError(f"{flag(name)}: only used with --latents auto")
-    if values.get("blur_method") == "motion_blur":
-        for name, what in (
-            ("latents_auto", "--latents auto"),
-            ("latent_positions", "--latent-positions"),
-        ):
-            if given.get(name) not in (None, False):
-                raise ConfigError(
-                    f"{what}: the motion_blur method has no latent frames (one render per "
-                    "blurry image); use --blur-method average"
-                )
+    # Every rule between options is the core's (BuildConfig's validator).
     try:
         cfg = BuildConfig(**{k: _plain(v) for k, v in values.items()})
         cfg.require_target()
@@ -254,6 +236,13 @@ def make_config(
         where = origin.get(e.option, flag(e.option))
         raise ConfigError(f"{where} {e.detail}") from None
     return cfg
+
+
+def out_dir(cfg: BuildConfig) -> Path:
+    """The output directory of a build's config (`require_target` has checked it)."""
+    if cfg.out is None:
+        raise ConfigError("--out is required: an output directory")
+    return Path(cfg.out)
 
 
 def from_flags(names: dict[str, str] | None = None, **values: Any) -> BuildConfig:

@@ -56,7 +56,9 @@ def patch_texture(rng: np.random.Generator, size: int = TEXTURE_SIZE) -> Image.I
     """
     # Smooth background: bilinear upsampling of a coarse random colour grid.
     coarse = rng.uniform(0.15, 0.85, size=(6, 6, 3)).astype(np.float32)
-    bg = Image.fromarray((coarse * 255).astype(np.uint8)).resize((size, size), Image.BILINEAR)
+    bg = Image.fromarray((coarse * 255).astype(np.uint8)).resize(
+        (size, size), Image.Resampling.BILINEAR
+    )
     img = bg.copy()
     draw = ImageDraw.Draw(img)
     for n, (lo, hi) in ((40, (40, 120)), (160, (12, 40)), (500, (3, 12))):
@@ -114,9 +116,12 @@ def _box(dims=(1.0, 0.5, 0.7)):
         ((0, 0, -1), (-1, 0, 0), (0, 1, 0)),
     ]
     half = np.array([hx, hy, hz])
-    verts, norms, uvs, faces = [], [], [], []
-    for k, (n, u, v) in enumerate(faces_def):
-        n, u, v = np.array(n, float), np.array(u, float), np.array(v, float)
+    verts: list[np.ndarray] = []
+    norms: list[np.ndarray] = []
+    uvs: list[tuple[float, float]] = []
+    faces: list[tuple[int, int, int]] = []
+    for k, axes in enumerate(faces_def):
+        n, u, v = (np.array(a, float) for a in axes)
         cu, cv = (k % 3) / 3.0, (k // 3) / 2.0  # 3 x 2 atlas
         base = len(verts)
         for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1)):

@@ -45,7 +45,9 @@ GEONERF_DIR = "images_4"  # what GeoNeRF's LLFF dataset reads
 
 def add_arguments(p) -> None:
     p.add_argument("build", type=Path, help="a build directory (dataset.json, splits.json)")
-    p.add_argument("--out", type=Path, required=True, help="the export root (outside the build)")
+    p.add_argument(
+        "--out", type=Path, required=True, help="the export root (outside the build; required)"
+    )
     p.add_argument(
         "--for",
         dest="target",
@@ -56,7 +58,11 @@ def add_arguments(p) -> None:
         "OUT/geonerf/test/<scene>__v<view>/ (one sharp target, 7 nearest degraded sources)",
     )
     p.add_argument("--levels", help="levels to export, e.g. blur_4,sharp (default: all)")
-    p.add_argument("--noise", type=Path, help="a `blurset noise BUILD` output: export its gains")
+    p.add_argument(
+        "--noise",
+        type=Path,
+        help="a `blurset noise BUILD` output: export its gains (default: none)",
+    )
     p.add_argument("--gains", nargs="+", help="gains of --noise to export (default: all)")
     p.add_argument("--copy", action="store_true", help="copy the files instead of symlinking")
     p.add_argument(
@@ -157,7 +163,8 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
     sources: dict[str, Path] = {}
     scenes: dict[str, str] = {}
     views: dict[str, list[int]] = {}
-    train_list, test_list = [], []
+    train_list: list[str] = []
+    test_list: list[str] = []
     for name in state.complete:
         setting = build / name
         if problem := layout.setting_problem(setting):

@@ -66,7 +66,10 @@ def mean_poses(setting: Path, level: str) -> list[list[list[float]]] | None:
     """The mean latent pose (OpenGL c2w rows) of every view of blur level `level`
     (`blur_<l>`) from the setting's meta.json; None for a meta.json from before mean
     poses. InputError naming the file when it lacks the level or a pose is not finite."""
-    return _core.read_mean_poses(Path(setting) / "meta.json", _core.parse_level_dir(level))
+    number = _core.parse_level_dir(level)
+    if number is None:
+        raise ValueError(f"{level!r} is not a level directory (sharp or blur_<l>)")
+    return _core.read_mean_poses(Path(setting) / "meta.json", number)
 
 
 def gain_name(g: float) -> str:

@@ -49,7 +49,7 @@ def hf_base() -> str:
 
 def default_dir() -> Path:
     try:
-        import objaverse
+        import objaverse  # type: ignore[import-untyped]  # the package ships no types
 
         return Path(objaverse.BASE_PATH)
     except ImportError:

@@ -63,18 +63,32 @@ def add_arguments(parser) -> None:
         help="PNG to write (default: SETTING/preview.png, BUILD/contact_sheet.png)",
     )
     parser.add_argument(
-        "--noise", type=Path, default=None, help="output of `blurset noise BUILD` to show beside"
+        "--noise",
+        type=Path,
+        default=None,
+        help="output of `blurset noise BUILD` to show beside (default: none)",
     )
-    parser.add_argument("--gain", default=None, help="gain of --noise to show, e.g. 4")
     parser.add_argument(
-        "--rows", type=int, default=4, help="views per setting figure, test views first (4)"
+        "--gain",
+        default=None,
+        help="gain of --noise to show, e.g. 4 (required with --noise; default: none)",
+    )
+    parser.add_argument(
+        "--rows", type=int, default=4, help="views per setting figure, test views first"
     )
     parser.add_argument(
         "--tile", type=int, default=None, help="thumbnail width in px (default: 128..256)"
     )
-    parser.add_argument("--columns", type=int, default=None, help="contact sheet columns")
     parser.add_argument(
-        "--force", action="store_true", help="replace an image at --out that preview did not write"
+        "--columns",
+        type=int,
+        default=None,
+        help="contact sheet columns (default: ceil(sqrt(settings)), about square)",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an image at --out that preview did not write (default: refuse)",
     )
 
 

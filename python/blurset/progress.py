@@ -19,9 +19,11 @@ class Progress:
         self._lock = threading.Lock()
         tty = sys.stderr.isatty()
         self._lines = enabled and not tty
+        # The bar's total, kept here (tqdm types its total as optional).
+        self._total = settings * frames_per_setting
         self._bar = (
             tqdm(
-                total=settings * frames_per_setting,
+                total=self._total,
                 unit="frame",
                 dynamic_ncols=True,
                 file=sys.stderr,
@@ -63,7 +65,8 @@ class Progress:
         with self._lock:
             self.settings_done += settings
             if self._bar is not None:
-                self._bar.total = max(0, self._bar.total - settings * self.fps)
+                self._total = max(0, self._total - settings * self.fps)
+                self._bar.total = self._total
                 self._bar.refresh()
             self._post()
 
@@ -71,7 +74,8 @@ class Progress:
         with self._lock:
             self.failed += 1
             if self._bar is not None and settings_left > 0:
-                self._bar.total = max(self._bar.n, self._bar.total - settings_left * self.fps)
+                self._total = max(int(self._bar.n), self._total - settings_left * self.fps)
+                self._bar.total = self._total
             self._post()
 
     def write(self, msg: str) -> None:

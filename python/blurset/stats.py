@@ -89,11 +89,14 @@ STATS = outputs.OutputKind.STATS
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("build", type=Path, metavar="OUT", help="a build directory (may be running)")
+    p.add_argument("build", type=Path, metavar="BUILD", help="a build directory (may be running)")
     p.add_argument(
-        "--out", type=Path, help="where figures, stats.json, CSV and report.md go (OUT/stats)"
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help="where figures, stats.json, CSV and report.md go (default: BUILD/stats)",
     )
-    p.add_argument("--bins", type=int, default=40, help="most histogram bins per panel (40)")
+    p.add_argument("--bins", type=int, default=40, help="most histogram bins per panel")
     p.add_argument("--quiet", action="store_true", help="print only where the report is")
 
 

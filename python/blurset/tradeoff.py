@@ -94,30 +94,36 @@ class Candidate:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--object", required=True, type=Path, help="a GLB file")
-    p.add_argument("--out", required=True, type=Path, help="output directory")
-    p.add_argument("--quick", action="store_true", help="small grid, 96 px: a few minutes")
-    p.add_argument("--level", type=int, help="blur level of the measured image (4)")
-    p.add_argument("--view", type=int, default=0, help="view index in the setting (0)")
-    p.add_argument("--resolution", type=int, help="image side, px (96 quick, 256 full)")
+    p.add_argument("--object", required=True, type=Path, help="a GLB file (required)")
+    p.add_argument("--out", required=True, type=Path, help="output directory (required)")
+    p.add_argument("--quick", action="store_true", help="small grid, 96 px: under a minute")
+    p.add_argument("--level", type=int, help="blur level of the measured image (default: 4)")
+    p.add_argument("--view", type=int, default=0, help="view index in the setting")
     p.add_argument(
-        "--budgets", type=str, help="samples per blurry image, e.g. 16,64 (the preset's)"
+        "--resolution", type=int, help="image side, px (default: 96 with --quick, else 256)"
     )
-    p.add_argument("--latents", type=str, help="latent counts, e.g. 2,8,32 (the preset's)")
     p.add_argument(
-        "--reference", type=str, help="reference M,S: M stratified frames of S samples each"
+        "--budgets", type=str, help="samples per blurry image, e.g. 16,64 (default: the preset's)"
     )
-    p.add_argument("--max-ghost-px", type=float, default=1.0, help="for the auto rows (1)")
+    p.add_argument("--latents", type=str, help="latent counts, e.g. 2,8,32 (default: the preset's)")
+    p.add_argument(
+        "--reference",
+        type=str,
+        help="reference M,S: M stratified frames of S samples each (default: the preset's)",
+    )
+    p.add_argument("--max-ghost-px", type=float, default=1.0, help="for the auto rows")
     p.add_argument(
         "--latent-sampling",
         choices=["subsets", "independent"],
         default="subsets",
-        help="how the candidates' latent frames share samples (subsets)",
+        help="how the candidates' latent frames share samples",
     )
-    p.add_argument("--seed", type=int, default=0, help="setting seed (0)")
-    p.add_argument("--theta0-deg", type=float, default=0.0, help="base azimuth (0)")
-    p.add_argument("--threads", type=int, default=0, help="Cycles threads (0 = all cores)")
-    p.add_argument("--blender", help="a Blender binary instead of the bpy module")
+    p.add_argument("--seed", type=int, default=0, help="setting seed")
+    p.add_argument("--theta0-deg", type=float, default=0.0, help="base azimuth, degrees")
+    p.add_argument("--threads", type=int, default=0, help="Cycles threads (0: all cores)")
+    p.add_argument(
+        "--blender", help="a Blender binary instead of the bpy module (default: the bpy module)"
+    )
     p.add_argument("--timeout", type=float, default=1800.0, help="worker reply timeout, s")
     p.add_argument("--quiet", action="store_true", help="no per-candidate lines")
 
@@ -146,12 +152,14 @@ def preset_from_args(args: argparse.Namespace) -> Preset:
     ref = _ints(args.reference, "--reference", "latents")
     if ref is not None and len(ref) != 2:
         raise ConfigError(f"--reference: expected M,S (frames, samples), got {args.reference!r}")
+    reference = base.reference
     if ref is not None:
         from_flags(samples=ref[1])
+        reference = (ref[0], ref[1])
     pre = Preset(
         resolution=args.resolution or base.resolution,
         level=args.level or base.level,
-        reference=ref or base.reference,  # type: ignore[arg-type]
+        reference=reference,
         budgets=_ints(args.budgets, "--budgets", "samples_total") or base.budgets,
         latents=_ints(args.latents, "--latents", "latents") or base.latents,
         samplings=base.samplings,
@@ -164,6 +172,8 @@ def preset_from_args(args: argparse.Namespace) -> Preset:
         seed=args.seed,
         timeout=args.timeout,
         threads=args.threads,
+        # --max-ghost-px is the auto rows' (latents auto), checked as they use it.
+        latents_auto=True,
         max_ghost_px=args.max_ghost_px,
         resolution=pre.resolution,
         levels=[pre.level],
@@ -178,7 +188,7 @@ def preset_from_args(args: argparse.Namespace) -> Preset:
 
 
 def candidates(pre: Preset) -> list[Candidate]:
-    out = []
+    out: list[Candidate] = []
     for s in pre.budgets:
         for sampling in pre.samplings:
             out.extend(Candidate("average", sampling, m, s) for m in pre.latents)
@@ -371,7 +381,7 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         fov = ref_cfg.fov_deg
 
         def psnr_of(a: Any, b: Any) -> float:
-            return float(_core.image_error(a, b, background=tuple(ref_cfg.background)).psnr)
+            return float(_core.image_error(a, b, background=ref_cfg.background).psnr)
 
         converged: dict[tuple, Any] = {}  # the same positions, r_samples, other seeds
         sharp_at: dict[int, float] = {}  # sharp_render_psnr per sharp budget
@@ -382,7 +392,7 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
             cfg = _config(pre, args.view, c, args.max_ghost_px, scheme)
             frames, lp = plan_level(cfg)
             mean, t = _render_image(w, frames, lp, pre.resolution, cfg.fov_deg)
-            err = _core.image_error(mean, ref, background=tuple(cfg.background))
+            err = _core.image_error(mean, ref, background=cfg.background)
             key = (c.method, tuple(f["t"] for f in lp["latent_frames"]))
             if key not in converged:
                 c_ref = dataclasses.replace(c, samples_total=r_samples)

@@ -265,7 +265,9 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
     if dataset.get("provisional"):
         rep.note("dataset.json", "provisional: the build has not finished (counts not compared)")
     elif dataset:
-        counts = dataset.get("counts") if isinstance(dataset.get("counts"), dict) else {}
+        counts = dataset.get("counts")
+        if not isinstance(counts, dict):
+            counts = {}
         on_disk = {"settings": len(complete), "images": n_images, "objects": len(uids)}
         for key, have in on_disk.items():
             if counts.get(key) != have:
@@ -286,9 +288,9 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
             rep.bad("dataset.json", f"settings: {what}")
     splits = _read_json(root, "splits.json", rep)
     if isinstance(splits, dict):
-        names = {s.name for s in complete}
+        settings_on_disk = {s.name for s in complete}
         for part in ("train", "test"):
-            missing = [s for s in splits.get(part) or [] if s not in names]
+            missing = [s for s in splits.get(part) or [] if s not in settings_on_disk]
             if missing:
                 rep.bad(
                     "splits.json", f"{part} names settings not on disk: {', '.join(missing[:5])}"

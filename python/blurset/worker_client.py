@@ -22,7 +22,7 @@ import time
 import weakref
 from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, NoReturn
 
 from blurset import _core
 from blurset.exceptions import BlursetError
@@ -240,7 +240,7 @@ class Worker:
         except (BrokenPipeError, OSError):
             self._crashed()
 
-    def _crashed(self) -> None:
+    def _crashed(self) -> NoReturn:
         code = self._proc.wait() if self._proc is not None else None
         tail = " | ".join(self.stderr_tail())
         self._discard()
@@ -333,9 +333,11 @@ class Worker:
         if self.workdir is not None:
             self.workdir.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(prefix="blurset-qa-", dir=self.workdir) as d:
-            frames = [
-                {"c2w": c2w, "seed": k, "out": Path(d) / f"qa_{k}.exr"}
-                for k, c2w in enumerate(_core.object_qa_cameras(bbox_dims))
+            cameras = _core.object_qa_cameras(bbox_dims)
+            outs = [Path(d) / f"qa_{k}.exr" for k in range(len(cameras))]
+            frames: list[dict[str, Any]] = [
+                {"c2w": c2w, "seed": k, "out": out}
+                for k, (c2w, out) in enumerate(zip(cameras, outs, strict=True))
             ]
             self.render(
                 frames,
@@ -343,7 +345,7 @@ class Worker:
                 fov_deg=_core.OBJECT_QA_FOV_DEG,
                 samples=_core.OBJECT_QA_SAMPLES,
             )
-            return [_core.frame_qa(_core.read_exr(f["out"])) for f in frames]
+            return [_core.frame_qa(_core.read_exr(out)) for out in outs]
 
     def render(
         self,

@@ -10,11 +10,12 @@ under a lock at the end (`dataset`). The flags are in `cli`.
 
 from __future__ import annotations
 
+import shutil
 import threading
 import time
 from pathlib import Path
 
-from blurset import devices, layout, outputs, publish
+from blurset import _core, devices, layout, outputs, publish
 from blurset.build.dataset import (
     append_failures,
     build_lock,
@@ -25,7 +26,8 @@ from blurset.build.dataset import (
 from blurset.build.executors import run_local, run_ray
 from blurset.build.setting import frames_per_setting
 from blurset.build.unit import ObjectResult, objaverse
-from blurset.config import BuildConfig
+from blurset.config import BuildConfig, flag, out_dir
+from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec, resolve_objects
 from blurset.progress import Progress
 
@@ -40,16 +42,15 @@ def check_out(out: Path, cfg: BuildConfig) -> None:
     layout.refuse_overlap(out, [p for p in inputs if p.exists()])
 
 
-def job_objects(cfg: BuildConfig) -> tuple[list[ObjectSpec], list[ObjectSpec]]:
-    """Every object of the build (all entries resolved, sorted by id) and this job's
-    share of them, its shard. The partition depends on the set of objects only, so the
-    shards of one config are disjoint and together are the whole build, however the
-    entries were listed."""
+def all_objects(cfg: BuildConfig) -> list[ObjectSpec]:
+    """Every object of the build (all shards): every entry resolved, sorted by id; with
+    demo, the demo objects are written into OUT first. Refuses test objects that are
+    not among them (ConfigError naming the option), so that fails before any render."""
     entries = list(cfg.objects)
     if cfg.demo:
         from blurset.demo import make_demo_objects
 
-        demo_dir = Path(cfg.out) / ".demo_objects"
+        demo_dir = out_dir(cfg) / ".demo_objects"
         entries += [str(p) for p in make_demo_objects(demo_dir, seed=cfg.seed)]
     objs = sorted(
         resolve_objects(
@@ -57,10 +58,32 @@ def job_objects(cfg: BuildConfig) -> tuple[list[ObjectSpec], list[ObjectSpec]]:
         ),
         key=lambda o: o.uid,
     )
-    if cfg.shard:
-        i, n = (int(x) for x in cfg.shard.split("/"))
-        return objs, objs[i::n]
-    return objs, objs
+    try:
+        cfg.check_test_objects([o.uid for o in objs])
+    except _core.ConfigValueError as e:
+        raise ConfigError(f"{flag(e.option)} {e.detail}") from None
+    return objs
+
+
+def check_blender(cfg: BuildConfig) -> None:
+    """`--blender` names an executable file (else every object would fail to start)."""
+    if cfg.blender is None:
+        return
+    exe = shutil.which(cfg.blender)
+    if exe is None:
+        what = "is not executable" if Path(cfg.blender).is_file() else "does not exist"
+        raise ConfigError(f"--blender {cfg.blender!r}: {what} (a Blender binary, or none: bpy)")
+
+
+def job_objects(cfg: BuildConfig, objs: list[ObjectSpec] | None = None) -> list[ObjectSpec]:
+    """This job's objects: its shard of `objs` (default: all_objects). The partition
+    depends on the set of objects only, so the shards of one config are disjoint and
+    together are the whole build, however the entries were listed."""
+    objs = all_objects(cfg) if objs is None else objs
+    if cfg.shard_index is not None:
+        i, n = cfg.shard_index
+        objs = objs[i::n]
+    return objs
 
 
 def _report_missing(objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress) -> None:
@@ -83,14 +106,22 @@ def _report_missing(objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress) ->
 def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # Absolute, so Ray workers (another working directory, another machine with the
     # same shared path) write where the driver reads.
-    cfg = cfg.replace(out=str(Path(cfg.out).resolve()))
-    out = Path(cfg.out)
-    # Bad entries and a missing device fail before anything is written.
-    resolve_objects(list(cfg.objects), cache=objaverse(cfg))
+    cfg = cfg.replace(out=str(out_dir(cfg).resolve()))
+    out = out_dir(cfg)
+    # Bad entries, unknown test objects, a missing Blender or device fail before anything
+    # is written (the demo's objects, written into OUT, are checked once they are).
+    if cfg.demo:
+        resolve_objects(list(cfg.objects), cache=objaverse(cfg))
+        everything = None
+    else:
+        everything = all_objects(cfg)
+    check_blender(cfg)
     check_out(out, cfg)
     slots = devices.plan_local(cfg) if cfg.executor == "local" else []
     out.mkdir(parents=True, exist_ok=True)
-    every, objs = job_objects(cfg)
+    # Every object of the build (all shards), for the sweep's one-file-one-set rule.
+    every = everything if everything is not None else all_objects(cfg)
+    objs = job_objects(cfg, every)
     n_settings = len(objs) * len(cfg.theta0s)
     prog = Progress(n_settings, frames_per_setting=frames_per_setting(cfg), enabled=progress)
     with build_lock(out):

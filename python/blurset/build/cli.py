@@ -7,67 +7,126 @@ import sys
 from pathlib import Path
 
 from blurset.config import (
+    DEMO_DEFAULTS,
     BuildConfig,
     load_toml,
     make_config,
+    out_dir,
     parse_downsample,
     parse_levels,
     split_test_objects,
 )
 
+# Defaults the core holds as none, in words (the others are the core's values).
+NONE_DEFAULTS = {
+    "samples_total": "--samples × the most latent frames of an image",
+    "sharp_samples": "the blurry image's budget S",
+    "gpus": "all",
+    "gpus_per_task": "1 with a GPU device, else 0",
+    "ray_address": "a local Ray",
+    "shard": "every object",
+    "objaverse_dir": "the objaverse package's, ~/.objaverse",
+    "objaverse_count": "every object listed",
+    "blender": "the bpy module",
+    "licenses": "every licence",
+    "test_settings": "none, --test-objects decides",
+}
+
+
+def default_text(option: str) -> str:
+    """The default of a build option as help states it: the core's value (and the
+    demo's, when it has its own)."""
+    core = BuildConfig()
+    value = getattr(core, option)
+    if value is None:
+        return NONE_DEFAULTS[option]
+    if isinstance(value, list):
+        text = ",".join(map(str, value)) if option == "levels" else " ".join(map(str, value))
+    elif isinstance(value, float):
+        text = f"{value:g}"
+    else:
+        text = str(value)
+    if option in DEMO_DEFAULTS:
+        text += f"; {DEMO_DEFAULTS[option]} with --demo"
+    return text
+
+
+def _state_defaults(p: argparse.ArgumentParser, first: int) -> None:
+    """Append the core's default to the help of each option added since action `first`
+    (flags, and options whose help says it, excepted)."""
+    for action in p._actions[first:]:
+        if (
+            action.nargs == 0
+            or "default" in (action.help or "")
+            or "required" in (action.help or "")
+        ):
+            continue
+        option = "test_fraction" if action.dest == "test_objects" else action.dest
+        action.help = f"{action.help} (default: {default_text(option)})"
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", type=Path, help="TOML file of options (flags override it)")
+    first = len(p._actions)
     p.add_argument(
-        "--objects", nargs="+", help="GLB files, folders of GLBs, or text files listing them"
+        "--config", type=Path, help="TOML file of options (flags override it; default: none)"
     )
-    p.add_argument("--out", type=Path, help="output directory")
+    p.add_argument(
+        "--objects",
+        nargs="+",
+        help="GLB files, folders of GLBs, or text files listing them (required, unless --demo)",
+    )
+    p.add_argument("--out", type=Path, help="output directory (required)")
     p.add_argument("--demo", action="store_true", default=None, help="built-in procedural objects")
-    p.add_argument("--settings-per-object", type=int, help="azimuth settings per object (4)")
-    p.add_argument("--views", type=int, help="views per setting (34)")
+    p.add_argument("--settings-per-object", type=int, help="azimuth settings per object")
+    p.add_argument("--views", type=int, help="views per setting")
     p.add_argument("--levels", type=str, help="blur levels, e.g. 1,2,3,4 or none (sharp only)")
     p.add_argument(
         "--latents",
         type=str,
-        help="latent frames averaged per blurry image (34), or auto: per view and level, "
+        help="latent frames averaged per blurry image, or auto: per view and level, "
         "the fewest that leave no gap over --max-ghost-px on screen",
     )
-    p.add_argument("--latents-max", type=int, help="cap of --latents auto (34)")
+    p.add_argument("--latents-max", type=int, help="cap of --latents auto")
     p.add_argument(
         "--max-ghost-px",
         type=float,
-        help="--latents auto: largest screen gap between latent frames, px (1)",
+        help="--latents auto: largest screen gap between latent frames, px",
     )
-    p.add_argument("--samples", type=int, help="Cycles samples per latent frame (32)")
+    p.add_argument(
+        "--samples",
+        type=int,
+        help="Cycles samples per latent frame of the flat split (budget S = this × m)",
+    )
     p.add_argument(
         "--samples-total",
         type=int,
-        help="sample budget of one blurry image: ceil(S/m) samples per latent frame",
+        help="sample budget S of one blurry image: its m latent frames render ceil(S·m^0.4/m) "
+        "samples each under --blur-budget parity, ceil(S/m) under flat",
     )
     p.add_argument(
         "--blur-method",
         choices=["average", "motion_blur"],
-        help="average of latent renders (the paper; default) or one Cycles motion blur render",
+        help="average of latent renders (the paper) or one Cycles motion blur render",
     )
     p.add_argument("--sharp-samples", type=int, help="Cycles samples of the sharp image")
     p.add_argument(
         "--latent-sampling",
         choices=["subsets", "independent"],
         help="subsets: a blurry image's latent frames render the blocks of one sample "
-        "sequence on the view's seed, which the sharp image renders too (default); "
-        "independent: a seed per frame (builds before issue 15)",
+        "sequence on the view's seed, which the sharp image renders too; "
+        "independent: a seed per frame",
     )
     p.add_argument(
         "--blur-budget",
         choices=["parity", "flat"],
-        help="parity (default): a blurry image gets the sample budget times a factor of "
-        "its latent frames and motion, so it is no noisier than its sharp image; flat: the "
-        "budget as given, m frames at S/m samples (builds before it)",
+        help="parity: a blurry image of m >= 2 latent frames renders the sample budget S "
+        "times m^0.4, so it is no noisier than its sharp image; flat: the budget as given, "
+        "ceil(S/m) samples a frame",
     )
     p.add_argument(
         "--light-paths",
         choices=["auto", "fixed"],
-        help="bounces from the object's materials (auto, default) or the same for every object",
+        help="light-path bounces from the object's materials (auto) or the same for every object",
     )
     p.add_argument(
         "--device",
@@ -75,21 +134,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="Cycles device; auto: the best backend Cycles reports "
         "(OptiX > CUDA > HIP > oneAPI > Metal > CPU)",
     )
-    p.add_argument("--gpus", help="GPU indices of the backend, e.g. 0,2 (default: all)")
+    p.add_argument("--gpus", help="GPU indices of the backend, e.g. 0,2, or all")
     p.add_argument(
-        "--gpus-per-task", type=float, help="GPUs each Ray task reserves (1 with a GPU device)"
+        "--gpus-per-task", type=float, help="GPUs each Ray task reserves (--executor ray)"
     )
-    p.add_argument("--resolution", type=int, help="image side in pixels, square (512)")
-    p.add_argument("--seed", type=int, help="build seed (0)")
-    p.add_argument("--fov-deg", type=float, help="field of view in degrees (40)")
+    p.add_argument("--resolution", type=int, help="image side in pixels, square")
+    p.add_argument("--seed", type=int, help="build seed")
+    p.add_argument("--fov-deg", type=float, help="field of view in degrees")
     p.add_argument(
-        "--latent-positions", choices=["random", "stratified"], help="latent positions (random)"
+        "--latent-positions",
+        choices=["random", "stratified"],
+        help="latent positions on the segment: uniform random or stratified",
     )
     p.add_argument(
         "--trajectory",
         choices=["start", "centered"],
         help="where the written pose p sits on each blurry image's camera path: its start "
-        "(the paper; default) or its middle, so sharp image, pose and exposure coincide",
+        "(the paper) or its middle, so sharp image, pose and exposure coincide",
     )
     p.add_argument(
         "--keep-linear",
@@ -107,41 +168,41 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--downsample",
         nargs="+",
         help="images_<f>/ beside images/ in every level, area-averaged in linear light "
-        "(4; e.g. 4 8, or none)",
+        "(e.g. 4 8, or none)",
     )
     p.add_argument(
         "--blurry-test-views",
         action="store_true",
         default=None,
-        help="render the held-out views blurry too (default: Deblur-NeRF's convention, "
+        help="render the held-out views blurry too (off: Deblur-NeRF's convention, "
         "the blur levels hold the sharp image there)",
     )
     p.add_argument(
         "--test-view-stride",
         dest="view_stride",
         type=int,
-        help="every k-th view of a setting is held out (16: LLFF's llffhold)",
+        help="every k-th view of a setting is held out (LLFF's llffhold)",
     )
     split = p.add_mutually_exclusive_group()
     split.add_argument(
         "--test-objects",
-        help="test settings: a seeded fraction F of the objects (0.2), or object ids a,b",
+        help="test settings: a seeded fraction F of the objects, or object ids a,b",
     )
     split.add_argument(
         "--test-settings",
         type=int,
-        help="test settings: N seeded random settings (the paper's 52)",
+        help="test settings: N seeded random settings (the paper: 52)",
     )
-    p.add_argument("--workers", type=int, help="objects rendered in parallel (1)")
-    p.add_argument("--threads", type=int, help="Cycles threads per worker (0 = all cores)")
+    p.add_argument("--workers", type=int, help="objects rendered in parallel")
+    p.add_argument("--threads", type=int, help="Cycles threads per worker (0: all cores)")
     p.add_argument("--executor", choices=["local", "ray"], help="local process pool or Ray")
     p.add_argument(
-        "--ray-address", help="Ray cluster to join (ray://host:10001 or auto); default: local"
+        "--ray-address", help="Ray cluster to join (ray://host:10001 or auto; --executor ray)"
     )
     p.add_argument(
         "--shard", help="i/N: this job's share of the objects (0 ≤ i < N), for job arrays"
     )
-    p.add_argument("--objaverse-dir", help="the objaverse package's cache directory (~/.objaverse)")
+    p.add_argument("--objaverse-dir", help="the objaverse package's cache directory")
     p.add_argument(
         "--objaverse-offline",
         action="store_true",
@@ -152,21 +213,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--objaverse-count", type=int, help="a seeded random subset of N objaverse objects"
     )
     p.add_argument(
-        "--timeout", type=float, help="seconds without a worker reply before it is killed (600)"
+        "--timeout", type=float, help="seconds without a worker reply before it is killed"
     )
     p.add_argument(
-        "--object-timeout", type=float, help="wall-clock budget of one object, s (0 = none)"
+        "--object-timeout", type=float, help="wall-clock budget of one object, s (0: none)"
     )
-    p.add_argument("--retries", type=int, help="extra attempts after a worker crash or hang (1)")
+    p.add_argument("--retries", type=int, help="extra attempts after a worker crash or hang")
     p.add_argument(
         "--max-failure-rate",
         type=float,
-        help="exit 1 when more than this fraction of objects failed (1.0)",
+        help="exit 1 when more than this fraction of objects failed",
     )
-    p.add_argument("--max-triangles", type=int, help="pre-flight triangle budget (5000000)")
-    p.add_argument(
-        "--max-texture-pixels", type=int, help="pre-flight texture budget, pixels (268435456)"
-    )
+    p.add_argument("--max-triangles", type=int, help="pre-flight triangle budget")
+    p.add_argument("--max-texture-pixels", type=int, help="pre-flight texture budget, pixels")
     p.add_argument("--blender", help="a Blender binary instead of the bpy module")
     p.add_argument(
         "--check-poses", action="store_true", default=None, help="COLMAP check per setting"
@@ -184,6 +243,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "before rendering and recorded in failures.jsonl (stage license)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _state_defaults(p, first)
 
 
 def config_from_args(args: argparse.Namespace) -> BuildConfig:
@@ -231,7 +291,7 @@ def run(args: argparse.Namespace) -> int:
         where = f.get("setting") or f["uid"]
         print(f"  {where}: {f['stage']}: {f['reason']}", file=sys.stderr)
     if len(summary["failures"]) > 5:
-        print(f"  … see {Path(cfg.out) / 'failures.jsonl'}", file=sys.stderr)
+        print(f"  … see {out_dir(cfg) / 'failures.jsonl'}", file=sys.stderr)
     if summary["objects"] and summary["settings_complete"] == 0:
         return 1  # nothing built (every object failed, or --licenses left none)
     if rate > cfg.max_failure_rate:

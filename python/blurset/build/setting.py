@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from blurset import _core, layout
-from blurset.config import BuildConfig
+from blurset.config import BuildConfig, out_dir
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
 from blurset.progress import Progress
@@ -84,7 +84,7 @@ def render_setting(
     progress: Progress,
 ) -> Path:
     """Plan, render, accumulate and write one setting; returns its final directory."""
-    out = Path(cfg.out)
+    out = out_dir(cfg)
     final = out / job.name
     partial = layout.partial_dir(final)
     shutil.rmtree(partial, ignore_errors=True)
@@ -127,7 +127,7 @@ def render_setting(
         if a.count == need[key]:
             view, level = key
             name = layout.image_name(view, n_views)
-            bg = tuple(cfg.background)
+            bg = cfg.background
             a.write_png(partial / level / "images" / name, background=bg)
             for f in cfg.downsample:
                 a.write_png(partial / level / f"images_{f}" / name, background=bg, downsample=f)
@@ -184,17 +184,22 @@ def render_setting(
         "total_s": round(time.time() - t0, 3),
         "frames": len(frames),
     }
-    meta = {
-        "config": cfg,
-        "object": _object_record(job.obj, info),
-        "timings": timings,
-        "qa": [qa[v] for v in range(n_views)],
-    }
-    meta["light_paths"] = info.get("light_paths")
-    meta["device"] = info.get("device")
-    plan.write_meta(partial / "meta.json", **meta)
+
+    def write_meta(pose_check: dict[str, Any] | None = None) -> None:
+        plan.write_meta(
+            partial / "meta.json",
+            config=cfg,
+            object=_object_record(job.obj, info),
+            timings=timings,
+            qa=[qa[v] for v in range(n_views)],
+            pose_check=pose_check,
+            light_paths=info.get("light_paths"),
+            device=info.get("device"),
+        )
+
+    write_meta()
     if cfg.check_poses:
-        plan.write_meta(partial / "meta.json", **meta, pose_check=_pose_check(partial))
+        write_meta(pose_check=_pose_check(partial))
     if cfg.previews:
         from blurset.preview import write_build_preview
 

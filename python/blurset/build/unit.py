@@ -22,7 +22,7 @@ import numpy as np
 
 from blurset import _core, attribution, layout, objaverse_cache, outputs, preflight
 from blurset.build.setting import SettingFailed, SettingJob, render_setting
-from blurset.config import BuildConfig
+from blurset.config import BuildConfig, out_dir
 from blurset.devices import Device
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
@@ -58,7 +58,7 @@ class ObjectUnit:
         self.obj, self.cfg, self.progress = obj, cfg, progress
         # The Cycles backend (or AUTO) and GPU indices the worker renders on.
         self.device = device
-        self.out = Path(cfg.out)
+        self.out = out_dir(cfg)
         self.work = self.out / f".work-{obj.uid}"
         self.result = ObjectResult(
             uid=obj.uid, local={"uid": obj.uid, "path": str(obj.path), "rel": obj.rel}
@@ -282,7 +282,7 @@ class ObjectUnit:
 def object_lock(out: Path, uid: str, say):
     """Hold OUT/.lock-<uid> while an object is built; a process that finds it held says
     who holds it (once) and waits."""
-    said = []
+    said: list[bool] = []
 
     def wait(holder: str) -> None:
         if not said:

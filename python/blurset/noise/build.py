@@ -384,7 +384,7 @@ def run(args) -> int:
         )
     gains = parse_gains(args.gains, args.any_gain)
     # A build still being written (or stopped) would be noised half, with stale splits.
-    settings = outputs.finished_build(build, "SCENE").complete
+    complete = outputs.finished_build(build, "SCENE").complete
     dataset = outputs.read_record(build / "dataset.json")
     if args.downsample is not None:
         downsample = check_downsample(parse_downsample(args.downsample))
@@ -393,7 +393,7 @@ def run(args) -> int:
     clean_policy = "none" if args.noisy_test_views else "test_views"
     available = dataset.get("levels") or ["sharp"]
     levels = parse_levels(args.levels, available)
-    settings = [build / name for name in settings]
+    settings = [build / name for name in complete]
     if not settings:
         raise InputError(f"no complete setting (<setting>/{layout.MARKER}) in build: {build}")
 

@@ -15,7 +15,9 @@ def add_arguments(parser) -> None:
         help="LLFF scene directory (images*/ + poses_bounds.npy), or a build directory "
         "(dataset.json + settings): then every chosen level of every complete setting",
     )
-    parser.add_argument("--out", type=Path, required=True, help="output directory (must not exist)")
+    parser.add_argument(
+        "--out", type=Path, required=True, help="output directory (must not exist; required)"
+    )
     parser.add_argument(
         "--gains",
         nargs="+",
@@ -24,7 +26,10 @@ def add_arguments(parser) -> None:
         help="gain levels (default: the LLFF-N levels 1 2 4 8 16 20)",
     )
     parser.add_argument(
-        "--factor", type=int, default=None, help="read images_<F>/ and divide the focal length by F"
+        "--factor",
+        type=int,
+        default=None,
+        help="read images_<F>/ and divide the focal length by F (default: images/)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of all noise and white balance")
     parser.add_argument(
@@ -38,7 +43,8 @@ def add_arguments(parser) -> None:
         "--kpn-levels",
         type=Path,
         default=None,
-        help="KPN's synthetic test file (.npz with sig_read, sig_shot) to reproduce NAN's sigmas",
+        help="KPN's synthetic test file (.npz with sig_read, sig_shot) to reproduce NAN's sigmas "
+        "(default: none, the LLFF-N sigma table)",
     )
     parser.add_argument(
         "--gamma",
@@ -48,7 +54,7 @@ def add_arguments(parser) -> None:
         "for a build)",
     )
     parser.add_argument(
-        "--white-level", type=float, default=1.0, help="linear value of white (1e-6..1, default 1)"
+        "--white-level", type=float, default=1.0, help="linear value of white, in [1e-6, 1]"
     )
     parser.add_argument(
         "--any-gain", action="store_true", help="allow gains outside the LLFF-N levels"
@@ -58,15 +64,15 @@ def add_arguments(parser) -> None:
         nargs="+",
         default=None,
         help="also images_<f>/ and linear_<f>/ per gain, noise drawn at that size on the clean "
-        "image area-averaged in linear light (a build: its own factors; a scene: none)",
+        "image area-averaged in linear light (default: a build's own factors; a scene: none)",
     )
     parser.add_argument(
         "--clean-views",
         type=int,
         default=None,
         metavar="K",
-        help="every K-th view stays clean, as a held-out target (a scene: none; a build: "
-        "its test views, unless --noisy-test-views)",
+        help="every K-th view stays clean, as a held-out target (default: a scene none; a "
+        "build its test views, unless --noisy-test-views)",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     build = parser.add_argument_group("build mode (SCENE is a build directory)")
@@ -83,7 +89,7 @@ def add_arguments(parser) -> None:
     build.add_argument(
         "--noisy-test-views",
         action="store_true",
-        help="noise the build's test views too (default: they stay clean, NAN's protocol)",
+        help="noise the build's test views too (off: they stay clean, NAN's protocol)",
     )
     build.add_argument("--quiet", action="store_true", help="no progress line")
 

@@ -9,6 +9,7 @@
 //! nothing else, so the compiler reports whatever nothing uses.
 mod dataset;
 mod error;
+mod ground;
 mod image;
 mod metrics;
 mod noise;
@@ -19,9 +20,10 @@ pub use crate::error::{Error, Result};
 pub use crate::rng::seed_for;
 
 // What one setting renders: views, trajectories, levels, latent frames.
-pub use crate::plan::config::{check_downsample, check_theta0, BuildConfig, Raw};
+pub use crate::plan::config::BuildConfig;
 pub use crate::plan::renders::{level_renders, Motion, Render};
 pub use crate::plan::sampling::{plan_setting, LevelPlan, SamplingConfig, SettingPlan};
+pub use crate::plan::spec::{check_downsample, check_theta0, Raw};
 
 // Linear frames in, encoded images out; image files; render QA.
 pub use crate::image::accumulate::Accumulator;
@@ -40,18 +42,13 @@ pub use crate::noise::model::{
 pub use crate::noise::variants::{write_variants, write_variants_linear, Variant, VariantOptions};
 
 // The files of a build.
-pub use crate::dataset::atomic::write_atomic;
 pub use crate::dataset::failures::{
     current as current_failures, read_records as read_failure_records,
 };
 pub use crate::dataset::layout::{
-    complete_settings, gain_name, image_name, is_complete, level_dir, level_dirs, parse_level_dir,
-    parse_temp_name, partial_dir, png_problem, publish, setting_levels, setting_name,
-    setting_problem, setting_problems, sort_level_dirs, temp_path, theta0s, SettingProblem, MARKER,
-    PARTIAL_SUFFIX, SHARP,
-};
-pub use crate::dataset::license::{
-    allowed as license_allowed, canonical as canonical_license, spdx_ids, spdx_of,
+    complete_settings, is_complete, parse_temp_name, partial_dir, png_problem, publish,
+    setting_levels, setting_problem, setting_problems, temp_path, SettingProblem, MARKER,
+    PARTIAL_SUFFIX,
 };
 pub use crate::dataset::llff::{
     parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_scene_transforms,
@@ -69,11 +66,18 @@ pub use crate::dataset::outputs::{
 pub use crate::dataset::read::{check_shape, read_record, Record};
 pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
 pub use crate::dataset::schema::{schema, schema_file, write_record, StatsFile, SCHEMA_RECORDS};
-pub use crate::dataset::splits::{
-    make_splits, seeded_subset, test_views, Holdout, SettingEntry, Splits,
-};
+pub use crate::dataset::splits::{make_splits, seeded_subset, Holdout, SettingEntry, Splits};
 pub use crate::dataset::stats::{build_stats, BuildStats};
 pub use crate::dataset::verify::{check_images, ImageCheck};
+pub use crate::ground::atomic::write_atomic;
+pub use crate::ground::license::{
+    allowed as license_allowed, canonical as canonical_license, spdx_ids, spdx_of,
+};
+pub use crate::ground::names::test_views;
+pub use crate::ground::names::{
+    gain_name, image_name, level_dir, level_dirs, parse_level_dir, setting_name, sort_level_dirs,
+    theta0s, SHARP,
+};
 
 // Image error against a reference and the speed/quality front.
 pub use crate::metrics::{image_error, pareto_front};

@@ -77,7 +77,7 @@ build_config_methods!(fields {
     sharp_samples: Option<u32>, latent_sampling: String, blur_budget: String, light_paths: String, device: String,
     gpus: Option<Vec<u32>>, gpus_per_task: Option<f64>, resolution: u32, seed: u64, fov_deg: f64, phi0_deg: f64,
     window_deg: f64, delta0: f64, radius_margin: f64, level_spread: f64,
-    latent_positions: String, trajectory: String, orientation_max: f64, near_floor: f64, background: [f64; 3],
+    latent_positions: String, trajectory: String, orientation_max: f64, near_floor: f64,
     write_linear: bool, previews: bool, view_stride: usize, test_fraction: f64,
     test_objects: Option<Vec<String>>, test_settings: Option<usize>,
     blurry_test_views: bool, downsample: Vec<u32>, workers: usize, threads: usize, executor: String,
@@ -111,10 +111,31 @@ build_config_methods!(fields {
         self.0.require_target().map_err(crate::error::to_pyerr)
     }
 
+    /// This job's share of the objects, `(i, N)` of `shard` (None: every object).
+    #[getter]
+    fn shard_index(&self) -> Option<(u64, u64)> {
+        self.0.shard_index()
+    }
+
+    /// ConfigValueError (option test_objects) naming the listed test objects that are
+    /// not among `uids`, every object of the build.
+    fn check_test_objects(&self, uids: Vec<String>) -> PyResult<()> {
+        self.0
+            .check_test_objects(&uids)
+            .map_err(crate::error::to_pyerr)
+    }
+
     /// The option names, in declaration order.
     #[staticmethod]
     fn options() -> Vec<&'static str> {
         core::BuildConfig::OPTIONS.to_vec()
+    }
+
+    /// Linear RGB the transparent film is composited over.
+    #[getter]
+    fn background(&self) -> (f64, f64, f64) {
+        let [r, g, b] = self.0.background;
+        (r, g, b)
     }
 
     /// The most renders one blurry image can take.

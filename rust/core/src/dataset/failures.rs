@@ -7,8 +7,8 @@
 //! latest record per (uid, setting) whose work is still not complete: a setting record
 //! until its setting is complete, an object record until every setting of the object is.
 //! A line that does not parse (a record torn by a kill mid-append) is skipped, counted.
-use super::layout::setting_name;
 use crate::error::{Error, Result};
+use crate::ground::names::setting_name;
 use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -63,7 +63,7 @@ pub fn current(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dataset::layout::theta0s;
+    use crate::ground::names::theta0s;
     use serde_json::json;
 
     #[test]

@@ -4,9 +4,9 @@
 //! camera-to-world pose with columns [down, right, backwards], flattened row-major,
 //! then near and far. This is what IBRNet / NAN / GeoNeRF loaders read; they turn the
 //! columns into OpenGL [right, up, backwards] themselves.
-use super::atomic::write_atomic;
-use super::layout::image_name;
 use crate::error::{Error, Result};
+use crate::ground::atomic::write_atomic;
+use crate::ground::names::image_name;
 use crate::plan::sampling::SettingPlan;
 use glam::DMat4;
 use std::path::Path;

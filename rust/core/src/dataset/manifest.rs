@@ -7,8 +7,8 @@
 //! starting with `.` (the `.lock`, the `.complete` markers, temp files of atomic writes,
 //! `.work-*` scratch, `.local/` with the builder's own paths) and `*.partial` staging
 //! directories (another shard may be writing one right now).
-use crate::dataset::atomic::write_atomic;
 use crate::error::{Error, Result};
+use crate::ground::atomic::write_atomic;
 use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, BTreeSet};

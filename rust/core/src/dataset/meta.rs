@@ -1,9 +1,9 @@
 //! `meta.json` of one setting (DESIGN §4): every sampled number of its plan, how it was
 //! rendered, the object, the QA of each sharp view. The writer and the reader
 //! (`blurset stats`) share these structs; the reader's subset skips the rest unparsed.
-use super::atomic::write_atomic;
 use super::splits::test_views;
 use crate::error::{Error, Result};
+use crate::ground::atomic::write_atomic;
 use crate::image::qa::FrameQa;
 use crate::plan::config::BuildConfig;
 use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan, ViewPlan, PARITY_EXPONENT};

@@ -1,9 +1,8 @@
-//! The files of a build: names and layout, LLFF poses, splits, failures, statistics,
-//! atomic writes, the checksum manifest and the image check of `blurset verify`.
-pub mod atomic;
+//! The files of a build: layout, LLFF poses, splits, failures, statistics, the
+//! checksum manifest and the image check of `blurset verify` (names, atomic writes and
+//! licence ids are `ground`'s).
 pub mod failures;
 pub mod layout;
-pub mod license;
 pub mod llff;
 pub mod manifest;
 pub mod meta;

@@ -27,7 +27,7 @@ impl StatsFile {
     pub fn write(&self, path: &Path) -> Result<()> {
         let mut text = serde_json::to_vec(self).map_err(|e| Error::Value(e.to_string()))?;
         text.push(b'\n');
-        super::atomic::write_atomic(path, &text)
+        crate::ground::atomic::write_atomic(path, &text)
     }
 }
 

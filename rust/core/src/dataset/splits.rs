@@ -77,10 +77,7 @@ pub fn seeded_subset(ids: &[String], k: usize, seed: u64) -> Vec<String> {
     chosen
 }
 
-/// Every `stride`-th view index below `views`.
-pub fn test_views(views: usize, stride: usize) -> Vec<usize> {
-    (0..views).step_by(stride.max(1)).collect()
-}
+pub use crate::ground::names::test_views;
 
 /// The test settings chosen by `holdout` among `settings`: whole objects (a seeded
 /// round(fraction · objects), at least one and one left for training when there are two

@@ -434,7 +434,7 @@ pub fn build_stats(out: &Path) -> Result<BuildStats> {
     let dataset: Option<DatasetDoc> = read_json_file(&out.join("dataset.json"), "dataset.json")?;
     let theta0s = dataset
         .and_then(|d| d.config.settings_per_object)
-        .map(layout::theta0s);
+        .map(crate::ground::names::theta0s);
     let (lines, skipped) = failures::read_records(&out.join("failures.jsonl"))?;
     let complete: BTreeSet<String> = scan.complete.iter().cloned().collect();
     let text =

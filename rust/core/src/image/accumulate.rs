@@ -262,7 +262,7 @@ impl Accumulator {
 #[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
 mod tests {
     use super::*;
-    use crate::dataset::atomic::write_atomic;
+    use crate::ground::atomic::write_atomic;
     use crate::image::exr::read::read_exr;
     use image::ImageEncoder;
     use proptest::prelude::*;

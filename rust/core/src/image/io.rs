@@ -1,8 +1,8 @@
 //! Integer images on disk: reading the images of an LLFF scene (8- and 16-bit PNG,
 //! JPEG, grayscale or colour, with or without alpha, kept in their own sample depth so
 //! a 16-bit input is not silently truncated) and writing PNGs.
-use crate::dataset::atomic::write_atomic;
 use crate::error::{Error, Result};
+use crate::ground::atomic::write_atomic;
 use image::{DynamicImage, ImageDecoder, ImageEncoder, ImageReader};
 use std::path::Path;
 

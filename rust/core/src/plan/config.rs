@@ -7,430 +7,14 @@
 //! The sampling options form the [`SamplingConfig`] of every setting's plan.
 use super::sampling::{
     BlurBudget, BlurMethod, LatentPositions, LatentSampling, SamplingConfig, TrajectoryAnchor,
-    MAX_COUNT, MAX_SAMPLES,
 };
+use super::spec::{check, specs, OptionValue, Raw, Spec};
+use super::spec::{config_error, convert};
 use super::weights::Guards;
-use crate::dataset::layout::{self, MAX_LEVEL};
-use crate::dataset::license;
-use crate::dataset::splits::test_views;
-use crate::error::{Error, Result};
+use crate::error::Result;
+use crate::ground::names::{self, test_views};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::fmt;
-
-/// A value as a user gave it (a flag after argparse, a TOML value), before its type is
-/// checked against the field it goes to.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Raw {
-    Null,
-    Bool(bool),
-    Int(i128),
-    /// An integer beyond i128, as its decimal text.
-    BigInt(String),
-    Float(f64),
-    Str(String),
-    List(Vec<Raw>),
-    /// A table (TOML) or a dict: never a valid option value.
-    Table,
-}
-
-impl fmt::Display for Raw {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Raw::Null => write!(f, "none"),
-            Raw::Bool(b) => write!(f, "{b}"),
-            Raw::Int(i) => write!(f, "{i}"),
-            Raw::BigInt(s) => write!(f, "{s}"),
-            Raw::Float(x) if x.is_nan() => write!(f, "nan"),
-            Raw::Float(x) if x.is_infinite() => {
-                write!(f, "{}", if *x > 0.0 { "inf" } else { "-inf" })
-            }
-            Raw::Float(x) => write!(f, "{x:?}"),
-            Raw::Str(s) => write!(f, "{s:?}"),
-            Raw::List(v) => {
-                write!(f, "[")?;
-                for (i, x) in v.iter().enumerate() {
-                    write!(f, "{}{x}", if i > 0 { ", " } else { "" })?;
-                }
-                write!(f, "]")
-            }
-            Raw::Table => write!(f, "a table"),
-        }
-    }
-}
-
-/// What one option accepts; its text is the range an error states.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Spec {
-    /// An integer in min..=max (a float with an integral value counts).
-    Int {
-        min: i128,
-        max: i128,
-    },
-    /// A finite number; `lo`/`hi` bounds, open or closed (an infinite bound is no bound).
-    Num {
-        lo: f64,
-        lo_open: bool,
-        hi: f64,
-        hi_open: bool,
-    },
-    Bool,
-    Str,
-    Choice(&'static [&'static str]),
-    /// Distinct blur levels, integers in 1..=MAX_LEVEL.
-    Levels,
-    /// Distinct downsampling factors, integers in 2..=MAX_FACTOR (none: no copies).
-    Factors,
-    /// Distinct device indices, integers in 0..=1023 (GPUs of a Cycles backend).
-    Indices,
-    /// Three numbers in [0, 1] (a linear RGB colour).
-    Rgb,
-    /// A string or a list of strings.
-    StrList,
-    /// Licence ids (dataset::license::canonical), comma-separated or a list, at least one.
-    Licenses,
-}
-
-impl Spec {
-    const fn int(min: i128, max: i128) -> Spec {
-        Spec::Int { min, max }
-    }
-    const fn closed(lo: f64, hi: f64) -> Spec {
-        Spec::Num {
-            lo,
-            lo_open: false,
-            hi,
-            hi_open: false,
-        }
-    }
-    const fn num(lo: f64, lo_open: bool, hi: f64, hi_open: bool) -> Spec {
-        Spec::Num {
-            lo,
-            lo_open,
-            hi,
-            hi_open,
-        }
-    }
-
-    /// The accepted values, as an error states them.
-    pub fn expected(&self) -> String {
-        match *self {
-            Spec::Int { min, max } => format!("must be an integer in {min}..={max}"),
-            Spec::Num {
-                lo,
-                lo_open,
-                hi,
-                hi_open,
-            } => match (lo.is_finite(), hi.is_finite()) {
-                (true, true) => format!(
-                    "must be a number in {}{lo}, {hi}{}",
-                    if lo_open { "(" } else { "[" },
-                    if hi_open { ")" } else { "]" }
-                ),
-                (true, false) => {
-                    format!(
-                        "must be a finite number {} {lo}",
-                        if lo_open { ">" } else { "≥" }
-                    )
-                }
-                _ => "must be a finite number".into(),
-            },
-            Spec::Bool => "must be true or false".into(),
-            Spec::Str => "must be a string".into(),
-            Spec::Choice(c) => format!("must be one of {}", c.join(", ")),
-            Spec::Levels => {
-                format!("must be distinct integers in 1..={MAX_LEVEL} (or none: sharp only)")
-            }
-            Spec::Factors => {
-                format!("must be distinct integers in 2..={MAX_FACTOR} (or none)")
-            }
-            Spec::Indices => "must be distinct integers in 0..=1023 (GPU indices)".into(),
-            Spec::Rgb => "must be 3 numbers in [0, 1] (linear RGB)".into(),
-            Spec::StrList => "must be a string or a list of strings".into(),
-            Spec::Licenses => "must be licence ids, comma-separated or a list: SPDX ids such as \
-                cc-by-4.0, cc-by-sa-4.0, cc-by-nc-4.0, cc0-1.0, or other / unknown"
-                .into(),
-        }
-    }
-
-    fn int_of(raw: &Raw) -> Option<i128> {
-        match raw {
-            Raw::Int(i) => Some(*i),
-            Raw::Float(x) if x.is_finite() && x.fract() == 0.0 && x.abs() < 1e38 => {
-                Some(*x as i128)
-            }
-            _ => None,
-        }
-    }
-
-    fn num_of(raw: &Raw) -> Option<f64> {
-        match raw {
-            Raw::Int(i) => Some(*i as f64),
-            Raw::Float(x) => Some(*x),
-            _ => None,
-        }
-    }
-
-    fn check_num(&self, x: f64) -> bool {
-        let Spec::Num {
-            lo,
-            lo_open,
-            hi,
-            hi_open,
-        } = *self
-        else {
-            return false;
-        };
-        x.is_finite()
-            && (if lo_open { x > lo } else { x >= lo })
-            && (if hi_open { x < hi } else { x <= hi })
-    }
-}
-
-/// A value of one option, converted from [`Raw`] under its [`Spec`] and back.
-pub trait OptionValue: Sized {
-    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self>;
-    fn to_raw(&self) -> Raw;
-}
-
-macro_rules! int_value {
-    ($($t:ty),*) => {$(
-        impl OptionValue for $t {
-            fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
-                let Spec::Int { min, max } = *spec else { return None };
-                Spec::int_of(raw)
-                    .filter(|i| (min..=max).contains(i))
-                    .and_then(|i| <$t>::try_from(i).ok())
-            }
-            fn to_raw(&self) -> Raw {
-                Raw::Int(i128::from(*self))
-            }
-        }
-    )*};
-}
-int_value!(u32, u64);
-
-impl OptionValue for usize {
-    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
-        u64::from_raw(raw, spec).and_then(|v| usize::try_from(v).ok())
-    }
-    fn to_raw(&self) -> Raw {
-        Raw::Int(*self as i128)
-    }
-}
-
-impl OptionValue for f64 {
-    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
-        Spec::num_of(raw).filter(|x| spec.check_num(*x))
-    }
-    fn to_raw(&self) -> Raw {
-        Raw::Float(*self)
-    }
-}
-
-impl OptionValue for bool {
-    fn from_raw(raw: &Raw, _: &Spec) -> Option<Self> {
-        match raw {
-            Raw::Bool(b) => Some(*b),
-            _ => None,
-        }
-    }
-    fn to_raw(&self) -> Raw {
-        Raw::Bool(*self)
-    }
-}
-
-impl OptionValue for String {
-    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
-        match (raw, spec) {
-            (Raw::Str(s), Spec::Choice(c)) => c.contains(&s.as_str()).then(|| s.clone()),
-            (Raw::Str(s), _) => Some(s.clone()),
-            _ => None,
-        }
-    }
-    fn to_raw(&self) -> Raw {
-        Raw::Str(self.clone())
-    }
-}
-
-impl<T: OptionValue> OptionValue for Option<T> {
-    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
-        match raw {
-            Raw::Null => Some(None),
-            r => T::from_raw(r, spec).map(Some),
-        }
-    }
-    fn to_raw(&self) -> Raw {
-        self.as_ref().map_or(Raw::Null, T::to_raw)
-    }
-}
-
-impl OptionValue for Vec<String> {
-    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
-        if *spec == Spec::Licenses {
-            return licenses_from_raw(raw);
-        }
-        match raw {
-            Raw::Str(s) => Some(vec![s.clone()]),
-            Raw::List(v) => v
-                .iter()
-                .map(|x| match x {
-                    Raw::Str(s) => Some(s.clone()),
-                    _ => None,
-                })
-                .collect(),
-            _ => None,
-        }
-    }
-    fn to_raw(&self) -> Raw {
-        Raw::List(self.iter().cloned().map(Raw::Str).collect())
-    }
-}
-
-/// `cc-by-4.0, CC0-1.0` or a list of ids → their canonical spellings, once each, in the
-/// order given; None when an id is unknown or none is given.
-fn licenses_from_raw(raw: &Raw) -> Option<Vec<String>> {
-    let items: Vec<&str> = match raw {
-        Raw::Str(s) => s.split(',').collect(),
-        Raw::List(v) => v
-            .iter()
-            .map(|x| match x {
-                Raw::Str(s) => Some(s.as_str()),
-                _ => None,
-            })
-            .collect::<Option<_>>()?,
-        _ => return None,
-    };
-    let mut out: Vec<String> = Vec::new();
-    for item in items.iter().filter(|s| !s.trim().is_empty()) {
-        let id = license::canonical(item)?;
-        if !out.contains(&id) {
-            out.push(id);
-        }
-    }
-    (!out.is_empty()).then_some(out)
-}
-
-impl OptionValue for Vec<u32> {
-    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
-        let items: Vec<Raw> = match raw {
-            Raw::List(v) => v.clone(),
-            Raw::Int(_) => vec![raw.clone()],
-            _ => return None,
-        };
-        let level = match spec {
-            Spec::Factors => Spec::int(2, MAX_FACTOR as i128),
-            Spec::Indices => Spec::int(0, 1023),
-            _ => Spec::int(1, MAX_LEVEL as i128),
-        };
-        let mut levels: Vec<u32> = items
-            .iter()
-            .map(|x| match x {
-                Raw::Int(_) => u32::from_raw(x, &level),
-                _ => None,
-            })
-            .collect::<Option<_>>()?;
-        levels.sort_unstable();
-        let n = levels.len();
-        levels.dedup();
-        (levels.len() == n).then_some(levels)
-    }
-    fn to_raw(&self) -> Raw {
-        Raw::List(self.iter().map(|l| Raw::Int(i128::from(*l))).collect())
-    }
-}
-
-impl OptionValue for [f64; 3] {
-    fn from_raw(raw: &Raw, _: &Spec) -> Option<Self> {
-        let Raw::List(v) = raw else { return None };
-        let unit = Spec::closed(0.0, 1.0);
-        match v.as_slice() {
-            [r, g, b] => Some([
-                f64::from_raw(r, &unit)?,
-                f64::from_raw(g, &unit)?,
-                f64::from_raw(b, &unit)?,
-            ]),
-            _ => None,
-        }
-    }
-    fn to_raw(&self) -> Raw {
-        Raw::List(self.iter().map(|x| Raw::Float(*x)).collect())
-    }
-}
-
-fn config_error(option: &str, detail: String) -> Error {
-    Error::Config {
-        option: option.to_string(),
-        detail,
-    }
-}
-
-fn convert<T: OptionValue>(option: &str, raw: &Raw, spec: &Spec) -> Result<T> {
-    T::from_raw(raw, spec)
-        .ok_or_else(|| config_error(option, format!("{raw}: {}", spec.expected())))
-}
-
-/// The ranges every check of these options uses (the build's and the plan's alike).
-pub mod specs {
-    use super::*;
-    pub const COUNT: Spec = Spec::int(1, MAX_COUNT as i128);
-    pub const SAMPLES: Spec = Spec::int(1, MAX_SAMPLES as i128);
-    pub const RESOLUTION: Spec = Spec::int(8, 16384);
-    pub const FOV_DEG: Spec = Spec::num(1.0, true, 150.0, true);
-    pub const WINDOW_DEG: Spec = Spec::num(0.0, false, 90.0, true);
-    pub const PHI0_DEG: Spec = Spec::num(0.0, true, 180.0, true);
-    pub const DELTA0: Spec = Spec::closed(0.0, 45.0);
-    pub const RADIUS_MARGIN: Spec = Spec::closed(1.0, 100.0);
-    pub const LEVEL_SPREAD: Spec = Spec::num(0.0, false, 1.0, true);
-    pub const MAX_GHOST_PX: Spec = Spec::num(0.01, false, f64::INFINITY, false);
-    pub const ORIENTATION_MAX: Spec = Spec::num(1.0, false, f64::INFINITY, false);
-    pub const NEAR_FLOOR: Spec = Spec::num(0.0, true, f64::INFINITY, false);
-    pub const LATENT_POSITIONS: Spec = Spec::Choice(&["random", "stratified"]);
-    pub const TRAJECTORY: Spec = Spec::Choice(&["start", "centered"]);
-    pub const BLUR_METHOD: Spec = Spec::Choice(&["average", "motion_blur"]);
-    pub const EXECUTOR: Spec = Spec::Choice(&["local", "ray"]);
-    pub const LATENT_SAMPLING: Spec = Spec::Choice(&["subsets", "independent"]);
-    pub const LIGHT_PATHS: Spec = Spec::Choice(&["auto", "fixed"]);
-    pub const BLUR_BUDGET: Spec = Spec::Choice(&["parity", "flat"]);
-    /// `auto`: the best backend Cycles reports (OptiX > CUDA > HIP > oneAPI > Metal > CPU).
-    pub const DEVICE: Spec =
-        Spec::Choice(&["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"]);
-    pub const GPUS_PER_TASK: Spec = Spec::closed(0.0, 64.0);
-    pub const SEED: Spec = Spec::int(0, u64::MAX as i128);
-    pub const FRACTION: Spec = Spec::closed(0.0, 1.0);
-    pub const SECONDS: Spec = Spec::num(0.0, true, f64::INFINITY, false);
-    pub const BUDGET_SECONDS: Spec = Spec::num(0.0, false, f64::INFINITY, false);
-    pub const THREADS: Spec = Spec::int(0, 4096);
-    pub const WORKERS: Spec = Spec::int(1, 1024);
-}
-
-/// Check an already typed value against its spec (the error as from_values gives it).
-pub fn check<T: OptionValue>(option: &str, value: &T, spec: &Spec) -> Result<()> {
-    let raw = value.to_raw();
-    T::from_raw(&raw, spec)
-        .map(|_| ())
-        .ok_or_else(|| config_error(option, format!("{raw}: {}", spec.expected())))
-}
-
-/// The largest factor of an `images_<f>/` copy.
-pub const MAX_FACTOR: u32 = 64;
-
-/// Refuse downsampling factors outside 2..=MAX_FACTOR or repeated (`blurset noise
-/// --downsample`, whose image size is the scene's own; the build checks them as a field).
-pub fn check_downsample(factors: &[u32]) -> Result<()> {
-    let raw = factors.to_vec().to_raw();
-    Vec::<u32>::from_raw(&raw, &Spec::Factors)
-        .map(|_| ())
-        .ok_or_else(|| config_error("downsample", format!("{raw}: {}", Spec::Factors.expected())))
-}
-
-/// θ0 of a setting: any finite azimuth in degrees.
-pub const THETA0_DEG: Spec = Spec::num(f64::NEG_INFINITY, false, f64::INFINITY, false);
-
-/// Refuse a non-finite θ0 (it would make every camera NaN).
-pub fn check_theta0(theta0_deg: f64) -> Result<()> {
-    check("theta0_deg", &theta0_deg, &THETA0_DEG)
-}
 
 /// Declares the fields of BuildConfig once: type, default, spec, doc.
 macro_rules! build_config {
@@ -578,14 +162,54 @@ impl BuildConfig {
         BuildConfig::default().with_values(values)
     }
 
-    /// This config with `values` replaced, validated.
+    /// This config with `values` replaced, validated: every field, what holds between
+    /// fields ([`Self::validate`]) and what holds of the options given here
+    /// ([`Self::check_given`]).
     pub fn with_values(&self, values: &BTreeMap<String, Raw>) -> Result<BuildConfig> {
         let mut cfg = self.clone();
         for (k, v) in values {
             cfg.set(k, v)?;
         }
         cfg.validate()?;
+        cfg.check_given(values)?;
         Ok(cfg)
+    }
+
+    /// An option given that means nothing under the others is refused, not ignored:
+    /// `latents_max` and `max_ghost_px` without latents auto, `latent_positions` under
+    /// the motion_blur method, test settings together with test objects or a fraction.
+    pub fn check_given(&self, given: &BTreeMap<String, Raw>) -> Result<()> {
+        let value = |k: &str| given.get(k).filter(|v| **v != Raw::Null);
+        if let Some(n) = value("test_settings") {
+            if value("test_objects").is_some() || value("test_fraction").is_some() {
+                return Err(config_error(
+                    "test_settings",
+                    format!("{n}: give either N random test settings or test objects, not both"),
+                ));
+            }
+        }
+        for option in ["latents_max", "max_ghost_px"] {
+            if let Some(v) = value(option) {
+                if !self.latents_auto {
+                    return Err(config_error(
+                        option,
+                        format!("{v}: only used with latents auto"),
+                    ));
+                }
+            }
+        }
+        if self.blur_method == "motion_blur" {
+            if let Some(v) = value("latent_positions") {
+                return Err(config_error(
+                    "latent_positions",
+                    format!(
+                        "{v}: the motion_blur method has no latent frames (one render per \
+                         blurry image); use blur_method average"
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The one validator: every field in its range, then what holds between fields.
@@ -602,16 +226,44 @@ impl BuildConfig {
             ));
         }
         if let Some(s) = &self.shard {
-            let ok = s
-                .split_once('/')
-                .and_then(|(i, n)| {
-                    Some((i.trim().parse::<u64>().ok()?, n.trim().parse::<u64>().ok()?))
-                })
-                .is_some_and(|(i, n)| i < n);
-            if !ok {
+            if parse_shard(s).is_none() {
                 return Err(config_error(
                     "shard",
                     format!("{s:?}: must be i/N with 0 ≤ i < N"),
+                ));
+            }
+        }
+        if self.executor == "ray" {
+            // Ray places the tasks: it hands each its GPUs and runs as many as fit.
+            if let Some(g) = &self.gpus {
+                return Err(config_error(
+                    "gpus",
+                    format!(
+                        "{}: only with executor local (Ray gives each task its GPUs: \
+                         gpus_per_task)",
+                        g.to_raw()
+                    ),
+                ));
+            }
+            if self.workers != 1 {
+                return Err(config_error(
+                    "workers",
+                    format!(
+                        "{}: only with executor local (Ray runs as many tasks as the \
+                         cluster holds)",
+                        self.workers
+                    ),
+                ));
+            }
+        }
+        if let Some(g) = self.gpus_per_task {
+            if self.executor != "ray" {
+                return Err(config_error(
+                    "gpus_per_task",
+                    format!(
+                        "{}: only with executor ray (a local build takes --gpus)",
+                        Raw::Float(g)
+                    ),
                 ));
             }
         }
@@ -643,6 +295,45 @@ impl BuildConfig {
             ));
         }
         Ok(())
+    }
+
+    /// This job's share of the objects, `(i, N)` of `shard` (None: every object).
+    pub fn shard_index(&self) -> Option<(u64, u64)> {
+        self.shard.as_deref().and_then(parse_shard)
+    }
+
+    /// Refuse `test_objects` that are not among the build's objects (`uids`: every
+    /// object of the build, all shards), before anything renders.
+    pub fn check_test_objects(&self, uids: &[String]) -> Result<()> {
+        let Some(listed) = &self.test_objects else {
+            return Ok(());
+        };
+        let unknown: Vec<&String> = listed.iter().filter(|o| !uids.contains(o)).collect();
+        if unknown.is_empty() {
+            return Ok(());
+        }
+        let mut known: Vec<&str> = uids.iter().map(String::as_str).take(8).collect();
+        if uids.len() > known.len() {
+            known.push("…");
+        }
+        let names: Vec<String> = unknown.iter().map(|o| format!("{o:?}")).collect();
+        Err(config_error(
+            "test_objects",
+            format!(
+                "{}: not {} of this build (its objects: {})",
+                names.join(", "),
+                if unknown.len() == 1 {
+                    "an object"
+                } else {
+                    "objects"
+                },
+                if known.is_empty() {
+                    "none".to_string()
+                } else {
+                    known.join(", ")
+                }
+            ),
+        ))
     }
 
     /// What a build (not a plan) needs besides valid values: an output and objects.
@@ -776,11 +467,11 @@ impl BuildConfig {
     }
 
     pub fn level_dirs(&self) -> Vec<String> {
-        layout::level_dirs(&self.levels)
+        names::level_dirs(&self.levels)
     }
 
     pub fn theta0s(&self) -> Vec<f64> {
-        layout::theta0s(self.settings_per_object)
+        names::theta0s(self.settings_per_object)
     }
 
     /// The `config` record of dataset.json: every option, `latents` = "auto" under
@@ -808,6 +499,17 @@ impl BuildConfig {
     }
 }
 
+/// `i/N` with 0 ≤ i < N, both plain decimal digits (no sign, no spaces).
+fn parse_shard(s: &str) -> Option<(u64, u64)> {
+    let (i, n) = s.split_once('/')?;
+    let digits = |t: &str| !t.is_empty() && t.bytes().all(|b| b.is_ascii_digit());
+    if !digits(i) || !digits(n) {
+        return None;
+    }
+    let (i, n) = (i.parse::<u64>().ok()?, n.parse::<u64>().ok()?);
+    (i < n).then_some((i, n))
+}
+
 /// A path's last component (`.`/`..`/`/` kept as given).
 fn last_component(path: &str) -> String {
     std::path::Path::new(path)
@@ -830,6 +532,8 @@ pub fn public_entry(entry: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::Error;
+    use crate::plan::spec::{check_downsample, MAX_SECONDS};
 
     fn values(pairs: &[(&str, Raw)]) -> BTreeMap<String, Raw> {
         pairs
@@ -886,7 +590,7 @@ mod tests {
         assert!(err(&[("seed", Raw::Int(-1))]).starts_with("seed -1: must be"));
         assert!(err(&[("seed", Raw::BigInt("1".repeat(50)))]).starts_with("seed 111"));
         assert!(err(&[("timeout", Raw::Float(f64::INFINITY))])
-            .starts_with("timeout inf: must be a finite number > 0"));
+            .starts_with("timeout inf: must be a number in (0, 31536000]"));
         assert!(err(&[("max_texture_pixels", Raw::Float(f64::INFINITY))])
             .starts_with("max_texture_pixels inf"));
         assert!(
@@ -903,6 +607,20 @@ mod tests {
         assert!(err(&[("samples", Raw::Int(1 << 21))]).contains("1..=1048576"));
         assert!(err(&[("sharp_samples", Raw::Int(1 << 21))]).contains("1..=1048576"));
         assert!(err(&[("shard", Raw::Str("2/2".into()))]).starts_with("shard \"2/2\""));
+        for bad in ["-1/2", "+1/2", " 1/2", "1/ 2", "1/2/3", "/2", "a/2", "1/0"] {
+            assert!(
+                err(&[("shard", Raw::Str(bad.into()))]).starts_with("shard"),
+                "{bad}"
+            );
+        }
+        assert!(err(&[("timeout", Raw::Float(1e308))]).starts_with("timeout 1e308: must be"));
+        assert!(err(&[("object_timeout", Raw::Float(1e308))]).starts_with("object_timeout"));
+        assert!(err(&[("gpus_per_task", Raw::Float(1.0))])
+            .starts_with("gpus_per_task 1.0: only with executor ray"));
+        let ray = ("executor", Raw::Str("ray".into()));
+        assert!(err(&[ray.clone(), ("gpus", Raw::List(vec![Raw::Int(0)]))])
+            .starts_with("gpus [0]: only with executor local"));
+        assert!(err(&[ray, ("workers", Raw::Int(4))]).starts_with("workers 4: only with"));
         assert!(err(&[("phi0_deg", Raw::Float(5.0))]).contains("pole"));
         assert!(err(&[("ray_address", Raw::Str("auto".into()))]).contains("executor ray"));
         assert!(err(&[("background", Raw::List(vec![Raw::Int(1)]))]).starts_with("background [1]"));
@@ -998,6 +716,63 @@ mod tests {
         assert_eq!(r["objaverse_dir"], ".objaverse");
         assert_eq!(r["licenses"], serde_json::Value::Null);
         assert!(!r.to_string().contains("/home/u"));
+        Ok(())
+    }
+
+    #[test]
+    fn options_given_that_mean_nothing_are_refused() -> Result<()> {
+        assert_eq!(
+            err(&[("latents_max", Raw::Int(5))]),
+            "latents_max 5: only used with latents auto"
+        );
+        assert!(err(&[("max_ghost_px", Raw::Float(2.0))]).starts_with("max_ghost_px 2.0: only"));
+        assert!(err(&[
+            ("blur_method", Raw::Str("motion_blur".into())),
+            ("latent_positions", Raw::Str("stratified".into()))
+        ])
+        .starts_with("latent_positions \"stratified\": the motion_blur method"));
+        assert!(err(&[
+            ("test_settings", Raw::Int(5)),
+            ("test_fraction", Raw::Float(0.3))
+        ])
+        .starts_with("test_settings 5: give either"));
+        // Given with what gives them meaning, or left as they are: accepted.
+        BuildConfig::from_values(&values(&[
+            ("latents_auto", Raw::Bool(true)),
+            ("latents_max", Raw::Int(5)),
+            ("test_settings", Raw::Null),
+            ("test_fraction", Raw::Float(0.3)),
+        ]))?
+        .with_values(&values(&[("views", Raw::Int(3))]))?;
+        Ok(())
+    }
+
+    #[test]
+    fn shards_and_test_objects() -> Result<()> {
+        let c = BuildConfig::from_values(&values(&[
+            ("shard", Raw::Str("1/3".into())),
+            ("test_objects", Raw::List(vec![Raw::Str("a".into())])),
+        ]))?;
+        assert_eq!(c.shard_index(), Some((1, 3)));
+        assert_eq!(BuildConfig::default().shard_index(), None);
+        let uids = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        c.check_test_objects(&uids(&["a", "b"]))?;
+        BuildConfig::default().check_test_objects(&[])?;
+        let e = c
+            .check_test_objects(&uids(&["b", "c"]))
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert_eq!(
+            e,
+            "test_objects \"a\": not an object of this build (its objects: b, c)"
+        );
+        let ray = BuildConfig::from_values(&values(&[
+            ("executor", Raw::Str("ray".into())),
+            ("gpus_per_task", Raw::Float(0.5)),
+            ("timeout", Raw::Float(MAX_SECONDS)),
+        ]))?;
+        assert_eq!(ray.gpus_per_task, Some(0.5));
         Ok(())
     }
 

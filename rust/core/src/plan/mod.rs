@@ -5,4 +5,5 @@ pub mod config;
 pub mod region;
 pub mod renders;
 pub mod sampling;
+pub mod spec;
 pub mod weights;

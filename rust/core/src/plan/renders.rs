@@ -2,7 +2,7 @@
 //! the driver streams the frames into accumulators (per view: sharp, then each level).
 use super::region::{call_cost_px, object_region, render_calls, Region};
 use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
-use crate::dataset::layout::{level_dir, SHARP};
+use crate::ground::names::{level_dir, SHARP};
 use glam::{DMat4, DVec3};
 use serde::Serialize;
 use std::path::Path;

@@ -102,11 +102,7 @@ pub fn parity_factor(m: usize) -> f64 {
 /// Longest Cycles sample sequence (`scene.cycles.samples` tops out at 2^24).
 pub const MAX_SEQUENCE: u64 = 1 << 24;
 
-/// Largest number of views per setting and of latent frames per blurry image.
-pub const MAX_COUNT: usize = 4096;
-
-/// Largest Cycles sample count of one render, and of a `samples_total` budget.
-pub const MAX_SAMPLES: u32 = 1 << 20;
+use super::spec::MAX_SAMPLES;
 
 /// Motion blur keys: Cycles interpolates the camera between its motion steps (position
 /// linearly, rotation by slerp); the steps are doubled until that interpolation stays
@@ -182,9 +178,9 @@ impl Default for SamplingConfig {
 
 impl SamplingConfig {
     /// Refuse values that would make a sample meaningless: each option against the
-    /// range the build config states (`config::specs`), then the poles.
+    /// range the build config states (`spec::specs`), then the poles.
     pub fn validate(&self) -> Result<()> {
-        use super::config::{check, specs, Spec};
+        use super::spec::{check, specs, Spec};
         check("views", &self.views, &specs::COUNT)?;
         check("latents", &self.latents, &specs::COUNT)?;
         check("latents_max", &self.latents_max, &specs::COUNT)?;
@@ -804,7 +800,7 @@ pub fn plan_setting(
     vertices: &[[f32; 3]],
 ) -> Result<SettingPlan> {
     cfg.validate()?;
-    super::config::check_theta0(theta0_deg)?;
+    super::spec::check_theta0(theta0_deg)?;
     if bbox_dims.iter().any(|d| !d.is_finite() || *d < 0.0) || bbox_dims.iter().all(|d| *d <= 0.0) {
         return Err(Error::Value(format!(
             "object {uid:?} has a degenerate bounding box {bbox_dims:?}"
@@ -958,6 +954,7 @@ pub fn plan_setting(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::spec::MAX_COUNT;
     use proptest::prelude::*;
 
     fn cube_vertices(d: [f64; 3]) -> Vec<[f32; 3]> {

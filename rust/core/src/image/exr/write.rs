@@ -1,6 +1,6 @@
 //! Writing linear float images as OpenEXR files.
-use crate::dataset::atomic::write_atomic;
 use crate::error::{Error, Result};
+use crate::ground::atomic::write_atomic;
 use crate::image::{check_rgba_len, CH};
 use std::io::Cursor;
 use std::path::Path;

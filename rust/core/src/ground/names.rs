@@ -1,0 +1,115 @@
+//! The names of a build's parts (settings, levels, images, gains) and the indices of
+//! its held-out views: pure functions of numbers and ids, below every module that
+//! writes or plans (`plan`, `image`, `noise`, `dataset`). What is on disk and what
+//! "complete" means stays in `dataset::layout`.
+
+/// The level directory of the sharp image (level 0).
+pub const SHARP: &str = "sharp";
+/// Largest blur level a build can write.
+pub const MAX_LEVEL: u32 = 64;
+
+/// `<uid>_<theta0>`: the directory of one setting, θ0 rounded to whole degrees.
+pub fn setting_name(uid: &str, theta0_deg: f64) -> String {
+    format!("{uid}_{:03}", theta0_deg.round() as i64)
+}
+
+/// The θ0 of each setting of an object: `n` azimuths evenly spaced from 0°.
+pub fn theta0s(settings_per_object: usize) -> Vec<f64> {
+    (0..settings_per_object)
+        .map(|k| 360.0 * k as f64 / settings_per_object as f64)
+        .collect()
+}
+
+/// Image file name of view `index` among `n`: zero-padded so sorted order is view order.
+pub fn image_name(index: usize, n: usize) -> String {
+    let width = n.saturating_sub(1).to_string().len().max(3);
+    format!("{index:0width$}.png")
+}
+
+/// Directory of a blur level (`blur_<l>`); level 0 is the sharp image.
+pub fn level_dir(level: u32) -> String {
+    if level == 0 {
+        SHARP.to_string()
+    } else {
+        format!("blur_{level}")
+    }
+}
+
+/// `sharp`, then `blur_<l>` of every blur level, in the given order.
+pub fn level_dirs(levels: &[u32]) -> Vec<String> {
+    std::iter::once(0)
+        .chain(levels.iter().copied())
+        .map(level_dir)
+        .collect()
+}
+
+/// The level of a level directory name: `sharp` → 0, `blur_<l>` → l for l in
+/// 1..=MAX_LEVEL written without leading zeros; anything else → None.
+pub fn parse_level_dir(name: &str) -> Option<u32> {
+    if name == SHARP {
+        return Some(0);
+    }
+    let num = name.strip_prefix("blur_")?;
+    if num.is_empty() || num.starts_with('0') || !num.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    num.parse::<u32>()
+        .ok()
+        .filter(|l| (1..=MAX_LEVEL).contains(l))
+}
+
+/// Level directories sorted in level order (sharp first, then by number); names that
+/// are not level directories are dropped.
+pub fn sort_level_dirs<S: AsRef<str>>(names: &[S]) -> Vec<String> {
+    let mut v: Vec<(u32, String)> = names
+        .iter()
+        .filter_map(|n| parse_level_dir(n.as_ref()).map(|l| (l, n.as_ref().to_string())))
+        .collect();
+    v.sort();
+    v.into_iter().map(|(_, n)| n).collect()
+}
+
+/// Every `stride`-th view index below `views` (the held-out views, LLFF's llffhold).
+pub fn test_views(views: usize, stride: usize) -> Vec<usize> {
+    (0..views).step_by(stride.max(1)).collect()
+}
+
+/// Directory name of a noise gain: `gain_4`, `gain_2.5` (Python's `%g` for fractions, so
+/// 6 significant digits: two gains closer than that share a name and are refused).
+pub fn gain_name(gain: f64) -> String {
+    if gain.is_finite() && gain.fract() == 0.0 {
+        format!("gain_{gain:.0}")
+    } else {
+        format!("gain_{}", format_g(gain))
+    }
+}
+
+/// C's `%g` (precision 6), as Python's `format(x, "g")` writes it.
+fn format_g(x: f64) -> String {
+    if x.is_nan() {
+        return "nan".into();
+    }
+    if x.is_infinite() {
+        return if x > 0.0 { "inf" } else { "-inf" }.into();
+    }
+    if x == 0.0 {
+        return if x.is_sign_negative() { "-0" } else { "0" }.into();
+    }
+    let sci = format!("{x:.5e}");
+    let (mant, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    let strip = |s: &str| -> String {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    if (-4..6).contains(&exp) {
+        let decimals = (5 - exp) as usize;
+        strip(&format!("{x:.decimals$}"))
+    } else {
+        let sign = if exp < 0 { '-' } else { '+' };
+        format!("{}e{sign}{:02}", strip(mant), exp.abs())
+    }
+}

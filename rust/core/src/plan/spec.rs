@@ -1,0 +1,432 @@
+//! What one option accepts ([`Spec`]), a value as the user gave it ([`Raw`]) and the
+//! conversion between them: the ranges every check of an option uses, the build
+//! config's ([`super::config`]) and a plan's ([`super::sampling`]) alike. Below both,
+//! so neither imports the other for its ranges.
+use crate::error::{Error, Result};
+use crate::ground::license;
+use crate::ground::names::MAX_LEVEL;
+use std::fmt;
+
+/// Largest number of views per setting and of latent frames per blurry image.
+pub const MAX_COUNT: usize = 4096;
+
+/// Largest Cycles sample count of one render, and of a `samples_total` budget.
+pub const MAX_SAMPLES: u32 = 1 << 20;
+
+/// A value as a user gave it (a flag after argparse, a TOML value), before its type is
+/// checked against the field it goes to.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Raw {
+    Null,
+    Bool(bool),
+    Int(i128),
+    /// An integer beyond i128, as its decimal text.
+    BigInt(String),
+    Float(f64),
+    Str(String),
+    List(Vec<Raw>),
+    /// A table (TOML) or a dict: never a valid option value.
+    Table,
+}
+
+impl fmt::Display for Raw {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Raw::Null => write!(f, "none"),
+            Raw::Bool(b) => write!(f, "{b}"),
+            Raw::Int(i) => write!(f, "{i}"),
+            Raw::BigInt(s) => write!(f, "{s}"),
+            Raw::Float(x) if x.is_nan() => write!(f, "nan"),
+            Raw::Float(x) if x.is_infinite() => {
+                write!(f, "{}", if *x > 0.0 { "inf" } else { "-inf" })
+            }
+            Raw::Float(x) => write!(f, "{x:?}"),
+            Raw::Str(s) => write!(f, "{s:?}"),
+            Raw::List(v) => {
+                write!(f, "[")?;
+                for (i, x) in v.iter().enumerate() {
+                    write!(f, "{}{x}", if i > 0 { ", " } else { "" })?;
+                }
+                write!(f, "]")
+            }
+            Raw::Table => write!(f, "a table"),
+        }
+    }
+}
+
+/// What one option accepts; its text is the range an error states.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Spec {
+    /// An integer in min..=max (a float with an integral value counts).
+    Int {
+        min: i128,
+        max: i128,
+    },
+    /// A finite number; `lo`/`hi` bounds, open or closed (an infinite bound is no bound).
+    Num {
+        lo: f64,
+        lo_open: bool,
+        hi: f64,
+        hi_open: bool,
+    },
+    Bool,
+    Str,
+    Choice(&'static [&'static str]),
+    /// Distinct blur levels, integers in 1..=MAX_LEVEL.
+    Levels,
+    /// Distinct downsampling factors, integers in 2..=MAX_FACTOR (none: no copies).
+    Factors,
+    /// Distinct device indices, integers in 0..=1023 (GPUs of a Cycles backend).
+    Indices,
+    /// Three numbers in [0, 1] (a linear RGB colour).
+    Rgb,
+    /// A string or a list of strings.
+    StrList,
+    /// Licence ids (ground::license::canonical), comma-separated or a list, at least one.
+    Licenses,
+}
+
+impl Spec {
+    pub(crate) const fn int(min: i128, max: i128) -> Spec {
+        Spec::Int { min, max }
+    }
+    const fn closed(lo: f64, hi: f64) -> Spec {
+        Spec::Num {
+            lo,
+            lo_open: false,
+            hi,
+            hi_open: false,
+        }
+    }
+    const fn num(lo: f64, lo_open: bool, hi: f64, hi_open: bool) -> Spec {
+        Spec::Num {
+            lo,
+            lo_open,
+            hi,
+            hi_open,
+        }
+    }
+
+    /// The accepted values, as an error states them.
+    pub fn expected(&self) -> String {
+        match *self {
+            Spec::Int { min, max } => format!("must be an integer in {min}..={max}"),
+            Spec::Num {
+                lo,
+                lo_open,
+                hi,
+                hi_open,
+            } => match (lo.is_finite(), hi.is_finite()) {
+                (true, true) => format!(
+                    "must be a number in {}{lo}, {hi}{}",
+                    if lo_open { "(" } else { "[" },
+                    if hi_open { ")" } else { "]" }
+                ),
+                (true, false) => {
+                    format!(
+                        "must be a finite number {} {lo}",
+                        if lo_open { ">" } else { "≥" }
+                    )
+                }
+                _ => "must be a finite number".into(),
+            },
+            Spec::Bool => "must be true or false".into(),
+            Spec::Str => "must be a string".into(),
+            Spec::Choice(c) => format!("must be one of {}", c.join(", ")),
+            Spec::Levels => {
+                format!("must be distinct integers in 1..={MAX_LEVEL} (or none: sharp only)")
+            }
+            Spec::Factors => {
+                format!("must be distinct integers in 2..={MAX_FACTOR} (or none)")
+            }
+            Spec::Indices => "must be distinct integers in 0..=1023 (GPU indices)".into(),
+            Spec::Rgb => "must be 3 numbers in [0, 1] (linear RGB)".into(),
+            Spec::StrList => "must be a string or a list of strings".into(),
+            Spec::Licenses => "must be licence ids, comma-separated or a list: SPDX ids such as \
+                cc-by-4.0, cc-by-sa-4.0, cc-by-nc-4.0, cc0-1.0, or other / unknown"
+                .into(),
+        }
+    }
+
+    fn int_of(raw: &Raw) -> Option<i128> {
+        match raw {
+            Raw::Int(i) => Some(*i),
+            Raw::Float(x) if x.is_finite() && x.fract() == 0.0 && x.abs() < 1e38 => {
+                Some(*x as i128)
+            }
+            _ => None,
+        }
+    }
+
+    fn num_of(raw: &Raw) -> Option<f64> {
+        match raw {
+            Raw::Int(i) => Some(*i as f64),
+            Raw::Float(x) => Some(*x),
+            _ => None,
+        }
+    }
+
+    fn check_num(&self, x: f64) -> bool {
+        let Spec::Num {
+            lo,
+            lo_open,
+            hi,
+            hi_open,
+        } = *self
+        else {
+            return false;
+        };
+        x.is_finite()
+            && (if lo_open { x > lo } else { x >= lo })
+            && (if hi_open { x < hi } else { x <= hi })
+    }
+}
+
+/// A value of one option, converted from [`Raw`] under its [`Spec`] and back.
+pub trait OptionValue: Sized {
+    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self>;
+    fn to_raw(&self) -> Raw;
+}
+
+macro_rules! int_value {
+    ($($t:ty),*) => {$(
+        impl OptionValue for $t {
+            fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
+                let Spec::Int { min, max } = *spec else { return None };
+                Spec::int_of(raw)
+                    .filter(|i| (min..=max).contains(i))
+                    .and_then(|i| <$t>::try_from(i).ok())
+            }
+            fn to_raw(&self) -> Raw {
+                Raw::Int(i128::from(*self))
+            }
+        }
+    )*};
+}
+int_value!(u32, u64);
+
+impl OptionValue for usize {
+    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
+        u64::from_raw(raw, spec).and_then(|v| usize::try_from(v).ok())
+    }
+    fn to_raw(&self) -> Raw {
+        Raw::Int(*self as i128)
+    }
+}
+
+impl OptionValue for f64 {
+    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
+        Spec::num_of(raw).filter(|x| spec.check_num(*x))
+    }
+    fn to_raw(&self) -> Raw {
+        Raw::Float(*self)
+    }
+}
+
+impl OptionValue for bool {
+    fn from_raw(raw: &Raw, _: &Spec) -> Option<Self> {
+        match raw {
+            Raw::Bool(b) => Some(*b),
+            _ => None,
+        }
+    }
+    fn to_raw(&self) -> Raw {
+        Raw::Bool(*self)
+    }
+}
+
+impl OptionValue for String {
+    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
+        match (raw, spec) {
+            (Raw::Str(s), Spec::Choice(c)) => c.contains(&s.as_str()).then(|| s.clone()),
+            (Raw::Str(s), _) => Some(s.clone()),
+            _ => None,
+        }
+    }
+    fn to_raw(&self) -> Raw {
+        Raw::Str(self.clone())
+    }
+}
+
+impl<T: OptionValue> OptionValue for Option<T> {
+    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
+        match raw {
+            Raw::Null => Some(None),
+            r => T::from_raw(r, spec).map(Some),
+        }
+    }
+    fn to_raw(&self) -> Raw {
+        self.as_ref().map_or(Raw::Null, T::to_raw)
+    }
+}
+
+impl OptionValue for Vec<String> {
+    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
+        if *spec == Spec::Licenses {
+            return licenses_from_raw(raw);
+        }
+        match raw {
+            Raw::Str(s) => Some(vec![s.clone()]),
+            Raw::List(v) => v
+                .iter()
+                .map(|x| match x {
+                    Raw::Str(s) => Some(s.clone()),
+                    _ => None,
+                })
+                .collect(),
+            _ => None,
+        }
+    }
+    fn to_raw(&self) -> Raw {
+        Raw::List(self.iter().cloned().map(Raw::Str).collect())
+    }
+}
+
+/// `cc-by-4.0, CC0-1.0` or a list of ids → their canonical spellings, once each, in the
+/// order given; None when an id is unknown or none is given.
+fn licenses_from_raw(raw: &Raw) -> Option<Vec<String>> {
+    let items: Vec<&str> = match raw {
+        Raw::Str(s) => s.split(',').collect(),
+        Raw::List(v) => v
+            .iter()
+            .map(|x| match x {
+                Raw::Str(s) => Some(s.as_str()),
+                _ => None,
+            })
+            .collect::<Option<_>>()?,
+        _ => return None,
+    };
+    let mut out: Vec<String> = Vec::new();
+    for item in items.iter().filter(|s| !s.trim().is_empty()) {
+        let id = license::canonical(item)?;
+        if !out.contains(&id) {
+            out.push(id);
+        }
+    }
+    (!out.is_empty()).then_some(out)
+}
+
+impl OptionValue for Vec<u32> {
+    fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
+        let items: Vec<Raw> = match raw {
+            Raw::List(v) => v.clone(),
+            Raw::Int(_) => vec![raw.clone()],
+            _ => return None,
+        };
+        let level = match spec {
+            Spec::Factors => Spec::int(2, MAX_FACTOR as i128),
+            Spec::Indices => Spec::int(0, 1023),
+            _ => Spec::int(1, MAX_LEVEL as i128),
+        };
+        let mut levels: Vec<u32> = items
+            .iter()
+            .map(|x| match x {
+                Raw::Int(_) => u32::from_raw(x, &level),
+                _ => None,
+            })
+            .collect::<Option<_>>()?;
+        levels.sort_unstable();
+        let n = levels.len();
+        levels.dedup();
+        (levels.len() == n).then_some(levels)
+    }
+    fn to_raw(&self) -> Raw {
+        Raw::List(self.iter().map(|l| Raw::Int(i128::from(*l))).collect())
+    }
+}
+
+impl OptionValue for [f64; 3] {
+    fn from_raw(raw: &Raw, _: &Spec) -> Option<Self> {
+        let Raw::List(v) = raw else { return None };
+        let unit = Spec::closed(0.0, 1.0);
+        match v.as_slice() {
+            [r, g, b] => Some([
+                f64::from_raw(r, &unit)?,
+                f64::from_raw(g, &unit)?,
+                f64::from_raw(b, &unit)?,
+            ]),
+            _ => None,
+        }
+    }
+    fn to_raw(&self) -> Raw {
+        Raw::List(self.iter().map(|x| Raw::Float(*x)).collect())
+    }
+}
+
+pub(crate) fn config_error(option: &str, detail: String) -> Error {
+    Error::Config {
+        option: option.to_string(),
+        detail,
+    }
+}
+
+pub(crate) fn convert<T: OptionValue>(option: &str, raw: &Raw, spec: &Spec) -> Result<T> {
+    T::from_raw(raw, spec)
+        .ok_or_else(|| config_error(option, format!("{raw}: {}", spec.expected())))
+}
+
+/// The ranges every check of these options uses (the build's and the plan's alike).
+pub mod specs {
+    use super::*;
+    pub const COUNT: Spec = Spec::int(1, MAX_COUNT as i128);
+    pub const SAMPLES: Spec = Spec::int(1, MAX_SAMPLES as i128);
+    pub const RESOLUTION: Spec = Spec::int(8, 16384);
+    pub const FOV_DEG: Spec = Spec::num(1.0, true, 150.0, true);
+    pub const WINDOW_DEG: Spec = Spec::num(0.0, false, 90.0, true);
+    pub const PHI0_DEG: Spec = Spec::num(0.0, true, 180.0, true);
+    pub const DELTA0: Spec = Spec::closed(0.0, 45.0);
+    pub const RADIUS_MARGIN: Spec = Spec::closed(1.0, 100.0);
+    pub const LEVEL_SPREAD: Spec = Spec::num(0.0, false, 1.0, true);
+    pub const MAX_GHOST_PX: Spec = Spec::num(0.01, false, f64::INFINITY, false);
+    pub const ORIENTATION_MAX: Spec = Spec::num(1.0, false, f64::INFINITY, false);
+    pub const NEAR_FLOOR: Spec = Spec::num(0.0, true, f64::INFINITY, false);
+    pub const LATENT_POSITIONS: Spec = Spec::Choice(&["random", "stratified"]);
+    pub const TRAJECTORY: Spec = Spec::Choice(&["start", "centered"]);
+    pub const BLUR_METHOD: Spec = Spec::Choice(&["average", "motion_blur"]);
+    pub const EXECUTOR: Spec = Spec::Choice(&["local", "ray"]);
+    pub const LATENT_SAMPLING: Spec = Spec::Choice(&["subsets", "independent"]);
+    pub const LIGHT_PATHS: Spec = Spec::Choice(&["auto", "fixed"]);
+    pub const BLUR_BUDGET: Spec = Spec::Choice(&["parity", "flat"]);
+    /// `auto`: the best backend Cycles reports (OptiX > CUDA > HIP > oneAPI > Metal > CPU).
+    pub const DEVICE: Spec =
+        Spec::Choice(&["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"]);
+    pub const GPUS_PER_TASK: Spec = Spec::closed(0.0, 64.0);
+    pub const SEED: Spec = Spec::int(0, u64::MAX as i128);
+    pub const FRACTION: Spec = Spec::closed(0.0, 1.0);
+    /// At most a year: every wait of the build (a thread's, a pipe's) can hold it.
+    pub const SECONDS: Spec = Spec::num(0.0, true, MAX_SECONDS, false);
+    pub const BUDGET_SECONDS: Spec = Spec::num(0.0, false, MAX_SECONDS, false);
+    pub const THREADS: Spec = Spec::int(0, 4096);
+    pub const WORKERS: Spec = Spec::int(1, 1024);
+}
+
+/// The longest timeout or time budget, s (a year; a wait of 1e308 s cannot be made).
+pub const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
+
+/// Check an already typed value against its spec (the error as from_values gives it).
+pub fn check<T: OptionValue>(option: &str, value: &T, spec: &Spec) -> Result<()> {
+    let raw = value.to_raw();
+    T::from_raw(&raw, spec)
+        .map(|_| ())
+        .ok_or_else(|| config_error(option, format!("{raw}: {}", spec.expected())))
+}
+
+/// The largest factor of an `images_<f>/` copy.
+pub const MAX_FACTOR: u32 = 64;
+
+/// Refuse downsampling factors outside 2..=MAX_FACTOR or repeated (`blurset noise
+/// --downsample`, whose image size is the scene's own; the build checks them as a field).
+pub fn check_downsample(factors: &[u32]) -> Result<()> {
+    let raw = factors.to_vec().to_raw();
+    Vec::<u32>::from_raw(&raw, &Spec::Factors)
+        .map(|_| ())
+        .ok_or_else(|| config_error("downsample", format!("{raw}: {}", Spec::Factors.expected())))
+}
+
+/// θ0 of a setting: any finite azimuth in degrees.
+pub const THETA0_DEG: Spec = Spec::num(f64::NEG_INFINITY, false, f64::INFINITY, false);
+
+/// Refuse a non-finite θ0 (it would make every camera NaN).
+pub fn check_theta0(theta0_deg: f64) -> Result<()> {
+    check("theta0_deg", &theta0_deg, &THETA0_DEG)
+}

@@ -1,0 +1,105 @@
+"""blurset-core is layered: ground utilities (error, rng, ground/: atomic writes, names,
+licence ids) under plan, plan under image, image under noise and metrics, and all of
+them under dataset; no module imports one above it, and no two files import each other
+(directly or round a circle). Read from the sources' `crate::`/`super::` paths."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parents[1] / "rust" / "core" / "src"
+
+# Top-level module -> layer; a module may use its own layer and those below.
+LAYERS = {
+    "error": 0,
+    "rng": 0,
+    "ground": 0,
+    "plan": 1,
+    "image": 2,
+    "noise": 3,
+    "metrics": 3,
+    "dataset": 4,
+}
+
+PATH = re.compile(r"\b(crate|super)::((?:\{[^}]*\})|[A-Za-z_][\w:]*)")
+
+
+def _module_of(file: Path) -> tuple[str, ...]:
+    parts = file.relative_to(SRC).with_suffix("").parts
+    return parts[:-1] if parts[-1] == "mod" else parts
+
+
+def _code(file: Path) -> str:
+    """The file without comments and without its `#[cfg(test)] mod tests` block."""
+    text = re.sub(r"//[^\n]*", "", file.read_text())
+    m = re.search(r"#\[cfg\(test\)\]\s*mod tests\b", text)
+    return text[: m.start()] if m else text
+
+
+def _files() -> dict[tuple[str, ...], Path]:
+    return {_module_of(f): f for f in sorted(SRC.rglob("*.rs")) if f.name != "lib.rs"}
+
+
+def _edges() -> dict[tuple[str, ...], set[tuple[str, ...]]]:
+    files = _files()
+    out: dict[tuple[str, ...], set[tuple[str, ...]]] = {m: set() for m in files}
+    for mod, f in files.items():
+        parent = mod[:-1]
+        for root, rest in PATH.findall(_code(f)):
+            heads = [h.strip() for h in rest[1:-1].split(",")] if rest.startswith("{") else [rest]
+            for head in heads:
+                names = [n for n in head.split("::") if n and n != "self" and n != "*"]
+                base = () if root == "crate" else parent
+                target = base
+                for n in names:  # the longest prefix that is a file module
+                    if (*target, n) in files:
+                        target = (*target, n)
+                    else:
+                        break
+                if target and target != mod and target in files:
+                    out[mod].add(target)
+    return out
+
+
+def test_no_module_imports_a_layer_above_it() -> None:
+    bad = []
+    for mod, deps in _edges().items():
+        for d in deps:
+            if LAYERS[d[0]] > LAYERS[mod[0]]:
+                bad.append(f"{'/'.join(mod)} uses {'::'.join(d)}")
+    assert not bad, bad
+
+
+def test_no_circles_between_files() -> None:
+    edges = _edges()
+    # A module's own mod.rs (its parent) holds shared items, not a dependency circle.
+    graph = {m: {d for d in ds if d != m[: len(d)]} for m, ds in edges.items()}
+    circles = []
+    state: dict[tuple[str, ...], int] = {}
+
+    def visit(m: tuple[str, ...], stack: list[tuple[str, ...]]) -> None:
+        state[m] = 1
+        stack.append(m)
+        for d in graph.get(m, ()):
+            if state.get(d) == 1:
+                circles.append(" -> ".join("/".join(x) for x in [*stack[stack.index(d) :], d]))
+            elif d not in state:
+                visit(d, stack)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [])
+    assert not circles, circles
+
+
+def test_the_check_sees_the_imports() -> None:
+    """The parser finds what it must (a circle or a climb would not hide behind it)."""
+    edges = _edges()
+    assert ("ground", "atomic") in edges[("dataset", "layout")]
+    assert ("plan", "spec") in edges[("plan", "config")]
+    assert ("plan", "sampling") in edges[("plan", "config")]
+    assert ("plan", "camera") in edges[("image", "qa")]
+    assert set(LAYERS) == {p.name if p.is_dir() else p.stem for p in SRC.iterdir()} - {"lib"}

@@ -1,0 +1,154 @@
+"""The build options are declared in the core (`build_config!` in plan/config.rs); every
+other place that lists them is checked against that declaration here: the flags of
+`blurset build`, the typed properties of the stub, the run options (those that do not
+shape the files) and the help's defaults. A core option without its flag, stub
+property or classification fails, and so does a flag that is no option."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import types
+from pathlib import Path
+from typing import Any, Union, get_args, get_origin
+
+from blurset import cli
+from blurset.build.cli import default_text
+from blurset.build.dataset import BEFORE_OPTION, RUN_OPTIONS
+from blurset.config import BuildConfig
+
+OPTIONS = BuildConfig.options()
+STUB = Path(__file__).resolve().parents[1] / "python" / "blurset" / "_core.pyi"
+
+# Options reached through another option's flag.
+FLAG_VIA = {"latents_auto": "--latents", "test_fraction": "--test-objects"}
+# The paper's constants of the sampling: TOML keys only, no flag.
+TOML_ONLY = {
+    "phi0_deg",
+    "window_deg",
+    "delta0",
+    "radius_margin",
+    "level_spread",
+    "orientation_max",
+    "near_floor",
+    "background",
+}
+# Flags of `blurset build` that are not options of the config.
+NOT_OPTIONS = {"help", "debug", "config", "quiet"}
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = cli.make_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return sub.choices["build"]
+
+
+def test_every_option_has_a_flag_and_every_flag_is_an_option() -> None:
+    dests = {a.dest for a in _build_parser()._actions}
+    missing = [o for o in OPTIONS if o not in dests and o not in FLAG_VIA and o not in TOML_ONLY]
+    assert not missing, f"core options without a flag of blurset build: {missing}"
+    extra = sorted(dests - set(OPTIONS) - NOT_OPTIONS)
+    assert not extra, f"flags of blurset build that are no core option: {extra}"
+    assert not (TOML_ONLY | set(FLAG_VIA)) - set(OPTIONS)
+
+
+def _stub_properties() -> dict[str, str]:
+    text = STUB.read_text()
+    start = text.index("class BuildConfig")
+    end = text.index("\nclass ", start + 1)
+    body = text[start:end]
+    return dict(re.findall(r"@property\s+def (\w+)\(self\) -> ([^:]+?): \.\.\.", body))
+
+
+def _conforms(value: Any, hint: Any) -> bool:
+    origin = get_origin(hint)
+    if origin in (Union, types.UnionType):
+        return any(_conforms(value, h) for h in get_args(hint))
+    if hint is None or hint is type(None):
+        return value is None
+    if origin is list:
+        (item,) = get_args(hint)
+        return isinstance(value, list) and all(_conforms(v, item) for v in value)
+    if origin is tuple:
+        items = get_args(hint)
+        return (
+            isinstance(value, tuple)
+            and len(value) == len(items)
+            and all(_conforms(v, h) for v, h in zip(value, items, strict=True))
+        )
+    if hint is float:
+        return isinstance(value, float)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, hint)
+
+
+def test_the_stub_types_every_option_as_the_core_gives_it() -> None:
+    props = _stub_properties()
+    missing = [o for o in OPTIONS if o not in props]
+    assert not missing, f"_core.pyi has no BuildConfig property for {missing}"
+    demo = BuildConfig(
+        demo=True,
+        out="o",
+        objects=["a.glb"],
+        samples_total=64,
+        sharp_samples=8,
+        gpus_per_task=0.5,
+        executor="ray",
+        ray_address="auto",
+        shard="0/2",
+        objaverse_dir="d",
+        objaverse_count=3,
+        blender="blender",
+        test_objects=["a"],
+        licenses="cc0-1.0",
+    )
+    local = BuildConfig(gpus=[0, 1], workers=2)
+    wrong = []
+    for o in OPTIONS:
+        hint = eval(props[o], {"list": list, "tuple": tuple})  # noqa: S307 - our own stub
+        for cfg in (BuildConfig(), demo, local):
+            if not _conforms(getattr(cfg, o), hint):
+                wrong.append(f"{o}: {getattr(cfg, o)!r} is not {props[o]}")
+    assert not wrong, wrong
+
+
+def test_every_option_is_classified_as_shaping_the_files_or_not() -> None:
+    """RUN_OPTIONS (a rerun may change them) are options; every other option shapes the
+    files and is compared between runs; BEFORE_OPTION only names shaping options."""
+    assert RUN_OPTIONS <= set(OPTIONS), sorted(RUN_OPTIONS - set(OPTIONS))
+    assert set(BEFORE_OPTION) <= set(OPTIONS) - RUN_OPTIONS
+    record = BuildConfig().record()
+    assert set(OPTIONS) <= set(record), sorted(set(OPTIONS) - set(record))
+
+
+def test_help_states_the_core_default_of_every_flagged_option() -> None:
+    helps = {a.dest: a.help or "" for a in _build_parser()._actions}
+    for o in OPTIONS:
+        if o in helps and o not in ("objects", "out") and _takes_value(o):
+            shown = "test_fraction" if o == "test_objects" else o  # --test-objects F|ids
+            assert f"(default: {default_text(shown)})" in helps[o], (o, helps[o])
+
+
+def _takes_value(option: str) -> bool:
+    return not isinstance(getattr(BuildConfig(), option), bool)
+
+
+def test_the_build_guides_synopsis_names_real_flags_with_the_core_defaults() -> None:
+    """The build guide's `blurset build` synopsis (docs/guide/build.md): every flag it
+    names is a flag of the parser, and a number it shows as the value of an option that
+    has one is the core's default."""
+    readme = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "build.md").read_text()
+    start = readme.index("```sh\nblurset build --objects")
+    synopsis = readme[start : readme.index("```", start + 5)]
+    flags = {s for a in _build_parser()._actions for s in a.option_strings}
+    named = re.findall(r"(--[a-z][a-z-]*)", synopsis)
+    assert named and not [f for f in named if f not in flags], named
+    dest = {s: a.dest for a in _build_parser()._actions for s in a.option_strings}
+    core = BuildConfig()
+    shown = re.findall(r"\[(--[a-z-]+) (\d+)[\]|]", synopsis)
+    assert shown
+    for f, value in shown:
+        default = getattr(core, dest[f])
+        if default is not None:  # a None default shows an example (`--gpus-per-task 1`)
+            assert default == int(value), (f, value, default)
