@@ -69,6 +69,12 @@ def job_objects(cfg: BuildConfig) -> list[ObjectSpec]:
     return objs
 
 
+def resumed_settings(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> int:
+    """How many of this job's settings an earlier run left complete in OUT."""
+    mine = {layout.setting_name(o.uid, t) for o in objs for t in cfg.theta0s}
+    return sum(1 for s in layout.complete_settings(out) if s.name in mine)
+
+
 def _report_missing(objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress) -> None:
     """Say up front which objaverse objects are not cached and what will happen to them."""
     missing = [o for o in objs if o.source == "objaverse" and not o.path.is_file()]
@@ -102,6 +108,11 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
         sweep(out, objs, cfg)
     n_settings = len(objs) * len(cfg.theta0s)
     prog = Progress(n_settings, frames_per_setting=frames_per_setting(cfg), enabled=progress)
+    if found := resumed_settings(out, objs, cfg):
+        prog.write(
+            f"resuming: {found} of {n_settings} settings are complete from an earlier run "
+            "and are skipped (each is checked first; one that is not whole is redone)"
+        )
     _report_missing(objs, cfg, prog)
     new_settings = 0
     lock = threading.Lock()
