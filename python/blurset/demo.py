@@ -214,6 +214,7 @@ def _glb_bytes(vertices, faces, normals, uv, texture: Image.Image, extras: dict)
         process=False,
     )
     buf = io.BytesIO()
+
     def attribute(tree: dict) -> None:
         tree.setdefault("asset", {})["extras"] = extras
 
