@@ -374,6 +374,7 @@ def test_licence_texts_map_to_spdx_ids():
         "cc0": "CC0-1.0",
         "SKETCHFAB-Standard (https://sketchfab.com/licenses)": "other",
         "free-st": "other",
+        "MIT (https://opensource.org/licenses/MIT)": "MIT",  # blurset's demo objects
         "": "unknown",
         None: "unknown",
     }

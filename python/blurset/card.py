@@ -313,7 +313,7 @@ def make_card(
     out += _construction(cfg, m0, metas, levels)
     for path, doc in noise_docs:
         out += _noise_section(path, doc)
-    out += _loading(levels)
+    out += _loading(levels, splits.get("view_stride") or cfg.get("view_stride") or 16)
     if previews:
         out += _previews(build, settings, card_dir or build)
     out += _attribution(objects, licences)
@@ -404,7 +404,8 @@ def _noise_section(path: Path, doc: dict) -> list[str]:
     ]
 
 
-def _loading(levels: list[str]) -> list[str]:
+def _loading(levels: list[str], llffhold: int) -> list[str]:
+    """How to load the build; `llffhold` is the build's test-view stride."""
     blur = next((lvl for lvl in levels if lvl != layout.SHARP), layout.SHARP)
     return [
         "## Loading",
@@ -412,7 +413,7 @@ def _loading(levels: list[str]) -> list[str]:
         "Every level directory is an LLFF scene as IBRNet, NAN and Deblur-NeRF read it: "
         "`images/` (sorted file order is view order) and `poses_bounds.npy` (N x 17: the "
         "3 x 5 camera-to-world [down, right, backwards | t | h w f] row-major, then near, "
-        "far). With IBRNet/NAN use `--llffhold 16`; nerfstudio reads `transforms.json` "
+        f"far). With IBRNet/NAN use `--llffhold {llffhold}`; nerfstudio reads `transforms.json` "
         "(use `--center-method focus`). Training pairs a degraded level with `sharp/` of "
         "the same setting.",
         "",

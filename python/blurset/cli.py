@@ -12,6 +12,12 @@ from typing import Any
 from blurset.exceptions import BlursetError
 
 # subcommand -> (module, one-line help)
+# What an interrupted command keeps, and how to go on (commands that resume).
+RESUME = {
+    "build": "; complete settings are kept: rerun the same command to resume",
+    "noise": "; complete scenes are kept: rerun the same command to resume",
+}
+
 COMMANDS = {
     "build": ("blurset.build.cli", "render an Objaverse-Blur style dataset from GLB objects"),
     "noise": (
@@ -125,7 +131,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as e:
         code = stop.exit_code(e)
         why = f" ({e.args[0]})" if code != 130 else ""
-        print(f"blurset {args.command}: interrupted{why}", file=sys.stderr)
+        print(
+            f"blurset {args.command}: interrupted{why}{RESUME.get(args.command, '')}",
+            file=sys.stderr,
+        )
         if stop.must_exit_now():
             sys.stdout.flush()
             sys.stderr.flush()

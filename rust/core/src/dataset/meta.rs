@@ -347,6 +347,10 @@ pub struct ReadMeta {
     pub levels: Option<Vec<String>>,
     #[serde(default)]
     pub test_views: Option<Vec<u64>>,
+    /// `sharp` when the blur levels hold the sharp image at the test views; absent in
+    /// metas from before the field, whose test views were blurry.
+    #[serde(default)]
+    pub test_view_images: Option<String>,
 }
 
 // -- what `blurset check-poses` reads: the mean latent poses of a blur level -----------
