@@ -3,21 +3,34 @@
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import os
+import signal
 import sys
-from typing import Any
 
-from blurset.exceptions import BlursetError
 
-# subcommand -> (module, one-line help)
+def _interrupted_early(signum: int, frame: object) -> None:
+    # Ctrl-C while the command starts (its modules import numpy, matplotlib …): nothing
+    # was written yet, so it ends at once, quietly; main() installs the real stop.
+    sys.stderr.write("blurset: interrupted\n")
+    os._exit(128 + signum)
+
+
+if __name__ == "__main__" or sys.argv[0].endswith("blurset"):
+    signal.signal(signal.SIGINT, _interrupted_early)
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+from typing import Any  # noqa: E402
+
+from blurset.exceptions import BlursetError  # noqa: E402
+
 # What an interrupted command keeps, and how to go on (commands that resume).
 RESUME = {
     "build": "; complete settings are kept: rerun the same command to resume",
     "noise": "; complete scenes are kept: rerun the same command to resume",
 }
 
+# subcommand -> (module, one-line help)
 COMMANDS = {
     "build": ("blurset.build.cli", "render an Objaverse-Blur style dataset from GLB objects"),
     "noise": (
