@@ -26,6 +26,7 @@ pub use crate::plan::sampling::{plan_setting, LevelPlan, SamplingConfig, Setting
 // Linear frames in, encoded images out; image files; render QA.
 pub use crate::image::accumulate::Accumulator;
 pub use crate::image::color::srgb_encode_slice;
+pub use crate::image::denoise::{DenoiseDevice, Denoiser};
 pub use crate::image::exr::read::{read_exr, Frame};
 pub use crate::image::io::{image_info, read_image, Image, Samples};
 pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
