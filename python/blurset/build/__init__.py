@@ -95,6 +95,10 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     resolve_objects(list(cfg.objects), cache=objaverse(cfg))
     check_out(out, cfg)
     slots = devices.plan_local(cfg) if cfg.executor == "local" else []
+    if cfg.denoise == "oidn":  # a missing OIDN fails before anything is written
+        from blurset.denoise import denoiser, device_for
+
+        denoiser(device_for(cfg.device))
     out.mkdir(parents=True, exist_ok=True)
     objs = job_objects(cfg)
     with build_lock(out):

@@ -59,10 +59,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--blur-budget",
-        choices=["parity", "flat"],
+        choices=["parity", "flat", "need"],
         help="parity (default): a blurry image gets the sample budget times a factor of "
-        "its latent frames and motion, so it is no noisier than its sharp image; flat: the "
-        "budget as given, m frames at S/m samples (builds before it)",
+        "its latent frames and motion, so it is no noisier than its sharp image; need: "
+        "that factor bought by the image's measured motion between frames (less for "
+        "small motion); flat: the budget as given, m frames at S/m samples (builds before it)",
+    )
+    p.add_argument(
+        "--denoise",
+        choices=["none", "oidn"],
+        help="none (default): images as rendered; oidn: every image denoised once by Open "
+        "Image Denoise, a blurry image after averaging (its frames' albedo and normal "
+        "averaged the same way), the sharp image the same way",
     )
     p.add_argument(
         "--light-paths",
@@ -192,7 +200,8 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
         k: getattr(args, k)
         for k in (
             "objects out demo settings_per_object views latents latents_max max_ghost_px "
-            "samples samples_total blur_method sharp_samples latent_sampling blur_budget light_paths "
+            "samples samples_total blur_method sharp_samples latent_sampling blur_budget denoise "
+            "light_paths "
             "device gpus gpus_per_task resolution seed fov_deg latent_positions trajectory "
             "write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "

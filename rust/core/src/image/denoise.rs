@@ -318,11 +318,11 @@ impl std::fmt::Debug for Denoiser {
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// The OIDN of the venv's bpy wheel, when the tests run beside one.
-    fn library() -> Option<PathBuf> {
+    pub(crate) fn library() -> Option<PathBuf> {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
         let venv = root.join(".venv/lib");
         for py in std::fs::read_dir(venv).ok()?.flatten() {
@@ -359,7 +359,9 @@ mod tests {
         let (w, h) = (32u32, 24u32);
         let n = (w * h * 3) as usize;
         let mut s = crate::rng::Stream::new(7, 0);
-        let noisy: Vec<f32> = (0..n).map(|_| 0.5 + 0.1 * (s.uniform() as f32 - 0.5)).collect();
+        let noisy: Vec<f32> = (0..n)
+            .map(|_| 0.5 + 0.1 * (s.uniform() as f32 - 0.5))
+            .collect();
         let albedo = vec![0.8f32; n];
         let normal: Vec<f32> = (0..n).map(|i| if i % 3 == 2 { 1.0 } else { 0.0 }).collect();
         let out = d.denoise(w, h, &noisy, &albedo, &normal)?;
@@ -367,7 +369,12 @@ mod tests {
             let m = v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64;
             v.iter().map(|&x| (f64::from(x) - m).powi(2)).sum::<f64>() / v.len() as f64
         };
-        assert!(var(&out) < var(&noisy) / 4.0, "{} {}", var(&out), var(&noisy));
+        assert!(
+            var(&out) < var(&noisy) / 4.0,
+            "{} {}",
+            var(&out),
+            var(&noisy)
+        );
         let mean = out.iter().map(|&x| f64::from(x)).sum::<f64>() / n as f64;
         assert!((mean - 0.5).abs() < 0.02, "{mean}");
         let e = d.denoise(w, h, &noisy[1..], &albedo, &normal).unwrap_err();
