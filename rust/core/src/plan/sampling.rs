@@ -1597,6 +1597,72 @@ mod tests {
     }
 
     #[test]
+    fn need_buys_what_the_motion_needs_and_never_more_than_parity() {
+        // The rule's ends: no motion needs the budget, ≥ 0.5 px per frame the full m^0.4.
+        assert_eq!(need_factor(34, 0.0), 1.0);
+        assert_eq!(need_factor(1, 100.0), 1.0);
+        assert!((need_factor(34, 34.0 * NEED_SATURATION_PX) - parity_factor(34)).abs() < 1e-12);
+        assert_eq!(need_factor(34, f64::INFINITY), parity_factor(34));
+        assert_eq!(need_factor(34, -3.0), 1.0);
+        // It lies on or above the needs measured on the demo box at 96 px (m = 34, flat
+        // budget: bench/results.json render_parity_paper_level*_x1 and the parity ratios).
+        for (motion_px, measured) in [(5.04, 1.55), (9.99, 2.20), (14.32, 2.77)] {
+            let f = need_factor(34, motion_px);
+            assert!(f >= measured && f <= parity_factor(34), "{motion_px}: {f}");
+        }
+        // Level 1 of that bench: 5.04 px over 34 frames gets ≈ 1.9×, not 4.1×.
+        assert!((need_factor(34, 5.04) - 1.92).abs() < 0.01);
+        let need = SamplingConfig {
+            blur_budget: BlurBudget::Need,
+            samples_total: Some(256),
+            ..Default::default()
+        };
+        let parity = SamplingConfig {
+            blur_budget: BlurBudget::Parity,
+            ..need.clone()
+        };
+        for m in 1..=64usize {
+            for motion in [0.0, 1.0, 5.0, 20.0, 80.0, f64::INFINITY] {
+                let (n, p) = (
+                    need.samples_per_frame_at(m, motion),
+                    parity.samples_per_frame_at(m, motion),
+                );
+                assert!(
+                    n <= p && n >= 256u32.div_ceil(m as u32),
+                    "{m} {motion}: {n} {p}"
+                );
+                // More motion never buys fewer samples.
+                assert!(n >= need.samples_per_frame_at(m, motion / 2.0));
+            }
+            // The sequence Cycles is pinned to bounds every level's.
+            assert!(
+                need.sample_blocks_at(m, 3.0).0 <= need.max_sequence().max(need.sample_blocks(m).0)
+            );
+        }
+        // The plan of a need build (the paper's 34 frames): each level's frames carry
+        // its motion's samples, fewer than parity's where frames move < 0.5 px apart.
+        // (Under --latents auto every gap is near max_ghost_px = 1 px: saturated.)
+        let cfg = SamplingConfig {
+            views: 4,
+            resolution: 96,
+            ..need.clone()
+        };
+        let p = plan(&cfg, 1, [1.0, 1.0, 1.0]);
+        let mut saved = 0.0;
+        for v in &p.views {
+            for lp in v.levels.values() {
+                assert_eq!(
+                    lp.samples_per_frame,
+                    cfg.samples_per_frame_at(lp.latents, lp.motion_px)
+                );
+                assert!(lp.sample_sequence <= p.sample_sequence_max);
+                saved += f64::from(cfg.samples_per_frame(lp.latents) - lp.samples_per_frame);
+            }
+        }
+        assert!(saved > 0.0);
+    }
+
+    #[test]
     fn parity_buys_the_blurry_image_more_samples_by_its_frames() {
         let flat = SamplingConfig {
             blur_budget: BlurBudget::Flat,
