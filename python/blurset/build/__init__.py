@@ -91,14 +91,14 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # same shared path) write where the driver reads.
     cfg = cfg.replace(out=str(Path(cfg.out).resolve()))
     out = Path(cfg.out)
-    # Bad entries and a missing device fail before anything is written.
-    resolve_objects(list(cfg.objects), cache=objaverse(cfg))
-    check_out(out, cfg)
-    slots = devices.plan_local(cfg) if cfg.executor == "local" else []
     if cfg.denoise == "oidn":  # a missing OIDN fails before anything is written
         from blurset.denoise import denoiser, device_for
 
         denoiser(device_for(cfg.device))
+    # Bad entries and a missing device fail before anything is written.
+    resolve_objects(list(cfg.objects), cache=objaverse(cfg))
+    check_out(out, cfg)
+    slots = devices.plan_local(cfg) if cfg.executor == "local" else []
     out.mkdir(parents=True, exist_ok=True)
     objs = job_objects(cfg)
     with build_lock(out):

@@ -93,7 +93,7 @@ impl Denoiser {
     /// name) and commit a device; the error names the file and what OIDN said.
     pub fn open(library: &Path, device: DenoiseDevice) -> Result<Denoiser> {
         let bad = |reason: String| Error::Input {
-            reason: format!("denoise oidn: {reason}"),
+            reason,
             path: library.to_path_buf(),
         };
         // SAFETY: loading OIDN runs its initializers only (C++ static constructors).
@@ -342,7 +342,7 @@ pub(crate) mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("denoise oidn") && e.contains("libOIDN.so"),
+            e.contains("cannot load Open Image Denoise") && e.contains("libOIDN.so"),
             "{e}"
         );
     }
