@@ -105,13 +105,14 @@ def test_denoised_pair_keeps_parity_at_zero_motion(tmp_path):
 
 
 def _edge_widths(img: np.ndarray, axis: int) -> list[float]:
-    """Per line along `axis`: the 10–90 % rise distance (px, sub-pixel) of the
-    premultiplied luma where the line first enters the object (transparent 0 before it),
-    the plateau taken just past the first fully covered pixel."""
+    """Per line along `axis`, from either end: the 10–90 % rise distance (px,
+    sub-pixel) of the premultiplied luma where the line first enters the object
+    (transparent 0 before it), the plateau taken just past the first fully covered pixel."""
     a = img[..., 3]
     p = img[..., :3] @ LUMA
     if axis == 0:
         a, p = a.T, p.T
+    a, p = np.concatenate([a, a[:, ::-1]]), np.concatenate([p, p[:, ::-1]])
     out = []
     for al, pl in zip(a, p, strict=True):
         inside = np.flatnonzero(al >= 0.999)
@@ -175,7 +176,7 @@ def test_denoising_keeps_the_motion_streak(tmp_path):
     alpha_w = [np.median(_edge_widths(np.dstack([raw[..., 3:]] * 4), ax)) for ax in (0, 1)]
     axis = int(np.argmax(alpha_w))
     w_raw, w_den = _edge_widths(raw, axis), _edge_widths(den, axis)
-    assert len(w_raw) >= 10 and len(w_den) >= 10, (len(w_raw), len(w_den))
+    assert len(w_raw) >= 8 and len(w_den) >= 8, (w_raw, w_den)
     m_raw, m_den = float(np.median(w_raw)), float(np.median(w_den))
     assert m_raw > 2.0, m_raw  # a streak several pixels wide, not a sharp edge
     assert abs(m_den / m_raw - 1.0) <= 0.10, (m_raw, m_den, alpha_w)
