@@ -43,7 +43,9 @@ def test_missing_oidn_library_is_one_line_before_anything_is_written(tmp_path):
     out = tmp_path / "o"
     p = run_cli("build", "--demo", "--out", str(out), "--denoise", "oidn", env=env, check=False)
     assert p.returncode == 2, p.stderr
-    assert p.stderr.strip().startswith("blurset build: error: --denoise oidn: cannot load"), p.stderr
+    assert p.stderr.strip().startswith("blurset build: error: --denoise oidn: cannot load"), (
+        p.stderr
+    )
     assert len(p.stderr.strip().splitlines()) == 1
     assert not out.exists()
 
@@ -123,7 +125,7 @@ def _edge_widths(img: np.ndarray, axis: int) -> list[float]:
         if ref < 0.05:
             continue
 
-        def cross(frac: float) -> float | None:
+        def cross(frac: float, pl=pl, ref=ref, x1=x1) -> float | None:
             hit = np.flatnonzero(pl[: x1 + 1] >= frac * ref)
             if hit.size == 0 or hit[0] == 0:
                 return None

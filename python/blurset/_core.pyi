@@ -510,6 +510,10 @@ class ImageMetrics:
     def mse(self) -> float: ...
     @property
     def mse_linear(self) -> float: ...
+    @property
+    def detail_ratio(self) -> float:
+        """High-frequency energy (squared Laplacian of sRGB luma over the background) of
+        the image over the reference's: < 1 smoothed, > 1 noisier (issue 28)."""
 
 def image_error(
     image: npt.NDArray[np.float32],
