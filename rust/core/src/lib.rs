@@ -71,4 +71,4 @@ pub use crate::dataset::stats::{build_stats, BuildStats};
 pub use crate::dataset::verify::{check_images, ImageCheck};
 
 // Image error against a reference and the speed/quality front.
-pub use crate::metrics::{image_error, pareto_front};
+pub use crate::metrics::{detail_ratio, image_error, pareto_front};
