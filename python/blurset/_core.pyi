@@ -338,6 +338,7 @@ class Accumulator:
     def write_exr(self, path: str | PathLike[str]) -> None:
         """Write the linear mean as a ZIP-compressed RGBA float32 EXR, atomically."""
 
+@final
 class Denoiser:
     """Open Image Denoise loaded from `library` (the bpy wheel's
     libOpenImageDenoise.so.2) with one device: `auto` (OIDN's fastest, a GPU when there is
