@@ -182,3 +182,27 @@ def test_denoising_keeps_the_motion_streak(tmp_path):
     m_raw, m_den = float(np.median(w_raw)), float(np.median(w_den))
     assert m_raw > 2.0, m_raw  # a streak several pixels wide, not a sharp edge
     assert abs(m_den / m_raw - 1.0) <= 0.10, (m_raw, m_den, alpha_w)
+
+
+@pytest.mark.blender
+def test_tradeoff_measures_denoised_candidates(tmp_path):
+    import csv
+
+    glb = shared("glb", "sketchfab_MapPin.glb")
+    out = tmp_path / "t"
+    run_cli("tradeoff", "--object", str(glb), "--out", str(out), "--quick", "--resolution",
+            "48", "--budgets", "16", "--latents", "4", "--reference", "16,8",
+            "--denoise", "oidn", "--quiet")  # fmt: skip
+    rows = [r for r in csv.DictReader((out / "tradeoff.csv").open()) if r["role"] == "candidate"]
+    raw = [r for r in rows if r["denoise"] == "none"]
+    den = [r for r in rows if r["denoise"] == "oidn"]
+    assert raw and len(den) == len(raw)
+    for r in den:
+        assert r["label"].endswith("+oidn") and int(r["render_reference_factor"]) == 32
+        assert 0.0 < float(r["detail_ratio"]) < 2.0 and 0.0 < float(r["sharp_detail_ratio"]) < 2.0
+        assert 10.0 < float(r["render_psnr"]) < 100.0
+    for r in raw:
+        # Raw noise only adds high-frequency energy.
+        assert float(r["detail_ratio"]) > 0.9
+    setup = json.loads((out / "tradeoff.json").read_text())["setup"]
+    assert setup["denoise"] == "oidn" and setup["denoised_reference_samples"] == 32 * 16
