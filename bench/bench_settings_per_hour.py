@@ -217,8 +217,8 @@ def _continuous_reference(glb: Path, work: Path) -> dict:
 
 def _render_reference(glb: Path, work: Path, preset: dict, samples: dict) -> tuple[dict, int]:
     """The preset's own images, undenoised, at K times its samples on other seeds:
-    (images per (view, level dir), K). `samples` is the largest sample count of an image
-    among the presets that share these frames."""
+    (images per (view, level dir), K). `samples`: the sample counts of `preset`'s images,
+    the most among the presets that share these frames."""
     from blurset.worker_client import Worker
 
     per_view = sum(samples.values())
@@ -283,7 +283,9 @@ def measure() -> dict:
             for names in groups.values():
                 samples = {lv: max(runs[n][0]["samples"][lv] for n in names)
                            for lv in runs[names[0]][0]["samples"]}  # fmt: skip
-                plain = {k: v for k, v in PRESETS[names[0]].items() if k != "denoise"}
+                # The reference renders the frames of the member with the most samples.
+                top = max(names, key=lambda n: sum(runs[n][0]["samples"].values()))
+                plain = {k: v for k, v in PRESETS[top].items() if k != "denoise"}
                 ref, k = _render_reference(glb, work, plain, samples)
                 for n in names:
                     own = runs[n][0]["samples"]
