@@ -177,6 +177,18 @@ def _link(text: str, url: Any) -> str:
     return _cell(text)
 
 
+def _denoiser(render: dict, cfg: dict) -> str:
+    """The card's denoiser cell: none (as the paper), or OIDN with its version and device
+    (issue 28)."""
+    kind = render.get("denoise", cfg.get("denoise", "none")) or "none"
+    if kind == "none":
+        return "none"
+    d = render.get("denoiser") or {}
+    what = " ".join(str(d[k]) for k in ("library", "version") if d.get(k)) or kind
+    on = f" on {d['device']}" if d.get("device") else ""
+    return f"{what}{on}, once per image after averaging (albedo + normal guides)"
+
+
 def _fmt(x: Any) -> str:
     if isinstance(x, float):
         return f"{x:g}"
@@ -350,6 +362,7 @@ def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> 
         ("Cycles samples per latent frame", render.get("samples_per_latent")),
         ("blurry sample budget", render.get("blur_budget")),
         ("Cycles samples of a sharp image", render.get("sharp_samples")),
+        ("denoiser", _denoiser(render, cfg)),
         ("background", _fmt(render.get("background", cfg.get("background")))),
         ("seed", cfg.get("seed")),
     ]

@@ -114,6 +114,10 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # same shared path) write where the driver reads.
     cfg = cfg.replace(out=str(out_dir(cfg).resolve()))
     out = out_dir(cfg)
+    if cfg.denoise == "oidn":  # a missing OIDN fails before anything is written
+        from blurset.denoise import denoiser, device_for
+
+        denoiser(device_for(cfg.device))
     # Bad entries, unknown test objects, a missing Blender or device fail before anything
     # is written (the demo's objects, written into OUT, are checked once they are).
     if cfg.demo:

@@ -118,10 +118,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--blur-budget",
-        choices=["parity", "flat"],
+        choices=["parity", "flat", "need"],
         help="parity: a blurry image of m >= 2 latent frames renders the sample budget S "
-        "times m^0.4, so it is no noisier than its sharp image; flat: the budget as given, "
-        "ceil(S/m) samples a frame",
+        "times m^0.4, so it is no noisier than its sharp image; need: that factor bought by "
+        "the image's measured motion between frames (less for small motion); flat: the "
+        "budget as given, ceil(S/m) samples a frame",
+    )
+    p.add_argument(
+        "--denoise",
+        choices=["none", "oidn"],
+        help="none: images as rendered; oidn: every image denoised once by Open Image "
+        "Denoise, a blurry image after averaging (its frames' albedo and normal averaged the "
+        "same way), the sharp image the same way",
     )
     p.add_argument(
         "--light-paths",
@@ -252,7 +260,8 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
         k: getattr(args, k)
         for k in (
             "objects out demo settings_per_object views latents latents_max max_ghost_px "
-            "samples samples_total blur_method sharp_samples latent_sampling blur_budget light_paths "
+            "samples samples_total blur_method sharp_samples latent_sampling blur_budget denoise "
+            "light_paths "
             "device gpus gpus_per_task resolution seed fov_deg latent_positions trajectory "
             "write_linear workers threads executor shard timeout "
             "object_timeout retries max_failure_rate max_triangles max_texture_pixels "

@@ -74,7 +74,7 @@ build_config_methods!(fields {
     objects: Vec<String>, out: Option<String>, demo: bool, settings_per_object: usize,
     views: usize, levels: Vec<u32>, latents: usize, latents_auto: bool, latents_max: usize,
     max_ghost_px: f64, blur_method: String, samples: u32, samples_total: Option<u32>,
-    sharp_samples: Option<u32>, latent_sampling: String, blur_budget: String, light_paths: String, device: String,
+    sharp_samples: Option<u32>, latent_sampling: String, blur_budget: String, denoise: String, light_paths: String, device: String,
     gpus: Option<Vec<u32>>, gpus_per_task: Option<f64>, resolution: u32, seed: u64, fov_deg: f64, phi0_deg: f64,
     window_deg: f64, delta0: f64, radius_margin: f64, level_spread: f64,
     latent_positions: String, trajectory: String, orientation_max: f64, near_floor: f64,

@@ -84,6 +84,10 @@ build_config! {
     /// it carries no more render noise than its sharp image (issue 15); `flat`: the
     /// budget as given (builds before it).
     blur_budget: String = "parity".into(), specs::BLUR_BUDGET;
+    /// `none`: images as rendered; `oidn`: every image (the sharp one and the mean of a
+    /// blurry image's latent frames, with their averaged albedo and normal guides)
+    /// denoised once by Open Image Denoise.
+    denoise: String = "none".into(), specs::DENOISE;
     /// `auto`: light-path bounces from the object's materials; `fixed`: the same for all.
     light_paths: String = "auto".into(), specs::LIGHT_PATHS;
     /// Cycles device (run-only: the pixels are the plan's on any device, within noise).
@@ -395,10 +399,10 @@ impl BuildConfig {
             } else {
                 LatentSampling::Subsets
             },
-            blur_budget: if self.blur_budget == "flat" {
-                BlurBudget::Flat
-            } else {
-                BlurBudget::Parity
+            blur_budget: match self.blur_budget.as_str() {
+                "flat" => BlurBudget::Flat,
+                "need" => BlurBudget::Need,
+                _ => BlurBudget::Parity,
             },
         }
     }
