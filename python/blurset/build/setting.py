@@ -227,5 +227,13 @@ def _pose_check(setting_dir: Path) -> dict:
         rep = check_setting(setting_dir, levels=[layout.SHARP])[layout.SHARP]
     except Exception as e:  # the check must never cost the setting itself
         return {"verdict": f"error: {e}", "pass": False}
-    keep = ("verdict", "pass", "registered", "total", "median_rot_err_deg", "median_center_err_rel")
+    keep = (
+        "verdict",
+        "meaning",
+        "pass",
+        "registered",
+        "total",
+        "median_rot_err_deg",
+        "median_center_err_rel",
+    )
     return {k: rep.get(k) for k in keep}
