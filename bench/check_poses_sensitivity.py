@@ -91,9 +91,10 @@ def measure(work: Path, sizes: list[int], view_counts: list[int]) -> list[dict]:
                 for k in view_counts:
                     scene = subset_scene(setting, level, k, work / "subsets")
                     t = time.perf_counter()
-                    cmd = [sys.executable, "-c", _ONE, str(scene)]
-                    out = subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=ROOT)
-                    r = json.loads(out.stdout)
+                    report = work / "report.json"
+                    cmd = [sys.executable, "-c", _ONE, str(scene), str(report)]
+                    subprocess.run(cmd, check=True, capture_output=True, cwd=ROOT)
+                    r = json.loads(report.read_text())
                     planted = r.get("planted") or {}
                     row = {
                         "object": obj,
@@ -121,8 +122,8 @@ def measure(work: Path, sizes: list[int], view_counts: list[int]) -> list[dict]:
 
 # One check in a process of its own (COLMAP's memory and threads).
 _ONE = (
-    "import json, sys; from blurset import check_poses; "
-    "print(json.dumps(check_poses.check_scene(sys.argv[1])))"
+    "import json, sys, pathlib; from blurset import check_poses; "
+    "pathlib.Path(sys.argv[2]).write_text(json.dumps(check_poses.check_scene(sys.argv[1])))"
 )
 
 
