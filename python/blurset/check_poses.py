@@ -36,6 +36,7 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -514,11 +515,11 @@ def _camera_poses(rec, image_ids):
         pts = [rec.point3D(p.point3D_id).xyz for p in image.points2D if p.has_point3D()]
         z = (np.asarray(pts) @ r.T + tvec)[:, 2] if pts else np.array([np.nan])
         depths.append(float(np.median(z)))
-    depths = np.asarray(depths)
-    if not np.isfinite(depths).any():
-        depths[:] = 1.0
-    depths = np.where(np.isfinite(depths), depths, np.nanmedian(depths))
-    return np.asarray(rots), np.asarray(centers), depths
+    d = np.asarray(depths)
+    if not np.isfinite(d).any():
+        d[:] = 1.0
+    d = np.where(np.isfinite(d), d, np.nanmedian(d))
+    return np.asarray(rots), np.asarray(centers), d
 
 
 def _reproject(proj, x, xy) -> float:
@@ -600,12 +601,12 @@ class _Tracks:
             out.append(k_mat @ np.hstack([r.T, (-r.T @ c)[:, None]]))
         return np.asarray(out)
 
-    def residuals(self, projs, changed: int | None = None, base=None) -> list[np.ndarray]:
+    def residuals(self, projs, changed: int | None = None, base=None) -> list[Any]:
         """Per track, the reprojection errors of its observations under `projs`; with
         `base` (the residuals of other poses), only the tracks through view `changed`
         are computed again."""
         out = list(base) if base is not None else [None] * len(self.views)
-        which = range(len(self.views)) if base is None else self.by_view[changed]
+        which = range(len(self.views)) if base is None or changed is None else self.by_view[changed]
         for t in which:
             ps, xys = projs[self.views[t]], self.xys[t]
             out[t] = _reproject_all(ps, _triangulate_robust(ps, xys), xys)
@@ -667,7 +668,7 @@ def planted_errors(model: _Model, rot_ours, c_ours, base: dict, deg: float = 5.0
     optical axis) axes and judged against the same COLMAP model (which sees only the
     images, so it is the model a wrong pose would meet). Caught: that view is no longer
     consistent with the images. `base` is the judgement of the unchanged poses."""
-    caught = {axis: [] for axis in PLANT_AXES}
+    caught: dict[str, list[Any]] = {axis: [] for axis in PLANT_AXES}
     missed = []
     for k, i in enumerate(model.reg_idx):
         for a, axis in enumerate(PLANT_AXES):
@@ -707,7 +708,7 @@ def _report(names, features, model: _Model, rot_ours, c_ours, *, plant: bool = T
         }
         for i, nm in enumerate(names)
     ]
-    report = {
+    report: dict[str, Any] = {
         "registered": len(reg_idx),
         "total": n,
         "registered_fraction": len(reg_idx) / n,
