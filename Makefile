@@ -49,14 +49,14 @@ test-packaging: venv
 lint: venv
 	cargo fmt --all -- --check
 	cargo clippy --workspace --all-targets -- -D warnings
-	$(VENV)/bin/ruff check python tests blender_scripts bench
-	$(VENV)/bin/ruff format --check python tests blender_scripts bench
+	$(VENV)/bin/ruff check python tests blender_scripts bench scripts
+	$(VENV)/bin/ruff format --check python tests blender_scripts bench scripts
 	$(PY) -m mypy.stubtest blurset._core --allowlist stubtest_allowlist.txt
 
 fmt:
 	cargo fmt --all
-	$(VENV)/bin/ruff format python tests blender_scripts bench
-	$(VENV)/bin/ruff check --fix python tests blender_scripts bench
+	$(VENV)/bin/ruff format python tests blender_scripts bench scripts
+	$(VENV)/bin/ruff check --fix python tests blender_scripts bench scripts
 
 # The JSON Schema of every record blurset writes, from the core's serde types (a test
 # fails when schemas/ differs from them).
