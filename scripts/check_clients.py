@@ -638,6 +638,11 @@ def _geonerf(p: dict) -> dict:
                 f"len(dataset) = {len(ds)} (max_len {ds.max_len}: with scene None GeoNeRF "
                 f"validates on the first {len(ds)} items; {len(ds.meta)} targets in all)"
             )
+            every = get_validation_dataset(argparse.Namespace(**{**vars(args), "scene": "*"}))
+            notes.append(
+                f"with --scene '*' (a glob to LLFF_Dataset) len(dataset) = {len(every)} of "
+                f"{len(every.scans)} test scenes"
+            )
         phases.append({"name": name, "draws": draws, "expect": expect, "notes": notes})
     return {
         "ran": [
