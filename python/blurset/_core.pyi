@@ -215,6 +215,25 @@ class BuildConfig:
 MARKER: str
 PARTIAL_SUFFIX: str
 SHARP: str
+META: str
+DATASET: str
+SPLITS: str
+FAILURES: str
+POSES_BOUNDS: str
+TRANSFORMS: str
+NOISE: str
+NOISE_DATASET: str
+NOISE_SCENE: str
+EXPORT: str
+STATS: str
+IMAGES: str
+LINEAR: str
+
+def images_dir(factor: int) -> str:
+    """The image folder at downsampling factor `factor` (`images`, `images_4`)."""
+
+def linear_dir(factor: int) -> str:
+    """The linear EXR folder at downsampling factor `factor` (`linear`, `linear_4`)."""
 
 def setting_name(uid: str, theta0_deg: float) -> str:
     """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""

@@ -65,7 +65,7 @@ COUNTS = [
     ("objects", "distinct object uids among complete settings"),
     ("settings", "complete settings (`.complete` marker, not `*.partial`)"),
     ("views", "views of complete settings"),
-    ("images", "image files: views × level directories (sharp + each blur level)"),
+    (layout.IMAGES, "image files: views × level directories (sharp + each blur level)"),
     (
         "sharp_copy_views",
         "held-out views whose blur levels hold the sharp image (Deblur-NeRF's convention): "
@@ -326,7 +326,7 @@ def write_csvs(stats: dict, out_dir: Path) -> list[Path]:
                 "uid",
                 "theta0_deg",
                 "views",
-                "images",
+                layout.IMAGES,
                 "bbox_dx",
                 "bbox_dy",
                 "bbox_dz",
@@ -335,7 +335,7 @@ def write_csvs(stats: dict, out_dir: Path) -> list[Path]:
             [
                 names,
                 uids,
-                *([s[k] for s in settings] for k in ("theta0_deg", "views", "images")),
+                *([s[k] for s in settings] for k in ("theta0_deg", "views", layout.IMAGES)),
                 *([s["bbox_dims"][j] for s in settings] for j in range(3)),
                 stats["scene_dimension"],
             ],
@@ -474,9 +474,9 @@ def write_stats(
     report = out_dir / "report.md"
     _write_text(report, report_markdown(stats, figures) + "\n")
     if document is None:
-        _write_text(out_dir / "stats.json", json.dumps(stats, allow_nan=False) + "\n")
+        _write_text(out_dir / layout.STATS, json.dumps(stats, allow_nan=False) + "\n")
     else:
-        document.write(out_dir / "stats.json", head["generated"])
+        document.write(out_dir / layout.STATS, head["generated"])
     return report
 
 

@@ -50,12 +50,12 @@ def frames_per_setting(cfg: BuildConfig) -> int:
 
 def _copy_sharp(setting: Path, views: list[int], n_views: int, cfg: BuildConfig) -> None:
     """The sharp files of `views` into every blur level (byte-identical copies)."""
-    subdirs = ["images", *(f"images_{f}" for f in cfg.downsample)]
+    subdirs = [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]
     for view in views:
         name = layout.image_name(view, n_views)
         files = [(d, name) for d in subdirs]
         if cfg.write_linear:
-            files.append(("linear", name.replace(".png", ".exr")))
+            files.append((layout.LINEAR, name.replace(".png", ".exr")))
         for level in cfg.level_dirs[1:]:
             for d, f in files:
                 (setting / level / d).mkdir(exist_ok=True)  # linear/: no view rendered
@@ -111,7 +111,7 @@ def render_setting(
     for k in keys:
         need[k] = need.get(k, 0) + 1
     for d in cfg.level_dirs:
-        for sub in ["images", *(f"images_{f}" for f in cfg.downsample)]:
+        for sub in [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]:
             (partial / d / sub).mkdir(parents=True)
     acc: dict[tuple[int, str], Any] = {}
     res = cfg.resolution
@@ -138,11 +138,13 @@ def render_setting(
             view, level = key
             name = layout.image_name(view, n_views)
             bg = cfg.background
-            a.write_png(partial / level / "images" / name, background=bg)
+            a.write_png(partial / level / layout.IMAGES / name, background=bg)
             for f in cfg.downsample:
-                a.write_png(partial / level / f"images_{f}" / name, background=bg, downsample=f)
+                a.write_png(
+                    partial / level / layout.images_dir(f) / name, background=bg, downsample=f
+                )
             if cfg.write_linear:
-                a.write_exr(partial / level / "linear" / name.replace(".png", ".exr"))
+                a.write_exr(partial / level / layout.LINEAR / name.replace(".png", ".exr"))
             if level == layout.SHARP:
                 qa[view] = _core.frame_qa(a.mean())
             del acc[key]
@@ -197,7 +199,7 @@ def render_setting(
 
     def write_meta(pose_check: dict[str, Any] | None = None) -> None:
         plan.write_meta(
-            partial / "meta.json",
+            partial / layout.META,
             config=cfg,
             object=_object_record(job.obj, info),
             timings=timings,

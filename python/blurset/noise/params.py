@@ -154,10 +154,10 @@ def copy_clean(
         for k in range(frames):
             name = f"{names[i * frames + k]}.png"
             if p.suffix.lower() == ".png":
-                shutil.copyfile(p, out / "images" / name)
+                shutil.copyfile(p, out / layout.IMAGES / name)
             for f, d in small_dirs.items():
                 if (d / p.name).is_file():
-                    shutil.copyfile(d / p.name, out / f"images_{f}" / name)
+                    shutil.copyfile(d / p.name, out / layout.images_dir(f) / name)
 
 
 def noise_json(

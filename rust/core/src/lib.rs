@@ -76,8 +76,8 @@ pub use crate::ground::license::{
 };
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
-    gain_name, image_name, level_dir, level_dirs, parse_level_dir, setting_name, sort_level_dirs,
-    theta0s, SHARP,
+    files, gain_name, image_name, images_dir, level_dir, level_dirs, linear_dir, parse_level_dir,
+    setting_name, sort_level_dirs, theta0s, SHARP,
 };
 
 // Image error against a reference and the speed/quality front.
