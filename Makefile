@@ -68,6 +68,7 @@ fmt:
 # fails when schemas/ differs from them).
 schemas: venv
 	$(PY) -c "from blurset import outputs; outputs.write_schemas('schemas')"
+	$(PY) -c "from blurset import stubgen; stubgen.write()"
 
 # The docs site into site/: the pages generated from the parsers, schemas/ and
 # bench/results.json (docs/gen/), the checks mkdocs cannot make, then a strict build

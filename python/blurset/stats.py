@@ -21,11 +21,14 @@ import time
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from blurset import __version__, _core, layout, outputs, publish
+
+if TYPE_CHECKING:
+    pass
 
 BAR = "#3b6ea8"  # histogram bars (tests look for this colour in the PNGs)
 MEDIAN = "#c8553d"
@@ -112,7 +115,7 @@ def build_stats(build: Path) -> _core.BuildStats:
 
 def load_stats(build: Path) -> dict[str, Any]:
     """The stats document of a build as a dict."""
-    return build_stats(build).to_dict()
+    return dict(build_stats(build).to_dict())
 
 
 def _write_text(path: Path, text: str | Iterable[str]) -> None:
@@ -490,8 +493,8 @@ def run(args: argparse.Namespace) -> int:
     document = build_stats(build)  # names what is not a build, before anything is written
     # Stats may read a running build: they say what they describe.
     provisional = outputs.build_state(build).provisional
-    stats = document.to_dict()
-    stats["provisional"] = provisional
+    # What the figures and the summary read: the document and whether it is provisional.
+    stats: dict[str, Any] = {**document.to_dict(), "provisional": provisional}
     t_read = time.perf_counter() - t0
     outputs.claim(out_dir, STATS, "--out")  # refused before the lock creates anything
     with outputs.lock(out_dir, STATS):

@@ -13,11 +13,15 @@ import shutil
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from blurset import __version__, _core, layout, outputs, publish
 from blurset.config import BuildConfig, flag
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 DATASET_NAME = "blurset Objaverse-Blur"
 # The files every process building into OUT shares (written under build_lock).
@@ -159,7 +163,7 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
         d = (m.get("render") or {}).get("device")
         if d and d not in used:
             used.append(d)
-    dataset = {
+    dataset: _records.DatasetDoc = {
         "name": DATASET_NAME,
         "blurset_version": __version__,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),

@@ -13,7 +13,7 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -22,6 +22,9 @@ from blurset.config import BuildConfig, out_dir
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
 from blurset.progress import Progress
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 
 @dataclass
@@ -62,10 +65,11 @@ def _copy_sharp(setting: Path, views: list[int], n_views: int, cfg: BuildConfig)
                 shutil.copyfile(setting / layout.SHARP / d / f, setting / level / d / f)
 
 
-def _object_record(obj: ObjectSpec, info: dict) -> dict[str, Any]:
-    """meta.json's `object`: the file and what the worker reported about it."""
+def _object_record(obj: ObjectSpec, info: dict) -> _records.ObjectRecord:
+    """meta.json's `object`: the file and what the worker reported about it (free JSON
+    from the worker: the core checks every field when it takes the record)."""
     keys = ("bbox_dims", "scale", "center", "n_vertices", "n_triangles", "unlit_fixed")
-    return {
+    record: dict[str, Any] = {
         # path (relative to its root), sha256, title, author, licence, source_url: where
         # the object came from, never the builder's absolute path (issue 19).
         **info.get("provenance", {}),
@@ -73,6 +77,7 @@ def _object_record(obj: ObjectSpec, info: dict) -> dict[str, Any]:
         "blender_version": info.get("blender_version"),
         "warnings": info.get("warnings", []),
     }
+    return cast("_records.ObjectRecord", record)
 
 
 def render_setting(
@@ -188,7 +193,7 @@ def render_setting(
         test_views=_core.test_views(n_views, cfg.view_stride),
         sharp_test_views=not cfg.blurry_test_views,
     )
-    timings = {
+    timings: _records.Timings = {
         "plan_s": round(t_plan, 3),
         "sharp_s": round(t_sharp, 3),
         "blur_s": round(t_blur, 3),

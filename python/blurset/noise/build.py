@@ -32,6 +32,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,6 +52,9 @@ from blurset.noise.params import (
 )
 from blurset.noise.scene import list_images, output_names
 from blurset.stop import interruptible, remove_tree
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 NOISE = outputs.OutputKind.NOISE
 DATASET_FILE = NOISE.record
@@ -225,7 +229,9 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
         shutil.rmtree(stale, ignore_errors=True)
 
 
-def _noise_json(unit: Unit, g: float, sr: float, ss: float, wb, params: dict, args, build) -> dict:
+def _noise_json(
+    unit: Unit, g: float, sr: float, ss: float, wb, params: dict, args, build
+) -> _records.NoiseDoc:
     subdir = "linear" if params["source"] == "linear" else "images"
     return noise_json(
         gain=g,

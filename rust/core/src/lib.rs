@@ -66,7 +66,9 @@ pub use crate::dataset::outputs::{
 };
 pub use crate::dataset::read::{check_shape, read_record, Record};
 pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
-pub use crate::dataset::schema::{schema, schema_file, write_record, StatsFile, SCHEMA_RECORDS};
+pub use crate::dataset::schema::{
+    schema, schema_file, value_schemas, write_record, StatsFile, SCHEMA_RECORDS,
+};
 pub use crate::dataset::splits::{make_splits, seeded_subset, Holdout, SettingEntry, Splits};
 pub use crate::dataset::stats::{build_stats, BuildStats};
 pub use crate::dataset::verify::{check_images, ImageCheck};
