@@ -22,7 +22,11 @@ on the written pose p (the exposure's start under the paper's `--trajectory star
 blur level of a build setting is therefore checked against the mean latent poses that
 meta.json records per view and level (computed by blurset-core with the plan); the
 written pose's errors and its offset to the mean latent pose (under `start`, the
-start-to-mean offset: half the blur) are reported beside them (DESIGN §6, §12).
+start-to-mean offset: half the blur) are reported beside them (DESIGN §6, §12). Its
+features, though, lie anywhere on the streaks the exposure draws (SIFT lands on a ghost
+copy or off the middle of a smear): the part of a feature's offset along its streak (its
+projections at the first and last latent frame), up to half the streak's length, is no
+error; the part across it is counted whole.
 
 Conventions: LLFF rows are camera-to-world with columns [down, right, backwards]; COLMAP
 poses are OpenCV world-to-camera (x right, y down, z forward).
@@ -687,9 +691,7 @@ class _Tracks:
             out.append(k_mat @ np.hstack([r.T, (-r.T @ c)[:, None]]))
         return np.asarray(out)
 
-    def residuals(
-        self, projs, changed: int | None = None, base=None, streaks=None
-    ) -> list[Any]:
+    def residuals(self, projs, changed: int | None = None, base=None, streaks=None) -> list[Any]:
         """Per track, the reprojection errors of its observations under `projs`; with
         `base` (the residuals of other poses), only the tracks through view `changed`
         are computed again. `streaks`: the projections at each exposure's first and
