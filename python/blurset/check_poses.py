@@ -198,8 +198,9 @@ def _orbit_c2w(frame: dict) -> np.ndarray:
 def exposure_ends(scene_dir: Path, mean):
     """OpenCV ((rotations, centres) at the first latent frame, (…) at the last) of each
     view's exposure in a blur level of a build setting (meta.json), where the streaks a
-    blurry image shows begin and end; the mean latent pose for a view whose image is a
-    sharp copy or has no latent frames (no streak). None when meta.json does not say."""
+    blurry image shows begin and end (the first and last motion key under the motion blur
+    method); the mean latent pose for a view whose image is a sharp copy or that has
+    neither (no streak). None when meta.json does not say."""
     meta = layout.read_json(scene_dir.parent / "meta.json")
     level = str(_core.parse_level_dir(scene_dir.name))
     sharp_copies = (
@@ -210,7 +211,10 @@ def exposure_ends(scene_dir: Path, mean):
     try:
         for i, view in enumerate(meta["views"]):
             lp = view["levels"][level]
-            frames = sorted(lp.get("latent_frames") or [], key=lambda f: f["t"])
+            # The average method's latent frames, or the motion blur method's keys (its
+            # exposure runs from the first key to the last).
+            frames = lp.get("latent_frames") or (lp.get("motion_blur") or {}).get("keys") or []
+            frames = sorted(frames, key=lambda f: f["t"])
             if i in sharp_copies or len(frames) < 2:
                 continue
             # The mean pose as meta.json records it, over the orbit it lies on: the
