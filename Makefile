@@ -50,8 +50,8 @@ test-packaging: venv
 lint: venv
 	cargo fmt --all -- --check
 	cargo clippy --workspace --all-targets -- -D warnings
-	$(VENV)/bin/ruff check python tests blender_scripts bench docs
-	$(VENV)/bin/ruff format --check python tests blender_scripts bench docs
+	$(VENV)/bin/ruff check python tests blender_scripts bench docs scripts
+	$(VENV)/bin/ruff format --check python tests blender_scripts bench docs scripts
 	$(PY) -m mypy.stubtest blurset._core --allowlist stubtest_allowlist.txt
 	$(MAKE) typecheck
 
@@ -61,8 +61,8 @@ typecheck: venv
 
 fmt:
 	cargo fmt --all
-	$(VENV)/bin/ruff format python tests blender_scripts bench docs
-	$(VENV)/bin/ruff check --fix python tests blender_scripts bench docs
+	$(VENV)/bin/ruff format python tests blender_scripts bench docs scripts
+	$(VENV)/bin/ruff check --fix python tests blender_scripts bench docs scripts
 
 # The JSON Schema of every record blurset writes, from the core's serde types (a test
 # fails when schemas/ differs from them).

@@ -1,20 +1,31 @@
-"""settings_per_hour: whole `blurset build` runs of the paper preset against faster
-presets (issue 6, DESIGN §9), with what the faster ones lose in PSNR.
+"""settings_per_hour: whole `blurset build` runs of the paper preset against faster and
+denoised presets, side by side in one run (issues 6 and 28, DESIGN §8–9), with what
+each costs in accuracy.
 
-Each preset builds the same setting of a demo object (same seed: same views, trajectories
-and w_l) with `--keep-linear`; builds of the presets are interleaved and repeated, and the
-median wall time is taken (the machine is shared). A 34-view setting is extrapolated from
-the measured views: settings/hour = 3600 / (34 · render time per view + the rest of the
-build, worker start and object load included, divided over the 4 settings an object has).
+Objects: the textured GLBs of ../shared/data (MapPin, Mazda, WaterBottle) when present,
+else the demo box (BLURSET_BENCH_GLBS: comma-separated paths). Every preset builds the
+same setting of each object (same seed: same views, trajectories and w_l) with
+`--keep-linear`; every measured view renders its blurry images. Settings/hour: a 34-view
+setting extrapolated from the measured views, 3600 / (34 · render time per view + the
+rest of the build, worker start and object load included, over the 4 settings of an
+object), the time summed over the objects (the median of the repeats).
 
-Quality: every blurry and sharp image of the first build of each preset against a
-reference rendered for the same views and trajectories (blurry: the mean of many
-stratified latent frames with many samples each; sharp: one render with as many samples);
-PSNR of the sRGB images over white, the mean over images. The PSNR loss is the paper
-preset's PSNR minus the preset's (negative: the faster preset is closer to the reference).
+Accuracy, per image (sharp and each blur level), the mean over images and objects:
+- `psnr_*_db`: against the continuous-blur reference (blurry: the mean of many
+  stratified latent frames with many samples each; sharp: one render with as many).
+- `render_psnr_*_db`: against the preset's own frames (same latent positions) rendered
+  undenoised with K times its samples on other Cycles seeds, K ≥ 32 unless that would
+  exceed BLURSET_BENCH_REF_CAP samples per view (the paper preset's 34 × 132-sample
+  images: then K = cap / samples, at least 1). For an undenoised image the reference's
+  own noise (1/K of the image's, the same sampler) is taken out: MSE / (1 + 1/K), so
+  K = 1 is the two-seed estimate of the render noise. A denoised image is scored as
+  measured (its reference at K ≥ 32 adds ≤ 1/32 of the raw noise: conservative).
+- `detail_ratio_*`: the high-frequency energy of the image over its render reference's
+  (core `detail_ratio`): < 1 a denoiser smoothed texture, > 1 noise on top.
 
-Sizes (env): BLURSET_BENCH_SPH_RES (128 px), BLURSET_BENCH_SPH_VIEWS (2),
-BLURSET_BENCH_REPEATS (2).
+Sizes (env): BLURSET_BENCH_SPH_RES (128 px), BLURSET_BENCH_SPH_VIEWS (1),
+BLURSET_BENCH_REPEATS (1), BLURSET_BENCH_SPH_PRESETS (all), BLURSET_BENCH_REF_CAP
+(20000).
 """
 
 from __future__ import annotations
@@ -29,28 +40,86 @@ from pathlib import Path
 
 import numpy as np
 
+HERE = Path(__file__).resolve().parent
 RES = int(os.environ.get("BLURSET_BENCH_SPH_RES", "128"))
-VIEWS = int(os.environ.get("BLURSET_BENCH_SPH_VIEWS", "2"))
-REPEATS = int(os.environ.get("BLURSET_BENCH_REPEATS", "2"))
+VIEWS = int(os.environ.get("BLURSET_BENCH_SPH_VIEWS", "1"))
+REPEATS = int(os.environ.get("BLURSET_BENCH_REPEATS", "1"))
+REF_CAP = int(os.environ.get("BLURSET_BENCH_REF_CAP", "20000"))
+REF_FACTOR = 32
 SEED = 5
-REFERENCE = (96, 32)
-SALT = 0x5BD1E995  # stratified latent frames x samples each; sharp: their product
+REFERENCE = (64, 16)  # continuous blur: stratified frames x samples; sharp: their product
+SALT = 0x5BD1E995
+FLOOR_DB = 58.9  # 8-bit quantization alone: 1 / (255² · 12) in MSE
+TEXTURED = ("sketchfab_MapPin", "sketchfab_MazdaRX7Stylised", "WaterBottle_blender_reexport")
 
+_AUTO = {"latents_auto": True, "latent_positions": "stratified"}
 PRESETS = {
     # blurset build's defaults: the paper's 34 random latent frames, 32 samples each
     # times the parity factor 34^0.4 (132), the sharp image with the budget (1088).
     "paper": {},
-    # One Cycles motion blur render per blurry image at 128 samples; sharp at 256.
-    "fast": {"blur_method": "motion_blur", "samples_total": 128, "sharp_samples": 256},
-    # Latent averaging kept: per-level m from the 1 px ghost bound (stratified, up to
-    # 34), 256 samples split over the frames; sharp at 256.
-    "balanced": {
-        "latents_auto": True,
-        "latent_positions": "stratified",
-        "samples_total": 256,
-        "sharp_samples": 256,
-    },
+    # Latent averaging, per-level m from the 1 px ghost bound (stratified, up to 34),
+    # 256 samples times the parity factor; sharp at 256 (issue 6 / 15).
+    "balanced": {**_AUTO, "samples_total": 256, "sharp_samples": 256},
+    "balanced_oidn": {**_AUTO, "samples_total": 256, "sharp_samples": 256, "denoise": "oidn"},
+    # Re-derived (issue 28): m from a 2 px ghost bound, the need budget, and the sample
+    # count at the 8-bit floor (floor) or a quarter of it (fast), raw or denoised.
+    "floor": {
+        **_AUTO,
+        "max_ghost_px": 2.0,
+        "samples_total": 192,
+        "sharp_samples": 192,
+        "blur_budget": "need",
+    },  # fmt: skip
+    "fast": {
+        **_AUTO,
+        "max_ghost_px": 2.0,
+        "samples_total": 48,
+        "sharp_samples": 48,
+        "blur_budget": "need",
+    },  # fmt: skip
+    "fast_oidn": {
+        **_AUTO,
+        "max_ghost_px": 2.0,
+        "samples_total": 48,
+        "sharp_samples": 48,
+        "blur_budget": "need",
+        "denoise": "oidn",
+    },  # fmt: skip
+    "floor_oidn": {
+        **_AUTO,
+        "max_ghost_px": 2.0,
+        "samples_total": 96,
+        "sharp_samples": 96,
+        "blur_budget": "need",
+        "denoise": "oidn",
+    },  # fmt: skip
+    # Denoised Cycles motion blur: one render per blurry image (the old fast preset's
+    # method, denoised).
+    "motion_blur_oidn": {
+        "blur_method": "motion_blur",
+        "samples_total": 128,
+        "sharp_samples": 128,
+        "denoise": "oidn",
+    },  # fmt: skip
 }
+_ONLY = os.environ.get("BLURSET_BENCH_SPH_PRESETS")
+if _ONLY:
+    PRESETS = {k: v for k, v in PRESETS.items() if k in {"paper", *_ONLY.split(",")}}
+# Options that move latent frames: presets equal in these share a render reference.
+_FRAMES = ("blur_method", "latents_auto", "latent_positions", "max_ghost_px", "latents")
+
+
+def _glbs(work: Path) -> list[Path]:
+    env = os.environ.get("BLURSET_BENCH_GLBS")
+    if env:
+        return [Path(p) for p in env.split(",") if p]
+    data = HERE.parent.parent / "shared" / "data" / "glb"
+    found = [data / f"{n}.glb" for n in TEXTURED if (data / f"{n}.glb").exists()]
+    if found:
+        return found
+    from blurset.demo import make_demo_objects
+
+    return [make_demo_objects(work / "obj")[0]]
 
 
 def _config(out: Path, glb: Path, **kw):
@@ -66,8 +135,7 @@ def _config(out: Path, glb: Path, **kw):
         "write_linear": True,
         "device": os.environ.get("BLURSET_BENCH_DEVICE", "cpu").lower(),
         # Every measured view renders its blurry images: by default view 0 is a test view
-        # whose blur levels are copies of its sharp image, which would halve the measured
-        # cost of a 2-view run and score sharp copies against blurry references.
+        # whose blur levels are copies of its sharp image.
         "blurry_test_views": True,
     }
     file_values = {k: v for k, v in kw.items() if k != "latents_auto"}
@@ -89,151 +157,230 @@ def _build(out: Path, glb: Path, preset: dict) -> dict:
     meta = json.loads((setting / "meta.json").read_text())
     t = meta["timings"]
     render = t["plan_s"] + t["sharp_s"] + t["blur_s"]
-    per_view = render / VIEWS
-    rest = wall - render
-    setting_s = 34 * per_view + rest / 4
+    samples = {"sharp": meta["render"]["sharp_samples"]}
+    for v in meta["views"][:1]:
+        for lvl, lp in v["levels"].items():
+            samples[f"blur_{lvl}"] = lp["samples_per_frame"] * lp["latents"]
     return {
         "wall_s": wall,
-        "per_view_s": per_view,
-        "rest_s": rest,
-        "setting_s": setting_s,
-        "settings_per_hour": 3600.0 / setting_s,
+        "render_s": render,
+        "rest_s": wall - render,
         "frames": t["frames"],
         "setting": setting,
+        "samples": samples,
     }
 
 
-def _reference(glb: Path, work: Path) -> dict:
-    """Reference images (premultiplied linear RGBA) per (view, level dir)."""
-    from blurset.image import Accumulator
+def _plan(cfg, glb: Path, w, work: Path):
     from blurset.plan import plan_setting, seed_for
+
+    info = w.load(glb, work / "v.npy")
+    verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
+    return plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
+                        bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
+
+
+def _render(w, frames: list[dict], samples: int) -> np.ndarray:
+    from blurset.image import Accumulator
+
+    acc = Accumulator(RES, RES)
+
+    def on_frame(_i: int, path: str, origin) -> None:
+        acc.add_exr(path, origin)
+        os.unlink(path)
+
+    w.render(frames, resolution=RES, fov_deg=40.0, samples=samples, on_frame=on_frame, crop=True)
+    return acc.mean()
+
+
+def _continuous_reference(glb: Path, work: Path) -> dict:
+    """Reference images (premultiplied linear RGBA) per (view, level dir): the continuous
+    blur of each level, and the sharp view with as many samples."""
     from blurset.worker_client import Worker
 
     cfg = _config(work / "unused", glb, latents=REFERENCE[0], latent_positions="stratified",
-                  samples=REFERENCE[1])  # fmt: skip
+                  samples=REFERENCE[1], blur_budget="flat")  # fmt: skip
     refs = {}
-    with Worker(timeout=3600, workdir=work / "scratch", device=cfg.device.upper()) as w:
-        info = w.load(glb, work / "v.npy")
-        verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
-        seed = seed_for(cfg.seed, glb.stem, 0)
-        setting = plan_setting(
-            cfg,
-            uid=glb.stem,
-            theta0_deg=0.0,
-            seed=seed,
-            bbox_dims=info["bbox_dims"],
-            vertices=verts,
-        )
+    with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
+        setting = _plan(cfg, glb, w, work)
         for v in setting.to_dict()["views"]:
             # Other Cycles seeds than the builds' (noise they share would flatter them).
-            jobs = [("sharp", [{"c2w": v["c2w"], "seed": v["sharp_seed"],
-                                "samples": REFERENCE[0] * REFERENCE[1],
-                                "out": str(work / "s.exr")}])]  # fmt: skip
-            jobs += [
-                (f"blur_{lvl}", setting.level_renders(v["index"], int(lvl), str(work / "f")))
-                for lvl in v["levels"]
-            ]
-            for name, frames in jobs:
+            sharp = [{"c2w": v["c2w"], "seed": v["sharp_seed"] ^ SALT, "out": str(work / "s.exr")}]
+            refs[(v["index"], "sharp")] = _render(w, sharp, REFERENCE[0] * REFERENCE[1])
+            for lvl in v["levels"]:
+                frames = setting.level_renders(v["index"], int(lvl), str(work / "f"))
                 for f in frames:
                     f["seed"] = (f["seed"] ^ SALT) & 0x7FFFFFFF
-                acc = Accumulator(RES, RES)
-
-                def on_frame(_i: int, path: str, origin, acc=acc) -> None:
-                    acc.add_exr(path, origin)
-                    os.unlink(path)
-
-                w.render(frames, resolution=RES, fov_deg=cfg.fov_deg, samples=1,
-                         on_frame=on_frame, crop=True)  # fmt: skip
-                refs[(v["index"], name)] = acc.mean()
+                refs[(v["index"], f"blur_{lvl}")] = _render(w, frames, 1)
     return refs
 
 
-def _quality(setting: Path, refs: dict) -> dict:
+def _render_reference(glb: Path, work: Path, preset: dict, samples: dict) -> tuple[dict, int]:
+    """The preset's own images, undenoised, at K times its samples on other seeds:
+    (images per (view, level dir), K). `samples`: the sample counts of `preset`'s images,
+    the most among the presets that share these frames."""
+    from blurset.worker_client import Worker
+
+    per_view = sum(samples.values())
+    k = max(1, min(REF_FACTOR, REF_CAP // max(per_view, 1)))
+    cfg = _config(work / "unused", glb, **preset)
+    refs = {}
+    with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
+        setting = _plan(cfg, glb, w, work)
+        sharp_n = int(cfg.effective_sharp_samples)
+        images: dict[tuple[int, str], list[dict]] = {}
+        for f in setting.renders(str(work / "r")):
+            images.setdefault((f["view"], f["level"]), []).append(f)
+        for key, frames in images.items():
+            for f in frames:
+                f["seed"] = (f["seed"] ^ SALT) & 0x7FFFFFFF
+                n = f.get("samples") or sharp_n
+                f["samples"] = k * n
+                if f.get("sample_offset") is not None:
+                    f["sample_offset"] *= k
+                    f["sample_sequence"] *= k
+            refs[key] = _render(w, frames, k * sharp_n)
+    return refs, k
+
+
+def _score(setting: Path, cont: dict, ref: dict, k_of: dict, denoised: bool) -> dict:
     from blurset.image import image_error, read_exr
 
-    blur, sharp = [], []
-    for (view, level), ref in refs.items():
-        img = read_exr(setting / level / "linear" / f"{view:03d}.exr")
-        q = image_error(np.ascontiguousarray(img), ref).psnr
-        (sharp if level == "sharp" else blur).append(q)
-    return {"psnr_blur": float(np.mean(blur)), "psnr_sharp": float(np.mean(sharp))}
+    out: dict[str, list[float]] = {}
+    for (view, level), c in cont.items():
+        img = np.ascontiguousarray(read_exr(setting / level / "linear" / f"{view:03d}.exr"))
+        kind = "sharp" if level == "sharp" else "blur"
+        q = image_error(img, c)
+        r = image_error(img, ref[(view, level)])
+        k = k_of[level]
+        mse = r.mse if denoised else r.mse / (1.0 + 1.0 / k)
+        out.setdefault(f"psnr_{kind}", []).append(q.psnr)
+        out.setdefault(f"render_mse_{kind}", []).append(mse)
+        out.setdefault(f"detail_{kind}", []).append(r.detail_ratio)
+        out.setdefault(f"ref_factor_{kind}", []).append(k)
+    return out
+
+
+def _db(mse: float) -> float:
+    return float(-10.0 * np.log10(mse)) if mse > 0 else 200.0
 
 
 def measure() -> dict:
-    from blurset.demo import make_demo_objects
-
     with tempfile.TemporaryDirectory(prefix="blurset-bench-sph-") as tmp:
         work = Path(tmp)
-        glb = Path(os.environ.get("BLURSET_BENCH_GLB") or make_demo_objects(work / "obj")[0])
-        runs: dict[str, list[dict]] = {k: [] for k in PRESETS}
-        quality = {}
-        for rep in range(REPEATS):
+        glbs = _glbs(work)
+        per: dict[str, dict] = {name: {"objects": {}} for name in PRESETS}
+        for glb in glbs:
+            runs: dict[str, list[dict]] = {k: [] for k in PRESETS}
+            for rep in range(REPEATS):
+                for name, preset in PRESETS.items():
+                    runs[name].append(_build(work / f"{glb.stem}_{name}_{rep}", glb, preset))
+            cont = _continuous_reference(glb, work)
+            groups: dict[tuple, list[str]] = {}
             for name, preset in PRESETS.items():
-                r = _build(work / f"{name}_{rep}", glb, preset)
-                runs[name].append(r)
-        refs = _reference(glb, work)
-        for name in PRESETS:
-            quality[name] = _quality(runs[name][0]["setting"], refs)
+                key = tuple((o, str(preset.get(o))) for o in _FRAMES)
+                groups.setdefault(key, []).append(name)
+            for names in groups.values():
+                samples = {lv: max(runs[n][0]["samples"][lv] for n in names)
+                           for lv in runs[names[0]][0]["samples"]}  # fmt: skip
+                # The reference renders the frames of the member with the most samples.
+                top = max(names, key=lambda n: sum(runs[n][0]["samples"].values()))
+                plain = {k: v for k, v in PRESETS[top].items() if k != "denoise"}
+                ref, k = _render_reference(glb, work, plain, samples)
+                for n in names:
+                    own = runs[n][0]["samples"]
+                    k_of = {lv: k * samples[lv] / own[lv] for lv in own}
+                    denoised = PRESETS[n].get("denoise") == "oidn"
+                    sc = _score(runs[n][0]["setting"], cont, ref, k_of, denoised)
+                    rs = runs[n]
+                    per[n]["objects"][glb.stem] = {
+                        "render_s": statistics.median(r["render_s"] for r in rs),
+                        "rest_s": statistics.median(r["rest_s"] for r in rs),
+                        "frames": rs[0]["frames"],
+                        "samples": rs[0]["samples"],
+                        **{key: [float(x) for x in v] for key, v in sc.items()},
+                    }
     out = {}
-    for name, rs in runs.items():
+    for name, p in per.items():
+        objs = p["objects"].values()
+        # One setting of each object, in turn: 34 views, the rest over 4 settings.
+        setting_s = statistics.mean(34 * o["render_s"] / VIEWS + o["rest_s"] / 4 for o in objs)
+        cat = {key: [x for o in objs for x in o[key]] for key in next(iter(objs)) if key.startswith(
+            ("psnr_", "render_mse_", "detail_", "ref_factor_"))}  # fmt: skip
         out[name] = {
-            k: statistics.median(r[k] for r in rs)
-            for k in ("wall_s", "per_view_s", "rest_s", "setting_s", "settings_per_hour")
+            "settings_per_hour": 3600.0 / setting_s,
+            "setting_s": setting_s,
+            "psnr_blur_db": float(np.mean(cat["psnr_blur"])),
+            "psnr_sharp_db": float(np.mean(cat["psnr_sharp"])),
+            # PSNR of the mean render-noise MSE over the images.
+            "render_psnr_blur_db": _db(float(np.mean(cat["render_mse_blur"]))),
+            "render_psnr_sharp_db": _db(float(np.mean(cat["render_mse_sharp"]))),
+            "render_psnr_blur_min_db": _db(float(np.max(cat["render_mse_blur"]))),
+            "render_psnr_sharp_min_db": _db(float(np.max(cat["render_mse_sharp"]))),
+            "detail_ratio_blur": float(np.mean(cat["detail_blur"])),
+            "detail_ratio_sharp": float(np.mean(cat["detail_sharp"])),
+            "reference_factor_min": float(min(cat["ref_factor_blur"] + cat["ref_factor_sharp"])),
+            "per_object": {
+                u: {
+                    "settings_per_hour": 3600.0 / (34 * o["render_s"] / VIEWS + o["rest_s"] / 4),
+                    "render_psnr_blur_db": _db(float(np.mean(o["render_mse_blur"]))),
+                    "render_psnr_sharp_db": _db(float(np.mean(o["render_mse_sharp"]))),
+                    "detail_ratio_blur": float(np.mean(o["detail_blur"])),
+                    "detail_ratio_sharp": float(np.mean(o["detail_sharp"])),
+                    "psnr_blur_db": float(np.mean(o["psnr_blur"])),
+                    "psnr_sharp_db": float(np.mean(o["psnr_sharp"])),
+                    "samples": o["samples"],
+                    "frames": o["frames"],
+                }
+                for u, o in p["objects"].items()
+            },
         }
-        out[name]["frames"] = rs[0]["frames"]
-        out[name].update(quality[name])
     return {"resolution": RES, "views": VIEWS, "repeats": REPEATS, "presets": out,
-            "load_average": os.getloadavg()}  # fmt: skip
+            "objects": [g.stem for g in glbs], "load_average": os.getloadavg()}  # fmt: skip
+
+
+def verdict(q: dict, paper: dict) -> dict:
+    """Issue 28's bar for a preset against the paper preset of the same run."""
+    floor_s = min(paper["render_psnr_sharp_db"], FLOOR_DB)
+    floor_b = min(paper["render_psnr_blur_db"], FLOOR_DB)
+    rb, rs = q["render_psnr_blur_db"], q["render_psnr_sharp_db"]
+    checks = {
+        "sharp_accurate": rs >= floor_s,
+        "blur_accurate": rb >= floor_b,
+        "blur_vs_continuous": q["psnr_blur_db"] >= paper["psnr_blur_db"],
+        "parity": abs(rb - rs) <= 0.5 or (rb >= FLOOR_DB and rs >= FLOOR_DB),
+        "detail": all(0.95 <= q[k] <= 1.05 for k in ("detail_ratio_blur", "detail_ratio_sharp")),
+        "speed_10x": q["settings_per_hour"] >= 10.0 * paper["settings_per_hour"],
+    }
+    return {**checks, "all": all(checks.values())}
 
 
 def run() -> list[dict]:
     m = measure()
     p = m["presets"]
     paper = p["paper"]
-    res = [
-        {
-            "name": "settings_per_hour_paper",
-            # Absolute: settings/hour of the paper preset (34-view settings, extrapolated).
-            "ratio": paper["settings_per_hour"],
-            "ratio_is": "settings per hour",
-            "contender": f"paper preset: {paper['settings_per_hour']:.2f} settings/h at "
-            f"{m['resolution']} px",
-            "baseline": "—",
-            "settings_per_hour": paper["settings_per_hour"],
-            "per_view_s": paper["per_view_s"],
-            "psnr_blur_db": paper["psnr_blur"],
-            "psnr_sharp_db": paper["psnr_sharp"],
-            "resolution": m["resolution"],
-            "views_measured": m["views"],
-            "repeats": m["repeats"],
-            "device": os.environ.get("BLURSET_BENCH_DEVICE", "CPU"),
-            "load_average": m["load_average"],
-        }
-    ]
-    for name in ("fast", "balanced"):
-        q = p[name]
+    device = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")
+    res = []
+    for name, q in p.items():
         res.append(
             {
                 "name": f"settings_per_hour_{name}",
                 "ratio": q["settings_per_hour"] / paper["settings_per_hour"],
+                "ratio_is": "settings per hour over the paper preset's, same run",
                 "contender": f"{name} preset {PRESETS[name]}: "
                 f"{q['settings_per_hour']:.2f} settings/h at {m['resolution']} px",
                 "baseline": f"paper preset: {paper['settings_per_hour']:.2f} settings/h",
-                "psnr_loss_blur_db": paper["psnr_blur"] - q["psnr_blur"],
-                "psnr_loss_sharp_db": paper["psnr_sharp"] - q["psnr_sharp"],
-                "psnr_blur_db": q["psnr_blur"],
-                "psnr_sharp_db": q["psnr_sharp"],
-                "paper_psnr_blur_db": paper["psnr_blur"],
-                "paper_psnr_sharp_db": paper["psnr_sharp"],
-                "settings_per_hour": q["settings_per_hour"],
-                "paper_settings_per_hour": paper["settings_per_hour"],
-                "per_view_s": q["per_view_s"],
-                "paper_per_view_s": paper["per_view_s"],
+                **{k: v for k, v in q.items() if k != "setting_s"},
+                "verdict": verdict(q, paper) if name != "paper" else None,
                 "resolution": m["resolution"],
                 "views_measured": m["views"],
                 "repeats": m["repeats"],
-                "reference": f"blurry: {REFERENCE[0]} stratified frames x {REFERENCE[1]} "
-                f"samples; sharp: {REFERENCE[0] * REFERENCE[1]} samples",
+                "objects": m["objects"],
+                "reference": f"continuous blur: {REFERENCE[0]} stratified frames x "
+                f"{REFERENCE[1]} samples, sharp {REFERENCE[0] * REFERENCE[1]}; render: the "
+                f"preset's own frames at >= {REF_FACTOR}x its samples, capped at {REF_CAP} "
+                "samples per view (reference_factor_min)",
+                "device": device,
                 "load_average": m["load_average"],
             }
         )

@@ -350,6 +350,24 @@ def set_light_paths(doc: dict, mode: str) -> dict:
     return {"mode": mode, **needs, "bounces": bounces}
 
 
+def set_guides(on: bool) -> None:
+    """Write Cycles' denoising guide passes (Denoising Albedo, Denoising Normal) beside
+    the combined pass, in a multi-layer EXR (the driver averages them with the colour and
+    denoises the mean once: issue 28); off: the single RGBA layer of every build before.
+    The EXR's depth and codec stay what they were."""
+    scene = bpy.context.scene
+    img = scene.render.image_settings
+    codec, depth = img.exr_codec, img.color_depth
+    scene.view_layers[0].cycles.denoising_store_passes = bool(on)
+    if hasattr(img, "media_type"):  # Blender >= 5.0 groups formats by media type
+        img.media_type = "MULTI_LAYER_IMAGE" if on else "IMAGE"
+    img.file_format = "OPEN_EXR_MULTILAYER" if on else "OPEN_EXR"
+    if not on:
+        img.color_mode = "RGBA"
+    img.color_depth = depth
+    img.exr_codec = codec
+
+
 def set_noise_threshold(threshold: float | None) -> None:
     """Cycles adaptive sampling: off (every pixel gets all its samples), or on with this
     noise threshold; min samples stay Cycles' automatic choice."""

@@ -79,6 +79,15 @@ def test_fern_passes(fern_report):
     assert all(v["registered"] and v["ok"] for v in r["views"])
     assert [v["name"] for v in r["views"]] == [f"image{i:03d}.png" for i in range(20)]
     json.dumps(r, allow_nan=False)  # the report is plain JSON
+    # The pass means something: a 5° error planted in any one pose, about any camera
+    # axis, is caught against the same COLMAP model; and the report line says so.
+    assert r["planted"]["caught"] == r["planted"]["tried"] == 60
+    assert r["planted"]["by_axis"] == {"tilt": "20/20", "pan": "20/20", "roll": "20/20"}
+    assert r["colmap_runs"] == [{"seed": 0, "consistent": 20}]
+    line = check_poses._summary("fern", r).splitlines()[0]
+    assert line.startswith("fern: pass — our poses explain the images")
+    assert "5° error planted in one pose is caught in 60/60 cases" in line
+    assert "COLMAP's own poses agree (20/20" in line
 
 
 def fern_copy(tmp_path: Path) -> Path:
@@ -99,6 +108,8 @@ def test_fern_one_view_rotated_5deg_fails_naming_it(tmp_path):
     r = json.loads(out.read_text())
     assert r["verdict"] == "fail" and not r["pass"]
     assert r["failed_views"] == ["image007.png"]
+    assert r["meaning"].startswith("the poses are wrong: 1 view(s)")
+    assert len(r["colmap_runs"]) == 1  # one view of 20: no second opinion needed
     bad = r["views"][7]
     assert not bad["ok"] and 4.0 < bad["rot_err_deg"] < 6.0
     assert "image007.png" in r["reason"]
@@ -125,6 +136,91 @@ def test_fern_wrong_convention_fails(tmp_path):
     r = check_poses.check_scene(scene, factor=8)
     assert r["verdict"] == "fail"
     assert len(r["failed_views"]) == 20
+    # Every view contradicts the model: COLMAP maps again, its runs agree with one
+    # another, so the poses are wrong (not a degenerate model).
+    assert [x["seed"] for x in r["colmap_runs"]] == [0, 1, 2]
+    assert all(x["consistent"] == 0 for x in r["colmap_runs"])
+    assert "agree with one another" in r["reason"]
+    assert r["meaning"].startswith("the poses are wrong: 20/20 views")
+
+
+# --------------------------------------------------------------------------- degenerate models
+
+
+@pytest.fixture(scope="module")
+def fern_colmap(tmp_path_factory):
+    """COLMAP's database of fern images_8 and its models with seeds 0, 1 and 2, made
+    once: the tests below serve them (some relabelled) in place of a COLMAP run."""
+    tmp = tmp_path_factory.mktemp("fern_colmap")
+    scene = fern_copy(tmp)
+    image_dir, names, intr, _, _ = check_poses._load_scene(scene, 8)
+    (tmp / "work").mkdir()
+    session = check_poses._Colmap(image_dir, names, intr, tmp / "work")
+    for seed in (0, 1, 2):
+        assert session.map(seed).num_reg_images() == 20
+    sparse = {0: tmp / "work" / "sparse"} | {s: tmp / "work" / f"sparse_seed{s}" for s in (1, 2)}
+    return scene, session.features, {s: next(d.iterdir()) for s, d in sparse.items()}
+
+
+def serve_models(monkeypatch, fern_colmap, shift: dict[int, int]) -> None:
+    """check_poses maps with the stored fern models; seed s's images renamed by a
+    cyclic shift of shift[s] views: a model that explains every feature (COLMAP's own
+    residuals stay small) but puts each image where another one was, as a degenerate
+    model does."""
+    import pycolmap
+
+    _, features, sparse = fern_colmap
+
+    class Stored:
+        def __init__(self, image_dir, names, intrinsics, workdir):
+            self.features = features
+
+        def map(self, seed=0):
+            rec = pycolmap.Reconstruction(str(sparse[seed]))
+            k = shift.get(seed, 0)
+            if k:
+                images = {i: rec.image(i).name for i in rec.reg_image_ids()}
+                names = sorted(images.values())
+                for i, name in images.items():
+                    rec.image(i).name = names[(names.index(name) + k) % len(names)]
+            return rec
+
+    monkeypatch.setattr(check_poses, "_Colmap", Stored)
+
+
+def test_a_degenerate_first_model_is_mapped_again_and_a_good_run_decides(fern_colmap, monkeypatch):
+    serve_models(monkeypatch, fern_colmap, {0: 5})
+    r = check_poses.check_scene(fern_colmap[0], factor=8)
+    assert r["verdict"] == "pass" and r["pass"], r["reason"]
+    assert r["colmap_seed"] == 1
+    assert [(x["seed"], x["consistent"]) for x in r["colmap_runs"]] == [(0, 0), (1, 20), (2, 20)]
+    assert "COLMAP's first model (seed 0) contradicted 20/20" in r["reason"]
+    assert "its run with seed 1 decides" in r["meaning"]
+
+
+def test_runs_that_disagree_with_one_another_are_not_checkable_never_fail(
+    fern_colmap, monkeypatch, tmp_path
+):
+    """Good poses against COLMAP models that each put the images elsewhere (no view
+    consistent, as in a degenerate model): not checkable, exit 3, never fail."""
+    serve_models(monkeypatch, fern_colmap, {0: 5, 1: 9, 2: 13})
+    out = tmp_path / "r.json"
+    assert run_cli(fern_colmap[0], "--json", out) == check_poses.EXIT_NOT_CHECKABLE
+    r = json.loads(out.read_text())
+    assert r["verdict"] == "not checkable: degenerate COLMAP model" and not r["pass"]
+    assert r["failed_views"] == []
+    assert r["median_rot_err_deg"] > 5.0
+    assert [x["consistent"] for x in r["colmap_runs"]] == [0, 0, 0]
+    assert "runs disagree with one another" in r["reason"]
+    assert r["meaning"].startswith("no verdict on the poses: COLMAP found no stable model")
+
+
+def test_runs_that_agree_with_one_another_fail_wrong_poses(fern_colmap, monkeypatch):
+    """The same relabelling in every run: COLMAP is stable, so the poses are wrong."""
+    serve_models(monkeypatch, fern_colmap, {0: 5, 1: 5, 2: 5})
+    r = check_poses.check_scene(fern_colmap[0], factor=8)
+    assert r["verdict"] == "fail"
+    assert "agree with one another" in r["reason"]
 
 
 # --------------------------------------------------------------------------- blank / input

@@ -97,3 +97,17 @@ def test_demo_objects_render_with_many_sift_features(tmp_path):
             counts[glb.stem] = len(keypoints)
     print("SIFT keypoints at 96 px:", counts)
     assert all(n >= 30 for n in counts.values()), counts
+
+
+def test_demo_objects_carry_blursets_licence(tmp_path):
+    """The demo objects are blurset's own: their glTF asset says so, and a build
+    attributes them (MIT, author blurset) as it does a Sketchfab export, not `unknown`."""
+    from blurset import attribution, preflight
+
+    for p in make_demo_objects(tmp_path, seed=2):
+        a = attribution.attribution(attribution.from_asset(preflight.check(p).asset))
+        assert a["license"] == "MIT", a
+        assert a["license_text"] == "MIT (https://opensource.org/licenses/MIT)"
+        assert a["author"] == "blurset" and a["title"].startswith("blurset ")
+        assert attribution.hf_license(a["license"]) == "mit"
+        assert attribution.allowed(a["license"], ["MIT"])

@@ -304,9 +304,12 @@ def test_killed_three_times_then_resumed_equals_an_uninterrupted_build(objects, 
     # The kills did leave debris for the resume to clean up.
     debris = [n for n in tree(killed) if ".partial" in n or ".work-" in n]
     assert debris
+    n_done = len(setting_dirs(killed))
     p = run_build(objs, killed)
     _, err = p.communicate(timeout=600)
     assert p.returncode == 0, err.decode()[-2000:]
+    # The rerun says that it resumed, and what it found.
+    assert f"resuming: {n_done} of " in err.decode(), err.decode()[-2000:]
 
     a, b = tree(clean), tree(killed)
     assert sorted(a) == sorted(b), set(a) ^ set(b)

@@ -59,10 +59,19 @@ def recompute(build: Path) -> dict:
     metas = [json.loads((d / "meta.json").read_text()) for d in dirs]
     views = [v for m in metas for v in m["views"]]
     levels = sorted({lvl for v in views for lvl in v["levels"]}, key=int)
+    # Held-out views whose blur levels hold the sharp image have no blur to count.
+    copies = [
+        m.get("test_view_images") == "sharp" and v["index"] in m.get("test_views", [])
+        for m in metas
+        for v in m["views"]
+    ]
 
     def per_level(key):
         return {
-            lvl: [v["levels"][lvl][key] if lvl in v["levels"] else None for v in views]
+            lvl: [
+                v["levels"][lvl][key] if lvl in v["levels"] and not copy else None
+                for v, copy in zip(views, copies, strict=True)
+            ]
             for lvl in levels
         }
 
@@ -94,6 +103,7 @@ def recompute(build: Path) -> dict:
         "settings": len(metas),
         "views": len(views),
         "images": sum(len(m["views"]) * len(m["levels"]) for m in metas),
+        "sharp_copy_views": sum(copies),
         "test_settings": len(test) if splits else None,
         "test_views": sum(len(splits["test_views"][d.name]) for d, _ in test) if splits else None,
         "test_images": (
@@ -161,10 +171,15 @@ def test_every_number_traces_back_to_meta_json(demo_build, demo_stats):
     check_against_meta(demo_build, stats)
     # scene range is the depth-range factor R by construction (near floored before both)
     assert stats["scene_range"] == stats["depth_range"]
-    # w_l lies in its sampling interval around w_u · l
+    # w_l lies in its sampling interval around w_u · l, for the blurry views; the two
+    # held-out views of each setting hold the sharp image at every level: no w_l.
+    assert stats["counts"]["sharp_copy_views"] == 3 * 2
     for lvl, w in stats["blur_weight"].items():
+        held = [k for k, i in enumerate(stats["view_index"]) if i in (0, 16)]
+        assert [w[k] for k in held] == [None] * 6
         for w_l, w_u in zip(w, stats["w_u"], strict=True):
-            assert 0.9 * w_u * int(lvl) - 1e-12 <= w_l <= 1.1 * w_u * int(lvl) + 1e-12
+            if w_l is not None:
+                assert 0.9 * w_u * int(lvl) - 1e-12 <= w_l <= 1.1 * w_u * int(lvl) + 1e-12
     # the terminal summary names the counts and where the report is
     assert "3 settings" in proc.stdout and str(out / "report.md") in proc.stdout
 
@@ -180,8 +195,9 @@ def test_csv_holds_the_same_numbers(demo_stats):
         assert float(r["scene_range"]) == stats["scene_range"][k]
         assert float(r["w_u"]) == stats["w_u"][k]
         for lvl in stats["blur_weight"]:
-            assert float(r[f"blur_weight_{lvl}"]) == stats["blur_weight"][lvl][k]
-            assert int(r[f"latent_frames_{lvl}"]) == stats["latent_frames"][lvl][k]
+            w, m = stats["blur_weight"][lvl][k], stats["latent_frames"][lvl][k]
+            assert r[f"blur_weight_{lvl}"] == ("" if w is None else repr(w))
+            assert r[f"latent_frames_{lvl}"] == ("" if m is None else str(m))
     srows = list(csv.DictReader((out / "settings.csv").open()))
     assert [float(r["scene_dimension"]) for r in srows] == stats["scene_dimension"]
     summary = {r["quantity"]: r for r in csv.DictReader((out / "summary.csv").open())}
@@ -204,7 +220,12 @@ def test_figures_open_and_are_not_blank(demo_stats):
         assert a.shape[0] >= 300 and a.shape[1] >= 500, (name, a.shape)
         bars = np.all(a == bar, axis=-1).mean()
         ink = np.any(a < 200, axis=-1).mean()
-        assert bars > 0.01, f"{name}: no histogram bars drawn ({bars:.4f})"
+        if name == "latent_frames":
+            # A fixed --latents 4: one number for every level, not four one-bar panels.
+            assert a.shape[1] <= 704, "one panel"
+            assert 0.0005 < bars < 0.02, f"{name}: the number is not drawn ({bars:.4f})"
+        else:
+            assert bars > 0.01, f"{name}: no histogram bars drawn ({bars:.4f})"
         assert ink > 0.005, f"{name}: no axes or labels ({ink:.4f})"
         assert f"]({name}.png)" in report
     for section in (
@@ -380,3 +401,36 @@ def test_ten_thousand_settings_aggregate(tmp_path):
         ]
         d = meta["bbox_dims"]
         assert stats["scene_dimension"][si] == cbrt_correctly_rounded(d[0] * d[1] * d[2])
+
+
+def test_blur_levels_count_the_blurry_views_only_and_a_constant_is_one_number(tmp_path):
+    """Held-out views holding the sharp image (`test_view_images` sharp) are left out of
+    every per-level quantity; a quantity with one value everywhere (a fixed --latents)
+    is drawn as that number in one panel, a varying one as a panel per level."""
+    build = tmp_path / "b"
+    write_synthetic_build(build, 4, views=20, latents=6)  # test views 0 and 16
+    for d in complete_settings(build)[:3]:
+        meta = json.loads((d / "meta.json").read_text())
+        meta["test_view_images"] = "sharp"
+        (d / "meta.json").write_text(json.dumps(meta))
+    out = tmp_path / "st"
+    run_cli("stats", str(build), "--out", str(out))
+    stats = json.loads((out / "stats.json").read_text())
+    check_against_meta(build, stats)
+    assert stats["counts"]["sharp_copy_views"] == 3 * 2
+    for lvl in ("1", "4"):
+        w = stats["blur_weight"][lvl]
+        assert [w[k] is None for k in (0, 16, 20, 36, 40, 56)] == [True] * 6
+        # The fourth setting's meta.json predates the field: its test views were blurry.
+        assert w[60] is not None and w[76] is not None
+    n = {s["quantity"]: s["n"] for s in stats["summary"]}
+    assert n["blur_weight_1"] == n["latent_frames_4"] == 4 * 20 - 6
+    assert n["w_u"] == 4 * 20
+    bar = np.array(Image.new("RGB", (1, 1), BAR)).reshape(3)
+    a = np.asarray(Image.open(out / "latent_frames.png").convert("RGB"))
+    b = np.asarray(Image.open(out / "blur_weight.png").convert("RGB"))
+    one = np.asarray(Image.open(out / "scene_range.png")).shape
+    assert a.shape[:2] == one[:2] != b.shape[:2], "one panel, not one per level"
+    assert 0.0005 < np.all(a == bar, axis=-1).mean() < 0.02  # the number, no bars
+    assert np.all(b == bar, axis=-1).mean() > 0.01
+    assert "| sharp_copy_views | 6 |" in (out / "report.md").read_text()

@@ -193,6 +193,17 @@ def test_open_scene_pairs_match_the_files(demo_build):
         fwd, eye = c[:3, 2], c[:3, 3]
         assert fwd @ (-eye / np.linalg.norm(eye)) > 1 - 1e-9
     assert (sc.near < np.linalg.norm(sc.c2w_opencv[:, :3, 3], axis=1)).all()
+    # pose="mean": each blurry image's mean latent pose from meta.json; the held-out
+    # views (sharp copies) keep the written pose.
+    mean = open_scene(demo_build, s.name, "blur_3", downsample=4, pose="mean")
+    want = [
+        v["c2w"] if v["index"] in meta["test_views"] else v["levels"]["3"]["mean_pose"]["c2w"]
+        for v in meta["views"]
+    ]
+    np.testing.assert_allclose(mean.c2w_opengl, want, atol=1e-12)
+    np.testing.assert_allclose(mean.c2w_opencv, mean.c2w_opengl @ flip, atol=1e-12)
+    assert not np.allclose(mean.c2w_opengl[sc.train_views], sc.c2w_opengl[sc.train_views])
+    np.testing.assert_array_equal(mean.images, sc.images)
     with pytest.raises(Exception, match="gain needs noise"):
         open_scene(demo_build, s.name, "blur_3", gain=4)
 

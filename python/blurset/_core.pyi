@@ -195,6 +195,8 @@ class BuildConfig:
     @property
     def blur_budget(self) -> str: ...
     @property
+    def denoise(self) -> str: ...
+    @property
     def light_paths(self) -> str: ...
     @property
     def device(self) -> str: ...
@@ -366,7 +368,21 @@ class Accumulator:
     linear light, then composited over a background, sRGB-encoded and quantized.
     """
 
-    def __new__(cls, width: int, height: int) -> Accumulator: ...
+    def __new__(cls, width: int, height: int, *, guides: bool = False) -> Accumulator:
+        """With `guides`, it also averages the frames' denoising guides (albedo and
+        normal passes of a multi-layer EXR) for `denoise`."""
+    @property
+    def guides(self) -> bool:
+        """Whether the denoising guides are averaged."""
+    @property
+    def denoised(self) -> bool:
+        """Whether the mean has been denoised (no frame can be added after)."""
+    def denoise(self, denoiser: Denoiser) -> None:
+        """Denoise the mean once: the denoiser sees the mean colour with the mean albedo
+        and normal; its output replaces the RGB of the mean (alpha stays). ValueError
+        without guides or frames."""
+    def guide_means(self) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+        """The mean albedo and normal, float32 (H, W, 3) each."""
     @property
     def width(self) -> int: ...
     @property
@@ -400,6 +416,32 @@ class Accumulator:
         area-averaged over `downsample` x `downsample` blocks in linear light first."""
     def write_exr(self, path: str | PathLike[str]) -> None:
         """Write the linear mean as a ZIP-compressed RGBA float32 EXR, atomically."""
+
+@final
+class Denoiser:
+    """Open Image Denoise loaded from `library` (the bpy wheel's
+    libOpenImageDenoise.so.2) with one device: `auto` (OIDN's fastest, a GPU when there is
+    one) or `cpu`. InputError naming the file when it cannot be loaded."""
+
+    def __new__(cls, library: str | PathLike[str], device: str = "auto") -> Denoiser: ...
+    @property
+    def library(self) -> str: ...
+    @property
+    def version(self) -> str:
+        """OIDN's version, e.g. 2.3.3."""
+    @property
+    def device_type(self) -> str:
+        """CPU, CUDA, HIP, SYCL or METAL."""
+    def record(self) -> dict[str, Any]:
+        """What meta.json records: {"library": "OpenImageDenoise", "version", "device"}."""
+    def denoise(
+        self,
+        color: npt.NDArray[np.float32],
+        albedo: npt.NDArray[np.float32],
+        normal: npt.NDArray[np.float32],
+    ) -> npt.NDArray[np.float32]:
+        """Denoise a float32 (H, W, 3) scene-linear colour image with its (H, W, 3)
+        guides (C-contiguous); returns the denoised colour."""
 
 def srgb_encode(linear: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
     """Exact IEC 61966-2-1 encoding, clamped to [0, 1] (NaN -> 0); same shape."""
@@ -548,6 +590,10 @@ class ImageMetrics:
     def mse(self) -> float: ...
     @property
     def mse_linear(self) -> float: ...
+    @property
+    def detail_ratio(self) -> float:
+        """High-frequency energy (squared Laplacian of sRGB luma over the background) of
+        the image over the reference's: < 1 smoothed, > 1 noisier (issue 28)."""
 
 def image_error(
     image: npt.NDArray[np.float32],
@@ -650,10 +696,12 @@ class Plan:
         pose_check: dict[str, Any] | None = None,
         light_paths: dict[str, Any] | None = None,
         device: dict[str, Any] | None = None,
+        denoiser: dict[str, Any] | None = None,
     ) -> None:
         """Write the setting's meta.json: this plan, the build config, the object as the
         worker reported it, the timings, the QA of every view and, with --check-poses, the
-        COLMAP verdict; `light_paths` and `device` as the worker reported them."""
+        COLMAP verdict; `light_paths` and `device` as the worker reported them, `denoiser`
+        as the driver's Denoiser describes itself."""
 
 def plan_setting(
     config: SamplingConfig | BuildConfig,

@@ -177,6 +177,18 @@ def _link(text: str, url: Any) -> str:
     return _cell(text)
 
 
+def _denoiser(render: dict, cfg: dict) -> str:
+    """The card's denoiser cell: none (as the paper), or OIDN with its version and device
+    (issue 28)."""
+    kind = render.get("denoise", cfg.get("denoise", "none")) or "none"
+    if kind == "none":
+        return "none"
+    d = render.get("denoiser") or {}
+    what = " ".join(str(d[k]) for k in ("library", "version") if d.get(k)) or kind
+    on = f" on {d['device']}" if d.get("device") else ""
+    return f"{what}{on}, once per image after averaging (albedo + normal guides)"
+
+
 def _fmt(x: Any) -> str:
     if isinstance(x, float):
         return f"{x:g}"
@@ -313,7 +325,7 @@ def make_card(
     out += _construction(cfg, m0, metas, levels)
     for path, doc in noise_docs:
         out += _noise_section(path, doc)
-    out += _loading(levels)
+    out += _loading(levels, splits.get("view_stride") or cfg.get("view_stride") or 16)
     if previews:
         out += _previews(build, settings, card_dir or build)
     out += _attribution(objects, licences)
@@ -350,6 +362,7 @@ def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> 
         ("Cycles samples per latent frame", render.get("samples_per_latent")),
         ("blurry sample budget", render.get("blur_budget")),
         ("Cycles samples of a sharp image", render.get("sharp_samples")),
+        ("denoiser", _denoiser(render, cfg)),
         ("background", _fmt(render.get("background", cfg.get("background")))),
         ("seed", cfg.get("seed")),
     ]
@@ -404,7 +417,8 @@ def _noise_section(path: Path, doc: dict) -> list[str]:
     ]
 
 
-def _loading(levels: list[str]) -> list[str]:
+def _loading(levels: list[str], llffhold: int) -> list[str]:
+    """How to load the build; `llffhold` is the build's test-view stride."""
     blur = next((lvl for lvl in levels if lvl != layout.SHARP), layout.SHARP)
     return [
         "## Loading",
@@ -412,7 +426,7 @@ def _loading(levels: list[str]) -> list[str]:
         "Every level directory is an LLFF scene as IBRNet, NAN and Deblur-NeRF read it: "
         "`images/` (sorted file order is view order) and `poses_bounds.npy` (N x 17: the "
         "3 x 5 camera-to-world [down, right, backwards | t | h w f] row-major, then near, "
-        "far). With IBRNet/NAN use `--llffhold 16`; nerfstudio reads `transforms.json` "
+        f"far). With IBRNet/NAN use `--llffhold {llffhold}`; nerfstudio reads `transforms.json` "
         "(use `--center-method focus`). Training pairs a degraded level with `sharp/` of "
         "the same setting.",
         "",

@@ -3,13 +3,32 @@
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import os
+import signal
 import sys
-from typing import Any
 
-from blurset.exceptions import BlursetError
+
+def _interrupted_early(signum: int, frame: object) -> None:
+    # Ctrl-C while the command starts (its modules import numpy, matplotlib …): nothing
+    # was written yet, so it ends at once, quietly; main() installs the real stop.
+    sys.stderr.write("blurset: interrupted\n")
+    os._exit(128 + signum)
+
+
+if __name__ == "__main__" or sys.argv[0].endswith("blurset"):
+    signal.signal(signal.SIGINT, _interrupted_early)
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+from typing import Any  # noqa: E402
+
+from blurset.exceptions import BlursetError  # noqa: E402
+
+# What an interrupted command keeps, and how to go on (commands that resume).
+RESUME = {
+    "build": "; complete settings are kept: rerun the same command to resume",
+    "noise": "; complete scenes are kept: rerun the same command to resume",
+}
 
 # subcommand -> (module, one-line help)
 COMMANDS = {
@@ -125,7 +144,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as e:
         code = stop.exit_code(e)
         why = f" ({e.args[0]})" if code != 130 else ""
-        print(f"blurset {args.command}: interrupted{why}", file=sys.stderr)
+        print(
+            f"blurset {args.command}: interrupted{why}{RESUME.get(args.command, '')}",
+            file=sys.stderr,
+        )
         if stop.must_exit_now():
             sys.stdout.flush()
             sys.stderr.flush()

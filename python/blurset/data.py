@@ -9,9 +9,21 @@
 
 With `gain=` and `noise=` (a `blurset noise BUILD` output) the degraded images are that
 gain's noisy copies of the level (drawn at the size read). `clean` is always the sharp
-level at the same size: the undegraded truth of every degradation. The cameras come
-from the level's `poses_bounds.npy` (LLFF columns down, right, backwards), exactly as
-the LLFF loaders read them.
+level at the same size: the undegraded truth of every degradation.
+
+Which pose a blurry image gets (`pose=`):
+
+- `"written"` (default): the pose p of the level's `poses_bounds.npy` (LLFF columns down,
+  right, backwards), exactly as the LLFF loaders read it. It is the sharp image's pose;
+  under `--trajectory start` (the paper's default) a blurry image's exposure starts there,
+  so what the image shows is centred half its blur away from it.
+- `"mean"`: the mean latent pose of each blurry image, from meta.json
+  (`views[i].levels[l].mean_pose`): the mean of the poses its latent frames were rendered
+  from, which is what its content is centred on and what structure from motion recovers.
+  Views whose blur-level image is the sharp copy (held-out views, Deblur-NeRF's
+  convention) keep p, where that image was rendered; so does every view of `sharp`.
+
+`near` and `far` are those of `poses_bounds.npy` under either choice.
 """
 
 from __future__ import annotations
@@ -24,7 +36,10 @@ import numpy as np
 from blurset import _core, layout
 from blurset.exceptions import InputError
 
-__all__ = ["Scene", "open_scene", "list_scenes"]
+__all__ = ["Scene", "open_scene", "list_scenes", "POSES"]
+
+#: What `open_scene(pose=…)` accepts: the written pose p, or the mean latent pose.
+POSES = ("written", "mean")
 
 
 @dataclass(frozen=True)
@@ -41,9 +56,11 @@ class Scene:
     clean: np.ndarray
     image_files: list[Path]
     clean_files: list[Path]
-    #: Camera to world, OpenCV axes (x right, y down, z forward), (N, 4, 4) float64.
+    #: Camera to world, OpenCV axes (x right, y down, z forward), (N, 4, 4) float64:
+    #: the written or the mean latent pose, as `pose` says.
     c2w_opencv: np.ndarray
-    #: Camera to world, OpenGL axes (x right, y up, z backwards), as transforms.json.
+    #: The same in OpenGL axes (x right, y up, z backwards); for `pose="written"` the
+    #: matrices of transforms.json.
     c2w_opengl: np.ndarray
     #: Pinhole intrinsics at this size (focal / downsample, principal point centred).
     intrinsics: np.ndarray
@@ -53,6 +70,8 @@ class Scene:
     test_views: np.ndarray
     #: The gain's noise.json (sigmas, white balance, seed), or None.
     noise: dict | None = None
+    #: Which pose the cameras are: "written" (poses_bounds.npy) or "mean" (meta.json).
+    pose: str = "written"
 
     @property
     def size(self) -> tuple[int, int]:
@@ -79,6 +98,21 @@ def _cameras(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cv, gl
 
 
+def _mean_cameras(sdir: Path, level: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV and OpenGL camera-to-world matrices of the mean latent poses of a level."""
+    poses = layout.mean_poses(sdir, level)
+    if poses is None:
+        raise InputError(
+            "meta.json records no mean latent poses (a build from before them): "
+            f"use pose='written': {sdir / 'meta.json'}"
+        )
+    gl = np.asarray(poses, dtype=np.float64)
+    if len(gl) != n:
+        raise InputError(f"{len(gl)} views in meta.json but {n} poses: {sdir / 'meta.json'}")
+    # OpenGL (right, up, backwards) → OpenCV (right, down, forward).
+    return gl * np.array([1.0, -1.0, -1.0, 1.0]), gl
+
+
 def open_scene(
     build: str | Path,
     setting: str,
@@ -87,10 +121,19 @@ def open_scene(
     *,
     noise: str | Path | None = None,
     downsample: int = 1,
+    pose: str = "written",
 ) -> Scene:
     """Read one scene of a build: `level` (`sharp`, `blur_<l>`) of `setting`, or with
     `gain` the noisy copy of it in `noise` (a `blurset noise BUILD` output), at full
-    size or from `images_<downsample>/`. Raises InputError naming a missing file."""
+    size or from `images_<downsample>/`.
+
+    `pose` picks the cameras of a blur level: `"written"` (default) the pose p in
+    `poses_bounds.npy`, as the LLFF loaders read it; `"mean"` each blurry image's mean
+    latent pose from meta.json (`views[i].levels[l].mean_pose`), what its content is
+    centred on (held-out views holding the sharp copy keep p). For `sharp` both are p.
+    Raises InputError naming a missing file, or a meta.json from before mean poses."""
+    if pose not in POSES:
+        raise ValueError(f"pose must be one of {', '.join(map(repr, POSES))}, got {pose!r}")
     build = Path(build)
     sdir = build / setting
     if not layout.is_complete(sdir):
@@ -121,6 +164,8 @@ def open_scene(
     rows = np.asarray(_core.read_poses_bounds(scene_dir / "poses_bounds.npy"), np.float64)
     rows = rows[:: len(rows) // n] if len(rows) != n else rows
     cv, gl = _cameras(rows)
+    if pose == "mean" and level != layout.SHARP:
+        cv, gl = _mean_cameras(sdir, level, n)
     images, clean = _read(image_files), _read(clean_files)
     h, w = images.shape[1:3]
     # hwf holds the full size (LLFF); the focal length scales with the size read.
@@ -151,6 +196,7 @@ def open_scene(
         train_views=train,
         test_views=test,
         noise=meta,
+        pose=pose,
     )
 
 

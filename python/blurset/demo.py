@@ -5,6 +5,9 @@ textures are dense multi-scale random patches, so SIFT finds many distinct featu
 96-320 px and a COLMAP check of a demo build has something to match; every face of an
 object shows a different part of its texture, so no two views look alike by symmetry.
 Deterministic for a seed: the same seed gives byte-identical files.
+
+They are part of blurset and carry its licence (MIT) in the glTF `asset.extras`, the
+same record Sketchfab exports carry, so a build attributes them like any other object.
 """
 
 from __future__ import annotations
@@ -22,6 +25,10 @@ from blurset import layout
 TEXTURE_SIZE = 512
 # (file stem, builder name): order is part of the contract (index k gets sub-seed k).
 DEMO_OBJECTS = ("demo_box", "demo_cylinder", "demo_vase")
+# Who made them and under which licence: blurset's own (pyproject.toml), as glTF
+# `asset.extras` in the fields blurset.attribution reads.
+AUTHOR = "blurset"
+LICENSE = "MIT (https://opensource.org/licenses/MIT)"
 
 
 def make_demo_objects(out_dir: Path, seed: int = 0) -> list[Path]:
@@ -38,7 +45,12 @@ def make_demo_objects(out_dir: Path, seed: int = 0) -> list[Path]:
         rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, k])
         texture = patch_texture(rng, TEXTURE_SIZE)
         vertices, faces, normals, uv = builders[name]()
-        data = _glb_bytes(vertices, faces, normals, uv, texture)
+        extras = {
+            "title": f"blurset {name.removeprefix('demo_')} (procedural demo object, seed {seed})",
+            "author": AUTHOR,
+            "license": LICENSE,
+        }
+        data = _glb_bytes(vertices, faces, normals, uv, texture, extras)
         path = out_dir / f"{name}.glb"
         layout.write_bytes_atomic(path, data)
         paths.append(path)
@@ -191,7 +203,7 @@ def _vase():
     return _revolve(np.stack([radius, s - 0.5], axis=1))
 
 
-def _glb_bytes(vertices, faces, normals, uv, texture: Image.Image) -> bytes:
+def _glb_bytes(vertices, faces, normals, uv, texture: Image.Image, extras: dict) -> bytes:
     material = PBRMaterial(
         name="demo_texture",
         baseColorTexture=texture,
@@ -207,5 +219,12 @@ def _glb_bytes(vertices, faces, normals, uv, texture: Image.Image) -> bytes:
         process=False,
     )
     buf = io.BytesIO()
-    buf.write(trimesh.exchange.gltf.export_glb(trimesh.Scene(mesh), include_normals=True))
+
+    def attribute(tree: dict) -> None:
+        tree.setdefault("asset", {})["extras"] = extras
+
+    glb = trimesh.exchange.gltf.export_glb(
+        trimesh.Scene(mesh), include_normals=True, tree_postprocessor=attribute
+    )
+    buf.write(glb)
     return buf.getvalue()

@@ -155,6 +155,11 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
         gains = _gains(noise, noised, args.gains)
     levels = _levels(args.levels, available)
     test = set(splits["test"])
+    if args.target == "geonerf" and noise and int(noised["params"].get("frames", 1)) != 1:
+        raise ConfigError(
+            "--for geonerf: GeoNeRF reads one image per view; --noise holds several noisy "
+            "frames per view (blurset noise --frames)"
+        )
     if args.target == "geonerf" and 4 not in factors:
         raise ConfigError(
             "--for geonerf: GeoNeRF reads images_4/, which this build has not: build with "

@@ -1,21 +1,50 @@
 """Progress of a build: a bar of frames rendered with settings done and an ETA (tqdm) on a
-terminal; on a log (stderr not a TTY) one plain line per setting instead, since a bar's
-carriage returns would bury the `failed:` lines."""
+terminal; on a log (stderr not a TTY) one plain line per setting instead, with the time
+elapsed and an ETA, since a bar's carriage returns would bury the `failed:` lines."""
 
 from __future__ import annotations
 
 import sys
 import threading
+import time
+from collections.abc import Callable
 
 from tqdm import tqdm
 
 
+def duration(seconds: float) -> str:
+    """A short duration for a log line: 42s, 3m07s, 2h05m."""
+    s = max(0, int(round(seconds)))
+    if s < 60:
+        return f"{s}s"
+    if s < 3600:
+        return f"{s // 60}m{s % 60:02d}s"
+    return f"{s // 3600}h{s % 3600 // 60:02d}m"
+
+
 class Progress:
-    def __init__(self, settings: int, *, frames_per_setting: int = 0, enabled: bool = True) -> None:
+    """Settings done, and frames rendered (the work left is counted in frames, so an ETA
+    moves within a setting too). Settings found complete (`skip`) and those of a failed
+    object leave the work to do; the ETA is the time per frame rendered in this run times
+    the frames left. `clock` is for tests (seconds, monotonic)."""
+
+    def __init__(
+        self,
+        settings: int,
+        *,
+        frames_per_setting: int = 0,
+        enabled: bool = True,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.settings_total = settings
         self.settings_done = 0
+        self.settings_skipped = 0
         self.failed = 0
         self.fps = frames_per_setting
+        self.frames_total = settings * frames_per_setting
+        self.frames_done = 0
+        self._clock = clock
+        self._t0 = clock()
         self._lock = threading.Lock()
         tty = sys.stderr.isatty()
         self._lines = enabled and not tty
@@ -41,9 +70,22 @@ class Progress:
                 s += f", {self.failed} failed"
             self._bar.set_postfix_str(s, refresh=False)
 
+    def timing(self) -> str:
+        """`1m05s elapsed, ETA 3m10s` (ETA `-` before the first frame of this run)."""
+        elapsed = self._clock() - self._t0
+        left = max(0, self.frames_total - self.frames_done)
+        if left == 0:
+            eta = "0s"
+        elif self.frames_done > 0:
+            eta = duration(elapsed * left / self.frames_done)
+        else:
+            eta = "-"
+        return f"{duration(elapsed)} elapsed, ETA {eta}"
+
     def frame_done(self, n: int = 1) -> None:
-        if self._bar is not None:
-            with self._lock:
+        with self._lock:
+            self.frames_done += n
+            if self._bar is not None:
                 self._bar.update(n)
 
     def setting_done(self) -> None:
@@ -53,7 +95,8 @@ class Progress:
             if self._lines:
                 failed = f", {self.failed} failed" if self.failed else ""
                 print(
-                    f"{self.settings_done}/{self.settings_total} settings done{failed}",
+                    f"{self.settings_done}/{self.settings_total} settings done{failed} "
+                    f"({self.timing()})",
                     file=sys.stderr,
                     flush=True,
                 )
@@ -64,6 +107,8 @@ class Progress:
             return
         with self._lock:
             self.settings_done += settings
+            self.settings_skipped += settings
+            self.frames_total = max(self.frames_done, self.frames_total - settings * self.fps)
             if self._bar is not None:
                 self._total = max(0, self._total - settings * self.fps)
                 self._bar.total = self._total
@@ -73,6 +118,10 @@ class Progress:
     def object_failed(self, settings_left: int) -> None:
         with self._lock:
             self.failed += 1
+            if settings_left > 0:
+                self.frames_total = max(
+                    self.frames_done, self.frames_total - settings_left * self.fps
+                )
             if self._bar is not None and settings_left > 0:
                 self._total = max(int(self._bar.n), self._total - settings_left * self.fps)
                 self._bar.total = self._total

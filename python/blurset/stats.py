@@ -66,6 +66,11 @@ COUNTS = [
     ("settings", "complete settings (`.complete` marker, not `*.partial`)"),
     ("views", "views of complete settings"),
     ("images", "image files: views × level directories (sharp + each blur level)"),
+    (
+        "sharp_copy_views",
+        "held-out views whose blur levels hold the sharp image (Deblur-NeRF's convention): "
+        "left out of blur weight, latent frames and blur extent",
+    ),
     ("test_settings", "complete settings listed as `test` in splits.json"),
     (
         "test_views",
@@ -121,9 +126,26 @@ def _median(stats: dict, quantity: str) -> float | None:
     return next((s["median"] for s in stats["summary"] if s["quantity"] == quantity), None)
 
 
+def constant(values: list) -> float | None:
+    """The one value all (non-null) values share, or None (also for no values)."""
+    v = {x for x in values if x is not None}
+    return next(iter(v)) if len(v) == 1 else None
+
+
+def _number(ax, value: float, what: str) -> None:
+    """A panel whose values are all one number: the number, not a one-bar histogram."""
+    ax.set_axis_off()
+    ax.text(0.5, 0.58, f"{value:.6g}", ha="center", va="center", fontsize=40,
+            color=BAR, transform=ax.transAxes)  # fmt: skip
+    ax.text(0.5, 0.25, what, ha="center", va="center", fontsize=10, transform=ax.transAxes)
+
+
 def _hist(ax, values: list[float], max_bins: int, median: float | None) -> None:
-    _integer_counts(ax)
     v = np.asarray([x for x in values if x is not None], dtype=np.float64)
+    if v.size and constant(values) is not None:
+        _number(ax, float(v[0]), f"all {v.size} values")
+        return
+    _integer_counts(ax)
     if v.size == 0:
         ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
         return
@@ -146,8 +168,12 @@ def _integer_counts(ax) -> None:
 
 
 def _bars(ax, values: list[int]) -> None:
-    _integer_counts(ax)
     c = Counter(x for x in values if x is not None)
+    if len(c) == 1:
+        ((value, n),) = c.items()
+        _number(ax, value, f"all {n} values")
+        return
+    _integer_counts(ax)
     if not c:
         ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
         return
@@ -176,7 +202,7 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
     """The PNG histograms; returns their paths in report order."""
     c = stats["counts"]
     n_set, n_views = c["settings"], c["views"]
-    written = []
+    written: list[Path] = []
 
     def single(name: str, values: list, n_label: str) -> None:
         title, xlabel, ylabel = FIGURES[name]
@@ -194,20 +220,33 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
         ("latent_frames", lambda ax, v, q: _bars(ax, v)),
         ("motion_px", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
     ]
+    blurry = f"{n_set} settings"
+    if c.get("sharp_copy_views"):
+        blurry += f"; {c['sharp_copy_views']} held-out sharp copies left out"
     for name, draw in per_level:
         by_level = stats[name]
         if name == "motion_px" and not by_level:
             continue
         title, xlabel, ylabel = FIGURES[name]
         levels = sorted(by_level, key=int) or ["-"]
+        one = constant([x for lvl in by_level for x in by_level[lvl]]) if by_level else None
+        if one is not None:
+            # One number at every level (a fixed --latents): one panel says it.
+            n = sum(x is not None for lvl in by_level for x in by_level[lvl])
+            fig, (ax,) = _figure(1)
+            _number(ax, one, f"every blurry image at levels {', '.join(levels)} ({n} images)")
+            ax.set(title=f"{title} — {blurry}")
+            _save(fig, out_dir / f"{name}.png")
+            written.append(out_dir / f"{name}.png")
+            continue
         fig, axes = _figure(len(levels))
         for ax, lvl in zip(axes, levels, strict=True):
             values = by_level.get(lvl, [])
             n = sum(x is not None for x in values)
             draw(ax, values, f"{name}_{lvl}")
-            panel = f"level {lvl} ({n} views)" if by_level else "no blur levels (sharp only)"
+            panel = f"level {lvl} ({n} blurry views)" if by_level else "no blur levels (sharp only)"
             ax.set(title=panel, xlabel=xlabel, ylabel=ylabel)
-        fig.suptitle(f"{title} — {n_views} views, {n_set} settings")
+        fig.suptitle(f"{title} — {blurry}")
         _save(fig, out_dir / f"{name}.png")
         written.append(out_dir / f"{name}.png")
 

@@ -53,6 +53,10 @@ COLUMNS = (
     "psnr_linear",
     "render_psnr",
     "sharp_render_psnr",
+    "denoise",
+    "detail_ratio",
+    "sharp_detail_ratio",
+    "render_reference_factor",
     "cpu_seconds",
     "max_gap_px",
     "pareto",
@@ -123,6 +127,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=0, help="Cycles threads (0: all cores)")
     p.add_argument(
         "--blender", help="a Blender binary instead of the bpy module (default: the bpy module)"
+    )
+    p.add_argument(
+        "--denoise",
+        choices=["none", "oidn"],
+        default="none",
+        help="oidn: every candidate is also measured denoised (Open Image Denoise on the "
+        "mean of its frames and of their albedo/normal guides, the sharp image the same "
+        "way) against references at 32x its samples",
     )
     p.add_argument("--timeout", type=float, default=1800.0, help="worker reply timeout, s")
     p.add_argument("--quiet", action="store_true", help="no per-candidate lines")
@@ -243,6 +255,9 @@ REFERENCE_SEED_SALT = 0x5BD1E995
 # budget, so their own noise adds at most 1/8 of a candidate's MSE (≤ 0.5 dB), alike
 # for the blurry and the sharp column.
 RENDER_REFERENCE_FACTOR = 8
+# A denoised image is scored against converged undenoised renders of at least 32 times
+# its samples (issue 28): its error can sit far below the raw render noise.
+DENOISED_REFERENCE_FACTOR = 32
 
 
 def _render_image(
@@ -272,6 +287,25 @@ def _render_image(
     seconds = time.perf_counter() - t0
     cpu = _proc_cpu(pid) - c0 + _own_cpu() - o0
     return mean, {"seconds": seconds, "cpu_seconds": cpu, "frames": len(frames)}
+
+
+def _render_denoised(
+    worker, frames: list[dict], lp: dict, res: int, fov: float, denoiser: Any
+) -> tuple[Any, Any, dict]:
+    """Render one image with its guide passes, as a --denoise oidn build does:
+    (undenoised mean, denoised mean, timings)."""
+    acc = _core.Accumulator(res, res, guides=True)
+
+    def on_frame(_i: int, path: str, origin: tuple[int, int] | None) -> None:
+        acc.add_exr(path, origin)
+        os.unlink(path)
+
+    t0 = time.perf_counter()
+    worker.render(frames, resolution=res, fov_deg=fov, samples=lp["samples_per_frame"],
+                  on_frame=on_frame, crop=True, guides=True)  # fmt: skip
+    raw = acc.mean()
+    acc.denoise(denoiser)
+    return raw, acc.mean(), {"seconds": time.perf_counter() - t0, "frames": len(frames)}
 
 
 def _sharp(view: dict, samples: int, work: Path) -> tuple[list[dict], dict]:
@@ -369,6 +403,10 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 "psnr_linear": "",
                 "render_psnr": "",
                 "sharp_render_psnr": "",
+                "denoise": "none",
+                "detail_ratio": "",
+                "sharp_detail_ratio": "",
+                "render_reference_factor": "",
                 "cpu_seconds": round(t_ref["cpu_seconds"], 3),
                 "max_gap_px": round(ref_lp["max_gap_px"], 4),
                 "pareto": "",
@@ -383,8 +421,25 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         def psnr_of(a: Any, b: Any) -> float:
             return float(_core.image_error(a, b, background=ref_cfg.background).psnr)
 
+        def detail_of(a: Any, b: Any) -> float:
+            return float(_core.image_error(a, b, background=ref_cfg.background).detail_ratio)
+
+        den = None
+        if args.denoise == "oidn":
+            from blurset.denoise import denoiser
+
+            den = denoiser("cpu")
+        d_samples = DENOISED_REFERENCE_FACTOR * max(pre.budgets)
+        converged_d: dict[tuple, Any] = {}  # at d_samples, for the denoised rows
+        sharp_d: dict[int, tuple[float, float]] = {}
+        sharp_ref_d = None
+        if den is not None:
+            sharp_ref_d, _ = _render_image(
+                w, *_sharp(view, d_samples, work), pre.resolution, fov, REFERENCE_SEED_SALT
+            )
+
         converged: dict[tuple, Any] = {}  # the same positions, r_samples, other seeds
-        sharp_at: dict[int, float] = {}  # sharp_render_psnr per sharp budget
+        sharp_at: dict[int, tuple[float, float]] = {}  # sharp (render PSNR, detail) per budget
         sharp_ref, _ = _render_image(
             w, *_sharp(view, r_samples, work), pre.resolution, fov, REFERENCE_SEED_SALT
         )
@@ -409,7 +464,10 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 sharp, _ = _render_image(
                     w, *_sharp(view, c.samples_total, work), pre.resolution, fov
                 )
-                sharp_at[c.samples_total] = psnr_of(sharp, sharp_ref)
+                sharp_at[c.samples_total] = (
+                    psnr_of(sharp, sharp_ref),
+                    detail_of(sharp, sharp_ref),
+                )
             name = c.label.replace(" ", "_").replace("=", "")
             _save_png(mean, out / "images" / f"{name}.png", pre.resolution)
             row = {
@@ -424,7 +482,11 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 "psnr": round(err.psnr, 3),
                 "psnr_linear": round(err.psnr_linear, 3),
                 "render_psnr": round(psnr_of(mean, converged[key]), 3),
-                "sharp_render_psnr": round(sharp_at[c.samples_total], 3),
+                "sharp_render_psnr": round(sharp_at[c.samples_total][0], 3),
+                "denoise": "none",
+                "detail_ratio": round(detail_of(mean, converged[key]), 4),
+                "sharp_detail_ratio": round(sharp_at[c.samples_total][1], 4),
+                "render_reference_factor": RENDER_REFERENCE_FACTOR,
                 "cpu_seconds": round(t["cpu_seconds"], 3),
                 "max_gap_px": round(lp["max_gap_px"], 4),
                 "pareto": "",
@@ -435,6 +497,15 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                 f"[{i + 1}/{len(cands)}] {row['label']:<34} {row['latents']:>4} x "
                 f"{row['samples_per_frame']:<4} {row['seconds']:7.2f} s  {row['psnr']:6.2f} dB"
             )
+            if den is not None:
+                rows.append(
+                    _denoised_row(
+                        row, c, w, frames, lp, den, plan_level, pre, args, work, fov, view,
+                        ref, d_samples, converged_d, sharp_d, sharp_ref_d, psnr_of, detail_of,
+                        scheme,
+                    )
+                )  # fmt: skip
+                say(f"      +oidn {rows[-1]['psnr']:6.2f} dB, render {rows[-1]['render_psnr']}")
     cand_rows = [r for r in rows if r["role"] == "candidate"]
     front = _core.pareto_front([r["seconds"] for r in cand_rows], [r["psnr"] for r in cand_rows])
     for r, on in zip(cand_rows, front, strict=True):
@@ -456,6 +527,10 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         "(render noise only); sharp_render_psnr: the sharp image at the candidate's budget "
         "against a converged sharp render",
         "max_ghost_px": args.max_ghost_px,
+        "denoise": args.denoise,
+        "denoised_reference_samples": DENOISED_REFERENCE_FACTOR * max(pre.budgets),
+        "detail_ratio": "high-frequency energy (squared Laplacian of sRGB luma) of the image "
+        "over its converged render's: < 1 smoothed, > 1 noisier",
         "psnr": "sRGB over a white background, peak 1, against the reference",
         "seconds": "wall clock of rendering + accumulating one blurry image (worker running)",
         "quick": bool(args.quick),
@@ -470,6 +545,41 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
     plot(out / "tradeoff.png", rows, setup)
     shutil.rmtree(work, ignore_errors=True)
     return {"setup": setup, "rows": rows, "recommendation": rec}
+
+
+def _denoised_row(
+    row, c, w, frames, lp, den, plan_level, pre, args, work, fov, view, ref, d_samples,
+    converged_d, sharp_d, sharp_ref_d, psnr_of, detail_of, scheme,
+) -> dict[str, Any]:  # fmt: skip
+    """The candidate rendered with its guides and denoised once after averaging, scored
+    against converged undenoised renders of DENOISED_REFERENCE_FACTOR x the budget."""
+    _raw, dmean, t = _render_denoised(w, frames, lp, pre.resolution, fov, den)
+    key = (c.method, tuple(f["t"] for f in lp["latent_frames"]))
+    if key not in converged_d:
+        c_ref = dataclasses.replace(c, samples_total=d_samples)
+        frames_ref, lp_ref = plan_level(_config(pre, args.view, c_ref, args.max_ghost_px, scheme))
+        converged_d[key], _ = _render_image(
+            w, frames_ref, lp_ref, pre.resolution, fov, REFERENCE_SEED_SALT
+        )
+    if c.samples_total not in sharp_d:
+        frames_s, lvl = _sharp(view, c.samples_total, work)
+        _r, sharp, _t = _render_denoised(w, frames_s, lvl, pre.resolution, fov, den)
+        sharp_d[c.samples_total] = (psnr_of(sharp, sharp_ref_d), detail_of(sharp, sharp_ref_d))
+    err = _core.image_error(dmean, ref)
+    return {
+        **row,
+        "seconds": round(t["seconds"], 3),
+        "psnr": round(err.psnr, 3),
+        "psnr_linear": round(err.psnr_linear, 3),
+        "render_psnr": round(psnr_of(dmean, converged_d[key]), 3),
+        "sharp_render_psnr": round(sharp_d[c.samples_total][0], 3),
+        "denoise": "oidn",
+        "detail_ratio": round(detail_of(dmean, converged_d[key]), 4),
+        "sharp_detail_ratio": round(sharp_d[c.samples_total][1], 4),
+        "render_reference_factor": DENOISED_REFERENCE_FACTOR,
+        "cpu_seconds": "",
+        "label": row["label"] + " +oidn",
+    }
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:

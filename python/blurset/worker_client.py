@@ -359,6 +359,7 @@ class Worker:
         noise_threshold: float | None = None,
         batch: bool = True,
         crop: bool = False,
+        guides: bool = False,
     ) -> dict[str, Any]:
         """Render frames ({"c2w": 4x4 row-major, "seed": int, "out": EXR path}) in order.
 
@@ -375,6 +376,8 @@ class Worker:
         `exr_codec` sets the codec of the EXRs the worker writes (its default: NONE).
         `noise_threshold` turns on Cycles adaptive sampling. `batch` False renders every
         frame with its own render call instead of one animation job per run of frames.
+        `guides` writes multi-layer EXRs with Cycles' denoising albedo and normal passes
+        (an Accumulator made with guides=True reads them).
         Returns the worker's final reply ({"done": n, "jobs": render calls}).
         """
         payload = []
@@ -413,6 +416,8 @@ class Worker:
             msg["batch"] = False
         if crop:
             msg["crop"] = True
+        if guides:
+            msg["guides"] = True
         self._send(msg)
         while True:
             msg = self._receive_in_sync()

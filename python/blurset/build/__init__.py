@@ -86,6 +86,12 @@ def job_objects(cfg: BuildConfig, objs: list[ObjectSpec] | None = None) -> list[
     return objs
 
 
+def resumed_settings(out: Path, objs: list[ObjectSpec], cfg: BuildConfig) -> int:
+    """How many of this job's settings an earlier run left complete in OUT."""
+    mine = {layout.setting_name(o.uid, t) for o in objs for t in cfg.theta0s}
+    return sum(1 for s in layout.complete_settings(out) if s.name in mine)
+
+
 def _report_missing(objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress) -> None:
     """Say up front which objaverse objects are not cached and what will happen to them."""
     missing = [o for o in objs if o.source == "objaverse" and not o.path.is_file()]
@@ -108,6 +114,10 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # same shared path) write where the driver reads.
     cfg = cfg.replace(out=str(out_dir(cfg).resolve()))
     out = out_dir(cfg)
+    if cfg.denoise == "oidn":  # a missing OIDN fails before anything is written
+        from blurset.denoise import denoiser, device_for
+
+        denoiser(device_for(cfg.device))
     # Bad entries, unknown test objects, a missing Blender or device fail before anything
     # is written (the demo's objects, written into OUT, are checked once they are).
     if cfg.demo:
@@ -127,6 +137,11 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     with build_lock(out):
         check_same_options(out, cfg)
         sweep(out, every, cfg, prog)
+    if found := resumed_settings(out, objs, cfg):
+        prog.write(
+            f"resuming: {found} of {n_settings} settings are complete from an earlier run "
+            "and are skipped (each is checked first; one that is not whole is redone)"
+        )
     _report_missing(objs, cfg, prog)
     new_settings = 0
     lock = threading.Lock()

@@ -116,15 +116,25 @@ def render_setting(
     acc: dict[tuple[int, str], Any] = {}
     res = cfg.resolution
     qa: dict[int, Any] = {}
+    # --denoise oidn: the frames carry their guide passes, every finished image (a
+    # blurry mean or the sharp render) is denoised once by the driver (issue 28).
+    guides = cfg.denoise == "oidn"
+    den = None
+    if guides:
+        from blurset.denoise import denoiser, device_for
+
+        den = denoiser(device_for(str((info.get("device") or {}).get("backend") or cfg.device)))
 
     def on_frame(i: int, path: str, origin: tuple[int, int] | None) -> None:
         key = keys[i]
         a = acc.get(key)
         if a is None:
-            a = acc[key] = _core.Accumulator(res, res)
+            a = acc[key] = _core.Accumulator(res, res, guides=guides)
         a.add_exr(path, origin)
         os.unlink(path)
         if a.count == need[key]:
+            if den is not None:
+                a.denoise(den)
             view, level = key
             name = layout.image_name(view, n_views)
             bg = cfg.background
@@ -144,7 +154,7 @@ def render_setting(
     blur_idx = [i for i, k in enumerate(keys) if k[1] != layout.SHARP]
     t1 = time.time()
     # Cropped EXRs: only the pixels the region traced cross the disk.
-    common = {"resolution": res, "fov_deg": cfg.fov_deg, "crop": True}
+    common = {"resolution": res, "fov_deg": cfg.fov_deg, "crop": True, "guides": guides}
     worker.render(
         [frames[i] for i in sharp_idx],
         samples=cfg.effective_sharp_samples,
@@ -195,6 +205,7 @@ def render_setting(
             pose_check=pose_check,
             light_paths=info.get("light_paths"),
             device=info.get("device"),
+            denoiser=den.record() if den is not None else None,
         )
 
     write_meta()
@@ -216,5 +227,13 @@ def _pose_check(setting_dir: Path) -> dict:
         rep = check_setting(setting_dir, levels=[layout.SHARP])[layout.SHARP]
     except Exception as e:  # the check must never cost the setting itself
         return {"verdict": f"error: {e}", "pass": False}
-    keep = ("verdict", "pass", "registered", "total", "median_rot_err_deg", "median_center_err_rel")
+    keep = (
+        "verdict",
+        "meaning",
+        "pass",
+        "registered",
+        "total",
+        "median_rot_err_deg",
+        "median_center_err_rel",
+    )
     return {k: rep.get(k) for k in keep}

@@ -29,6 +29,7 @@ pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
 // Linear frames in, encoded images out; image files; render QA.
 pub use crate::image::accumulate::Accumulator;
 pub use crate::image::color::srgb_encode_slice;
+pub use crate::image::denoise::{DenoiseDevice, Denoiser};
 pub use crate::image::exr::read::{read_exr, Frame};
 pub use crate::image::io::{image_info, read_image, Image, Samples};
 pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
@@ -81,4 +82,4 @@ pub use crate::ground::names::{
 };
 
 // Image error against a reference and the speed/quality front.
-pub use crate::metrics::{image_error, pareto_front};
+pub use crate::metrics::{detail_ratio, image_error, pareto_front};

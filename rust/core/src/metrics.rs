@@ -69,6 +69,79 @@ pub fn image_error(image: &[f32], reference: &[f32], background: [f64; 3]) -> Re
     })
 }
 
+/// High-frequency energy of an image (issue 28): the mean squared 4-neighbour Laplacian
+/// of its luma (Rec. 709 weights) in sRGB, composited over `background`, over the
+/// interior pixels of a `width`-wide premultiplied linear RGBA image. Texture and edges
+/// carry it; render noise adds to it and a denoiser that smooths texture removes it.
+pub fn detail_energy(image: &[f32], width: usize, background: [f64; 3]) -> Result<f64> {
+    if width == 0 || image.is_empty() || !image.len().is_multiple_of(CH * width) {
+        return Err(Error::Shape(format!(
+            "{} values are not rows of {width} RGBA pixels",
+            image.len()
+        )));
+    }
+    let height = image.len() / (CH * width);
+    if width < 3 || height < 3 {
+        return Err(Error::Shape(format!(
+            "detail energy needs at least 3x3 pixels, got {width}x{height}"
+        )));
+    }
+    let luma: Vec<f64> = image
+        .par_chunks_exact(CH)
+        .map(|p| {
+            let c = composite_over([p[0], p[1], p[2], p[3]].map(f64::from), background);
+            (0..3).map(|k| LUMA[k] * srgb_encode_f64(c[k])).sum()
+        })
+        .collect();
+    let sum: f64 = (1..height - 1)
+        .into_par_iter()
+        .map(|y| {
+            (1..width - 1)
+                .map(|x| {
+                    let i = y * width + x;
+                    let lap = luma[i - 1] + luma[i + 1] + luma[i - width] + luma[i + width]
+                        - 4.0 * luma[i];
+                    lap * lap
+                })
+                .sum::<f64>()
+        })
+        .sum();
+    Ok(sum / ((width - 2) * (height - 2)) as f64)
+}
+
+/// Rec. 709 luma weights.
+const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+/// The detail ratio of an image against its reference: [`detail_energy`] of the image
+/// over the reference's (1: the same texture and edges; < 1: smoothed, as a denoiser
+/// that erases texture; > 1: noise on top). A flat reference (energy 0) gives +inf for
+/// any detail and 1 for none.
+pub fn detail_ratio(
+    image: &[f32],
+    reference: &[f32],
+    width: usize,
+    background: [f64; 3],
+) -> Result<f64> {
+    if image.len() != reference.len() {
+        return Err(Error::Shape(format!(
+            "image has {} values and reference {}",
+            image.len(),
+            reference.len()
+        )));
+    }
+    let (a, b) = (
+        detail_energy(image, width, background)?,
+        detail_energy(reference, width, background)?,
+    );
+    Ok(if b > 0.0 {
+        a / b
+    } else if a > 0.0 {
+        f64::INFINITY
+    } else {
+        1.0
+    })
+}
+
 /// Which of the points (seconds, psnr) are Pareto-optimal: no other point is at least
 /// as fast and at least as good, and strictly better in one of the two.
 pub fn pareto_front(seconds: &[f64], psnr: &[f64]) -> Result<Vec<bool>> {
@@ -114,6 +187,23 @@ mod tests {
         assert!((e.mse - d * d / 6.0).abs() < 1e-6);
         assert!((e.psnr - psnr_from_mse(e.mse)).abs() < 1e-12);
         assert!(image_error(&a, &a[..4], [1.0; 3]).is_err());
+        // Detail: the same image 1; a flat copy of it 0; added noise > 1.
+        let (w, h) = (8usize, 6usize);
+        let tex: Vec<f32> = (0..w * h)
+            .flat_map(|i| {
+                let v = if (i % w + i / w) % 2 == 0 { 0.8 } else { 0.2 };
+                [v, v, v, 1.0]
+            })
+            .collect();
+        let flat: Vec<f32> = (0..w * h).flat_map(|_| [0.5, 0.5, 0.5, 1.0]).collect();
+        assert_eq!(detail_ratio(&tex, &tex, w, [1.0; 3])?, 1.0);
+        assert_eq!(detail_ratio(&flat, &tex, w, [1.0; 3])?, 0.0);
+        assert_eq!(detail_ratio(&flat, &flat, w, [1.0; 3])?, 1.0);
+        let mut noisy = tex.clone();
+        noisy[4 * 9] += 0.05;
+        assert!(detail_ratio(&noisy, &tex, w, [1.0; 3])? > 1.0);
+        assert!(detail_energy(&tex, 5, [1.0; 3]).is_err());
+        assert!(detail_energy(&tex[..4 * 2 * w], w, [1.0; 3]).is_err());
         Ok(())
     }
 

@@ -69,15 +69,57 @@ pub struct PyAccumulator {
 #[pymethods]
 impl PyAccumulator {
     #[new]
-    fn new(width: u32, height: u32) -> PyResult<Self> {
+    #[pyo3(signature = (width, height, *, guides = false))]
+    fn new(width: u32, height: u32, guides: bool) -> PyResult<Self> {
         if width == 0 || height == 0 {
             return Err(PyValueError::new_err(format!(
                 "accumulator size must be positive, got {width}x{height}"
             )));
         }
         Ok(PyAccumulator {
-            inner: core::Accumulator::new(width, height),
+            inner: if guides {
+                core::Accumulator::with_guides(width, height)
+            } else {
+                core::Accumulator::new(width, height)
+            },
         })
+    }
+
+    /// Whether the denoising guides are averaged.
+    #[getter]
+    fn guides(&self) -> bool {
+        self.inner.has_guides()
+    }
+
+    /// Whether the mean has been denoised.
+    #[getter]
+    fn denoised(&self) -> bool {
+        self.inner.is_denoised()
+    }
+
+    /// Denoise the mean once with its mean guides (core `Accumulator::denoise`).
+    fn denoise(&mut self, py: Python<'_>, denoiser: &PyDenoiser) -> PyResult<()> {
+        let inner = &mut self.inner;
+        let d = &denoiser.inner;
+        run_detached(py, move || inner.denoise(d))
+    }
+
+    /// The mean albedo and normal, float32 (H, W, 3) each.
+    #[allow(clippy::type_complexity)]
+    fn guide_means<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, numpy::PyArray3<f32>>,
+        Bound<'py, numpy::PyArray3<f32>>,
+    )> {
+        let inner = &self.inner;
+        let (a, n) = run_detached(py, move || inner.guide_means())?;
+        let shape = [inner.height() as usize, inner.width() as usize, 3];
+        Ok((
+            PyArray1::from_vec(py, a).reshape(shape)?,
+            PyArray1::from_vec(py, n).reshape(shape)?,
+        ))
     }
 
     #[getter]
@@ -169,6 +211,105 @@ impl PyAccumulator {
     }
 }
 
+/// Open Image Denoise loaded at run time (core `Denoiser`).
+#[pyclass(frozen, name = "Denoiser", module = "blurset._core")]
+pub struct PyDenoiser {
+    inner: core::Denoiser,
+}
+
+/// A C-contiguous float32 (H, W, 3) image.
+fn rgb_image<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<PyReadonlyArray3<'py, f32>> {
+    let arr = f32_array(obj, what)?;
+    let shape = arr.shape();
+    if shape.len() != 3 || shape[2] != 3 {
+        return Err(PyValueError::new_err(format!(
+            "{what} must have shape (H, W, 3), got {shape:?}"
+        )));
+    }
+    if !arr.is_c_contiguous() {
+        return Err(PyValueError::new_err(format!(
+            "{what} must be C-contiguous; use np.ascontiguousarray({what})"
+        )));
+    }
+    Ok(arr.cast::<numpy::PyArray3<f32>>()?.readonly())
+}
+
+#[pymethods]
+impl PyDenoiser {
+    #[new]
+    #[pyo3(signature = (library, device = "auto"))]
+    fn new(py: Python<'_>, library: PathBuf, device: &str) -> PyResult<Self> {
+        let device = match device {
+            "auto" => core::DenoiseDevice::Auto,
+            "cpu" => core::DenoiseDevice::Cpu,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "denoiser device must be auto or cpu, got {other:?}"
+                )))
+            }
+        };
+        let inner = run_detached(py, move || core::Denoiser::open(&library, device))?;
+        Ok(PyDenoiser { inner })
+    }
+
+    #[getter]
+    fn library(&self) -> String {
+        self.inner.library().display().to_string()
+    }
+
+    #[getter]
+    fn version(&self) -> String {
+        self.inner.version()
+    }
+
+    #[getter]
+    fn device_type(&self) -> &'static str {
+        self.inner.device_type()
+    }
+
+    /// What meta.json records of this denoiser.
+    fn record<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("library", "OpenImageDenoise")?;
+        d.set_item("version", self.inner.version())?;
+        d.set_item("device", self.inner.device_type())?;
+        Ok(d)
+    }
+
+    /// Denoise a float32 (H, W, 3) colour image with its (H, W, 3) albedo and normal.
+    fn denoise<'py>(
+        &self,
+        py: Python<'py>,
+        color: &Bound<'py, PyAny>,
+        albedo: &Bound<'py, PyAny>,
+        normal: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        let (c, a, n) = (
+            rgb_image(color, "color")?,
+            rgb_image(albedo, "albedo")?,
+            rgb_image(normal, "normal")?,
+        );
+        let shape = c.shape().to_vec();
+        for (what, x) in [("albedo", &a), ("normal", &n)] {
+            if x.shape() != shape.as_slice() {
+                return Err(PyValueError::new_err(format!(
+                    "{what} has shape {:?}, color {shape:?}",
+                    x.shape()
+                )));
+            }
+        }
+        let (h, w) = (shape[0] as u32, shape[1] as u32);
+        let (c, a, n) = (c.as_slice()?, a.as_slice()?, n.as_slice()?);
+        let inner = &self.inner;
+        let out = run_detached(py, move || inner.denoise(w, h, c, a, n))?;
+        PyArray1::from_vec(py, out).reshape([h as usize, w as usize, 3])
+    }
+
+    fn __repr__(&self) -> String {
+        format!("{:?}", self.inner)
+    }
+}
+
 /// Exact IEC 61966-2-1 encoding of linear float32 values, clamped to [0, 1]; same shape.
 #[pyfunction]
 fn srgb_encode<'py>(
@@ -200,6 +341,7 @@ fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, numpy::PyArray3
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyAccumulator>()?;
+    m.add_class::<PyDenoiser>()?;
     m.add_function(wrap_pyfunction!(srgb_encode, m)?)?;
     m.add_function(wrap_pyfunction!(read_exr, m)?)?;
     Ok(())

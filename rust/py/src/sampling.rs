@@ -168,8 +168,8 @@ impl Plan {
     /// Write the setting's meta.json: this plan, the build config, the object as the
     /// worker reported it (dict), the timings (dict), the QA of every view and, with
     /// --check-poses, the COLMAP verdict (dict); `light_paths` and `device` as the worker
-    /// reported them (dicts).
-    #[pyo3(signature = (path, *, config, object, timings, qa, pose_check = None, light_paths = None, device = None))]
+    /// reported them, `denoiser` as the driver's denoiser describes itself (dicts).
+    #[pyo3(signature = (path, *, config, object, timings, qa, pose_check = None, light_paths = None, device = None, denoiser = None))]
     #[allow(clippy::too_many_arguments)] // keyword arguments of one Python call
     fn write_meta(
         &self,
@@ -182,6 +182,7 @@ impl Plan {
         pose_check: Option<&Bound<'_, PyAny>>,
         light_paths: Option<&Bound<'_, PyAny>>,
         device: Option<&Bound<'_, PyAny>>,
+        denoiser: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
         let object: core::ObjectRecord = from_py("object", object)?;
         let timings: core::Timings = from_py("timings", timings)?;
@@ -198,6 +199,7 @@ impl Plan {
         };
         meta.render.light_paths = json("light_paths", light_paths)?;
         meta.render.device = json("device", device)?;
+        meta.render.denoiser = json("denoiser", denoiser)?;
         crate::run_detached(py, || meta.write(&path))
     }
 }

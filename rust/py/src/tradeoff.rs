@@ -24,6 +24,8 @@ pub struct ImageMetrics {
     pub psnr_linear: f64,
     pub mse: f64,
     pub mse_linear: f64,
+    /// High-frequency energy of the image over the reference's (core `detail_ratio`).
+    pub detail_ratio: f64,
 }
 
 /// Error of `image` against `reference` (float32 (H, W, 4), premultiplied linear RGBA):
@@ -45,12 +47,19 @@ fn image_error(
     }
     let (a, b) = (rgba(&image, "image")?, rgba(&reference, "reference")?);
     let bg = [background.0, background.1, background.2];
-    let e = crate::run_detached(py, || core::image_error(a, b, bg))?;
+    let width = image.shape()[1];
+    let (e, detail) = crate::run_detached(py, || {
+        Ok((
+            core::image_error(a, b, bg)?,
+            core::detail_ratio(a, b, width, bg)?,
+        ))
+    })?;
     Ok(ImageMetrics {
         psnr: e.psnr,
         psnr_linear: e.psnr_linear,
         mse: e.mse,
         mse_linear: e.mse_linear,
+        detail_ratio: detail,
     })
 }
 

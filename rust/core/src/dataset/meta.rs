@@ -6,7 +6,9 @@ use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
 use crate::image::qa::FrameQa;
 use crate::plan::config::BuildConfig;
-use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan, ViewPlan, PARITY_EXPONENT};
+use crate::plan::sampling::{
+    LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
+};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -79,6 +81,15 @@ pub struct RenderRecord {
     pub blur_budget: String,
     #[serde(default)]
     pub blur_budget_is: String,
+    /// `oidn` (issue 28): every image denoised once by Open Image Denoise, in words in
+    /// `denoise_is`, with the library and device in `denoiser`; absent (as in builds before
+    /// it) when the images are as rendered.
+    #[serde(default = "no_denoise", skip_serializing_if = "is_no_denoise")]
+    pub denoise: String,
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub denoise_is: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub denoiser: Option<serde_json::Value>,
     /// The Cycles `samples` of every render under subsets (`BuildConfig::cycles_samples`).
     pub cycles_samples: Option<u32>,
     /// Cycles adaptive sampling stays off: with it the sharp image stops early while the
@@ -99,6 +110,14 @@ pub struct RenderRecord {
     pub linear: bool,
 }
 
+fn no_denoise() -> String {
+    "none".into()
+}
+
+fn is_no_denoise(s: &str) -> bool {
+    s == "none"
+}
+
 impl RenderRecord {
     pub fn of(cfg: &BuildConfig) -> Self {
         RenderRecord {
@@ -106,6 +125,7 @@ impl RenderRecord {
             // The count every latent frame renders, where one count holds for all of them.
             samples_per_latent: match cfg.samples_total {
                 Some(_) => None,
+                None if cfg.blur_budget == "need" && cfg.blur_method == "average" => None,
                 None if cfg.blur_budget == "parity" && cfg.blur_method == "average" => {
                     (!cfg.latents_auto).then(|| cfg.sampling().samples_per_frame(cfg.latents))
                 }
@@ -130,7 +150,14 @@ impl RenderRecord {
             }
             .into(),
             blur_budget: cfg.blur_budget.clone(),
-            blur_budget_is: if cfg.blur_budget == "parity" {
+            blur_budget_is: if cfg.blur_budget == "need" {
+                format!(
+                    "a blurry image of m >= 2 latent frames renders the sample budget times \
+                     1 + (m^{PARITY_EXPONENT} - 1) * min(1, motion_px / m / \
+                     {NEED_SATURATION_PX}) (rounded up per frame): the parity factor bought \
+                     by its screen motion between frames; sharp_samples is the budget itself"
+                )
+            } else if cfg.blur_budget == "parity" {
                 format!(
                     "a blurry image of m >= 2 latent frames renders the sample budget times \
                      m^{PARITY_EXPONENT} (rounded up per frame), so it carries no more render \
@@ -139,6 +166,17 @@ impl RenderRecord {
             } else {
                 "a blurry image of m latent frames renders the sample budget split over them".into()
             },
+            denoise: cfg.denoise.clone(),
+            denoise_is: if cfg.denoise == "oidn" {
+                "Open Image Denoise (RT filter, quality high, hdr, albedo and normal guides \
+                 prefiltered, cleanAux; Cycles' defaults) applied once to every finished \
+                 image: the sharp render, and the mean of a blurry image's latent frames \
+                 with the means of their albedo and normal passes; alpha as rendered"
+                    .into()
+            } else {
+                String::new()
+            },
+            denoiser: None,
             cycles_samples: cfg.cycles_samples(),
             adaptive_sampling: false,
             light_paths: None,
@@ -347,6 +385,10 @@ pub struct ReadMeta {
     pub levels: Option<Vec<String>>,
     #[serde(default)]
     pub test_views: Option<Vec<u64>>,
+    /// `sharp` when the blur levels hold the sharp image at the test views; absent in
+    /// metas from before the field, whose test views were blurry.
+    #[serde(default)]
+    pub test_view_images: Option<String>,
 }
 
 // -- what `blurset check-poses` reads: the mean latent poses of a blur level -----------

@@ -10,8 +10,13 @@
 //!   setting, cbrt(dx · dy · dz) correctly rounded, in object units (the normalized object's largest
 //!   side is 1).
 //! - blur weight w_l, latent frames m and the largest screen motion (px) of a
-//!   bounding-box corner, per level and view; flatness F, depth range R, orientation O
-//!   and w_u = (F · R · O)^(1/3) per view, as sampled.
+//!   bounding-box corner, per level and blurry view; flatness F, depth range R,
+//!   orientation O and w_u = (F · R · O)^(1/3) per view, as sampled.
+//!
+//! A blur level's numbers are those of its blurry images only: a held-out view whose
+//! blur-level images are copies of its sharp image (meta.json `test_view_images`
+//! `sharp`, Deblur-NeRF's convention, the default) has no blur at any level, so its
+//! per-level entries are null although meta.json records what was sampled for it.
 //!
 //! What counts (see [`Counts`]): a setting is complete when its directory has the
 //! `.complete` marker and is not a `*.partial` directory; any other directory that looks
@@ -68,17 +73,17 @@ pub const QUANTITIES: &[(&str, &str, &str)] = &[
     (
         "blur_weight",
         "1",
-        "w_l ~ U[0.9, 1.1]·w_u·l: multiplier of the trajectory δ at level l (one per view)",
+        "w_l ~ U[0.9, 1.1]·w_u·l: multiplier of the trajectory δ at level l (one per blurry view)",
     ),
     (
         "latent_frames",
         "frames",
-        "m, latent frames averaged into the blurry image at level l (one per view)",
+        "m, latent frames averaged into the blurry image at level l (one per blurry view)",
     ),
     (
         "motion_px",
         "px",
-        "largest screen motion of a bounding-box corner over the trajectory at level l (one per view)",
+        "largest screen motion of a bounding-box corner over the trajectory at level l (one per blurry view)",
     ),
 ];
 
@@ -120,6 +125,8 @@ pub struct SettingInfo {
     pub level_dirs: Vec<String>,
     pub images: usize,
     pub test_views: Vec<u64>,
+    /// Whether the blur levels hold the sharp image at the test views.
+    pub test_views_sharp: bool,
 }
 
 /// Minimum, median (mean of the two middle values for an even count), maximum and
@@ -145,6 +152,9 @@ pub struct Counts {
     pub views: usize,
     /// Image files of complete settings: views × level directories (sharp + blur levels).
     pub images: usize,
+    /// Held-out views whose blur levels hold copies of the sharp image
+    /// (`test_view_images` sharp): left out of every per-level quantity.
+    pub sharp_copy_views: usize,
     /// Complete settings listed as test in splits.json (None without splits.json).
     pub test_settings: Option<usize>,
     /// Held-out target views of the test settings: Σ |test_views[s]| over complete
@@ -290,6 +300,10 @@ struct SettingRecord {
     info: SettingInfo,
     scene_dimension: f64,
     views: Vec<ViewRecord>,
+    /// Blur levels meta.json records (also those only sharp copies have).
+    levels: BTreeSet<u32>,
+    /// Views whose blur levels hold the sharp image.
+    sharp_copies: usize,
 }
 
 fn check(ok: bool, path: &Path, what: impl FnOnce() -> String) -> Result<()> {
@@ -317,6 +331,10 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
         || format!("bbox_dims {:?} must be finite and ≥ 0", meta.bbox_dims),
     )?;
     check(!meta.views.is_empty(), &path, || "no views".into())?;
+    let test_views = meta.test_views.unwrap_or_default();
+    let test_views_sharp = meta.test_view_images.as_deref() == Some("sharp");
+    let mut level_keys = BTreeSet::new();
+    let mut sharp_copies = 0;
     let mut views = Vec::with_capacity(meta.views.len());
     for v in &meta.views {
         let i = v.index;
@@ -336,6 +354,9 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
                 format!("view {i}: {what} {x} is negative")
             })?;
         }
+        // A held-out view holding the sharp image at every blur level has no blur.
+        let sharp_copy = test_views_sharp && test_views.contains(&i);
+        sharp_copies += usize::from(sharp_copy);
         let mut levels = BTreeMap::new();
         for (key, lp) in &v.levels {
             let l: u32 = key.parse().map_err(|_| {
@@ -347,14 +368,17 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
             check(lp.w_l >= 0.0, &path, || {
                 format!("view {i} level {l}: w_l {} is negative", lp.w_l)
             })?;
-            levels.insert(
-                l,
-                MetaLevel {
-                    w_l: lp.w_l,
-                    latents: lp.latents,
-                    motion_px: lp.motion_px,
-                },
-            );
+            level_keys.insert(l);
+            if !sharp_copy {
+                levels.insert(
+                    l,
+                    MetaLevel {
+                        w_l: lp.w_l,
+                        latents: lp.latents,
+                        motion_px: lp.motion_px,
+                    },
+                );
+            }
         }
         let sr = scene_range(v.near, v.far);
         check(sr.is_finite(), &path, || {
@@ -373,10 +397,10 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
             levels,
         });
     }
-    // Older metas lack `levels`: sharp plus the blur levels of the first view.
+    // Older metas lack `levels`: sharp plus the blur levels the views record.
     let level_dirs = meta.levels.unwrap_or_else(|| {
         std::iter::once("sharp".to_string())
-            .chain(views[0].levels.keys().map(|l| format!("blur_{l}")))
+            .chain(level_keys.iter().map(|l| format!("blur_{l}")))
             .collect()
     });
     let n = views.len();
@@ -386,6 +410,7 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
     })?;
     Ok(SettingRecord {
         scene_dimension: dim,
+        sharp_copies,
         info: SettingInfo {
             name: name.to_string(),
             uid: meta.uid,
@@ -394,9 +419,11 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
             bbox_dims: meta.bbox_dims,
             images: n * level_dirs.len(),
             level_dirs,
-            test_views: meta.test_views.unwrap_or_default(),
+            test_views,
+            test_views_sharp,
         },
         views,
+        levels: level_keys,
     })
 }
 
@@ -463,8 +490,9 @@ fn assemble(
     let n_views: usize = records.iter().map(|r| r.views.len()).sum();
     let levels: BTreeSet<u32> = records
         .iter()
-        .flat_map(|r| r.views.iter().flat_map(|v| v.levels.keys().copied()))
+        .flat_map(|r| r.levels.iter().copied())
         .collect();
+    let sharp_copy_views = records.iter().map(|r| r.sharp_copies).sum();
     let col = || Vec::with_capacity(n_views);
     let mut st = BuildStats {
         schema: SCHEMA.to_string(),
@@ -540,6 +568,7 @@ fn assemble(
         settings: st.settings.len(),
         views: n_views,
         images: st.settings.iter().map(|s| s.images).sum(),
+        sharp_copy_views,
         failures: failed_uids.len(),
         settings_failed: st.failures.iter().filter(|f| f.setting.is_some()).count(),
         incomplete_settings: st.incomplete.len(),
@@ -785,6 +814,39 @@ mod tests {
         // the document is valid JSON without NaN
         let text = serde_json::to_string(&s).map_err(|e| Error::Value(e.to_string()))?;
         assert!(text.contains("\"blur_weight\":{\"1\":[0.5,1.5,0.5,null]"));
+        Ok(())
+    }
+
+    #[test]
+    fn sharp_copies_are_left_out_of_the_blur_levels() -> Result<()> {
+        let t = TempDir::new("copies")?;
+        let text = meta("a", 0.0, [1.0; 3], &[2.0, 4.0, 3.0], &[1, 2]);
+        let mut m: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| Error::Value(e.to_string()))?;
+        m["test_view_images"] = "sharp".into(); // view 0 holds the sharp image
+        setting(&t.0, "a_0", &m.to_string(), true)?;
+        // A meta.json from before the field: its test view was rendered blurry.
+        setting(
+            &t.0,
+            "b_0",
+            &meta("b", 0.0, [1.0; 3], &[2.0], &[1, 2]),
+            true,
+        )?;
+        let s = build_stats(&t.0)?;
+        assert_eq!(s.blur_weight[&1], [None, Some(1.5), Some(2.5), Some(0.5)]);
+        assert_eq!(s.latent_frames[&2], [None, Some(6), Some(6), Some(6)]);
+        assert_eq!(s.motion_px[&2], [None, Some(20.0), Some(20.0), Some(20.0)]);
+        // The view itself still counts: its scene range, factors and images.
+        assert_eq!(s.scene_range.len(), 4);
+        assert_eq!((s.counts.views, s.counts.images), (4, 4 * 3));
+        assert_eq!(s.counts.sharp_copy_views, 1);
+        assert!(s.settings[0].test_views_sharp && !s.settings[1].test_views_sharp);
+        let b1 = s
+            .summary
+            .iter()
+            .find(|x| x.quantity == "blur_weight_1")
+            .ok_or_else(|| Error::Value("no summary".into()))?;
+        assert_eq!((b1.n, b1.min, b1.max), (3, Some(0.5), Some(2.5)));
         Ok(())
     }
 

@@ -19,6 +19,8 @@ pub fn spdx_ids() -> Vec<String> {
         .collect();
     ids.push("CC0-1.0".into());
     ids.push("CC-PDDC".into());
+    // blurset's own licence, which its built-in demo objects carry.
+    ids.push("MIT".into());
     ids
 }
 
@@ -117,6 +119,7 @@ mod tests {
                 "other",
             ),
             ("free-st", "other"),
+            ("MIT (https://opensource.org/licenses/MIT)", "MIT"),
             ("https://creativecommons.org/licenses/by/x.y/", "other"),
             ("  ", "unknown"),
         ];
@@ -131,7 +134,8 @@ mod tests {
         assert_eq!(canonical(" cc-by-nc-4.0").as_deref(), Some("CC-BY-NC-4.0"));
         assert_eq!(canonical("Unknown").as_deref(), Some("unknown"));
         assert_eq!(canonical("cc-by-4"), None);
-        assert_eq!(spdx_ids().len(), 26);
+        assert_eq!(spdx_ids().len(), 27);
+        assert_eq!(canonical("mit").as_deref(), Some("MIT"));
         let only = ["CC-BY-4.0".to_string()];
         assert!(allowed("CC-BY-4.0", Some(&only)));
         assert!(!allowed("unknown", Some(&only)));

@@ -7,6 +7,8 @@
 //! share a single encoding: composite over a background (premultiplied alpha, §3),
 //! sRGB-encode (IEC 61966-2-1), quantize to 8 bits.
 use super::color::{composite_over, srgb_encode_u8};
+use super::denoise::Denoiser;
+use super::exr::passes::decode_passes;
 use super::exr::read::{decode_rgba, first_non_finite, read_into};
 use super::exr::write::write_exr;
 use super::io::write_png_rgb8;
@@ -46,7 +48,15 @@ pub struct Accumulator {
     staging: Vec<f32>,
     /// The bytes of the EXR file being added, kept for the same reason.
     file: Vec<u8>,
+    /// Sums of the denoising guides (albedo RGB, normal XYZ: 6 per pixel) when the image
+    /// will be denoised (issue 28): averaged exactly as the colour is.
+    guides: Option<Vec<f64>>,
+    /// The mean was replaced by its denoised version: nothing more may be added.
+    denoised: bool,
 }
+
+/// Values per pixel of the guide sums: albedo RGB, then normal XYZ.
+const GUIDES: usize = 6;
 
 impl Accumulator {
     pub fn new(width: u32, height: u32) -> Self {
@@ -57,7 +67,29 @@ impl Accumulator {
             count: 0,
             staging: Vec::new(),
             file: Vec::new(),
+            guides: None,
+            denoised: false,
         }
+    }
+
+    /// An accumulator that also averages the frames' denoising guides (Cycles' albedo and
+    /// normal passes), for an image that [`Self::denoise`] finishes: its EXRs must hold
+    /// them (multi-layer, see `exr::passes`).
+    pub fn with_guides(width: u32, height: u32) -> Self {
+        Accumulator {
+            guides: Some(vec![0.0; width as usize * height as usize * GUIDES]),
+            ..Accumulator::new(width, height)
+        }
+    }
+
+    /// Whether this accumulator averages denoising guides.
+    pub fn has_guides(&self) -> bool {
+        self.guides.is_some()
+    }
+
+    /// Whether the mean has been denoised.
+    pub fn is_denoised(&self) -> bool {
+        self.denoised
     }
 
     pub fn width(&self) -> u32 {
@@ -77,6 +109,7 @@ impl Accumulator {
     ///
     /// A frame with a NaN or inf is refused whole, so the sum is never poisoned.
     pub fn add_frame(&mut self, rgba: &[f32]) -> Result<()> {
+        self.check_open(false)?;
         check_rgba_len(self.width, self.height, rgba.len())?;
         if let Some((x, y, c, v)) = first_non_finite(self.width as usize, rgba) {
             return Err(Error::Value(format!(
@@ -100,6 +133,10 @@ impl Accumulator {
     /// there (plan/region.rs), so the sum is the same bit for bit. `None`: the file
     /// must be the accumulator's size.
     pub fn add_exr_at(&mut self, path: &Path, origin: Option<(u32, u32)>) -> Result<()> {
+        if self.guides.is_some() {
+            return self.add_passes_at(path, origin);
+        }
+        self.check_open(false)?;
         let mut file = std::mem::take(&mut self.file);
         let mut staging = std::mem::take(&mut self.staging);
         let res = read_into(path, &mut file).and_then(|()| {
@@ -134,6 +171,184 @@ impl Accumulator {
         self.file = file;
         self.staging = staging;
         res
+    }
+
+    /// Refuse a frame once the mean is denoised, and one without guides when they are
+    /// averaged (`with_guides`).
+    fn check_open(&self, guides_given: bool) -> Result<()> {
+        if self.denoised {
+            return Err(Error::Value(
+                "the image is already denoised; a frame can no longer be added".into(),
+            ));
+        }
+        if self.guides.is_some() && !guides_given {
+            return Err(Error::Value(
+                "this accumulator averages denoising guides: add frames with their albedo \
+                 and normal"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Add one frame with its guides: RGBA (4 f32 per pixel), albedo and normal (3 f32
+    /// per pixel each), all finite (an accumulator made `with_guides`).
+    pub fn add_frame_with_guides(
+        &mut self,
+        rgba: &[f32],
+        albedo: &[f32],
+        normal: &[f32],
+    ) -> Result<()> {
+        self.check_open(true)?;
+        if self.guides.is_none() {
+            return Err(Error::Value(
+                "this accumulator does not average guides (make it with guides)".into(),
+            ));
+        }
+        check_rgba_len(self.width, self.height, rgba.len())?;
+        let n = self.width as usize * self.height as usize * 3;
+        for (what, v) in [("albedo", albedo), ("normal", normal)] {
+            if v.len() != n {
+                return Err(Error::Shape(format!(
+                    "{what} has {} values, a {}x{} image needs {n}",
+                    v.len(),
+                    self.width,
+                    self.height
+                )));
+            }
+        }
+        if let Some(v) = rgba
+            .iter()
+            .chain(albedo)
+            .chain(normal)
+            .find(|v| !v.is_finite())
+        {
+            return Err(Error::Value(format!(
+                "frame or guide has a non-finite value {v}"
+            )));
+        }
+        self.add_guides_tile(albedo, normal, self.width as usize, 0, 0);
+        self.add_unchecked(rgba);
+        Ok(())
+    }
+
+    /// [`Self::add_exr_at`] of a render with its guide passes (multi-layer EXR).
+    fn add_passes_at(&mut self, path: &Path, origin: Option<(u32, u32)>) -> Result<()> {
+        self.check_open(true)?;
+        let mut file = std::mem::take(&mut self.file);
+        let res = read_into(path, &mut file).and_then(|()| decode_passes(&file, path));
+        self.file = file;
+        let p = res?;
+        let (w, h) = (self.width as usize, self.height as usize);
+        let (x0, y0) = origin.map_or((0, 0), |(x, y)| (x as usize, y as usize));
+        let fits = match origin {
+            None => (p.width, p.height) == (w, h),
+            Some(_) => x0 + p.width <= w && y0 + p.height <= h,
+        };
+        if !fits {
+            let at = origin.map_or(String::new(), |o| format!(" at {o:?}"));
+            return Err(Error::Shape(format!(
+                "EXR is {}x{}{at} but the accumulator is {}x{}: {path:?}",
+                p.width, p.height, self.width, self.height
+            )));
+        }
+        for (name, v, ch) in [
+            ("RGBA", &p.rgba, 4usize),
+            ("albedo RGB", &p.albedo, 3),
+            ("normal XYZ", &p.normal, 3),
+        ] {
+            if let Some(i) = v.iter().position(|v| !v.is_finite()) {
+                let px = i / ch;
+                return Err(Error::Image {
+                    reason: format!(
+                        "non-finite value {} at pixel ({}, {}) of the {name} pass; a render \
+                         must not poison the average",
+                        v[i],
+                        x0 + px % p.width.max(1),
+                        y0 + px / p.width.max(1)
+                    ),
+                    path: path.to_path_buf(),
+                });
+            }
+        }
+        self.add_guides_tile(&p.albedo, &p.normal, p.width, x0, y0);
+        self.add_tile_unchecked(&p.rgba, p.width, x0, y0);
+        Ok(())
+    }
+
+    /// Add guide rows of `tile_width` pixels at (x0, y0); the caller checked that they fit.
+    fn add_guides_tile(
+        &mut self,
+        albedo: &[f32],
+        normal: &[f32],
+        tile_width: usize,
+        x0: usize,
+        y0: usize,
+    ) {
+        let w = self.width as usize;
+        let Some(g) = self.guides.as_mut() else {
+            return;
+        };
+        if tile_width == 0 {
+            return;
+        }
+        let rows = albedo.len() / (3 * tile_width);
+        for y in 0..rows {
+            for x in 0..tile_width {
+                let (s, d) = (3 * (y * tile_width + x), GUIDES * ((y0 + y) * w + x0 + x));
+                for c in 0..3 {
+                    g[d + c] += f64::from(albedo[s + c]);
+                    g[d + 3 + c] += f64::from(normal[s + c]);
+                }
+            }
+        }
+    }
+
+    /// The means of the guides: (albedo RGB, normal XYZ), 3 f32 per pixel each.
+    pub fn guide_means(&self) -> Result<(Vec<f32>, Vec<f32>)> {
+        self.require_frames()?;
+        let Some(g) = self.guides.as_ref() else {
+            return Err(Error::Value(
+                "this accumulator does not average guides (make it with guides)".into(),
+            ));
+        };
+        let inv = 1.0 / f64::from(self.count);
+        let (mut a, mut n) = (
+            Vec::with_capacity(g.len() / 2),
+            Vec::with_capacity(g.len() / 2),
+        );
+        for p in g.chunks_exact(GUIDES) {
+            a.extend(p[..3].iter().map(|&v| (v * inv) as f32));
+            n.extend(p[3..].iter().map(|&v| (v * inv) as f32));
+        }
+        Ok((a, n))
+    }
+
+    /// Denoise the image once, now that its frames are in: `denoiser` sees the mean
+    /// colour (RGB of the premultiplied mean) with the mean albedo and normal, and its
+    /// output replaces the mean's RGB; alpha stays the frames' mean (Cycles does not
+    /// denoise alpha either). Every writer then writes the denoised image.
+    pub fn denoise(&mut self, denoiser: &Denoiser) -> Result<()> {
+        if self.denoised {
+            return Ok(());
+        }
+        let (albedo, normal) = self.guide_means()?;
+        let mean = self.mean()?;
+        let color: Vec<f32> = mean
+            .chunks_exact(CH)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect();
+        let out = denoiser.denoise(self.width, self.height, &color, &albedo, &normal)?;
+        let count = f64::from(self.count);
+        // sum = value · count, exact in f64 (a 24-bit mantissa times a count < 2^29), so
+        // the mean gives the denoiser's f32 back bit for bit.
+        for (s, d) in self.sum.chunks_exact_mut(CH).zip(out.chunks_exact(3)) {
+            for c in 0..3 {
+                s[c] = f64::from(d[c]) * count;
+            }
+        }
+        self.denoised = true;
+        Ok(())
     }
 
     /// Add rows of `tile_width` pixels at (x0, y0); the caller checked that they fit.
@@ -498,6 +713,44 @@ mod tests {
         acc.write_png_downsampled(&p, bg, 2)?;
         let img = image::open(&p).map_err(|e| Error::Value(e.to_string()))?;
         assert_eq!((img.width(), img.height()), (4, 2));
+        Ok(())
+    }
+
+    #[test]
+    fn guides_are_averaged_like_the_colour_and_denoising_ends_the_image() -> Result<()> {
+        let (w, h) = (16u32, 8u32);
+        let n3 = (w * h * 3) as usize;
+        let mut acc = Accumulator::with_guides(w, h);
+        assert!(acc.has_guides());
+        let e = acc.add_frame(&frame(w, h, 1)).unwrap_err().to_string();
+        assert!(e.contains("albedo"), "{e}");
+        let (a1, a2) = (vec![0.2f32; n3], vec![0.6f32; n3]);
+        let (z1, z2) = (vec![1.0f32; n3], vec![0.0f32; n3]);
+        acc.add_frame_with_guides(&frame(w, h, 1), &a1, &z1)?;
+        acc.add_frame_with_guides(&frame(w, h, 2), &a2, &z2)?;
+        let (ma, mn) = acc.guide_means()?;
+        assert!(ma.iter().all(|&v| (v - 0.4).abs() < 1e-6));
+        assert!(mn.iter().all(|&v| v == 0.5));
+        assert!(Accumulator::new(w, h).guide_means().is_err());
+        let Some(lib) = crate::image::denoise::tests::library() else {
+            return Ok(());
+        };
+        let d = Denoiser::open(&lib, crate::image::denoise::DenoiseDevice::Cpu)?;
+        let before = acc.mean()?;
+        acc.denoise(&d)?;
+        assert!(acc.is_denoised());
+        assert_eq!(acc.count(), 2);
+        let after = acc.mean()?;
+        // Alpha is the frames' mean; the colour is the denoiser's.
+        for (b, a) in before.chunks_exact(4).zip(after.chunks_exact(4)) {
+            assert_eq!(b[3], a[3]);
+        }
+        assert_ne!(before, after);
+        let e = acc
+            .add_frame_with_guides(&frame(w, h, 3), &a1, &z1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("already denoised"), "{e}");
         Ok(())
     }
 

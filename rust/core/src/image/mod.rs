@@ -4,6 +4,7 @@ use crate::error::{Error, Result};
 
 pub mod accumulate;
 pub mod color;
+pub mod denoise;
 pub mod exr;
 pub mod io;
 pub mod qa;

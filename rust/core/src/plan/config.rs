@@ -103,9 +103,18 @@ macro_rules! build_options {
     /// budget as given (builds before it).
     blur_budget: String = "parity".into(), specs::BLUR_BUDGET, shapes {
         help: "parity: a blurry image of m >= 2 latent frames renders the sample budget S \
-            times m^0.4, so it is no noisier than its sharp image; flat: the budget as \
-            given, ceil(S/m) samples a frame",
+            times m^0.4, so it is no noisier than its sharp image; need: that factor bought \
+            by the image's measured motion between frames (less for small motion); flat: \
+            the budget as given, ceil(S/m) samples a frame",
         before: Some("flat".into()),
+    };
+    /// `none`: images as rendered; `oidn`: every image (the sharp one and the mean of a
+    /// blurry image's latent frames, with their averaged albedo and normal guides)
+    /// denoised once by Open Image Denoise.
+    denoise: String = "none".into(), specs::DENOISE, shapes {
+        help: "none: images as rendered; oidn: every image denoised once by Open Image \
+            Denoise, a blurry image after averaging (its frames' albedo and normal averaged \
+            the same way), the sharp image the same way",
     };
     /// `auto`: light-path bounces from the object's materials; `fixed`: the same for all.
     light_paths: String = "auto".into(), specs::LIGHT_PATHS, shapes {
@@ -545,10 +554,10 @@ impl BuildConfig {
             } else {
                 LatentSampling::Subsets
             },
-            blur_budget: if self.blur_budget == "flat" {
-                BlurBudget::Flat
-            } else {
-                BlurBudget::Parity
+            blur_budget: match self.blur_budget.as_str() {
+                "flat" => BlurBudget::Flat,
+                "need" => BlurBudget::Need,
+                _ => BlurBudget::Parity,
             },
         }
     }

@@ -85,6 +85,11 @@ pub enum BlurBudget {
     Parity,
     /// The budget as given: m frames at S/m samples (builds before this option).
     Flat,
+    /// Parity bought by the image's measured motion (issue 28): [`need_factor`] of m and
+    /// the screen motion between its frames, never more than [`parity_factor`]`(m)`. A
+    /// level whose frames move ≪ 0.5 px apart still renders nearly one stratified
+    /// sequence and needs little more than the budget.
+    Need,
 }
 
 /// The parity factor is m^PARITY_EXPONENT: measured on the demo box
@@ -97,6 +102,30 @@ pub const PARITY_EXPONENT: f64 = 0.4;
 /// [`BlurBudget::Parity`]: 1 for one frame, m^[`PARITY_EXPONENT`] (≈ 4.1 at the paper's 34).
 pub fn parity_factor(m: usize) -> f64 {
     libm::pow(m.max(1) as f64, PARITY_EXPONENT)
+}
+
+/// Screen motion between consecutive latent frames (px) from which their sample blocks
+/// stop sharing content and the parity penalty is whole: measured on the demo box at 96
+/// px (bench/bench_render_parity.py, m = 34, flat budget): the factor a level needs is
+/// 1.55 at 0.15 px per frame, ≈ 2.2 at 0.29 px, ≈ 2.8 at 0.42 px and ≈ 4 (m^0.4) at
+/// 0.56 px.
+pub const NEED_SATURATION_PX: f64 = 0.5;
+
+/// How many times the budget an average of m latent frames gets under
+/// [`BlurBudget::Need`] when a bounding-box corner moves `motion_px` over its segment:
+/// 1 + (m^0.4 − 1) · min(1, g / [`NEED_SATURATION_PX`]) with g = motion_px / m, the mean
+/// screen step between frames. It rises linearly from 1 (no motion: the frames' blocks
+/// add up to one stratified sequence, DESIGN §3) to [`parity_factor`] (saturated), and it
+/// lies on or above every measured need (the line through the measurements' ends).
+pub fn need_factor(m: usize, motion_px: f64) -> f64 {
+    let m = m.max(1);
+    let full = parity_factor(m);
+    let g = if motion_px.is_finite() {
+        motion_px.max(0.0) / m as f64
+    } else {
+        f64::INFINITY
+    };
+    1.0 + (full - 1.0) * (g / NEED_SATURATION_PX).min(1.0)
 }
 
 /// Longest Cycles sample sequence (`scene.cycles.samples` tops out at 2^24).
@@ -249,6 +278,14 @@ impl SamplingConfig {
     /// Under [`BlurBudget::Parity`] an average of m ≥ 2 frames gets [`parity_factor`]`(m)`
     /// times that, rounded up per frame.
     pub fn samples_per_frame(&self, m: usize) -> u32 {
+        self.samples_per_frame_at(m, f64::INFINITY)
+    }
+
+    /// [`Self::samples_per_frame`] of an image whose bounding box moves `motion_px` on
+    /// screen over its segment: under [`BlurBudget::Need`] the factor is
+    /// [`need_factor`]`(m, motion_px)` (an infinite motion gives the parity factor); the
+    /// other budgets do not look at the motion.
+    pub fn samples_per_frame_at(&self, m: usize, motion_px: f64) -> u32 {
         let m = m.max(1);
         let budget = match (self.blur_method, self.samples_total) {
             (_, Some(total)) => total as f64 / m as f64,
@@ -257,6 +294,7 @@ impl SamplingConfig {
         };
         let factor = match (self.blur_method, self.blur_budget) {
             (BlurMethod::Average, BlurBudget::Parity) => parity_factor(m),
+            (BlurMethod::Average, BlurBudget::Need) => need_factor(m, motion_px),
             _ => 1.0,
         };
         (budget * factor).ceil().min(MAX_SAMPLES as f64) as u32
@@ -269,7 +307,13 @@ impl SamplingConfig {
     /// equally in the mean; when m does not divide S the sequence is m·⌈S / m⌉ > S
     /// samples, never fewer. Independent: each frame renders its own first L samples.
     pub fn sample_blocks(&self, m: usize) -> (u32, Vec<u32>) {
-        let len = self.samples_per_frame(m);
+        self.sample_blocks_at(m, f64::INFINITY)
+    }
+
+    /// [`Self::sample_blocks`] of an image with `motion_px` of screen motion
+    /// ([`Self::samples_per_frame_at`]).
+    pub fn sample_blocks_at(&self, m: usize, motion_px: f64) -> (u32, Vec<u32>) {
+        let len = self.samples_per_frame_at(m, motion_px);
         match self.latent_sampling {
             LatentSampling::Subsets => (
                 (m as u64 * len as u64).min(MAX_SEQUENCE) as u32,
@@ -859,7 +903,8 @@ pub fn plan_setting(
                             let draw = |m| sample_level_m(cfg, seed, index, level, w.w_u, m).1;
                             let (ts, max_gap_px) =
                                 latent_positions(cfg, draw, &seg, &screen, motion_px);
-                            let (sample_sequence, offsets) = cfg.sample_blocks(ts.len());
+                            let (sample_sequence, offsets) =
+                                cfg.sample_blocks_at(ts.len(), motion_px);
                             let latent_frames: Vec<LatentFrame> = ts
                                 .iter()
                                 .enumerate()
@@ -883,7 +928,7 @@ pub fn plan_setting(
                                 motion_px,
                                 max_gap_px,
                                 method: BlurMethod::Average,
-                                samples_per_frame: cfg.samples_per_frame(ts.len()),
+                                samples_per_frame: cfg.samples_per_frame_at(ts.len(), motion_px),
                                 latent_sampling: cfg.latent_sampling,
                                 sample_sequence,
                                 latent_frames,
@@ -1548,6 +1593,72 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(mb.max_sequence(), 128);
+    }
+
+    #[test]
+    fn need_buys_what_the_motion_needs_and_never_more_than_parity() {
+        // The rule's ends: no motion needs the budget, ≥ 0.5 px per frame the full m^0.4.
+        assert_eq!(need_factor(34, 0.0), 1.0);
+        assert_eq!(need_factor(1, 100.0), 1.0);
+        assert!((need_factor(34, 34.0 * NEED_SATURATION_PX) - parity_factor(34)).abs() < 1e-12);
+        assert_eq!(need_factor(34, f64::INFINITY), parity_factor(34));
+        assert_eq!(need_factor(34, -3.0), 1.0);
+        // It lies on or above the needs measured on the demo box at 96 px (m = 34, flat
+        // budget: bench/results.json render_parity_paper_level*_x1 and the parity ratios).
+        for (motion_px, measured) in [(5.04, 1.55), (9.99, 2.20), (14.32, 2.77)] {
+            let f = need_factor(34, motion_px);
+            assert!(f >= measured && f <= parity_factor(34), "{motion_px}: {f}");
+        }
+        // Level 1 of that bench: 5.04 px over 34 frames gets ≈ 1.9×, not 4.1×.
+        assert!((need_factor(34, 5.04) - 1.92).abs() < 0.01);
+        let need = SamplingConfig {
+            blur_budget: BlurBudget::Need,
+            samples_total: Some(256),
+            ..Default::default()
+        };
+        let parity = SamplingConfig {
+            blur_budget: BlurBudget::Parity,
+            ..need.clone()
+        };
+        for m in 1..=64usize {
+            for motion in [0.0, 1.0, 5.0, 20.0, 80.0, f64::INFINITY] {
+                let (n, p) = (
+                    need.samples_per_frame_at(m, motion),
+                    parity.samples_per_frame_at(m, motion),
+                );
+                assert!(
+                    n <= p && n >= 256u32.div_ceil(m as u32),
+                    "{m} {motion}: {n} {p}"
+                );
+                // More motion never buys fewer samples.
+                assert!(n >= need.samples_per_frame_at(m, motion / 2.0));
+            }
+            // The sequence Cycles is pinned to bounds every level's.
+            assert!(
+                need.sample_blocks_at(m, 3.0).0 <= need.max_sequence().max(need.sample_blocks(m).0)
+            );
+        }
+        // The plan of a need build (the paper's 34 frames): each level's frames carry
+        // its motion's samples, fewer than parity's where frames move < 0.5 px apart.
+        // (Under --latents auto every gap is near max_ghost_px = 1 px: saturated.)
+        let cfg = SamplingConfig {
+            views: 4,
+            resolution: 96,
+            ..need.clone()
+        };
+        let p = plan(&cfg, 1, [1.0, 1.0, 1.0]);
+        let mut saved = 0.0;
+        for v in &p.views {
+            for lp in v.levels.values() {
+                assert_eq!(
+                    lp.samples_per_frame,
+                    cfg.samples_per_frame_at(lp.latents, lp.motion_px)
+                );
+                assert!(lp.sample_sequence <= p.sample_sequence_max);
+                saved += f64::from(cfg.samples_per_frame(lp.latents) - lp.samples_per_frame);
+            }
+        }
+        assert!(saved > 0.0);
     }
 
     #[test]

@@ -465,7 +465,8 @@ pub mod specs {
     pub const EXECUTOR: Spec = Spec::Choice(&["local", "ray"]);
     pub const LATENT_SAMPLING: Spec = Spec::Choice(&["subsets", "independent"]);
     pub const LIGHT_PATHS: Spec = Spec::Choice(&["auto", "fixed"]);
-    pub const BLUR_BUDGET: Spec = Spec::Choice(&["parity", "flat"]);
+    pub const BLUR_BUDGET: Spec = Spec::Choice(&["parity", "flat", "need"]);
+    pub const DENOISE: Spec = Spec::Choice(&["none", "oidn"]);
     /// `auto`: the best backend Cycles reports (OptiX > CUDA > HIP > oneAPI > Metal > CPU).
     pub const DEVICE: Spec =
         Spec::Choice(&["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"]);

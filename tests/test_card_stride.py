@@ -1,0 +1,18 @@
+"""The dataset card's loading recipe follows the build's test-view stride (a real build
+by the stand-in worker: no rendering)."""
+
+from __future__ import annotations
+
+import pytest
+from blurset.card import make_card
+
+from tests.conftest import standin_build
+
+
+@pytest.mark.parametrize("stride", [8, 16])
+def test_card_llffhold_is_the_builds_view_stride(tmp_path, standin_blender, stride):
+    out = tmp_path / "build"
+    standin_build(out, standin_blender, "--views", "17", "--test-view-stride", str(stride))
+    card = make_card(out)
+    assert f"use `--llffhold {stride}`" in card
+    assert card.count("--llffhold") == 1
