@@ -266,3 +266,85 @@ pub(crate) fn check_declarations(decls: &[OptionInfo]) -> std::result::Result<()
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    //! Adding an option is one declaration: a toy table of two entries makes a config
+    //! struct whose defaults, conversion, range check and [`OptionInfo`] records all
+    //! come from those entries (the parsers and docs are made from the records).
+    use super::*;
+    use crate::error::Result;
+    use crate::plan::spec::{check, config_error, convert, Raw};
+    use serde::Deserialize;
+    use std::collections::BTreeMap;
+
+    config_struct! {
+        /// A toy config: one declaration per option, nothing else.
+        ToyConfig, "toy";
+        /// A toy option that shapes the outputs.
+        width: u32 = 3, Spec::int(1, 10), shapes {
+            help: "toy width",
+            demo: Some(2),
+            before: Some(1),
+        };
+        toy_mode: String = "a".into(), Spec::Choice(&["a", "b"]), run {
+            flags: &["--mode", "--toy-mode"],
+            help: "toy mode",
+        };
+    }
+
+    impl ToyConfig {
+        fn from_values(values: &BTreeMap<String, Raw>) -> Result<ToyConfig> {
+            let mut c = ToyConfig::default();
+            for (k, v) in values {
+                c.set(k, v)?;
+            }
+            c.check_fields()?;
+            Ok(c)
+        }
+    }
+
+    #[test]
+    fn a_toy_option_is_one_declaration() -> Result<()> {
+        assert_eq!(ToyConfig::OPTIONS, ["width", "toy_mode"]);
+        assert_eq!(
+            ToyConfig::default(),
+            ToyConfig {
+                width: 3,
+                toy_mode: "a".into()
+            }
+        );
+        let decls = ToyConfig::declarations();
+        check_declarations(&decls).map_err(crate::error::Error::Value)?;
+        let w = &decls[0];
+        assert_eq!((w.name, w.rust_type, w.kind), ("width", "u32", Kind::Int));
+        assert_eq!(w.flags, ["--width"]);
+        assert_eq!(w.keys, ["width"]);
+        assert_eq!(w.default, serde_json::json!(3));
+        assert_eq!(w.demo, Some(serde_json::json!(2)));
+        assert_eq!(w.before, serde_json::json!(1));
+        assert_eq!(w.range, "must be an integer in 1..=10");
+        assert!(w.shapes_outputs && !w.optional);
+        let m = &decls[1];
+        assert_eq!((m.kind, m.choices.clone()), (Kind::Choice, vec!["a", "b"]));
+        assert_eq!(m.flags, ["--mode", "--toy-mode"]);
+        assert_eq!(m.keys, ["toy_mode", "mode"]);
+        assert!(!m.shapes_outputs && m.before == m.default);
+        // The conversion and the range check are the declaration's too.
+        let one = |k: &str, v: Raw| BTreeMap::from([(k.to_string(), v)]);
+        assert_eq!(ToyConfig::from_values(&one("width", Raw::Int(7)))?.width, 7);
+        let err = |k: &str, v: Raw| {
+            ToyConfig::from_values(&one(k, v))
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default()
+        };
+        assert_eq!(
+            err("width", Raw::Int(11)),
+            "width 11: must be an integer in 1..=10"
+        );
+        assert!(err("toy_mode", Raw::Str("c".into())).contains("one of a, b"));
+        assert_eq!(err("depth", Raw::Int(1)), "depth is not an option of toy");
+        Ok(())
+    }
+}
