@@ -48,7 +48,9 @@ def test_every_declared_flag_is_one_parser_flag_with_its_default_and_back() -> N
         assert action.default is None  # unset flags leave the core's default
         assert d.help.split()[0] in _help(p, action), d.name
         if d.kind == "switch":
-            assert action.nargs == 0, d.name
+            assert action.nargs == 0, d.name  # off unless given
+        elif "required" in d.help:
+            assert "default" not in _help(p, action), d.name
         else:
             assert f"(default: {BUILD.default_text(d.name)})" in _help(p, action), d.name
         if d.kind == "choice":

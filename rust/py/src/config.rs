@@ -228,7 +228,13 @@ blurset_core::build_options!(py_build_config {
 /// One option as its declaration in the core states it: the flags, help, TOML keys,
 /// range, defaults and whether it shapes the outputs (python/blurset/options.py makes the
 /// parsers and the CLI reference from these).
-#[pyclass(frozen, eq, skip_from_py_object, name = "OptionDecl", module = "blurset._core")]
+#[pyclass(
+    frozen,
+    eq,
+    skip_from_py_object,
+    name = "OptionDecl",
+    module = "blurset._core"
+)]
 #[derive(Clone, PartialEq)]
 pub struct OptionDecl(pub core::OptionInfo);
 

@@ -5,10 +5,10 @@
 //! A value is checked against its field's [`Spec`]; an error names the option, the value
 //! and the range (`views -1: must be an integer in 1..=4096`), never a parser position.
 //! The sampling options form the [`SamplingConfig`] of every setting's plan.
+use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use super::sampling::{
     BlurBudget, BlurMethod, LatentPositions, LatentSampling, SamplingConfig, TrajectoryAnchor,
 };
-use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use super::spec::{check, specs, Kind, OptionValue, Raw, Spec};
 use super::spec::{config_error, convert};
 use super::weights::Guards;
@@ -956,23 +956,30 @@ mod tests {
         assert_eq!(wl.flags, ["--keep-linear", "--write-linear"]);
         assert_eq!(wl.keys, ["write_linear", "keep_linear"]);
         let ds = d("downsample").ok_or(Error::Value("downsample".into()))?;
-        assert_eq!((ds.kind, ds.before.clone()), (Kind::Factors, serde_json::json!([])));
+        assert_eq!(
+            (ds.kind, ds.before.clone()),
+            (Kind::Factors, serde_json::json!([]))
+        );
         assert_eq!(ds.default, serde_json::json!([4]));
         let la = d("latents_auto").ok_or(Error::Value("latents_auto".into()))?;
         assert!(la.flags.is_empty() && la.via == Some("latents") && la.shapes_outputs);
         let ph = d("phi0_deg").ok_or(Error::Value("phi0_deg".into()))?;
         assert!(ph.flags.is_empty() && ph.keys == ["phi0_deg"]);
         let bm = d("blur_method").ok_or(Error::Value("blur_method".into()))?;
-        assert_eq!((bm.kind, bm.choices.clone()), (Kind::Choice, vec!["average", "motion_blur"]));
+        assert_eq!(
+            (bm.kind, bm.choices.clone()),
+            (Kind::Choice, vec!["average", "motion_blur"])
+        );
         Ok(())
     }
 
     fn json_raw(v: &serde_json::Value) -> Raw {
         match v {
             serde_json::Value::Bool(b) => Raw::Bool(*b),
-            serde_json::Value::Number(n) => n
-                .as_i64()
-                .map_or_else(|| Raw::Float(n.as_f64().unwrap_or(f64::NAN)), |i| Raw::Int(i.into())),
+            serde_json::Value::Number(n) => n.as_i64().map_or_else(
+                || Raw::Float(n.as_f64().unwrap_or(f64::NAN)),
+                |i| Raw::Int(i.into()),
+            ),
             serde_json::Value::String(s) => Raw::Str(s.clone()),
             serde_json::Value::Array(a) => Raw::List(a.iter().map(json_raw).collect()),
             serde_json::Value::Null => Raw::Null,

@@ -248,7 +248,10 @@ pub(crate) fn check_declarations(decls: &[OptionInfo]) -> std::result::Result<()
             }
             let low = d.help.to_lowercase();
             if low.contains("issue") || low.contains("builds before") || low.contains("(default") {
-                return Err(format!("{}: help speaks of history or states a default", d.name));
+                return Err(format!(
+                    "{}: help speaks of history or states a default",
+                    d.name
+                ));
             }
         }
         if d.optional && d.default.is_null() && d.unset.is_none() && !d.flags.is_empty() {
@@ -258,7 +261,10 @@ pub(crate) fn check_declarations(decls: &[OptionInfo]) -> std::result::Result<()
             }
         }
         if d.before != d.default && !d.shapes_outputs {
-            return Err(format!("{}: `before` on an option that shapes nothing", d.name));
+            return Err(format!(
+                "{}: `before` on an option that shapes nothing",
+                d.name
+            ));
         }
         if d.kind == Kind::Choice && d.choices.is_empty() {
             return Err(format!("{}: a choice without choices", d.name));
