@@ -13,7 +13,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import pytest
-from blurset import cli
+from blurset import cli, options
 from blurset.build.dataset import BEFORE_OPTION, RUN_OPTIONS, check_same_options
 from blurset.config import BUILD, BuildConfig, load_toml, make_config
 from blurset.exceptions import ConfigError
@@ -189,28 +189,16 @@ def test_the_cli_reference_lists_every_declaration(monkeypatch: pytest.MonkeyPat
             assert f"| `{d.name}` |" in page, d.name
 
 
-def _python_type(rust: str) -> str:
-    """The stub's type of a field of this Rust type (as the binding converts it)."""
-    rust = rust.replace(" ", "")
-    if rust.startswith("Option<"):
-        return f"{_python_type(rust[7:-1])} | None"
-    if rust.startswith("Vec<"):
-        return f"list[{_python_type(rust[4:-1])}]"
-    if rust == "[f64;3]":
-        return "tuple[float, float, float]"
-    return {"String": "str", "bool": "bool", "f64": "float"}.get(rust, "int")
-
-
-def test_the_stubs_typed_properties_are_the_declared_types() -> None:
-    import re
-
+def test_the_stubs_typed_properties_are_generated_from_the_declarations() -> None:
+    """_core.pyi's BuildConfig properties are exactly `make stub`'s output: a property
+    per declaration, typed as the binding converts the declared Rust type."""
     stub = (Path(__file__).resolve().parents[1] / "python" / "blurset" / "_core.pyi").read_text()
-    start = stub.index("class BuildConfig")
-    body = stub[start : stub.index("\nclass ", start + 1)]
-    props = dict(re.findall(r"@property\s+def (\w+)\(self\) -> ([^:]+?): \.\.\.", body))
-    wrong = {
-        d.name: (props.get(d.name), _python_type(d.rust_type))
-        for d in BUILD.decls
-        if props.get(d.name) != _python_type(d.rust_type)
-    }
-    assert not wrong, f"stub property vs declared type: {wrong}"
+    start = stub.index("\nclass BuildConfig:")
+    begin = stub.index(options.STUB_BEGIN, start)
+    end = stub.index(options.STUB_END, begin) + len(options.STUB_END)
+    assert stub[begin:end] == options.stub_properties(BUILD.decls), "run `make stub`"
+    assert options.python_type("Option<Vec<u32>>") == "list[int] | None"
+    assert options.python_type("[f64; 3]") == "tuple[float, float, float]"
+    # A toy declaration gets its typed property.
+    toy = _toy(name="toy_width", kind="int", default=3, help="toy", shapes_outputs=True)
+    assert "    def toy_width(self) -> int: ...\n" in options.stub_properties([toy])  # type: ignore[list-item]

@@ -162,6 +162,7 @@ class BuildConfig:
     @property
     def test_view_images(self) -> str:
         """What the blur levels hold at the test views: "sharp" or "blurry"."""
+    # The options, generated from the core's declarations (`make stub`):
     @property
     def objects(self) -> list[str]: ...
     @property
@@ -282,6 +283,7 @@ class BuildConfig:
     def allow_mixed(self) -> bool: ...
     @property
     def licenses(self) -> list[str] | None: ...
+    # (end of the generated options)
 
 # --- layout (rust/py/src/layout.rs) --------------------------------------------------
 

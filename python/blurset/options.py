@@ -209,3 +209,56 @@ def parse_indices(value: Any, where: str = "--gpus") -> Any:
         return [int(x) for x in text.split(",")]
     except ValueError:
         raise ConfigError(f"{where}: expected GPU indices like 0,2 or all, got {value!r}") from None
+
+
+# -- the stub's typed properties -------------------------------------------------------
+
+STUB_BEGIN = "    # The options, generated from the core's declarations (`make stub`):\n"
+STUB_END = "    # (end of the generated options)\n"
+
+
+def python_type(rust: str) -> str:
+    """The Python type the binding gives a field of this Rust type (`Option<Vec<u32>>`
+    → `list[int] | None`)."""
+    rust = rust.replace(" ", "")
+    if rust.startswith("Option<") and rust.endswith(">"):
+        return f"{python_type(rust[7:-1])} | None"
+    if rust.startswith("Vec<") and rust.endswith(">"):
+        return f"list[{python_type(rust[4:-1])}]"
+    if rust.startswith("[") and rust.endswith("]") and ";" in rust:
+        item, n = rust[1:-1].split(";")
+        return f"tuple[{', '.join([python_type(item)] * int(n))}]"
+    if rust == "String":
+        return "str"
+    if rust == "bool":
+        return "bool"
+    if rust in ("f32", "f64"):
+        return "float"
+    if rust in ("u8", "u16", "u32", "u64", "usize", "i32", "i64"):
+        return "int"
+    raise ValueError(f"no Python type for the Rust type {rust!r}")
+
+
+def stub_properties(decls: Sequence[Decl]) -> str:
+    """The typed properties of a config class in _core.pyi, one per declaration."""
+    body = "".join(
+        f"    @property\n    def {d.name}(self) -> {python_type(d.rust_type)}: ...\n" for d in decls
+    )
+    return STUB_BEGIN + body + STUB_END
+
+
+def write_stub(path: str, cls: str = "BuildConfig") -> bool:
+    """Rewrite the generated properties of `cls` in the stub at `path`; True when it
+    changed."""
+    from pathlib import Path
+
+    p = Path(path)
+    text = p.read_text()
+    start = text.index(f"\nclass {cls}:")
+    begin = text.index(STUB_BEGIN, start)
+    end = text.index(STUB_END, begin) + len(STUB_END)
+    decls = getattr(_core, cls).declarations()
+    new = text[:begin] + stub_properties(decls) + text[end:]
+    if new != text:
+        p.write_text(new)
+    return new != text
