@@ -68,6 +68,7 @@ fmt:
 # fails when schemas/ differs from them).
 schemas: venv
 	$(PY) -c "from blurset import outputs; outputs.write_schemas('schemas')"
+	$(PY) -c "from blurset import stubgen; stubgen.write()"
 
 # The typed option properties of _core.pyi, from the core's option declarations (a test
 # fails when the stub differs from them).

@@ -36,6 +36,19 @@ def check_tree(root: Path, seen: dict[str, int]) -> None:
             seen[p.name] = seen.get(p.name, 0) + 1
 
 
+def test_the_stubs_typed_dicts_are_the_cores():
+    """blurset/_records.pyi (the types of the dicts crossing the FFI) is what the core's
+    serde types make today (`make schemas` writes it), and _core.pyi uses them."""
+    from blurset import stubgen
+
+    assert stubgen.STUB.read_text() == stubgen.render(), "run `make schemas`"
+    text = stubgen.STUB.read_text()
+    for name in ("Render", "SettingPlan", "LevelPlan", "DatasetDoc", "NoiseDoc", "BuildStats"):
+        assert f"class {name}(TypedDict)" in text, name
+    core_stub = (stubgen.STUB.parent / "_core.pyi").read_text()
+    assert "-> list[rec.Render]" in core_stub and "doc: rec.NoiseDoc" in core_stub
+
+
 def test_the_shipped_schemas_are_the_cores():
     generated = outputs.record_schemas()
     shipped = {p.name: json.loads(p.read_text()) for p in SCHEMAS.glob("*.schema.json")}

@@ -10,6 +10,9 @@ from typing import Any, Literal, TypeAlias, final
 import numpy as np
 import numpy.typing as npt
 
+# The dicts that cross the FFI, typed from the core's serde types (blurset.stubgen).
+from blurset import _records as rec
+
 __version__: str
 
 class BlursetError(Exception): ...
@@ -290,6 +293,25 @@ class BuildConfig:
 MARKER: str
 PARTIAL_SUFFIX: str
 SHARP: str
+META: str
+DATASET: str
+SPLITS: str
+FAILURES: str
+POSES_BOUNDS: str
+TRANSFORMS: str
+NOISE: str
+NOISE_DATASET: str
+NOISE_SCENE: str
+EXPORT: str
+STATS: str
+IMAGES: str
+LINEAR: str
+
+def images_dir(factor: int) -> str:
+    """The image folder at downsampling factor `factor` (`images`, `images_4`)."""
+
+def linear_dir(factor: int) -> str:
+    """The linear EXR folder at downsampling factor `factor` (`linear`, `linear_4`)."""
 
 def setting_name(uid: str, theta0_deg: float) -> str:
     """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
@@ -353,11 +375,11 @@ def parse_temp_name(name: str) -> tuple[str, int] | None:
 def write_atomic(path: str | PathLike[str], data: bytes) -> None:
     """Write `data` through a synced temp file and a rename (parents created)."""
 
-def write_dataset_json(path: str | PathLike[str], doc: dict[str, Any]) -> None:
+def write_dataset_json(path: str | PathLike[str], doc: rec.DatasetDoc) -> None:
     """Write a build's dataset.json; `doc` must match the core's DatasetDoc (unknown or
     missing fields are errors)."""
 
-def write_noise_json(path: str | PathLike[str], doc: dict[str, Any]) -> None:
+def write_noise_json(path: str | PathLike[str], doc: rec.NoiseDoc) -> None:
     """Write a noisy scene's noise.json; `doc` must match the core's NoiseDoc."""
 
 # --- accumulate (rust/py/src/accumulate.rs) -----------------------------------------
@@ -630,7 +652,7 @@ class SamplingConfig:
     """
 
     def __new__(cls, **values: object) -> SamplingConfig: ...
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> rec.SamplingConfig:
         """The fields as a dict (what meta.json records as `sampling`)."""
     @property
     def max_latents(self) -> int:
@@ -657,9 +679,9 @@ class Plan:
     def resolution(self) -> list[int]: ...
     @property
     def fov_deg(self) -> float: ...
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> rec.SettingPlan:
         """The whole plan as a dict (views[].levels["<l>"].latent_frames …), for reading."""
-    def level(self, view: int, level: int) -> dict[str, Any]:
+    def level(self, view: int, level: int) -> rec.LevelPlan:
         """One view's plan of one blur level as a dict (w_l, latents, motion_px, …)."""
     def renders(
         self,
@@ -667,14 +689,14 @@ class Plan:
         pin: int | None = None,
         *,
         sharp_views: list[int] = ...,
-    ) -> list[dict[str, Any]]:
+    ) -> list[rec.Render]:
         """Every render of the setting in stream order (per view: sharp, then each level),
         as the worker takes them: {view, level, c2w, seed, samples?, sample_offset?,
         sample_sequence?, out, motion?}; `pin`: BuildConfig.cycles_samples; the blur
         renders of `sharp_views` are left out (their levels get the sharp image)."""
     def level_renders(
         self, view: int, level: int, prefix: str, pin: int | None = None
-    ) -> list[dict[str, Any]]:
+    ) -> list[rec.Render]:
         """The renders of one blurry image (view, level), EXRs named `<prefix>_…`."""
     def write_poses(
         self,
@@ -692,8 +714,8 @@ class Plan:
         path: str | PathLike[str],
         *,
         config: BuildConfig,
-        object: dict[str, Any],
-        timings: dict[str, Any],
+        object: rec.ObjectRecord,
+        timings: rec.Timings,
         qa: list[FrameQa],
         pose_check: dict[str, Any] | None = None,
         light_paths: dict[str, Any] | None = None,
@@ -748,7 +770,7 @@ class Splits:
         """Held-out view indices per test setting."""
     def write(self, path: str | PathLike[str]) -> None:
         """Write splits.json atomically."""
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> rec.Splits:
         """The document as a dict."""
 
 def make_splits(
@@ -840,9 +862,9 @@ class BuildStats:
     def counts(self) -> dict[str, int | None]:
         """Objects, settings, views, images, test counts, failures, skipped settings."""
     @property
-    def settings(self) -> list[dict[str, Any]]:
+    def settings(self) -> list[rec.SettingInfo]:
         """The complete settings read (name, uid, θ0, views, level dirs, images …)."""
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> rec.BuildStats:
         """The whole document as a dict (per-level maps keyed "1" … as in stats.json)."""
     def write(self, path: str | PathLike[str], generated: str) -> None:
         """Write stats.json (compact), `generated` and `blurset_version` first, atomically."""
@@ -975,3 +997,7 @@ def write_record(path: str | PathLike[str], record: str, value: Any) -> None:
 
 def record_schemas() -> list[tuple[str, Any]]:
     """(schema file name, JSON Schema) of every record blurset writes."""
+
+def value_schemas() -> list[tuple[str, Any]]:
+    """(type name, JSON Schema) of every value the bindings hand across as a dict (what
+    blurset/_records.pyi is generated from)."""

@@ -90,7 +90,7 @@ def _objects(build: Path, settings: list[Path]) -> tuple[dict[str, dict], list[d
     objects: dict[str, dict] = {}
     metas = []
     for s in settings:
-        meta = outputs.read_record(s / "meta.json")
+        meta = outputs.read_record(s / layout.META)
         metas.append(meta)
         rec = meta.get("object") if isinstance(meta.get("object"), dict) else {}
         objects.setdefault(str(meta.get("uid", s.name)), rec)
@@ -106,7 +106,7 @@ def _noise_outputs(build: Path, given: list[Path] | None) -> list[tuple[Path, di
         for p in given:
             if outputs.kind_of(p) is not outputs.OutputKind.NOISE:
                 raise InputError(f"--noise is not a `blurset noise BUILD` output: {p}")
-            doc = outputs.read_record(p / "noise_dataset.json")
+            doc = outputs.read_record(p / layout.NOISE_DATASET)
             if doc["build"] != name:
                 raise InputError(
                     f"--noise was made from the build {doc['build']!r}, not from {name!r}: {p}"
@@ -122,7 +122,7 @@ def _noise_outputs(build: Path, given: list[Path] | None) -> list[tuple[Path, di
         try:
             if outputs.kind_of(d) is not outputs.OutputKind.NOISE:
                 continue
-            doc = outputs.read_record(d / "noise_dataset.json")
+            doc = outputs.read_record(d / layout.NOISE_DATASET)
         except (OSError, ValueError, InputError):
             continue  # a damaged folder beside the build is not described
         if doc["build"] == name and doc.get("counts") is not None:
@@ -252,8 +252,8 @@ def make_card(
     build = Path(build)
     # A card describes a finished build: a provisional one would publish wrong counts.
     state = outputs.finished_build(build)
-    dataset = outputs.read_record(build / "dataset.json")
-    splits = outputs.read_record(build / "splits.json")
+    dataset = outputs.read_record(build / layout.DATASET)
+    splits = outputs.read_record(build / layout.SPLITS)
     settings = [build / n for n in state.complete]
     if not settings:
         raise InputError(f"no complete setting in build: {build}")
@@ -316,7 +316,7 @@ def make_card(
         "```",
         "",
     ]
-    if any((s / layout.SHARP / "linear").is_dir() for s in settings[:1]):
+    if any((s / layout.SHARP / layout.LINEAR).is_dir() for s in settings[:1]):
         out += [
             "Each level also holds `linear/<view>.exr`: the linear premultiplied RGBA "
             "image before compositing and sRGB.",

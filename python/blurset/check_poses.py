@@ -83,12 +83,12 @@ def _image_dir(scene_dir: Path, factor: int | None) -> tuple[Path, int]:
     if factor is not None:
         if factor < 1:
             raise ConfigError(f"--factor must be >= 1, got {factor}")
-        d = scene_dir / ("images" if factor == 1 else f"images_{factor}")
+        d = scene_dir / layout.images_dir(factor)
         if not d.is_dir():
             raise InputError(f"no image directory for --factor {factor}: {d}")
         return d, factor
-    if (scene_dir / "images").is_dir():
-        return scene_dir / "images", 1
+    if (scene_dir / layout.IMAGES).is_dir():
+        return scene_dir / layout.IMAGES, 1
     found = sorted(
         (int(m.group(1)), p)
         for p in scene_dir.glob("images_*")
@@ -105,7 +105,7 @@ def _image_dir(scene_dir: Path, factor: int | None) -> tuple[Path, int]:
 
 
 def _load_scene(scene_dir: Path, factor: int | None):
-    pb_path = scene_dir / "poses_bounds.npy"
+    pb_path = scene_dir / layout.POSES_BOUNDS
     if not pb_path.is_file():
         raise InputError(f"no poses_bounds.npy in {scene_dir}")
     rows = np.asarray(read_poses_bounds(pb_path), dtype=np.float64)
@@ -143,7 +143,7 @@ def mean_latent_poses(scene_dir: Path, n: int):
     level = scene_dir.name
     if level == layout.SHARP or not layout.is_level_dir(level):
         return None
-    if not (scene_dir.parent / "meta.json").is_file():
+    if not (scene_dir.parent / layout.META).is_file():
         return None
     poses = layout.mean_poses(scene_dir.parent, level)
     if poses is None:
@@ -151,7 +151,7 @@ def mean_latent_poses(scene_dir: Path, n: int):
     if len(poses) != n:
         raise InputError(
             f"{len(poses)} views in meta.json but {n} images in {level}: "
-            f"{scene_dir.parent / 'meta.json'}"
+            f"{scene_dir.parent / layout.META}"
         )
     c2w = np.asarray(poses, dtype=np.float64)
     # OpenGL (right, up, backwards) → OpenCV (right, down, forward).
@@ -901,8 +901,8 @@ def exit_code(report: dict) -> int:
 def is_setting(path: Path) -> bool:
     """A build setting directory holds level directories, not a scene of its own."""
     path = Path(path)
-    return not (path / "poses_bounds.npy").exists() and any(
-        (path / lv / "poses_bounds.npy").exists() for lv in layout.setting_levels(path)
+    return not (path / layout.POSES_BOUNDS).exists() and any(
+        (path / lv / layout.POSES_BOUNDS).exists() for lv in layout.setting_levels(path)
     )
 
 

@@ -80,7 +80,7 @@ class Scene:
 
 
 def _subdir(downsample: int) -> str:
-    return "images" if downsample == 1 else f"images_{downsample}"
+    return layout.images_dir(downsample)
 
 
 def _read(files: list[Path]) -> np.ndarray:
@@ -104,11 +104,11 @@ def _mean_cameras(sdir: Path, level: str, n: int) -> tuple[np.ndarray, np.ndarra
     if poses is None:
         raise InputError(
             "meta.json records no mean latent poses (a build from before them): "
-            f"use pose='written': {sdir / 'meta.json'}"
+            f"use pose='written': {sdir / layout.META}"
         )
     gl = np.asarray(poses, dtype=np.float64)
     if len(gl) != n:
-        raise InputError(f"{len(gl)} views in meta.json but {n} poses: {sdir / 'meta.json'}")
+        raise InputError(f"{len(gl)} views in meta.json but {n} poses: {sdir / layout.META}")
     # OpenGL (right, up, backwards) → OpenCV (right, down, forward).
     return gl * np.array([1.0, -1.0, -1.0, 1.0]), gl
 
@@ -141,7 +141,7 @@ def open_scene(
     if not (sdir / level).is_dir():
         raise InputError(f"setting {setting!r} has no level {level!r}: {sdir / level}")
     sub = _subdir(downsample)
-    n = len(np.asarray(_core.read_poses_bounds(sdir / level / "poses_bounds.npy")))
+    n = len(np.asarray(_core.read_poses_bounds(sdir / level / layout.POSES_BOUNDS)))
     names = [layout.image_name(i, n) for i in range(n)]
     meta = None
     if gain is None:
@@ -152,7 +152,7 @@ def open_scene(
         scene_dir = Path(noise) / setting / level / layout.gain_name(gain)
         if not layout.is_complete(scene_dir):
             raise InputError(f"no complete noisy scene of gain {gain:g}: {scene_dir}")
-        meta = layout.read_json(scene_dir / "noise.json", "noise.json")
+        meta = layout.read_json(scene_dir / layout.NOISE, layout.NOISE)
         # One file per view: frame 0 of a burst.
         by_view = {f["view"]: Path(f["image"]).name for f in meta["files"] if f["frame"] == 0}
         names = [by_view[i] for i in range(n)]
@@ -161,7 +161,7 @@ def open_scene(
     for p in (*image_files, *clean_files):
         if not p.is_file():
             raise InputError(f"image not found (downsample {downsample}?): {p}")
-    rows = np.asarray(_core.read_poses_bounds(scene_dir / "poses_bounds.npy"), np.float64)
+    rows = np.asarray(_core.read_poses_bounds(scene_dir / layout.POSES_BOUNDS), np.float64)
     rows = rows[:: len(rows) // n] if len(rows) != n else rows
     cv, gl = _cameras(rows)
     if pose == "mean" and level != layout.SHARP:
@@ -171,12 +171,12 @@ def open_scene(
     # hwf holds the full size (LLFF); the focal length scales with the size read.
     focal = rows[0, 14] * w / rows[0, 9]
     k = np.array([[focal, 0, w / 2], [0, focal, h / 2], [0, 0, 1]], dtype=np.float64)
-    splits = build / "splits.json"
+    splits = build / layout.SPLITS
     held = None
     if splits.is_file():
-        held = layout.read_json(splits, "splits.json").get("test_views", {}).get(setting)
+        held = layout.read_json(splits, layout.SPLITS).get("test_views", {}).get(setting)
     if held is None:
-        held = layout.read_json(sdir / "meta.json", "meta.json").get("test_views", [])
+        held = layout.read_json(sdir / layout.META, layout.META).get("test_views", [])
     test = np.array(sorted(held), dtype=np.int64)
     train = np.array([i for i in range(n) if i not in set(held)], dtype=np.int64)
     return Scene(

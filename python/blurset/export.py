@@ -122,10 +122,10 @@ def _scene_problem(src: Path, noise: bool) -> str | None:
     check, layout.setting_problem): its images against its pose rows."""
     if not noise:
         return None
-    images = src / "images"
+    images = src / layout.IMAGES
     n = len([p for p in images.iterdir() if p.suffix == ".png"]) if images.is_dir() else 0
     try:
-        rows = len(_core.read_poses_bounds(src / "poses_bounds.npy"))
+        rows = len(_core.read_poses_bounds(src / layout.POSES_BOUNDS))
     except (OSError, ValueError) as e:
         return f"poses_bounds.npy does not read ({e.__class__.__name__})"
     return None if n == rows else f"{n} images for {rows} pose rows"
@@ -136,8 +136,8 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
     build or the noise output, and the lists), and each scene's source folder."""
     build: Path = args.build.resolve()
     state = outputs.finished_build(build)
-    dataset = outputs.read_record(build / "dataset.json")
-    splits = outputs.read_record(build / "splits.json")
+    dataset = outputs.read_record(build / layout.DATASET)
+    splits = outputs.read_record(build / layout.SPLITS)
     config = dataset["config"]
     noise = args.noise.resolve() if args.noise else None
     if args.gains and noise is None:
@@ -234,7 +234,7 @@ def _geonerf_scenes(
     """GeoNeRF scenes of one level: a train setting's train views (its held-out views too
     when they are degraded), or per held-out view of a test setting, that view and its 7
     nearest train views by camera centre (GeoNeRF's own `dist`)."""
-    rows = np.asarray(_core.read_poses_bounds(src / "poses_bounds.npy"), dtype=np.float64)
+    rows = np.asarray(_core.read_poses_bounds(src / layout.POSES_BOUNDS), dtype=np.float64)
     n = len(rows)
     train = [v for v in range(n) if v not in held_out]
     if not is_test:
@@ -269,7 +269,7 @@ def _write_geonerf_scene(
     """A GeoNeRF scene: its views' images_4/ files (renamed 000.png … in its order) and
     their poses_bounds.npy rows; a test scene's target image is the sharp level's."""
     vs = doc["views"][scene]
-    rows = np.asarray(_core.read_poses_bounds(src / "poses_bounds.npy"), dtype=np.float64)
+    rows = np.asarray(_core.read_poses_bounds(src / layout.POSES_BOUNDS), dtype=np.float64)
     images = sorted(p for p in (src / GEONERF_DIR).iterdir() if p.suffix == ".png")
     if len(images) != len(rows):
         raise InputError(f"{len(images)} images for {len(rows)} pose rows: {src / GEONERF_DIR}")
@@ -281,17 +281,17 @@ def _write_geonerf_scene(
         image = sharp / layout.image_name(v, len(rows)) if test_target else images[v]
         name = f"{k:03d}.png"
         _link(image, d / GEONERF_DIR / name, final / GEONERF_DIR / name, doc["copy"])
-    _core.write_poses_bounds(d / "poses_bounds.npy", rows[vs])
+    _core.write_poses_bounds(d / layout.POSES_BOUNDS, rows[vs])
 
 
 def _write_scene(d: Path, final: Path, src: Path, doc: dict) -> None:
     d.mkdir(parents=True)
-    parts = ["images", *(f"images_{f}" for f in doc["factors"])]
-    parts += ["poses_bounds.npy", "transforms.json"]
+    parts = [layout.IMAGES, *(layout.images_dir(f) for f in doc["factors"])]
+    parts += [layout.POSES_BOUNDS, layout.TRANSFORMS]
     for part in parts:
         s = src / part
         if not s.exists():
-            if part == "transforms.json" and doc["for"] == "llff":
+            if part == layout.TRANSFORMS and doc["for"] == "llff":
                 continue  # a build from before per-level transforms.json
             raise InputError(f"missing {part} in the scene to export: {src}")
         _link(s, d / part, final / part, doc["copy"])
@@ -405,7 +405,7 @@ def _replace(
 
 def _say(doc: dict, out: Path, what: str) -> None:
     root = out / doc["scenes_dir"] if doc["scenes_dir"] != "." else out
-    factors = ", ".join(f"images_{f}/" for f in doc["factors"]) or "images/ only"
+    factors = ", ".join(f"{layout.images_dir(f)}/" for f in doc["factors"]) or "images/ only"
     # nerfstudio reads the split from each scene's transforms.json; LLFF loaders need llffhold.
     hint = {
         "nerfstudio": "splits in each transforms.json",

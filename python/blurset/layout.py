@@ -20,6 +20,32 @@ from blurset import _core
 MARKER: str = _core.MARKER
 PARTIAL_SUFFIX: str = _core.PARTIAL_SUFFIX
 SHARP: str = _core.SHARP
+# The files and folders of the layout (blurset-core's ground::names::files): Python
+# spells them with these names only (tests/test_layout_names.py holds it to that).
+META: str = _core.META
+DATASET: str = _core.DATASET
+SPLITS: str = _core.SPLITS
+FAILURES: str = _core.FAILURES
+POSES_BOUNDS: str = _core.POSES_BOUNDS
+TRANSFORMS: str = _core.TRANSFORMS
+NOISE: str = _core.NOISE
+NOISE_DATASET: str = _core.NOISE_DATASET
+NOISE_SCENE: str = _core.NOISE_SCENE
+EXPORT: str = _core.EXPORT
+STATS: str = _core.STATS
+IMAGES: str = _core.IMAGES
+LINEAR: str = _core.LINEAR
+MANIFEST: str = _core.MANIFEST
+
+
+def images_dir(factor: int) -> str:
+    """The image folder at downsampling factor `factor`: `images` at 1, else `images_<f>`."""
+    return _core.images_dir(factor)
+
+
+def linear_dir(factor: int) -> str:
+    """The linear EXR folder at downsampling factor `factor`: `linear` or `linear_<f>`."""
+    return _core.linear_dir(factor)
 
 
 def setting_name(uid: str, theta0_deg: float) -> str:

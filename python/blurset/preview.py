@@ -200,7 +200,7 @@ class Figure:
 
 
 def _read_meta(setting: Path) -> dict:
-    p = setting / "meta.json"
+    p = setting / layout.META
     if not p.is_file():
         raise InputError(f"not a setting or a build (no meta.json or dataset.json): {setting}")
     return outputs.read_record(p)
@@ -235,7 +235,7 @@ def _noise_columns(
     cols = []
     for lvl in levels:
         for d in (noise_dir / setting / lvl / gname, noise_dir / lvl / gname):
-            if (d / "noise.json").is_file():
+            if (d / layout.NOISE).is_file():
                 cols.append((f"{lvl} · gain {g:g}", d))
                 break
     if not cols:
@@ -244,7 +244,7 @@ def _noise_columns(
 
 
 def _noisy_files(gain_dir: Path) -> dict[int, Path]:
-    meta = outputs.read_record(gain_dir / "noise.json")
+    meta = outputs.read_record(gain_dir / layout.NOISE)
     return {f["view"]: gain_dir / f["image"] for f in meta["files"] if f.get("frame", 0) == 0}
 
 
@@ -262,7 +262,7 @@ def setting_figure(
     meta = _read_meta(setting)
     n = len(meta.get("views", []))
     levels = list(meta["levels"])
-    gone = [lvl for lvl in levels if not (setting / lvl / "images").is_dir()]
+    gone = [lvl for lvl in levels if not (setting / lvl / layout.IMAGES).is_dir()]
     if gone and not setting.name.endswith(layout.PARTIAL_SUFFIX):
         raise InputError(
             f"level {gone[0]} has no images/ folder (a damaged setting: `blurset verify` "
@@ -278,7 +278,7 @@ def setting_figure(
     test = set(meta.get("test_views", []))
     columns: list[tuple[str, dict[int, Path]]] = []
     for lvl in levels:
-        files = {v: setting / lvl / "images" / _core.image_name(v, n) for v in views}
+        files = {v: setting / lvl / layout.IMAGES / _core.image_name(v, n) for v in views}
         columns.append((lvl, files))
     if noise is not None or gain is not None:
         if noise is None or gain is None:
@@ -376,7 +376,7 @@ def contact_sheet(
         meta = _read_meta(s)
         n = len(meta["views"])
         view = (meta.get("test_views") or [0])[0]
-        path = s / "sharp" / "images" / _core.image_name(view, n)
+        path = s / "sharp" / layout.IMAGES / _core.image_name(view, n)
         if not path.is_file():
             raise InputError(f"sharp image not found: {path}")
         bg = tuple(meta.get("render", {}).get("background", [1.0, 1.0, 1.0]))
@@ -420,7 +420,7 @@ def contact_sheet(
 def _failed_objects(build: Path) -> int:
     """Objects failing now, as the build counted them in dataset.json (failures.jsonl keeps
     every attempt, also of objects a later run built)."""
-    counts = outputs.read_record(build / "dataset.json").get("counts") or {}
+    counts = outputs.read_record(build / layout.DATASET).get("counts") or {}
     return int(counts.get("objects_failed", 0))
 
 

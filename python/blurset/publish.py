@@ -21,7 +21,7 @@ from typing import Any
 
 from blurset import _core
 
-MANIFEST = "MANIFEST.sha256"
+MANIFEST = _core.MANIFEST
 # Where builds of older blurset versions kept their absolute paths, under OUT.
 LEGACY_LOCAL_DIR = ".local"
 LOCAL_PATHS = "paths.jsonl"

@@ -21,11 +21,14 @@ import time
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from blurset import __version__, _core, layout, outputs, publish
+
+if TYPE_CHECKING:
+    pass
 
 BAR = "#3b6ea8"  # histogram bars (tests look for this colour in the PNGs)
 MEDIAN = "#c8553d"
@@ -65,7 +68,7 @@ COUNTS = [
     ("objects", "distinct object uids among complete settings"),
     ("settings", "complete settings (`.complete` marker, not `*.partial`)"),
     ("views", "views of complete settings"),
-    ("images", "image files: views × level directories (sharp + each blur level)"),
+    (layout.IMAGES, "image files: views × level directories (sharp + each blur level)"),
     (
         "sharp_copy_views",
         "held-out views whose blur levels hold the sharp image (Deblur-NeRF's convention): "
@@ -112,7 +115,7 @@ def build_stats(build: Path) -> _core.BuildStats:
 
 def load_stats(build: Path) -> dict[str, Any]:
     """The stats document of a build as a dict."""
-    return build_stats(build).to_dict()
+    return dict(build_stats(build).to_dict())
 
 
 def _write_text(path: Path, text: str | Iterable[str]) -> None:
@@ -326,7 +329,7 @@ def write_csvs(stats: dict, out_dir: Path) -> list[Path]:
                 "uid",
                 "theta0_deg",
                 "views",
-                "images",
+                layout.IMAGES,
                 "bbox_dx",
                 "bbox_dy",
                 "bbox_dz",
@@ -335,7 +338,7 @@ def write_csvs(stats: dict, out_dir: Path) -> list[Path]:
             [
                 names,
                 uids,
-                *([s[k] for s in settings] for k in ("theta0_deg", "views", "images")),
+                *([s[k] for s in settings] for k in ("theta0_deg", "views", layout.IMAGES)),
                 *([s["bbox_dims"][j] for s in settings] for j in range(3)),
                 stats["scene_dimension"],
             ],
@@ -474,9 +477,9 @@ def write_stats(
     report = out_dir / "report.md"
     _write_text(report, report_markdown(stats, figures) + "\n")
     if document is None:
-        _write_text(out_dir / "stats.json", json.dumps(stats, allow_nan=False) + "\n")
+        _write_text(out_dir / layout.STATS, json.dumps(stats, allow_nan=False) + "\n")
     else:
-        document.write(out_dir / "stats.json", head["generated"])
+        document.write(out_dir / layout.STATS, head["generated"])
     return report
 
 
@@ -490,8 +493,8 @@ def run(args: argparse.Namespace) -> int:
     document = build_stats(build)  # names what is not a build, before anything is written
     # Stats may read a running build: they say what they describe.
     provisional = outputs.build_state(build).provisional
-    stats = document.to_dict()
-    stats["provisional"] = provisional
+    # What the figures and the summary read: the document and whether it is provisional.
+    stats: dict[str, Any] = {**document.to_dict(), "provisional": provisional}
     t_read = time.perf_counter() - t0
     outputs.claim(out_dir, STATS, "--out")  # refused before the lock creates anything
     with outputs.lock(out_dir, STATS):

@@ -333,7 +333,7 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     work = out / ".work"
     shutil.rmtree(work, ignore_errors=True)
-    (out / "images").mkdir(exist_ok=True)
+    (out / layout.IMAGES).mkdir(exist_ok=True)
     say = (lambda *_: None) if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
     cands = candidates(pre)
     rows: list[dict[str, Any]] = []
@@ -388,7 +388,7 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
         ref, t_ref = _render_image(
             w, ref_frames, ref_lp, pre.resolution, ref_cfg.fov_deg, salt=REFERENCE_SEED_SALT
         )
-        _save_png(ref, out / "images" / "reference.png", pre.resolution)
+        _save_png(ref, out / layout.IMAGES / "reference.png", pre.resolution)
         rows.append(
             {
                 "role": "reference",
@@ -469,7 +469,7 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
                     detail_of(sharp, sharp_ref),
                 )
             name = c.label.replace(" ", "_").replace("=", "")
-            _save_png(mean, out / "images" / f"{name}.png", pre.resolution)
+            _save_png(mean, out / layout.IMAGES / f"{name}.png", pre.resolution)
             row = {
                 "role": "candidate",
                 "method": c.method,

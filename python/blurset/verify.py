@@ -31,7 +31,7 @@ from typing import Any
 from blurset import _core, layout, outputs, publish
 from blurset.exceptions import InputError, reason_of
 
-NOISE_DATASET = "noise_dataset.json"
+NOISE_DATASET = layout.NOISE_DATASET
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -72,7 +72,7 @@ def _read_json(root: Path, rel: str, report: Report) -> Any:
         report.bad(rel, "missing")
         return None
     try:
-        if p.name == "transforms.json":
+        if p.name == layout.TRANSFORMS:
             return json.loads(p.read_text())
         return outputs.read_record(p)
     except (OSError, ValueError, InputError) as e:
@@ -127,7 +127,7 @@ def setting_problems(
         if not what.startswith("holds "):
             rep.bad(name / rel, what)
     flagged = {rel for rel, _ in cheap}
-    if "meta.json" in flagged:
+    if layout.META in flagged:
         return rep.problems, []
     meta = _read_json(root, f"{name}/meta.json", rep)
     try:
@@ -149,23 +149,23 @@ def setting_problems(
         if level in flagged:  # the level folder is missing
             continue
         # images/ at full size, images_<f>/ at 1/f (the core checked f divides the size).
-        subs = [("images", images, w, h)] + [
-            (f"images_{f}", images, w // int(f), h // int(f)) for f in factors
+        subs = [(layout.IMAGES, images, w, h)] + [
+            (layout.images_dir(f), images, w // int(f), h // int(f)) for f in factors
         ]
         if render.get("linear"):
-            subs.append(("linear", exrs, w, h))
+            subs.append((layout.LINEAR, exrs, w, h))
         for sub, names, sw, sh in subs:
             for p in _expect_files(root, d / sub, names, rep, sub):
                 if f"{level}/{sub}/{p.name}" not in flagged:
                     to_decode.append((p, sw, sh))
         if f"{level}/poses_bounds.npy" in flagged:
             continue
-        rows = _rows(d / "poses_bounds.npy")
+        rows = _rows(d / layout.POSES_BOUNDS)
         if isinstance(rows, str):
-            rep.bad((d / "poses_bounds.npy").relative_to(root), rows)
+            rep.bad((d / layout.POSES_BOUNDS).relative_to(root), rows)
         elif rows != n:
-            rep.bad((d / "poses_bounds.npy").relative_to(root), f"{rows} rows, expected {n}")
-    if "transforms.json" in flagged:
+            rep.bad((d / layout.POSES_BOUNDS).relative_to(root), f"{rows} rows, expected {n}")
+    if layout.TRANSFORMS in flagged:
         return _one_per_file(rep.problems), to_decode
     tf = _read_json(root, f"{name}/transforms.json", rep)
     if tf is not None:
@@ -227,12 +227,12 @@ def _header(p: Path, w: int, h: int) -> str | None:
 
 def verify_build(root: Path, *, decode: bool = True) -> Report:
     rep = Report(root)
-    dataset = _read_json(root, "dataset.json", rep)
+    dataset = _read_json(root, layout.DATASET, rep)
     dataset = dataset if isinstance(dataset, dict) else {}
     complete = layout.complete_settings(root)
     for d in sorted(root.iterdir()):
         if d.is_dir() and not d.name.startswith(".") and d not in complete:
-            if (d / "meta.json").exists() or d.name.endswith(layout.PARTIAL_SUFFIX):
+            if (d / layout.META).exists() or d.name.endswith(layout.PARTIAL_SUFFIX):
                 rep.note(d.name, "incomplete setting (a rerun of the build finishes it)")
     n_images = 0
     uids: set[str] = set()
@@ -245,7 +245,7 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
         rep.problems.extend(problems)
         todo.extend(images)
         try:
-            meta = outputs.read_record(s / "meta.json")
+            meta = outputs.read_record(s / layout.META)
         except (OSError, InputError):
             continue  # named by setting_problems
         n_images += len(meta["views"]) * len(meta["levels"])
@@ -263,7 +263,7 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
     rep.settings = len(complete)
     _decode(todo, root, rep, decode)
     if dataset.get("provisional"):
-        rep.note("dataset.json", "provisional: the build has not finished (counts not compared)")
+        rep.note(layout.DATASET, "provisional: the build has not finished (counts not compared)")
     elif dataset:
         counts = dataset.get("counts")
         if not isinstance(counts, dict):
@@ -271,7 +271,7 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
         on_disk = {"settings": len(complete), "images": n_images, "objects": len(uids)}
         for key, have in on_disk.items():
             if counts.get(key) != have:
-                rep.bad("dataset.json", f"counts.{key} is {counts.get(key)}, {have} on disk")
+                rep.bad(layout.DATASET, f"counts.{key} is {counts.get(key)}, {have} on disk")
         listed = dataset.get("settings")
         names = [s.name for s in complete]
         if isinstance(listed, list) and sorted(map(str, listed)) != names:
@@ -285,15 +285,15 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
                 )
                 if x
             )
-            rep.bad("dataset.json", f"settings: {what}")
-    splits = _read_json(root, "splits.json", rep)
+            rep.bad(layout.DATASET, f"settings: {what}")
+    splits = _read_json(root, layout.SPLITS, rep)
     if isinstance(splits, dict):
         settings_on_disk = {s.name for s in complete}
         for part in ("train", "test"):
             missing = [s for s in splits.get(part) or [] if s not in settings_on_disk]
             if missing:
                 rep.bad(
-                    "splits.json", f"{part} names settings not on disk: {', '.join(missing[:5])}"
+                    layout.SPLITS, f"{part} names settings not on disk: {', '.join(missing[:5])}"
                 )
     finished = not outputs.build_state(root).provisional
     _check_manifest(root, rep, finished=finished)
@@ -331,18 +331,21 @@ def verify_noise(root: Path, *, decode: bool = True) -> Report:
             continue
         settings.add(rel.parts[0])
         n_images += len(files)
-        subs = [("images", images, 1), ("linear", linears, 1)]
+        subs = [(layout.IMAGES, images, 1), (layout.LINEAR, linears, 1)]
         for f in meta.get("downsample") or []:
-            subs += [(f"images_{f}", images, int(f)), (f"linear_{f}", linears, int(f))]
+            subs += [
+                (layout.images_dir(f), images, int(f)),
+                (layout.linear_dir(f), linears, int(f)),
+            ]
         for sub, names, f in subs:
             base = [n.split("/", 1)[-1] for n in names]
             for p in _expect_files(root, u / sub, base, rep, sub):
                 todo.append((p, w // f, h // f))
-        rows = _rows(u / "poses_bounds.npy")
+        rows = _rows(u / layout.POSES_BOUNDS)
         if isinstance(rows, str):
-            rep.bad(rel / "poses_bounds.npy", rows)
+            rep.bad(rel / layout.POSES_BOUNDS, rows)
         elif rows != len(files):
-            rep.bad(rel / "poses_bounds.npy", f"{rows} rows, expected {len(files)}")
+            rep.bad(rel / layout.POSES_BOUNDS, f"{rows} rows, expected {len(files)}")
     rep.settings = len(complete)
     _decode(todo, root, rep, decode)
     counts = doc.get("counts") if isinstance(doc.get("counts"), dict) else None

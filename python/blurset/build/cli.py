@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from blurset import layout
 from blurset.config import BUILD, BuildConfig, load_toml, make_config, out_dir
 
 
@@ -50,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
         where = f.get("setting") or f["uid"]
         print(f"  {where}: {f['stage']}: {f['reason']}", file=sys.stderr)
     if len(summary["failures"]) > 5:
-        print(f"  … see {out_dir(cfg) / 'failures.jsonl'}", file=sys.stderr)
+        print(f"  … see {out_dir(cfg) / layout.FAILURES}", file=sys.stderr)
     if summary["objects"] and summary["settings_complete"] == 0:
         return 1  # nothing built (every object failed, or --licenses left none)
     if rate > cfg.max_failure_rate:

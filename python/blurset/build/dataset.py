@@ -13,15 +13,19 @@ import shutil
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from blurset import __version__, _core, layout, outputs, publish
 from blurset.config import BUILD, BuildConfig, flag
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec
 
+if TYPE_CHECKING:
+    from blurset import _records
+
 DATASET_NAME = "blurset Objaverse-Blur"
 # The files every process building into OUT shares (written under build_lock).
-SHARED_FILES = ("failures.jsonl", "splits.json", "dataset.json", "MANIFEST.sha256")
+SHARED_FILES = (layout.FAILURES, layout.SPLITS, layout.DATASET, layout.MANIFEST)
 
 
 @contextlib.contextmanager
@@ -64,7 +68,7 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
     """Refuse (naming the options) a rerun into OUT whose output-shaping options differ
     from those OUT was made with, unless --allow-mixed; the first run records them in a
     provisional dataset.json (call under build_lock)."""
-    path = out / "dataset.json"
+    path = out / layout.DATASET
     now = cfg.record()
     if not path.is_file():
         outputs.write_record(path, {"name": DATASET_NAME, "config": now, "provisional": True})
@@ -90,7 +94,7 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
 
 def append_failures(out: Path, records: list[dict]) -> None:
     """Append failure records to failures.jsonl (call under build_lock)."""
-    with open(out / "failures.jsonl", "a+b") as f:
+    with open(out / layout.FAILURES, "a+b") as f:
         # A record torn by a kill mid-append gets its line ended first, so the next
         # record stays whole (readers skip the torn one).
         f.seek(0, os.SEEK_END)
@@ -110,12 +114,12 @@ def _complete_settings(out: Path) -> list[tuple[str, dict]]:
     found = []
     for d in layout.complete_settings(out):
         try:
-            meta = json.loads((d / "meta.json").read_text())
+            meta = json.loads((d / layout.META).read_text())
             if not isinstance(meta, dict) or not isinstance(meta.get("views"), list):
                 raise ValueError("not a setting's meta.json")
         except (OSError, ValueError) as e:
             print(
-                f"skipped {d.name}: unreadable meta.json ({e}): {d / 'meta.json'}", file=sys.stderr
+                f"skipped {d.name}: unreadable meta.json ({e}): {d / layout.META}", file=sys.stderr
             )
             continue
         found.append((d.name, meta))
@@ -127,7 +131,7 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     build_lock). failures.jsonl keeps the latest record per object (or per setting, for
     QA failures) whose work is still not complete."""
     complete = _complete_settings(out)
-    fpath = out / "failures.jsonl"
+    fpath = out / layout.FAILURES
     kept, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
     layout.write_text_atomic(fpath, "".join(json.dumps(r) + "\n" for r in kept))
     entries = [(n, m["uid"], len(m["views"])) for n, m in complete]
@@ -140,7 +144,7 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
         test_settings=cfg.test_settings,
         sharp_test_views=not cfg.blurry_test_views,
     )
-    splits.write(out / "splits.json")
+    splits.write(out / layout.SPLITS)
     checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
     # What the workers rendered on (backend, device names, Cycles kernel), once each.
     used: list[dict] = []
@@ -148,7 +152,7 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
         d = (m.get("render") or {}).get("device")
         if d and d not in used:
             used.append(d)
-    dataset = {
+    dataset: _records.DatasetDoc = {
         "name": DATASET_NAME,
         "blurset_version": __version__,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
@@ -175,7 +179,7 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     }
     if checks:
         dataset["pose_checks"] = checks
-    _core.write_dataset_json(out / "dataset.json", dataset)
+    _core.write_dataset_json(out / layout.DATASET, dataset)
     # Last: the checksums of everything above (another shard's finalize rewrites it).
     publish.write_manifest(out)
     return {"settings_complete": len(complete), "failures": kept}

@@ -13,7 +13,7 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -22,6 +22,9 @@ from blurset.config import BuildConfig, out_dir
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
 from blurset.progress import Progress
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 
 @dataclass
@@ -50,22 +53,23 @@ def frames_per_setting(cfg: BuildConfig) -> int:
 
 def _copy_sharp(setting: Path, views: list[int], n_views: int, cfg: BuildConfig) -> None:
     """The sharp files of `views` into every blur level (byte-identical copies)."""
-    subdirs = ["images", *(f"images_{f}" for f in cfg.downsample)]
+    subdirs = [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]
     for view in views:
         name = layout.image_name(view, n_views)
         files = [(d, name) for d in subdirs]
         if cfg.write_linear:
-            files.append(("linear", name.replace(".png", ".exr")))
+            files.append((layout.LINEAR, name.replace(".png", ".exr")))
         for level in cfg.level_dirs[1:]:
             for d, f in files:
                 (setting / level / d).mkdir(exist_ok=True)  # linear/: no view rendered
                 shutil.copyfile(setting / layout.SHARP / d / f, setting / level / d / f)
 
 
-def _object_record(obj: ObjectSpec, info: dict) -> dict[str, Any]:
-    """meta.json's `object`: the file and what the worker reported about it."""
+def _object_record(obj: ObjectSpec, info: dict) -> _records.ObjectRecord:
+    """meta.json's `object`: the file and what the worker reported about it (free JSON
+    from the worker: the core checks every field when it takes the record)."""
     keys = ("bbox_dims", "scale", "center", "n_vertices", "n_triangles", "unlit_fixed")
-    return {
+    record: dict[str, Any] = {
         # path (relative to its root), sha256, title, author, licence, source_url: where
         # the object came from, never the builder's absolute path (issue 19).
         **info.get("provenance", {}),
@@ -73,6 +77,7 @@ def _object_record(obj: ObjectSpec, info: dict) -> dict[str, Any]:
         "blender_version": info.get("blender_version"),
         "warnings": info.get("warnings", []),
     }
+    return cast("_records.ObjectRecord", record)
 
 
 def render_setting(
@@ -111,7 +116,7 @@ def render_setting(
     for k in keys:
         need[k] = need.get(k, 0) + 1
     for d in cfg.level_dirs:
-        for sub in ["images", *(f"images_{f}" for f in cfg.downsample)]:
+        for sub in [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]:
             (partial / d / sub).mkdir(parents=True)
     acc: dict[tuple[int, str], Any] = {}
     res = cfg.resolution
@@ -138,11 +143,13 @@ def render_setting(
             view, level = key
             name = layout.image_name(view, n_views)
             bg = cfg.background
-            a.write_png(partial / level / "images" / name, background=bg)
+            a.write_png(partial / level / layout.IMAGES / name, background=bg)
             for f in cfg.downsample:
-                a.write_png(partial / level / f"images_{f}" / name, background=bg, downsample=f)
+                a.write_png(
+                    partial / level / layout.images_dir(f) / name, background=bg, downsample=f
+                )
             if cfg.write_linear:
-                a.write_exr(partial / level / "linear" / name.replace(".png", ".exr"))
+                a.write_exr(partial / level / layout.LINEAR / name.replace(".png", ".exr"))
             if level == layout.SHARP:
                 qa[view] = _core.frame_qa(a.mean())
             del acc[key]
@@ -186,7 +193,7 @@ def render_setting(
         test_views=_core.test_views(n_views, cfg.view_stride),
         sharp_test_views=not cfg.blurry_test_views,
     )
-    timings = {
+    timings: _records.Timings = {
         "plan_s": round(t_plan, 3),
         "sharp_s": round(t_sharp, 3),
         "blur_s": round(t_blur, 3),
@@ -197,7 +204,7 @@ def render_setting(
 
     def write_meta(pose_check: dict[str, Any] | None = None) -> None:
         plan.write_meta(
-            partial / "meta.json",
+            partial / layout.META,
             config=cfg,
             object=_object_record(job.obj, info),
             timings=timings,

@@ -201,7 +201,7 @@ class ObjectUnit:
             return False
         problem = layout.setting_problem(setting)
         if problem is None:
-            made_from = json.loads((setting / "meta.json").read_text()).get("object") or {}
+            made_from = json.loads((setting / layout.META).read_text()).get("object") or {}
             problem = self._other_file(made_from)
             if problem is None:
                 return True

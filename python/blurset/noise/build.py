@@ -32,6 +32,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,6 +52,9 @@ from blurset.noise.params import (
 )
 from blurset.noise.scene import list_images, output_names
 from blurset.stop import interruptible, remove_tree
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 NOISE = outputs.OutputKind.NOISE
 DATASET_FILE = NOISE.record
@@ -121,15 +125,15 @@ def _plan_unit(
     downsample: list[int],
 ) -> Unit:
     src = setting_dir / level
-    meta = outputs.read_record(setting_dir / "meta.json")
+    meta = outputs.read_record(setting_dir / layout.META)
     bg = (meta.get("render") or {}).get("background") or [1.0, 1.0, 1.0]
-    image_dir = src / "images"
+    image_dir = src / layout.IMAGES
     if not image_dir.is_dir():
         raise InputError(f"level {level!r} has no images/ directory: {image_dir}")
     pngs = list_images(image_dir)
     if not pngs:
         raise InputError(f"no .png/.jpg images in {image_dir}")
-    poses = src / "poses_bounds.npy"
+    poses = src / layout.POSES_BOUNDS
     if not poses.is_file():
         raise InputError(f"poses_bounds.npy not found: {poses}")
     rows = np.asarray(_core.read_poses_bounds(poses), dtype=np.float64)
@@ -144,7 +148,7 @@ def _plan_unit(
         if (w, h) != (w0, h0):
             raise InputError(f"image size {w}x{h} differs from {w0}x{h0} of {pngs[0].name}: {p}")
     if kind == "linear":
-        sources = [src / "linear" / f"{p.stem}.exr" for p in pngs]
+        sources = [src / layout.LINEAR / f"{p.stem}.exr" for p in pngs]
         missing = next((s for s in sources if not s.is_file()), None)
         if missing is not None:
             raise InputError(
@@ -174,8 +178,8 @@ def _plan_unit(
 
 
 def _has_linear(level_dir: Path) -> bool:
-    lin = level_dir / "linear"
-    images = level_dir / "images"
+    lin = level_dir / layout.LINEAR
+    images = level_dir / layout.IMAGES
     if not (lin.is_dir() and images.is_dir()):
         return False
     return all((lin / f"{p.stem}.exr").is_file() for p in list_images(images))
@@ -225,7 +229,9 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
         shutil.rmtree(stale, ignore_errors=True)
 
 
-def _noise_json(unit: Unit, g: float, sr: float, ss: float, wb, params: dict, args, build) -> dict:
+def _noise_json(
+    unit: Unit, g: float, sr: float, ss: float, wb, params: dict, args, build
+) -> _records.NoiseDoc:
     subdir = "linear" if params["source"] == "linear" else "images"
     return noise_json(
         gain=g,
@@ -296,8 +302,8 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
         # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the
         # build's rows already hold the written resolution and focal length.
         rows = np.repeat(unit.rows, args.frames, axis=0)
-        small = {f: unit.src / f"images_{f}" for f in params["downsample"]}
-        setting_transforms = json.loads((unit.src.parent / "transforms.json").read_text())
+        small = {f: unit.src / layout.images_dir(f) for f in params["downsample"]}
+        setting_transforms = json.loads((unit.src.parent / layout.TRANSFORMS).read_text())
         files = [
             (v, f"images/{unit.names[v * args.frames + k]}.png")
             for v in range(len(unit.pngs))
@@ -306,9 +312,9 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
         for g in unit.pending:
             part = partials[g]
             copy_clean(part, unit.pngs, unit.names, args.frames, unit.clean_views, small)
-            _core.write_poses_bounds(part / "poses_bounds.npy", rows)
+            _core.write_poses_bounds(part / layout.POSES_BOUNDS, rows)
             _core.write_scene_transforms(
-                part / "transforms.json",
+                part / layout.TRANSFORMS,
                 setting_transforms,
                 files,
                 test_views=unit.test_views,
@@ -320,7 +326,7 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             )
             sr, ss = gains_sigmas[g]
             _core.write_noise_json(
-                part / "noise.json", _noise_json(unit, g, sr, ss, wb, params, args, build)
+                part / layout.NOISE, _noise_json(unit, g, sr, ss, wb, params, args, build)
             )
             layout.publish(part, unit.dst / gain_name(g))
     except BaseException:
@@ -335,7 +341,7 @@ def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
     gains_on_disk: dict[str, dict] = {}
     n_units = n_images = 0
     for unit in sorted(u for u in out.glob("*/*/gain_*") if layout.is_complete(u)):
-        meta = outputs.read_record(unit / "noise.json")
+        meta = outputs.read_record(unit / layout.NOISE)
         setting, level = unit.parent.parent.name, unit.parent.name
         seeds.setdefault(setting, {})[level] = meta["seed"]
         gains_on_disk[unit.name] = {
@@ -385,7 +391,7 @@ def run(args) -> int:
     gains = parse_gains(args.gains, args.any_gain)
     # A build still being written (or stopped) would be noised half, with stale splits.
     complete = outputs.finished_build(build, "SCENE").complete
-    dataset = outputs.read_record(build / "dataset.json")
+    dataset = outputs.read_record(build / layout.DATASET)
     if args.downsample is not None:
         downsample = check_downsample(parse_downsample(args.downsample))
     else:  # the build's own images_<f>/ factors (none in a build made before them)
@@ -419,7 +425,7 @@ def run(args) -> int:
         # Pending gains once more: --overwrite may just have removed units.
         for u in units:
             u.pending = [g for g in gains if not layout.is_complete(u.dst / gain_name(g))]
-        layout.write_text_atomic(out / "splits.json", (build / "splits.json").read_text())
+        layout.write_text_atomic(out / layout.SPLITS, (build / layout.SPLITS).read_text())
         written = 0
         todo = [u for u in units if u.pending]
         skipped = sum(len(gains) - len(u.pending) for u in units)

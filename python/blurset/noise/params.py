@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from blurset import __version__, _core, layout
 from blurset.exceptions import ConfigError, InputError, reason_of
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 # The gain levels of the LLFF-N benchmark (NAN, Pearl et al. 2022).
 LLFF_N_GAINS = (1.0, 2.0, 4.0, 8.0, 16.0, 20.0)
@@ -154,10 +157,10 @@ def copy_clean(
         for k in range(frames):
             name = f"{names[i * frames + k]}.png"
             if p.suffix.lower() == ".png":
-                shutil.copyfile(p, out / "images" / name)
+                shutil.copyfile(p, out / layout.IMAGES / name)
             for f, d in small_dirs.items():
                 if (d / p.name).is_file():
-                    shutil.copyfile(d / p.name, out / f"images_{f}" / name)
+                    shutil.copyfile(d / p.name, out / layout.images_dir(f) / name)
 
 
 def noise_json(
@@ -176,10 +179,11 @@ def noise_json(
     rng: str,
     files: list[dict[str, Any]],
     **extra: Any,
-) -> dict[str, Any]:
-    """The `noise.json` of one noisy scene (one gain)."""
+) -> _records.NoiseDoc:
+    """The `noise.json` of one noisy scene (one gain). The core checks every field when
+    it writes it (write_noise_json: unknown or missing fields are errors)."""
     wb = white_balance
-    return {
+    doc: dict[str, Any] = {
         "gain": int(gain) if float(gain).is_integer() else gain,
         "seed": seed,
         "sigma_read": sigmas[0],
@@ -198,3 +202,4 @@ def noise_json(
         "blurset_version": __version__,
         "files": files,
     }
+    return cast("_records.NoiseDoc", doc)

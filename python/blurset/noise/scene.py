@@ -87,10 +87,10 @@ def run(args) -> int:
     check_options(args)
     gains = parse_gains(args.gains, args.any_gain)
 
-    image_dir = scene / (f"images_{args.factor}" if args.factor else "images")
+    image_dir = scene / (layout.images_dir(args.factor) if args.factor else layout.IMAGES)
     if not image_dir.is_dir():
         raise InputError(f"image directory not found: {image_dir}")
-    poses_path = scene / "poses_bounds.npy"
+    poses_path = scene / layout.POSES_BOUNDS
     if not poses_path.is_file():
         raise InputError(f"poses_bounds.npy not found: {poses_path}")
     rows = _core.read_poses_bounds(poses_path)
@@ -157,7 +157,7 @@ def run(args) -> int:
                 clean_views=clean,
             )
             # The scene's own images_<f>/ are its clean images of that size (not with --factor).
-            small = {} if args.factor else {f: scene / f"images_{f}" for f in downsample}
+            small = {} if args.factor else {f: scene / layout.images_dir(f) for f in downsample}
             for gdir, *_ in variants:
                 copy_clean(gdir, sources, names, args.frames, clean, small)
             # Every frame of a view shares its pose: the rows repeat, so a burst stays a
@@ -168,7 +168,7 @@ def run(args) -> int:
             out_rows[:, 14] = out_rows[:, 14] / factor
             files = files_record([p.name for p in sources], names, args.frames, set(clean))
             for g, (gdir, sr, ss, _key) in zip(gains, variants, strict=True):
-                _core.write_poses_bounds(gdir / "poses_bounds.npy", out_rows)
+                _core.write_poses_bounds(gdir / layout.POSES_BOUNDS, out_rows)
                 doc = noise_json(
                     gain=g,
                     seed=args.seed,
@@ -195,7 +195,7 @@ def run(args) -> int:
                     "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
                     files=files,
                 )
-                _core.write_noise_json(gdir / "noise.json", doc)
+                _core.write_noise_json(gdir / layout.NOISE, doc)
             # The previous output's own entries make way (nothing else in OUT), then each
             # gain moves in whole; the record comes last.
             outputs.remove_owned(out, NOISE_SCENE)

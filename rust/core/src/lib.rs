@@ -67,7 +67,9 @@ pub use crate::dataset::outputs::{
 };
 pub use crate::dataset::read::{check_shape, read_record, Record};
 pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
-pub use crate::dataset::schema::{schema, schema_file, write_record, StatsFile, SCHEMA_RECORDS};
+pub use crate::dataset::schema::{
+    schema, schema_file, value_schemas, write_record, StatsFile, SCHEMA_RECORDS,
+};
 pub use crate::dataset::splits::{make_splits, seeded_subset, Holdout, SettingEntry, Splits};
 pub use crate::dataset::stats::{build_stats, BuildStats};
 pub use crate::dataset::verify::{check_images, ImageCheck};
@@ -77,8 +79,8 @@ pub use crate::ground::license::{
 };
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
-    gain_name, image_name, level_dir, level_dirs, parse_level_dir, setting_name, sort_level_dirs,
-    theta0s, SHARP,
+    files, gain_name, image_name, images_dir, level_dir, level_dirs, linear_dir, parse_level_dir,
+    setting_name, sort_level_dirs, theta0s, SHARP,
 };
 
 // Image error against a reference and the speed/quality front.

@@ -63,6 +63,18 @@ fn read_mean_poses(
     crate::run_detached(py, || core::read_mean_poses(&meta, level))
 }
 
+/// The image folder at downsampling factor `factor` (`images`, `images_4`).
+#[pyfunction]
+fn images_dir(factor: u32) -> String {
+    core::images_dir(factor)
+}
+
+/// The linear EXR folder at downsampling factor `factor` (`linear`, `linear_4`).
+#[pyfunction]
+fn linear_dir(factor: u32) -> String {
+    core::linear_dir(factor)
+}
+
 /// Directory name of a noise gain (`gain_4`, `gain_2.5`).
 #[pyfunction]
 fn gain_name(gain: f64) -> String {
@@ -153,6 +165,26 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MARKER", core::MARKER)?;
     m.add("PARTIAL_SUFFIX", core::PARTIAL_SUFFIX)?;
     m.add("SHARP", core::SHARP)?;
+    use core::files;
+    for (name, value) in [
+        ("META", files::META),
+        ("DATASET", files::DATASET),
+        ("SPLITS", files::SPLITS),
+        ("FAILURES", files::FAILURES),
+        ("POSES_BOUNDS", files::POSES_BOUNDS),
+        ("TRANSFORMS", files::TRANSFORMS),
+        ("NOISE", files::NOISE),
+        ("NOISE_DATASET", files::NOISE_DATASET),
+        ("NOISE_SCENE", files::NOISE_SCENE),
+        ("EXPORT", files::EXPORT),
+        ("STATS", files::STATS),
+        ("IMAGES", files::IMAGES),
+        ("LINEAR", files::LINEAR),
+    ] {
+        m.add(name, value)?;
+    }
+    m.add_function(wrap_pyfunction!(images_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(linear_dir, m)?)?;
     m.add_function(wrap_pyfunction!(setting_name, m)?)?;
     m.add_function(wrap_pyfunction!(theta0s, m)?)?;
     m.add_function(wrap_pyfunction!(image_name, m)?)?;

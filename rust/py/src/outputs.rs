@@ -216,8 +216,21 @@ fn record_schemas(py: Python<'_>) -> PyResult<Vec<(String, Bound<'_, PyAny>)>> {
         .collect()
 }
 
+/// (type name, JSON Schema) of every value the bindings hand across as a dict.
+#[pyfunction]
+fn value_schemas(py: Python<'_>) -> PyResult<Vec<(&'static str, Bound<'_, PyAny>)>> {
+    core::value_schemas()
+        .into_iter()
+        .map(|(name, s)| {
+            let s = pythonize(py, &s).map_err(|e| PyValueError::new_err(e.to_string()))?;
+            Ok((name, s))
+        })
+        .collect()
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(write_record, m)?)?;
+    m.add_function(wrap_pyfunction!(value_schemas, m)?)?;
     m.add_function(wrap_pyfunction!(record_schemas, m)?)?;
     m.add_class::<PyOutputKind>()?;
     m.add_class::<PyBuildState>()?;

@@ -9,6 +9,7 @@
 //! - a build's setting directories are scanned once, here ([`scan`]).
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
+use crate::ground::names::{files, images_dir};
 use crate::ground::names::{sort_level_dirs, SHARP};
 use std::path::{Path, PathBuf};
 
@@ -112,15 +113,15 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
         render: Option<Render>,
     }
     let mut out = Vec::new();
-    let meta = setting.join("meta.json");
+    let meta = setting.join(files::META);
     let text = match std::fs::read(&meta) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return vec![SettingProblem::new("meta.json", "missing")]
+            return vec![SettingProblem::new(files::META, "missing")]
         }
         Err(e) => {
             return vec![SettingProblem::new(
-                "meta.json",
+                files::META,
                 format!("unreadable ({})", e.kind()),
             )]
         }
@@ -134,7 +135,7 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
         Ok(c) => c,
         Err(e) => {
             return vec![SettingProblem::new(
-                "meta.json",
+                files::META,
                 format!("unreadable ({e})"),
             )]
         }
@@ -154,8 +155,8 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
             });
             continue;
         }
-        let subdirs = std::iter::once("images".to_string())
-            .chain(downsample.iter().map(|f| format!("images_{f}")));
+        let subdirs = std::iter::once(files::IMAGES.to_string())
+            .chain(downsample.iter().map(|&f| images_dir(f)));
         for sub in subdirs {
             let images = files_with(&d.join(&sub), "png");
             if images.len() != views {
@@ -179,7 +180,7 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
             }
         }
         if linear {
-            let exrs = files_with(&d.join("linear"), "exr");
+            let exrs = files_with(&d.join(files::LINEAR), "exr");
             if exrs.len() != views {
                 let path = format!("{lvl}/linear");
                 out.push(SettingProblem {
@@ -195,7 +196,7 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
             }
         }
         let npy = format!("{lvl}/poses_bounds.npy");
-        match std::fs::metadata(d.join("poses_bounds.npy")) {
+        match std::fs::metadata(d.join(files::POSES_BOUNDS)) {
             Ok(m) if m.is_file() => {
                 if m.len() < views as u64 * POSE_ROW_BYTES + 16 {
                     out.push(SettingProblem::new(npy, "truncated"));
@@ -275,7 +276,7 @@ pub struct Scan {
 }
 
 /// The files of a build that are not settings.
-const BUILD_FILES: [&str; 3] = ["dataset.json", "splits.json", "failures.jsonl"];
+const BUILD_FILES: [&str; 3] = [files::DATASET, files::SPLITS, files::FAILURES];
 
 /// List the setting directories of `out` (hidden directories such as `.work-*` are not
 /// settings). A missing or non-directory `out` is an input error.
@@ -308,7 +309,7 @@ pub fn scan(out: &Path) -> Result<Scan> {
         let partial = name.ends_with(PARTIAL_SUFFIX);
         if is_complete(&path) {
             s.complete.push(name);
-        } else if partial || path.join("meta.json").exists() || path.join(SHARP).is_dir() {
+        } else if partial || path.join(files::META).exists() || path.join(SHARP).is_dir() {
             s.incomplete.push(name);
         }
     }

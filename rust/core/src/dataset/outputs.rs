@@ -19,6 +19,7 @@
 use super::layout::{scan, PARTIAL_SUFFIX};
 use super::read::{check_shape, read_record, Record};
 use crate::error::{Error, Result};
+use crate::ground::names::files;
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
@@ -132,7 +133,7 @@ fn legacy_scene_noise(dir: &Path) -> Result<bool> {
         && visible.iter().all(|(n, p)| {
             n.starts_with("gain_")
                 && p.is_dir()
-                && (p.join("noise.json").is_file() || n.ends_with(PARTIAL_SUFFIX))
+                && (p.join(files::NOISE).is_file() || n.ends_with(PARTIAL_SUFFIX))
         }))
 }
 
@@ -431,13 +432,13 @@ pub fn build_state(out: &Path) -> Result<BuildState> {
     }
     let dataset = out.join(Record::Dataset.file_name());
     match read_record(&dataset, Record::Dataset) {
-        Err(e) => why.push(short(&e, "dataset.json")),
+        Err(e) => why.push(short(&e, files::DATASET)),
         Ok(doc) => {
             if doc.get("provisional").and_then(|v| v.as_bool()) == Some(true) {
                 why.push("dataset.json is provisional: no run of the build has finished".into());
             } else {
                 disagree(
-                    "dataset.json",
+                    files::DATASET,
                     &strings(doc.get("settings")),
                     &s.complete,
                     &mut why,
@@ -447,12 +448,12 @@ pub fn build_state(out: &Path) -> Result<BuildState> {
     }
     let splits = out.join(Record::Splits.file_name());
     match read_record(&splits, Record::Splits) {
-        Err(e) => why.push(short(&e, "splits.json")),
+        Err(e) => why.push(short(&e, files::SPLITS)),
         Ok(doc) => {
             let mut listed = strings(doc.get("train"));
             listed.extend(strings(doc.get("test")));
             listed.sort();
-            disagree("splits.json", &listed, &s.complete, &mut why);
+            disagree(files::SPLITS, &listed, &s.complete, &mut why);
         }
     }
     Ok(BuildState {

@@ -7,6 +7,7 @@
 //! [`Error::Input`] naming the file and the field (`splits.json: train: invalid type:
 //! integer `5`, expected a sequence`), never a crash further down.
 use crate::error::{Error, Result};
+use crate::ground::names::files;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -37,14 +38,14 @@ impl Record {
     /// The file name of the record.
     pub fn file_name(self) -> &'static str {
         match self {
-            Record::Meta => "meta.json",
-            Record::Splits => "splits.json",
-            Record::Dataset => "dataset.json",
-            Record::NoiseDataset => "noise_dataset.json",
-            Record::Noise => "noise.json",
-            Record::NoiseScene => "noise_scene.json",
-            Record::Export => "export.json",
-            Record::Stats => "stats.json",
+            Record::Meta => files::META,
+            Record::Splits => files::SPLITS,
+            Record::Dataset => files::DATASET,
+            Record::NoiseDataset => files::NOISE_DATASET,
+            Record::Noise => files::NOISE,
+            Record::NoiseScene => files::NOISE_SCENE,
+            Record::Export => files::EXPORT,
+            Record::Stats => files::STATS,
         }
     }
 

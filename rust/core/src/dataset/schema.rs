@@ -65,6 +65,30 @@ pub fn schema(record: Record) -> serde_json::Value {
     v
 }
 
+/// The JSON Schema of each value the bindings give to Python, or take from it, as a
+/// dict: the stub's TypedDicts (python/blurset/_records.pyi, `make schemas`) are made
+/// from these, so a dict crossing the FFI has the type the core gives it.
+pub fn value_schemas() -> Vec<(&'static str, serde_json::Value)> {
+    use super::meta::{ObjectRecord, Timings};
+    use super::records::DatasetDoc;
+    use super::stats::BuildStats;
+    use crate::plan::renders::Render;
+    use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan};
+    use schemars::schema_for;
+    vec![
+        ("Render", schema_for!(Render).to_value()),
+        ("SettingPlan", schema_for!(SettingPlan).to_value()),
+        ("LevelPlan", schema_for!(LevelPlan).to_value()),
+        ("SamplingConfig", schema_for!(SamplingConfig).to_value()),
+        ("ObjectRecord", schema_for!(ObjectRecord).to_value()),
+        ("Timings", schema_for!(Timings).to_value()),
+        ("DatasetDoc", schema_for!(DatasetDoc).to_value()),
+        ("NoiseDoc", schema_for!(NoiseDoc).to_value()),
+        ("Splits", schema_for!(Splits).to_value()),
+        ("BuildStats", schema_for!(BuildStats).to_value()),
+    ]
+}
+
 /// The file name of a record's schema: `meta.schema.json` …
 pub fn schema_file(record: Record) -> String {
     let name = record.file_name();

@@ -8,6 +8,56 @@ pub const SHARP: &str = "sharp";
 /// Largest blur level a build can write.
 pub const MAX_LEVEL: u32 = 64;
 
+/// The files and folders of the layout, named here only: every reader and writer (the
+/// core's and Python's, through `blurset.layout`) spells them with these.
+pub mod files {
+    /// A setting's record (views, poses, sampling, object).
+    pub const META: &str = "meta.json";
+    /// A build's record (config, counts, provisional until the run finishes).
+    pub const DATASET: &str = "dataset.json";
+    /// A build's train/test split of settings and held-out views.
+    pub const SPLITS: &str = "splits.json";
+    /// A build's failed objects and settings, one JSON line each.
+    pub const FAILURES: &str = "failures.jsonl";
+    /// LLFF poses and bounds of one image folder's views.
+    pub const POSES_BOUNDS: &str = "poses_bounds.npy";
+    /// nerfstudio's camera file (exports).
+    pub const TRANSFORMS: &str = "transforms.json";
+    /// A noisy scene's record (gain, noise parameters, source).
+    pub const NOISE: &str = "noise.json";
+    /// The record of `blurset noise` over a build.
+    pub const NOISE_DATASET: &str = "noise_dataset.json";
+    /// The record of `blurset noise` over one LLFF scene.
+    pub const NOISE_SCENE: &str = "noise_scene.json";
+    /// The record of `blurset export`.
+    pub const EXPORT: &str = "export.json";
+    /// The record of `blurset stats`.
+    pub const STATS: &str = "stats.json";
+    /// The full-size 8-bit images of a level or scene.
+    pub const IMAGES: &str = "images";
+    /// The full-size linear EXRs of a level (`--write-linear`).
+    pub const LINEAR: &str = "linear";
+}
+
+/// The image folder at downsampling factor `factor`: `images` at 1, else `images_<f>`
+/// (the LLFF loaders' names).
+pub fn images_dir(factor: u32) -> String {
+    if factor <= 1 {
+        files::IMAGES.to_string()
+    } else {
+        format!("{}_{factor}", files::IMAGES)
+    }
+}
+
+/// The linear EXR folder at downsampling factor `factor`: `linear` or `linear_<f>`.
+pub fn linear_dir(factor: u32) -> String {
+    if factor <= 1 {
+        files::LINEAR.to_string()
+    } else {
+        format!("{}_{factor}", files::LINEAR)
+    }
+}
+
 /// `<uid>_<theta0>`: the directory of one setting, θ0 rounded to whole degrees.
 pub fn setting_name(uid: &str, theta0_deg: f64) -> String {
     format!("{uid}_{:03}", theta0_deg.round() as i64)
