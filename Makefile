@@ -8,7 +8,7 @@ RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pypro
 
 PYTEST := $(PY) -m pytest -q
 
-.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint typecheck fmt schemas docs bench bench-gpu clean
+.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint typecheck fmt schemas stub docs bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -69,6 +69,11 @@ fmt:
 schemas: venv
 	$(PY) -c "from blurset import outputs; outputs.write_schemas('schemas')"
 	$(PY) -c "from blurset import stubgen; stubgen.write()"
+
+# The typed option properties of _core.pyi, from the core's option declarations (a test
+# fails when the stub differs from them).
+stub: venv
+	$(PY) -c "from blurset import options; options.write_stub('python/blurset/_core.pyi')"
 
 # The docs site into site/: the pages generated from the parsers, schemas/ and
 # bench/results.json (docs/gen/), the checks mkdocs cannot make, then a strict build

@@ -79,6 +79,12 @@ def test_cli_reference_covers_every_command_and_option(tmp_path, monkeypatch) ->
                 continue
             for flag in action.option_strings:
                 assert f"`{flag}`" in page, (name, flag)
+    # The keys only a --config file sets, from the core's declarations.
+    from blurset.config import BUILD
+
+    for d in BUILD.decls:
+        if not d.flags and not d.via:
+            assert f"| `{d.name}` |" in page, d.name
 
 
 def test_a_page_per_schema_listing_every_field(tmp_path, monkeypatch) -> None:

@@ -1,4 +1,4 @@
-"""The build options are declared in the core (`build_config!` in plan/config.rs); every
+"""The build options are declared in the core (`build_options!` in plan/config.rs); every
 other place that lists them is checked against that declaration here: the flags of
 `blurset build`, the typed properties of the stub, the run options (those that do not
 shape the files) and the help's defaults. A core option without its flag, stub

@@ -2,7 +2,9 @@
 
 Run by `make docs`. Nothing here lists an option by hand: every subcommand, option,
 choice, default and help text comes from the argparse parser the `blurset` command
-itself uses, so the page changes when a declaration changes.
+itself uses, whose build and noise flags are made from the core's option declarations
+(python/blurset/options.py), and the keys only a `--config` file sets come from those
+declarations too; so the page changes when a declaration changes.
 """
 
 from __future__ import annotations
@@ -106,6 +108,26 @@ def _options_table(parser: argparse.ArgumentParser) -> list[str]:
     return lines
 
 
+def _toml_only_table() -> list[str]:
+    """The options of `blurset build` a `--config` file sets but no flag does (the
+    paper's constants), from the core's declarations."""
+    from blurset.config import BUILD
+
+    rows = [d for d in BUILD.decls if not d.flags and not d.via]
+    if not rows:
+        return []
+    lines = [
+        "\n**Keys of a `--config` file only**\n",
+        "| key | default | accepted | what it sets |",
+        "| --- | --- | --- | --- |",
+    ]
+    for d in rows:
+        accepted = d.range.removeprefix("must be ")
+        default = BUILD.default_text(d.name)
+        lines.append(f"| `{d.name}` | `{default}` | {_cell(accepted)} | {_cell(d.help)} |")
+    return lines
+
+
 def _help_lines(p: argparse.ArgumentParser) -> list[str]:
     return [sanitize(line) for line in p.format_help().rstrip().split("\n")]
 
@@ -146,6 +168,8 @@ def reference() -> str:
             for a in positionals:
                 out.append(f"- `{a.metavar or a.dest}`: {_cell(_help_text(p, a))}")
         out += _options_table(p)
+        if name == "build":
+            out += _toml_only_table()
         out += [
             "",
             f'??? note "`blurset {name} --help`"',

@@ -5,7 +5,7 @@ One section per binding file; keep each section next to its Rust counterpart's n
 
 from os import PathLike
 from pathlib import Path
-from typing import Any, TypeAlias, final
+from typing import Any, Literal, TypeAlias, final
 
 import numpy as np
 import numpy.typing as npt
@@ -33,6 +33,76 @@ class ConfigValueError(ValueError):
 def check_downsample(factors: list[int]) -> None:
     """ConfigValueError unless the factors are distinct integers in 2..=64."""
 
+_OptionKind: TypeAlias = Literal[
+    "switch",
+    "int",
+    "float",
+    "text",
+    "choice",
+    "words",
+    "levels",
+    "factors",
+    "indices",
+    "rgb",
+    "count_or_auto",
+    "fraction_or_ids",
+]
+
+@final
+class OptionDecl:
+    """One option as its declaration in the core states it: the flags, help, TOML keys,
+    range, defaults and whether it shapes the outputs (python/blurset/options.py makes the
+    parsers and the CLI reference from these)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def rust_type(self) -> str:
+        """The field's Rust type as the core's table writes it (`Option<Vec<String>>`)."""
+    @property
+    def flags(self) -> list[str]:
+        """Its flags, the first the one errors name (none: set through `via`, or TOML only)."""
+    @property
+    def via(self) -> str | None:
+        """The option whose flag sets this one."""
+    @property
+    def keys(self) -> list[str]:
+        """The keys a TOML file may name it by (dashes or underscores alike)."""
+    @property
+    def kind(self) -> _OptionKind:
+        """How it reads on the command line: switch, int, float, text, choice, words,
+        levels, factors, indices, rgb, count_or_auto, fraction_or_ids."""
+    @property
+    def optional(self) -> bool:
+        """None is a value of it."""
+    @property
+    def choices(self) -> list[str]: ...
+    @property
+    def range(self) -> str:
+        """The accepted values, as an error states them."""
+    @property
+    def default(self) -> object:
+        """The default, as dataset.json records it."""
+    @property
+    def unset(self) -> str | None:
+        """What a None default means, in words."""
+    @property
+    def demo(self) -> object:
+        """The default under --demo, when it has its own."""
+    @property
+    def before(self) -> object:
+        """The value a recorded config without this option was made with."""
+    @property
+    def help(self) -> str: ...
+    @property
+    def shapes_outputs(self) -> bool:
+        """Whether it shapes the files written (a rerun into the same output must keep it)."""
+    @property
+    def group(self) -> str | None:
+        """Options whose flags exclude each other share a group."""
+    @property
+    def metavar(self) -> str | None: ...
+
 @final
 class BuildConfig:
     """Every option of `blurset build`, validated (frozen: `replace` makes a new one).
@@ -55,6 +125,9 @@ class BuildConfig:
     @staticmethod
     def options() -> list[str]:
         """The option names, in declaration order."""
+    @staticmethod
+    def declarations() -> list[OptionDecl]:
+        """Every option as the core declares it, in declaration order."""
     def record(self) -> dict[str, Any]:
         """dataset.json's `config` record: every option, `latents` = "auto" under latents
         auto, and `effective_sharp_samples`."""
@@ -92,6 +165,7 @@ class BuildConfig:
     @property
     def test_view_images(self) -> str:
         """What the blur levels hold at the test views: "sharp" or "blurry"."""
+    # The options, generated from the core's declarations (`make stub`):
     @property
     def objects(self) -> list[str]: ...
     @property
@@ -212,6 +286,7 @@ class BuildConfig:
     def allow_mixed(self) -> bool: ...
     @property
     def licenses(self) -> list[str] | None: ...
+    # (end of the generated options)
 
 # --- layout (rust/py/src/layout.rs) --------------------------------------------------
 

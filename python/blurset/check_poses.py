@@ -1074,11 +1074,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--factor",
         type=int,
         default=None,
-        help="use images_<F>/ and divide the focal length by F, as the LLFF loaders do",
+        help="use images_<F>/ and divide the focal length by F, as the LLFF loaders do "
+        "(default: images/)",
     )
-    parser.add_argument("--json", type=Path, default=None, help="write the JSON report here")
     parser.add_argument(
-        "--workdir", type=Path, default=None, help="keep COLMAP's database and model here"
+        "--json", type=Path, default=None, help="write the JSON report here (default: none)"
+    )
+    parser.add_argument(
+        "--workdir",
+        type=Path,
+        default=None,
+        help="keep COLMAP's database and model here (default: a temporary directory)",
     )
     parser.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
 

@@ -14,61 +14,35 @@ from typing import Any
 
 from blurset import _core
 from blurset.exceptions import ConfigError
+from blurset.options import Options, parse_downsample, parse_indices, parse_levels
+
+__all__ = [
+    "BUILD",
+    "DEMO_DEFAULTS",
+    "OPTIONS",
+    "BuildConfig",
+    "check_downsample",
+    "flag",
+    "from_flags",
+    "load_toml",
+    "make_config",
+    "out_dir",
+    "parse_downsample",
+    "parse_indices",
+    "parse_levels",
+]
 
 BuildConfig = _core.BuildConfig
 
-# Small enough for about two minutes on 2 cores, rich enough for SfM.
-DEMO_DEFAULTS: dict[str, Any] = {
-    "settings_per_object": 1,
-    "views": 17,
-    "latents": 6,
-    "samples": 4,
-    "resolution": 96,
-}
-
-OPTIONS: tuple[str, ...] = tuple(BuildConfig.options())
-# Other spellings of option names in TOML files (the issue's name → the option).
-ALIASES = {"keep_linear": "write_linear", "test_view_stride": "view_stride"}
-
-
-# Options whose flag is not their name.
-FLAGS = {
-    "view_stride": "--test-view-stride",
-    "test_fraction": "--test-objects",
-    "test_objects": "--test-objects",
-}
+# The options of `blurset build` as the core declares them (flags, keys, kinds, help).
+BUILD = Options(BuildConfig.declarations())
+OPTIONS: tuple[str, ...] = BUILD.names
+# Small enough for about two minutes on 2 cores, rich enough for SfM (declared per option).
+DEMO_DEFAULTS: dict[str, Any] = BUILD.demo_defaults
 
 
 def flag(option: str) -> str:
-    return FLAGS.get(option, f"--{option.replace('_', '-')}")
-
-
-def parse_levels(value: Any, where: str = "--levels") -> Any:
-    """`1,2,3,4` or `none`/`sharp`/`` (sharp only) → a list; other values go to the core
-    as they are (it checks the list: distinct integers in 1..64)."""
-    if not isinstance(value, str):
-        return value
-    text = value.strip().lower()
-    items = [] if text in ("", "none", "sharp") else [s.strip() for s in text.split(",")]
-    try:
-        return [int(x) for x in items]
-    except ValueError:
-        raise ConfigError(f"{where}: expected levels like 1,2,3,4 or none, got {value!r}") from None
-
-
-def parse_downsample(value: Any, where: str = "--downsample") -> Any:
-    """`4 8` (flag words), `4,8` or `none` → a list of factors; other values go to the
-    core as they are (it checks them: distinct integers in 2..64 dividing the resolution)."""
-    items = value if isinstance(value, list) else [value]
-    if not all(isinstance(v, str) for v in items):
-        return value
-    words = [w for v in items for w in v.replace(",", " ").split()]
-    if [w.lower() for w in words] in ([], ["none"]):
-        return []
-    try:
-        return [int(w) for w in words]
-    except ValueError:
-        raise ConfigError(f"{where}: expected factors like 4 8, or none, got {value!r}") from None
+    return BUILD.flag(option)
 
 
 def check_downsample(factors: Any, where: str = "--downsample") -> list[int]:
@@ -83,39 +57,9 @@ def check_downsample(factors: Any, where: str = "--downsample") -> list[int]:
     return sorted(factors)
 
 
-def split_test_objects(value: Any, where: str) -> dict[str, Any]:
-    """`test-objects`: a fraction of the objects (0.2) → test_fraction, or object ids
-    (`a,b` or a list) → test_objects."""
-    if isinstance(value, bool):
-        raise ConfigError(f"{where} {value!r}: expected a fraction in [0, 1] or object ids")
-    if isinstance(value, int | float):
-        return {"test_fraction": value}
-    if isinstance(value, str):
-        try:
-            return {"test_fraction": float(value)}
-        except ValueError:
-            value = [v.strip() for v in value.split(",") if v.strip()]
-    return {"test_objects": value}
-
-
-def parse_gpus(value: Any, where: str = "--gpus") -> Any:
-    """`0,2` → [0, 2], `all`/`` → None (every GPU of the backend); other values go to the
-    core as they are (it checks the list: distinct integers in 0..1023)."""
-    if not isinstance(value, str):
-        return value
-    text = value.strip().lower()
-    if text in ("", "all"):
-        return None
-    try:
-        return [int(x) for x in text.split(",")]
-    except ValueError:
-        raise ConfigError(f"{where}: expected GPU indices like 0,2 or all, got {value!r}") from None
-
-
 def _option(key: str, where: str) -> str:
-    name = key.replace("-", "_")
-    name = ALIASES.get(name, name)
-    if name not in OPTIONS:
+    name = BUILD.option_of_key(key)
+    if name is None:
         raise ConfigError(f"{where}: unknown option {key!r}")
     return name
 
@@ -153,19 +97,14 @@ def load_toml(path: Path) -> TomlValues:
         name = _option(key, str(path))
         if name in out:
             raise ConfigError(f"{path}: {key!r} is given twice (as {name})")
-        if name == "test_objects":
-            split = split_test_objects(value, f"{path}: {key}")
-            out.update(split)
-            out.written.update(dict.fromkeys(split, key))
-            continue
-        out.written[name] = key
-        if name == "levels":
-            value = parse_levels(value, f"{path}: {key}")
-        elif name == "downsample":
-            value = parse_downsample(value, f"{path}: {key}")
-        elif name == "gpus":
-            value = parse_gpus(value, f"{path}: {key}")
-        out[name] = value
+        # Read by the option's kind (levels "1,2", factors, `auto`, a fraction or ids …);
+        # a count or auto stays as given: make_config reads it per layer.
+        if BUILD.by_name[name].kind == "count_or_auto":
+            read = {name: value}
+        else:
+            read = BUILD.read(name, value, f"{path}: {key}")
+        out.update(read)
+        out.written.update(dict.fromkeys(read, key))
     return out
 
 
@@ -178,23 +117,21 @@ class TomlValues(dict):
         self.written: dict[str, str] = {}
 
 
-def _latents_layer(layer: dict[str, Any], where: str) -> dict[str, Any]:
-    """`latents = auto` in one layer → latents_auto; a number there turns auto off."""
+def _layer(layer: dict[str, Any], where: Any) -> dict[str, Any]:
+    """One layer's values (None: not given) with a count-or-auto (`latents = auto`) and
+    device indices read in it; `where(option)` names what gave the option."""
     layer = {k: v for k, v in layer.items() if v is not None}
-    if "latents" in layer:
-        value = layer.pop("latents")
-        if isinstance(value, str) and value.strip().lower() == "auto":
-            layer["latents_auto"] = True
-        else:
-            if isinstance(value, str):
-                try:
-                    value = int(value)
-                except ValueError:
-                    raise ConfigError(
-                        f"{where} {value!r}: expected a number of frames or auto"
-                    ) from None
-            layer["latents"], layer["latents_auto"] = value, False
+    for name in list(layer):
+        d = BUILD.by_name.get(name)
+        if d is not None and d.kind in ("count_or_auto", "indices"):
+            layer.update(BUILD.read(name, layer.pop(name), where(name)))
     return layer
+
+
+def _via(option: str) -> str:
+    """The option whose flag or key sets `option` (itself, or the one it is set via)."""
+    d = BUILD.by_name.get(option)
+    return d.via if d is not None and d.via else option
 
 
 def _plain(value: Any) -> Any:
@@ -212,22 +149,14 @@ def make_config(
     origin: dict[str, str] = {}
     values: dict[str, Any] = dict(DEMO_DEFAULTS) if demo else {}
     in_file = f"{config_path}: " if config_path else "--config: "
-    given = _latents_layer(file_values, f"{in_file}latents")
     written = getattr(file_values, "written", {})
-    origin.update({k: f"{in_file}{written.get(k, k)}" for k in given})
-    if isinstance(given.get("gpus"), str):
-        given["gpus"] = parse_gpus(given["gpus"], f"{in_file}gpus")
-    flags = _latents_layer(flag_values, "--latents")
-    if isinstance(flags.get("gpus"), str):
-        flags["gpus"] = parse_gpus(flags["gpus"])
+    given = _layer(file_values, lambda k: f"{in_file}{written.get(k, k)}")
+    origin.update({k: f"{in_file}{written.get(k, written.get(_via(k), k))}" for k in given})
+    flags = _layer(flag_values, flag)
     origin.update({k: flag(k) for k in flags})
-    if "latents_auto" in flags:
-        origin["latents_auto"] = "--latents"
     given.update(flags)
     values.update(given)
     values.setdefault("demo", False)
-    if isinstance(values.get("device"), str):  # CUDA, Cuda … name the same backend
-        values["device"] = values["device"].strip().lower()
     # Every rule between options is the core's (BuildConfig's validator).
     try:
         cfg = BuildConfig(**{k: _plain(v) for k, v in values.items()})

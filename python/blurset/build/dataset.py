@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from blurset import __version__, _core, layout, outputs, publish
-from blurset.config import BuildConfig, flag
+from blurset.config import BUILD, BuildConfig, flag
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec
 
@@ -56,23 +56,12 @@ def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig, prog=None) -> Non
 
 
 # Options that decide where and how a build runs, not what it writes: a rerun may change
-# them freely. Every other option shapes the files, so a rerun must keep it.
-RUN_OPTIONS = frozenset(
-    "objects out demo workers threads executor ray_address shard objaverse_dir "
-    "objaverse_offline objaverse_count timeout object_timeout retries max_failure_rate "
-    "max_triangles max_texture_pixels blender check_poses previews allow_mixed "
-    "test_fraction test_objects test_settings device gpus gpus_per_task".split()
-)
+# them freely. Every other option shapes the files, so a rerun must keep it. Both from
+# the core's declarations (`shapes`/`run` in build_options!).
+RUN_OPTIONS = frozenset(BUILD.names) - BUILD.shaping
 # What a recorded config without the key was built with (blurset before the option),
-# not today's defaults: blurry test views, no images_<f>/, independent seeds per latent
-# frame, a flat sample budget, fixed light paths.
-BEFORE_OPTION = {
-    "blurry_test_views": True,
-    "downsample": [],
-    "latent_sampling": "independent",
-    "blur_budget": "flat",
-    "light_paths": "fixed",
-}
+# where that is not today's default: declared with the option (`before`).
+BEFORE_OPTION = {d.name: d.before for d in BUILD.decls if d.before != d.default}
 
 
 def check_same_options(out: Path, cfg: BuildConfig) -> None:

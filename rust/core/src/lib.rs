@@ -21,9 +21,10 @@ pub use crate::rng::seed_for;
 
 // What one setting renders: views, trajectories, levels, latent frames.
 pub use crate::plan::config::BuildConfig;
+pub use crate::plan::options::OptionInfo;
 pub use crate::plan::renders::{level_renders, Motion, Render};
 pub use crate::plan::sampling::{plan_setting, LevelPlan, SamplingConfig, SettingPlan};
-pub use crate::plan::spec::{check_downsample, check_theta0, Raw};
+pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
 
 // Linear frames in, encoded images out; image files; render QA.
 pub use crate::image::accumulate::Accumulator;

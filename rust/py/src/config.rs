@@ -59,34 +59,33 @@ fn raw_values(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<BTreeMap<String, c
 #[derive(Clone, PartialEq)]
 pub struct BuildConfig(pub core::BuildConfig);
 
-// One #[pymethods] block per class: the field getters and the methods below.
-macro_rules! build_config_methods {
-    (fields { $($f:ident : $t:ty),* $(,)? } $($rest:tt)*) => {
+// One #[pymethods] block per class: a getter per option of the core's declaration
+// table (`build_options!`), and the methods below.
+macro_rules! py_build_config {
+    (
+        { $($methods:tt)* }
+        $(#[doc = $sdoc:expr])*
+        $cfg:ident, $command:literal;
+        $(
+            $(#[doc = $doc:expr])*
+            $name:ident : $ty:ty = $default:expr, $spec:expr, $shape:ident
+                { $($k:ident : $v:expr),* $(,)? };
+        )*
+    ) => {
         #[pymethods]
         impl BuildConfig {
-            $( #[getter] fn $f(&self) -> $t { self.0.$f.clone() } )*
-            $($rest)*
+            $(
+                #[getter]
+                fn $name<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+                    crate::sampling::to_py(py, &self.0.$name)
+                }
+            )*
+            $($methods)*
         }
     };
 }
 
-build_config_methods!(fields {
-    objects: Vec<String>, out: Option<String>, demo: bool, settings_per_object: usize,
-    views: usize, levels: Vec<u32>, latents: usize, latents_auto: bool, latents_max: usize,
-    max_ghost_px: f64, blur_method: String, samples: u32, samples_total: Option<u32>,
-    sharp_samples: Option<u32>, latent_sampling: String, blur_budget: String, denoise: String, light_paths: String, device: String,
-    gpus: Option<Vec<u32>>, gpus_per_task: Option<f64>, resolution: u32, seed: u64, fov_deg: f64, phi0_deg: f64,
-    window_deg: f64, delta0: f64, radius_margin: f64, level_spread: f64,
-    latent_positions: String, trajectory: String, orientation_max: f64, near_floor: f64,
-    write_linear: bool, previews: bool, view_stride: usize, test_fraction: f64,
-    test_objects: Option<Vec<String>>, test_settings: Option<usize>,
-    blurry_test_views: bool, downsample: Vec<u32>, workers: usize, threads: usize, executor: String,
-    ray_address: Option<String>, shard: Option<String>, objaverse_dir: Option<String>,
-    objaverse_offline: bool, objaverse_count: Option<usize>, timeout: f64,
-    object_timeout: f64, retries: u32, max_failure_rate: f64, max_triangles: u64,
-    max_texture_pixels: u64, blender: Option<String>, check_poses: bool, allow_mixed: bool,
-    licenses: Option<Vec<String>>,
-}
+blurset_core::build_options!(py_build_config {
     #[new]
     #[pyo3(signature = (**values))]
     fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
@@ -131,11 +130,13 @@ build_config_methods!(fields {
         core::BuildConfig::OPTIONS.to_vec()
     }
 
-    /// Linear RGB the transparent film is composited over.
-    #[getter]
-    fn background(&self) -> (f64, f64, f64) {
-        let [r, g, b] = self.0.background;
-        (r, g, b)
+    /// Every option as the core declares it, in declaration order.
+    #[staticmethod]
+    fn declarations() -> Vec<OptionDecl> {
+        core::BuildConfig::declarations()
+            .into_iter()
+            .map(OptionDecl)
+            .collect()
     }
 
     /// The most renders one blurry image can take.
@@ -222,7 +223,109 @@ build_config_methods!(fields {
     fn __repr__(&self) -> String {
         format!("{:?}", self.0)
     }
-);
+});
+
+/// One option as its declaration in the core states it: the flags, help, TOML keys,
+/// range, defaults and whether it shapes the outputs (python/blurset/options.py makes the
+/// parsers and the CLI reference from these).
+#[pyclass(
+    frozen,
+    eq,
+    skip_from_py_object,
+    name = "OptionDecl",
+    module = "blurset._core"
+)]
+#[derive(Clone, PartialEq)]
+pub struct OptionDecl(pub core::OptionInfo);
+
+#[pymethods]
+impl OptionDecl {
+    #[getter]
+    fn name(&self) -> &'static str {
+        self.0.name
+    }
+    /// The field's Rust type as the core's table writes it (`Option<Vec<String>>`).
+    #[getter]
+    fn rust_type(&self) -> &'static str {
+        self.0.rust_type
+    }
+    /// Its flags, the first the one errors name (none: set through `via`, or TOML only).
+    #[getter]
+    fn flags(&self) -> Vec<String> {
+        self.0.flags.clone()
+    }
+    /// The option whose flag sets this one.
+    #[getter]
+    fn via(&self) -> Option<&'static str> {
+        self.0.via
+    }
+    /// The keys a TOML file may name it by (dashes or underscores alike).
+    #[getter]
+    fn keys(&self) -> Vec<String> {
+        self.0.keys.clone()
+    }
+    /// How it reads on the command line: switch, int, float, text, choice, words,
+    /// levels, factors, indices, rgb, count_or_auto, fraction_or_ids.
+    #[getter]
+    fn kind<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::sampling::to_py(py, &self.0.kind)
+    }
+    /// None is a value of it.
+    #[getter]
+    fn optional(&self) -> bool {
+        self.0.optional
+    }
+    #[getter]
+    fn choices(&self) -> Vec<&'static str> {
+        self.0.choices.clone()
+    }
+    /// The accepted values, as an error states them.
+    #[getter]
+    fn range(&self) -> String {
+        self.0.range.clone()
+    }
+    /// The default, as dataset.json records it.
+    #[getter]
+    fn default<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::sampling::to_py(py, &self.0.default)
+    }
+    /// What a None default means, in words.
+    #[getter]
+    fn unset(&self) -> Option<&'static str> {
+        self.0.unset
+    }
+    /// The default under --demo, when it has its own.
+    #[getter]
+    fn demo<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::sampling::to_py(py, &self.0.demo)
+    }
+    /// The value a recorded config without this option was made with.
+    #[getter]
+    fn before<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::sampling::to_py(py, &self.0.before)
+    }
+    #[getter]
+    fn help(&self) -> &'static str {
+        self.0.help
+    }
+    /// Whether it shapes the files written (a rerun into the same output must keep it).
+    #[getter]
+    fn shapes_outputs(&self) -> bool {
+        self.0.shapes_outputs
+    }
+    /// Options whose flags exclude each other share a group.
+    #[getter]
+    fn group(&self) -> Option<&'static str> {
+        self.0.group
+    }
+    #[getter]
+    fn metavar(&self) -> Option<&'static str> {
+        self.0.metavar
+    }
+    fn __repr__(&self) -> String {
+        format!("OptionDecl({:?})", self.0.name)
+    }
+}
 
 /// ConfigValueError unless the factors are distinct integers in 2..=64.
 #[pyfunction]
@@ -232,6 +335,7 @@ fn check_downsample(factors: Vec<u32>) -> PyResult<()> {
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<BuildConfig>()?;
+    m.add_class::<OptionDecl>()?;
     m.add_function(wrap_pyfunction!(check_downsample, m)?)?;
     Ok(())
 }

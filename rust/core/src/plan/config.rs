@@ -5,10 +5,11 @@
 //! A value is checked against its field's [`Spec`]; an error names the option, the value
 //! and the range (`views -1: must be an integer in 1..=4096`), never a parser position.
 //! The sampling options form the [`SamplingConfig`] of every setting's plan.
+use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use super::sampling::{
     BlurBudget, BlurMethod, LatentPositions, LatentSampling, SamplingConfig, TrajectoryAnchor,
 };
-use super::spec::{check, specs, OptionValue, Raw, Spec};
+use super::spec::{check, specs, Kind, OptionValue, Raw, Spec};
 use super::spec::{config_error, convert};
 use super::weights::Guards;
 use crate::error::Result;
@@ -16,149 +17,303 @@ use crate::ground::names::{self, test_views};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-/// Declares the fields of BuildConfig once: type, default, spec, doc.
-macro_rules! build_config {
-    ($( $(#[doc = $doc:expr])* $name:ident : $ty:ty = $default:expr, $spec:expr; )*) => {
-        /// Every option of `blurset build` (see the module docs).
-        #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-        #[serde(default, deny_unknown_fields)]
-        pub struct BuildConfig {
-            $( $(#[doc = $doc])* pub $name: $ty, )*
-        }
-
-        impl Default for BuildConfig {
-            fn default() -> Self {
-                BuildConfig { $( $name: $default, )* }
-            }
-        }
-
-        impl BuildConfig {
-            /// The option names, in declaration order.
-            pub const OPTIONS: &'static [&'static str] = &[$(stringify!($name)),*];
-
-            fn set(&mut self, option: &str, raw: &Raw) -> Result<()> {
-                match option {
-                    $( stringify!($name) => self.$name = convert(option, raw, &$spec)?, )*
-                    _ => return Err(config_error(option, "is not an option of blurset build".into())),
-                }
-                Ok(())
-            }
-
-            fn check_fields(&self) -> Result<()> {
-                $( check(stringify!($name), &self.$name, &$spec)?; )*
-                Ok(())
-            }
-        }
-    };
-}
-
 const SAMPLING: fn() -> SamplingConfig = SamplingConfig::default;
 
-build_config! {
+/// The options of `blurset build`, declared once (DESIGN §10): `name: Type = default,
+/// range, shapes|run { flags, help, … }` ([`super::options::Meta`]). `shapes`: the
+/// option shapes the files a build writes, so a rerun into the same output must keep
+/// it; `run`: it decides only where and how the build runs. The table is a macro so
+/// that one list makes the struct here ([`config_struct!`]) and the binding's getters
+/// (`rust/py/src/config.rs`); Python makes the flags, the TOML keys and the CLI
+/// reference from [`BuildConfig::declarations`].
+#[macro_export]
+macro_rules! build_options {
+    ($then:ident $({ $($extra:tt)* })?) => { $then! { $({ $($extra)* })?
+    /// Every option of `blurset build` (see the module docs).
+    BuildConfig, "blurset build";
     /// GLB files, folders of them, list files, objaverse ids (resolved by Python).
-    objects: Vec<String> = Vec::new(), Spec::StrList;
+    objects: Vec<String> = Vec::new(), Spec::StrList, run {
+        help: "GLB files, folders of GLBs, or text files listing them (required, unless --demo)",
+    };
     /// The output directory.
-    out: Option<String> = None, Spec::Str;
-    /// Built-in procedural objects (and smaller defaults; see Python's DEMO_DEFAULTS).
-    demo: bool = false, Spec::Bool;
-    settings_per_object: usize = 4, Spec::int(1, 360);
-    views: usize = SAMPLING().views, specs::COUNT;
-    levels: Vec<u32> = SAMPLING().levels, Spec::Levels;
-    latents: usize = SAMPLING().latents, specs::COUNT;
+    out: Option<String> = None, Spec::Str, run {
+        help: "output directory (required)",
+    };
+    /// Built-in procedural objects (and smaller defaults: the `demo` of each option).
+    demo: bool = false, Spec::Bool, run {
+        help: "built-in procedural objects",
+    };
+    settings_per_object: usize = 4, Spec::int(1, 360), shapes {
+        help: "azimuth settings per object",
+        demo: Some(1),
+    };
+    views: usize = SAMPLING().views, specs::COUNT, shapes {
+        help: "views per setting",
+        demo: Some(17),
+    };
+    levels: Vec<u32> = SAMPLING().levels, Spec::Levels, shapes {
+        help: "blur levels, e.g. 1,2,3,4 or none (sharp only)",
+    };
+    latents: usize = SAMPLING().latents, specs::COUNT, shapes {
+        kind: Some(Kind::CountOrAuto),
+        help: "latent frames averaged per blurry image, or auto: per view and level, the \
+            fewest that leave no gap over --max-ghost-px on screen",
+        demo: Some(6),
+    };
     /// m per view and level from the screen motion (DESIGN §8), at most latents_max.
-    latents_auto: bool = SAMPLING().latents_auto, Spec::Bool;
-    latents_max: usize = SAMPLING().latents_max, specs::COUNT;
-    max_ghost_px: f64 = SAMPLING().max_ghost_px, specs::MAX_GHOST_PX;
-    blur_method: String = "average".into(), specs::BLUR_METHOD;
+    latents_auto: bool = SAMPLING().latents_auto, Spec::Bool, shapes {
+        via: Some("latents"),
+    };
+    latents_max: usize = SAMPLING().latents_max, specs::COUNT, shapes {
+        help: "cap of --latents auto",
+    };
+    max_ghost_px: f64 = SAMPLING().max_ghost_px, specs::MAX_GHOST_PX, shapes {
+        help: "--latents auto: largest screen gap between latent frames, px",
+    };
+    blur_method: String = "average".into(), specs::BLUR_METHOD, shapes {
+        help: "average of latent renders (the paper) or one Cycles motion blur render",
+    };
     /// Cycles samples per rendered latent frame.
-    samples: u32 = SAMPLING().samples, specs::SAMPLES;
+    samples: u32 = SAMPLING().samples, specs::SAMPLES, shapes {
+        help: "Cycles samples per latent frame of the flat split (budget S = this × m)",
+        demo: Some(4),
+    };
     /// Sample budget S of one blurry image: ⌈S / m⌉ samples per latent frame.
-    samples_total: Option<u32> = None, specs::SAMPLES;
+    samples_total: Option<u32> = None, specs::SAMPLES, shapes {
+        help: "sample budget S of one blurry image: its m latent frames render \
+            ceil(S·m^0.4/m) samples each under --blur-budget parity, ceil(S/m) under flat",
+        unset: Some("--samples × the most latent frames of an image"),
+    };
     /// Samples of the sharp render; None = the blurry image's budget.
-    sharp_samples: Option<u32> = None, specs::SAMPLES;
+    sharp_samples: Option<u32> = None, specs::SAMPLES, shapes {
+        help: "Cycles samples of the sharp image",
+        unset: Some("the blurry image's budget S"),
+    };
     /// `subsets`: a blurry image's latent frames render the blocks of one sample sequence
     /// on the view's seed, which the sharp image renders too (issue 15); `independent`:
     /// a seed per frame (builds before it).
-    latent_sampling: String = "subsets".into(), specs::LATENT_SAMPLING;
+    latent_sampling: String = "subsets".into(), specs::LATENT_SAMPLING, shapes {
+        help: "subsets: a blurry image's latent frames render the blocks of one sample \
+            sequence on the view's seed, which the sharp image renders too; independent: \
+            a seed per frame",
+        before: Some("independent".into()),
+    };
     /// `parity`: a blurry image gets the budget times a factor of its m and motion, so
     /// it carries no more render noise than its sharp image (issue 15); `flat`: the
     /// budget as given (builds before it).
-    blur_budget: String = "parity".into(), specs::BLUR_BUDGET;
+    blur_budget: String = "parity".into(), specs::BLUR_BUDGET, shapes {
+        help: "parity: a blurry image of m >= 2 latent frames renders the sample budget S \
+            times m^0.4, so it is no noisier than its sharp image; need: that factor bought \
+            by the image's measured motion between frames (less for small motion); flat: \
+            the budget as given, ceil(S/m) samples a frame",
+        before: Some("flat".into()),
+    };
     /// `none`: images as rendered; `oidn`: every image (the sharp one and the mean of a
     /// blurry image's latent frames, with their averaged albedo and normal guides)
     /// denoised once by Open Image Denoise.
-    denoise: String = "none".into(), specs::DENOISE;
+    denoise: String = "none".into(), specs::DENOISE, shapes {
+        help: "none: images as rendered; oidn: every image denoised once by Open Image \
+            Denoise, a blurry image after averaging (its frames' albedo and normal averaged \
+            the same way), the sharp image the same way",
+    };
     /// `auto`: light-path bounces from the object's materials; `fixed`: the same for all.
-    light_paths: String = "auto".into(), specs::LIGHT_PATHS;
+    light_paths: String = "auto".into(), specs::LIGHT_PATHS, shapes {
+        help: "light-path bounces from the object's materials (auto) or the same for every \
+            object",
+        before: Some("fixed".into()),
+    };
     /// Cycles device (run-only: the pixels are the plan's on any device, within noise).
-    device: String = "auto".into(), specs::DEVICE;
+    device: String = "auto".into(), specs::DEVICE, run {
+        help: "Cycles device; auto: the best backend Cycles reports \
+            (OptiX > CUDA > HIP > oneAPI > Metal > CPU)",
+    };
     /// GPU indices of the backend; None = all of them.
-    gpus: Option<Vec<u32>> = None, Spec::Indices;
+    gpus: Option<Vec<u32>> = None, Spec::Indices, run {
+        help: "GPU indices of the backend, e.g. 0,2, or all",
+        unset: Some("all"),
+    };
     /// GPUs each Ray task reserves; None = 1 with a GPU device, else 0.
-    gpus_per_task: Option<f64> = None, specs::GPUS_PER_TASK;
-    resolution: u32 = SAMPLING().resolution, specs::RESOLUTION;
-    seed: u64 = 0, specs::SEED;
-    fov_deg: f64 = SAMPLING().fov_deg, specs::FOV_DEG;
-    phi0_deg: f64 = SAMPLING().phi0_deg, specs::PHI0_DEG;
-    window_deg: f64 = SAMPLING().window_deg, specs::WINDOW_DEG;
-    delta0: f64 = SAMPLING().delta0, specs::DELTA0;
-    radius_margin: f64 = SAMPLING().radius_margin, specs::RADIUS_MARGIN;
-    level_spread: f64 = SAMPLING().level_spread, specs::LEVEL_SPREAD;
-    latent_positions: String = "random".into(), specs::LATENT_POSITIONS;
+    gpus_per_task: Option<f64> = None, specs::GPUS_PER_TASK, run {
+        help: "GPUs each Ray task reserves (--executor ray)",
+        unset: Some("1 with a GPU device, else 0"),
+    };
+    resolution: u32 = SAMPLING().resolution, specs::RESOLUTION, shapes {
+        help: "image side in pixels, square",
+        demo: Some(96),
+    };
+    seed: u64 = 0, specs::SEED, shapes {
+        help: "build seed",
+    };
+    fov_deg: f64 = SAMPLING().fov_deg, specs::FOV_DEG, shapes {
+        help: "field of view in degrees",
+    };
+    phi0_deg: f64 = SAMPLING().phi0_deg, specs::PHI0_DEG, shapes {
+        toml_only: true,
+        help: "polar angle φ0 of the views, degrees: each view's φ is drawn in φ0 ± window_deg",
+    };
+    window_deg: f64 = SAMPLING().window_deg, specs::WINDOW_DEG, shapes {
+        toml_only: true,
+        help: "half-width of the windows a view's polar angle and azimuth are drawn in \
+            (φ0 ± w, θ0 ± w), degrees",
+    };
+    delta0: f64 = SAMPLING().delta0, specs::DELTA0, shapes {
+        toml_only: true,
+        help: "largest trajectory step of a blurry image per component (Δr %, Δφ, Δθ in \
+            degrees), each drawn in ±[δ0/2, δ0]",
+    };
+    radius_margin: f64 = SAMPLING().radius_margin, specs::RADIUS_MARGIN, shapes {
+        toml_only: true,
+        help: "camera distance = this × the bounding sphere's radius / sin(fov / 2)",
+    };
+    level_spread: f64 = SAMPLING().level_spread, specs::LEVEL_SPREAD, shapes {
+        toml_only: true,
+        help: "spread s of a level's blur weight: w_l ~ U[1 − s, 1 + s] · w_u · l",
+    };
+    latent_positions: String = "random".into(), specs::LATENT_POSITIONS, shapes {
+        help: "latent positions on the segment: uniform random or stratified",
+    };
     /// Where the written pose p sits on a blurry image's segment: `start` (the paper's
     /// U(p, p + w_l·δ)) or `centered` (U(p − w_l·δ/2, p + w_l·δ/2)).
-    trajectory: String = "start".into(), specs::TRAJECTORY;
-    orientation_max: f64 = SAMPLING().guards.orientation_max, specs::ORIENTATION_MAX;
-    near_floor: f64 = SAMPLING().guards.near_floor, specs::NEAR_FLOOR;
+    trajectory: String = "start".into(), specs::TRAJECTORY, shapes {
+        help: "where the written pose p sits on each blurry image's camera path: its start \
+            (the paper) or its middle, so sharp image, pose and exposure coincide",
+    };
+    orientation_max: f64 = SAMPLING().guards.orientation_max, specs::ORIENTATION_MAX, shapes {
+        toml_only: true,
+        help: "cap of the orientation term O = max(d) / min(d) of the blur weight (a sheet \
+            would blur without bound)",
+    };
+    near_floor: f64 = SAMPLING().guards.near_floor, specs::NEAR_FLOOR, shapes {
+        toml_only: true,
+        help: "floor of a view's near depth (object units) in the depth range f / n of the \
+            blur weight",
+    };
     /// Linear RGB the transparent film is composited over.
-    background: [f64; 3] = [1.0, 1.0, 1.0], Spec::Rgb;
+    background: [f64; 3] = [1.0, 1.0, 1.0], Spec::Rgb, shapes {
+        toml_only: true,
+        help: "linear RGB the transparent film is composited over",
+    };
     /// linear/<view>.exr beside images/ per level (`--keep-linear`).
-    write_linear: bool = false, Spec::Bool;
+    write_linear: bool = false, Spec::Bool, shapes {
+        flags: &["--keep-linear", "--write-linear"],
+        help: "also store the linear float image (EXR) of every view and level; \
+            `blurset noise BUILD` then starts from it",
+    };
     /// <setting>/preview.png, written before the marker.
-    previews: bool = false, Spec::Bool;
+    previews: bool = false, Spec::Bool, run {
+        help: "write <setting>/preview.png",
+    };
     /// Every k-th view of a setting is held out (`--test-view-stride`, LLFF's llffhold).
-    view_stride: usize = 16, specs::COUNT;
+    view_stride: usize = 16, specs::COUNT, shapes {
+        flags: &["--test-view-stride"],
+        help: "every k-th view of a setting is held out (LLFF's llffhold)",
+    };
     /// Test settings: a seeded fraction of the objects, or the objects listed
     /// (`--test-objects`), or N random settings (`test_settings`), not both.
-    test_fraction: f64 = 0.2, specs::FRACTION;
-    test_objects: Option<Vec<String>> = None, Spec::StrList;
+    test_fraction: f64 = 0.2, specs::FRACTION, run {
+        via: Some("test_objects"),
+    };
+    test_objects: Option<Vec<String>> = None, Spec::StrList, run {
+        kind: Some(Kind::FractionOrIds),
+        help: "test settings: a seeded fraction F of the objects, or object ids a,b",
+        group: Some("test split"),
+    };
     /// N seeded random test settings (the paper's 52).
-    test_settings: Option<usize> = None, Spec::int(1, u32::MAX as i128);
+    test_settings: Option<usize> = None, Spec::int(1, u32::MAX as i128), run {
+        help: "test settings: N seeded random settings (the paper: 52)",
+        unset: Some("none, --test-objects decides"),
+        group: Some("test split"),
+    };
     /// Render the held-out views blurry too; by default the blur levels hold the sharp
     /// image there (Deblur-NeRF's convention; those blur renders are skipped).
-    blurry_test_views: bool = false, Spec::Bool;
+    blurry_test_views: bool = false, Spec::Bool, shapes {
+        help: "render the held-out views blurry too (off: Deblur-NeRF's convention, the \
+            blur levels hold the sharp image there)",
+        before: Some(true),
+    };
     /// `images_<f>/` beside `images/` in every level: area mean in linear light, sRGB.
-    downsample: Vec<u32> = vec![4], Spec::Factors;
-    workers: usize = 1, specs::WORKERS;
+    downsample: Vec<u32> = vec![4], Spec::Factors, shapes {
+        help: "images_<f>/ beside images/ in every level, area-averaged in linear light \
+            (e.g. 4 8, or none)",
+        before: Some(Vec::new()),
+    };
+    workers: usize = 1, specs::WORKERS, run {
+        help: "objects rendered in parallel",
+    };
     /// Cycles threads per worker (0 = all cores).
-    threads: usize = 0, specs::THREADS;
-    executor: String = "local".into(), specs::EXECUTOR;
+    threads: usize = 0, specs::THREADS, run {
+        help: "Cycles threads per worker (0: all cores)",
+    };
+    executor: String = "local".into(), specs::EXECUTOR, run {
+        help: "local process pool or Ray",
+    };
     /// Ray cluster address; None starts a local Ray.
-    ray_address: Option<String> = None, Spec::Str;
+    ray_address: Option<String> = None, Spec::Str, run {
+        help: "Ray cluster to join (ray://host:10001 or auto; --executor ray)",
+        unset: Some("a local Ray"),
+    };
     /// `i/N`: this job's share of the objects.
-    shard: Option<String> = None, Spec::Str;
-    objaverse_dir: Option<String> = None, Spec::Str;
-    objaverse_offline: bool = false, Spec::Bool;
-    objaverse_count: Option<usize> = None, Spec::int(1, u32::MAX as i128);
+    shard: Option<String> = None, Spec::Str, run {
+        help: "i/N: this job's share of the objects (0 ≤ i < N), for job arrays",
+        unset: Some("every object"),
+    };
+    objaverse_dir: Option<String> = None, Spec::Str, run {
+        help: "the objaverse package's cache directory",
+        unset: Some("the objaverse package's, ~/.objaverse"),
+    };
+    objaverse_offline: bool = false, Spec::Bool, run {
+        help: "never download: objects missing from the cache fail",
+    };
+    objaverse_count: Option<usize> = None, Spec::int(1, u32::MAX as i128), run {
+        help: "a seeded random subset of N objaverse objects",
+        unset: Some("every object listed"),
+    };
     /// Seconds without a reply from the worker before it counts as hung.
-    timeout: f64 = 600.0, specs::SECONDS;
+    timeout: f64 = 600.0, specs::SECONDS, run {
+        help: "seconds without a worker reply before it is killed",
+    };
     /// Wall-clock budget of one object, s (0 = none).
-    object_timeout: f64 = 0.0, specs::BUDGET_SECONDS;
+    object_timeout: f64 = 0.0, specs::BUDGET_SECONDS, run {
+        help: "wall-clock budget of one object, s (0: none)",
+    };
     /// Extra attempts after a transient failure (worker crash or hang).
-    retries: u32 = 1, Spec::int(0, 100);
+    retries: u32 = 1, Spec::int(0, 100), run {
+        help: "extra attempts after a worker crash or hang",
+    };
     /// Exit 1 when more than this fraction of the objects failed.
-    max_failure_rate: f64 = 1.0, specs::FRACTION;
-    max_triangles: u64 = 5_000_000, Spec::int(1, u64::MAX as i128);
-    max_texture_pixels: u64 = 256 << 20, Spec::int(0, u64::MAX as i128);
+    max_failure_rate: f64 = 1.0, specs::FRACTION, run {
+        help: "exit 1 when more than this fraction of objects failed",
+    };
+    max_triangles: u64 = 5_000_000, Spec::int(1, u64::MAX as i128), run {
+        help: "pre-flight triangle budget",
+    };
+    max_texture_pixels: u64 = 256 << 20, Spec::int(0, u64::MAX as i128), run {
+        help: "pre-flight texture budget, pixels",
+    };
     /// A Blender binary instead of the bpy module.
-    blender: Option<String> = None, Spec::Str;
-    check_poses: bool = false, Spec::Bool;
+    blender: Option<String> = None, Spec::Str, run {
+        help: "a Blender binary instead of the bpy module",
+        unset: Some("the bpy module"),
+    };
+    check_poses: bool = false, Spec::Bool, run {
+        help: "COLMAP check per setting",
+    };
     /// Build into an OUT made with other output-shaping options (mixes settings).
-    allow_mixed: bool = false, Spec::Bool;
+    allow_mixed: bool = false, Spec::Bool, run {
+        help: "build into an OUT made with other output-shaping options (mixes settings)",
+    };
     /// Only objects under these licences (SPDX ids, `other`, `unknown`); the rest are
     /// skipped before rendering (failures.jsonl stage `license`). None = every licence.
-    licenses: Option<Vec<String>> = None, Spec::Licenses;
+    licenses: Option<Vec<String>> = None, Spec::Licenses, shapes {
+        help: "only objects under these licences, e.g. cc-by-4.0,cc0-1.0 (SPDX ids; add \
+            unknown for objects that name none, other for unmapped ones); the rest are \
+            skipped before rendering and recorded in failures.jsonl (stage license)",
+        unset: Some("every licence"),
+    };
+    } };
 }
+
+build_options!(config_struct);
 
 impl BuildConfig {
     /// Defaults overridden by `values` (option name → value), then validated.
@@ -537,6 +692,7 @@ pub fn public_entry(entry: &str) -> String {
 mod tests {
     use super::*;
     use crate::error::Error;
+    use crate::plan::options::check_declarations;
     use crate::plan::spec::{check_downsample, MAX_SECONDS};
 
     fn values(pairs: &[(&str, Raw)]) -> BTreeMap<String, Raw> {
@@ -778,6 +934,57 @@ mod tests {
         ]))?;
         assert_eq!(ray.gpus_per_task, Some(0.5));
         Ok(())
+    }
+
+    #[test]
+    fn every_option_is_declared_whole() -> Result<()> {
+        let decls = BuildConfig::declarations();
+        check_declarations(&decls).map_err(Error::Value)?;
+        let names: Vec<&str> = decls.iter().map(|d| d.name).collect();
+        assert_eq!(names, BuildConfig::OPTIONS);
+        // The demo's defaults are values of their options.
+        let demo: BTreeMap<String, Raw> = decls
+            .iter()
+            .filter_map(|d| Some((d.name.to_string(), json_raw(d.demo.as_ref()?))))
+            .collect();
+        assert_eq!(demo.len(), 5);
+        let c = BuildConfig::from_values(&demo)?;
+        assert_eq!((c.views, c.latents, c.resolution), (17, 6, 96));
+        // Flags, keys and what a record without the option was made with.
+        let d = |n: &str| decls.iter().find(|d| d.name == n).cloned();
+        let wl = d("write_linear").ok_or(Error::Value("write_linear".into()))?;
+        assert_eq!(wl.flags, ["--keep-linear", "--write-linear"]);
+        assert_eq!(wl.keys, ["write_linear", "keep_linear"]);
+        let ds = d("downsample").ok_or(Error::Value("downsample".into()))?;
+        assert_eq!(
+            (ds.kind, ds.before.clone()),
+            (Kind::Factors, serde_json::json!([]))
+        );
+        assert_eq!(ds.default, serde_json::json!([4]));
+        let la = d("latents_auto").ok_or(Error::Value("latents_auto".into()))?;
+        assert!(la.flags.is_empty() && la.via == Some("latents") && la.shapes_outputs);
+        let ph = d("phi0_deg").ok_or(Error::Value("phi0_deg".into()))?;
+        assert!(ph.flags.is_empty() && ph.keys == ["phi0_deg"]);
+        let bm = d("blur_method").ok_or(Error::Value("blur_method".into()))?;
+        assert_eq!(
+            (bm.kind, bm.choices.clone()),
+            (Kind::Choice, vec!["average", "motion_blur"])
+        );
+        Ok(())
+    }
+
+    fn json_raw(v: &serde_json::Value) -> Raw {
+        match v {
+            serde_json::Value::Bool(b) => Raw::Bool(*b),
+            serde_json::Value::Number(n) => n.as_i64().map_or_else(
+                || Raw::Float(n.as_f64().unwrap_or(f64::NAN)),
+                |i| Raw::Int(i.into()),
+            ),
+            serde_json::Value::String(s) => Raw::Str(s.clone()),
+            serde_json::Value::Array(a) => Raw::List(a.iter().map(json_raw).collect()),
+            serde_json::Value::Null => Raw::Null,
+            serde_json::Value::Object(_) => Raw::Table,
+        }
     }
 
     #[test]

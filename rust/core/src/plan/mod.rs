@@ -2,6 +2,7 @@
 //! seeded sampling of views, trajectories, levels and latent frames.
 pub mod camera;
 pub mod config;
+pub mod options;
 pub mod region;
 pub mod renders;
 pub mod sampling;

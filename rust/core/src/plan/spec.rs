@@ -5,6 +5,7 @@
 use crate::error::{Error, Result};
 use crate::ground::license;
 use crate::ground::names::MAX_LEVEL;
+use serde::Serialize;
 use std::fmt;
 
 /// Largest number of views per setting and of latent frames per blurry image.
@@ -182,10 +183,44 @@ impl Spec {
     }
 }
 
+/// How an option reads on the command line and in a TOML file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kind {
+    /// A flag without a value: given means true.
+    Switch,
+    Int,
+    Float,
+    Text,
+    /// One of [`OptionInfo::choices`].
+    Choice,
+    /// One or more words (`--objects a.glb models/`).
+    Words,
+    /// Blur levels: `1,2,3,4`, or `none` (sharp only).
+    Levels,
+    /// Downsampling factors: `4 8`, `4,8`, or `none`.
+    Factors,
+    /// Device indices: `0,2`, or `all` (None).
+    Indices,
+    /// Three numbers in [0, 1] (TOML only).
+    Rgb,
+    /// A count, or `auto`, which sets the option declared `via` this one instead.
+    CountOrAuto,
+    /// A fraction of the objects, which sets the option declared `via` this one, or
+    /// object ids.
+    FractionOrIds,
+}
+
 /// A value of one option, converted from [`Raw`] under its [`Spec`] and back.
 pub trait OptionValue: Sized {
     fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self>;
     fn to_raw(&self) -> Raw;
+    /// How a value of this type under `spec` reads on the command line.
+    fn kind(spec: &Spec) -> Kind;
+    /// Whether None is a value (an `Option`).
+    fn optional() -> bool {
+        false
+    }
 }
 
 macro_rules! int_value {
@@ -200,6 +235,9 @@ macro_rules! int_value {
             fn to_raw(&self) -> Raw {
                 Raw::Int(i128::from(*self))
             }
+            fn kind(_: &Spec) -> Kind {
+                Kind::Int
+            }
         }
     )*};
 }
@@ -212,6 +250,9 @@ impl OptionValue for usize {
     fn to_raw(&self) -> Raw {
         Raw::Int(*self as i128)
     }
+    fn kind(_: &Spec) -> Kind {
+        Kind::Int
+    }
 }
 
 impl OptionValue for f64 {
@@ -220,6 +261,9 @@ impl OptionValue for f64 {
     }
     fn to_raw(&self) -> Raw {
         Raw::Float(*self)
+    }
+    fn kind(_: &Spec) -> Kind {
+        Kind::Float
     }
 }
 
@@ -233,18 +277,31 @@ impl OptionValue for bool {
     fn to_raw(&self) -> Raw {
         Raw::Bool(*self)
     }
+    fn kind(_: &Spec) -> Kind {
+        Kind::Switch
+    }
 }
 
 impl OptionValue for String {
     fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
         match (raw, spec) {
-            (Raw::Str(s), Spec::Choice(c)) => c.contains(&s.as_str()).then(|| s.clone()),
+            // `CUDA`, ` Cuda` … name the value `cuda`: a choice is read in any case.
+            (Raw::Str(s), Spec::Choice(c)) => c
+                .iter()
+                .find(|v| v.eq_ignore_ascii_case(s.trim()))
+                .map(|v| v.to_string()),
             (Raw::Str(s), _) => Some(s.clone()),
             _ => None,
         }
     }
     fn to_raw(&self) -> Raw {
         Raw::Str(self.clone())
+    }
+    fn kind(spec: &Spec) -> Kind {
+        match spec {
+            Spec::Choice(_) => Kind::Choice,
+            _ => Kind::Text,
+        }
     }
 }
 
@@ -257,6 +314,12 @@ impl<T: OptionValue> OptionValue for Option<T> {
     }
     fn to_raw(&self) -> Raw {
         self.as_ref().map_or(Raw::Null, T::to_raw)
+    }
+    fn kind(spec: &Spec) -> Kind {
+        T::kind(spec)
+    }
+    fn optional() -> bool {
+        true
     }
 }
 
@@ -279,6 +342,12 @@ impl OptionValue for Vec<String> {
     }
     fn to_raw(&self) -> Raw {
         Raw::List(self.iter().cloned().map(Raw::Str).collect())
+    }
+    fn kind(spec: &Spec) -> Kind {
+        match spec {
+            Spec::Licenses => Kind::Text,
+            _ => Kind::Words,
+        }
     }
 }
 
@@ -333,6 +402,13 @@ impl OptionValue for Vec<u32> {
     fn to_raw(&self) -> Raw {
         Raw::List(self.iter().map(|l| Raw::Int(i128::from(*l))).collect())
     }
+    fn kind(spec: &Spec) -> Kind {
+        match spec {
+            Spec::Factors => Kind::Factors,
+            Spec::Indices => Kind::Indices,
+            _ => Kind::Levels,
+        }
+    }
 }
 
 impl OptionValue for [f64; 3] {
@@ -350,6 +426,9 @@ impl OptionValue for [f64; 3] {
     }
     fn to_raw(&self) -> Raw {
         Raw::List(self.iter().map(|x| Raw::Float(*x)).collect())
+    }
+    fn kind(_: &Spec) -> Kind {
+        Kind::Rgb
     }
 }
 
