@@ -201,7 +201,7 @@ def exposure_ends(scene_dir: Path, mean):
     blurry image shows begin and end (the first and last motion key under the motion blur
     method); the mean latent pose for a view whose image is a sharp copy or that has
     neither (no streak). None when meta.json does not say."""
-    meta = layout.read_json(scene_dir.parent / "meta.json")
+    meta = layout.read_json(scene_dir.parent / layout.META)
     level = str(_core.parse_level_dir(scene_dir.name))
     sharp_copies = (
         set(meta.get("test_views", [])) if meta.get("test_view_images") == "sharp" else set()
