@@ -484,16 +484,7 @@ class MetaRecord(TypedDict):
     uid: str
     views: list[MetaView]
 
-class SplitsRecord(TypedDict):
-    holdout: str
-    seed: int
-    test: list[str]
-    test_objects: list[str]
-    test_settings: NotRequired[int | None]
-    test_view_images: str
-    test_views: dict[str, list[int]]
-    train: list[str]
-    view_stride: int
+SplitsRecord = Splits
 
 class DatasetStart(TypedDict):
     """The dataset.json a build's first run writes under its lock before any setting: the options it is made with (a rerun must keep those that shape outputs)."""
@@ -504,28 +495,7 @@ class DatasetStart(TypedDict):
 
 DatasetRecord = DatasetDoc | DatasetStart
 
-class NoiseRecord(TypedDict):
-    """`noise.json` of one noisy scene (one gain)."""
-
-    blurset_version: str
-    build_noise: NotRequired[BuildNoiseRecord | None]
-    clean: NotRequired[str | None]
-    clean_views: NotRequired[list[int]]
-    downsample: NotRequired[list[int]]
-    files: list[NoiseFile]
-    frames: int
-    gain: float
-    gamma: Any
-    levels: NoiseTableRecord
-    model: str
-    profile: str
-    rng: str
-    seed: int
-    sigma_read: float
-    sigma_shot: float
-    source: NoiseSource
-    white_balance: NotRequired[WhiteBalanceRecord | None]
-    white_level: float
+NoiseRecord = NoiseDoc
 
 class NoiseCounts(TypedDict):
     """What a noise output holds."""

@@ -52,6 +52,7 @@ class _Gen:
     def __init__(self) -> None:
         self.classes: dict[str, str] = {}  # class name → its source
         self.shapes: dict[str, str] = {}  # class name → the JSON of the schema it is
+        self.by_shape: dict[str, str] = {}  # the JSON of a schema → its first class
 
     def typ(self, s: Any, defs: dict[str, Any], hint: str) -> str:
         if s is True or s == {} or not isinstance(s, dict):
@@ -110,6 +111,11 @@ class _Gen:
             if name in self.shapes:
                 return name
         self.shapes[name] = shape
+        if shape in self.by_shape:
+            # One type under two names (a record's root that is also a value type).
+            self.classes[name] = f"{name} = {self.by_shape[shape]}\n"
+            return name
+        self.by_shape[shape] = name
         if not s.get("properties"):
             # An enum, a union or a map: an alias of its type.
             body = self.typ({k: v for k, v in s.items() if k != "title"}, defs, f"{name}Of")
