@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ast
 import json
+import math
 import re
 import shutil
 import sys
@@ -144,6 +145,7 @@ def presets_page(rs: list[dict]) -> list[str]:
         ax.text(v, y, f" {v:.2f}", va="center", fontsize=8)
     ax.set_xlim(right=max(sph) * 4)
     ax = axes[1]
+    placed: list[tuple[float, float]] = []  # label anchors (log10 x, dB) already drawn
     for i, p in enumerate(names):
         r = rows[p]
         x, yb, ys = r.get("settings_per_hour"), r.get("psnr_blur_db"), r.get("psnr_sharp_db")
@@ -158,7 +160,16 @@ def presets_page(rs: list[dict]) -> list[str]:
         if ys is not None:
             ax.scatter([x], [ys], marker="s", color=color)
         if ys_:
-            ax.annotate(p, (x, max(ys_)), fontsize=8, xytext=(4, 4), textcoords="offset points")
+            # Presets close on both axes would print their names over each other: each
+            # next one goes on the left of its marker, then a line lower.
+            here = (math.log10(x), max(ys_))
+            n = sum(abs(here[0] - a) < 0.15 and abs(here[1] - b) < 1.5 for a, b in placed)
+            placed.append(here)
+            left = n % 2 == 1
+            ax.annotate(
+                p, (x, max(ys_)), fontsize=8, textcoords="offset points",
+                xytext=(-6 if left else 4, 4 - 10 * (n // 2)), ha="right" if left else "left",
+            )  # fmt: skip
     ax.scatter([], [], marker="o", color="grey", label="blurry images")
     ax.scatter([], [], marker="s", color="grey", label="sharp images")
     ax.axhline(PNG_FLOOR_DB, ls=":", color="grey", label="8-bit floor")

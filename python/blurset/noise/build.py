@@ -232,7 +232,7 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
 def _noise_json(
     unit: Unit, g: float, sr: float, ss: float, wb, params: dict, args, build
 ) -> _records.NoiseDoc:
-    subdir = "linear" if params["source"] == "linear" else "images"
+    subdir = layout.LINEAR if params["source"] == "linear" else layout.IMAGES
     return noise_json(
         gain=g,
         seed=unit.seed,
