@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 
 import pytest
-from blurset import _core, cli, options
+from blurset import cli, options
 from blurset.exceptions import ConfigError
 from blurset.noise.cli import NOISE, NoiseConfig, config_of
 
@@ -71,8 +71,23 @@ def test_the_help_default_is_the_core_default() -> None:
 def test_flags_read_into_the_core_config(tmp_path: Path) -> None:
     p = _noise_parser()
     args = p.parse_args(
-        [str(tmp_path), "--out", "o", "--gains", "2", "16", "--frames", "3", "--seed", "7",
-         "--downsample", "4", "--gamma", "srgb", "--quiet"]  # fmt: skip
+        [
+            str(tmp_path),
+            "--out",
+            "o",
+            "--gains",
+            "2",
+            "16",
+            "--frames",
+            "3",
+            "--seed",
+            "7",
+            "--downsample",
+            "4",
+            "--gamma",
+            "srgb",
+            "--quiet",
+        ]  # fmt: skip
     )
     cfg = config_of(args)
     assert (cfg.out, cfg.gains, cfg.gain_values) == ("o", ["2", "16"], [2.0, 16.0])
@@ -107,9 +122,9 @@ def test_a_bad_value_is_refused_by_the_core_naming_the_flag(
     assert all(w in str(e.value) for w in words), (str(e.value), words)
     # The core refuses it itself, naming the option.
     name = next(d.name for d in NOISE.decls if flags[0] in d.flags)
-    with pytest.raises(_core.ConfigValueError) as raw:
+    with pytest.raises(ValueError) as raw:  # the core's ConfigValueError
         NoiseConfig(**NOISE.from_args(args))
-    assert raw.value.option == name
+    assert getattr(raw.value, "option", None) == name
 
 
 def test_the_stubs_noise_properties_are_generated_from_the_declarations() -> None:

@@ -79,9 +79,7 @@ class Options:
             text = f"{text} (default: {self.default_text(d.name)})"
         return text.replace("%", "%%")
 
-    def add_flags(
-        self, parser: argparse.ArgumentParser, *, required: Collection[str] = ()
-    ) -> None:
+    def add_flags(self, parser: argparse.ArgumentParser, *, required: Collection[str] = ()) -> None:
         """A flag per declared option that has one, in declaration order, under its
         help section when it names one; the options in `required` must be given."""
         groups: dict[str, Any] = {}

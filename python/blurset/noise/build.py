@@ -184,7 +184,9 @@ def _has_linear(level_dir: Path) -> bool:
     return all((lin / f"{p.stem}.exr").is_file() for p in list_images(images))
 
 
-def _params(cfg: _core.NoiseConfig, kind: str, gamma: str, table, downsample: list[int], clean_policy: str) -> dict:
+def _params(
+    cfg: _core.NoiseConfig, kind: str, gamma: str, table, downsample: list[int], clean_policy: str
+) -> dict:
     """The options a noise build is made with; a rerun into the same DIR must match them."""
     return {
         "seed": cfg.seed,
