@@ -128,9 +128,10 @@ impl NoiseConfig {
     pub fn gain_values(&self) -> Result<Vec<f64>> {
         let mut out: Vec<f64> = Vec::new();
         for v in &self.gains {
-            let g: f64 = v.trim().parse().map_err(|_| {
-                config_error("gains", format!("unknown gain '{v}': not a number"))
-            })?;
+            let g: f64 = v
+                .trim()
+                .parse()
+                .map_err(|_| config_error("gains", format!("unknown gain '{v}': not a number")))?;
             if !(g.is_finite() && g > 0.0) {
                 return Err(config_error(
                     "gains",
@@ -152,7 +153,10 @@ impl NoiseConfig {
             out.push(g);
         }
         if out.is_empty() {
-            return Err(config_error("gains", "none given: at least one gain".into()));
+            return Err(config_error(
+                "gains",
+                "none given: at least one gain".into(),
+            ));
         }
         Ok(out)
     }
@@ -196,6 +200,9 @@ mod tests {
             ("gains".to_string(), g(&["3"])),
             ("any_gain".to_string(), Raw::Bool(true)),
         ]));
-        assert_eq!(any.ok().map(|c| c.gain_values().ok()), Some(Some(vec![3.0])));
+        assert_eq!(
+            any.ok().map(|c| c.gain_values().ok()),
+            Some(Some(vec![3.0]))
+        );
     }
 }
