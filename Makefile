@@ -73,7 +73,7 @@ schemas: venv
 # The typed option properties of _core.pyi, from the core's option declarations (a test
 # fails when the stub differs from them).
 stub: venv
-	$(PY) -c "from blurset import options; options.write_stub('python/blurset/_core.pyi')"
+	$(PY) -c "from blurset import options; options.write_stub('python/blurset/_core.pyi'); options.write_stub('python/blurset/_core.pyi', 'NoiseConfig')"
 
 # The docs site into site/: the pages generated from the parsers, schemas/ and
 # bench/results.json (docs/gen/), the checks mkdocs cannot make, then a strict build

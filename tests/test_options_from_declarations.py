@@ -126,6 +126,7 @@ def _toy(**kw: Any) -> SimpleNamespace:
         demo=None,
         group=None,
         metavar=None,
+        section=None,
         rust_type="u32",
     )
     base.update(kw)

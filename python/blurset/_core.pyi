@@ -102,6 +102,9 @@ class OptionDecl:
         """Options whose flags exclude each other share a group."""
     @property
     def metavar(self) -> str | None: ...
+    @property
+    def section(self) -> str | None:
+        """The titled section of the help its flag is listed under (None: the command's)."""
 
 @final
 class BuildConfig:
@@ -286,6 +289,61 @@ class BuildConfig:
     def allow_mixed(self) -> bool: ...
     @property
     def licenses(self) -> list[str] | None: ...
+    # (end of the generated options)
+
+@final
+class NoiseConfig:
+    """Every option of `blurset noise`, validated (frozen).
+
+    `NoiseConfig(**values)` takes option names (`gains=["1", "4"]`, `frames=2` …) over
+    the defaults; a bad value raises ConfigValueError naming the option.
+    """
+
+    def __new__(cls, **values: object) -> NoiseConfig: ...
+    @property
+    def gain_values(self) -> list[float]:
+        """The gains as numbers, in the order given."""
+    @staticmethod
+    def options() -> list[str]:
+        """The option names, in declaration order."""
+    @staticmethod
+    def declarations() -> list[OptionDecl]:
+        """Every option as the core declares it, in declaration order."""
+    # The options, generated from the core's declarations (`make stub`):
+    @property
+    def out(self) -> str | None: ...
+    @property
+    def gains(self) -> list[str]: ...
+    @property
+    def factor(self) -> int | None: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def profile(self) -> str: ...
+    @property
+    def frames(self) -> int: ...
+    @property
+    def kpn_levels(self) -> str | None: ...
+    @property
+    def gamma(self) -> str | None: ...
+    @property
+    def white_level(self) -> float: ...
+    @property
+    def any_gain(self) -> bool: ...
+    @property
+    def downsample(self) -> list[int] | None: ...
+    @property
+    def clean_views(self) -> int | None: ...
+    @property
+    def overwrite(self) -> bool: ...
+    @property
+    def levels(self) -> str | None: ...
+    @property
+    def source(self) -> str: ...
+    @property
+    def noisy_test_views(self) -> bool: ...
+    @property
+    def quiet(self) -> bool: ...
     # (end of the generated options)
 
 # --- layout (rust/py/src/layout.rs) --------------------------------------------------

@@ -11,7 +11,7 @@ error. Nothing here lists an option by name: a new option is a new declaration.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
 from blurset import _core
@@ -21,7 +21,8 @@ Decl = _core.OptionDecl
 
 
 class Options:
-    """The declarations of one config (`BuildConfig.declarations()`)."""
+    """The declarations of one config (`BuildConfig.declarations()`,
+    `NoiseConfig.declarations()`)."""
 
     def __init__(self, decls: Sequence[Decl], *, demo_flag: str = "--demo") -> None:
         self.decls = list(decls)
@@ -78,18 +79,26 @@ class Options:
             text = f"{text} (default: {self.default_text(d.name)})"
         return text.replace("%", "%%")
 
-    def add_flags(self, parser: argparse.ArgumentParser) -> None:
-        """A flag per declared option that has one, in declaration order."""
+    def add_flags(self, parser: argparse.ArgumentParser, *, required: Collection[str] = ()) -> None:
+        """A flag per declared option that has one, in declaration order, under its
+        help section when it names one; the options in `required` must be given."""
         groups: dict[str, Any] = {}
+        sections: dict[str, Any] = {}
         for d in self.decls:
             if not d.flags:
                 continue
             target: Any = parser
+            if d.section:
+                if d.section not in sections:
+                    sections[d.section] = parser.add_argument_group(d.section)
+                target = sections[d.section]
             if d.group:
                 if d.group not in groups:
-                    groups[d.group] = parser.add_mutually_exclusive_group()
+                    groups[d.group] = target.add_mutually_exclusive_group()
                 target = groups[d.group]
             kw: dict[str, Any] = {"dest": d.name, "help": self.help(d)}
+            if d.name in required:
+                kw["required"] = True
             if d.metavar:
                 kw["metavar"] = d.metavar
             if d.kind == "switch":

@@ -226,9 +226,10 @@ def _noise_columns(
     noise_dir: Path, setting: str, levels: list[str], gain: str
 ) -> list[tuple[str, Path]]:
     """(label, gain dir) for every level of `setting` that `noise_dir` holds at `gain`."""
-    from blurset.noise.params import parse_gains
-
-    g = parse_gains([gain], any_gain=True)[0]
+    try:
+        g = _core.NoiseConfig(gains=[gain], any_gain=True).gain_values[0]
+    except _core.ConfigValueError as e:
+        raise ConfigError(f"--gains {e.detail}") from None
     gname = layout.gain_name(g)
     if not noise_dir.is_dir():
         raise InputError(f"--noise directory not found: {noise_dir}")

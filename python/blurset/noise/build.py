@@ -37,17 +37,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from blurset import __version__, _core, layout, outputs, publish
-from blurset.config import check_downsample, parse_downsample
 from blurset.exceptions import ConfigError, InputError
 from blurset.layout import gain_name
 from blurset.noise.params import (
-    check_options,
     copy_clean,
     files_record,
     gain_sigmas,
+    gains_of,
+    kpn_path,
     noise_json,
     noise_table,
-    parse_gains,
     table_record,
 )
 from blurset.noise.scene import list_images, output_names
@@ -185,16 +184,18 @@ def _has_linear(level_dir: Path) -> bool:
     return all((lin / f"{p.stem}.exr").is_file() for p in list_images(images))
 
 
-def _params(args, kind: str, gamma: str, table, downsample: list[int], clean_policy: str) -> dict:
+def _params(
+    cfg: _core.NoiseConfig, kind: str, gamma: str, table, downsample: list[int], clean_policy: str
+) -> dict:
     """The options a noise build is made with; a rerun into the same DIR must match them."""
     return {
-        "seed": args.seed,
+        "seed": cfg.seed,
         "source": kind,
-        "profile": args.profile,
+        "profile": cfg.profile,
         "gamma": gamma,
-        "white_level": args.white_level,
-        "frames": args.frames,
-        "levels_table": table_record(table, args.kpn_levels),
+        "white_level": cfg.white_level,
+        "frames": cfg.frames,
+        "levels_table": table_record(table, kpn_path(cfg)),
         "downsample": downsample,
         "clean_views": clean_policy,
     }
@@ -230,7 +231,7 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
 
 
 def _noise_json(
-    unit: Unit, g: float, sr: float, ss: float, wb, params: dict, args, build
+    unit: Unit, g: float, sr: float, ss: float, wb, params: dict, cfg: _core.NoiseConfig, build
 ) -> _records.NoiseDoc:
     subdir = layout.LINEAR if params["source"] == "linear" else layout.IMAGES
     return noise_json(
@@ -239,14 +240,14 @@ def _noise_json(
         sigmas=(sr, ss),
         gamma=params["gamma"],
         white_balance=wb,
-        white_level=args.white_level,
-        frames=args.frames,
-        profile=args.profile,
+        white_level=cfg.white_level,
+        frames=cfg.frames,
+        profile=cfg.profile,
         model=MODEL,
         clean=CLEAN[params["source"]],
         levels={
             **params["levels_table"],
-            "file": args.kpn_levels.name if args.kpn_levels else None,
+            "file": Path(cfg.kpn_levels).name if cfg.kpn_levels else None,
         },
         source={
             "kind": params["source"],
@@ -257,7 +258,7 @@ def _noise_json(
             "background": list(unit.background),
             "resolution": list(unit.resolution),
         },
-        build_noise={"seed": args.seed, "seed_derivation": SEED_DERIVATION},
+        build_noise={"seed": cfg.seed, "seed_derivation": SEED_DERIVATION},
         rng="philox4x32-10, key noise_key(seed, gain), stream view<<32|frame, "
         "word = pixel*3 + c; ziggurat normals (shared by the png and linear sources)",
         downsample=params["downsample"],
@@ -265,13 +266,15 @@ def _noise_json(
         files=files_record(
             [f"{unit.level}/{subdir}/{p.name}" for p in unit.sources],
             unit.names,
-            args.frames,
+            cfg.frames,
             set(unit.clean_views),
         ),
     )
 
 
-def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -> None:
+def _write_unit(
+    unit: Unit, gains_sigmas, wb, params: dict, cfg: _core.NoiseConfig, build: Path
+) -> None:
     unit.dst.mkdir(parents=True, exist_ok=True)
     partials = {g: layout.partial_dir(unit.dst / gain_name(g)) for g in unit.pending}
     for p in partials.values():
@@ -281,10 +284,10 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             (partials[g], *gains_sigmas[g], _core.noise_key(unit.seed, g)) for g in unit.pending
         ]
         common = {
-            "frames": args.frames,
+            "frames": cfg.frames,
             "gamma": params["gamma"],
             "white_balance": wb,
-            "white_level": args.white_level,
+            "white_level": cfg.white_level,
             "downsample": params["downsample"],
             "clean_views": unit.clean_views,
         }
@@ -301,17 +304,17 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             interruptible(_core.noise_write_variants, unit.sources, unit.names, variants, **common)
         # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the
         # build's rows already hold the written resolution and focal length.
-        rows = np.repeat(unit.rows, args.frames, axis=0)
+        rows = np.repeat(unit.rows, cfg.frames, axis=0)
         small = {f: unit.src / layout.images_dir(f) for f in params["downsample"]}
         setting_transforms = json.loads((unit.src.parent / layout.TRANSFORMS).read_text())
         files = [
-            (v, f"images/{unit.names[v * args.frames + k]}.png")
+            (v, f"images/{unit.names[v * cfg.frames + k]}.png")
             for v in range(len(unit.pngs))
-            for k in range(args.frames)
+            for k in range(cfg.frames)
         ]
         for g in unit.pending:
             part = partials[g]
-            copy_clean(part, unit.pngs, unit.names, args.frames, unit.clean_views, small)
+            copy_clean(part, unit.pngs, unit.names, cfg.frames, unit.clean_views, small)
             _core.write_poses_bounds(part / layout.POSES_BOUNDS, rows)
             _core.write_scene_transforms(
                 part / layout.TRANSFORMS,
@@ -326,7 +329,7 @@ def _write_unit(unit: Unit, gains_sigmas, wb, params: dict, args, build: Path) -
             )
             sr, ss = gains_sigmas[g]
             _core.write_noise_json(
-                part / layout.NOISE, _noise_json(unit, g, sr, ss, wb, params, args, build)
+                part / layout.NOISE, _noise_json(unit, g, sr, ss, wb, params, cfg, build)
             )
             layout.publish(part, unit.dst / gain_name(g))
     except BaseException:
@@ -377,43 +380,42 @@ def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
     return doc
 
 
-def run(args) -> int:
-    build: Path = args.scene
-    out: Path = args.out
-    if args.factor is not None:
+def run(build: Path, cfg: _core.NoiseConfig) -> int:
+    assert cfg.out is not None  # a required flag
+    out = Path(cfg.out)
+    if cfg.factor is not None:
         raise ConfigError("--factor: a build has no images_<F>/ directories; omit it")
-    check_options(args)
-    if args.clean_views is not None:
+    if cfg.clean_views is not None:
         raise ConfigError(
             "--clean-views applies to a scene: a build keeps its own test views clean "
             "(splits.json), or none with --noisy-test-views"
         )
-    gains = parse_gains(args.gains, args.any_gain)
+    gains = gains_of(cfg)
     # A build still being written (or stopped) would be noised half, with stale splits.
     complete = outputs.finished_build(build, "SCENE").complete
     dataset = outputs.read_record(build / layout.DATASET)
-    if args.downsample is not None:
-        downsample = check_downsample(parse_downsample(args.downsample))
+    if cfg.downsample is not None:
+        downsample = list(cfg.downsample)
     else:  # the build's own images_<f>/ factors (none in a build made before them)
         downsample = list((dataset.get("config") or {}).get("downsample") or [])
-    clean_policy = "none" if args.noisy_test_views else "test_views"
+    clean_policy = "none" if cfg.noisy_test_views else "test_views"
     available = dataset.get("levels") or ["sharp"]
-    levels = parse_levels(args.levels, available)
+    levels = parse_levels(cfg.levels, available)
     settings = [build / name for name in complete]
     if not settings:
         raise InputError(f"no complete setting (<setting>/{layout.MARKER}) in build: {build}")
 
-    source = args.source or "auto"
+    source = cfg.source
     with_linear = all(_has_linear(s / lvl) for s in settings for lvl in levels)
     kind = ("linear" if with_linear else "png") if source == "auto" else source
-    gamma = args.gamma or "srgb"
-    table = noise_table(args.kpn_levels)
+    gamma = cfg.gamma or "srgb"
+    table = noise_table(kpn_path(cfg))
     gains_sigmas = gain_sigmas(gains, table)
-    params = _params(args, kind, gamma, table, downsample, clean_policy)
+    params = _params(cfg, kind, gamma, table, downsample, clean_policy)
 
     # Check every unit before writing anything: a bad build fails with nothing written.
     units = [
-        _plan_unit(s, lvl, out, args.seed, gains, args.frames, kind, clean_policy, downsample)
+        _plan_unit(s, lvl, out, cfg.seed, gains, cfg.frames, kind, clean_policy, downsample)
         for s in settings
         for lvl in levels
     ]
@@ -421,7 +423,7 @@ def run(args) -> int:
     layout.refuse_inside_settings(out)
     outputs.claim(out, NOISE, "--out")  # refused before the lock creates anything
     with outputs.lock(out, NOISE):
-        _prepare_out(out, build, params, args.overwrite)
+        _prepare_out(out, build, params, cfg.overwrite)
         # Pending gains once more: --overwrite may just have removed units.
         for u in units:
             u.pending = [g for g in gains if not layout.is_complete(u.dst / gain_name(g))]
@@ -429,10 +431,10 @@ def run(args) -> int:
         written = 0
         todo = [u for u in units if u.pending]
         skipped = sum(len(gains) - len(u.pending) for u in units)
-        show = not getattr(args, "quiet", False) and sys.stderr.isatty()
+        show = not cfg.quiet and sys.stderr.isatty()
         for n, u in enumerate(todo, 1):
-            wb = _core.noise_white_balance(u.seed) if args.profile == "paper" else None
-            _write_unit(u, gains_sigmas, wb, params, args, build)
+            wb = _core.noise_white_balance(u.seed) if cfg.profile == "paper" else None
+            _write_unit(u, gains_sigmas, wb, params, cfg, build)
             written += len(u.pending)
             if show:
                 print(f"\r{n}/{len(todo)} levels noised", end="", file=sys.stderr, flush=True)

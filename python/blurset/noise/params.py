@@ -15,38 +15,20 @@ from blurset.exceptions import ConfigError, InputError, reason_of
 if TYPE_CHECKING:
     from blurset import _records
 
-# The gain levels of the LLFF-N benchmark (NAN, Pearl et al. 2022).
-LLFF_N_GAINS = (1.0, 2.0, 4.0, 8.0, 16.0, 20.0)
 NoiseTable = tuple[float, float, float, float]
 
 
-def check_options(args) -> None:
-    """The options both noise modes share: frames, white level, seed."""
-    if args.frames < 1:
-        raise ConfigError(f"--frames {args.frames}: must be >= 1")
-    if not (1e-6 <= args.white_level <= 1.0):
-        raise ConfigError(f"--white-level {args.white_level}: must be in [1e-6, 1]")
-    if not (0 <= args.seed < 2**64):
-        raise ConfigError(f"--seed {args.seed}: must be in [0, 2^64)")
+def kpn_path(cfg: _core.NoiseConfig) -> Path | None:
+    """The `--kpn-levels` file of a config, or None."""
+    return Path(cfg.kpn_levels) if cfg.kpn_levels else None
 
 
-def parse_gains(values: list[str], any_gain: bool) -> list[float]:
+def gains_of(cfg: _core.NoiseConfig) -> list[float]:
+    """The gains of a config as numbers, in the order given (the core has checked each:
+    a positive number, an LLFF-N level unless --any-gain, none twice); two that would
+    share a gain_<g>/ folder are refused."""
     gains: list[float] = []
-    for v in values:
-        try:
-            g = float(v)
-        except ValueError:
-            raise ConfigError(f"unknown gain {v!r} (--gains): not a number") from None
-        if not (math.isfinite(g) and g > 0):
-            raise ConfigError(f"unknown gain {v!r} (--gains): gains are positive numbers")
-        if not any_gain and g not in LLFF_N_GAINS:
-            known = " ".join(f"{k:g}" for k in LLFF_N_GAINS)
-            raise ConfigError(
-                f"unknown gain {v!r} (--gains): the LLFF-N levels are {known}; "
-                "pass --any-gain for other values"
-            )
-        if g in gains:
-            raise ConfigError(f"gain {v!r} given twice (--gains)")
+    for v, g in zip(cfg.gains, cfg.gain_values, strict=True):
         same = next((h for h in gains if layout.gain_name(h) == layout.gain_name(g)), None)
         if same is not None:
             raise ConfigError(
@@ -133,8 +115,6 @@ def every_kth(n_views: int, k: int | None) -> list[int]:
     """Views 0, K, 2K … (`--clean-views K`); none when K is None."""
     if k is None:
         return []
-    if k < 1:
-        raise ConfigError(f"--clean-views {k}: must be >= 1")
     return list(range(0, n_views, k))
 
 

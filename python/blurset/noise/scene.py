@@ -17,17 +17,16 @@ from pathlib import Path
 import numpy as np
 
 from blurset import __version__, _core, layout, outputs
-from blurset.config import check_downsample, parse_downsample
 from blurset.exceptions import ConfigError, InputError
 from blurset.noise.params import (
-    check_options,
     copy_clean,
     every_kth,
     files_record,
     gain_sigmas,
+    gains_of,
+    kpn_path,
     noise_json,
     noise_table,
-    parse_gains,
     table_record,
 )
 from blurset.stop import interruptible, remove_tree
@@ -68,26 +67,24 @@ def output_names(sources: list[Path], frames: int) -> list[str]:
     return [f"view{i:0{vw}d}_f{k:0{fw}d}" for i in range(len(sources)) for k in range(frames)]
 
 
-def run(args) -> int:
+def run(scene: Path, cfg: _core.NoiseConfig) -> int:
     """The single-scene mode: SCENE is one LLFF scene."""
-    scene: Path = args.scene
-    out: Path = args.out
-    if args.levels is not None:
+    assert cfg.out is not None  # a required flag
+    out = Path(cfg.out)
+    if cfg.levels is not None:
         raise ConfigError(f"--levels applies to a build (no dataset.json in {scene})")
-    if args.noisy_test_views:
+    if cfg.noisy_test_views:
         raise ConfigError(
             f"--noisy-test-views applies to a build (no dataset.json in {scene}); "
             "a scene is noised whole unless --clean-views K"
         )
-    if args.source != "auto":
+    if cfg.source != "auto":
         raise ConfigError(f"--source applies to a build (no dataset.json in {scene})")
-    args.gamma = args.gamma or "2.2"
-    if args.factor is not None and args.factor < 1:
-        raise ConfigError(f"--factor {args.factor}: must be >= 1")
-    check_options(args)
-    gains = parse_gains(args.gains, args.any_gain)
+    gamma = cfg.gamma or "2.2"
+    gains = gains_of(cfg)
+    kpn = kpn_path(cfg)
 
-    image_dir = scene / (layout.images_dir(args.factor) if args.factor else layout.IMAGES)
+    image_dir = scene / (layout.images_dir(cfg.factor) if cfg.factor else layout.IMAGES)
     if not image_dir.is_dir():
         raise InputError(f"image directory not found: {image_dir}")
     poses_path = scene / layout.POSES_BOUNDS
@@ -114,26 +111,26 @@ def run(args) -> int:
             raise InputError(f"image size {w}x{h} differs from {w0}x{h0} of {sources[0].name}: {p}")
     width, height = sizes[sources[0]]
 
-    levels = noise_table(args.kpn_levels)
+    levels = noise_table(kpn)
     sigmas = gain_sigmas(gains, levels)
-    wb = _core.noise_white_balance(args.seed) if args.profile == "paper" else None
-    factor = args.factor or 1
-    names = output_names(sources, args.frames)
-    clean = every_kth(len(sources), args.clean_views)
-    downsample = check_downsample(parse_downsample(args.downsample)) if args.downsample else []
+    wb = _core.noise_white_balance(cfg.seed) if cfg.profile == "paper" else None
+    factor = cfg.factor or 1
+    names = output_names(sources, cfg.frames)
+    clean = every_kth(len(sources), cfg.clean_views)
+    downsample = list(cfg.downsample or [])
     bad = next((f for f in downsample if width % f or height % f), None)
     if bad is not None:
         raise ConfigError(f"--downsample {bad}: does not divide the image size {width}x{height}")
 
     layout.refuse_overlap(out, [scene])
     layout.refuse_inside_settings(out)
-    if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not args.overwrite:
+    if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not cfg.overwrite:
         raise ConfigError(
             f"--out is a noise output already (pass --overwrite to replace it): {out}"
         )
     with outputs.lock(out, NOISE_SCENE):
         # Claimed again under the lock: another run may have written it meanwhile.
-        if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not args.overwrite:
+        if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not cfg.overwrite:
             raise ConfigError(f"--out is a noise output already (pass --overwrite): {out}")
         # A killed run's staging tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
         layout.remove_stale_temps(out, [STAGE])
@@ -143,45 +140,45 @@ def run(args) -> int:
             variants = []
             for g in gains:
                 sr, ss = sigmas[g]
-                variants.append((tmp / layout.gain_name(g), sr, ss, _core.noise_key(args.seed, g)))
+                variants.append((tmp / layout.gain_name(g), sr, ss, _core.noise_key(cfg.seed, g)))
             interruptible(
                 _core.noise_write_variants,
                 sources,
                 names,
                 variants,
-                frames=args.frames,
-                gamma=args.gamma,
+                frames=cfg.frames,
+                gamma=gamma,
                 white_balance=wb,
-                white_level=args.white_level,
+                white_level=cfg.white_level,
                 downsample=downsample,
                 clean_views=clean,
             )
             # The scene's own images_<f>/ are its clean images of that size (not with --factor).
-            small = {} if args.factor else {f: scene / layout.images_dir(f) for f in downsample}
+            small = {} if cfg.factor else {f: scene / layout.images_dir(f) for f in downsample}
             for gdir, *_ in variants:
-                copy_clean(gdir, sources, names, args.frames, clean, small)
+                copy_clean(gdir, sources, names, cfg.frames, clean, small)
             # Every frame of a view shares its pose: the rows repeat, so a burst stays a
             # valid LLFF scene (N * frames images, N * frames rows).
-            out_rows = np.repeat(np.asarray(rows, dtype=np.float64), args.frames, axis=0)
+            out_rows = np.repeat(np.asarray(rows, dtype=np.float64), cfg.frames, axis=0)
             out_rows[:, 4] = height
             out_rows[:, 9] = width
             out_rows[:, 14] = out_rows[:, 14] / factor
-            files = files_record([p.name for p in sources], names, args.frames, set(clean))
+            files = files_record([p.name for p in sources], names, cfg.frames, set(clean))
             for g, (gdir, sr, ss, _key) in zip(gains, variants, strict=True):
                 _core.write_poses_bounds(gdir / layout.POSES_BOUNDS, out_rows)
                 doc = noise_json(
                     gain=g,
-                    seed=args.seed,
+                    seed=cfg.seed,
                     sigmas=(sr, ss),
-                    gamma=args.gamma,
+                    gamma=gamma,
                     white_balance=wb,
-                    white_level=args.white_level,
-                    frames=args.frames,
-                    profile=args.profile,
+                    white_level=cfg.white_level,
+                    frames=cfg.frames,
+                    profile=cfg.profile,
                     model=MODEL,
                     levels={
-                        **table_record(levels, args.kpn_levels),
-                        "file": args.kpn_levels.name if args.kpn_levels else None,
+                        **table_record(levels, kpn),
+                        "file": kpn.name if kpn else None,
                     },
                     source={
                         "scene": scene.resolve().name,
@@ -208,8 +205,8 @@ def run(args) -> int:
                     "blurset_version": __version__,
                     "scene": scene.resolve().name,
                     "gains": [gdir.name for gdir, *_ in variants],
-                    "seed": args.seed,
-                    "profile": args.profile,
+                    "seed": cfg.seed,
+                    "profile": cfg.profile,
                 },
             )
         finally:

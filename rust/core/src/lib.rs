@@ -35,6 +35,7 @@ pub use crate::image::io::{image_info, read_image, Image, Samples};
 pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
 
 // Sensor noise, from 8/16-bit images or from a build's linear EXRs.
+pub use crate::noise::config::NoiseConfig;
 pub use crate::noise::kernel::{add_noise, clean_linear};
 pub use crate::noise::linear::{add_noise_linear, clean_from_linear, read_linear, LinearRgb};
 pub use crate::noise::model::{

@@ -225,6 +225,81 @@ blurset_core::build_options!(py_build_config {
     }
 });
 
+/// Every option of `blurset noise`, validated (frozen).
+///
+/// `NoiseConfig(**values)` takes option names (`gains=["1", "4"]`, `frames=2` …) over
+/// the defaults; a bad value raises ConfigValueError naming the option.
+#[pyclass(
+    frozen,
+    eq,
+    skip_from_py_object,
+    name = "NoiseConfig",
+    module = "blurset._core"
+)]
+#[derive(Clone, PartialEq)]
+pub struct NoiseConfig(pub core::NoiseConfig);
+
+// A getter per option of the core's `noise_options!` table, and the methods below.
+macro_rules! py_noise_config {
+    (
+        { $($methods:tt)* }
+        $(#[doc = $sdoc:expr])*
+        $cfg:ident, $command:literal;
+        $(
+            $(#[doc = $doc:expr])*
+            $name:ident : $ty:ty = $default:expr, $spec:expr, $shape:ident
+                { $($k:ident : $v:expr),* $(,)? };
+        )*
+    ) => {
+        #[pymethods]
+        impl NoiseConfig {
+            $(
+                #[getter]
+                fn $name<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+                    crate::sampling::to_py(py, &self.0.$name)
+                }
+            )*
+            $($methods)*
+        }
+    };
+}
+
+blurset_core::noise_options!(py_noise_config {
+    #[new]
+    #[pyo3(signature = (**values))]
+    fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let v = raw_values(values)?;
+        core::NoiseConfig::from_values(&v)
+            .map(NoiseConfig)
+            .map_err(crate::error::to_pyerr)
+    }
+
+    /// The gains as numbers, in the order given.
+    #[getter]
+    fn gain_values(&self) -> PyResult<Vec<f64>> {
+        self.0.gain_values().map_err(crate::error::to_pyerr)
+    }
+
+    /// The option names, in declaration order.
+    #[staticmethod]
+    fn options() -> Vec<&'static str> {
+        core::NoiseConfig::OPTIONS.to_vec()
+    }
+
+    /// Every option as the core declares it, in declaration order.
+    #[staticmethod]
+    fn declarations() -> Vec<OptionDecl> {
+        core::NoiseConfig::declarations()
+            .into_iter()
+            .map(OptionDecl)
+            .collect()
+    }
+
+    fn __repr__(&self) -> String {
+        format!("NoiseConfig({:?})", self.0)
+    }
+});
+
 /// One option as its declaration in the core states it: the flags, help, TOML keys,
 /// range, defaults and whether it shapes the outputs (python/blurset/options.py makes the
 /// parsers and the CLI reference from these).
@@ -322,6 +397,11 @@ impl OptionDecl {
     fn metavar(&self) -> Option<&'static str> {
         self.0.metavar
     }
+    /// The titled section of the help its flag is listed under (None: the command's).
+    #[getter]
+    fn section(&self) -> Option<&'static str> {
+        self.0.section
+    }
     fn __repr__(&self) -> String {
         format!("OptionDecl({:?})", self.0.name)
     }
@@ -335,6 +415,7 @@ fn check_downsample(factors: Vec<u32>) -> PyResult<()> {
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<BuildConfig>()?;
+    m.add_class::<NoiseConfig>()?;
     m.add_class::<OptionDecl>()?;
     m.add_function(wrap_pyfunction!(check_downsample, m)?)?;
     Ok(())

@@ -17,6 +17,7 @@
 //! `kernel` the per-image kernel (AVX2 where the CPU has it, bit for bit the scalar
 //! path), `linear` the same noise from a build's linear EXRs, and `variants` the files
 //! of a scene's variants.
+pub mod config;
 pub mod kernel;
 pub mod linear;
 pub mod model;

@@ -35,6 +35,8 @@ pub struct Meta<T> {
     pub group: Option<&'static str>,
     /// The flag's value as usage shows it (default: the name in capitals).
     pub metavar: Option<&'static str>,
+    /// The titled section of the help its flag is listed under (none: the command's).
+    pub section: Option<&'static str>,
 }
 
 impl<T> Meta<T> {
@@ -50,6 +52,7 @@ impl<T> Meta<T> {
             demo: None,
             group: None,
             metavar: None,
+            section: None,
         }
     }
 }
@@ -89,6 +92,8 @@ pub struct OptionInfo {
     pub shapes_outputs: bool,
     pub group: Option<&'static str>,
     pub metavar: Option<&'static str>,
+    /// The titled section of the help its flag is listed under.
+    pub section: Option<&'static str>,
 }
 
 impl OptionInfo {
@@ -138,6 +143,7 @@ impl OptionInfo {
             shapes_outputs,
             group: meta.group,
             metavar: meta.metavar,
+            section: meta.section,
         }
     }
 }

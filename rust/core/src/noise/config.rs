@@ -1,0 +1,208 @@
+//! The noise configuration: every option of `blurset noise`, its default, its range and
+//! the one validator, declared once like the build's (`noise_options!`, made into a
+//! struct by [`config_struct!`]). Python makes the command's flags from
+//! [`NoiseConfig::declarations`] and passes the validated config through the noise
+//! modes; an error names the option, which Python turns into its flag.
+use crate::error::Result;
+use crate::plan::options::{config_struct, shapes_outputs, Meta, OptionInfo};
+use crate::plan::spec::{check, config_error, convert, specs, Kind, Raw, Spec};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The gain levels of the LLFF-N benchmark (NAN, Pearl et al. 2022).
+pub const LLFF_N_GAINS: [f64; 6] = [1.0, 2.0, 4.0, 8.0, 16.0, 20.0];
+
+/// A count of at least one with no upper bound of its own.
+const AT_LEAST_ONE: Spec = Spec::int(1, u32::MAX as i128);
+
+/// The options of `blurset noise`, declared once: `name: Type = default, range,
+/// shapes|run { flags, help, … }` ([`crate::plan::options::Meta`]). The table is a
+/// macro so that one list makes the struct here and the binding's getters
+/// (`rust/py/src/config.rs`).
+#[macro_export]
+macro_rules! noise_options {
+    ($then:ident $({ $($extra:tt)* })?) => { $then! { $({ $($extra)* })?
+    /// Every option of `blurset noise` (see the module docs).
+    NoiseConfig, "blurset noise";
+    /// The output directory.
+    out: Option<String> = None, Spec::Str, run {
+        help: "output directory (must not exist; required)",
+    };
+    /// Gains as given (numbers; the LLFF-N levels unless any_gain).
+    gains: Vec<String> = vec!["1".into(), "2".into(), "4".into(), "8".into(), "16".into(),
+        "20".into()], Spec::StrList, shapes {
+        help: "gain levels, each one of the LLFF-N levels unless --any-gain",
+    };
+    /// Read images_<F>/ of a scene and divide its focal length by F.
+    factor: Option<u32> = None, AT_LEAST_ONE, shapes {
+        help: "read images_<F>/ and divide the focal length by F",
+        unset: Some("images/"),
+    };
+    seed: u64 = 0, specs::SEED, shapes {
+        help: "seed of all noise and white balance",
+    };
+    profile: String = "paper".into(), Spec::Choice(&["paper", "nan"]), shapes {
+        help: "paper: random white balance per scene; nan: none (parity with NAN's evaluation)",
+    };
+    frames: u32 = 1, AT_LEAST_ONE, shapes {
+        help: "independent noisy frames per view",
+    };
+    /// KPN's synthetic test file (.npz) whose sigmas NAN used.
+    kpn_levels: Option<String> = None, Spec::Str, shapes {
+        help: "KPN's synthetic test file (.npz with sig_read, sig_shot) to reproduce NAN's \
+            sigmas",
+        unset: Some("none, the LLFF-N sigma table"),
+    };
+    /// Transfer curve; None: 2.2 for a scene, srgb for a build.
+    gamma: Option<String> = None, Spec::Choice(&["2.2", "srgb"]), shapes {
+        help: "transfer curve",
+        unset: Some("2.2 as NAN for a scene; srgb, the build's own curve, for a build"),
+    };
+    white_level: f64 = 1.0, Spec::Num { lo: 1e-6, lo_open: false, hi: 1.0, hi_open: false },
+        shapes {
+        help: "linear value of white, in [1e-6, 1]",
+    };
+    any_gain: bool = false, Spec::Bool, run {
+        help: "allow gains outside the LLFF-N levels",
+    };
+    /// images_<f>/ and linear_<f>/ per gain; None: a build's own factors, a scene none.
+    downsample: Option<Vec<u32>> = None, Spec::Factors, shapes {
+        help: "also images_<f>/ and linear_<f>/ per gain, noise drawn at that size on the \
+            clean image area-averaged in linear light",
+        unset: Some("a build's own factors; a scene: none"),
+    };
+    /// Every K-th view stays clean.
+    clean_views: Option<u32> = None, AT_LEAST_ONE, shapes {
+        help: "every K-th view stays clean, as a held-out target",
+        unset: Some("a scene none; a build its test views, unless --noisy-test-views"),
+        metavar: Some("K"),
+    };
+    overwrite: bool = false, Spec::Bool, run {
+        help: "replace OUT if it exists",
+    };
+    /// Levels of a build to noise (`sharp,blur_4`); None: all.
+    levels: Option<String> = None, Spec::Str, shapes {
+        kind: Some(Kind::Text),
+        help: "levels to noise, e.g. sharp,blur_4",
+        unset: Some("all"),
+        section: Some("build mode (SCENE is a build directory)"),
+    };
+    source: String = "auto".into(), Spec::Choice(&["auto", "linear", "png"]), shapes {
+        help: "clean image: the build's linear EXRs (--keep-linear) or its PNGs \
+            (auto: linear when every chosen level has them)",
+        section: Some("build mode (SCENE is a build directory)"),
+    };
+    noisy_test_views: bool = false, Spec::Bool, shapes {
+        help: "noise the build's test views too (off: they stay clean, NAN's protocol)",
+        section: Some("build mode (SCENE is a build directory)"),
+    };
+    quiet: bool = false, Spec::Bool, run {
+        help: "no progress line",
+        section: Some("build mode (SCENE is a build directory)"),
+    };
+    } };
+}
+
+noise_options!(config_struct);
+
+impl NoiseConfig {
+    /// Defaults overridden by `values` (option name → value), then validated.
+    pub fn from_values(values: &BTreeMap<String, Raw>) -> Result<NoiseConfig> {
+        let mut cfg = NoiseConfig::default();
+        for (k, v) in values {
+            cfg.set(k, v)?;
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The one validator: every field in its range, then the gains.
+    pub fn validate(&self) -> Result<()> {
+        self.check_fields()?;
+        self.gain_values()?;
+        Ok(())
+    }
+
+    /// The gains as numbers, in the order given: each a positive finite number, one of
+    /// the LLFF-N levels unless `any_gain`, none twice.
+    pub fn gain_values(&self) -> Result<Vec<f64>> {
+        let mut out: Vec<f64> = Vec::new();
+        for v in &self.gains {
+            let g: f64 = v
+                .trim()
+                .parse()
+                .map_err(|_| config_error("gains", format!("unknown gain '{v}': not a number")))?;
+            if !(g.is_finite() && g > 0.0) {
+                return Err(config_error(
+                    "gains",
+                    format!("unknown gain '{v}': gains are positive numbers"),
+                ));
+            }
+            if !self.any_gain && !LLFF_N_GAINS.contains(&g) {
+                return Err(config_error(
+                    "gains",
+                    format!(
+                        "unknown gain '{v}': the LLFF-N levels are 1 2 4 8 16 20; pass \
+                         --any-gain for other values"
+                    ),
+                ));
+            }
+            if out.contains(&g) {
+                return Err(config_error("gains", format!("gain '{v}' given twice")));
+            }
+            out.push(g);
+        }
+        if out.is_empty() {
+            return Err(config_error(
+                "gains",
+                "none given: at least one gain".into(),
+            ));
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::options::check_declarations;
+
+    fn with(k: &str, v: Raw) -> Result<NoiseConfig> {
+        NoiseConfig::from_values(&BTreeMap::from([(k.to_string(), v)]))
+    }
+
+    fn err(k: &str, v: Raw) -> String {
+        with(k, v).err().map(|e| e.to_string()).unwrap_or_default()
+    }
+
+    #[test]
+    fn the_declarations_hold() {
+        assert_eq!(check_declarations(&NoiseConfig::declarations()), Ok(()));
+        let d = NoiseConfig::default();
+        assert_eq!(d.gains.len(), 6);
+        assert_eq!((d.frames, d.seed, d.white_level), (1, 0, 1.0));
+        assert_eq!(d.gain_values().ok(), Some(LLFF_N_GAINS.to_vec()));
+    }
+
+    #[test]
+    fn a_bad_value_names_its_option() {
+        assert!(err("frames", Raw::Int(0)).starts_with("frames 0:"));
+        assert!(err("white_level", Raw::Float(2.0)).starts_with("white_level "));
+        assert!(err("seed", Raw::Int(-1)).starts_with("seed -1:"));
+        assert!(err("factor", Raw::Int(0)).starts_with("factor 0:"));
+        assert!(err("clean_views", Raw::Int(0)).starts_with("clean_views 0:"));
+        assert!(err("profile", Raw::Str("x".into())).starts_with("profile"));
+        let g = |v: &[&str]| Raw::List(v.iter().map(|s| Raw::Str(s.to_string())).collect());
+        assert!(err("gains", g(&["1", "3"])).contains("unknown gain '3'"));
+        assert!(err("gains", g(&["x"])).contains("not a number"));
+        assert!(err("gains", g(&["2", "2"])).contains("given twice"));
+        let any = NoiseConfig::from_values(&BTreeMap::from([
+            ("gains".to_string(), g(&["3"])),
+            ("any_gain".to_string(), Raw::Bool(true)),
+        ]));
+        assert_eq!(
+            any.ok().map(|c| c.gain_values().ok()),
+            Some(Some(vec![3.0]))
+        );
+    }
+}
