@@ -59,9 +59,10 @@ fn raw_values(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<BTreeMap<String, c
 #[derive(Clone, PartialEq)]
 pub struct BuildConfig(pub core::BuildConfig);
 
-// One #[pymethods] block per class: a getter per option of the core's declaration
-// table (`build_options!`), and the methods below.
-macro_rules! py_build_config {
+// One #[pymethods] block per config class: a getter per option of the core's
+// declaration table (`build_options!`, `noise_options!`; the table names the class, which
+// this module defines under the core's name), and the methods given.
+macro_rules! py_config {
     (
         { $($methods:tt)* }
         $(#[doc = $sdoc:expr])*
@@ -73,7 +74,7 @@ macro_rules! py_build_config {
         )*
     ) => {
         #[pymethods]
-        impl BuildConfig {
+        impl $cfg {
             $(
                 #[getter]
                 fn $name<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
@@ -85,7 +86,7 @@ macro_rules! py_build_config {
     };
 }
 
-blurset_core::build_options!(py_build_config {
+blurset_core::build_options!(py_config {
     #[new]
     #[pyo3(signature = (**values))]
     fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
@@ -239,32 +240,7 @@ blurset_core::build_options!(py_build_config {
 #[derive(Clone, PartialEq)]
 pub struct NoiseConfig(pub core::NoiseConfig);
 
-// A getter per option of the core's `noise_options!` table, and the methods below.
-macro_rules! py_noise_config {
-    (
-        { $($methods:tt)* }
-        $(#[doc = $sdoc:expr])*
-        $cfg:ident, $command:literal;
-        $(
-            $(#[doc = $doc:expr])*
-            $name:ident : $ty:ty = $default:expr, $spec:expr, $shape:ident
-                { $($k:ident : $v:expr),* $(,)? };
-        )*
-    ) => {
-        #[pymethods]
-        impl NoiseConfig {
-            $(
-                #[getter]
-                fn $name<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-                    crate::sampling::to_py(py, &self.0.$name)
-                }
-            )*
-            $($methods)*
-        }
-    };
-}
-
-blurset_core::noise_options!(py_noise_config {
+blurset_core::noise_options!(py_config {
     #[new]
     #[pyo3(signature = (**values))]
     fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
