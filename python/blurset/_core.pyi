@@ -399,6 +399,13 @@ def read_mean_poses(meta: str | PathLike[str], level: int) -> list[list[list[flo
     """The mean latent pose (OpenGL c2w rows) of blur level `level` of every view of a
     setting's meta.json, or None for a meta.json from before mean poses."""
 
+def read_exposure_ends(
+    meta: str | PathLike[str], level: int
+) -> list[tuple[list[list[float]], list[list[float]]] | None] | None:
+    """The first and last latent camera (OpenGL c2w rows, in time) of each view's exposure
+    in blur level `level`: None for a view whose image is a sharp copy or that has under
+    two frames; None overall for a meta.json from before mean poses."""
+
 def gain_name(gain: float) -> str:
     """Directory name of a noise gain (`gain_4`, `gain_2.5`)."""
 

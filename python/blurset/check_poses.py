@@ -177,58 +177,29 @@ def mean_latent_poses(scene_dir: Path, n: int):
     return c2w[:, :3, :3] * np.array([1.0, -1.0, -1.0]), c2w[:, :3, 3]
 
 
-def _orbit_c2w(frame: dict) -> np.ndarray:
-    """OpenGL camera-to-world of a camera at (r, phi, theta) looking at the origin, world
-    Z up (blurset-core's `orbit_c2w`)."""
-    phi = np.radians(np.clip(frame["phi_deg"], 0.5, 179.5))
-    theta = np.radians(frame["theta_deg"])
-    eye = frame["r"] * np.array(
-        [np.sin(phi) * np.cos(theta), np.sin(phi) * np.sin(theta), np.cos(phi)]
-    )
-    fwd = -eye / np.linalg.norm(eye)
-    right = np.cross(fwd, [0.0, 0.0, 1.0])
-    if np.dot(right, right) < 1e-18:
-        right = np.cross(fwd, [0.0, 1.0, 0.0])
-    right /= np.linalg.norm(right)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, np.cross(right, fwd), -fwd, eye
-    return m
-
-
 def exposure_ends(scene_dir: Path, mean):
     """OpenCV ((rotations, centres) at the first latent frame, (…) at the last) of each
-    view's exposure in a blur level of a build setting (meta.json), where the streaks a
-    blurry image shows begin and end (the first and last motion key under the motion blur
-    method); the mean latent pose for a view whose image is a sharp copy or that has
-    neither (no streak). None when meta.json does not say."""
-    meta = layout.read_json(scene_dir.parent / layout.META)
-    level = str(_core.parse_level_dir(scene_dir.name))
-    sharp_copies = (
-        set(meta.get("test_views", [])) if meta.get("test_view_images") == "sharp" else set()
-    )
-    rot_mean, c_mean = mean
-    ends = [(rot_mean.copy(), c_mean.copy()), (rot_mean.copy(), c_mean.copy())]
-    try:
-        for i, view in enumerate(meta["views"]):
-            lp = view["levels"][level]
-            # The average method's latent frames, or the motion blur method's keys (its
-            # exposure runs from the first key to the last).
-            frames = lp.get("latent_frames") or (lp.get("motion_blur") or {}).get("keys") or []
-            frames = sorted(frames, key=lambda f: f["t"])
-            if i in sharp_copies or len(frames) < 2:
-                continue
-            # The mean pose as meta.json records it, over the orbit it lies on: the
-            # camera-local remainder (none today) is carried to the latent frames.
-            local = np.linalg.inv(_orbit_c2w(lp["mean_pose"])) @ np.asarray(
-                lp["mean_pose"]["c2w"], dtype=np.float64
-            )
-            for (rot, c), frame in zip(ends, (frames[0], frames[-1]), strict=True):
-                c2w = _orbit_c2w(frame) @ local
-                rot[i] = c2w[:3, :3] * np.array([1.0, -1.0, -1.0])
-                c[i] = c2w[:3, 3]
-    except (KeyError, TypeError, IndexError):
+    view's exposure in a blur level of a build setting (meta.json, read by the core), where
+    the streaks a blurry image shows begin and end (the first and last motion key under
+    the motion blur method); the mean latent pose for a view whose image is a sharp copy
+    or that has neither (no streak). None when meta.json does not say."""
+    level = _core.parse_level_dir(scene_dir.name)
+    if level is None:
         return None
-    return ends
+    ends = _core.read_exposure_ends(scene_dir.parent / layout.META, level)
+    if ends is None:
+        return None
+    rot_mean, c_mean = mean
+    out = [(rot_mean.copy(), c_mean.copy()), (rot_mean.copy(), c_mean.copy())]
+    for i, pair in enumerate(ends):
+        if pair is None:
+            continue
+        for (rot, c), rows in zip(out, pair, strict=True):
+            c2w = np.asarray(rows, dtype=np.float64)
+            # OpenGL (right, up, backwards) → OpenCV (right, down, forward).
+            rot[i] = c2w[:3, :3] * np.array([1.0, -1.0, -1.0])
+            c[i] = c2w[:3, 3]
+    return out
 
 
 # --------------------------------------------------------------------------- COLMAP

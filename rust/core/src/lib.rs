@@ -61,7 +61,9 @@ pub use crate::dataset::manifest::{
     check_manifest, list_files as manifest_files, sha256_file, update_manifest, write_manifest,
     ManifestProblem, MANIFEST,
 };
-pub use crate::dataset::meta::{read_mean_poses, write_json, Meta, ObjectRecord, Timings};
+pub use crate::dataset::meta::{
+    read_exposure_ends, read_mean_poses, write_json, Meta, ObjectRecord, Pose, Timings,
+};
 pub use crate::dataset::outputs::{
     build_state, claim, mark_text, output_kind, owned_entries, remove_owned, superseded_settings,
     text_owner, BuildState, Claim, OutputKind, TextOwner,

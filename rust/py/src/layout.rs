@@ -63,6 +63,19 @@ fn read_mean_poses(
     crate::run_detached(py, || core::read_mean_poses(&meta, level))
 }
 
+/// The first and last latent camera (OpenGL c2w rows) of each view's exposure in blur level
+/// `level` (None: a sharp copy or under two frames), or None for a meta.json from before
+/// mean poses.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn read_exposure_ends(
+    py: Python<'_>,
+    meta: PathBuf,
+    level: u32,
+) -> PyResult<Option<Vec<Option<[core::Pose; 2]>>>> {
+    crate::run_detached(py, || core::read_exposure_ends(&meta, level))
+}
+
 /// The image folder at downsampling factor `factor` (`images`, `images_4`).
 #[pyfunction]
 fn images_dir(factor: u32) -> String {
@@ -194,6 +207,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sort_level_dirs, m)?)?;
     m.add_function(wrap_pyfunction!(setting_levels, m)?)?;
     m.add_function(wrap_pyfunction!(read_mean_poses, m)?)?;
+    m.add_function(wrap_pyfunction!(read_exposure_ends, m)?)?;
     m.add_function(wrap_pyfunction!(gain_name, m)?)?;
     m.add_function(wrap_pyfunction!(partial_dir, m)?)?;
     m.add_function(wrap_pyfunction!(is_complete, m)?)?;

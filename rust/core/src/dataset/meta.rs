@@ -5,9 +5,10 @@ use super::splits::test_views;
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
 use crate::image::qa::FrameQa;
+use crate::plan::camera::orbit_c2w;
 use crate::plan::config::BuildConfig;
 use crate::plan::sampling::{
-    LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
+    rows, LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
 };
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -398,10 +399,29 @@ struct PoseRead {
     c2w: [[f64; 4]; 4],
 }
 
+/// A latent frame or motion key as meta.json records it: where on the orbit, when.
+#[derive(Deserialize)]
+struct OrbitRead {
+    t: f64,
+    r: f64,
+    phi_deg: f64,
+    theta_deg: f64,
+}
+
+#[derive(Deserialize)]
+struct MotionRead {
+    #[serde(default)]
+    keys: Vec<OrbitRead>,
+}
+
 #[derive(Deserialize)]
 struct LevelPoseRead {
     #[serde(default)]
     mean_pose: Option<PoseRead>,
+    #[serde(default)]
+    latent_frames: Vec<OrbitRead>,
+    #[serde(default)]
+    motion_blur: Option<MotionRead>,
 }
 
 #[derive(Deserialize)]
@@ -431,9 +451,7 @@ pub fn read_mean_poses(path: &Path, level: u32) -> Result<Option<Vec<[[f64; 4]; 
         reason,
         path: path.to_path_buf(),
     };
-    let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read meta.json", path, e))?;
-    let meta: MetaPoseRead =
-        serde_json::from_slice(&bytes).map_err(|e| bad(format!("corrupt meta.json ({e})")))?;
+    let meta = read_pose_meta(path)?;
     let key = level.to_string();
     let mut poses = Vec::with_capacity(meta.views.len());
     for (i, v) in meta.views.iter().enumerate() {
@@ -455,6 +473,56 @@ pub fn read_mean_poses(path: &Path, level: u32) -> Result<Option<Vec<[[f64; 4]; 
     }
     Ok(Some(poses))
 }
+
+fn read_pose_meta(path: &Path) -> Result<MetaPoseRead> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read meta.json", path, e))?;
+    serde_json::from_slice(&bytes).map_err(|e| Error::Input {
+        reason: format!("corrupt meta.json ({e})"),
+        path: path.to_path_buf(),
+    })
+}
+
+/// Where each view's exposure of blur level `level` opens and closes: the OpenGL
+/// camera-to-world (row-major) of its first and last latent frame in time (first and last
+/// motion key under the motion blur method), the ends of the streaks a blurry image shows.
+/// None for a view whose image is a sharp copy (`test_view_images` sharp) or that has
+/// fewer than two frames; None overall for a meta.json from before mean poses.
+#[allow(clippy::type_complexity)]
+pub fn read_exposure_ends(path: &Path, level: u32) -> Result<Option<Vec<Option<[Pose; 2]>>>> {
+    let meta = read_pose_meta(path)?;
+    let key = level.to_string();
+    let mut ends = Vec::with_capacity(meta.views.len());
+    for (i, v) in meta.views.iter().enumerate() {
+        let Some(lp) = v.levels.get(&key) else {
+            return Err(Error::Input {
+                reason: format!("view {i} of meta.json has no blur level {level}"),
+                path: path.to_path_buf(),
+            });
+        };
+        if lp.mean_pose.is_none() {
+            return Ok(None);
+        }
+        let frames = match &lp.motion_blur {
+            Some(m) if lp.latent_frames.is_empty() => &m.keys,
+            _ => &lp.latent_frames,
+        };
+        let sharp_copy = meta.test_view_images == "sharp" && meta.test_views.contains(&i);
+        let by_t = |a: &&OrbitRead, b: &&OrbitRead| a.t.total_cmp(&b.t);
+        let pose = |f: &OrbitRead| rows(&orbit_c2w(f.r, f.phi_deg, f.theta_deg));
+        ends.push(
+            match (frames.iter().min_by(by_t), frames.iter().max_by(by_t)) {
+                (Some(first), Some(last)) if frames.len() >= 2 && !sharp_copy => {
+                    Some([pose(first), pose(last)])
+                }
+                _ => None,
+            },
+        );
+    }
+    Ok(Some(ends))
+}
+
+/// An OpenGL camera-to-world, row-major.
+pub type Pose = [[f64; 4]; 4];
 
 #[cfg(test)]
 mod tests {
@@ -549,11 +617,17 @@ mod tests {
             .collect();
         assert_eq!(poses, want);
         assert_ne!(plan.views[0].c2w, plan.views[0].levels["3"].mean_pose.c2w);
+        // The exposure's ends are its first and last latent camera; none at a sharp copy.
+        let ends = read_exposure_ends(&path, 3)?.expect("ends");
+        assert!(ends[0].is_none());
+        let frames = &plan.views[1].levels["3"].latent_frames;
+        assert_eq!(ends[1], Some([frames[0].c2w, frames[frames.len() - 1].c2w]));
         let mut blurry = v.clone();
         blurry["test_view_images"] = "blurry".into();
         write_json(&path, &blurry)?;
         let poses = read_mean_poses(&path, 3)?.expect("mean poses");
         assert_eq!(poses[0], plan.views[0].levels["3"].mean_pose.c2w);
+        assert!(read_exposure_ends(&path, 3)?.expect("ends")[0].is_some());
         assert!(matches!(
             read_mean_poses(&path, 2),
             Err(Error::Input { .. })
@@ -570,6 +644,7 @@ mod tests {
             None,
             "a meta.json from before mean poses"
         );
+        assert_eq!(read_exposure_ends(&path, 1)?, None);
         std::fs::write(&path, b"{").map_err(|e| Error::io("write", &path, e))?;
         assert!(matches!(
             read_mean_poses(&path, 1),

@@ -626,7 +626,7 @@ pub fn along(
     )
 }
 
-fn rows(m: &DMat4) -> [[f64; 4]; 4] {
+pub(crate) fn rows(m: &DMat4) -> [[f64; 4]; 4] {
     m.transpose().to_cols_array_2d()
 }
 
