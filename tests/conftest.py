@@ -1,4 +1,5 @@
-"""Shared fixtures. Tests that need third-party data read it from ../shared/data and skip
+"""Shared fixtures. Tests that need third-party data read it from ../shared/data (see
+_shared_data for a clone made elsewhere) and skip
 with a reason when it is absent (a user's clone); CI always has it, so under CI=true a
 missing ../shared/data or bpy fails the run instead of skipping it.
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import subprocess
 import tempfile
 from pathlib import Path
 
@@ -17,7 +19,29 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+def _shared_data() -> Path:
+    """../shared/data beside this checkout; for a clone made elsewhere (`git clone .
+    $(mktemp -d)`), the one beside the checkout it was cloned from; BLURSET_SHARED_DATA
+    names another place."""
+    if env := os.environ.get("BLURSET_SHARED_DATA"):
+        return Path(env)
+    here = ROOT.parent / "shared" / "data"
+    if here.exists():
+        return here
+    try:
+        origin = subprocess.run(
+            ["git", "-C", str(ROOT), "config", "--get", "remote.origin.url"],
+            capture_output=True, text=True, check=False,
+        ).stdout.strip()  # fmt: skip
+    except OSError:
+        return here
+    beside = Path(origin).parent / "shared" / "data" if origin.startswith("/") else None
+    return beside if beside is not None and beside.exists() else here
+
+
+SHARED_DATA = _shared_data()
 HAS_BPY = importlib.util.find_spec("bpy") is not None
 # In CI nothing may be skipped for want of bpy or the shared data: a hole there would
 # leave the run green with its render tests never run.
