@@ -10,7 +10,7 @@ import argparse
 import re
 import types
 from pathlib import Path
-from typing import Any, Union, get_args, get_origin
+from typing import Any, Literal, Union, get_args, get_origin
 
 from blurset import cli
 from blurset.build.cli import default_text
@@ -66,6 +66,8 @@ def _conforms(value: Any, hint: Any) -> bool:
         return any(_conforms(value, h) for h in get_args(hint))
     if hint is None or hint is type(None):
         return value is None
+    if origin is Literal:
+        return value in get_args(hint)
     if origin is list:
         (item,) = get_args(hint)
         return isinstance(value, list) and all(_conforms(v, item) for v in value)
@@ -106,7 +108,7 @@ def test_the_stub_types_every_option_as_the_core_gives_it() -> None:
     local = BuildConfig(gpus=[0, 1], workers=2)
     wrong = []
     for o in OPTIONS:
-        hint = eval(props[o], {"list": list, "tuple": tuple})  # noqa: S307 - our own stub
+        hint = eval(props[o], {"list": list, "tuple": tuple, "Literal": Literal})  # noqa: S307 - our own stub
         for cfg in (BuildConfig(), demo, local):
             if not _conforms(getattr(cfg, o), hint):
                 wrong.append(f"{o}: {getattr(cfg, o)!r} is not {props[o]}")

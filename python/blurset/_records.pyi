@@ -369,24 +369,26 @@ class BuildStats(TypedDict):
     view_setting: list[int]
     w_u: list[float]
 
+Denoise = Literal["none", "oidn"]
+
 class RenderRecord(TypedDict):
     """How the images were rendered and encoded."""
 
     adaptive_sampling: bool
     alpha: str
     background: list[float]
-    blur_budget: NotRequired[str]
+    blur_budget: NotRequired[BlurBudget]
     blur_budget_is: NotRequired[str]
-    blur_method: str
+    blur_method: BlurMethod
     cycles_samples: NotRequired[int | None]
-    denoise: NotRequired[str]
+    denoise: NotRequired[Denoise]
     denoise_is: NotRequired[str]
     denoiser: NotRequired[Any]
     device: NotRequired[Any]
     encoding: str
     engine: str
     exr_codec: str
-    latent_sampling: str
+    latent_sampling: LatentSampling
     latent_sampling_is: str
     latents: Any
     light_paths: NotRequired[Any]

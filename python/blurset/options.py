@@ -248,10 +248,19 @@ def python_type(rust: str) -> str:
     raise ValueError(f"no Python type for the Rust type {rust!r}")
 
 
+def property_type(d: Decl) -> str:
+    """The Python type of a config property: a choice is the Literal of its names (the
+    binding hands the value's name across), anything else from its Rust type."""
+    if not d.choices:
+        return python_type(d.rust_type)
+    names = ", ".join(f'"{c}"' for c in d.choices)
+    return f"Literal[{names}]" + (" | None" if d.optional else "")
+
+
 def stub_properties(decls: Sequence[Decl]) -> str:
     """The typed properties of a config class in _core.pyi, one per declaration."""
     body = "".join(
-        f"    @property\n    def {d.name}(self) -> {python_type(d.rust_type)}: ...\n" for d in decls
+        f"    @property\n    def {d.name}(self) -> {property_type(d)}: ...\n" for d in decls
     )
     return STUB_BEGIN + body + STUB_END
 

@@ -6,6 +6,7 @@ use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
 use crate::image::qa::FrameQa;
 use crate::plan::camera::orbit_c2w;
+use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling};
 use crate::plan::config::BuildConfig;
 use crate::plan::sampling::{
     rows, LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
@@ -67,26 +68,26 @@ pub struct RenderRecord {
     /// images (a budget split over m frames, or parity under `--latents auto`).
     pub samples_per_latent: Option<u32>,
     pub samples_total: Option<u32>,
-    pub blur_method: String,
+    pub blur_method: BlurMethod,
     /// A number, or "auto".
     pub latents: serde_json::Value,
     pub sharp_samples: u64,
     /// How a blurry image's latent frames share Cycles samples (issue 15): `subsets` or
     /// `independent`, in words in `latent_sampling_is`. Per level: `sample_sequence`;
     /// per latent frame: `seed` and `sample_offset`.
-    pub latent_sampling: String,
+    pub latent_sampling: LatentSampling,
     pub latent_sampling_is: String,
-    /// `parity` or `flat` (issue 15), in words in `blur_budget_is`; per level the result
-    /// is `samples_per_frame`.
-    #[serde(default)]
-    pub blur_budget: String,
+    /// `parity`, `need` or `flat`, in words in `blur_budget_is`; per level the result is
+    /// `samples_per_frame`. A record without it is of a build before the option: flat.
+    #[serde(default = "flat_budget")]
+    pub blur_budget: BlurBudget,
     #[serde(default)]
     pub blur_budget_is: String,
     /// `oidn` (issue 28): every image denoised once by Open Image Denoise, in words in
     /// `denoise_is`, with the library and device in `denoiser`; absent (as in builds before
     /// it) when the images are as rendered.
     #[serde(default = "no_denoise", skip_serializing_if = "is_no_denoise")]
-    pub denoise: String,
+    pub denoise: Denoise,
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub denoise_is: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -111,12 +112,16 @@ pub struct RenderRecord {
     pub linear: bool,
 }
 
-fn no_denoise() -> String {
-    "none".into()
+fn no_denoise() -> Denoise {
+    Denoise::None
 }
 
-fn is_no_denoise(s: &str) -> bool {
-    s == "none"
+fn is_no_denoise(d: &Denoise) -> bool {
+    *d == Denoise::None
+}
+
+fn flat_budget() -> BlurBudget {
+    BlurBudget::Flat
 }
 
 impl RenderRecord {
@@ -126,22 +131,28 @@ impl RenderRecord {
             // The count every latent frame renders, where one count holds for all of them.
             samples_per_latent: match cfg.samples_total {
                 Some(_) => None,
-                None if cfg.blur_budget == "need" && cfg.blur_method == "average" => None,
-                None if cfg.blur_budget == "parity" && cfg.blur_method == "average" => {
+                None if cfg.blur_budget == BlurBudget::Need
+                    && cfg.blur_method == BlurMethod::Average =>
+                {
+                    None
+                }
+                None if cfg.blur_budget == BlurBudget::Parity
+                    && cfg.blur_method == BlurMethod::Average =>
+                {
                     (!cfg.latents_auto).then(|| cfg.sampling().samples_per_frame(cfg.latents))
                 }
                 None => Some(cfg.samples),
             },
             samples_total: cfg.samples_total,
-            blur_method: cfg.blur_method.clone(),
+            blur_method: cfg.blur_method,
             latents: if cfg.latents_auto {
                 "auto".into()
             } else {
                 cfg.latents.into()
             },
             sharp_samples: cfg.effective_sharp_samples(),
-            latent_sampling: cfg.latent_sampling.clone(),
-            latent_sampling_is: if cfg.latent_sampling == "subsets" {
+            latent_sampling: cfg.latent_sampling,
+            latent_sampling_is: if cfg.latent_sampling == LatentSampling::Subsets {
                 "latent frame k of a level renders the Cycles samples [sample_offset, \
                  sample_offset + samples_per_frame) of one sequence on the view's sharp_seed; \
                  the sharp image renders its first sharp_samples; every render is a block of \
@@ -150,15 +161,15 @@ impl RenderRecord {
                 "every latent frame renders the first samples_per_frame samples of its own seed"
             }
             .into(),
-            blur_budget: cfg.blur_budget.clone(),
-            blur_budget_is: if cfg.blur_budget == "need" {
+            blur_budget: cfg.blur_budget,
+            blur_budget_is: if cfg.blur_budget == BlurBudget::Need {
                 format!(
                     "a blurry image of m >= 2 latent frames renders the sample budget times \
                      1 + (m^{PARITY_EXPONENT} - 1) * min(1, motion_px / m / \
                      {NEED_SATURATION_PX}) (rounded up per frame): the parity factor bought \
                      by its screen motion between frames; sharp_samples is the budget itself"
                 )
-            } else if cfg.blur_budget == "parity" {
+            } else if cfg.blur_budget == BlurBudget::Parity {
                 format!(
                     "a blurry image of m >= 2 latent frames renders the sample budget times \
                      m^{PARITY_EXPONENT} (rounded up per frame), so it carries no more render \
@@ -167,8 +178,8 @@ impl RenderRecord {
             } else {
                 "a blurry image of m latent frames renders the sample budget split over them".into()
             },
-            denoise: cfg.denoise.clone(),
-            denoise_is: if cfg.denoise == "oidn" {
+            denoise: cfg.denoise,
+            denoise_is: if cfg.denoise == Denoise::Oidn {
                 "Open Image Denoise (RT filter, quality high, hdr, albedo and normal guides \
                  prefiltered, cleanAux; Cycles' defaults) applied once to every finished \
                  image: the sharp render, and the mean of a blurry image's latent frames \
@@ -564,7 +575,7 @@ mod tests {
         assert_eq!(v["render"]["blur_budget"], "parity");
         assert_eq!(v["views"][1]["levels"]["3"]["samples_per_frame"], 43);
         let flat = BuildConfig {
-            blur_budget: "flat".into(),
+            blur_budget: BlurBudget::Flat,
             ..cfg.clone()
         };
         assert_eq!(RenderRecord::of(&flat).samples_per_latent, Some(32));

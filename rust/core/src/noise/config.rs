@@ -4,8 +4,9 @@
 //! [`NoiseConfig::declarations`] and passes the validated config through the noise
 //! modes; an error names the option, which Python turns into its flag.
 use crate::error::Result;
+use crate::plan::choices::{NoiseGamma, NoiseProfile, NoiseSource};
 use crate::plan::options::{config_struct, shapes_outputs, Meta, OptionInfo};
-use crate::plan::spec::{check, config_error, convert, specs, Kind, Raw, Spec};
+use crate::plan::spec::{check, choice, config_error, convert, specs, Kind, Raw, Spec};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -41,7 +42,7 @@ macro_rules! noise_options {
     seed: u64 = 0, specs::SEED, shapes {
         help: "seed of all noise and white balance",
     };
-    profile: String = "paper".into(), Spec::Choice(&["paper", "nan"]), shapes {
+    profile: NoiseProfile = NoiseProfile::Paper, choice::<NoiseProfile>(), shapes {
         help: "paper: random white balance per scene; nan: none (parity with NAN's evaluation)",
     };
     frames: u32 = 1, AT_LEAST_ONE, shapes {
@@ -54,7 +55,7 @@ macro_rules! noise_options {
         unset: Some("none, the LLFF-N sigma table"),
     };
     /// Transfer curve; None: 2.2 for a scene, srgb for a build.
-    gamma: Option<String> = None, Spec::Choice(&["2.2", "srgb"]), shapes {
+    gamma: Option<NoiseGamma> = None, choice::<NoiseGamma>(), shapes {
         help: "transfer curve",
         unset: Some("2.2 as NAN for a scene; srgb, the build's own curve, for a build"),
     };
@@ -87,7 +88,7 @@ macro_rules! noise_options {
         unset: Some("all"),
         section: Some("build mode (SCENE is a build directory)"),
     };
-    source: String = "auto".into(), Spec::Choice(&["auto", "linear", "png"]), shapes {
+    source: NoiseSource = NoiseSource::Auto, choice::<NoiseSource>(), shapes {
         help: "clean image: the build's linear EXRs (--keep-linear) or its PNGs \
             (auto: linear when every chosen level has them)",
         section: Some("build mode (SCENE is a build directory)"),

@@ -5,11 +5,13 @@
 //! A value is checked against its field's [`Spec`]; an error names the option, the value
 //! and the range (`views -1: must be an integer in 1..=4096`), never a parser position.
 //! The sampling options form the [`SamplingConfig`] of every setting's plan.
-use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
-use super::sampling::{
-    BlurBudget, BlurMethod, LatentPositions, LatentSampling, SamplingConfig, TrajectoryAnchor,
+use super::choices::{
+    BlurBudget, BlurMethod, Denoise, Device, Executor, LatentPositions, LatentSampling, LightPaths,
+    TrajectoryAnchor,
 };
-use super::spec::{check, specs, Kind, OptionValue, Raw, Spec};
+use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
+use super::sampling::SamplingConfig;
+use super::spec::{check, choice, specs, Kind, OptionValue, Raw, Spec};
 use super::spec::{config_error, convert};
 use super::weights::Guards;
 use crate::error::Result;
@@ -70,7 +72,7 @@ macro_rules! build_options {
     max_ghost_px: f64 = SAMPLING().max_ghost_px, specs::MAX_GHOST_PX, shapes {
         help: "--latents auto: largest screen gap between latent frames, px",
     };
-    blur_method: String = "average".into(), specs::BLUR_METHOD, shapes {
+    blur_method: BlurMethod = BlurMethod::Average, choice::<BlurMethod>(), shapes {
         help: "average of latent renders (the paper) or one Cycles motion blur render",
     };
     /// Cycles samples per rendered latent frame.
@@ -92,38 +94,38 @@ macro_rules! build_options {
     /// `subsets`: a blurry image's latent frames render the blocks of one sample sequence
     /// on the view's seed, which the sharp image renders too (issue 15); `independent`:
     /// a seed per frame (builds before it).
-    latent_sampling: String = "subsets".into(), specs::LATENT_SAMPLING, shapes {
+    latent_sampling: LatentSampling = LatentSampling::Subsets, choice::<LatentSampling>(), shapes {
         help: "subsets: a blurry image's latent frames render the blocks of one sample \
             sequence on the view's seed, which the sharp image renders too; independent: \
             a seed per frame",
-        before: Some("independent".into()),
+        before: Some(LatentSampling::Independent),
     };
     /// `parity`: a blurry image gets the budget times a factor of its m and motion, so
     /// it carries no more render noise than its sharp image (issue 15); `flat`: the
     /// budget as given (builds before it).
-    blur_budget: String = "parity".into(), specs::BLUR_BUDGET, shapes {
+    blur_budget: BlurBudget = BlurBudget::Parity, choice::<BlurBudget>(), shapes {
         help: "parity: a blurry image of m >= 2 latent frames renders the sample budget S \
             times m^0.4, so it is no noisier than its sharp image; need: that factor bought \
             by the image's measured motion between frames (less for small motion); flat: \
             the budget as given, ceil(S/m) samples a frame",
-        before: Some("flat".into()),
+        before: Some(BlurBudget::Flat),
     };
     /// `none`: images as rendered; `oidn`: every image (the sharp one and the mean of a
     /// blurry image's latent frames, with their averaged albedo and normal guides)
     /// denoised once by Open Image Denoise.
-    denoise: String = "none".into(), specs::DENOISE, shapes {
+    denoise: Denoise = Denoise::None, choice::<Denoise>(), shapes {
         help: "none: images as rendered; oidn: every image denoised once by Open Image \
             Denoise, a blurry image after averaging (its frames' albedo and normal averaged \
             the same way), the sharp image the same way",
     };
     /// `auto`: light-path bounces from the object's materials; `fixed`: the same for all.
-    light_paths: String = "auto".into(), specs::LIGHT_PATHS, shapes {
+    light_paths: LightPaths = LightPaths::Auto, choice::<LightPaths>(), shapes {
         help: "light-path bounces from the object's materials (auto) or the same for every \
             object",
-        before: Some("fixed".into()),
+        before: Some(LightPaths::Fixed),
     };
     /// Cycles device (run-only: the pixels are the plan's on any device, within noise).
-    device: String = "auto".into(), specs::DEVICE, run {
+    device: Device = Device::Auto, choice::<Device>(), run {
         help: "Cycles device; auto: the best backend Cycles reports \
             (OptiX > CUDA > HIP > oneAPI > Metal > CPU)",
     };
@@ -169,12 +171,12 @@ macro_rules! build_options {
         toml_only: true,
         help: "spread s of a level's blur weight: w_l ~ U[1 − s, 1 + s] · w_u · l",
     };
-    latent_positions: String = "random".into(), specs::LATENT_POSITIONS, shapes {
+    latent_positions: LatentPositions = SAMPLING().latent_positions, choice::<LatentPositions>(), shapes {
         help: "latent positions on the segment: uniform random or stratified",
     };
     /// Where the written pose p sits on a blurry image's segment: `start` (the paper's
     /// U(p, p + w_l·δ)) or `centered` (U(p − w_l·δ/2, p + w_l·δ/2)).
-    trajectory: String = "start".into(), specs::TRAJECTORY, shapes {
+    trajectory: TrajectoryAnchor = SAMPLING().trajectory, choice::<TrajectoryAnchor>(), shapes {
         help: "where the written pose p sits on each blurry image's camera path: its start \
             (the paper) or its middle, so sharp image, pose and exposure coincide",
     };
@@ -244,7 +246,7 @@ macro_rules! build_options {
     threads: usize = 0, specs::THREADS, run {
         help: "Cycles threads per worker (0: all cores)",
     };
-    executor: String = "local".into(), specs::EXECUTOR, run {
+    executor: Executor = Executor::Local, choice::<Executor>(), run {
         help: "local process pool or Ray",
     };
     /// Ray cluster address; None starts a local Ray.
@@ -357,7 +359,7 @@ impl BuildConfig {
                 }
             }
         }
-        if self.blur_method == "motion_blur" {
+        if self.blur_method == BlurMethod::MotionBlur {
             if let Some(v) = value("latent_positions") {
                 return Err(config_error(
                     "latent_positions",
@@ -375,7 +377,7 @@ impl BuildConfig {
     pub fn validate(&self) -> Result<()> {
         self.check_fields()?;
         self.sampling().validate()?;
-        if self.ray_address.is_some() && self.executor != "ray" {
+        if self.ray_address.is_some() && self.executor != Executor::Ray {
             return Err(config_error(
                 "ray_address",
                 format!(
@@ -392,7 +394,7 @@ impl BuildConfig {
                 ));
             }
         }
-        if self.executor == "ray" {
+        if self.executor == Executor::Ray {
             // Ray places the tasks: it hands each its GPUs and runs as many as fit.
             if let Some(g) = &self.gpus {
                 return Err(config_error(
@@ -416,7 +418,7 @@ impl BuildConfig {
             }
         }
         if let Some(g) = self.gpus_per_task {
-            if self.executor != "ray" {
+            if self.executor != Executor::Ray {
                 return Err(config_error(
                     "gpus_per_task",
                     format!(
@@ -446,7 +448,7 @@ impl BuildConfig {
                 "and test_objects: give either N random test settings or test objects".into(),
             ));
         }
-        if self.latents_auto && self.blur_method == "motion_blur" {
+        if self.latents_auto && self.blur_method == BlurMethod::MotionBlur {
             return Err(config_error(
                 "latents",
                 "auto: the motion_blur method has no latent frames (one render per blurry image)"
@@ -524,16 +526,8 @@ impl BuildConfig {
             levels: self.levels.clone(),
             level_spread: self.level_spread,
             latents: self.latents,
-            latent_positions: if self.latent_positions == "stratified" {
-                LatentPositions::Stratified
-            } else {
-                LatentPositions::Random
-            },
-            trajectory: if self.trajectory == "centered" {
-                TrajectoryAnchor::Centered
-            } else {
-                TrajectoryAnchor::Start
-            },
+            latent_positions: self.latent_positions,
+            trajectory: self.trajectory,
             resolution: self.resolution,
             guards: Guards {
                 orientation_max: self.orientation_max,
@@ -542,23 +536,11 @@ impl BuildConfig {
             latents_auto: self.latents_auto,
             latents_max: self.latents_max,
             max_ghost_px: self.max_ghost_px,
-            blur_method: if self.blur_method == "motion_blur" {
-                BlurMethod::MotionBlur
-            } else {
-                BlurMethod::Average
-            },
+            blur_method: self.blur_method,
             samples: self.samples,
             samples_total: self.samples_total,
-            latent_sampling: if self.latent_sampling == "independent" {
-                LatentSampling::Independent
-            } else {
-                LatentSampling::Subsets
-            },
-            blur_budget: match self.blur_budget.as_str() {
-                "flat" => BlurBudget::Flat,
-                "need" => BlurBudget::Need,
-                _ => BlurBudget::Parity,
-            },
+            latent_sampling: self.latent_sampling,
+            blur_budget: self.blur_budget,
         }
     }
 
@@ -586,7 +568,7 @@ impl BuildConfig {
         if let Some(t) = self.samples_total {
             return u64::from(t);
         }
-        let m = if self.blur_method == "motion_blur" {
+        let m = if self.blur_method == BlurMethod::MotionBlur {
             self.latents
         } else {
             self.max_latents()

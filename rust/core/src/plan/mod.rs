@@ -1,6 +1,7 @@
 //! The plan of a setting (DESIGN §2): cameras, the scene-dependent blur weight, and the
 //! seeded sampling of views, trajectories, levels and latent frames.
 pub mod camera;
+pub mod choices;
 pub mod config;
 pub mod options;
 pub mod region;

@@ -210,6 +210,7 @@ impl SettingPlan {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::choices::{BlurBudget, BlurMethod};
     use crate::plan::config::BuildConfig;
     use crate::plan::sampling::plan_setting;
 
@@ -219,7 +220,7 @@ mod tests {
             views: 2,
             levels: vec![1, 10],
             latents: 3,
-            blur_budget: "flat".into(),
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         };
         let plan = plan_setting(&cfg.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
@@ -265,7 +266,7 @@ mod tests {
             .count()
             == 1));
         let mb = BuildConfig {
-            blur_method: "motion_blur".into(),
+            blur_method: BlurMethod::MotionBlur,
             ..cfg
         };
         let plan = plan_setting(&mb.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
@@ -283,7 +284,7 @@ mod tests {
             latents: 7,
             samples_total: Some(300),
             sharp_samples: Some(200),
-            blur_budget: "flat".into(),
+            blur_budget: BlurBudget::Flat,
             ..Default::default()
         };
         let plan = plan_setting(&cfg.sampling(), "u", 0.0, 1, [1.0; 3], &[])?;
@@ -303,7 +304,7 @@ mod tests {
         assert!(r[1..].iter().all(|f| f.sample_sequence == Some(301)));
         // Independent: no blocks and no pin, frame seeds of their own.
         let ind = BuildConfig {
-            latent_sampling: "independent".into(),
+            latent_sampling: LatentSampling::Independent,
             ..cfg
         };
         assert_eq!(ind.cycles_samples(), None);

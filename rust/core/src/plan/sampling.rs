@@ -12,85 +12,9 @@ use glam::{DMat4, DVec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum LatentPositions {
-    /// t_i ~ U[0, 1], as in the paper.
-    Random,
-    /// t_i = (i + u_i) / m: one draw per stratum, no gaps larger than 2/m.
-    Stratified,
-}
-
-/// Where the written pose p sits on a blurry image's segment (DESIGN §2, §12). The same
-/// seeded draws, δ and w_l either way; only the latent positions t move by ½.
-#[derive(
-    Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema,
-)]
-#[serde(rename_all = "lowercase")]
-pub enum TrajectoryAnchor {
-    /// The paper's U(p, p + w_l·δ): the exposure starts at p, t ∈ [0, 1].
-    #[default]
-    Start,
-    /// U(p − w_l·δ/2, p + w_l·δ/2), t ∈ [−½, ½]: the sharp image, the written pose and
-    /// the exposure's middle coincide, which is what SfM recovers from a blurry image.
-    Centered,
-}
-
-impl TrajectoryAnchor {
-    /// The latent position t at which the exposure opens; it closes at `t_open() + 1`.
-    pub fn t_open(self) -> f64 {
-        match self {
-            TrajectoryAnchor::Start => 0.0,
-            TrajectoryAnchor::Centered => -0.5,
-        }
-    }
-}
-
-/// How a blurry image is made from its trajectory segment.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum BlurMethod {
-    /// The mean of m latent frames rendered at positions t_1..t_m (the paper).
-    Average,
-    /// One Cycles render with the camera keyframed along the segment over the shutter:
-    /// every path sample gets its own time, so the image integrates the whole segment.
-    MotionBlur,
-}
-
-/// How the Cycles samples of a blurry image's m latent frames relate (issue 15).
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum LatentSampling {
-    /// The frames render the m consecutive blocks of ONE sample sequence on the view's
-    /// seed (Cycles `use_sample_subset`): frame i takes samples [i·L, (i + 1)·L) of a
-    /// sequence of m·L, L = `samples_per_frame`. Their mean is a stratified estimator
-    /// over the exposure, and at zero motion it IS the render of that sequence, which
-    /// the sharp image renders too (its first `sharp_samples` samples, same seed).
-    Subsets,
-    /// Every frame its own seed and the first L samples of its own sequence (datasets
-    /// built before issue 15): the mean of m such renders converges like plain Monte
-    /// Carlo, ≈ 2× the error of one render at m·L samples.
-    Independent,
-}
-
-/// How many samples a blurry image gets against the sharp image's budget (issue 15).
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum BlurBudget {
-    /// The budget times [`parity_factor`] of the image's m and motion: a moving camera
-    /// shows a pixel other content in every latent frame, so the frames' sample blocks
-    /// stop adding up to one stratified sequence and m frames at S/m samples carry more
-    /// render noise than one frame at S. The factor buys that back, so the blurry image
-    /// is no noisier than its sharp truth (measured: bench/bench_render_parity.py).
-    Parity,
-    /// The budget as given: m frames at S/m samples (builds before this option).
-    Flat,
-    /// Parity bought by the image's measured motion (issue 28): [`need_factor`] of m and
-    /// the screen motion between its frames, never more than [`parity_factor`]`(m)`. A
-    /// level whose frames move ≪ 0.5 px apart still renders nearly one stratified
-    /// sequence and needs little more than the budget.
-    Need,
-}
+pub use super::choices::{
+    BlurBudget, BlurMethod, LatentPositions, LatentSampling, TrajectoryAnchor,
+};
 
 /// The parity factor is m^PARITY_EXPONENT: measured on the demo box
 /// (bench/bench_render_parity.py), m = 34 frames at S/m samples need ≈ 4 S to carry the

@@ -2,6 +2,10 @@
 //! conversion between them: the ranges every check of an option uses, the build
 //! config's ([`super::config`]) and a plan's ([`super::sampling`]) alike. Below both,
 //! so neither imports the other for its ranges.
+use super::choices::{
+    BlurBudget, BlurMethod, Choice, Denoise, Device, Executor, LatentPositions, LatentSampling,
+    LightPaths, NoiseGamma, NoiseProfile, NoiseSource, TrajectoryAnchor,
+};
 use crate::error::{Error, Result};
 use crate::ground::license;
 use crate::ground::names::MAX_LEVEL;
@@ -305,6 +309,45 @@ impl OptionValue for String {
     }
 }
 
+/// A value of one of the [`Choice`] enums, read by its name in any case.
+macro_rules! choice_value {
+    ($($t:ty),*) => {$(
+        impl OptionValue for $t {
+            fn from_raw(raw: &Raw, _: &Spec) -> Option<Self> {
+                match raw {
+                    Raw::Str(s) => <$t>::from_name(s),
+                    _ => None,
+                }
+            }
+            fn to_raw(&self) -> Raw {
+                Raw::Str(self.name().into())
+            }
+            fn kind(_: &Spec) -> Kind {
+                Kind::Choice
+            }
+        }
+    )*};
+}
+choice_value!(
+    LatentPositions,
+    TrajectoryAnchor,
+    BlurMethod,
+    LatentSampling,
+    BlurBudget,
+    Denoise,
+    LightPaths,
+    Device,
+    Executor,
+    NoiseProfile,
+    NoiseGamma,
+    NoiseSource
+);
+
+/// The spec of a [`Choice`] option: its names.
+pub const fn choice<T: Choice>() -> Spec {
+    Spec::Choice(T::NAMES)
+}
+
 impl<T: OptionValue> OptionValue for Option<T> {
     fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
         match raw {
@@ -459,17 +502,6 @@ pub mod specs {
     pub const MAX_GHOST_PX: Spec = Spec::num(0.01, false, f64::INFINITY, false);
     pub const ORIENTATION_MAX: Spec = Spec::num(1.0, false, f64::INFINITY, false);
     pub const NEAR_FLOOR: Spec = Spec::num(0.0, true, f64::INFINITY, false);
-    pub const LATENT_POSITIONS: Spec = Spec::Choice(&["random", "stratified"]);
-    pub const TRAJECTORY: Spec = Spec::Choice(&["start", "centered"]);
-    pub const BLUR_METHOD: Spec = Spec::Choice(&["average", "motion_blur"]);
-    pub const EXECUTOR: Spec = Spec::Choice(&["local", "ray"]);
-    pub const LATENT_SAMPLING: Spec = Spec::Choice(&["subsets", "independent"]);
-    pub const LIGHT_PATHS: Spec = Spec::Choice(&["auto", "fixed"]);
-    pub const BLUR_BUDGET: Spec = Spec::Choice(&["parity", "flat", "need"]);
-    pub const DENOISE: Spec = Spec::Choice(&["none", "oidn"]);
-    /// `auto`: the best backend Cycles reports (OptiX > CUDA > HIP > oneAPI > Metal > CPU).
-    pub const DEVICE: Spec =
-        Spec::Choice(&["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"]);
     pub const GPUS_PER_TASK: Spec = Spec::closed(0.0, 64.0);
     pub const SEED: Spec = Spec::int(0, u64::MAX as i128);
     pub const FRACTION: Spec = Spec::closed(0.0, 1.0);
