@@ -130,7 +130,22 @@ class StandIn:
             "center": ((lo + hi) / 2).tolist(),
             "warnings": [],
             "unlit_fixed": False,
-            "light_paths": {"mode": "stand-in"},
+            # The real worker's report for an opaque, lit object (no transmission or
+            # transparent bounces under auto).
+            "light_paths": {
+                "mode": cmd.get("light_paths", "auto"),
+                "transmission": False,
+                "transparency": False,
+                "unlit_only": False,
+                "bounces": {
+                    "max_bounces": 6,
+                    "diffuse_bounces": 2,
+                    "glossy_bounces": 2,
+                    "transmission_bounces": 0 if cmd.get("light_paths", "auto") == "auto" else 4,
+                    "volume_bounces": 0,
+                    "transparent_max_bounces": 0 if cmd.get("light_paths", "auto") == "auto" else 8,
+                },
+            },
             "device": {"backend": "CPU", "devices": ["stand-in"], "kernel": "analytic"},
             "seconds": 0.0,
         }

@@ -521,8 +521,8 @@ class Denoiser:
     @property
     def device_type(self) -> str:
         """CPU, CUDA, HIP, SYCL or METAL."""
-    def record(self) -> dict[str, Any]:
-        """What meta.json records: {"library": "OpenImageDenoise", "version", "device"}."""
+    def record(self) -> rec.DenoiserRecord:
+        """What meta.json records: the library, its version and the device type."""
     def denoise(
         self,
         color: npt.NDArray[np.float32],
@@ -783,9 +783,9 @@ class Plan:
         timings: rec.Timings,
         qa: list[FrameQa],
         pose_check: dict[str, Any] | None = None,
-        light_paths: dict[str, Any] | None = None,
-        device: dict[str, Any] | None = None,
-        denoiser: dict[str, Any] | None = None,
+        light_paths: rec.LightPathsRecord | None = None,
+        device: rec.DeviceRecord | None = None,
+        denoiser: rec.DenoiserRecord | None = None,
     ) -> None:
         """Write the setting's meta.json: this plan, the build config, the object as the
         worker reported it, the timings, the QA of every view and, with --check-poses, the
@@ -946,7 +946,7 @@ def build_stats(out: str | PathLike[str]) -> BuildStats:
 
 def current_failures(
     path: str | PathLike[str], *, complete: list[str], theta0s: list[float] | None = None
-) -> tuple[list[dict[str, Any]], int]:
+) -> tuple[list[rec.Failure], int]:
     """(the failures now, torn lines skipped): the latest record per (uid, setting)
     whose work is still not complete."""
 

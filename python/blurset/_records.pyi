@@ -191,6 +191,13 @@ class DatasetCounts(TypedDict):
     settings: int
     settings_failed: int
 
+class DeviceRecord(TypedDict):
+    """What a worker rendered on."""
+
+    backend: str
+    devices: list[str]
+    kernel: str
+
 class Versions(TypedDict):
     """Versions of what made a build."""
 
@@ -208,7 +215,7 @@ class DatasetDoc(TypedDict):
     levels: list[str]
     name: str
     pose_checks: NotRequired[dict[str, Any] | None]
-    render_devices: NotRequired[list[Any]]
+    render_devices: NotRequired[list[DeviceRecord]]
     seconds: float
     seed: int
     settings: list[str]
@@ -371,6 +378,34 @@ class BuildStats(TypedDict):
 
 Denoise = Literal["none", "oidn"]
 
+class DenoiserRecord(TypedDict):
+    """The denoiser of a build's images, as meta.json records it (fields in alphabetical order, as the dict it replaced was written)."""
+
+    device: str
+    library: str
+    version: str
+
+class Bounces(TypedDict):
+    """The Cycles bounce limits a worker set (`blender_scene.FIXED_BOUNCES`'s keys)."""
+
+    diffuse_bounces: int
+    glossy_bounces: int
+    max_bounces: int
+    transmission_bounces: int
+    transparent_max_bounces: int
+    volume_bounces: int
+
+LightPaths = Literal["auto", "fixed"]
+
+class LightPathsRecord(TypedDict):
+    """The light paths of an object's renders, as its worker reported them: the bounce limits and what the materials can do that decided them under `auto`."""
+
+    bounces: Bounces
+    mode: LightPaths
+    transmission: bool
+    transparency: bool
+    unlit_only: bool
+
 class RenderRecord(TypedDict):
     """How the images were rendered and encoded."""
 
@@ -383,15 +418,15 @@ class RenderRecord(TypedDict):
     cycles_samples: NotRequired[int | None]
     denoise: NotRequired[Denoise]
     denoise_is: NotRequired[str]
-    denoiser: NotRequired[Any]
-    device: NotRequired[Any]
+    denoiser: NotRequired[DenoiserRecord | None]
+    device: NotRequired[DeviceRecord | None]
     encoding: str
     engine: str
     exr_codec: str
     latent_sampling: LatentSampling
     latent_sampling_is: str
     latents: Any
-    light_paths: NotRequired[Any]
+    light_paths: NotRequired[LightPathsRecord | None]
     linear: NotRequired[bool]
     samples_per_latent: NotRequired[int | None]
     samples_total: NotRequired[int | None]

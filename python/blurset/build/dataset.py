@@ -147,7 +147,7 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     splits.write(out / layout.SPLITS)
     checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
     # What the workers rendered on (backend, device names, Cycles kernel), once each.
-    used: list[dict] = []
+    used: list[_records.DeviceRecord] = []
     for _, m in complete:
         d = (m.get("render") or {}).get("device")
         if d and d not in used:

@@ -29,7 +29,7 @@ pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
 // Linear frames in, encoded images out; image files; render QA.
 pub use crate::image::accumulate::Accumulator;
 pub use crate::image::color::srgb_encode_slice;
-pub use crate::image::denoise::{DenoiseDevice, Denoiser};
+pub use crate::image::denoise::{DenoiseDevice, Denoiser, DenoiserRecord};
 pub use crate::image::exr::read::{read_exr, Frame};
 pub use crate::image::io::{image_info, read_image, Image, Samples};
 pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
@@ -62,7 +62,8 @@ pub use crate::dataset::manifest::{
     ManifestProblem, MANIFEST,
 };
 pub use crate::dataset::meta::{
-    read_exposure_ends, read_mean_poses, write_json, Meta, ObjectRecord, Pose, Timings,
+    read_exposure_ends, read_mean_poses, write_json, DeviceRecord, LightPathsRecord, Meta,
+    ObjectRecord, Pose, Timings,
 };
 pub use crate::dataset::outputs::{
     build_state, claim, mark_text, output_kind, owned_entries, remove_owned, superseded_settings,

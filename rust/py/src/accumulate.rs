@@ -268,12 +268,8 @@ impl PyDenoiser {
     }
 
     /// What meta.json records of this denoiser.
-    fn record<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-        let d = pyo3::types::PyDict::new(py);
-        d.set_item("library", "OpenImageDenoise")?;
-        d.set_item("version", self.inner.version())?;
-        d.set_item("device", self.inner.device_type())?;
-        Ok(d)
+    fn record<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::sampling::to_py(py, &self.inner.record())
     }
 
     /// Denoise a float32 (H, W, 3) colour image with its (H, W, 3) albedo and normal.

@@ -192,16 +192,21 @@ impl Plan {
         meta.pose_check = pose_check
             .map(|p| from_py::<serde_json::Value>("pose_check", p))
             .transpose()?;
-        let json = |what: &str, v: Option<&Bound<'_, PyAny>>| {
-            v.filter(|x| !x.is_none())
-                .map(|x| from_py::<serde_json::Value>(what, x))
-                .transpose()
-        };
-        meta.render.light_paths = json("light_paths", light_paths)?;
-        meta.render.device = json("device", device)?;
-        meta.render.denoiser = json("denoiser", denoiser)?;
+        meta.render.light_paths = typed("light_paths", light_paths)?;
+        meta.render.device = typed("device", device)?;
+        meta.render.denoiser = typed("denoiser", denoiser)?;
         crate::run_detached(py, || meta.write(&path))
     }
+}
+
+/// An optional record given as a dict, read through its core type (None stays None).
+fn typed<T: serde::de::DeserializeOwned>(
+    what: &str,
+    v: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Option<T>> {
+    v.filter(|x| !x.is_none())
+        .map(|x| from_py::<T>(what, x))
+        .transpose()
 }
 
 impl Plan {

@@ -4,9 +4,10 @@
 use super::splits::test_views;
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
+use crate::image::denoise::DenoiserRecord;
 use crate::image::qa::FrameQa;
 use crate::plan::camera::orbit_c2w;
-use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling};
+use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, LightPaths};
 use crate::plan::config::BuildConfig;
 use crate::plan::sampling::{
     rows, LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
@@ -91,16 +92,16 @@ pub struct RenderRecord {
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub denoise_is: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub denoiser: Option<serde_json::Value>,
+    pub denoiser: Option<DenoiserRecord>,
     /// The Cycles `samples` of every render under subsets (`BuildConfig::cycles_samples`).
     pub cycles_samples: Option<u32>,
     /// Cycles adaptive sampling stays off: with it the sharp image stops early while the
     /// sample blocks do not, and the pair loses its noise parity (issue 15).
     pub adaptive_sampling: bool,
     /// Light-path bounces the worker chose from the object's materials (or fixed).
-    pub light_paths: Option<serde_json::Value>,
+    pub light_paths: Option<LightPathsRecord>,
     /// What the worker rendered on: backend, device names, Cycles kernel.
-    pub device: Option<serde_json::Value>,
+    pub device: Option<DeviceRecord>,
     pub exr_codec: String,
     pub background: [f64; 3],
     pub alpha: String,
@@ -110,6 +111,48 @@ pub struct RenderRecord {
     /// unchanged).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub linear: bool,
+}
+
+// The records below list their fields in alphabetical order: the worker's reports they
+// type were written as JSON objects, whose keys serde_json sorts.
+
+/// The Cycles bounce limits a worker set (`blender_scene.FIXED_BOUNCES`'s keys).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Bounces {
+    pub diffuse_bounces: u32,
+    pub glossy_bounces: u32,
+    pub max_bounces: u32,
+    pub transmission_bounces: u32,
+    pub transparent_max_bounces: u32,
+    pub volume_bounces: u32,
+}
+
+/// The light paths of an object's renders, as its worker reported them: the bounce
+/// limits and what the materials can do that decided them under `auto`.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LightPathsRecord {
+    pub bounces: Bounces,
+    pub mode: LightPaths,
+    /// A rendered material transmits light (transmission, diffuse transmission, volume).
+    pub transmission: bool,
+    /// A rendered material is alpha-blended or alpha-masked.
+    pub transparency: bool,
+    /// Every rendered primitive is unlit (camera-only emission): no bounce changes it.
+    pub unlit_only: bool,
+}
+
+/// What a worker rendered on.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DeviceRecord {
+    /// The Cycles backend: CPU, OPTIX, CUDA, HIP, ONEAPI or METAL.
+    pub backend: String,
+    /// The names of the devices it used.
+    pub devices: Vec<String>,
+    /// The CPU's instruction set Cycles runs, or the GPU backend.
+    pub kernel: String,
 }
 
 fn no_denoise() -> Denoise {

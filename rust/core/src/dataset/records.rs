@@ -1,7 +1,7 @@
 //! The documents beside the images (DESIGN §4): `dataset.json` of a build and
 //! `noise.json` of a noisy scene. Their schema lives here; Python supplies the values
 //! (a dict checked against these structs: an unknown or missing field is an error).
-use super::meta::write_json;
+use super::meta::{write_json, DeviceRecord};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -46,7 +46,7 @@ pub struct DatasetDoc {
     /// What the workers rendered on (meta.json `render.device`: backend, device names,
     /// Cycles kernel), each once.
     #[serde(default)]
-    pub render_devices: Vec<serde_json::Value>,
+    pub render_devices: Vec<DeviceRecord>,
     pub seconds: f64,
     /// The COLMAP verdict per setting, when the build checked poses.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -15,6 +15,7 @@
 //! not denoised (Cycles leaves it as rendered). Images go through OIDN buffers, so the
 //! same code runs on a GPU device when OIDN finds one (`DenoiseDevice::Auto`).
 use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -178,6 +179,15 @@ impl Denoiser {
         self.device_type
     }
 
+    /// What meta.json records of this denoiser.
+    pub fn record(&self) -> DenoiserRecord {
+        DenoiserRecord {
+            device: self.device_type.into(),
+            library: "OpenImageDenoise".into(),
+            version: self.version(),
+        }
+    }
+
     /// Denoise a `width × height` colour image (3 f32 per pixel, scene-linear) with its
     /// albedo and normal guides (3 f32 per pixel each); returns the denoised colour.
     pub fn denoise(
@@ -314,6 +324,19 @@ impl std::fmt::Debug for Denoiser {
             self.path
         )
     }
+}
+
+/// The denoiser of a build's images, as meta.json records it (fields in alphabetical
+/// order, as the dict it replaced was written).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DenoiserRecord {
+    /// The device type OIDN ran on: CPU, CUDA, HIP, SYCL or METAL.
+    pub device: String,
+    /// `OpenImageDenoise`.
+    pub library: String,
+    /// Its version, e.g. 2.3.3.
+    pub version: String,
 }
 
 #[cfg(test)]
