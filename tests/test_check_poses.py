@@ -292,6 +292,48 @@ def test_cli_entry_point(tmp_path):
     assert p.returncode == 2 and "check-poses: error: not a directory" in p.stderr
 
 
+def test_workdir_holding_a_colmap_database_is_refused_and_kept(tmp_path):
+    """--workdir never deletes: a folder already holding a COLMAP database (a user's own
+    workspace) or a sparse model is refused by name before COLMAP runs, its files as
+    they were; a run into a new folder keeps its database and model there."""
+    scene = blank_scene(tmp_path)
+    work = tmp_path / "colmap_ws"
+    (work / "sparse" / "0").mkdir(parents=True)
+    (work / "database.db").write_bytes(b"the user's own database")
+    (work / "sparse" / "0" / "cameras.bin").write_bytes(b"their model")
+    p = subprocess.run(
+        [sys.executable, "-m", "blurset.cli", "check-poses", str(scene), "--workdir", str(work)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.strip().splitlines() == [
+        f"blurset check-poses: error: --workdir {work}: already holds database.db, sparse "
+        "(check-poses writes a new COLMAP database and model there and deletes none): name a "
+        "new folder, or remove them yourself"
+    ], p.stderr
+    assert (work / "database.db").read_bytes() == b"the user's own database"
+    assert (work / "sparse" / "0" / "cameras.bin").read_bytes() == b"their model"
+    fresh = tmp_path / "fresh"
+    p = subprocess.run(
+        [sys.executable, "-m", "blurset.cli", "check-poses", str(scene), "--workdir", str(fresh)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert p.returncode == check_poses.EXIT_NOT_CHECKABLE, p.stderr
+    assert (fresh / "database.db").is_file()
+    # Run again into the folder it wrote: refused too (nothing is replaced silently).
+    again = subprocess.run(
+        [sys.executable, "-m", "blurset.cli", "check-poses", str(scene), "--workdir", str(fresh)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert again.returncode == 2 and "--workdir" in again.stderr, again.stderr
+
+
 # --------------------------------------------------------------------------- real builds
 
 

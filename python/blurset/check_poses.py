@@ -214,9 +214,8 @@ class _Colmap:
         import pycolmap
 
         self.pycolmap, self.image_dir, self.workdir = pycolmap, image_dir, workdir
-        self.db_path = workdir / "database.db"
-        if self.db_path.exists():
-            self.db_path.unlink()
+        self.db_path = workdir / COLMAP_DATABASE
+        _refuse_used_workdir(workdir)
         w, h, f = intrinsics
         with self._quiet():
             pycolmap.set_random_seed(0)
@@ -283,6 +282,28 @@ class _Colmap:
                 pycolmap.set_random_seed(seed)
             recs = pycolmap.incremental_mapping(self.db_path, self.image_dir, sparse, options=opts)
         return max(recs.values(), key=lambda r: r.num_reg_images(), default=None)
+
+
+COLMAP_DATABASE = "database.db"
+
+
+def _refuse_used_workdir(workdir: Path) -> None:
+    """ConfigError naming --workdir when `workdir` already holds a COLMAP database or
+    sparse model: check-poses writes its own there and never deletes one (it may be the
+    user's own COLMAP workspace, or a model they kept)."""
+    if not workdir.is_dir():
+        return
+    used = sorted(
+        p.name
+        for p in workdir.iterdir()
+        if p.name == COLMAP_DATABASE or (p.is_dir() and p.name.startswith("sparse"))
+    )
+    if used:
+        raise ConfigError(
+            f"--workdir {workdir}: already holds {', '.join(used)} (check-poses writes a new "
+            "COLMAP database and model there and deletes none): name a new folder, or "
+            "remove them yourself"
+        )
 
 
 def _run_colmap(image_dir: Path, names: list[str], intrinsics, workdir: Path):
@@ -1055,7 +1076,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--workdir",
         type=Path,
         default=None,
-        help="keep COLMAP's database and model here (default: a temporary directory)",
+        help="keep COLMAP's database and model here, in a folder that holds none yet "
+        "(default: a temporary directory)",
     )
     parser.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
 
@@ -1149,6 +1171,10 @@ def run(args: argparse.Namespace) -> int:
         if args.level != "all":
             _check_level_name(args.level)
         levels = layout.setting_levels(path) if args.level == "all" else [args.level]
+        if workdir:
+            # Every level's folder before the first COLMAP run: nothing half done.
+            for level in levels:
+                _refuse_used_workdir(workdir / level)
         reports = {}
         for level in levels:
             scene = path / level
@@ -1168,6 +1194,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         if args.level not in ("sharp", "all"):
             raise ConfigError(f"--level {args.level}: {path} is an LLFF scene without levels")
+        if workdir:
+            _refuse_used_workdir(workdir)
         data = decisive = check_scene(path, factor=args.factor, workdir=workdir)
         print(_summary(path.name, decisive))
     if args.json:
