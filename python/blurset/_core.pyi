@@ -805,15 +805,19 @@ def plan_setting(
 
 def write_scene_transforms(
     path: str | PathLike[str],
-    setting: dict[str, Any],
+    setting: str | PathLike[str],
     files: list[tuple[int, str]],
     *,
     test_views: list[int],
-    extra: dict[str, Any] | None = None,
+    level: str,
+    gain: float | None = None,
+    test_view_images: str | None = None,
 ) -> None:
-    """The transforms.json of one scene of a setting: the setting's cameras (its
-    transforms.json as a dict), a frame per (view, file path), train/val/test_filenames,
-    and the fields of `extra`."""
+    """The transforms.json of one scene of a setting (a noisy copy of a level): the
+    cameras of the setting's transforms.json at `setting` (InputError naming it when it
+    cannot be read or lacks a field), a frame per (view, file path),
+    train/val/test_filenames, its level, gain (an integer when integral) and what its
+    held-out views hold."""
 
 def test_views(views: int, stride: int) -> list[int]:
     """Every `stride`-th view index below `views`."""

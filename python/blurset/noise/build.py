@@ -26,7 +26,6 @@ inverted (`--source png`). Both share the same draws, so they differ only by wha
 
 from __future__ import annotations
 
-import json
 import shutil
 import sys
 import time
@@ -306,7 +305,7 @@ def _write_unit(
         # build's rows already hold the written resolution and focal length.
         rows = np.repeat(unit.rows, cfg.frames, axis=0)
         small = {f: unit.src / layout.images_dir(f) for f in params["downsample"]}
-        setting_transforms = json.loads((unit.src.parent / layout.TRANSFORMS).read_text())
+        setting_transforms = unit.src.parent / layout.TRANSFORMS
         files = [
             (v, f"images/{unit.names[v * cfg.frames + k]}.png")
             for v in range(len(unit.pngs))
@@ -321,11 +320,9 @@ def _write_unit(
                 setting_transforms,
                 files,
                 test_views=unit.test_views,
-                extra={
-                    "level": unit.level,
-                    "gain": int(g) if float(g).is_integer() else g,
-                    "test_view_images": "clean" if unit.clean_views else "noisy",
-                },
+                level=unit.level,
+                gain=g,
+                test_view_images="clean" if unit.clean_views else "noisy",
             )
             sr, ss = gains_sigmas[g]
             _core.write_noise_json(

@@ -55,7 +55,7 @@ pub use crate::dataset::layout::{
 };
 pub use crate::dataset::llff::{
     parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_scene_transforms,
-    write_setting_poses, PoseRow,
+    write_setting_poses, PoseRow, SceneFields,
 };
 pub use crate::dataset::manifest::{
     check_manifest, list_files as manifest_files, sha256_file, update_manifest, write_manifest,

@@ -253,26 +253,30 @@ fn plan_setting(
     Ok(Plan(plan))
 }
 
-/// Write the `transforms.json` of one scene of a setting (a level, or a gain of one) at
-/// `path`: the cameras of the setting's transforms.json (`setting`, a dict), one frame
-/// per (view, file path), the train/val/test file lists, and the fields of `extra`.
+/// Write the `transforms.json` of one scene of a setting (a noisy copy of a level) at
+/// `path`: the cameras of the setting's transforms.json at `setting`, one frame per (view,
+/// file path), the train/val/test file lists, its level, gain and what its held-out
+/// views hold.
 #[pyfunction]
-#[pyo3(signature = (path, setting, files, *, test_views, extra = None))]
+#[pyo3(signature = (path, setting, files, *, test_views, level, gain = None, test_view_images = None))]
+#[allow(clippy::too_many_arguments)] // keyword arguments of one Python call
 fn write_scene_transforms(
     py: Python<'_>,
     path: PathBuf,
-    setting: &Bound<'_, PyAny>,
+    setting: PathBuf,
     files: Vec<(usize, String)>,
     test_views: Vec<usize>,
-    extra: Option<&Bound<'_, PyAny>>,
+    level: String,
+    gain: Option<f64>,
+    test_view_images: Option<String>,
 ) -> PyResult<()> {
-    let setting: serde_json::Value = from_py("setting transforms.json", setting)?;
-    let extra: serde_json::Map<String, serde_json::Value> = match extra {
-        Some(e) => from_py("extra fields", e)?,
-        None => serde_json::Map::new(),
+    let fields = core::SceneFields {
+        level,
+        gain,
+        test_view_images,
     };
     crate::run_detached(py, || {
-        core::write_scene_transforms(&path, &setting, &files, &test_views, extra)
+        core::write_scene_transforms(&path, &setting, &files, &test_views, &fields)
     })
 }
 

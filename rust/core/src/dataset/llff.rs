@@ -201,16 +201,48 @@ const CAMERA_KEYS: [&str; 9] = [
     "h",
 ];
 
+/// What a scene's transforms.json says of itself beside its setting's cameras.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SceneFields {
+    /// The level directory it is a scene of (`sharp`, `blur_2`).
+    pub level: String,
+    /// The gain of a noisy copy.
+    pub gain: Option<f64>,
+    /// What its held-out views hold: `sharp` or `blurry` in a blur level, `clean` or
+    /// `noisy` in a noisy copy.
+    pub test_view_images: Option<String>,
+}
+
+impl SceneFields {
+    fn map(&self) -> serde_json::Map<String, serde_json::Value> {
+        let mut m = serde_json::Map::new();
+        m.insert("level".into(), self.level.clone().into());
+        if let Some(g) = self.gain {
+            // An integral gain reads as an integer, as the folder name gain_<g> does.
+            let v = if g.fract() == 0.0 && g.abs() < 9.0e15 {
+                serde_json::Value::from(g as i64)
+            } else {
+                serde_json::Value::from(g)
+            };
+            m.insert("gain".into(), v);
+        }
+        if let Some(t) = &self.test_view_images {
+            m.insert("test_view_images".into(), t.clone().into());
+        }
+        m
+    }
+}
+
 /// The `transforms.json` of one LLFF scene of a setting (a level directory, or a gain
 /// of one), as nerfstudio's data parser reads it: the setting's cameras, one frame per
 /// file (`files`: view index and path relative to the scene, e.g. `images/000.png`),
 /// and `train_filenames` / `val_filenames` / `test_filenames` from the test views (val
-/// = test, as nerfstudio's own split makes them). `extra` fields are added at the top.
+/// = test, as nerfstudio's own split makes them), and the scene's own `fields`.
 pub fn scene_transforms(
     setting: &serde_json::Value,
     files: &[(usize, String)],
     test_views: &[usize],
-    extra: serde_json::Map<String, serde_json::Value>,
+    fields: &SceneFields,
 ) -> Result<serde_json::Value> {
     let bad = |what: String| Error::Value(format!("setting transforms.json: {what}"));
     let mut doc = serde_json::Map::new();
@@ -245,7 +277,7 @@ pub fn scene_transforms(
             train.push(path.clone());
         }
     }
-    doc.extend(extra);
+    doc.extend(fields.map());
     doc.insert("frames".into(), frames.into());
     doc.insert("train_filenames".into(), train.into());
     doc.insert("val_filenames".into(), test.clone().into());
@@ -254,14 +286,40 @@ pub fn scene_transforms(
 }
 
 /// [`scene_transforms`] written atomically to `path`.
-pub fn write_scene_transforms(
+fn write_scene_doc(
     path: &Path,
     setting: &serde_json::Value,
     files: &[(usize, String)],
     test_views: &[usize],
-    extra: serde_json::Map<String, serde_json::Value>,
+    fields: &SceneFields,
 ) -> Result<()> {
-    let doc = scene_transforms(setting, files, test_views, extra)?;
+    let doc = scene_transforms(setting, files, test_views, fields)?;
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::Value(e.to_string()))?;
+    write_atomic(path, text.as_bytes())
+}
+
+/// The transforms.json of one scene made from a setting's transforms.json at
+/// `setting_path` (a noisy copy of a level), written atomically to `path`. A setting file
+/// that cannot be read or lacks a camera field or a view's frame is one Input error
+/// naming it; nothing is written then.
+pub fn write_scene_transforms(
+    path: &Path,
+    setting_path: &Path,
+    files: &[(usize, String)],
+    test_views: &[usize],
+    fields: &SceneFields,
+) -> Result<()> {
+    let bad = |reason: String| Error::Input {
+        reason,
+        path: setting_path.into(),
+    };
+    let text = std::fs::read(setting_path).map_err(|e| bad(format!("cannot read ({e})")))?;
+    let setting: serde_json::Value = serde_json::from_slice(&text)
+        .map_err(|e| bad(format!("transforms.json is not readable JSON ({e})")))?;
+    let doc = scene_transforms(&setting, files, test_views, fields).map_err(|e| match e {
+        Error::Value(reason) => bad(reason),
+        other => other,
+    })?;
     let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::Value(e.to_string()))?;
     write_atomic(path, text.as_bytes())
 }
@@ -324,18 +382,18 @@ pub fn write_setting_poses(
         .map(|v| (v.index, format!("images/{}", image_name(v.index, n))))
         .collect();
     for level in level_dirs {
-        let mut extra = serde_json::Map::new();
-        extra.insert("level".into(), level.clone().into());
-        if level != "sharp" {
-            let kind = if sharp_test_views { "sharp" } else { "blurry" };
-            extra.insert("test_view_images".into(), kind.into());
-        }
-        write_scene_transforms(
+        let fields = SceneFields {
+            level: level.clone(),
+            gain: None,
+            test_view_images: (level != "sharp")
+                .then(|| if sharp_test_views { "sharp" } else { "blurry" }.to_string()),
+        };
+        write_scene_doc(
             &setting_dir.join(level).join("transforms.json"),
             &doc,
             &files,
             test_views,
-            extra,
+            &fields,
         )?;
     }
     Ok(())
@@ -530,11 +588,51 @@ mod tests {
         );
         assert_eq!(blur["val_filenames"], blur["test_filenames"]);
         assert_eq!(blur["train_filenames"].as_array().map(Vec::len), Some(3));
-        let e = scene_transforms(&setting, &[(9, "x".into())], &[], Default::default())
+        let e = scene_transforms(&setting, &[(9, "x".into())], &[], &SceneFields::default())
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(e.contains("view 9"), "{e}");
+        // A noisy copy's scene from the setting's file: an integral gain is an integer.
+        let noisy = dir.join("gain.json");
+        let fields = |gain| SceneFields {
+            level: "blur_2".into(),
+            gain: Some(gain),
+            test_view_images: Some("clean".into()),
+        };
+        let files = [(0, "images/000.png".to_string())];
+        write_scene_transforms(
+            &noisy,
+            &dir.join("transforms.json"),
+            &files,
+            &[0],
+            &fields(4.0),
+        )?;
+        let doc = read(noisy.clone())?;
+        assert_eq!(
+            (doc["gain"].as_i64(), doc["level"].as_str()),
+            (Some(4), Some("blur_2"))
+        );
+        write_scene_transforms(
+            &noisy,
+            &dir.join("transforms.json"),
+            &files,
+            &[0],
+            &fields(2.5),
+        )?;
+        assert_eq!(read(noisy.clone())?["gain"].as_f64(), Some(2.5));
+        // A setting file that is missing, or lacks a camera field, is an Input error
+        // naming it, and nothing is written.
+        let broken = dir.join("broken.json");
+        std::fs::write(&broken, b"{\"frames\": []}").map_err(|e| Error::io("write", &broken, e))?;
+        let out = dir.join("never.json");
+        for setting in [dir.join("absent.json"), broken.clone()] {
+            match write_scene_transforms(&out, &setting, &files, &[0], &fields(1.0)) {
+                Err(Error::Input { path, .. }) => assert_eq!(path, setting),
+                other => panic!("{other:?}"),
+            }
+        }
+        assert!(!out.exists());
         let _ = std::fs::remove_dir_all(&dir);
         Ok(())
     }
