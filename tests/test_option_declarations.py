@@ -54,7 +54,7 @@ def test_every_option_has_a_flag_and_every_flag_is_an_option() -> None:
 
 def _stub_properties() -> dict[str, str]:
     text = STUB.read_text()
-    start = text.index("class BuildConfig")
+    start = text.index("\nclass BuildConfig:")
     end = text.index("\nclass ", start + 1)
     body = text[start:end]
     return dict(re.findall(r"@property\s+def (\w+)\(self\) -> ([^:]+?): \.\.\.", body))
@@ -113,6 +113,26 @@ def test_the_stub_types_every_option_as_the_core_gives_it() -> None:
             if not _conforms(getattr(cfg, o), hint):
                 wrong.append(f"{o}: {getattr(cfg, o)!r} is not {props[o]}")
     assert not wrong, wrong
+
+
+def test_the_config_record_is_what_its_stub_type_says() -> None:
+    """BuildConfigRecord (generated into _core.pyi) names every key of
+    `BuildConfig.record()` and types each value as it comes, under latents auto too."""
+    text = STUB.read_text()
+    start = text.index("class BuildConfigRecord(TypedDict):")
+    body = text[start : text.index("# (end of the generated record)", start)]
+    fields = dict(re.findall(r"^    (\w+): (.+)$", body, re.M))
+    env = {"list": list, "tuple": tuple, "Literal": Literal}
+    for cfg in (BuildConfig(), BuildConfig(latents_auto=True, background=[0.5, 0.5, 0.5])):
+        record = cfg.record()
+        assert sorted(record) == sorted(fields)
+        wrong = [
+            f"{k}: {v!r} is not {fields[k]}"
+            for k, v in record.items()
+            if not _conforms(v, eval(fields[k], env))  # noqa: S307 - our own stub
+        ]
+        assert not wrong, wrong
+    assert BuildConfig(latents_auto=True).record()["latents"] == "auto"
 
 
 def test_every_option_is_classified_as_shaping_the_files_or_not() -> None:

@@ -198,6 +198,9 @@ def test_the_stubs_typed_properties_are_generated_from_the_declarations() -> Non
     begin = stub.index(options.STUB_BEGIN, start)
     end = stub.index(options.STUB_END, begin) + len(options.STUB_END)
     assert stub[begin:end] == options.stub_properties(BUILD.decls), "run `make stub`"
+    rb = stub.index(options.RECORD_BEGIN)
+    re_ = stub.index(options.RECORD_END, rb) + len(options.RECORD_END)
+    assert stub[rb:re_] == options.record_type(BUILD.decls), "run `make stub`"
     assert options.python_type("Option<Vec<u32>>") == "list[int] | None"
     assert options.python_type("[f64; 3]") == "tuple[float, float, float]"
     # A toy declaration gets its typed property.

@@ -5,7 +5,7 @@ One section per binding file; keep each section next to its Rust counterpart's n
 
 from os import PathLike
 from pathlib import Path
-from typing import Any, Literal, TypeAlias, final
+from typing import Any, Literal, TypeAlias, TypedDict, final
 
 import numpy as np
 import numpy.typing as npt
@@ -106,6 +106,73 @@ class OptionDecl:
     def section(self) -> str | None:
         """The titled section of the help its flag is listed under (None: the command's)."""
 
+# dataset.json's config record, generated from the declarations (`make stub`):
+class BuildConfigRecord(TypedDict):
+    """dataset.json's `config`: every option as `BuildConfig.record()` writes it."""
+
+    objects: list[str]
+    out: str | None
+    demo: bool
+    settings_per_object: int
+    views: int
+    levels: list[int]
+    latents: int | Literal["auto"]
+    latents_auto: bool
+    latents_max: int
+    max_ghost_px: float
+    blur_method: Literal["average", "motion_blur"]
+    samples: int
+    samples_total: int | None
+    sharp_samples: int | None
+    latent_sampling: Literal["subsets", "independent"]
+    blur_budget: Literal["parity", "flat", "need"]
+    denoise: Literal["none", "oidn"]
+    light_paths: Literal["auto", "fixed"]
+    device: Literal["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"]
+    gpus: list[int] | None
+    gpus_per_task: float | None
+    resolution: int
+    seed: int
+    fov_deg: float
+    phi0_deg: float
+    window_deg: float
+    delta0: float
+    radius_margin: float
+    level_spread: float
+    latent_positions: Literal["random", "stratified"]
+    trajectory: Literal["start", "centered"]
+    orientation_max: float
+    near_floor: float
+    background: list[float]
+    write_linear: bool
+    previews: bool
+    view_stride: int
+    test_fraction: float
+    test_objects: list[str] | None
+    test_settings: int | None
+    blurry_test_views: bool
+    downsample: list[int]
+    workers: int
+    threads: int
+    executor: Literal["local", "ray"]
+    ray_address: str | None
+    shard: str | None
+    objaverse_dir: str | None
+    objaverse_offline: bool
+    objaverse_count: int | None
+    timeout: float
+    object_timeout: float
+    retries: int
+    max_failure_rate: float
+    max_triangles: int
+    max_texture_pixels: int
+    blender: str | None
+    check_poses: bool
+    allow_mixed: bool
+    licenses: list[str] | None
+    effective_sharp_samples: int
+# (end of the generated record)
+
 @final
 class BuildConfig:
     """Every option of `blurset build`, validated (frozen: `replace` makes a new one).
@@ -131,7 +198,7 @@ class BuildConfig:
     @staticmethod
     def declarations() -> list[OptionDecl]:
         """Every option as the core declares it, in declaration order."""
-    def record(self) -> dict[str, Any]:
+    def record(self) -> BuildConfigRecord:
         """dataset.json's `config` record: every option, `latents` = "auto" under latents
         auto, and `effective_sharp_samples`."""
     def sampling(self) -> SamplingConfig:

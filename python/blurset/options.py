@@ -226,16 +226,19 @@ STUB_BEGIN = "    # The options, generated from the core's declarations (`make s
 STUB_END = "    # (end of the generated options)\n"
 
 
-def python_type(rust: str) -> str:
+def python_type(rust: str, json: bool = False) -> str:
     """The Python type the binding gives a field of this Rust type (`Option<Vec<u32>>`
-    → `list[int] | None`)."""
+    → `list[int] | None`); `json`: as a record parsed from JSON holds it (an array is a
+    list, not a tuple)."""
     rust = rust.replace(" ", "")
     if rust.startswith("Option<") and rust.endswith(">"):
-        return f"{python_type(rust[7:-1])} | None"
+        return f"{python_type(rust[7:-1], json)} | None"
     if rust.startswith("Vec<") and rust.endswith(">"):
-        return f"list[{python_type(rust[4:-1])}]"
+        return f"list[{python_type(rust[4:-1], json)}]"
     if rust.startswith("[") and rust.endswith("]") and ";" in rust:
         item, n = rust[1:-1].split(";")
+        if json:
+            return f"list[{python_type(item, json)}]"
         return f"tuple[{', '.join([python_type(item)] * int(n))}]"
     if rust == "String":
         return "str"
@@ -248,11 +251,12 @@ def python_type(rust: str) -> str:
     raise ValueError(f"no Python type for the Rust type {rust!r}")
 
 
-def property_type(d: Decl) -> str:
-    """The Python type of a config property: a choice is the Literal of its names (the
-    binding hands the value's name across), anything else from its Rust type."""
+def property_type(d: Decl, json: bool = False) -> str:
+    """The Python type of a config property (`json`: of its value in a record): a choice
+    is the Literal of its names (the binding hands the value's name across), anything
+    else from its Rust type."""
     if not d.choices:
-        return python_type(d.rust_type)
+        return python_type(d.rust_type, json)
     names = ", ".join(f'"{c}"' for c in d.choices)
     return f"Literal[{names}]" + (" | None" if d.optional else "")
 
@@ -263,6 +267,30 @@ def stub_properties(decls: Sequence[Decl]) -> str:
         f"    @property\n    def {d.name}(self) -> {property_type(d)}: ...\n" for d in decls
     )
     return STUB_BEGIN + body + STUB_END
+
+
+RECORD_BEGIN = "# dataset.json's config record, generated from the declarations (`make stub`):\n"
+RECORD_END = "# (end of the generated record)\n"
+
+
+def record_type(decls: Sequence[Decl]) -> str:
+    """The TypedDict of `BuildConfig.record()` in _core.pyi: a field per declaration,
+    typed as its property, a count-or-auto option also "auto" (the record writes "auto"
+    for the option it sets), and the derived `effective_sharp_samples`."""
+    fields = "".join(
+        f"    {d.name}: {property_type(d, json=True)}"
+        + (' | Literal["auto"]' if d.kind == "count_or_auto" else "")
+        + "\n"
+        for d in decls
+    )
+    return (
+        RECORD_BEGIN
+        + "class BuildConfigRecord(TypedDict):\n"
+        + '    """dataset.json\'s `config`: every option as `BuildConfig.record()` writes it."""\n\n'
+        + fields
+        + "    effective_sharp_samples: int\n"
+        + RECORD_END
+    )
 
 
 def write_stub(path: str, cls: str = "BuildConfig") -> bool:
@@ -277,6 +305,10 @@ def write_stub(path: str, cls: str = "BuildConfig") -> bool:
     end = text.index(STUB_END, begin) + len(STUB_END)
     decls = getattr(_core, cls).declarations()
     new = text[:begin] + stub_properties(decls) + text[end:]
+    if cls == "BuildConfig":
+        rb = new.index(RECORD_BEGIN)
+        re_ = new.index(RECORD_END, rb) + len(RECORD_END)
+        new = new[:rb] + record_type(decls) + new[re_:]
     if new != text:
         p.write_text(new)
     return new != text

@@ -69,9 +69,11 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
     from those OUT was made with, unless --allow-mixed; the first run records them in a
     provisional dataset.json (call under build_lock)."""
     path = out / layout.DATASET
-    now = cfg.record()
+    record = cfg.record()
+    # Compared option by option, whatever the option: a plain mapping of its values.
+    now: dict[str, object] = dict(record)
     if not path.is_file():
-        outputs.write_record(path, {"name": DATASET_NAME, "config": now, "provisional": True})
+        outputs.write_record(path, {"name": DATASET_NAME, "config": record, "provisional": True})
         return
     try:
         was = json.loads(path.read_text())["config"]
@@ -81,7 +83,7 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
         raise ConfigError(
             f"dataset.json of OUT is unreadable; move it away to rebuild: {path}"
         ) from None
-    defaults = BuildConfig(out=cfg.out, objects=cfg.objects).record()
+    defaults: dict[str, object] = dict(BuildConfig(out=cfg.out, objects=cfg.objects).record())
     before = {k: was.get(k, BEFORE_OPTION.get(k, defaults.get(k))) for k in now}
     differ = [k for k in sorted(now) if k not in RUN_OPTIONS and before[k] != now[k]]
     if differ and not cfg.allow_mixed:
