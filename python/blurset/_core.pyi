@@ -171,6 +171,7 @@ class BuildConfigRecord(TypedDict):
     allow_mixed: bool
     licenses: list[str] | None
     effective_sharp_samples: int
+
 # (end of the generated record)
 
 @final

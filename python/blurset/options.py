@@ -288,7 +288,7 @@ def record_type(decls: Sequence[Decl]) -> str:
         + "class BuildConfigRecord(TypedDict):\n"
         + '    """dataset.json\'s `config`: every option as `BuildConfig.record()` writes it."""\n\n'
         + fields
-        + "    effective_sharp_samples: int\n"
+        + "    effective_sharp_samples: int\n\n"
         + RECORD_END
     )
 
