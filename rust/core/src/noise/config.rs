@@ -4,9 +4,9 @@
 //! [`NoiseConfig::declarations`] and passes the validated config through the noise
 //! modes; an error names the option, which Python turns into its flag.
 use crate::error::Result;
-use crate::plan::choices::{NoiseGamma, NoiseProfile, NoiseSource};
+use crate::plan::choices::{choice, NoiseGamma, NoiseProfile, NoiseSource};
 use crate::plan::options::{config_struct, shapes_outputs, Meta, OptionInfo};
-use crate::plan::spec::{check, choice, config_error, convert, specs, Kind, Raw, Spec};
+use crate::plan::spec::{check, config_error, convert, specs, Kind, Raw, Spec};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 

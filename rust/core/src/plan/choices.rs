@@ -1,7 +1,9 @@
 //! The options that take one of a few named values, as types: every name is spelled once,
 //! in its enum's [`choice_enum!`] declaration, which gives serde (records), the option
 //! parser (case-insensitive) and the declarations' `choices` (the CLI and the stub's
-//! `Literal` types) the same list. Below the config and the plan, which both use them.
+//! `Literal` types) the same list. Above the option specs (a choice is read by
+//! [`choice_index`], as a `Spec::Choice`), below the config and the plan.
+use super::spec::{choice_index, Kind, OptionValue, Raw, Spec};
 use serde::{Deserialize, Serialize};
 
 /// An option value that is one of a fixed set of names.
@@ -20,16 +22,18 @@ pub trait Choice: Copy + PartialEq + Sized + 'static {
     /// The value named `text`, in any case and without surrounding blanks (`CUDA`,
     /// ` Cuda` name `cuda`).
     fn from_name(text: &str) -> Option<Self> {
-        let text = text.trim();
-        Self::NAMES
-            .iter()
-            .position(|n| n.eq_ignore_ascii_case(text))
-            .map(|i| Self::ALL[i])
+        choice_index(Self::NAMES, text).map(|i| Self::ALL[i])
     }
 }
 
+/// The spec of a [`Choice`] option: its names.
+pub const fn choice<T: Choice>() -> Spec {
+    Spec::Choice(T::NAMES)
+}
+
 /// An enum of named values: `pub enum E { Variant = "name", … }`, each name given once;
-/// serde writes and reads that name, and [`Choice`] lists it.
+/// serde writes and reads that name, [`Choice`] lists it, and [`OptionValue`] reads it
+/// as an option's value.
 macro_rules! choice_enum {
     (
         $(#[$meta:meta])*
@@ -46,6 +50,21 @@ macro_rules! choice_enum {
         impl Choice for $name {
             const NAMES: &'static [&'static str] = &[$($text),+];
             const ALL: &'static [Self] = &[$($name::$variant),+];
+        }
+
+        impl OptionValue for $name {
+            fn from_raw(raw: &Raw, _: &Spec) -> Option<Self> {
+                match raw {
+                    Raw::Str(s) => Self::from_name(s),
+                    _ => None,
+                }
+            }
+            fn to_raw(&self) -> Raw {
+                Raw::Str(self.name().into())
+            }
+            fn kind(_: &Spec) -> Kind {
+                Kind::Choice
+            }
         }
 
         impl std::fmt::Display for $name {

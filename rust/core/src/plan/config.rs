@@ -6,12 +6,12 @@
 //! and the range (`views -1: must be an integer in 1..=4096`), never a parser position.
 //! The sampling options form the [`SamplingConfig`] of every setting's plan.
 use super::choices::{
-    BlurBudget, BlurMethod, Denoise, Device, Executor, LatentPositions, LatentSampling, LightPaths,
-    TrajectoryAnchor,
+    choice, BlurBudget, BlurMethod, Denoise, Device, Executor, LatentPositions, LatentSampling,
+    LightPaths, TrajectoryAnchor,
 };
 use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use super::sampling::SamplingConfig;
-use super::spec::{check, choice, specs, Kind, OptionValue, Raw, Spec};
+use super::spec::{check, specs, Kind, OptionValue, Raw, Spec};
 use super::spec::{config_error, convert};
 use super::weights::Guards;
 use crate::error::Result;

@@ -2,10 +2,6 @@
 //! conversion between them: the ranges every check of an option uses, the build
 //! config's ([`super::config`]) and a plan's ([`super::sampling`]) alike. Below both,
 //! so neither imports the other for its ranges.
-use super::choices::{
-    BlurBudget, BlurMethod, Choice, Denoise, Device, Executor, LatentPositions, LatentSampling,
-    LightPaths, NoiseGamma, NoiseProfile, NoiseSource, TrajectoryAnchor,
-};
 use crate::error::{Error, Result};
 use crate::ground::license;
 use crate::ground::names::MAX_LEVEL;
@@ -289,11 +285,7 @@ impl OptionValue for bool {
 impl OptionValue for String {
     fn from_raw(raw: &Raw, spec: &Spec) -> Option<Self> {
         match (raw, spec) {
-            // `CUDA`, ` Cuda` … name the value `cuda`: a choice is read in any case.
-            (Raw::Str(s), Spec::Choice(c)) => c
-                .iter()
-                .find(|v| v.eq_ignore_ascii_case(s.trim()))
-                .map(|v| v.to_string()),
+            (Raw::Str(s), Spec::Choice(c)) => choice_index(c, s).map(|i| c[i].to_string()),
             (Raw::Str(s), _) => Some(s.clone()),
             _ => None,
         }
@@ -309,43 +301,11 @@ impl OptionValue for String {
     }
 }
 
-/// A value of one of the [`Choice`] enums, read by its name in any case.
-macro_rules! choice_value {
-    ($($t:ty),*) => {$(
-        impl OptionValue for $t {
-            fn from_raw(raw: &Raw, _: &Spec) -> Option<Self> {
-                match raw {
-                    Raw::Str(s) => <$t>::from_name(s),
-                    _ => None,
-                }
-            }
-            fn to_raw(&self) -> Raw {
-                Raw::Str(self.name().into())
-            }
-            fn kind(_: &Spec) -> Kind {
-                Kind::Choice
-            }
-        }
-    )*};
-}
-choice_value!(
-    LatentPositions,
-    TrajectoryAnchor,
-    BlurMethod,
-    LatentSampling,
-    BlurBudget,
-    Denoise,
-    LightPaths,
-    Device,
-    Executor,
-    NoiseProfile,
-    NoiseGamma,
-    NoiseSource
-);
-
-/// The spec of a [`Choice`] option: its names.
-pub const fn choice<T: Choice>() -> Spec {
-    Spec::Choice(T::NAMES)
+/// The index of the name `text` among `names`, in any case and without surrounding
+/// blanks (`CUDA`, ` Cuda` name `cuda`): how every choice is read.
+pub fn choice_index(names: &[&str], text: &str) -> Option<usize> {
+    let text = text.trim();
+    names.iter().position(|n| n.eq_ignore_ascii_case(text))
 }
 
 impl<T: OptionValue> OptionValue for Option<T> {
