@@ -61,7 +61,8 @@ pub struct BuildConfig(pub core::BuildConfig);
 
 // One #[pymethods] block per config class: a getter per option of the core's
 // declaration table (`build_options!`, `noise_options!`; the table names the class, which
-// this module defines under the core's name), and the methods given.
+// this module defines under the core's name), what every config has (the constructor
+// from option values, `options`, `declarations`), and the methods given.
 macro_rules! py_config {
     (
         { $($methods:tt)* }
@@ -81,21 +82,37 @@ macro_rules! py_config {
                     crate::sampling::to_py(py, &self.0.$name)
                 }
             )*
+
+            #[new]
+            #[pyo3(signature = (**values))]
+            fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+                let v = raw_values(values)?;
+                core::$cfg::from_values(&v)
+                    .map($cfg)
+                    .map_err(crate::error::to_pyerr)
+            }
+
+            /// The option names, in declaration order.
+            #[staticmethod]
+            fn options() -> Vec<&'static str> {
+                core::$cfg::OPTIONS.to_vec()
+            }
+
+            /// Every option as the core declares it, in declaration order.
+            #[staticmethod]
+            fn declarations() -> Vec<OptionDecl> {
+                core::$cfg::declarations()
+                    .into_iter()
+                    .map(OptionDecl)
+                    .collect()
+            }
+
             $($methods)*
         }
     };
 }
 
 blurset_core::build_options!(py_config {
-    #[new]
-    #[pyo3(signature = (**values))]
-    fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let v = raw_values(values)?;
-        core::BuildConfig::from_values(&v)
-            .map(BuildConfig)
-            .map_err(crate::error::to_pyerr)
-    }
-
     /// A copy with these options replaced, validated.
     #[pyo3(signature = (**values))]
     fn replace(&self, values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
@@ -123,21 +140,6 @@ blurset_core::build_options!(py_config {
         self.0
             .check_test_objects(&uids)
             .map_err(crate::error::to_pyerr)
-    }
-
-    /// The option names, in declaration order.
-    #[staticmethod]
-    fn options() -> Vec<&'static str> {
-        core::BuildConfig::OPTIONS.to_vec()
-    }
-
-    /// Every option as the core declares it, in declaration order.
-    #[staticmethod]
-    fn declarations() -> Vec<OptionDecl> {
-        core::BuildConfig::declarations()
-            .into_iter()
-            .map(OptionDecl)
-            .collect()
     }
 
     /// The most renders one blurry image can take.
@@ -241,34 +243,10 @@ blurset_core::build_options!(py_config {
 pub struct NoiseConfig(pub core::NoiseConfig);
 
 blurset_core::noise_options!(py_config {
-    #[new]
-    #[pyo3(signature = (**values))]
-    fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let v = raw_values(values)?;
-        core::NoiseConfig::from_values(&v)
-            .map(NoiseConfig)
-            .map_err(crate::error::to_pyerr)
-    }
-
     /// The gains as numbers, in the order given.
     #[getter]
     fn gain_values(&self) -> PyResult<Vec<f64>> {
         self.0.gain_values().map_err(crate::error::to_pyerr)
-    }
-
-    /// The option names, in declaration order.
-    #[staticmethod]
-    fn options() -> Vec<&'static str> {
-        core::NoiseConfig::OPTIONS.to_vec()
-    }
-
-    /// Every option as the core declares it, in declaration order.
-    #[staticmethod]
-    fn declarations() -> Vec<OptionDecl> {
-        core::NoiseConfig::declarations()
-            .into_iter()
-            .map(OptionDecl)
-            .collect()
     }
 
     fn __repr__(&self) -> String {
