@@ -316,12 +316,10 @@ pub fn write_scene_transforms(
     let text = std::fs::read(setting_path).map_err(|e| bad(format!("cannot read ({e})")))?;
     let setting: serde_json::Value = serde_json::from_slice(&text)
         .map_err(|e| bad(format!("transforms.json is not readable JSON ({e})")))?;
-    let doc = scene_transforms(&setting, files, test_views, fields).map_err(|e| match e {
+    write_scene_doc(path, &setting, files, test_views, fields).map_err(|e| match e {
         Error::Value(reason) => bad(reason),
         other => other,
-    })?;
-    let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::Value(e.to_string()))?;
-    write_atomic(path, text.as_bytes())
+    })
 }
 
 /// Write `<level>/poses_bounds.npy` and `<level>/transforms.json` for every level
