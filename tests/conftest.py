@@ -288,3 +288,9 @@ def copy_build(src: Path, dst: Path) -> Path:
 
     shutil.copytree(src, dst, symlinks=True)
     return dst
+
+
+def help_text(parser, action) -> str:
+    """The help line of `action` in `parser` as the user reads it (defaults expanded),
+    whitespace folded."""
+    return " ".join(parser._get_formatter()._expand_help(action).split())

@@ -12,13 +12,7 @@ from blurset import cli
 HISTORY = re.compile(r"\bissue\b|builds? before|this round", re.IGNORECASE)
 
 
-def _subparsers() -> dict[str, argparse.ArgumentParser]:
-    parser = cli.make_parser()
-    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return dict(sub.choices)
-
-
-SUBPARSERS = _subparsers()
+SUBPARSERS = cli.subcommands()
 
 
 def _help_of(p: argparse.ArgumentParser, action: argparse.Action) -> str:

@@ -68,11 +68,9 @@ def test_cli_reference_covers_every_command_and_option(tmp_path, monkeypatch) ->
     monkeypatch.setattr(cli_gen, "OUT", tmp_path / "cli.md")
     assert cli_gen.main() == 0
     page = (tmp_path / "cli.md").read_text()
-    from blurset.cli import make_parser
+    from blurset.cli import subcommands
 
-    parser = make_parser()
-    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    for name, p in sub.choices.items():
+    for name, p in subcommands().items():
         assert f"## `blurset {name}`" in page
         for action in p._actions:
             if isinstance(action, argparse._HelpAction) or "--debug" in action.option_strings:

@@ -12,18 +12,14 @@ from blurset import cli, options
 from blurset.exceptions import ConfigError
 from blurset.noise.cli import NOISE, NoiseConfig, config_of
 
+from tests.conftest import help_text
+
 # Flags of `blurset noise` that are not options of the config.
 NOT_OPTIONS = {"help", "debug", "scene"}
 
 
 def _noise_parser() -> argparse.ArgumentParser:
-    parser = cli.make_parser()
-    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return sub.choices["noise"]
-
-
-def _help(p: argparse.ArgumentParser, action: argparse.Action) -> str:
-    return " ".join(p._get_formatter()._expand_help(action).split())
+    return cli.subcommands()["noise"]
 
 
 def test_every_declared_flag_is_one_parser_flag_with_its_default_and_back() -> None:
@@ -36,13 +32,13 @@ def test_every_declared_flag_is_one_parser_flag_with_its_default_and_back() -> N
         (action,) = by_dest[d.name]  # exactly one flag per declaration
         assert action.option_strings == d.flags, d.name
         assert action.default is None  # unset flags leave the core's default
-        assert d.help.split()[0] in _help(p, action), d.name
+        assert d.help.split()[0] in help_text(p, action), d.name
         if d.kind == "switch":
             assert action.nargs == 0, d.name
         elif "required" in d.help:
-            assert action.required and "default" not in _help(p, action), d.name
+            assert action.required and "default" not in help_text(p, action), d.name
         else:
-            assert f"(default: {NOISE.default_text(d.name)})" in _help(p, action), d.name
+            assert f"(default: {NOISE.default_text(d.name)})" in help_text(p, action), d.name
         if d.kind == "choice":
             assert list(action.choices or []) == d.choices, d.name
     declared = {d.name for d in NOISE.decls}

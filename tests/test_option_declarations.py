@@ -38,9 +38,7 @@ NOT_OPTIONS = {"help", "debug", "config", "quiet"}
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = cli.make_parser()
-    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return sub.choices["build"]
+    return cli.subcommands()["build"]
 
 
 def test_every_option_has_a_flag_and_every_flag_is_an_option() -> None:

@@ -19,18 +19,14 @@ from blurset.config import BUILD, BuildConfig, load_toml, make_config
 from blurset.exceptions import ConfigError
 from blurset.options import Options
 
+from tests.conftest import help_text
+
 # Flags of `blurset build` that are not options of the config.
 NOT_OPTIONS = {"help", "debug", "config", "quiet"}
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = cli.make_parser()
-    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return sub.choices["build"]
-
-
-def _help(p: argparse.ArgumentParser, action: argparse.Action) -> str:
-    return " ".join(p._get_formatter()._expand_help(action).split())
+    return cli.subcommands()["build"]
 
 
 def test_every_declared_flag_is_one_parser_flag_with_its_default_and_back() -> None:
@@ -46,13 +42,13 @@ def test_every_declared_flag_is_one_parser_flag_with_its_default_and_back() -> N
         (action,) = by_dest[d.name]  # exactly one flag per declaration
         assert action.option_strings == d.flags, d.name
         assert action.default is None  # unset flags leave the core's default
-        assert d.help.split()[0] in _help(p, action), d.name
+        assert d.help.split()[0] in help_text(p, action), d.name
         if d.kind == "switch":
             assert action.nargs == 0, d.name  # off unless given
         elif "required" in d.help:
-            assert "default" not in _help(p, action), d.name
+            assert "default" not in help_text(p, action), d.name
         else:
-            assert f"(default: {BUILD.default_text(d.name)})" in _help(p, action), d.name
+            assert f"(default: {BUILD.default_text(d.name)})" in help_text(p, action), d.name
         if d.kind == "choice":
             assert list(action.choices or []) == d.choices, d.name
     declared = {d.name for d in BUILD.decls}

@@ -22,11 +22,6 @@ OUT = DOCS / "reference" / "cli.md"
 WIDTH = 88
 
 
-def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
-    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return dict(sub.choices)
-
-
 def _cell(text: str) -> str:
     return sanitize(" ".join(str(text).split())).replace("|", "\\|")
 
@@ -134,10 +129,10 @@ def _help_lines(p: argparse.ArgumentParser) -> list[str]:
 
 def reference() -> str:
     os.environ["COLUMNS"] = str(WIDTH)  # argparse wraps the usage at this width
-    from blurset.cli import make_parser
+    from blurset.cli import make_parser, subcommands
 
     parser = make_parser()
-    subs = _subparsers(parser)
+    subs = subcommands(parser)
     out = [
         "# Command-line reference",
         "",

@@ -122,6 +122,16 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def subcommands(
+    parser: argparse.ArgumentParser | None = None,
+) -> dict[str, argparse.ArgumentParser]:
+    """The parser of each subcommand of `parser` (default: `make_parser()`'s), by name:
+    what the CLI reference and the help tests read."""
+    parser = parser or make_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return dict(sub.choices)
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         # Building the parser imports every command (numpy, matplotlib …): a Ctrl-C in
