@@ -44,6 +44,20 @@ def pick_device(name: str) -> str:
         raise SystemExit(f"bench/run.py: {e}") from None
 
 
+def machine() -> str:
+    """The CPU this run measured on (model name and cores): results from different
+    machines share results.json, and a ratio holds on one machine only."""
+    model = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} cores"
+
+
 def main() -> int:
     results = []
     argv = sys.argv[1:]
@@ -67,6 +81,7 @@ def main() -> int:
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
         for r in mod.run():
+            r.setdefault("machine", machine())
             print(
                 f"{r['name']}: {r['ratio']:.2f}x  ({r['contender']} vs {r['baseline']})", flush=True
             )

@@ -43,6 +43,7 @@ COST = re.compile(
     r"^(blur_cost_vs_sharp\w*|motion_blur_cost_vs_sharp|render_region_saving|exr_crop_saving)$"
 )
 LIGHT = re.compile(r"^light_paths_(?P<glb>.+)$")
+GAIN = re.compile(r"^denoise_gain_(?P<glb>.+)_(?P<res>\d+)px$")
 NOT_PRESETS = {"settings_per_hour_2_vs_1_workers"}
 
 plt.rcParams.update({"figure.dpi": 110, "font.size": 9, "axes.grid": True, "grid.alpha": 0.3})
@@ -122,8 +123,8 @@ def presets_page(rs: list[dict]) -> list[str]:
     out = [
         "# Presets: settings per hour and accuracy",
         "",
-        "Each preset builds the same demo setting side by side in one run of",
-        "`bench/bench_settings_per_hour.py`; settings per hour are extrapolated from the",
+        "Each preset builds the same setting of each measured object side by side in one run",
+        "of `bench/bench_settings_per_hour.py`; settings per hour are extrapolated from the",
         "views measured, and PSNR is measured over every blurry and sharp image against",
         "converged references (the guide [Speed or accuracy](../guide/speed.md) says what each",
         "preset is for). The dotted line is the 8-bit floor: a PNG's own rounding alone is",
@@ -202,6 +203,107 @@ def presets_page(rs: list[dict]) -> list[str]:
     out += ["", "What each preset ran:", ""]
     for p in names:
         out.append(f"- `{p}`: {_flags(rows[p].get('contender', ''))}")
+    out += _verdicts(rows, names) + _pairs(rows, names)
+    return out
+
+
+VERDICT_CHECKS = {
+    "sharp_accurate": "sharp render PSNR ≥ min(paper's, 8-bit floor)",
+    "blur_accurate": "blurry render PSNR ≥ min(paper's, 8-bit floor)",
+    "blur_vs_continuous": "blurry PSNR against the continuous blur ≥ paper's",
+    "parity": "blurry and sharp render PSNR within 0.5 dB, or both ≥ the floor",
+    "detail": "detail ratios within [0.95, 1.05]",
+    "speed_10x": "≥ 10× the paper preset's settings per hour",
+}
+
+
+def _verdicts(rows: dict, names: list[str]) -> list[str]:
+    """Issue 28's bar, as the bench judged each preset against the paper preset."""
+    judged = [p for p in names if isinstance(rows[p].get("verdict"), dict)]
+    if not judged:
+        return []
+    out = [
+        "",
+        "## Against the bar",
+        "",
+        "A preset is a cheaper way to make the paper's pairs when every check holds (means",
+        "over the images of all objects; the bench's `verdict`):",
+        "",
+    ]
+    out += [f"- **{k}**: {t}" for k, t in VERDICT_CHECKS.items()]
+    head = ["preset", *VERDICT_CHECKS, "all"]
+    out += ["", "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    for p in judged:
+        v = rows[p]["verdict"]
+        marks = ["✓" if v.get(k) else "✗" for k in [*VERDICT_CHECKS, "all"]]
+        out.append("| " + " | ".join([f"`{p}`", *marks]) + " |")
+    return out
+
+
+def _pairs(rows: dict, names: list[str]) -> list[str]:
+    """Render PSNR of blurry and sharp per object: parity is a property of each pair, and
+    a mean over objects can hide a pair that is not one."""
+    have = [p for p in names if rows[p].get("per_object")]
+    if not have:
+        return []
+    objects = sorted({u for p in have for u in rows[p]["per_object"]})
+    lines = ["| preset | " + " | ".join(f"`{u}`" for u in objects) + " |"]
+    lines.append("|" + " --- |" * (len(objects) + 1))
+    for p in have:
+        cells = []
+        for u in objects:
+            o = rows[p]["per_object"].get(u)
+            if o is None:
+                cells.append("")
+                continue
+            b, s = o.get("render_psnr_blur_db"), o.get("render_psnr_sharp_db")
+            gap = "" if b is None or s is None else f" ({b - s:+.1f})"
+            cells.append(f"{_fmt(b, 1)} / {_fmt(s, 1)}{gap}")
+        lines.append("| " + " | ".join([f"`{p}`", *cells]) + " |")
+    return [
+        "",
+        "## Per object",
+        "",
+        "Render PSNR of the blurry / sharp images of each object, dB (blurry minus sharp in",
+        "brackets: a pair at parity is within ±0.5).",
+        "",
+        *lines,
+    ]
+
+
+def denoise_gain_lines(rs: list[dict]) -> list[str]:
+    """What the denoiser buys a sharp image, per object and size (bench_denoise_gain)."""
+    if not rs:
+        return []
+    out = [
+        "",
+        "## What the denoiser buys, by size",
+        "",
+        "`bench/bench_denoise_gain.py`: one sharp view of each object rendered with its guide",
+        "passes at several sample counts, scored undenoised and denoised (`--denoise oidn`)",
+        "against a converged render; the samples each needs to reach the 8-bit floor are read",
+        "off its curve. Render time is close to proportional to samples, so their ratio is",
+        "the render time the denoiser saves, before its own time.",
+        "",
+        "| object | px | undenoised: samples for the floor | OIDN: samples | ratio "
+        "| OIDN detail ratio | denoise s |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in sorted(rs, key=lambda r: (r.get("resolution", 0), r["name"])):
+        m = GAIN.match(r["name"])
+        samples = r.get("samples", [])
+        detail = r.get("oidn_detail", [])
+        det = f"{min(detail):.3f}–{max(detail):.3f}" if detail else ""
+        den = r.get("denoise_s", [])
+        ratio = r.get("ratio")
+        ratio = f"{ratio:.2f}" if isinstance(ratio, float) and math.isfinite(ratio) else "–"
+        raw_n, oidn_n = r.get("raw_samples_at_floor"), r.get("oidn_samples_at_floor")
+        above = f"> {max(samples)}" if samples else "–"
+        out.append(
+            f"| `{m['glb']}` | {m['res']} | {above if raw_n is None else f'{raw_n:.0f}'} | "
+            f"{above if oidn_n is None else f'{oidn_n:.0f}'} | {ratio} | {det} | "
+            f"{_fmt(max(den) if den else None)} |"
+        )
     return out
 
 
@@ -437,8 +539,9 @@ def index_page(
         "so a ratio holds on a busy machine where absolute times do not. Tests never assert",
         "timings.",
         "",
-        f"Measured on: {_machine(results)}. The development machine has 2 CPU cores (AMD EPYC,",
-        "AVX2), shared with other jobs, and no GPU. `make bench-gpu` runs the rendering",
+        f"Measured on: {_machine(results)}. The development machines have 2 CPU cores,",
+        "shared with other jobs, and no GPU; each result records its own device (and, since",
+        "issue 28's second run, its `machine`). `make bench-gpu` runs the rendering",
         "benchmarks on a GPU into `bench/results_gpu.json`.",
         "",
         "| page | results |",
@@ -473,7 +576,7 @@ def main() -> int:
     if OUT.exists():
         shutil.rmtree(OUT)
     OUT.mkdir(parents=True)
-    presets, parity, noise, cost, light, other = [], [], [], [], [], []
+    presets, parity, noise, cost, light, gain, other = [], [], [], [], [], [], []
     for r in results:
         n = r["name"]
         if PRESETS.match(n) and n not in NOT_PRESETS:
@@ -486,10 +589,17 @@ def main() -> int:
             cost.append(r)
         elif LIGHT.match(n):
             light.append(r)
+        elif GAIN.match(n):
+            gain.append(r)
         else:
             other.append(r)
     pages = [
-        ("presets.md", "Presets", presets_page(presets), len(presets)),
+        (
+            "presets.md",
+            "Presets",
+            presets_page(presets) + denoise_gain_lines(gain),
+            len(presets) + len(gain),
+        ),
         (
             "render-noise.md",
             "Render noise of a pair",
