@@ -75,16 +75,17 @@ def _render(w, work: Path, c2w, seed: int, res: int, fov: float, samples: int, g
 def measure() -> dict:
     sys.path.insert(0, str(HERE))
     from bench_settings_per_hour import _glbs
-    from blurset.denoise import denoiser
+    from blurset.denoise import denoiser, device_for
     from blurset.image import image_error
     from blurset.plan import BuildConfig, plan_setting
     from blurset.worker_client import Worker
 
-    den = denoiser("cpu")
+    device = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")  # bench/run.py --device
+    den = denoiser(device_for(device))  # on the render device, as a build denoises
     out: dict = {"ref_samples": REF, "samples": list(SAMPLES), "objects": {}}
     with tempfile.TemporaryDirectory(prefix="blurset-bench-gain-") as tmp:
         work = Path(tmp)
-        with Worker(timeout=7200, workdir=work / "scratch", device="CPU") as w:
+        with Worker(timeout=7200, workdir=work / "scratch", device=device) as w:
             for glb in _glbs(work):
                 info = w.load(glb, work / "v.npy")
                 verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)

@@ -559,3 +559,38 @@ def test_a_blurry_scene_still_fails_two_swapped_views(tmp_path):
     r = judge_stored_blur(blurry_box_copy(tmp_path, swap))
     assert r["verdict"] == "fail", r["reason"]
     assert sorted(r["failed_views"]) == ["003.png", "012.png"]
+
+
+def test_json_report_never_replaces_a_file_it_did_not_write(tmp_path):
+    """--json names a file the report goes to: an earlier report is replaced, but a
+    build's meta.json or any other file of the user's is refused by name before COLMAP
+    runs, its bytes as they were."""
+    scene = blank_scene(tmp_path)
+
+    def check(json_path: Path) -> subprocess.CompletedProcess:
+        return subprocess.run(
+            [sys.executable, "-m", "blurset.cli", "check-poses", str(scene), "--json",
+             str(json_path)],
+            capture_output=True, text=True, cwd=ROOT,
+        )  # fmt: skip
+
+    meta = tmp_path / "meta.json"
+    meta.write_text('{"seed": 5, "pose_check": {"verdict": "pass", "pass": true}}\n')
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes\n")
+    for path in (meta, notes, tmp_path):
+        before = None if path.is_dir() else path.read_bytes()
+        p = check(path)
+        assert p.returncode == 2, p.stderr
+        (line,) = p.stderr.strip().splitlines()
+        assert line.startswith(f"blurset check-poses: error: --json {path}: "), line
+        if before is not None:
+            assert path.read_bytes() == before
+    report = tmp_path / "report.json"
+    p = check(report)
+    assert p.returncode == check_poses.EXIT_NOT_CHECKABLE, p.stderr
+    first = json.loads(report.read_text())
+    assert check_poses.is_report(first) and not check_poses.is_report(json.loads(meta.read_text()))
+    p = check(report)  # its own earlier report: replaced
+    assert p.returncode == check_poses.EXIT_NOT_CHECKABLE, p.stderr
+    assert json.loads(report.read_text())["verdict"] == first["verdict"]

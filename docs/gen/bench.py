@@ -32,7 +32,7 @@ RESULTS = ROOT / "bench" / "results.json"
 OUT = ROOT / "docs" / "benchmarks"
 PNG_FLOOR_DB = 58.9  # PSNR of 8-bit quantization alone: 1 / (255² · 12) in MSE
 
-PRESETS = re.compile(r"^settings_per_hour_(?P<preset>[a-z][a-z0-9_]*)$")
+PRESETS = re.compile(r"^settings_per_hour_(?:(?P<res>\d+)px_)?(?P<preset>[a-z][a-z0-9_]*)$")
 PARITY = re.compile(
     r"^render_parity_(?P<preset>[a-z0-9]+)_level(?P<level>\d)_(?P<budget>x\d+|\w+)$"
 )
@@ -119,7 +119,33 @@ def _fmt(x: object, digits: int = 2) -> str:
 
 
 def presets_page(rs: list[dict]) -> list[str]:
+    """The 128 px run (the default size), then one section per other size measured: a
+    size's ratios are to the paper preset of its own run."""
+    by_res: dict[str, list[dict]] = defaultdict(list)
+    for r in rs:
+        by_res[PRESETS.match(r["name"])["res"] or ""].append(r)
+    out = _presets_section(by_res.pop("", []))
+    for res in sorted(by_res, key=int):
+        out += _presets_section(by_res[res], res)
+    return out
+
+
+def _presets_section(rs: list[dict], res: str = "") -> list[str]:
     rows = {PRESETS.match(r["name"])["preset"]: r for r in rs}
+    if res:
+        objects = sorted({o for r in rs for o in r.get("objects", [])})
+        return [
+            "",
+            f"## At {res} px",
+            "",
+            f"A separate run at {res} px ({', '.join(f'`{o}`' for o in objects)}; "
+            f"{_fmt(rs[0].get('views_measured'))} view, {_fmt(rs[0].get('repeats'))} "
+            "repeat): ratios are to this run's paper preset. An empty render PSNR was not "
+            "measured (the paper preset's render reference costs as much as its build); the "
+            "bar then takes the paper preset to be above the floor.",
+            "",
+            *_presets_table(rows, f"presets_{res}.png", res),
+        ]
     out = [
         "# Presets: settings per hour and accuracy",
         "",
@@ -134,6 +160,11 @@ def presets_page(rs: list[dict]) -> list[str]:
     ]
     if not rows:
         return out + ["No `settings_per_hour_<preset>` result in bench/results.json yet."]
+    return out + _presets_table(rows, "presets.png", "")
+
+
+def _presets_table(rows: dict, png: str, res: str) -> list[str]:
+    out: list[str] = []
     names = sorted(rows, key=lambda p: (p != "paper", -rows[p].get("settings_per_hour", 0)))
     sph = [rows[p].get("settings_per_hour", rows[p].get("ratio")) for p in names]
     fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.6))
@@ -179,7 +210,7 @@ def presets_page(rs: list[dict]) -> list[str]:
     ax.set_xlabel("settings per hour (log)")
     ax.set_ylabel("PSNR against the reference, dB")
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3)
-    out += [_save(fig, "presets.png"), ""]
+    out += [_save(fig, png), ""]
     extra = [
         ("psnr_blur_db", "blurry PSNR, dB"),
         ("psnr_sharp_db", "sharp PSNR, dB"),
@@ -203,7 +234,7 @@ def presets_page(rs: list[dict]) -> list[str]:
     out += ["", "What each preset ran:", ""]
     for p in names:
         out.append(f"- `{p}`: {_flags(rows[p].get('contender', ''))}")
-    out += _verdicts(rows, names) + _pairs(rows, names)
+    out += _verdicts(rows, names, res) + _pairs(rows, names, res)
     return out
 
 
@@ -217,14 +248,14 @@ VERDICT_CHECKS = {
 }
 
 
-def _verdicts(rows: dict, names: list[str]) -> list[str]:
+def _verdicts(rows: dict, names: list[str], res: str = "") -> list[str]:
     """Issue 28's bar, as the bench judged each preset against the paper preset."""
     judged = [p for p in names if isinstance(rows[p].get("verdict"), dict)]
     if not judged:
         return []
     out = [
         "",
-        "## Against the bar",
+        f"{'###' if res else '##'} Against the bar{f' at {res} px' if res else ''}",
         "",
         "A preset is a cheaper way to make the paper's pairs when every check holds (means",
         "over the images of all objects; the bench's `verdict`):",
@@ -240,7 +271,7 @@ def _verdicts(rows: dict, names: list[str]) -> list[str]:
     return out
 
 
-def _pairs(rows: dict, names: list[str]) -> list[str]:
+def _pairs(rows: dict, names: list[str], res: str = "") -> list[str]:
     """Render PSNR of blurry and sharp per object: parity is a property of each pair, and
     a mean over objects can hide a pair that is not one."""
     have = [p for p in names if rows[p].get("per_object")]
@@ -262,7 +293,7 @@ def _pairs(rows: dict, names: list[str]) -> list[str]:
         lines.append("| " + " | ".join([f"`{p}`", *cells]) + " |")
     return [
         "",
-        "## Per object",
+        f"{'###' if res else '##'} Per object{f' at {res} px' if res else ''}",
         "",
         "Render PSNR of the blurry / sharp images of each object, dB (blurry minus sharp in",
         "brackets: a pair at parity is within ±0.5).",

@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import _core, layout
+from blurset import _core, layout, outputs
 from blurset._core import read_poses_bounds
 from blurset.exceptions import ConfigError, InputError
 
@@ -1070,7 +1070,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(default: images/)",
     )
     parser.add_argument(
-        "--json", type=Path, default=None, help="write the JSON report here (default: none)"
+        "--json",
+        type=Path,
+        default=None,
+        help="write the JSON report here (default: none); a file already there is replaced "
+        "only when it is an earlier check-poses report",
     )
     parser.add_argument(
         "--workdir",
@@ -1155,6 +1159,16 @@ def _table(reports: dict[str, dict]) -> str:
     return "\n".join(rows)
 
 
+def is_report(doc: Any) -> bool:
+    """A JSON report check-poses wrote: one scene's ({verdict, pass, …}) or one per
+    level ({level: {verdict, pass, …}})."""
+
+    def one(d: Any) -> bool:
+        return isinstance(d, dict) and "verdict" in d and "pass" in d
+
+    return one(doc) or (isinstance(doc, dict) and bool(doc) and all(one(v) for v in doc.values()))
+
+
 def _write_json(path: Path, data) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     layout.write_json(path, data, indent=2)
@@ -1167,6 +1181,9 @@ def run(args: argparse.Namespace) -> int:
     if not path.is_dir():
         raise InputError(f"not a directory: {path}")
     workdir = getattr(args, "workdir", None)
+    if args.json:
+        # Before COLMAP runs: a report never replaces a file it did not write.
+        outputs.claim_report(args.json, is_report, "--json")
     if is_setting(path):
         if args.level != "all":
             _check_level_name(args.level)

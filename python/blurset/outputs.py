@@ -12,12 +12,16 @@ owner (blurset-core `dataset::outputs`, DESIGN §10).
 - `write_marked_text` writes a text file (a dataset card) that a later run tells from an
   edited or foreign one: those are replaced only with `force`, the old kept as `.bak`.
 - `read_record` reads a record checked against its shape.
+- `claim_report` says whether a command may write its JSON report to a file the user
+  named: nothing there, or an earlier report of its own; never a build's record or
+  another file of the user's.
 """
 
 from __future__ import annotations
 
 import contextlib
 import fcntl
+import json
 import os
 import socket
 from collections.abc import Callable, Iterator
@@ -167,6 +171,27 @@ def lock(path: Path, kind: _core.OutputKind, option: str = "--out") -> Iterator[
             # A run that wrote nothing leaves nothing, not even the folder it made.
             with contextlib.suppress(OSError):
                 path.rmdir()
+
+
+def claim_report(path: Path, is_report: Callable[[Any], bool], option: str) -> None:
+    """Refuse, before any work, a report file that would replace something else: `path`
+    may be absent or hold a report `is_report` recognises (the command's own, from an
+    earlier run); a folder, a build's meta.json, any other file is left alone, with a
+    ConfigError naming `option` and the file."""
+    path = Path(path)
+    if not path.exists():
+        return
+    if path.is_dir():
+        raise ConfigError(f"{option} {path}: is a folder; give the report's file name")
+    try:
+        doc = json.loads(path.read_bytes())
+    except (OSError, ValueError):
+        doc = None
+    if doc is None or not is_report(doc):
+        raise ConfigError(
+            f"{option} {path}: the file exists and is not a report of this command; "
+            "give another file name (nothing was replaced)"
+        )
 
 
 def write_marked_text(
