@@ -108,6 +108,11 @@ def test_benchmark_pages_plot_every_result(tmp_path, monkeypatch) -> None:
     pages = "".join(p.read_text() for p in (tmp_path / "bench").glob("*.md"))
     for r in json.loads((ROOT / "bench" / "results.json").read_text()):
         light = bench.LIGHT.match(r["name"])
-        shown = r["name"] in pages or (light and f"| {light['glb']} |" in pages)
+        gain = bench.GAIN.match(r["name"])
+        shown = (
+            r["name"] in pages
+            or (light and f"| {light['glb']} |" in pages)
+            or (gain and f"| `{gain['glb']}` | {gain['res']} |" in pages)
+        )
         assert shown or bench.PRESETS.match(r["name"]), r["name"]
     assert list((tmp_path / "bench").glob("*.png"))
