@@ -140,7 +140,8 @@ def _presets_section(rs: list[dict], res: str = "") -> list[str]:
             "",
             f"A separate run at {res} px ({', '.join(f'`{o}`' for o in objects)}; "
             f"{_fmt(rs[0].get('views_measured'))} view, {_fmt(rs[0].get('repeats'))} "
-            "repeat): ratios are to this run's paper preset. An empty render PSNR was not "
+            "repeat): each ratio is to the paper preset of the run that measured it. An "
+            "empty render PSNR was not "
             "measured (the paper preset's render reference costs as much as its build); the "
             "bar then takes the paper preset to be above the floor.",
             "",
@@ -228,7 +229,10 @@ def _presets_table(rows: dict, png: str, res: str) -> list[str]:
         r = rows[p]
         cells = [f"`{p}`", _fmt(r.get("settings_per_hour"))]
         if paper:
-            cells.append(f"{r.get('settings_per_hour', 0) / paper:.1f}×")
+            # Each result's own ratio: to the paper preset of the run that measured it (a
+            # preset re-measured later keeps its run's ratio).
+            ratio = r.get("ratio", r.get("settings_per_hour", 0) / paper)
+            cells.append(f"{ratio:.1f}×")
         cells += [_fmt(r.get(k), 1 if "db" in k else 2) for k, _ in cols]
         out.append("| " + " | ".join(cells) + " |")
     out += ["", "What each preset ran:", ""]
