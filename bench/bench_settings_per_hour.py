@@ -266,8 +266,8 @@ def _continuous_reference(glb: Path, work: Path) -> dict:
 
 def _render_reference(glb: Path, work: Path, preset: dict, samples: dict) -> tuple[dict, int]:
     """The preset's own images, undenoised, at K times its samples on other seeds:
-    (images per (view, level dir), K). `samples`: the sample counts of `preset`'s images,
-    the most among the presets that share these frames."""
+    (images per (view, level dir), K). `samples`: the sample counts of `preset`'s images
+    (the member with the most samples of the presets that share these frames)."""
     from blurset.worker_client import Worker
 
     per_view = sum(samples.values())
@@ -341,10 +341,12 @@ def measure() -> dict:
                 key = tuple((o, str(preset.get(o))) for o in _FRAMES)
                 groups.setdefault(key, []).append(name)
             for names in groups.values():
-                samples = {lv: max(runs[n][0]["samples"][lv] for n in names)
-                           for lv in runs[names[0]][0]["samples"]}  # fmt: skip
-                # The reference renders the frames of the member with the most samples.
+                # The reference renders the frames of the member with the most samples, K
+                # times each image's samples in that member: a member's factor is K times
+                # that member's samples over its own (the most in one image need not be the
+                # top member's).
                 top = max(names, key=lambda n: sum(runs[n][0]["samples"].values()))
+                samples = runs[top][0]["samples"]
                 plain = {k: v for k, v in PRESETS[top].items() if k != "denoise"}
                 if set(names) <= NO_RENDER_REF:
                     ref, k = None, 1
