@@ -281,7 +281,9 @@ def test_killed_three_times_then_resumed_equals_an_uninterrupted_build(objects, 
     assert p.returncode == 0, err.decode()[-2000:]
 
     def partial_exists():
-        return killed.exists() and any(killed.glob("*.partial/.frames/*.exr"))
+        # A setting in progress: its .partial folder lives for the whole setting, a
+        # frame's EXR only until the driver adds it (missed between polls when idle).
+        return killed.exists() and any(killed.glob("*.partial"))
 
     def one_more_complete(n):
         return lambda: killed.exists() and len(setting_dirs(killed)) > n
