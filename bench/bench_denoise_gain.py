@@ -139,7 +139,7 @@ def run() -> list[dict]:
                     "contender": f"OIDN: {_n(oidn_n)} samples for 58.9 dB",
                     "baseline": f"undenoised: {_n(raw_n)} samples",
                     "resolution": int(r),
-                    **{k: v for k, v in row.items()},
+                    **row,
                     "samples": m["samples"],
                     "ref_samples": m["ref_samples"],
                     "device": m["device"],
