@@ -18,8 +18,12 @@ Accuracy, per image (sharp and each blur level), the mean over images and object
   exceed BLURSET_BENCH_REF_CAP samples per view (the paper preset's 34 × 132-sample
   images: then K = cap / samples, at least 1). For an undenoised image the reference's
   own noise (1/K of the image's, the same sampler) is taken out: MSE / (1 + 1/K), so
-  K = 1 is the two-seed estimate of the render noise. A denoised image is scored as
-  measured (its reference at K ≥ 32 adds ≤ 1/32 of the raw noise: conservative).
+  K = 1 is the two-seed estimate of the render noise. A denoised image has no such
+  model, so its reference's own noise is measured: a group with a denoised member renders
+  its reference as two halves on two seed sets (K₁ + K₂ = K), and the noise of their
+  weighted mean, MSE(r₁, r₂) · K₁K₂ / K², is taken out of the denoised image's MSE
+  (independent seeds: E[MSE(image, ref)] = MSE(image, truth) + that noise). At K = 7 it
+  was ≈ 1 dB of a 512 px denoised image's score.
 - `detail_ratio_*`: the high-frequency energy of the image over its render reference's
   (core `detail_ratio`): < 1 a denoiser smoothed texture, > 1 noise on top.
 
@@ -54,6 +58,7 @@ REF_FACTOR = 32
 SEED = 5
 REFERENCE = (64, 16)  # continuous blur: stratified frames x samples; sharp: their product
 SALT = 0x5BD1E995
+SALT2 = 0x27D4EB2F  # the second half of a split reference
 FLOOR_DB = 58.9  # 8-bit quantization alone: 1 / (255² · 12) in MSE
 TEXTURED = ("sketchfab_MapPin", "sketchfab_MazdaRX7Stylised", "WaterBottle_blender_reexport")
 
@@ -138,6 +143,26 @@ PRESETS = {
         **_AUTO,
         "max_ghost_px": 2.0,
         "samples_total": 72,
+        "sharp_samples": 336,
+        "blur_budget": "need",
+        "denoise": "oidn",
+    },  # fmt: skip
+    # floor512_wide_oidn: the fit preset's samples with latent frames up to 3 px apart (2
+    # at 512 px is 4 times finer than at 128): fewer frames, and the need budget
+    # (m^0.4 once saturated) buys fewer blurry samples for the same render noise.
+    # floor512_wide64_oidn: the same at samples_total 64.
+    "floor512_wide_oidn": {
+        **_AUTO,
+        "max_ghost_px": 3.0,
+        "samples_total": 72,
+        "sharp_samples": 336,
+        "blur_budget": "need",
+        "denoise": "oidn",
+    },  # fmt: skip
+    "floor512_wide64_oidn": {
+        **_AUTO,
+        "max_ghost_px": 3.0,
+        "samples_total": 64,
         "sharp_samples": 336,
         "blur_budget": "need",
         "denoise": "oidn",
@@ -264,16 +289,22 @@ def _continuous_reference(glb: Path, work: Path) -> dict:
     return refs
 
 
-def _render_reference(glb: Path, work: Path, preset: dict, samples: dict) -> tuple[dict, int]:
+def _render_reference(
+    glb: Path, work: Path, preset: dict, samples: dict, split: bool
+) -> tuple[dict, int, dict]:
     """The preset's own images, undenoised, at K times its samples on other seeds:
-    (images per (view, level dir), K). `samples`: the sample counts of `preset`'s images
-    (the member with the most samples of the presets that share these frames)."""
+    (images per (view, level dir), K, the noise MSE of each image). `samples`: the sample
+    counts of `preset`'s images (the member with the most samples of the presets that share
+    these frames). `split`: render each image as two halves on two seed sets and measure
+    the noise of their mean (else the noise is not measured: 0)."""
+    from blurset.image import image_error
     from blurset.worker_client import Worker
 
     per_view = sum(samples.values())
-    k = max(1, min(REF_FACTOR, REF_CAP // max(per_view, 1)))
+    k = max(2 if split else 1, min(REF_FACTOR, REF_CAP // max(per_view, 1)))
+    halves = [(SALT, k // 2), (SALT2, k - k // 2)] if split else [(SALT, k)]
     cfg = _config(work / "unused", glb, **preset)
-    refs = {}
+    refs, noise = {}, {}
     with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
         setting = _plan(cfg, glb, w, work)
         sharp_n = int(cfg.effective_sharp_samples)
@@ -281,18 +312,29 @@ def _render_reference(glb: Path, work: Path, preset: dict, samples: dict) -> tup
         for f in setting.renders(str(work / "r")):
             images.setdefault((f["view"], f["level"]), []).append(f)
         for key, frames in images.items():
-            for f in frames:
-                f["seed"] = (f["seed"] ^ SALT) & 0x7FFFFFFF
-                n = f.get("samples") or sharp_n
-                f["samples"] = k * n
-                if f.get("sample_offset") is not None:
-                    f["sample_offset"] *= k
-                    f["sample_sequence"] *= k
-            refs[key] = _render(w, frames, k * sharp_n)
-    return refs, k
+            parts = []
+            for salt, kh in halves:
+                half = [dict(f) for f in frames]
+                for f in half:
+                    f["seed"] = (f["seed"] ^ salt) & 0x7FFFFFFF
+                    n = f.get("samples") or sharp_n
+                    f["samples"] = kh * n
+                    if f.get("sample_offset") is not None:
+                        f["sample_offset"] *= kh
+                        f["sample_sequence"] *= kh
+                parts.append((kh, _render(w, half, kh * sharp_n)))
+            refs[key] = sum(kh * img for kh, img in parts) / k
+            if split:
+                (k1, r1), (k2, r2) = parts
+                noise[key] = image_error(r1, r2).mse * k1 * k2 / k**2
+            else:
+                noise[key] = 0.0
+    return refs, k, noise
 
 
-def _score(setting: Path, cont: dict, ref: dict | None, k_of: dict, denoised: bool) -> dict:
+def _score(
+    setting: Path, cont: dict, ref: dict | None, noise: dict, k_of: dict, denoised: bool
+) -> dict:
     from blurset.image import image_error, read_exr
 
     out: dict[str, list[float]] = {}
@@ -302,15 +344,16 @@ def _score(setting: Path, cont: dict, ref: dict | None, k_of: dict, denoised: bo
         q = image_error(img, c)
         out.setdefault(f"psnr_{kind}", []).append(q.psnr)
         if ref is None:  # not rendered (NO_RENDER_REF): NaN, reported as None
-            for key in ("render_mse", "detail", "ref_factor"):
+            for key in ("render_mse", "detail", "ref_factor", "ref_noise"):
                 out.setdefault(f"{key}_{kind}", []).append(float("nan"))
             continue
         r = image_error(img, ref[(view, level)])
         k = k_of[level]
-        mse = r.mse if denoised else r.mse / (1.0 + 1.0 / k)
+        mse = max(r.mse - noise[(view, level)], 0.0) if denoised else r.mse / (1.0 + 1.0 / k)
         out.setdefault(f"render_mse_{kind}", []).append(mse)
         out.setdefault(f"detail_{kind}", []).append(r.detail_ratio)
         out.setdefault(f"ref_factor_{kind}", []).append(k)
+        out.setdefault(f"ref_noise_{kind}", []).append(noise.get((view, level), 0.0))
     return out
 
 
@@ -348,15 +391,16 @@ def measure() -> dict:
                 top = max(names, key=lambda n: sum(runs[n][0]["samples"].values()))
                 samples = runs[top][0]["samples"]
                 plain = {k: v for k, v in PRESETS[top].items() if k != "denoise"}
+                split = any(PRESETS[n].get("denoise") == "oidn" for n in names)
                 if set(names) <= NO_RENDER_REF:
-                    ref, k = None, 1
+                    ref, k, noise = None, 1, {}
                 else:
-                    ref, k = _render_reference(glb, work, plain, samples)
+                    ref, k, noise = _render_reference(glb, work, plain, samples, split)
                 for n in names:
                     own = runs[n][0]["samples"]
                     k_of = {lv: k * samples[lv] / own[lv] for lv in own}
                     denoised = PRESETS[n].get("denoise") == "oidn"
-                    sc = _score(runs[n][0]["setting"], cont, ref, k_of, denoised)
+                    sc = _score(runs[n][0]["setting"], cont, ref, noise, k_of, denoised)
                     rs = runs[n]
                     per[n]["objects"][glb.stem] = {
                         "render_s": statistics.median(r["render_s"] for r in rs),
@@ -371,7 +415,7 @@ def measure() -> dict:
         # One setting of each object, in turn: 34 views, the rest over 4 settings.
         setting_s = statistics.mean(34 * o["render_s"] / VIEWS + o["rest_s"] / 4 for o in objs)
         cat = {key: [x for o in objs for x in o[key]] for key in next(iter(objs)) if key.startswith(
-            ("psnr_", "render_mse_", "detail_", "ref_factor_"))}  # fmt: skip
+            ("psnr_", "render_mse_", "detail_", "ref_factor_", "ref_noise_"))}  # fmt: skip
         out[name] = {
             "settings_per_hour": 3600.0 / setting_s,
             "setting_s": setting_s,
@@ -385,6 +429,14 @@ def measure() -> dict:
             "detail_ratio_blur": _mean(cat["detail_blur"]),
             "detail_ratio_sharp": _mean(cat["detail_sharp"]),
             "reference_factor_min": _mean([min(cat["ref_factor_blur"] + cat["ref_factor_sharp"])]),
+            # The reference's own noise taken out of denoised images' MSE (None: not
+            # measured, no denoised member).
+            "reference_noise_psnr_blur_db": _db(float(np.mean(cat["ref_noise_blur"])))
+            if any(cat["ref_noise_blur"])
+            else None,
+            "reference_noise_psnr_sharp_db": _db(float(np.mean(cat["ref_noise_sharp"])))
+            if any(cat["ref_noise_sharp"])
+            else None,
             "per_object": {
                 u: {
                     "settings_per_hour": 3600.0 / (34 * o["render_s"] / VIEWS + o["rest_s"] / 4),
@@ -451,7 +503,8 @@ def run() -> list[dict]:
                 "reference": f"continuous blur: {REFERENCE[0]} stratified frames x "
                 f"{REFERENCE[1]} samples, sharp {REFERENCE[0] * REFERENCE[1]}; render: the "
                 f"preset's own frames at >= {REF_FACTOR}x its samples, capped at {REF_CAP} "
-                "samples per view (reference_factor_min)",
+                "samples per view (reference_factor_min); a denoised image's MSE less its "
+                "reference's own noise, measured from two half references on two seed sets",
                 "device": device,
                 "load_average": m["load_average"],
             }
