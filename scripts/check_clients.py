@@ -209,6 +209,11 @@ def analyse(client: str, export: Path, doc: dict, build: Path, result: dict) -> 
     return "\n".join(lines), 0
 
 
+def is_report(doc: object) -> bool:
+    """Whether `doc` is what `--json` writes: a child's result (what a client read)."""
+    return isinstance(doc, dict) and {"python", "versions", "ran", "scenes", "phases"} <= set(doc)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter
@@ -224,6 +229,16 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     if a.child:
         return child(*a.child)
+    if a.json:
+        # The parent side only: the child runs under the client's Python, without blurset.
+        from blurset.exceptions import ConfigError
+        from blurset.outputs import claim_report
+
+        try:
+            claim_report(a.json, is_report, "--json")
+        except ConfigError as e:
+            print(f"check_clients: {e}", file=sys.stderr)
+            return 2
     export = a.export.resolve()
     doc = json.loads((export / "export.json").read_text())
     if doc.get("for") not in WANTS[a.client]:

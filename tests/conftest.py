@@ -13,6 +13,7 @@ import importlib.util
 import os
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -294,3 +295,33 @@ def help_text(parser, action) -> str:
     """The help line of `action` in `parser` as the user reads it (defaults expanded),
     whitespace folded."""
     return " ".join(parser._get_formatter()._expand_help(action).split())
+
+
+# -- waiting on events: CI runs on a busy machine, so a test waits for what a process does
+# (a file, a line), with a generous deadline, never for a fixed time.
+
+
+def wait_until(cond, deadline_s: float = 300.0) -> bool:
+    """Whether `cond()` came true within the deadline (polled every 50 ms)."""
+    end = time.monotonic() + deadline_s
+    while not cond() and time.monotonic() < end:
+        time.sleep(0.05)
+    return bool(cond())
+
+
+def wait_for(cond, proc: subprocess.Popen, deadline_s: float = 300.0) -> None:
+    """Wait for an event a running process causes; fails at once, with its stderr, if the
+    process ended first, and after the deadline if the event never came."""
+    end = time.monotonic() + deadline_s
+    while not cond():
+        if proc.poll() is not None:
+            err = b""
+            try:
+                err = proc.communicate(timeout=30)[1] or b""
+            except (ValueError, OSError, subprocess.TimeoutExpired):
+                pass  # its stderr is being read elsewhere
+            text = err.decode() if isinstance(err, bytes) else err
+            raise AssertionError(f"process ended first ({proc.returncode}): {text[-2000:]}")
+        if time.monotonic() > end:
+            raise AssertionError(f"no event within {deadline_s} s")
+        time.sleep(0.05)

@@ -78,3 +78,23 @@ def test_a_client_given_the_wrong_export_or_failing_says_so(cc, geonerf_export, 
     # An empty checkout: the client's modules do not import, and the error is shown.
     assert cc.main(["geonerf", str(root), *args]) == 2
     assert "ModuleNotFoundError" in capsys.readouterr().out
+
+
+def test_json_never_replaces_a_file_it_did_not_write(cc, tmp_path, capsys):
+    # Refused before anything runs (no export, checkout or Python is looked at): one line
+    # naming --json and the file, its bytes unchanged; its own earlier report may go.
+    mine = tmp_path / "meta.json"
+    mine.write_text('{"build": "not a client report"}')
+    before = mine.read_bytes()
+    args = ["geonerf", str(tmp_path / "none"), "--checkout", str(tmp_path), "--python", "x"]
+    assert cc.main([*args, "--json", str(mine)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--json" in err[0] and str(mine) in err[0], err
+    assert mine.read_bytes() == before
+    assert cc.main([*args, "--json", str(tmp_path)]) == 2  # a folder
+    own = tmp_path / "read.json"
+    own.write_text(
+        json.dumps({"python": "py", "versions": [], "ran": [], "scenes": [], "phases": []})
+    )
+    with pytest.raises(FileNotFoundError):  # past the claim: the export is absent
+        cc.main([*args, "--json", str(own)])

@@ -18,7 +18,7 @@ from blurset import layout
 from blurset.demo import make_demo_objects
 from PIL import Image
 
-from tests.conftest import run_cli, shared
+from tests.conftest import run_cli, shared, wait_until
 
 
 def tree(path: Path) -> dict[str, bytes]:
@@ -94,9 +94,9 @@ def test_sigterm_during_noise_leaves_nothing(fern_copy, tmp_path):
     def written() -> int:
         return sum(1 for _ in out.glob(f".noise.tmp{proc.pid}/gain_*/images/*.png"))
 
-    assert wait_for(lambda: written() >= 20 or proc.poll() is not None, 600)
+    assert wait_until(lambda: written() >= 20 or proc.poll() is not None, 600)
     t_a, n_a = time.monotonic(), written()
-    assert wait_for(lambda: written() >= n_a + 40 or proc.poll() is not None, 600)
+    assert wait_until(lambda: written() >= n_a + 40 or proc.poll() is not None, 600)
     t_b, n_b = time.monotonic(), written()
     assert proc.poll() is None, "the noise run ended before it could be stopped"
     rest_s = (total - n_b) * (t_b - t_a) / max(1, n_b - n_a)
@@ -188,15 +188,6 @@ def workers_of(out: Path) -> list[int]:
     return pids
 
 
-def wait_for(cond, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return cond()
-
-
 @pytest.fixture(scope="module")
 def objs(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("objs")
@@ -219,16 +210,16 @@ def start_build(objs: Path, out: Path, *extra: str) -> subprocess.Popen:
 def test_a_signal_stops_the_build_and_its_workers(objs, tmp_path, sig, workers, rerun):
     out = tmp_path / "out"
     proc = start_build(objs, out, "--workers", workers)
-    assert wait_for(lambda: len(workers_of(out)) == int(workers), 600), proc.stderr
+    assert wait_until(lambda: len(workers_of(out)) == int(workers), 600), proc.stderr
     # Mid-build: a setting is in progress (an event, not a sleep). Its .partial folder
     # lives for the whole setting; a frame's EXR only until the driver adds it, which an
     # idle machine can finish between two polls.
-    assert wait_for(lambda: any(out.glob("*.partial")), 600), proc.stderr
+    assert wait_until(lambda: any(out.glob("*.partial")), 600), proc.stderr
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=600)
     assert proc.returncode == 128 + sig, err
     # The workers die with the stop; generous deadlines, CI's machine is busy.
-    assert wait_for(lambda: workers_of(out) == [], 120), workers_of(out)
+    assert wait_until(lambda: workers_of(out) == [], 120), workers_of(out)
     # No failure was recorded for the objects that were stopped, and a rerun finishes.
     fails = out / "failures.jsonl"
     assert not fails.exists() or fails.read_text().strip() == ""
@@ -243,10 +234,10 @@ def test_a_signal_stops_the_build_and_its_workers(objs, tmp_path, sig, workers, 
 def test_a_killed_build_leaves_no_blender_behind(objs, tmp_path):
     out = tmp_path / "out"
     proc = start_build(objs, out)
-    assert wait_for(lambda: len(workers_of(out)) == 1, 600), proc.stderr
+    assert wait_until(lambda: len(workers_of(out)) == 1, 600), proc.stderr
     proc.kill()  # SIGKILL: no handler runs; the worker must die with its parent
     proc.wait()
-    assert wait_for(lambda: workers_of(out) == [], 120), workers_of(out)
+    assert wait_until(lambda: workers_of(out) == [], 120), workers_of(out)
 
 
 def test_a_worker_flooding_stdout_still_times_out(tmp_path):
@@ -307,7 +298,7 @@ def test_a_full_disk_stops_the_build_naming_it(objs, small_disk):
 def test_two_identical_builds_at_once_take_turns_per_object(objs, tmp_path):
     out = tmp_path / "out"
     first = start_build(objs, out)
-    assert wait_for(lambda: len(workers_of(out)) == 1, 120), first.stderr
+    assert wait_until(lambda: len(workers_of(out)) == 1, 120), first.stderr
     second = start_build(objs, out)
     _, err1 = first.communicate(timeout=900)
     _, err2 = second.communicate(timeout=900)

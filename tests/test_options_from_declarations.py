@@ -202,3 +202,15 @@ def test_the_stubs_typed_properties_are_generated_from_the_declarations() -> Non
     # A toy declaration gets its typed property.
     toy = _toy(name="toy_width", kind="int", default=3, help="toy", shapes_outputs=True)
     assert "    def toy_width(self) -> int: ...\n" in options.stub_properties([toy])  # type: ignore[list-item]
+
+
+def test_a_choice_flag_takes_any_case_as_its_toml_key_does() -> None:
+    p = _build_parser()
+    for d in BUILD.decls:
+        if d.kind == "choice" and d.flags:
+            c = d.choices[-1]
+            got = p.parse_args([d.flags[0], c.upper()])
+            assert getattr(got, d.name) == c, d.name
+            assert BUILD.from_args(got) == BUILD.from_args(p.parse_args([d.flags[0], c]))
+    with pytest.raises(SystemExit):
+        p.parse_args(["--blur-budget", "needy"])

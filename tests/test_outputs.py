@@ -12,7 +12,6 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +19,7 @@ import pytest
 from blurset import layout, outputs, publish
 from blurset.demo import make_demo_objects
 
-from tests.conftest import ROOT, copy_build, run_cli, shared, standin_build
+from tests.conftest import ROOT, copy_build, run_cli, shared, standin_build, wait_for, wait_until
 
 
 def tree(path: Path) -> dict[str, bytes]:
@@ -298,31 +297,6 @@ def workers_in(out: Path) -> list[int]:
         if "worker.py" in cmd and str(out) in cmd and state != "Z":
             pids.append(int(d.name))
     return pids
-
-
-def wait_until(cond, deadline_s: float = 300.0) -> bool:
-    end = time.monotonic() + deadline_s
-    while not cond() and time.monotonic() < end:
-        time.sleep(0.05)
-    return bool(cond())
-
-
-def wait_for(cond, proc: subprocess.Popen, deadline_s: float = 300.0) -> None:
-    """Wait for an event (a file a process writes), with a generous deadline: CI runs
-    on a busy machine. Fails at once if the process ended first."""
-    end = time.monotonic() + deadline_s
-    while not cond():
-        if proc.poll() is not None:
-            err = b""
-            try:
-                err = proc.communicate(timeout=30)[1] or b""
-            except (ValueError, OSError, subprocess.TimeoutExpired):
-                pass  # its stderr is being read elsewhere
-            text = err.decode() if isinstance(err, bytes) else err
-            raise AssertionError(f"process ended first ({proc.returncode}): {text[-2000:]}")
-        if time.monotonic() > end:
-            raise AssertionError(f"no event within {deadline_s} s")
-        time.sleep(0.05)
 
 
 def test_export_refuses_a_damaged_setting(b, tmp_path):

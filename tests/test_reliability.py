@@ -21,7 +21,7 @@ from blurset.demo import make_demo_objects
 from blurset.objects import resolve_objects, sanitize, setting_name
 from blurset.preflight import glb_inspect
 
-from tests.conftest import run_cli, shared_if_present
+from tests.conftest import run_cli, shared_if_present, wait_for
 
 pytestmark = pytest.mark.blender
 
@@ -234,14 +234,6 @@ def run_build(objects: Path, out: Path, env=None) -> subprocess.Popen:
     )  # fmt: skip
 
 
-def wait_for(cond, proc: subprocess.Popen, timeout: float = 120.0) -> None:
-    t0 = time.monotonic()
-    while not cond():
-        assert proc.poll() is None, "the build ended before the kill point"
-        assert time.monotonic() - t0 < timeout, "kill point never reached"
-        time.sleep(0.02)
-
-
 def tree(out: Path) -> dict[str, bytes]:
     return {
         str(p.relative_to(out)): p.read_bytes()
@@ -298,7 +290,7 @@ def test_killed_three_times_then_resumed_equals_an_uninterrupted_build(objects, 
         p = run_build(objs, killed)
         if cond is kill_points[1]:
             cond = one_more_complete(n_before)
-        wait_for(cond, p)
+        wait_for(cond, p, 120.0)
         os.killpg(p.pid, signal.SIGKILL)
         p.wait()
         p.stderr.close()

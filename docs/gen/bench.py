@@ -130,23 +130,52 @@ def presets_page(rs: list[dict]) -> list[str]:
     return out
 
 
+def _paper_of(r: dict) -> float:
+    """The settings per hour of the paper preset a result was measured against (its run's):
+    a result re-measured later keeps its own run's ratio."""
+    sph, ratio = r.get("settings_per_hour"), r.get("ratio")
+    return round(sph / ratio, 6) if sph and ratio else 0.0
+
+
 def _presets_section(rs: list[dict], res: str = "") -> list[str]:
     rows = {PRESETS.match(r["name"])["preset"]: r for r in rs}
     if res:
-        objects = sorted({o for r in rs for o in r.get("objects", [])})
-        return [
+        # One table per run: results of earlier runs at this size stay, each with the ratio
+        # to its own run's paper preset (whose own entry the newest run replaced).
+        runs: dict[float, list[dict]] = defaultdict(list)
+        for r in rs:
+            runs[_paper_of(r)].append(r)
+        newest = _paper_of(rows["paper"]) if "paper" in rows else None
+        order = sorted(runs, key=lambda k: (k != newest, k))
+        out = [
             "",
             f"## At {res} px",
             "",
-            f"A separate run at {res} px ({', '.join(f'`{o}`' for o in objects)}; "
-            f"{_fmt(rs[0].get('views_measured'))} view, {_fmt(rs[0].get('repeats'))} "
-            "repeat): each ratio is to the paper preset of the run that measured it. An "
-            "empty render PSNR was not "
-            "measured (the paper preset's render reference costs as much as its build); the "
-            "bar then takes the paper preset to be above the floor.",
-            "",
-            *_presets_table(rows, f"presets_{res}.png", res),
+            f"Separate runs at {res} px: each ratio is to the paper preset of the run that "
+            "measured it. An empty render PSNR was not measured (the paper preset's render "
+            "reference costs as much as its build); the bar then takes the paper preset to "
+            "be above the floor.",
         ]
+        for n, key in enumerate(order):
+            group = runs[key]
+            g_rows = {PRESETS.match(r["name"])["preset"]: r for r in group}
+            objects = sorted({o for r in group for o in r.get("objects", [])})
+            where = f"{res} px" if n == 0 else f"{res} px, earlier run {n}"
+            head = (
+                f"The run ({', '.join(f'`{o}`' for o in objects)}; "
+                if n == 0
+                else f"### Earlier run {n} at {res} px\n\n"
+                f"Its paper preset made {key:.3f} settings/h ({', '.join(f'`{o}`' for o in objects)}; "
+            )
+            out += [
+                "",
+                head + f"{_fmt(group[0].get('views_measured'))} view, "
+                f"{_fmt(group[0].get('repeats'))} repeat; references: "
+                f"{group[0].get('reference', 'not recorded')}).",
+                "",
+                *_presets_table(g_rows, f"presets_{res}{'' if n == 0 else f'_run{n}'}.png", where),
+            ]
+        return out
     out = [
         "# Presets: settings per hour and accuracy",
         "",
@@ -222,7 +251,7 @@ def _presets_table(rows: dict, png: str, res: str) -> list[str]:
         ("resolution", "px"),
     ]
     cols = [(k, t) for k, t in extra if any(k in rows[p] for p in names)]
-    paper = rows.get("paper", {}).get("settings_per_hour")
+    paper = any(rows[p].get("ratio") for p in names)
     head = ["preset", "settings / hour"] + (["× paper"] if paper else []) + [t for _, t in cols]
     out += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for p in names:
@@ -231,8 +260,7 @@ def _presets_table(rows: dict, png: str, res: str) -> list[str]:
         if paper:
             # Each result's own ratio: to the paper preset of the run that measured it (a
             # preset re-measured later keeps its run's ratio).
-            ratio = r.get("ratio", r.get("settings_per_hour", 0) / paper)
-            cells.append(f"{ratio:.1f}×")
+            cells.append(f"{r['ratio']:.1f}×" if r.get("ratio") else "")
         cells += [_fmt(r.get(k), 1 if "db" in k else 2) for k, _ in cols]
         out.append("| " + " | ".join(cells) + " |")
     out += ["", "What each preset ran:", ""]
@@ -259,7 +287,7 @@ def _verdicts(rows: dict, names: list[str], res: str = "") -> list[str]:
         return []
     out = [
         "",
-        f"{'###' if res else '##'} Against the bar{f' at {res} px' if res else ''}",
+        f"{'###' if res else '##'} Against the bar{f' at {res}' if res else ''}",
         "",
         "A preset is a cheaper way to make the paper's pairs when every check holds (means",
         "over the images of all objects; the bench's `verdict`):",
@@ -297,7 +325,7 @@ def _pairs(rows: dict, names: list[str], res: str = "") -> list[str]:
         lines.append("| " + " | ".join([f"`{p}`", *cells]) + " |")
     return [
         "",
-        f"{'###' if res else '##'} Per object{f' at {res} px' if res else ''}",
+        f"{'###' if res else '##'} Per object{f' at {res}' if res else ''}",
         "",
         "Render PSNR of the blurry / sharp images of each object, dB (blurry minus sharp in",
         "brackets: a pair at parity is within ±0.5).",

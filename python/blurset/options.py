@@ -11,7 +11,7 @@ error. Nothing here lists an option by name: a new option is a new declaration.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
 from blurset import _core
@@ -108,7 +108,8 @@ class Options:
             elif d.kind == "float":
                 kw["type"] = float
             elif d.kind == "choice":
-                kw["choices"] = d.choices
+                # Any case, as the TOML key and the core take it; help lists the names.
+                kw.update(choices=d.choices, type=_any_case(d.choices))
             elif d.kind in ("words", "factors"):
                 kw["nargs"] = "+"
             # text, levels, indices, count_or_auto, fraction_or_ids: the text as given
@@ -249,6 +250,16 @@ def python_type(rust: str, json: bool = False) -> str:
     if rust in ("u8", "u16", "u32", "u64", "usize", "i32", "i64"):
         return "int"
     raise ValueError(f"no Python type for the Rust type {rust!r}")
+
+
+def _any_case(choices: Sequence[str]) -> Callable[[str], str]:
+    """A flag's value → the choice it names in any case (else as given: argparse then
+    names the flag and lists the choices)."""
+
+    def canonical(value: str) -> str:
+        return next((c for c in choices if c.lower() == value.lower()), value)
+
+    return canonical
 
 
 def property_type(d: Decl, json: bool = False) -> str:
