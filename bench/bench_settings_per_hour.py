@@ -22,8 +22,9 @@ Accuracy, per image (sharp and each blur level), the mean over images and object
   model, so its reference's own noise is measured: a group with a denoised member renders
   its reference as two halves on two seed sets (K₁ + K₂ = K), and the noise of their
   weighted mean, MSE(r₁, r₂) · K₁K₂ / K², is taken out of the denoised image's MSE
-  (independent seeds: E[MSE(image, ref)] = MSE(image, truth) + that noise). At K = 7 it
-  was ≈ 1 dB of a 512 px denoised image's score.
+  (independent seeds: E[MSE(image, ref)] = MSE(image, truth) + that noise). At K = 8 it
+  is ≈ 0.6 dB of a 512 px denoised image's score (bench/check_reference_noise.py checks
+  it against a K = 32 reference).
 - `detail_ratio_*`: the high-frequency energy of the image over its render reference's
   (core `detail_ratio`): < 1 a denoiser smoothed texture, > 1 noise on top.
 
