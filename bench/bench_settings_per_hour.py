@@ -297,7 +297,7 @@ def _render_reference(
     (images per (view, level dir), K, the noise MSE of each image). `samples`: the sample
     counts of `preset`'s images (the member with the most samples of the presets that share
     these frames). `split`: render each image as two halves on two seed sets and measure
-    the noise of their mean (else the noise is not measured: 0)."""
+    the noise of their mean (else the noise is not measured: no entry)."""
     from blurset.image import image_error
     from blurset.worker_client import Worker
 
@@ -328,9 +328,13 @@ def _render_reference(
             if split:
                 (k1, r1), (k2, r2) = parts
                 noise[key] = image_error(r1, r2).mse * k1 * k2 / k**2
-            else:
-                noise[key] = 0.0
     return refs, k, noise
+
+
+def denoised_mse(measured: float, reference_noise: float) -> float:
+    """A denoised image's MSE against the truth: its MSE against the reference less the
+    reference's own noise (independent seeds: the two add)."""
+    return max(measured - reference_noise, 0.0)
 
 
 def _score(
@@ -350,7 +354,7 @@ def _score(
             continue
         r = image_error(img, ref[(view, level)])
         k = k_of[level]
-        mse = max(r.mse - noise[(view, level)], 0.0) if denoised else r.mse / (1.0 + 1.0 / k)
+        mse = denoised_mse(r.mse, noise[(view, level)]) if denoised else r.mse / (1.0 + 1.0 / k)
         out.setdefault(f"render_mse_{kind}", []).append(mse)
         out.setdefault(f"detail_{kind}", []).append(r.detail_ratio)
         out.setdefault(f"ref_factor_{kind}", []).append(k)

@@ -44,7 +44,9 @@ def main(preset_name: str, glb: Path) -> dict:
             kind = "sharp" if level == "sharp" else "blur"
             e = image_error(img, r).mse
             mse.setdefault(f"{kind}_measured", []).append(e)
-            mse.setdefault(f"{kind}_corrected", []).append(max(e - noise[(view, level)], 0.0))
+            mse.setdefault(f"{kind}_corrected", []).append(
+                sph.denoised_mse(e, noise[(view, level)])
+            )
             mse.setdefault(f"{kind}_reference_noise", []).append(noise[(view, level)])
     return {
         "preset": preset_name,

@@ -169,7 +169,8 @@ def _presets_section(rs: list[dict], res: str = "") -> list[str]:
                 f"Its paper preset made {key:.3f} settings/h ({', '.join(f'`{o}`' for o in objects)}; "
             )
             denoised = any("'denoise': 'oidn'" in r.get("contender", "") for r in group)
-            if denoised and "own noise" not in ref:
+            corrected = any("reference_noise_psnr_blur_db" in r for r in group)
+            if denoised and not corrected:
                 ref += (
                     "; a denoised image was scored as measured, its reference's own noise "
                     "counted against it: its render PSNR reads low"
@@ -180,7 +181,9 @@ def _presets_section(rs: list[dict], res: str = "") -> list[str]:
                 f"{_fmt(group[0].get('repeats'))} repeat; references: "
                 f"{ref}).",
                 "",
-                *_presets_table(g_rows, f"presets_{res}{'' if n == 0 else f'_run{n}'}.png", where),
+                *_presets_table(
+                    g_rows, f"presets_{res}{'' if n == 0 else f'_run{n}'}.png", where, n == 0
+                ),
             ]
         return out
     out = [
@@ -200,7 +203,7 @@ def _presets_section(rs: list[dict], res: str = "") -> list[str]:
     return out + _presets_table(rows, "presets.png", "")
 
 
-def _presets_table(rows: dict, png: str, res: str) -> list[str]:
+def _presets_table(rows: dict, png: str, res: str, explain: bool = True) -> list[str]:
     out: list[str] = []
     names = sorted(rows, key=lambda p: (p != "paper", -rows[p].get("settings_per_hour", 0)))
     sph = [rows[p].get("settings_per_hour", rows[p].get("ratio")) for p in names]
@@ -273,7 +276,7 @@ def _presets_table(rows: dict, png: str, res: str) -> list[str]:
     out += ["", "What each preset ran:", ""]
     for p in names:
         out.append(f"- `{p}`: {_flags(rows[p].get('contender', ''))}")
-    out += _verdicts(rows, names, res) + _pairs(rows, names, res)
+    out += _verdicts(rows, names, res, explain) + _pairs(rows, names, res)
     return out
 
 
@@ -287,14 +290,14 @@ VERDICT_CHECKS = {
 }
 
 
-def _verdicts(rows: dict, names: list[str], res: str = "") -> list[str]:
-    """Issue 28's bar, as the bench judged each preset against the paper preset (the
-    checks spelled out under the first table of a size, not again for its earlier runs)."""
+def _verdicts(rows: dict, names: list[str], res: str = "", explain: bool = True) -> list[str]:
+    """Issue 28's bar, as the bench judged each preset against the paper preset (`explain`:
+    spell the checks out; not again for a size's earlier runs)."""
     judged = [p for p in names if isinstance(rows[p].get("verdict"), dict)]
     if not judged:
         return []
     out = ["", f"{'###' if res else '##'} Against the bar{f' at {res}' if res else ''}", ""]
-    if "earlier run" not in res:
+    if explain:
         out += [
             "A preset is a cheaper way to make the paper's pairs when every check holds",
             "(means over the images of all objects; the bench's `verdict`):",
