@@ -36,6 +36,19 @@ fn encode_run(out: &mut [u8], pixels: impl Iterator<Item = [f64; 4]>, bg: [f64; 
     }
 }
 
+/// `sum += frame · weight`; a weight of 1 adds the frame as it is (the same bits).
+fn add_scaled(sum: &mut [f64], frame: &[f32], weight: f64) {
+    if weight == 1.0 {
+        for (s, &f) in sum.iter_mut().zip(frame) {
+            *s += f64::from(f);
+        }
+    } else {
+        for (s, &f) in sum.iter_mut().zip(frame) {
+            *s += f64::from(f) * weight;
+        }
+    }
+}
+
 /// Running sum of linear RGBA frames of one size; the mean is the blurry image.
 #[derive(Clone, Debug)]
 pub struct Accumulator {
@@ -44,6 +57,9 @@ pub struct Accumulator {
     // f64: the sum of hundreds of f32 frames keeps every f32 bit of their mean.
     sum: Vec<f64>,
     count: u32,
+    /// The frames' weights summed (each frame 1 unless added with a weight: its samples,
+    /// when rounds of one image render different counts per frame, `plan/target.rs`).
+    weight: f64,
     /// The frame being added by `add_exr`, kept so its memory is reused.
     staging: Vec<f32>,
     /// The bytes of the EXR file being added, kept for the same reason.
@@ -65,6 +81,7 @@ impl Accumulator {
             height,
             sum: vec![0.0; width as usize * height as usize * CH],
             count: 0,
+            weight: 0.0,
             staging: Vec::new(),
             file: Vec::new(),
             guides: None,
@@ -133,8 +150,25 @@ impl Accumulator {
     /// there (plan/region.rs), so the sum is the same bit for bit. `None`: the file
     /// must be the accumulator's size.
     pub fn add_exr_at(&mut self, path: &Path, origin: Option<(u32, u32)>) -> Result<()> {
+        self.add_exr_weighted(path, origin, 1.0)
+    }
+
+    /// [`Self::add_exr_at`] of a frame that counts `weight` times in the mean (a positive,
+    /// finite number: the samples it rendered, where the frames of one image render
+    /// different counts and each is weighted by its own).
+    pub fn add_exr_weighted(
+        &mut self,
+        path: &Path,
+        origin: Option<(u32, u32)>,
+        weight: f64,
+    ) -> Result<()> {
+        if !(weight.is_finite() && weight > 0.0) {
+            return Err(Error::Value(format!(
+                "frame weight {weight}: must be a positive, finite number"
+            )));
+        }
         if self.guides.is_some() {
-            return self.add_passes_at(path, origin);
+            return self.add_passes_at(path, origin, weight);
         }
         self.check_open(false)?;
         let mut file = std::mem::take(&mut self.file);
@@ -165,7 +199,7 @@ impl Accumulator {
                     path: path.to_path_buf(),
                 });
             }
-            self.add_tile_unchecked(&staging, d.width, x0, y0);
+            self.add_tile_unchecked(&staging, d.width, x0, y0, weight);
             Ok(())
         });
         self.file = file;
@@ -227,13 +261,18 @@ impl Accumulator {
                 "frame or guide has a non-finite value {v}"
             )));
         }
-        self.add_guides_tile(albedo, normal, self.width as usize, 0, 0);
+        self.add_guides_tile(albedo, normal, self.width as usize, 0, 0, 1.0);
         self.add_unchecked(rgba);
         Ok(())
     }
 
     /// [`Self::add_exr_at`] of a render with its guide passes (multi-layer EXR).
-    fn add_passes_at(&mut self, path: &Path, origin: Option<(u32, u32)>) -> Result<()> {
+    fn add_passes_at(
+        &mut self,
+        path: &Path,
+        origin: Option<(u32, u32)>,
+        weight: f64,
+    ) -> Result<()> {
         self.check_open(true)?;
         let mut file = std::mem::take(&mut self.file);
         let res = read_into(path, &mut file).and_then(|()| decode_passes(&file, path));
@@ -271,8 +310,8 @@ impl Accumulator {
                 });
             }
         }
-        self.add_guides_tile(&p.albedo, &p.normal, p.width, x0, y0);
-        self.add_tile_unchecked(&p.rgba, p.width, x0, y0);
+        self.add_guides_tile(&p.albedo, &p.normal, p.width, x0, y0, weight);
+        self.add_tile_unchecked(&p.rgba, p.width, x0, y0, weight);
         Ok(())
     }
 
@@ -284,6 +323,7 @@ impl Accumulator {
         tile_width: usize,
         x0: usize,
         y0: usize,
+        weight: f64,
     ) {
         let w = self.width as usize;
         let Some(g) = self.guides.as_mut() else {
@@ -297,8 +337,8 @@ impl Accumulator {
             for x in 0..tile_width {
                 let (s, d) = (3 * (y * tile_width + x), GUIDES * ((y0 + y) * w + x0 + x));
                 for c in 0..3 {
-                    g[d + c] += f64::from(albedo[s + c]);
-                    g[d + 3 + c] += f64::from(normal[s + c]);
+                    g[d + c] += f64::from(albedo[s + c]) * weight;
+                    g[d + 3 + c] += f64::from(normal[s + c]) * weight;
                 }
             }
         }
@@ -312,7 +352,7 @@ impl Accumulator {
                 "this accumulator does not average guides (make it with guides)".into(),
             ));
         };
-        let inv = 1.0 / f64::from(self.count);
+        let inv = 1.0 / self.weight;
         let (mut a, mut n) = (
             Vec::with_capacity(g.len() / 2),
             Vec::with_capacity(g.len() / 2),
@@ -339,7 +379,7 @@ impl Accumulator {
             .flat_map(|p| [p[0], p[1], p[2]])
             .collect();
         let out = denoiser.denoise(self.width, self.height, &color, &albedo, &normal)?;
-        let count = f64::from(self.count);
+        let count = self.weight;
         // sum = value · count, exact in f64 (a 24-bit mantissa times a count < 2^29), so
         // the mean gives the denoiser's f32 back bit for bit.
         for (s, d) in self.sum.chunks_exact_mut(CH).zip(out.chunks_exact(3)) {
@@ -352,44 +392,73 @@ impl Accumulator {
     }
 
     /// Add rows of `tile_width` pixels at (x0, y0); the caller checked that they fit.
-    fn add_tile_unchecked(&mut self, rgba: &[f32], tile_width: usize, x0: usize, y0: usize) {
+    fn add_tile_unchecked(
+        &mut self,
+        rgba: &[f32],
+        tile_width: usize,
+        x0: usize,
+        y0: usize,
+        weight: f64,
+    ) {
         if tile_width == self.width as usize {
             let start = y0 * tile_width * CH;
-            return self.add_rows(start, rgba);
+            return self.add_rows(start, rgba, weight);
         }
         let row = self.width as usize * CH;
         let tile_row = tile_width * CH;
         if tile_row == 0 {
-            self.count += 1;
+            self.count_frame(weight);
             return;
         }
         self.sum[y0 * row..]
             .par_chunks_mut(row)
             .zip(rgba.par_chunks(tile_row))
-            .for_each(|(s, f)| {
-                for (s, &f) in s[x0 * CH..x0 * CH + tile_row].iter_mut().zip(f) {
-                    *s += f64::from(f);
-                }
-            });
-        self.count += 1;
+            .for_each(|(s, f)| add_scaled(&mut s[x0 * CH..x0 * CH + tile_row], f, weight));
+        self.count_frame(weight);
     }
 
     fn add_unchecked(&mut self, rgba: &[f32]) {
-        self.add_rows(0, rgba);
+        self.add_rows(0, rgba, 1.0);
     }
 
     /// Add whole rows starting at sum index `start`.
-    fn add_rows(&mut self, start: usize, rgba: &[f32]) {
+    fn add_rows(&mut self, start: usize, rgba: &[f32], weight: f64) {
         let row = (self.width as usize * CH).max(1);
         self.sum[start..start + rgba.len()]
             .par_chunks_mut(row)
             .zip(rgba.par_chunks(row))
-            .for_each(|(s, f)| {
-                for (s, &f) in s.iter_mut().zip(f) {
-                    *s += f64::from(f);
-                }
-            });
+            .for_each(|(s, f)| add_scaled(s, f, weight));
+        self.count_frame(weight);
+    }
+
+    fn count_frame(&mut self, weight: f64) {
         self.count += 1;
+        self.weight += weight;
+    }
+
+    /// Add the frames of `other` (same size, neither denoised nor with guides): the two
+    /// halves of an image rendered to a target (`plan/target.rs`) become one image, each
+    /// frame keeping its weight.
+    pub fn merge(&mut self, other: &Accumulator) -> Result<()> {
+        self.check_open(false)?;
+        if (other.width, other.height) != (self.width, self.height) {
+            return Err(Error::Shape(format!(
+                "cannot merge a {}x{} image into a {}x{} one",
+                other.width, other.height, self.width, self.height
+            )));
+        }
+        if other.guides.is_some() || other.denoised {
+            return Err(Error::Value(
+                "only plain, undenoised accumulators merge".into(),
+            ));
+        }
+        self.sum
+            .par_iter_mut()
+            .zip(other.sum.par_iter())
+            .for_each(|(s, o)| *s += o);
+        self.count += other.count;
+        self.weight += other.weight;
+        Ok(())
     }
 
     fn require_frames(&self) -> Result<()> {
@@ -404,14 +473,14 @@ impl Accumulator {
     /// The mean of the frames added, premultiplied linear RGBA f32.
     pub fn mean(&self) -> Result<Vec<f32>> {
         self.require_frames()?;
-        let inv = 1.0 / f64::from(self.count);
+        let inv = 1.0 / self.weight;
         Ok(self.sum.par_iter().map(|&s| (s * inv) as f32).collect())
     }
 
     /// The mean composited over `background` (linear RGB), sRGB-encoded, as RGB8.
     pub fn encode_rgb8(&self, background: [f32; 3]) -> Result<Vec<u8>> {
         self.require_frames()?;
-        let inv = 1.0 / f64::from(self.count);
+        let inv = 1.0 / self.weight;
         let bg = background.map(f64::from);
         let mut out = vec![0u8; self.sum.len() / CH * 3];
         let row = (self.width as usize).max(1);
@@ -436,7 +505,7 @@ impl Accumulator {
             return self.encode_rgb8(background);
         }
         self.require_frames()?;
-        let inv = 1.0 / f64::from(self.count);
+        let inv = 1.0 / self.weight;
         let bg = background.map(f64::from);
         let rgb: Vec<f64> = self
             .sum
@@ -516,6 +585,35 @@ mod tests {
         acc.add_frame(&[2.0, 1.0, 1.0, 0.5, 0.0, 0.0, 3.0, 0.5])?;
         assert_eq!(acc.count(), 3);
         assert_eq!(acc.mean()?, vec![1.0, 1.0, 1.0, 0.5, 2.0, 0.0, 1.0, 0.5]);
+        Ok(())
+    }
+
+    #[test]
+    fn weighted_frames_and_merged_halves() -> Result<()> {
+        std::fs::create_dir_all(tmp("")).unwrap();
+        let (p1, p2) = (tmp("w1.exr"), tmp("w2.exr"));
+        write_exr(&p1, 2, 1, &[0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0])?;
+        write_exr(&p2, 2, 1, &[1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0])?;
+        // Weights 1 and 3: the second frame counts three times.
+        let mut a = Accumulator::new(2, 1);
+        a.add_exr_weighted(&p1, None, 1.0)?;
+        let mut b = Accumulator::new(2, 1);
+        b.add_exr_weighted(&p2, None, 3.0)?;
+        a.merge(&b)?;
+        assert_eq!(a.count(), 2);
+        assert_eq!(
+            a.mean()?,
+            vec![0.75, 0.75, 0.75, 1.0, 0.25, 0.25, 0.25, 0.25]
+        );
+        // Weight 1 is the unweighted sum, bit for bit.
+        let (mut u, mut w) = (Accumulator::new(2, 1), Accumulator::new(2, 1));
+        u.add_exr(&p1)?;
+        w.add_exr_weighted(&p1, None, 1.0)?;
+        assert_eq!(u.mean()?, w.mean()?);
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert!(w.add_exr_weighted(&p1, None, bad).is_err());
+        }
+        assert!(a.merge(&Accumulator::new(1, 1)).is_err());
         Ok(())
     }
 

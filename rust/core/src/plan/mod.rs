@@ -8,4 +8,5 @@ pub mod region;
 pub mod renders;
 pub mod sampling;
 pub mod spec;
+pub mod target;
 pub mod weights;

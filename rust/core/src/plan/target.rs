@@ -1,0 +1,282 @@
+//! Rendering each image to a render-noise target (`--target-psnr`, DESIGN §8): an image is
+//! rendered as two halves on independent Cycles sequences, in rounds; after each round its
+//! own render noise is estimated from the two halves (the noise of their mean is
+//! MSE(h₁, h₂) / 4, on its object pixels: `metrics::half_noise`) and the samples still
+//! needed are extrapolated from it, so each image renders what it needs and no more.
+//!
+//! Every round of an image renders each of its m frames (1 for a sharp image) once per
+//! half, the same number of samples each, as the next block of that half's sequence: a
+//! half is always the first samples of one sequence split over its frames, so at zero
+//! motion a blurry image's half is the sharp image's half with as many samples, and
+//! the pair lands on one sample count by construction. Nothing depends on timing: the
+//! rounds follow from rendered pixels, which Cycles makes the same on every run.
+use super::renders::Render;
+use crate::rng::derive_seed;
+use serde::{Deserialize, Serialize};
+
+/// Extrapolated samples aim this far above the target (dB): the estimate of a round is
+/// itself noisy, and one more round costs a render call per frame and half.
+pub const AIM_ABOVE_DB: f64 = 0.2;
+
+/// A final estimate this far under the target (dB) is accepted: the next round would buy
+/// less than the estimate's own scatter.
+pub const ACCEPT_BELOW_DB: f64 = 0.25;
+
+/// Rounds of one image at most (pilot included); the record says when the target was
+/// not reached within them or within the sample cap.
+pub const MAX_ROUNDS: u32 = 4;
+
+/// The rule of a target-driven build.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct TargetRule {
+    /// Render PSNR (dB, peak 1, on the object's pixels) each image is rendered to.
+    pub target_psnr_db: f64,
+    /// Samples of an image's first round, both halves together (at least one per frame
+    /// and half).
+    pub pilot_samples: u32,
+    /// Most samples of one image, both halves together (the Cycles sequence of every
+    /// render is half of it).
+    pub max_samples: u32,
+}
+
+/// Where one image stands: its frames m, the samples each frame has rendered per half
+/// so far, the rounds so far, and the last estimate of its render noise (the MSE of the
+/// mean of its halves, on object pixels; None before the first round).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImageState {
+    pub frames: u32,
+    pub spent_per_frame: u32,
+    pub rounds: u32,
+    pub mse: Option<f64>,
+}
+
+impl TargetRule {
+    /// The MSE the target is.
+    pub fn target_mse(&self) -> f64 {
+        10f64.powf(-self.target_psnr_db / 10.0)
+    }
+
+    /// The Cycles sequence every render of a target-driven build takes its blocks of.
+    pub fn sequence(&self) -> u32 {
+        (self.max_samples / 2).max(1)
+    }
+
+    /// Samples per frame and half of the pilot round of an image of `frames` frames.
+    pub fn pilot_per_frame(&self, frames: u32) -> u32 {
+        let per_half = (self.pilot_samples / 2).max(1);
+        per_half
+            .div_ceil(frames.max(1))
+            .min(self.cap_per_frame(frames))
+    }
+
+    /// The most samples a frame may render per half: the sequence split over the frames.
+    fn cap_per_frame(&self, frames: u32) -> u32 {
+        (self.sequence() / frames.max(1)).max(1)
+    }
+
+    /// Samples per frame and half of the image's next round, or None when it is done: the
+    /// estimate reached the target (within [`ACCEPT_BELOW_DB`]), or the cap or
+    /// [`MAX_ROUNDS`] stops it. Render noise variance falls as 1 / samples, so the
+    /// samples that reach the target (aimed [`AIM_ABOVE_DB`] above it) are the spent
+    /// ones times estimate / target.
+    pub fn next_round(&self, s: &ImageState) -> Option<u32> {
+        let Some(mse) = s.mse else {
+            return Some(self.pilot_per_frame(s.frames));
+        };
+        let target = self.target_mse();
+        let cap = self.cap_per_frame(s.frames);
+        if s.rounds >= MAX_ROUNDS || s.spent_per_frame >= cap || !mse.is_finite() {
+            return None;
+        }
+        if mse <= target * 10f64.powf(ACCEPT_BELOW_DB / 10.0) {
+            return None;
+        }
+        let aim = target * 10f64.powf(-AIM_ABOVE_DB / 10.0);
+        let need = (f64::from(s.spent_per_frame) * mse / aim).ceil();
+        let total = if need >= f64::from(cap) {
+            cap
+        } else {
+            need as u32
+        };
+        let add = total.saturating_sub(s.spent_per_frame).max(1);
+        Some(add.min(cap - s.spent_per_frame))
+    }
+}
+
+/// The Cycles seed of half `half` (0 or 1) of an image whose plan gives it `seed`: half 0
+/// keeps the plan's seed (the sequence an untargeted build renders), half 1 takes an
+/// independent one derived from it.
+pub fn half_seed(seed: u32, half: u32) -> u32 {
+    if half == 0 {
+        seed
+    } else {
+        (derive_seed(u64::from(seed), &[0x6861_6c66, u64::from(half)]) & 0x7fff_ffff) as u32
+    }
+}
+
+/// One round of one image: its view and level, how many samples per frame and half
+/// it adds and how many each frame rendered before, and which round it is (EXR names).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct ImageRound {
+    pub view: usize,
+    pub level: String,
+    pub spent_per_frame: u32,
+    pub add_per_frame: u32,
+    pub round: u32,
+}
+
+/// The renders of `rounds`, made from the plan's renders `base` of the same images (their
+/// cameras, motion and regions): for each image, half 0's frames then half 1's, frame
+/// k of m taking the block `m · spent + k · add` of length `add` of a `sequence`-sample
+/// Cycles sequence on its half's seed. Each (image, round, plan call) is one render call.
+pub fn round_renders(base: &[Render], rounds: &[ImageRound], sequence: u32) -> Vec<Render> {
+    let mut out = Vec::new();
+    let mut call = 0usize;
+    for r in rounds {
+        let frames: Vec<&Render> = base
+            .iter()
+            .filter(|f| f.view == r.view && f.level == r.level)
+            .collect();
+        let m = frames.len() as u32;
+        // The plan's calls of this image, in order (a frame without one is its own): each
+        // stays one call per half.
+        let mut runs: Vec<Vec<u32>> = Vec::new();
+        for (k, f) in frames.iter().enumerate() {
+            match runs.last_mut() {
+                Some(run) if f.call.is_some() && frames[run[0] as usize].call == f.call => {
+                    run.push(k as u32)
+                }
+                _ => runs.push(vec![k as u32]),
+            }
+        }
+        for run in &runs {
+            for half in 0..2u32 {
+                for &k in run {
+                    let f = frames[k as usize];
+                    let stem = f.out.strip_suffix(".exr").unwrap_or(&f.out);
+                    out.push(Render {
+                        seed: half_seed(f.seed, half),
+                        samples: Some(r.add_per_frame),
+                        sample_offset: Some(m * r.spent_per_frame + k * r.add_per_frame),
+                        sample_sequence: Some(sequence),
+                        out: format!("{stem}_r{}{}.exr", r.round, ["a", "b"][half as usize]),
+                        call: Some(call),
+                        ..f.clone()
+                    });
+                }
+                call += 1;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const RULE: TargetRule = TargetRule {
+        target_psnr_db: 40.0,
+        pilot_samples: 32,
+        max_samples: 8192,
+    };
+
+    fn state(frames: u32, spent: u32, rounds: u32, mse: Option<f64>) -> ImageState {
+        ImageState {
+            frames,
+            spent_per_frame: spent,
+            rounds,
+            mse,
+        }
+    }
+
+    #[test]
+    fn pilot_splits_its_samples_over_the_frames() {
+        assert_eq!(RULE.next_round(&state(1, 0, 0, None)), Some(16));
+        assert_eq!(RULE.next_round(&state(4, 0, 0, None)), Some(4));
+        // At least one sample per frame and half.
+        assert_eq!(RULE.next_round(&state(40, 0, 0, None)), Some(1));
+    }
+
+    #[test]
+    fn extrapolates_as_one_over_samples_and_stops_at_the_target() {
+        // 10x the target's MSE after 16 samples: 160 samples, aimed 0.2 dB above.
+        let add = RULE.next_round(&state(1, 16, 1, Some(1e-3))).unwrap();
+        let total = 16 + add;
+        let expect = 16.0 * 1e-3 / (1e-4 * 10f64.powf(-0.02));
+        assert_eq!(total, expect.ceil() as u32);
+        // A harder image (more noise at the same samples) gets more.
+        let harder = RULE.next_round(&state(1, 16, 1, Some(4e-3))).unwrap();
+        assert!(harder > add);
+        // At the target, or within the accepted 0.25 dB: done.
+        assert_eq!(RULE.next_round(&state(1, 176, 2, Some(1e-4))), None);
+        assert_eq!(RULE.next_round(&state(1, 176, 2, Some(1.05e-4))), None);
+        assert!(RULE.next_round(&state(1, 176, 2, Some(1.1e-4))).is_some());
+        // A flat image (no object pixels: exact) is done after its pilot.
+        assert_eq!(RULE.next_round(&state(1, 16, 1, Some(0.0))), None);
+    }
+
+    #[test]
+    fn cap_and_round_limit_stop_an_image() {
+        let cap = RULE.sequence() / 8;
+        let add = RULE.next_round(&state(8, 2, 1, Some(1.0))).unwrap();
+        assert_eq!(2 + add, cap);
+        assert_eq!(RULE.next_round(&state(8, cap, 2, Some(1.0))), None);
+        assert_eq!(RULE.next_round(&state(1, 16, MAX_ROUNDS, Some(1.0))), None);
+    }
+
+    #[test]
+    fn halves_are_independent_and_stable() {
+        assert_eq!(half_seed(17, 0), 17);
+        assert_ne!(half_seed(17, 1), 17);
+        assert_eq!(half_seed(17, 1), half_seed(17, 1));
+        assert!(half_seed(u32::MAX, 1) <= i32::MAX as u32);
+    }
+
+    fn frame(view: usize, level: &str, k: usize, call: Option<usize>) -> Render {
+        Render {
+            view,
+            level: level.into(),
+            c2w: [[k as f64; 4]; 4],
+            seed: 5,
+            samples: Some(3),
+            sample_offset: Some(0),
+            sample_sequence: Some(9),
+            out: format!("/x/{view:04}_{level}_{k:04}.exr"),
+            motion: None,
+            region: None,
+            call,
+        }
+    }
+
+    #[test]
+    fn round_renders_take_consecutive_blocks_per_half() {
+        let base = vec![
+            frame(0, "sharp", 0, Some(0)),
+            frame(0, "blur_1", 0, Some(1)),
+            frame(0, "blur_1", 1, Some(1)),
+            frame(0, "blur_1", 2, Some(2)),
+        ];
+        let rounds = [ImageRound {
+            view: 0,
+            level: "blur_1".into(),
+            spent_per_frame: 4,
+            add_per_frame: 6,
+            round: 2,
+        }];
+        let r = round_renders(&base, &rounds, 4096);
+        assert_eq!(r.len(), 6);
+        // Plan call 1 (frames 0, 1) per half, then plan call 2 (frame 2) per half.
+        let calls: Vec<_> = r.iter().map(|f| f.call.unwrap()).collect();
+        assert_eq!(calls, [0, 0, 1, 1, 2, 3]);
+        let offsets: Vec<_> = r.iter().map(|f| f.sample_offset.unwrap()).collect();
+        assert_eq!(offsets, [12, 18, 12, 18, 24, 24]);
+        assert!(r
+            .iter()
+            .all(|f| f.samples == Some(6) && f.sample_sequence == Some(4096)));
+        assert_eq!((r[0].seed, r[2].seed), (5, half_seed(5, 1)));
+        assert_eq!(r[0].out, "/x/0000_blur_1_0000_r2a.exr");
+        assert_eq!(r[3].out, "/x/0000_blur_1_0001_r2b.exr");
+        assert_eq!(r[1].c2w, base[2].c2w);
+    }
+}
