@@ -513,6 +513,8 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".md":
         raise ConfigError(f"--out {out}: a dataset card is a Markdown file (.md)")
     layout.refuse_inside_settings(out)
+    # The card of A never lands in B (B's manifest would list it, its README describe A).
+    outputs.refuse_inside_output(out, "--out", within=build)
     if out.is_dir():
         raise ConfigError(f"--out is a folder, not a card file: {out}")
     text = make_card(

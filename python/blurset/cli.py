@@ -20,6 +20,7 @@ if __name__ == "__main__" or sys.argv[0].endswith("blurset"):
 
 import argparse  # noqa: E402
 import importlib  # noqa: E402
+from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 from blurset.exceptions import BlursetError  # noqa: E402
@@ -119,7 +120,34 @@ def make_parser() -> argparse.ArgumentParser:
         # Also after the subcommand; SUPPRESS keeps it from resetting the top-level flag.
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="traceback")
         importlib.import_module(module).add_arguments(p)
+        _refuse_empty_paths(p)
     return parser
+
+
+class EmptyPathError(BlursetError):
+    """An empty value of a path option (argparse does not catch it: one line, in main)."""
+
+
+def _nonempty(option: str, convert: Any) -> Any:
+    def check(text: str) -> Any:
+        if not text.strip():
+            # Path("") is the current folder: an empty value would write there.
+            raise EmptyPathError(
+                f"{option} is empty (it would mean the current folder): give a file or folder"
+            )
+        return convert(text)
+
+    check.__name__ = getattr(convert, "__name__", "path")  # argparse names it in errors
+    return check
+
+
+def _refuse_empty_paths(p: argparse.ArgumentParser) -> None:
+    """Every option that names a file or folder (`type=Path`, and build's and noise's
+    `--out`) refuses an empty value by name, before anything runs."""
+    for action in p._actions:
+        if action.type is Path or (action.dest == "out" and action.type in (None, str)):
+            name = action.option_strings[-1] if action.option_strings else action.dest.upper()
+            action.type = _nonempty(name, action.type or str)
 
 
 def subcommands(
@@ -137,6 +165,10 @@ def main(argv: list[str] | None = None) -> int:
         # Building the parser imports every command (numpy, matplotlib …): a Ctrl-C in
         # that first second is a stop like any other, not a traceback.
         args = make_parser().parse_args(argv)
+    except EmptyPathError as e:
+        command = next((a for a in (sys.argv[1:] if argv is None else argv) if a in COMMANDS), "")
+        print(f"blurset {command}: error: {e}".replace("  ", " "), file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("blurset: interrupted", file=sys.stderr)
         return 130

@@ -51,6 +51,7 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--for",
         dest="target",
+        type=str.lower,  # choices in any case, as build and noise take them
         choices=sorted(SCENES_DIR),
         default="llff",
         help="llff: OUT/nerf_llff_data/<scene>/ (IBRNet, NAN, GNT); nerfstudio: OUT/<scene>/ "
@@ -313,6 +314,29 @@ def _refuse_overlap(out: Path, doc: dict, inputs: list[Path]) -> None:
                     raise ConfigError(f"--out/{e} would hold the input {str(i)!r}: {out}")
 
 
+def _not_written_by_export(scene: Path) -> str | None:
+    """The first entry of an exported scene folder (or of its copied image folders) that
+    no export writes, relative to the scene; None when it holds only an export's files:
+    images/, images_<f>/, poses_bounds.npy, transforms.json, and image files in the
+    folders."""
+    if scene.is_symlink() or not scene.is_dir():
+        return None
+    for p in sorted(scene.iterdir()):
+        name = p.name
+        is_images = name == layout.IMAGES or (
+            name.startswith(layout.IMAGES + "_") and name[len(layout.IMAGES) + 1 :].isdigit()
+        )
+        if name in (layout.POSES_BOUNDS, layout.TRANSFORMS) and not p.is_dir():
+            continue
+        if not is_images:
+            return name
+        if p.is_dir() and not p.is_symlink():
+            for q in sorted(p.iterdir()):
+                if q.suffix.lower() not in (".png", ".jpg", ".jpeg", ".exr") or q.is_dir():
+                    return f"{name}/{q.name}"
+    return None
+
+
 def _entry(doc: dict, scene: str) -> str:
     return scene if doc["scenes_dir"] == "." else f"{doc['scenes_dir']}/{scene}"
 
@@ -336,6 +360,9 @@ def _replace(
     """Put the export's entries in place, replacing only what the previous export here
     wrote; everything else in OUT stays as it is."""
     old: dict | None = None
+    # A killed export's staged scenes and the old ones it moved aside (GBs with --copy)
+    # go first, also when the export is otherwise up to date.
+    layout.remove_stale_temps(out, [STAGE, TRASH])
     if how == "same":
         old = outputs.read_record(out / EXPORT_FILE)
         if old == doc:
@@ -359,7 +386,18 @@ def _replace(
             )
     if doc["scenes_dir"] != "." and (out / doc["scenes_dir"]).is_file():
         raise ConfigError(f"--out holds a file {doc['scenes_dir']}: {out}")
-    layout.remove_stale_temps(out, [STAGE, TRASH])
+    # A scene folder that makes way holds only what an export writes: a user's file
+    # there (a note) is named, never deleted with it.
+    for rel in sorted(owned):
+        if rel in ("train.txt", "test.txt", EXPORT_FILE):
+            continue
+        foreign = _not_written_by_export(out / rel)
+        if foreign:
+            raise ConfigError(
+                f"--out/{rel} holds {foreign}, which export did not write and would delete "
+                f"with the scene: move it out of the scene folder, then rerun (nothing was "
+                f"changed): {out}"
+            )
     stage, trash = layout.temp_path(out / STAGE), layout.temp_path(out / TRASH)
     for t in (stage, trash):
         shutil.rmtree(t, ignore_errors=True)

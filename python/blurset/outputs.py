@@ -40,12 +40,73 @@ def kind_of(path: Path) -> _core.OutputKind | None:
     return _core.output_kind(Path(path))
 
 
-def claim(path: Path, kind: _core.OutputKind, option: str = "--out") -> str:
+def claim(
+    path: Path, kind: _core.OutputKind, option: str = "--out", within: Path | None = None
+) -> str:
     """`new`, `empty`, `same` (an output of this kind: the caller compares records) or
     `beside` (an export among other things); ConfigError naming `option` and the folder
     when the command may not write there (a file, another kind's output, a foreign
-    folder)."""
+    folder, a folder inside another output: only `within`, the output a command
+    describes, e.g. a build's own stats/, may hold it)."""
+    refuse_inside_output(path, option, within=within)
     return _core.claim(Path(path), kind, option)
+
+
+def is_tradeoff(path: Path) -> bool:
+    """A folder `blurset tradeoff` wrote: its tradeoff.json says so (`kind`)."""
+    try:
+        doc = json.loads((Path(path) / TRADEOFF_RECORD).read_bytes())
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and doc.get("kind") == TRADEOFF_KIND
+
+
+# `blurset tradeoff` measures and writes no dataset: its folder is recognised here, by
+# its record, and no other command writes into it.
+TRADEOFF_RECORD = "tradeoff.json"
+TRADEOFF_KIND = "blurset tradeoff"
+TRADEOFF_LOCK = ".tradeoff.lock"
+
+
+def enclosing_output(path: Path, include_self: bool = False) -> tuple[Path, str] | None:
+    """The nearest folder above `path` (links resolved; `path` itself too with
+    `include_self`) that is a blurset output, with how messages name its kind (`build`,
+    `noise output`, … `tradeoff folder`), or None."""
+    p = Path(path).expanduser().resolve()
+    for d in [p, *p.parents] if include_self else p.parents:
+        try:
+            k = kind_of(d)
+        except InputError:
+            return d, "output"  # two outputs' records: an output all the same
+        except OSError:
+            continue  # a folder we may not list holds no output we wrote
+        # (A `.lock` alone, which a build's first moments hold, is not enough above a
+        # path: other tools name their locks so too, pytest's temp folders among them.)
+        if k is not None and (k is not OutputKind.BUILD or (d / k.record).is_file()):
+            return d, k.label
+        if is_tradeoff(d):
+            return d, "tradeoff folder"
+    return None
+
+
+def refuse_inside_output(
+    path: Path, option: str = "--out", within: Path | None = None, include_self: bool = False
+) -> None:
+    """ConfigError naming `option` when `path` lies inside a blurset output other than
+    `within` (the output a command may write into: a build's own statistics or card),
+    or with `include_self` is one: a command writes only in its own output, and one
+    output never holds another's files (the other's MANIFEST would list them and
+    `verify` certify them)."""
+    found = enclosing_output(path, include_self)
+    if found is None:
+        return
+    folder, what = found
+    if within is not None and folder == Path(within).expanduser().resolve():
+        return
+    raise ConfigError(
+        f"{option} lies inside the blurset {what} {str(folder)!r}, which this command does "
+        f"not write: give a path outside it (nothing was written): {path}"
+    )
 
 
 def owned_entries(path: Path, kind: _core.OutputKind) -> list[str]:

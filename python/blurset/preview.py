@@ -439,6 +439,10 @@ def run(args) -> int:
             raise ConfigError(f"--out {args.out}: the figure is an image: .png, .jpg or .webp")
         # A figure never replaces a dataset image or lands in a level folder.
         layout.refuse_inside_settings(args.out, allow=("preview.png",))
+        # Only the build the figure shows may hold it: never another build or a noise
+        # output (their manifests would list it and `verify` certify it).
+        own = path if outputs.kind_of(path) is outputs.OutputKind.BUILD else path.parent
+        outputs.refuse_inside_output(args.out, "--out", within=own)
         if args.out.is_dir():
             raise ConfigError(f"--out is a folder, not an image file: {args.out}")
         if args.out.exists() and not args.force and not is_our_figure(args.out):

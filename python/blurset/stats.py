@@ -489,6 +489,7 @@ def run(args: argparse.Namespace) -> int:
     build = args.build.expanduser().absolute()
     out_dir = (args.out or build / "stats").expanduser().absolute()
     layout.refuse_inside_settings(out_dir)
+    outputs.refuse_inside_output(out_dir, "--out", within=build)
     t0 = time.perf_counter()
     document = build_stats(build)  # names what is not a build, before anything is written
     # Stats may read a running build: they say what they describe.
@@ -496,9 +497,10 @@ def run(args: argparse.Namespace) -> int:
     # What the figures and the summary read: the document and whether it is provisional.
     stats: dict[str, Any] = {**document.to_dict(), "provisional": provisional}
     t_read = time.perf_counter() - t0
-    outputs.claim(out_dir, STATS, "--out")  # refused before the lock creates anything
+    # Refused before the lock creates anything; only the build it describes may hold it.
+    outputs.claim(out_dir, STATS, "--out", within=build)
     with outputs.lock(out_dir, STATS):
-        outputs.claim(out_dir, STATS, "--out")
+        outputs.claim(out_dir, STATS, "--out", within=build)
         report = write_stats(stats, out_dir, max_bins=args.bins, document=document)
         # Statistics written into a published build keep its manifest whole.
         publish.refresh_manifest(

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import _core, layout
+from blurset import _core, layout, outputs
 from blurset.config import BuildConfig, from_flags
 from blurset.exceptions import ConfigError
 
@@ -130,6 +130,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--denoise",
+        type=str.lower,  # choices in any case, as build and noise take them
         choices=["none", "oidn"],
         default="none",
         help="oidn: every candidate is also measured denoised (Open Image Denoise on the "
@@ -169,8 +170,9 @@ def preset_from_args(args: argparse.Namespace) -> Preset:
         from_flags(samples=ref[1])
         reference = (ref[0], ref[1])
     pre = Preset(
-        resolution=args.resolution or base.resolution,
-        level=args.level or base.level,
+        # 0 is a value (refused by the build's own ranges below), not "the default".
+        resolution=base.resolution if args.resolution is None else args.resolution,
+        level=base.level if args.level is None else args.level,
         reference=reference,
         budgets=_ints(args.budgets, "--budgets", "samples_total") or base.budgets,
         latents=_ints(args.latents, "--latents", "latents") or base.latents,
@@ -321,8 +323,6 @@ def _save_png(mean: Any, path: Path, res: int) -> None:
 
 
 def run_tradeoff(args: argparse.Namespace) -> dict:
-    from blurset.worker_client import Worker
-
     pre = preset_from_args(args)
     glb = Path(args.object)
     if not glb.is_file():
@@ -330,7 +330,54 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
     out = Path(args.out)
     layout.refuse_overlap(out, [glb])
     layout.refuse_inside_settings(out)
+    claim(out)  # refused before anything is created
     out.mkdir(parents=True, exist_ok=True)
+
+    def busy(holder: str) -> None:
+        raise ConfigError(
+            f"--out is being written by another blurset tradeoff ({holder}): wait for it "
+            f"to end, or give another --out: {out}"
+        )
+
+    with outputs.flock_file(out / outputs.TRADEOFF_LOCK, busy):
+        claim(out)  # again under the lock
+        if not outputs.is_tradeoff(out):
+            # The record first: a stopped run's folder is still this command's own.
+            layout.write_json(out / outputs.TRADEOFF_RECORD, {"kind": outputs.TRADEOFF_KIND})
+        return _measure(args, pre, glb, out)
+
+
+def claim(out: Path) -> None:
+    """May tradeoff write into `out`? A new or empty folder, or an earlier tradeoff's
+    (its tradeoff.json says so): it replaces only its own files there. Anything else (a
+    build, any other output, a folder of other files, a folder inside an output) is
+    refused by name: ConfigError."""
+    outputs.refuse_inside_output(out, "--out")
+    if out.is_symlink() and not out.exists():
+        raise ConfigError(f"--out is a link to nothing: {out}")
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise ConfigError(f"--out exists and is not a directory: {out}")
+    kind = outputs.kind_of(out)
+    if kind is not None:
+        raise ConfigError(
+            f"--out is a blurset {kind.label} ({kind.record}), not a tradeoff folder: give a "
+            f"new or empty folder (nothing was written): {out}"
+        )
+    if outputs.is_tradeoff(out):
+        return
+    if any(not p.name.startswith(".") for p in out.iterdir()):
+        raise ConfigError(
+            f"--out is a folder with other files, not an earlier blurset tradeoff's (no "
+            f"{outputs.TRADEOFF_RECORD} of its own): give a new or empty folder (nothing "
+            f"was written): {out}"
+        )
+
+
+def _measure(args: argparse.Namespace, pre: Preset, glb: Path, out: Path) -> dict:
+    from blurset.worker_client import Worker
+
     work = out / ".work"
     shutil.rmtree(work, ignore_errors=True)
     (out / layout.IMAGES).mkdir(exist_ok=True)
@@ -539,8 +586,13 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
     }
     rec = recommend(cand_rows)
     _write_csv(out / "tradeoff.csv", rows)
-    (out / "tradeoff.json").write_text(
-        json.dumps({"setup": setup, "rows": rows, "recommendation": rec}, indent=1) + "\n"
+    layout.write_text_atomic(
+        out / outputs.TRADEOFF_RECORD,
+        json.dumps(
+            {"kind": outputs.TRADEOFF_KIND, "setup": setup, "rows": rows, "recommendation": rec},
+            indent=1,
+        )
+        + "\n",
     )
     plot(out / "tradeoff.png", rows, setup)
     shutil.rmtree(work, ignore_errors=True)

@@ -1,0 +1,259 @@
+"""Issue 34, "data lost or inputs changed": the commands outside the build path go
+through the output owner too (blurset.outputs). Each case is the hostile user's
+reproduction, with real commands; the builds are stand-in builds (no Blender render)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from blurset import layout, outputs
+
+from tests.conftest import copy_build, run_cli, standin_build
+
+
+def tree(path: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(path)): (
+            p.read_bytes() if not p.is_symlink() else os.readlink(p).encode()
+        )
+        for p in sorted(path.rglob("*"))
+        if p.is_file() or p.is_symlink()
+    }
+
+
+def refused(proc, *words: str) -> str:
+    """Exit 2 with one error line naming `words`."""
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, proc.stderr
+    assert len(lines) == 1 and "error:" in lines[0], proc.stderr
+    for w in words:
+        assert w in lines[0], proc.stderr
+    return lines[0]
+
+
+@pytest.fixture
+def b(standin_build_dir, tmp_path) -> Path:
+    return copy_build(standin_build_dir, tmp_path / "b")
+
+
+@pytest.fixture
+def b2(standin_build_dir, tmp_path) -> Path:
+    return copy_build(standin_build_dir, tmp_path / "b2")
+
+
+def a_setting(build: Path) -> Path:
+    return layout.complete_settings(build)[0]
+
+
+def fake_noise_output(path: Path) -> Path:
+    path.mkdir(parents=True)
+    (path / layout.NOISE_DATASET).write_text(json.dumps({"build": "b", "params": {}}))
+    assert outputs.kind_of(path) is outputs.OutputKind.NOISE
+    return path
+
+
+# -- tradeoff --out ------------------------------------------------------------------
+
+
+def tradeoff(out: Path, glb: Path, *extra: str):
+    # A Blender that does not exist: an old tradeoff that accepted --out fails later, at
+    # the worker, after it has touched the folder.
+    return run_cli("tradeoff", "--object", str(glb), "--out", str(out), "--quick",
+                   "--blender", str(glb.parent / "no-blender"), *extra, check=False)  # fmt: skip
+
+
+def test_tradeoff_refuses_a_build_and_a_folder_it_does_not_own(b, tmp_path):
+    glb = tmp_path / "obj.glb"
+    glb.write_bytes(b"glTF")
+    (b / ".work").mkdir()
+    (b / ".work" / "mine.txt").write_text("keep")
+    before = tree(b)
+    refused(tradeoff(b, glb), "--out", "build", str(b))
+    assert tree(b) == before
+    # Inside a build (not a setting): refused too.
+    refused(tradeoff(b / "sub", glb), "--out", "lies inside the blurset build")
+    assert not (b / "sub").exists() and tree(b) == before
+    # A folder of the user's: its .work and images/ are not tradeoff's.
+    mine = tmp_path / "mine"
+    (mine / ".work").mkdir(parents=True)
+    (mine / ".work" / "notes.txt").write_text("keep")
+    (mine / "images").mkdir()
+    (mine / "images" / "reference.png").write_bytes(b"the user's picture")
+    before = tree(mine)
+    refused(tradeoff(mine, glb), "--out", "folder with other files", str(mine))
+    assert tree(mine) == before
+
+
+def test_tradeoff_writes_into_a_new_or_its_own_folder(tmp_path):
+    from blurset import tradeoff as t
+
+    t.claim(tmp_path / "new")
+    (tmp_path / "empty").mkdir()
+    t.claim(tmp_path / "empty")
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "tradeoff.json").write_text(json.dumps({"kind": "blurset tradeoff", "rows": []}))
+    (own / "images").mkdir()
+    t.claim(own)
+    assert outputs.enclosing_output(own / "x") == (own.resolve(), "tradeoff folder")
+
+
+def test_tradeoff_zero_resolution_and_level_are_refused_and_choices_take_any_case(tmp_path):
+    glb = tmp_path / "obj.glb"
+    glb.write_bytes(b"glTF")
+    out = tmp_path / "out"
+    refused(tradeoff(out, glb, "--resolution", "0"), "--resolution 0")
+    refused(tradeoff(out, glb, "--level", "0"), "--level")
+    # --denoise OIDN is parsed as oidn (the refusal is the next option's).
+    refused(tradeoff(out, glb, "--denoise", "OIDN", "--level", "0"), "--level")
+    assert not out.exists()
+
+
+# -- check-poses --workdir / --json ----------------------------------------------------
+
+
+def test_check_poses_never_writes_into_what_it_checks(b, tmp_path):
+    s = a_setting(b)
+    before = tree(b)
+    refused(run_cli("check-poses", str(s), "--workdir", str(s), check=False), "--workdir")
+    refused(
+        run_cli("check-poses", str(s), "--workdir", str(b / "colmap"), check=False),
+        "--workdir",
+        "lies inside the blurset build",
+    )
+    refused(
+        run_cli("check-poses", str(s), "--json", str(s / "sharp" / "r.json"), check=False),
+        "--json",
+    )
+    refused(run_cli("check-poses", str(s), "--json", str(b / "r.json"), check=False), "--json")
+    # An LLFF scene (outside any build): its images_<f>/ is no workdir.
+    scene = tmp_path / "scene"
+    shutil.copytree(s / "sharp", scene)
+    sub = next(p for p in scene.iterdir() if p.is_dir())
+    refused(run_cli("check-poses", str(scene), "--workdir", str(sub), check=False), "--workdir")
+    refused(
+        run_cli("check-poses", str(scene), "--json", str(sub / "r.json"), check=False), "--json"
+    )
+    assert tree(b) == before
+    assert sorted(p.name for p in sub.iterdir()) == sorted(
+        p.name for p in (s / "sharp" / sub.name).iterdir()
+    )
+
+
+def test_check_poses_refuses_a_workdir_holding_colmap_files_at_its_top(b, tmp_path):
+    wd = tmp_path / "wd"
+    (wd / "sparse" / "0").mkdir(parents=True)
+    (wd / "database.db").write_bytes(b"the user's COLMAP database")
+    before = tree(wd)
+    line = refused(
+        run_cli("check-poses", str(a_setting(b)), "--workdir", str(wd), check=False), "--workdir"
+    )
+    assert "database.db" in line and tree(wd) == before
+
+
+# -- one output inside another ------------------------------------------------------------
+
+
+def test_a_build_inside_another_build_is_refused(b, standin_blender):
+    before = tree(b)
+    for out in (a_setting(b) / "sub", b / "sub"):
+        proc = standin_build(out, standin_blender, check=False)
+        refused(proc, "--out", "lies inside the blurset build", str(b))
+        assert not out.exists()
+    assert tree(b) == before
+
+
+def test_reports_of_one_build_are_never_written_into_another_output(b, b2, tmp_path):
+    noise = fake_noise_output(tmp_path / "n")
+    for other in (b2, noise):
+        before = tree(other)
+        refused(run_cli("stats", str(b), "--out", str(other / "x"), check=False), "--out")
+        refused(
+            run_cli("card", str(b), "--out", str(other / "README.md"), check=False),
+            "--out",
+            "lies inside the blurset",
+        )
+        refused(run_cli("preview", str(b), "--out", str(other / "sheet.png"), check=False), "--out")
+        refused(
+            run_cli("preview", str(a_setting(b)), "--out", str(other / "p.png"), check=False),
+            "--out",
+        )
+        assert tree(other) == before
+    # Into the build they describe, as before.
+    run_cli("stats", str(b), "--quiet")
+    run_cli("card", str(b))
+    run_cli("preview", str(b), "--out", str(b / "sheet.png"))
+    assert (b / "stats" / "stats.json").is_file() and (b / "README.md").is_file()
+
+
+# -- empty paths -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        # (a Blender that does not exist: a regression fails at once, renders nothing)
+        ["build", "--demo", "--blender", "/nonexistent/blender", "--out", ""],
+        ["noise", "SCENE", "--out", ""],
+        ["export", "BUILD", "--out", ""],
+        ["stats", "BUILD", "--out", ""],
+        ["card", "BUILD", "--out", ""],
+        ["check-poses", "BUILD", "--workdir", ""],
+        ["check-poses", "BUILD", "--json", ""],
+        ["tradeoff", "--object", "x.glb", "--out", ""],
+        ["export", "BUILD", "--out="],
+    ],
+)
+def test_an_empty_path_is_refused_by_name_not_taken_for_the_cwd(argv, tmp_path):
+    proc = subprocess.run(
+        [sys.executable, "-m", "blurset.cli", *argv],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+    )
+    option = argv[-2] if argv[-1] == "" else argv[-1].rstrip("=")
+    line = refused(proc, option, "empty")
+    assert line.startswith(f"blurset {argv[0]}: error:")
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- export ---------------------------------------------------------------------------
+
+
+def test_reexport_names_a_note_inside_a_scene_it_would_replace(b, tmp_path):
+    data = tmp_path / "data"
+    run_cli("export", str(b), "--out", str(data))
+    scenes = data / "nerf_llff_data"
+    blur = next(p for p in sorted(scenes.iterdir()) if "__blur_" in p.name)
+    (blur / "notes.txt").write_text("my notes")
+    before = tree(data)
+    line = refused(
+        run_cli("export", str(b), "--out", str(data), "--levels", "sharp", check=False),
+        "--out",
+        "notes.txt",
+    )
+    assert blur.name in line
+    assert tree(data) == before
+    (blur / "notes.txt").unlink()
+    run_cli("export", str(b), "--out", str(data), "--levels", "sharp")
+    assert not blur.exists()
+
+
+def test_an_up_to_date_export_removes_what_a_killed_export_left(b, tmp_path):
+    data = tmp_path / "data"
+    run_cli("export", str(b), "--out", str(data), "--for", "NERFSTUDIO")
+    assert outputs.read_record(data / "export.json")["for"] == "nerfstudio"
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    stale = data / f".export.old.tmp{dead.pid}"
+    (stale / "0").mkdir(parents=True)
+    (stale / "0" / "big.png").write_bytes(b"x" * 1000)
+    p = run_cli("export", str(b), "--out", str(data), "--for", "nerfstudio")
+    assert "up to date" in p.stdout
+    assert not stale.exists()
