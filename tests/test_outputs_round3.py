@@ -257,3 +257,29 @@ def test_an_up_to_date_export_removes_what_a_killed_export_left(b, tmp_path):
     p = run_cli("export", str(b), "--out", str(data), "--for", "nerfstudio")
     assert "up to date" in p.stdout
     assert not stale.exists()
+
+
+# -- a user's file inside a setting a rerun redoes ------------------------------------
+
+
+def test_a_rerun_that_redoes_a_damaged_setting_keeps_a_users_files_in_it(b, standin_blender):
+    s = a_setting(b)
+    (s / "notes.txt").write_text("my notes")
+    (s / "sharp" / "README").write_text("about this level")
+    png = sorted((s / "sharp" / "images").iterdir())[0]
+    png.write_bytes(b"not a png any more")
+    assert layout.setting_problem(s) is not None
+    assert layout.not_written_by_build(s) == ["notes.txt", "sharp/README"]
+    proc = standin_build(b, standin_blender)
+    assert f"redoing {s.name}" in proc.stderr
+    assert layout.setting_problem(s) is None
+    assert (s / "notes.txt").read_text() == "my notes"
+    assert (s / "sharp" / "README").read_text() == "about this level"
+    assert f"kept {s.name}/notes.txt" in proc.stderr
+
+
+def test_build_out_a_dangling_link_is_refused_and_its_target_not_made(tmp_path, standin_blender):
+    link = tmp_path / "link"
+    link.symlink_to(tmp_path / "elsewhere" / "deep")
+    refused(standin_build(link, standin_blender, check=False), "--out", "link to nothing")
+    assert not (tmp_path / "elsewhere").exists()

@@ -125,16 +125,20 @@ def make_parser() -> argparse.ArgumentParser:
 
 
 class EmptyPathError(BlursetError):
-    """An empty value of a path option (argparse does not catch it: one line, in main)."""
+    """An empty value of a path option, or an --out that is a link to nothing (argparse
+    does not catch it: one line, in main)."""
 
 
-def _nonempty(option: str, convert: Any) -> Any:
+def _nonempty(option: str, convert: Any, output: bool = False) -> Any:
     def check(text: str) -> Any:
         if not text.strip():
             # Path("") is the current folder: an empty value would write there.
             raise EmptyPathError(
                 f"{option} is empty (it would mean the current folder): give a file or folder"
             )
+        if output and Path(text).is_symlink() and not Path(text).exists():
+            # Resolved, it would name (and create) the link's target anywhere on disk.
+            raise EmptyPathError(f"{option} is a link to nothing: {text}")
         return convert(text)
 
     check.__name__ = getattr(convert, "__name__", "path")  # argparse names it in errors
@@ -143,11 +147,12 @@ def _nonempty(option: str, convert: Any) -> Any:
 
 def _refuse_empty_paths(p: argparse.ArgumentParser) -> None:
     """Every option that names a file or folder (`type=Path`, and build's and noise's
-    `--out`) refuses an empty value by name, before anything runs."""
+    `--out`) refuses an empty value by name, before anything runs; an `--out` that is a
+    link to nothing too."""
     for action in p._actions:
         if action.type is Path or (action.dest == "out" and action.type in (None, str)):
             name = action.option_strings[-1] if action.option_strings else action.dest.upper()
-            action.type = _nonempty(name, action.type or str)
+            action.type = _nonempty(name, action.type or str, output=action.dest == "out")
 
 
 def subcommands(

@@ -119,8 +119,66 @@ def complete_settings(build: Path) -> list[Path]:
 
 
 def publish(partial: Path, final: Path) -> None:
-    """Write the marker into `partial` and rename it to `final` (replacing an old one)."""
+    """Write the marker into `partial` and rename it to `final` (replacing an old one).
+    What the old one holds that a build does not write (a user's note) is kept: moved
+    into the new one at the same place, and named on stderr."""
+    import sys
+
+    partial, final = Path(partial), Path(final)
+    for rel in not_written_by_build(final):
+        dst = partial / rel
+        if dst.exists() or dst.is_symlink():
+            continue  # (the new setting wrote that name: cannot happen for a foreign one)
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(final / rel, dst)
+        print(
+            f"blurset: kept {final.name}/{rel} (not written by blurset) in the redone "
+            f"setting: {final / rel}",
+            file=sys.stderr,
+        )
     _core.publish(partial, final, time.strftime("%Y-%m-%dT%H:%M:%S"))
+
+
+def _is_folder_of(name: str, base: str) -> bool:
+    """`base` or `base_<f>` (images, images_8, linear_4)."""
+    return name == base or (name.startswith(base + "_") and name[len(base) + 1 :].isdigit())
+
+
+def not_written_by_build(setting: Path) -> list[str]:
+    """The entries (relative paths) of a setting folder that no build writes: anything
+    but meta.json, transforms.json, the marker, preview.png, the level folders with
+    their images/, images_<f>/, linear/, linear_<f>/ of image files, poses_bounds.npy
+    and transforms.json, and a killed writer's temp names."""
+    setting = Path(setting)
+    if setting.is_symlink() or not setting.is_dir():
+        return []
+    found: list[str] = []
+    for p in sorted(setting.iterdir()):
+        if p.name in (META, TRANSFORMS, MARKER, "preview.png") and not p.is_dir():
+            continue
+        if _core.parse_temp_name(p.name) is not None:
+            continue
+        if not (is_level_dir(p.name) and p.is_dir() and not p.is_symlink()):
+            found.append(p.name)
+            continue
+        for q in sorted(p.iterdir()):
+            rel = f"{p.name}/{q.name}"
+            if q.name in (POSES_BOUNDS, TRANSFORMS) and not q.is_dir():
+                continue
+            if _core.parse_temp_name(q.name) is not None:
+                continue
+            if not (
+                (_is_folder_of(q.name, IMAGES) or _is_folder_of(q.name, LINEAR))
+                and q.is_dir()
+                and not q.is_symlink()
+            ):
+                found.append(rel)
+                continue
+            for r in sorted(q.iterdir()):
+                ok = r.suffix.lower() in (".png", ".exr") and r.is_file()
+                if not ok and _core.parse_temp_name(r.name) is None:
+                    found.append(f"{rel}/{r.name}")
+    return found
 
 
 def temp_path(path: Path) -> Path:
