@@ -138,6 +138,28 @@ def _plain(value: Any) -> Any:
     return str(value) if isinstance(value, Path) else value
 
 
+# What a target replaces: a demo default among these would be refused beside it.
+_SAMPLE_COUNTS = ("samples", "samples_total", "sharp_samples", "blur_budget")
+
+
+def _under_preset(values: dict[str, Any], given: dict[str, Any]) -> None:
+    """A preset (and a target) comes under what the user gave but over the demo's smaller
+    defaults: drop a demo default that the preset sets, or that a target replaces."""
+    sets: dict[str, Any] = {}
+    preset = given.get("preset")
+    if isinstance(preset, str):
+        try:
+            sets = _core.preset_values(preset.strip().lower())
+        except ValueError:
+            return  # not a preset: the core refuses the name, naming the option
+    dropped = [*sets, *(["latents"] if "latents_auto" in sets else [])]
+    if "target_psnr" in sets or given.get("target_psnr") is not None:
+        dropped += _SAMPLE_COUNTS
+    for k in dropped:
+        if k not in given:
+            values.pop(k, None)
+
+
 def make_config(
     file_values: dict[str, Any], flag_values: dict[str, Any], *, config_path: Path | None = None
 ) -> BuildConfig:
@@ -156,6 +178,7 @@ def make_config(
     origin.update({k: flag(k) for k in flags})
     given.update(flags)
     values.update(given)
+    _under_preset(values, given)
     values.setdefault("demo", False)
     # Every rule between options is the core's (BuildConfig's validator).
     try:

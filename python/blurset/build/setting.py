@@ -130,6 +130,21 @@ def render_setting(
 
         den = denoiser(device_for(str((info.get("device") or {}).get("backend") or cfg.device)))
 
+    def finish(key: tuple[int, str], a: Any) -> None:
+        """Write a finished image (the mean of its frames) and its copies; QA a sharp one."""
+        if den is not None:
+            a.denoise(den)
+        view, level = key
+        name = layout.image_name(view, n_views)
+        bg = cfg.background
+        a.write_png(partial / level / layout.IMAGES / name, background=bg)
+        for f in cfg.downsample:
+            a.write_png(partial / level / layout.images_dir(f) / name, background=bg, downsample=f)
+        if cfg.write_linear:
+            a.write_exr(partial / level / layout.LINEAR / name.replace(".png", ".exr"))
+        if level == layout.SHARP:
+            qa[view] = _core.frame_qa(a.mean())
+
     def on_frame(i: int, path: str, origin: tuple[int, int] | None) -> None:
         key = keys[i]
         a = acc.get(key)
@@ -138,20 +153,7 @@ def render_setting(
         a.add_exr(path, origin)
         os.unlink(path)
         if a.count == need[key]:
-            if den is not None:
-                a.denoise(den)
-            view, level = key
-            name = layout.image_name(view, n_views)
-            bg = cfg.background
-            a.write_png(partial / level / layout.IMAGES / name, background=bg)
-            for f in cfg.downsample:
-                a.write_png(
-                    partial / level / layout.images_dir(f) / name, background=bg, downsample=f
-                )
-            if cfg.write_linear:
-                a.write_exr(partial / level / layout.LINEAR / name.replace(".png", ".exr"))
-            if level == layout.SHARP:
-                qa[view] = _core.frame_qa(a.mean())
+            finish(key, a)
             del acc[key]
         progress.frame_done()
 
@@ -162,25 +164,29 @@ def render_setting(
     t1 = time.time()
     # Cropped EXRs: only the pixels the region traced cross the disk.
     common = {"resolution": res, "fov_deg": cfg.fov_deg, "crop": True, "guides": guides}
-    worker.render(
-        [frames[i] for i in sharp_idx],
-        samples=cfg.effective_sharp_samples,
-        on_frame=lambda j, p, o: on_frame(sharp_idx[j], p, o),
-        **common,
-    )
-    # QA before the costly blur renders: a bad sharp view fails this setting only.
-    for view in sorted(qa):
-        if qa[view].failure:
-            raise SettingFailed("qa", f"render QA: view {view} is {qa[view].failure}")
-    t_sharp = time.time() - t1
-    if blur_idx:
+    images: dict[tuple[int, str], dict[str, Any]] = {}
+    n_rendered = len(frames)
+    if cfg.target_psnr is not None:
+        images, n_rendered, t_sharp, t_blur = _render_targeted(
+            plan, cfg, worker, exr_dir, sharp, keys, finish, qa, progress, common, len(frames)
+        )
+    else:
         worker.render(
-            [frames[i] for i in blur_idx],
-            samples=cfg.samples,
-            on_frame=lambda j, p, o: on_frame(blur_idx[j], p, o),
+            [frames[i] for i in sharp_idx],
+            samples=cfg.effective_sharp_samples,
+            on_frame=lambda j, p, o: on_frame(sharp_idx[j], p, o),
             **common,
         )
-    t_blur = time.time() - t1 - t_sharp
+        _raise_on_qa(qa)
+        t_sharp = time.time() - t1
+        if blur_idx:
+            worker.render(
+                [frames[i] for i in blur_idx],
+                samples=cfg.samples,
+                on_frame=lambda j, p, o: on_frame(blur_idx[j], p, o),
+                **common,
+            )
+        t_blur = time.time() - t1 - t_sharp
     if acc:
         raise BlursetError(f"{len(acc)} view/level images incomplete after rendering")
     # --latents auto / motion blur render fewer frames than the bar's per-setting bound.
@@ -199,7 +205,7 @@ def render_setting(
         "blur_s": round(t_blur, 3),
         "load_s": info.get("load_s"),
         "total_s": round(time.time() - t0, 3),
-        "frames": len(frames),
+        "frames": n_rendered,
     }
 
     def write_meta(pose_check: dict[str, Any] | None = None) -> None:
@@ -213,6 +219,7 @@ def render_setting(
             light_paths=info.get("light_paths"),
             device=info.get("device"),
             denoiser=den.record() if den is not None else None,
+            images=[(v, level, r) for (v, level), r in sorted(images.items())] or None,
         )
 
     write_meta()
@@ -224,6 +231,52 @@ def render_setting(
         write_build_preview(partial, warn=progress.write)
     layout.publish(partial, final)
     return final
+
+
+def _raise_on_qa(qa: dict[int, Any]) -> None:
+    """QA before the costly blur renders: a bad sharp view fails this setting only."""
+    for view in sorted(qa):
+        if qa[view].failure:
+            raise SettingFailed("qa", f"render QA: view {view} is {qa[view].failure}")
+
+
+def _render_targeted(
+    plan: Any,
+    cfg: BuildConfig,
+    worker: Any,
+    exr_dir: Path,
+    sharp: list[int],
+    keys: list[tuple[int, str]],
+    finish: Any,
+    qa: dict[int, Any],
+    progress: Progress,
+    common: dict[str, Any],
+    bound: int,
+) -> tuple[dict[tuple[int, str], dict[str, Any]], int, float, float]:
+    """Every image to the config's target (build/target.py): the sharp images first, QA,
+    then the blurry ones. The progress bar counts renders up to the setting's share.
+    Returns each image's record, the renders, and the seconds of each phase."""
+    from blurset.build.target import frame_counts, render_to_target
+
+    counts = frame_counts({"view": v, "level": lv} for v, lv in keys)
+    order = list(dict.fromkeys(keys))
+    done = [0]
+
+    def on_render() -> None:
+        if done[0] < bound:
+            progress.frame_done()
+        done[0] += 1
+
+    t1 = time.time()
+    args = (plan, cfg, worker, exr_dir, sharp)
+    sharp_keys = [k for k in order if k[1] == layout.SHARP]
+    images, n = render_to_target(*args, sharp_keys, counts, finish, on_render, common)
+    _raise_on_qa(qa)
+    t_sharp = time.time() - t1
+    blur_keys = [k for k in order if k[1] != layout.SHARP]
+    blur, n_blur = render_to_target(*args, blur_keys, counts, finish, on_render, common)
+    images.update(blur)
+    return images, n + n_blur, t_sharp, time.time() - t1 - t_sharp
 
 
 def _pose_check(setting_dir: Path) -> dict:

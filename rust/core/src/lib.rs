@@ -22,7 +22,10 @@ pub use crate::rng::seed_for;
 // What one setting renders: views, trajectories, levels, latent frames.
 pub use crate::plan::config::BuildConfig;
 pub use crate::plan::options::OptionInfo;
+pub use crate::plan::choices::{Choice, Preset};
+pub use crate::plan::presets::{preset_values, FLOOR_PSNR_DB};
 pub use crate::plan::renders::{level_renders, Motion, Render};
+pub use crate::plan::target::{round_renders, ImageRound, ImageState, TargetRule};
 pub use crate::plan::sampling::{plan_setting, LevelPlan, SamplingConfig, SettingPlan};
 pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
 
@@ -30,7 +33,7 @@ pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
 pub use crate::image::accumulate::Accumulator;
 pub use crate::image::color::srgb_encode_slice;
 pub use crate::image::denoise::{DenoiseDevice, Denoiser, DenoiserRecord};
-pub use crate::image::exr::read::{read_exr, Frame};
+pub use crate::image::exr::read::{decode_exr, read_exr, Frame};
 pub use crate::image::io::{image_info, read_image, Image, Samples};
 pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
 
@@ -62,7 +65,7 @@ pub use crate::dataset::manifest::{
     ManifestProblem, MANIFEST,
 };
 pub use crate::dataset::meta::{
-    read_exposure_ends, read_mean_poses, write_json, DeviceRecord, LightPathsRecord, Meta,
+    read_exposure_ends, read_mean_poses, write_json, DeviceRecord, ImageRender, LightPathsRecord, Meta,
     ObjectRecord, Pose, Timings,
 };
 pub use crate::dataset::outputs::{
@@ -88,4 +91,6 @@ pub use crate::ground::names::{
 };
 
 // Image error against a reference and the speed/quality front.
-pub use crate::metrics::{detail_ratio, image_error, pareto_front};
+pub use crate::metrics::{
+    detail_ratio, half_noise, image_error, object_error, pareto_front, spread, ObjectError, Spread,
+};

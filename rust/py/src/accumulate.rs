@@ -140,15 +140,24 @@ impl PyAccumulator {
 
     /// Read a linear RGBA float EXR and add it (alpha 1 when the file has none); with
     /// `origin` = (x0, y0), a render cropped to its region, placed there.
-    #[pyo3(signature = (path, origin=None))]
+    /// `weight`: how many times the frame counts in the mean (its samples, where the
+    /// frames of one image render different counts).
+    #[pyo3(signature = (path, origin=None, *, weight=1.0))]
     fn add_exr(
         &mut self,
         py: Python<'_>,
         path: PathBuf,
         origin: Option<(u32, u32)>,
+        weight: f64,
     ) -> PyResult<()> {
         let inner = &mut self.inner;
-        run_detached(py, move || inner.add_exr_at(&path, origin))
+        run_detached(py, move || inner.add_exr_weighted(&path, origin, weight))
+    }
+
+    /// Add the frames of `other` (the other half of an image rendered to a target).
+    fn merge(&mut self, py: Python<'_>, other: PyRef<'_, Self>) -> PyResult<()> {
+        let (inner, other) = (&mut self.inner, &other.inner);
+        run_detached(py, move || inner.merge(other))
     }
 
     /// Add a premultiplied linear RGBA frame, float32 (H, W, 4) C-contiguous.

@@ -367,7 +367,56 @@ fn check_downsample(factors: Vec<u32>) -> PyResult<()> {
     core::check_downsample(&factors).map_err(crate::error::to_pyerr)
 }
 
+/// What preset `name` sets: option name → value (core `preset_values`).
+#[pyfunction]
+fn preset_values<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
+    use core::Raw;
+    let preset = <core::Preset as core::Choice>::from_name(name)
+        .ok_or_else(|| PyValueError::new_err(format!("no preset {name:?}")))?;
+    let out = PyDict::new(py);
+    for (k, v) in core::preset_values(preset) {
+        match v {
+            Raw::Bool(b) => out.set_item(k, b)?,
+            Raw::Float(x) => out.set_item(k, x)?,
+            Raw::Int(i) => out.set_item(k, i)?,
+            Raw::Str(t) => out.set_item(k, t)?,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "preset {name}: {k} = {other} has no Python value"
+                )))
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Samples per frame and half of an image's next round under the config's target, or
+/// None when the image is done (core `TargetRule::next_round`; `mse`: the last estimate,
+/// None before the pilot).
+#[pyfunction]
+#[pyo3(signature = (config, *, frames, spent_per_frame, rounds, mse = None))]
+fn target_next_round(
+    config: PyRef<'_, BuildConfig>,
+    frames: u32,
+    spent_per_frame: u32,
+    rounds: u32,
+    mse: Option<f64>,
+) -> PyResult<Option<u32>> {
+    let rule = config
+        .0
+        .target()
+        .ok_or_else(|| PyValueError::new_err("the config has no target_psnr"))?;
+    Ok(rule.next_round(&core::ImageState {
+        frames,
+        spent_per_frame,
+        rounds,
+        mse,
+    }))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(preset_values, m)?)?;
+    m.add_function(wrap_pyfunction!(target_next_round, m)?)?;
     m.add_class::<BuildConfig>()?;
     m.add_class::<NoiseConfig>()?;
     m.add_class::<OptionDecl>()?;

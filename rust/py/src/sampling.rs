@@ -123,6 +123,22 @@ impl Plan {
         to_py(py, &self.0.renders_except(&exr_dir, &sharp_views, pin))
     }
 
+    /// The renders of `rounds` of a target-driven build (core `round_renders`): each
+    /// round (dict: view, level, spent_per_frame, add_per_frame, round) of one image,
+    /// from that image's renders in `renders(exr_dir, pin, sharp_views)`.
+    fn round_renders<'py>(
+        &self,
+        py: Python<'py>,
+        exr_dir: PathBuf,
+        pin: u32,
+        sharp_views: Vec<usize>,
+        rounds: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let rounds: Vec<core::ImageRound> = from_py("rounds", rounds)?;
+        let base = self.0.renders_except(&exr_dir, &sharp_views, Some(pin));
+        to_py(py, &core::round_renders(&base, &rounds, pin))
+    }
+
     /// The renders of one blurry image (view, level), EXRs named `<prefix>_…`.
     #[pyo3(signature = (view, level, prefix, pin = None))]
     fn level_renders<'py>(
@@ -169,7 +185,7 @@ impl Plan {
     /// worker reported it (dict), the timings (dict), the QA of every view and, with
     /// --check-poses, the COLMAP verdict (dict); `light_paths` and `device` as the worker
     /// reported them, `denoiser` as the driver's denoiser describes itself (dicts).
-    #[pyo3(signature = (path, *, config, object, timings, qa, pose_check = None, light_paths = None, device = None, denoiser = None))]
+    #[pyo3(signature = (path, *, config, object, timings, qa, pose_check = None, light_paths = None, device = None, denoiser = None, images = None))]
     #[allow(clippy::too_many_arguments)] // keyword arguments of one Python call
     fn write_meta(
         &self,
@@ -183,8 +199,10 @@ impl Plan {
         light_paths: Option<&Bound<'_, PyAny>>,
         device: Option<&Bound<'_, PyAny>>,
         denoiser: Option<&Bound<'_, PyAny>>,
+        images: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
         let object: core::ObjectRecord = from_py("object", object)?;
+        let images: Option<Vec<(usize, String, core::ImageRender)>> = typed("images", images)?;
         let timings: core::Timings = from_py("timings", timings)?;
         let qa: Vec<core::FrameQa> = qa.iter().map(|q| q.0).collect();
         let mut meta = core::Meta::new(&self.0, &config.0, object, timings, &qa)
@@ -195,6 +213,9 @@ impl Plan {
         meta.render.light_paths = typed("light_paths", light_paths)?;
         meta.render.device = typed("device", device)?;
         meta.render.denoiser = typed("denoiser", denoiser)?;
+        if let Some(images) = images {
+            meta.set_images(images).map_err(crate::error::to_pyerr)?;
+        }
         crate::run_detached(py, || meta.write(&path))
     }
 }

@@ -63,6 +63,79 @@ fn image_error(
     })
 }
 
+/// Error on the object's pixels (alpha > 0 in either image; DESIGN §8).
+#[pyclass(frozen, get_all, name = "ObjectError", module = "blurset._core")]
+pub struct ObjectError {
+    /// PSNR (dB, peak 1) of the sRGB image over the background, on object pixels (≤ 200).
+    pub psnr: f64,
+    pub mse: f64,
+    /// Fraction of the frame that is object pixels.
+    pub coverage: f64,
+    pub object_px: u64,
+}
+
+impl From<core::ObjectError> for ObjectError {
+    fn from(e: core::ObjectError) -> Self {
+        ObjectError {
+            psnr: e.psnr,
+            mse: e.mse,
+            coverage: e.coverage,
+            object_px: e.object_px,
+        }
+    }
+}
+
+fn same_shape(a: &PyReadonlyArray3<'_, f32>, b: &PyReadonlyArray3<'_, f32>) -> PyResult<()> {
+    if a.shape() != b.shape() {
+        return Err(PyValueError::new_err(format!(
+            "images {:?} and {:?} differ in shape",
+            a.shape(),
+            b.shape()
+        )));
+    }
+    Ok(())
+}
+
+/// Error of `image` against `reference` (float32 (H, W, 4), premultiplied linear RGBA) on
+/// the object's pixels (core `object_error`).
+#[pyfunction]
+#[pyo3(signature = (image, reference, *, background = (1.0, 1.0, 1.0)))]
+fn object_error(
+    py: Python<'_>,
+    image: PyReadonlyArray3<'_, f32>,
+    reference: PyReadonlyArray3<'_, f32>,
+    background: (f64, f64, f64),
+) -> PyResult<ObjectError> {
+    same_shape(&image, &reference)?;
+    let (a, b) = (rgba(&image, "image")?, rgba(&reference, "reference")?);
+    let bg = [background.0, background.1, background.2];
+    Ok(crate::run_detached(py, || core::object_error(a, b, bg))?.into())
+}
+
+/// The render noise of the mean of two independent halves of an image, estimated from
+/// them: MSE(half_a, half_b) / 4 on object pixels (core `half_noise`).
+#[pyfunction]
+#[pyo3(signature = (half_a, half_b, *, background = (1.0, 1.0, 1.0)))]
+fn half_noise(
+    py: Python<'_>,
+    half_a: PyReadonlyArray3<'_, f32>,
+    half_b: PyReadonlyArray3<'_, f32>,
+    background: (f64, f64, f64),
+) -> PyResult<ObjectError> {
+    same_shape(&half_a, &half_b)?;
+    let (a, b) = (rgba(&half_a, "half_a")?, rgba(&half_b, "half_b")?);
+    let bg = [background.0, background.1, background.2];
+    Ok(crate::run_detached(py, || core::half_noise(a, b, bg))?.into())
+}
+
+/// The worst value, the 5th percentile and the mean of per-image figures (core `spread`):
+/// a dict with worst, p5, mean, n.
+#[pyfunction]
+fn spread(py: Python<'_>, values: Vec<f64>) -> PyResult<Bound<'_, PyAny>> {
+    let s = core::spread(&values).map_err(crate::error::to_pyerr)?;
+    crate::sampling::to_py(py, &s)
+}
+
 /// Which points (seconds, psnr) are Pareto-optimal (faster or better than every other).
 #[pyfunction]
 fn pareto_front(seconds: Vec<f64>, psnr: Vec<f64>) -> PyResult<Vec<bool>> {
@@ -71,6 +144,10 @@ fn pareto_front(seconds: Vec<f64>, psnr: Vec<f64>) -> PyResult<Vec<bool>> {
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<ImageMetrics>()?;
+    m.add_class::<ObjectError>()?;
+    m.add_function(wrap_pyfunction!(object_error, m)?)?;
+    m.add_function(wrap_pyfunction!(half_noise, m)?)?;
+    m.add_function(wrap_pyfunction!(spread, m)?)?;
     m.add_function(wrap_pyfunction!(image_error, m)?)?;
     m.add_function(wrap_pyfunction!(pareto_front, m)?)?;
     Ok(())

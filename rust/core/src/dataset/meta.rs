@@ -7,7 +7,7 @@ use crate::ground::atomic::write_atomic;
 use crate::image::denoise::DenoiserRecord;
 use crate::image::qa::FrameQa;
 use crate::plan::camera::orbit_c2w;
-use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, LightPaths};
+use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, LightPaths, Preset};
 use crate::plan::config::BuildConfig;
 use crate::plan::sampling::{
     rows, LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
@@ -111,6 +111,35 @@ pub struct RenderRecord {
     /// unchanged).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub linear: bool,
+    /// The `--preset` the build was asked for (the options it set are recorded as options).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preset: Option<Preset>,
+    /// `--target-psnr`: every image rendered until its render PSNR, estimated from two
+    /// halves of its samples on independent sequences, reached this on its object's
+    /// pixels (in words in `target_is`); per image in `views[].images`. Absent: fixed
+    /// sample counts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_psnr_db: Option<f64>,
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub target_is: String,
+}
+
+/// How one image of a target-driven build was rendered (`views[].images[<level dir>]`).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ImageRender {
+    /// Cycles samples the image rendered: every latent frame, both halves.
+    pub samples: u64,
+    /// Render rounds, the pilot included.
+    pub rounds: u32,
+    /// Its render PSNR (dB, peak 1, sRGB over the background, on its object's pixels),
+    /// estimated from its two halves after the last round.
+    pub render_psnr_db: f64,
+    /// Fraction of the frame that is object pixels (alpha > 0 in either half).
+    pub coverage: f64,
+    /// The estimate is at the target (within 0.25 dB); false: the sample cap or the round
+    /// limit stopped it first.
+    pub reached: bool,
 }
 
 // The records below list their fields in alphabetical order: the worker's reports they
@@ -233,6 +262,23 @@ impl RenderRecord {
             },
             denoiser: None,
             cycles_samples: cfg.cycles_samples(),
+            preset: cfg.preset,
+            target_psnr_db: cfg.target_psnr,
+            target_is: match cfg.target() {
+                Some(t) => format!(
+                    "each image (the sharp one and each blurry one) renders in rounds as two \
+                     halves on independent seeds, each half's frames taking consecutive \
+                     blocks of one {}-sample Cycles sequence; after a pilot of {} samples \
+                     its render noise is MSE(half 1, half 2) / 4 on its object pixels, the \
+                     samples it still needs are extrapolated as 1 / samples, and it stops \
+                     once the estimate is within 0.25 dB of the target (at most {} samples, \
+                     4 rounds); the image is the mean of its halves",
+                    t.sequence(),
+                    t.pilot_samples,
+                    t.max_samples
+                ),
+                None => String::new(),
+            },
             adaptive_sampling: false,
             light_paths: None,
             device: None,
@@ -295,6 +341,10 @@ pub struct MetaView {
     pub view: ViewPlan<MetaLevel>,
     /// Render QA of the sharp view.
     pub qa: FrameQa,
+    /// Under `--target-psnr`: how each image of the view was rendered, by level directory
+    /// (`sharp`, `blur_1`, …; a held-out view's blur levels hold its sharp image).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub images: BTreeMap<String, ImageRender>,
 }
 
 impl MetaView {
@@ -302,6 +352,7 @@ impl MetaView {
         MetaView {
             view: v.map_levels(meta_level),
             qa,
+            images: BTreeMap::new(),
         }
     }
 }
@@ -385,6 +436,18 @@ impl Meta {
             blurset_version: env!("CARGO_PKG_VERSION").into(),
             pose_check: None,
         })
+    }
+
+    /// Record how each image was rendered under a target: (view, level dir, record).
+    pub fn set_images(&mut self, images: Vec<(usize, String, ImageRender)>) -> Result<()> {
+        let n = self.views.len();
+        for (view, level, record) in images {
+            let v = self.views.get_mut(view).ok_or_else(|| {
+                Error::Shape(format!("image record of view {view}: the setting has {n} views"))
+            })?;
+            v.images.insert(level, record);
+        }
+        Ok(())
     }
 
     /// Write meta.json atomically (one-space indent, like the build's other JSON).

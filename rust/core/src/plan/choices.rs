@@ -235,6 +235,20 @@ choice_enum! {
     }
 }
 
+choice_enum! {
+    /// A named set of build options (`plan/presets.rs` holds what each sets).
+    pub enum Preset {
+        /// The paper's construction: the defaults.
+        Paper = "paper",
+        /// Frames by motion, every image rendered to 50 dB on its object's pixels.
+        Balanced = "balanced",
+        /// Frames by motion, every image rendered to the 8-bit floor (58.9 dB).
+        Floor = "floor",
+        /// Frames by motion (2 px gaps), every image rendered to 40 dB.
+        Fast = "fast",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -269,6 +283,7 @@ mod tests {
         same_names::<NoiseProfile>()?;
         same_names::<NoiseGamma>()?;
         same_names::<NoiseSource>()?;
+        same_names::<Preset>()?;
         Ok(())
     }
 }

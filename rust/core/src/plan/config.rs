@@ -7,8 +7,10 @@
 //! The sampling options form the [`SamplingConfig`] of every setting's plan.
 use super::choices::{
     choice, BlurBudget, BlurMethod, Denoise, Device, Executor, LatentPositions, LatentSampling,
-    LightPaths, TrajectoryAnchor,
+    LightPaths, Preset, TrajectoryAnchor,
 };
+use super::presets::preset_values;
+use super::target::TargetRule;
 use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use super::sampling::SamplingConfig;
 use super::spec::{check, specs, Kind, OptionValue, Raw, Spec};
@@ -117,6 +119,30 @@ macro_rules! build_options {
         help: "none: images as rendered; oidn: every image denoised once by Open Image \
             Denoise, a blurry image after averaging (its frames' albedo and normal averaged \
             the same way), the sharp image the same way",
+    };
+    /// A named set of options (`plan/presets.rs`), applied under the options given.
+    preset: Option<Preset> = None, choice::<Preset>(), run {
+        help: "a named set of options, under those given beside it: paper (the paper's \
+            construction), balanced, floor, fast (latent frames by motion, every image \
+            rendered to 50 dB, the 8-bit floor 58.9 dB, 40 dB on its object's pixels)",
+        unset: Some("none: the options as given (the paper's defaults)"),
+    };
+    /// Render every image to this render PSNR on its object's pixels (`plan/target.rs`).
+    target_psnr: Option<f64> = None, specs::TARGET_PSNR, shapes {
+        help: "render every image (sharp and blurry, each view and level) until its own \
+            render noise, estimated from two independent halves of its samples, reaches \
+            this PSNR (dB) on its object's pixels; replaces the fixed sample counts",
+        unset: Some("none: fixed sample counts (--samples, --samples-total, --sharp-samples)"),
+    };
+    /// Samples of an image's first round under a target, both halves together.
+    target_pilot_samples: u32 = 32, specs::SAMPLES, shapes {
+        help: "--target-psnr: samples of each image's first round, from which the rest \
+            it needs is estimated (at least one per latent frame and half)",
+    };
+    /// Most samples of one image under a target, both halves together.
+    target_max_samples: u32 = 16384, specs::TARGET_MAX_SAMPLES, shapes {
+        help: "--target-psnr: most samples of one image (an image that would need more \
+            stops there, and meta.json says it did not reach the target)",
     };
     /// `auto`: light-path bounces from the object's materials; `fixed`: the same for all.
     light_paths: LightPaths = LightPaths::Auto, choice::<LightPaths>(), shapes {
@@ -328,6 +354,15 @@ impl BuildConfig {
     /// ([`Self::check_given`]).
     pub fn with_values(&self, values: &BTreeMap<String, Raw>) -> Result<BuildConfig> {
         let mut cfg = self.clone();
+        // A preset first, then every option given (beside it, they override it).
+        if let Some(p) = values.get("preset") {
+            cfg.set("preset", p)?;
+            if let Some(preset) = cfg.preset {
+                for (k, v) in preset_values(preset) {
+                    cfg.set(k, &v)?;
+                }
+            }
+        }
         for (k, v) in values {
             cfg.set(k, v)?;
         }
@@ -355,6 +390,30 @@ impl BuildConfig {
                     return Err(config_error(
                         option,
                         format!("{v}: only used with latents auto"),
+                    ));
+                }
+            }
+        }
+        if let Some(t) = self.target_psnr {
+            // Under a target each image renders what its own noise needs: a count of
+            // samples beside it would mean nothing.
+            for option in ["samples", "samples_total", "sharp_samples", "blur_budget"] {
+                if let Some(v) = value(option) {
+                    return Err(config_error(
+                        option,
+                        format!(
+                            "{v}: a fixed sample count, but every image renders to \
+                             target_psnr {t} dB; give one or the other"
+                        ),
+                    ));
+                }
+            }
+        } else {
+            for option in ["target_pilot_samples", "target_max_samples"] {
+                if let Some(v) = value(option) {
+                    return Err(config_error(
+                        option,
+                        format!("{v}: only used with target_psnr"),
                     ));
                 }
             }
@@ -447,6 +506,37 @@ impl BuildConfig {
                 "test_settings",
                 "and test_objects: give either N random test settings or test objects".into(),
             ));
+        }
+        if let Some(t) = self.target_psnr {
+            if self.denoise != Denoise::None {
+                return Err(config_error(
+                    "denoise",
+                    format!(
+                        "{}: target_psnr {t} dB is an estimate of an image's render noise \
+                         from its own samples, which a denoiser's output is not",
+                        self.denoise
+                    ),
+                ));
+            }
+            if self.latent_sampling != LatentSampling::Subsets {
+                return Err(config_error(
+                    "latent_sampling",
+                    format!(
+                        "{}: target_psnr renders each image as blocks of one sequence per \
+                         half (subsets)",
+                        self.latent_sampling
+                    ),
+                ));
+            }
+            if self.target_pilot_samples > self.target_max_samples {
+                return Err(config_error(
+                    "target_pilot_samples",
+                    format!(
+                        "{}: more than target_max_samples {}",
+                        self.target_pilot_samples, self.target_max_samples
+                    ),
+                ));
+            }
         }
         if self.latents_auto && self.blur_method == BlurMethod::MotionBlur {
             return Err(config_error(
@@ -550,10 +640,22 @@ impl BuildConfig {
     /// a process, so one value for the whole build keeps every pixel independent of what
     /// the worker rendered before it (a resumed object equals an uninterrupted one).
     pub fn cycles_samples(&self) -> Option<u32> {
+        if let Some(rule) = self.target() {
+            return Some(rule.sequence());
+        }
         let s = self.sampling();
         (s.latent_sampling == LatentSampling::Subsets).then(|| {
             let sharp = u32::try_from(self.effective_sharp_samples()).unwrap_or(u32::MAX);
             s.max_sequence().max(sharp)
+        })
+    }
+
+    /// The rule of a build that renders every image to a target (None: fixed counts).
+    pub fn target(&self) -> Option<TargetRule> {
+        self.target_psnr.map(|t| TargetRule {
+            target_psnr_db: t,
+            pilot_samples: self.target_pilot_samples,
+            max_samples: self.target_max_samples,
         })
     }
 

@@ -4,6 +4,7 @@ pub mod camera;
 pub mod choices;
 pub mod config;
 pub mod options;
+pub mod presets;
 pub mod region;
 pub mod renders;
 pub mod sampling;

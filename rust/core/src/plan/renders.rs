@@ -44,6 +44,10 @@ pub struct Render {
     /// animation job ([`super::region::render_calls`]); None: a call of its own.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub call: Option<usize>,
+    /// Under a render target ([`super::target`]): which of the image's two independent
+    /// halves this render adds to (0 or 1); None: the image has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub half: Option<u32>,
 }
 
 /// The renders of one blurry image: its latent frames (average method) or its single
@@ -86,6 +90,7 @@ pub fn level_renders(
             // The camera moves during the render, between its keys too: whole image.
             region: None,
             call: None,
+            half: None,
         }];
     }
     lp.latent_frames
@@ -105,6 +110,7 @@ pub fn level_renders(
                 motion: None,
                 region: None,
                 call: None,
+                half: None,
             }
         })
         .collect()
@@ -142,6 +148,7 @@ impl SettingPlan {
                 motion: None,
                 region: None,
                 call: None,
+                half: None,
             });
             if sharp_views.contains(&i) {
                 continue;

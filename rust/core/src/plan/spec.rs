@@ -457,6 +457,10 @@ pub mod specs {
     pub const WINDOW_DEG: Spec = Spec::num(0.0, false, 90.0, true);
     pub const PHI0_DEG: Spec = Spec::num(0.0, true, 180.0, true);
     pub const DELTA0: Spec = Spec::closed(0.0, 45.0);
+    /// A render PSNR an image is rendered to (dB, peak 1, on its object's pixels).
+    pub const TARGET_PSNR: Spec = Spec::closed(10.0, 120.0);
+    /// Two halves of at least one sample.
+    pub const TARGET_MAX_SAMPLES: Spec = Spec::int(2, MAX_SAMPLES as i128);
     pub const RADIUS_MARGIN: Spec = Spec::closed(1.0, 100.0);
     pub const LEVEL_SPREAD: Spec = Spec::num(0.0, false, 1.0, true);
     pub const MAX_GHOST_PX: Spec = Spec::num(0.01, false, f64::INFINITY, false);

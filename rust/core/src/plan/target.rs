@@ -161,6 +161,7 @@ pub fn round_renders(base: &[Render], rounds: &[ImageRound], sequence: u32) -> V
                         sample_sequence: Some(sequence),
                         out: format!("{stem}_r{}{}.exr", r.round, ["a", "b"][half as usize]),
                         call: Some(call),
+                        half: Some(half),
                         ..f.clone()
                     });
                 }
@@ -246,6 +247,7 @@ mod tests {
             motion: None,
             region: None,
             call,
+            half: None,
         }
     }
 
@@ -278,5 +280,7 @@ mod tests {
         assert_eq!(r[0].out, "/x/0000_blur_1_0000_r2a.exr");
         assert_eq!(r[3].out, "/x/0000_blur_1_0001_r2b.exr");
         assert_eq!(r[1].c2w, base[2].c2w);
+        let halves: Vec<_> = r.iter().map(|f| f.half.unwrap()).collect();
+        assert_eq!(halves, [0, 0, 1, 1, 0, 1]);
     }
 }

@@ -1,0 +1,132 @@
+"""Rendering each image of a setting to a render-noise target (`--target-psnr`, DESIGN §8).
+
+The core decides everything numeric (`plan/target.rs`: the rounds, the sample blocks, the
+seeds of the two halves, when an image is done; `metrics::half_noise`: the estimate on
+the object's pixels); this module schedules the rounds on the worker and keeps the two
+halves of each image in flight, a few images at a time so memory stays bounded at any
+resolution.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from blurset import _core
+from blurset.config import BuildConfig
+
+# Images whose halves are in flight at once (two accumulators each): 8 MB a half at 512 px.
+GROUP = 8
+
+
+@dataclass
+class _Image:
+    view: int
+    level: str
+    frames: int
+    halves: tuple[Any, Any]
+    spent: int = 0
+    rounds: int = 0
+    estimate: Any = None  # _core.ObjectError of the last round
+
+    def record(self, target: float) -> dict[str, Any]:
+        e = self.estimate
+        return {
+            "samples": 2 * self.frames * self.spent,
+            "rounds": self.rounds,
+            "render_psnr_db": round(float(e.psnr), 3),
+            "coverage": round(float(e.coverage), 6),
+            "reached": bool(e.psnr >= target - 0.25),
+        }
+
+
+def frame_counts(renders: Iterable[dict]) -> dict[tuple[int, str], int]:
+    """Latent frames of each image (view, level) in the plan's render list."""
+    out: dict[tuple[int, str], int] = {}
+    for r in renders:
+        key = (r["view"], r["level"])
+        out[key] = out.get(key, 0) + 1
+    return out
+
+
+def render_to_target(
+    plan: Any,
+    cfg: BuildConfig,
+    worker: Any,
+    exr_dir: Path,
+    sharp_views: list[int],
+    keys: list[tuple[int, str]],
+    frames: dict[tuple[int, str], int],
+    finish: Callable[[tuple[int, str], Any], None],
+    on_render: Callable[[], None],
+    common: dict[str, Any],
+) -> tuple[dict[tuple[int, str], dict[str, Any]], int]:
+    """Render the images `keys` (each of `frames[key]` latent frames) to the config's
+    target, a group at a time; `finish(key, accumulator)` gets each finished image (its
+    halves merged) as soon as it is done. Returns each image's record and the renders."""
+    target = float(cfg.target_psnr)
+    pin = int(cfg.cycles_samples)
+    res = cfg.resolution
+    records: dict[tuple[int, str], dict[str, Any]] = {}
+    n_renders = 0
+    for start in range(0, len(keys), GROUP):
+        group = {
+            k: _Image(
+                k[0],
+                k[1],
+                frames[k],
+                (_core.Accumulator(res, res), _core.Accumulator(res, res)),
+            )
+            for k in keys[start : start + GROUP]
+        }
+        while group:
+            rounds = []
+            for key, im in list(group.items()):
+                add = _core.target_next_round(
+                    cfg,
+                    frames=im.frames,
+                    spent_per_frame=im.spent,
+                    rounds=im.rounds,
+                    mse=None if im.estimate is None else im.estimate.mse,
+                )
+                if add is None:
+                    a, b = im.halves
+                    a.merge(b)
+                    records[key] = im.record(target)
+                    finish(key, a)
+                    del group[key]
+                    continue
+                rounds.append(
+                    {
+                        "view": im.view,
+                        "level": im.level,
+                        "spent_per_frame": im.spent,
+                        "add_per_frame": add,
+                        "round": im.rounds + 1,
+                    }
+                )
+            if not rounds:
+                break
+            renders = plan.round_renders(exr_dir, pin, sharp_views, rounds)
+            adds = {(r["view"], r["level"]): r["add_per_frame"] for r in rounds}
+
+            def on_frame(i: int, path: str, origin: tuple[int, int] | None) -> None:
+                r = renders[i]
+                key = (r["view"], r["level"])
+                group[key].halves[r["half"]].add_exr(path, origin, weight=float(adds[key]))
+                Path(path).unlink()
+                on_render()
+
+            worker.render(renders, samples=1, on_frame=on_frame, **common)
+            n_renders += len(renders)
+            for key, add in adds.items():
+                im = group[key]
+                im.spent += add
+                im.rounds += 1
+                a, b = im.halves
+                im.estimate = _core.half_noise(
+                    a.mean(), b.mean(), background=tuple(cfg.background)
+                )
+    return records, n_renders
