@@ -54,6 +54,8 @@ def a_setting(build: Path) -> Path:
 def fake_noise_output(path: Path) -> Path:
     path.mkdir(parents=True)
     (path / layout.NOISE_DATASET).write_text(json.dumps({"build": "b", "params": {}}))
+    (path / "a_000" / "sharp" / "gain_1").mkdir(parents=True)
+    (path / "a_000" / "sharp" / "gain_1" / layout.NOISE).write_text("{}")
     assert outputs.kind_of(path) is outputs.OutputKind.NOISE
     return path
 
@@ -283,3 +285,45 @@ def test_build_out_a_dangling_link_is_refused_and_its_target_not_made(tmp_path, 
     link.symlink_to(tmp_path / "elsewhere" / "deep")
     refused(standin_build(link, standin_blender, check=False), "--out", "link to nothing")
     assert not (tmp_path / "elsewhere").exists()
+
+
+# -- stats -----------------------------------------------------------------------------------
+
+
+def test_a_stopped_stats_run_is_taken_back_by_its_rerun(b, tmp_path, monkeypatch):
+    import errno
+
+    from blurset import cli, stats
+
+    def full_disk(*_a, **_k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    out = tmp_path / "st"
+    monkeypatch.setattr(stats, "write_csvs", full_disk)
+    assert cli.main(["stats", str(b), "--out", str(out), "--quiet"]) == 2
+    assert any(out.glob("*.png")) and not (out / "stats.json").exists()
+    monkeypatch.undo()
+    run_cli("stats", str(b), "--out", str(out), "--quiet")
+    assert (out / "stats.json").is_file() and not (out / stats.UNFINISHED).exists()
+    # A user's file in such a folder is still not stats': refused.
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    (mine / stats.UNFINISHED).touch()
+    refused(run_cli("stats", str(b), "--out", str(mine), check=False), "--out", "other files")
+
+
+def test_stats_of_a_noise_output_says_it_is_not_a_build(tmp_path):
+    noise = fake_noise_output(tmp_path / "n")
+    line = refused(run_cli("stats", str(noise), check=False), "noise output", "not a build")
+    assert str(noise) in line and not (noise / "stats").exists()
+
+
+def test_preview_gain_errors_name_gain(b, tmp_path):
+    noise = fake_noise_output(tmp_path / "n")
+    s = a_setting(b)
+    out = str(tmp_path / "p.png")
+    for gain in ("nan", "1e308"):
+        line = refused(run_cli("preview", str(s), "--noise", str(noise), "--gain", gain,
+                               "--out", out, check=False), "--gain ", gain)  # fmt: skip
+        assert "--gains" not in line and "Errno" not in line, line

@@ -229,14 +229,18 @@ def _noise_columns(
     try:
         g = _core.NoiseConfig(gains=[gain], any_gain=True).gain_values[0]
     except _core.ConfigValueError as e:
-        raise ConfigError(f"--gains {e.detail}") from None
+        raise ConfigError(f"--gain {e.detail}") from None
     gname = layout.gain_name(g)
     if not noise_dir.is_dir():
         raise InputError(f"--noise directory not found: {noise_dir}")
     cols = []
     for lvl in levels:
         for d in (noise_dir / setting / lvl / gname, noise_dir / lvl / gname):
-            if (d / layout.NOISE).is_file():
+            try:
+                there = (d / layout.NOISE).is_file()
+            except OSError:  # a name no folder can have (--gain 1e308): not there
+                there = False
+            if there:
                 cols.append((f"{lvl} · gain {g:g}", d))
                 break
     if not cols:

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from blurset import __version__, _core, layout, outputs, publish
+from blurset.exceptions import InputError
 
 if TYPE_CHECKING:
     pass
@@ -470,6 +471,11 @@ def write_stats(
     (no re-encoding of 100 MB at 10,000 settings in Python) with two fields in front.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
+    # Until stats.json is written the folder is not yet a statistics folder by its
+    # record: this mark lets the rerun of a stopped (or disk-full) run take it back.
+    unfinished = out_dir / UNFINISHED
+    if not (out_dir / layout.STATS).is_file():
+        unfinished.touch()
     head = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "blurset_version": __version__}
     stats = {**head, **stats}
     figures = write_figures(stats, out_dir, max_bins=max_bins)
@@ -480,13 +486,48 @@ def write_stats(
         _write_text(out_dir / layout.STATS, json.dumps(stats, allow_nan=False) + "\n")
     else:
         document.write(out_dir / layout.STATS, head["generated"])
+    unfinished.unlink(missing_ok=True)
     return report
+
+
+# The mark of a statistics folder whose stats.json is not written yet.
+UNFINISHED = ".stats.unfinished"
+
+
+def own_files() -> set[str]:
+    """The names stats writes into its folder."""
+    return {f"{n}.png" for n in FIGURES} | {
+        "views.csv",
+        "settings.csv",
+        "summary.csv",
+        "counts.csv",
+        "report.md",
+        layout.STATS,
+    }
+
+
+def _claim(out_dir: Path, build: Path) -> None:
+    """The output owner's claim, and also a folder a stopped stats run left: its mark
+    and nothing but files stats writes (a user's file there is still refused)."""
+    try:
+        outputs.claim(out_dir, STATS, "--out", within=build)
+    except ValueError:
+        left = out_dir / UNFINISHED
+        names = {p.name for p in out_dir.iterdir() if not p.name.startswith(".")}
+        if not (left.is_file() and names <= own_files()):
+            raise
 
 
 def run(args: argparse.Namespace) -> int:
     if args.bins < 1:
         raise ValueError(f"--bins {args.bins} must be at least 1")
     build = args.build.expanduser().absolute()
+    kind = outputs.kind_of(build) if build.is_dir() else None
+    if kind is not None and kind is not outputs.OutputKind.BUILD:
+        raise InputError(
+            f"BUILD is a blurset {kind.label} ({kind.record}), not a build: stats describe "
+            f"a build: {build}"
+        )
     out_dir = (args.out or build / "stats").expanduser().absolute()
     layout.refuse_inside_settings(out_dir)
     outputs.refuse_inside_output(out_dir, "--out", within=build)
@@ -498,9 +539,9 @@ def run(args: argparse.Namespace) -> int:
     stats: dict[str, Any] = {**document.to_dict(), "provisional": provisional}
     t_read = time.perf_counter() - t0
     # Refused before the lock creates anything; only the build it describes may hold it.
-    outputs.claim(out_dir, STATS, "--out", within=build)
+    _claim(out_dir, build)
     with outputs.lock(out_dir, STATS):
-        outputs.claim(out_dir, STATS, "--out", within=build)
+        _claim(out_dir, build)
         report = write_stats(stats, out_dir, max_bins=args.bins, document=document)
         # Statistics written into a published build keep its manifest whole.
         publish.refresh_manifest(
