@@ -327,3 +327,20 @@ def test_preview_gain_errors_name_gain(b, tmp_path):
         line = refused(run_cli("preview", str(s), "--noise", str(noise), "--gain", gain,
                                "--out", out, check=False), "--gain ", gain)  # fmt: skip
         assert "--gains" not in line and "Errno" not in line, line
+
+
+def test_export_copy_on_a_full_disk_is_one_line(b, tmp_path, monkeypatch, capsys):
+    import errno
+
+    from blurset import cli
+
+    def full(src, dst, *a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device", str(dst))
+
+    monkeypatch.setattr(shutil, "copyfile", full)
+    out = tmp_path / "data"
+    assert cli.main(["export", str(b), "--out", str(out), "--copy"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "No space left on device" in err[0] and "--copy" in err[0], err
+    assert "[(" not in err[0] and str(b) not in err[0]
+    assert not (out / "nerf_llff_data").exists() and not (out / "export.json").exists()

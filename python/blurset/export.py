@@ -257,7 +257,18 @@ def _geonerf_scenes(
 def _link(s: Path, dst: Path, final: Path, copy: bool) -> None:
     """`dst` (staged) links to or copies `s`; `final` is where `dst` will end up."""
     if copy:
-        (shutil.copytree if s.is_dir() else shutil.copyfile)(s, dst)
+        try:
+            (shutil.copytree if s.is_dir() else shutil.copyfile)(s, dst)
+        except shutil.Error as e:
+            # copytree gathers every file's error into one list of (src, dst, why)
+            # tuples: say the first reason, how many, and where, in one line.
+            errors = e.args[0] if e.args and isinstance(e.args[0], list) else []
+            why = str(errors[0][2]) if errors else str(e)
+            why = why.split("] ", 1)[-1].split(":", 1)[0] if why.startswith("[Errno") else why
+            raise OSError(
+                f"--copy: {why} ({len(errors) or 'some'} files not copied; nothing of the "
+                f"new export was put in place): {final}"
+            ) from None
     else:
         # Relative to where the link will live: the export and the build may move
         # together.
