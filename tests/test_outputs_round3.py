@@ -344,3 +344,10 @@ def test_export_copy_on_a_full_disk_is_one_line(b, tmp_path, monkeypatch, capsys
     assert len(err) == 1 and "No space left on device" in err[0] and "--copy" in err[0], err
     assert "[(" not in err[0] and str(b) not in err[0]
     assert not (out / "nerf_llff_data").exists() and not (out / "export.json").exists()
+
+
+def test_check_poses_of_a_setting_without_its_images_names_the_damage(b, tmp_path):
+    s = a_setting(b)
+    shutil.rmtree(s / "sharp" / "images")
+    line = refused(run_cli("check-poses", str(s), check=False), "no images/", str(s / "sharp"))
+    assert "texture" not in line

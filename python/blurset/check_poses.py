@@ -108,6 +108,13 @@ def _image_dir(scene_dir: Path, factor: int | None) -> tuple[Path, int]:
         return d, factor
     if (scene_dir / layout.IMAGES).is_dir():
         return scene_dir / layout.IMAGES, 1
+    if layout.is_level_dir(scene_dir.name) and (scene_dir.parent / layout.META).is_file():
+        # A build writes images/ in every level: without it the setting is damaged, and
+        # its small images_<f>/ copies would only measure "too little texture".
+        raise InputError(
+            f"no {layout.IMAGES}/ in this level of a build setting (damaged: rerun the "
+            f"build to redo it, or give --factor to check images_<f>/): {scene_dir}"
+        )
     found = sorted(
         (int(m.group(1)), p)
         for p in scene_dir.glob("images_*")
