@@ -240,7 +240,21 @@ def main(argv: list[str] | None = None) -> int:
             print(f"check_clients: {e}", file=sys.stderr)
             return 2
     export = a.export.resolve()
-    doc = json.loads((export / "export.json").read_text())
+    try:
+        doc = json.loads((export / "export.json").read_text())
+        if not isinstance(doc, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, ValueError) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+        print(
+            f"check_clients: EXPORT is not a `blurset export` folder (its export.json: "
+            f"{why}): {a.export}",
+            file=sys.stderr,
+        )
+        return 2
+    if not a.checkout.is_dir():
+        print(f"check_clients: --checkout is not a directory: {a.checkout}", file=sys.stderr)
+        return 2
     if doc.get("for") not in WANTS[a.client]:
         print(
             f"check_clients: {a.client} reads an export --for {' or '.join(WANTS[a.client])}, "
@@ -268,11 +282,16 @@ def main(argv: list[str] | None = None) -> int:
         pin.write_text(json.dumps(params))
         env = dict(os.environ, CUDA_VISIBLE_DEVICES="", PYTHONDONTWRITEBYTECODE="1")
         env.pop("PYTHONPATH", None)
-        proc = subprocess.run(
-            [a.python, str(Path(__file__).resolve()), a.client, str(export), "--checkout",
-             str(a.checkout), "--python", a.python, "--child", a.client, str(pin), str(pout)],
-            cwd=a.checkout, env=env, capture_output=True, text=True,
-        )  # fmt: skip
+        try:
+            proc = subprocess.run(
+                [a.python, str(Path(__file__).resolve()), a.client, str(export), "--checkout",
+                 str(a.checkout), "--python", a.python, "--child", a.client, str(pin),
+                 str(pout)],
+                cwd=a.checkout, env=env, capture_output=True, text=True,
+            )  # fmt: skip
+        except OSError as e:
+            print(f"check_clients: --python {a.python}: {e.strerror or e}", file=sys.stderr)
+            return 2
         if proc.returncode != 0 or not pout.exists():
             tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-12:])
             print(f"check_clients: {a.client}'s code failed (exit {proc.returncode}):\n{tail}")

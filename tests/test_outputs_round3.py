@@ -351,3 +351,30 @@ def test_check_poses_of_a_setting_without_its_images_names_the_damage(b, tmp_pat
     shutil.rmtree(s / "sharp" / "images")
     line = refused(run_cli("check-poses", str(s), check=False), "no images/", str(s / "sharp"))
     assert "texture" not in line
+
+
+# -- scripts/check_clients.py ----------------------------------------------------------------
+
+
+def test_check_clients_bad_arguments_are_one_line(b, tmp_path):
+    script = Path(__file__).resolve().parents[1] / "scripts" / "check_clients.py"
+
+    def run(*args: str):
+        return subprocess.run(
+            [sys.executable, str(script), *args], capture_output=True, text=True, cwd=tmp_path
+        )
+
+    data = tmp_path / "data"
+    run_cli("export", str(b), "--out", str(data))
+    for args, words in [
+        (("ibrnet", str(b), "--checkout", str(tmp_path), "--python", sys.executable),
+         ("EXPORT", "export.json", str(b))),
+        (("ibrnet", str(data), "--checkout", str(tmp_path / "none"), "--python", sys.executable),
+         ("--checkout", str(tmp_path / "none"))),
+        (("ibrnet", str(data), "--checkout", str(tmp_path), "--python", str(tmp_path / "py")),
+         ("--python", str(tmp_path / "py"))),
+    ]:  # fmt: skip
+        proc = run(*args)
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+        assert "Traceback" not in proc.stderr and all(w in lines[0] for w in words), proc.stderr
