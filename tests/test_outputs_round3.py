@@ -53,7 +53,9 @@ def a_setting(build: Path) -> Path:
 
 def fake_noise_output(path: Path) -> Path:
     path.mkdir(parents=True)
-    (path / layout.NOISE_DATASET).write_text(json.dumps({"build": "b", "params": {}}))
+    counts = {"settings": 1, "units": 1, "images": 4}
+    doc = {"build": "b", "params": {}, "counts": counts}
+    (path / layout.NOISE_DATASET).write_text(json.dumps(doc))
     (path / "a_000" / "sharp" / "gain_1").mkdir(parents=True)
     (path / "a_000" / "sharp" / "gain_1" / layout.NOISE).write_text("{}")
     assert outputs.kind_of(path) is outputs.OutputKind.NOISE
@@ -378,3 +380,30 @@ def test_check_clients_bad_arguments_are_one_line(b, tmp_path):
         lines = proc.stderr.strip().splitlines()
         assert proc.returncode == 2 and len(lines) == 1, proc.stderr
         assert "Traceback" not in proc.stderr and all(w in lines[0] for w in words), proc.stderr
+
+
+# -- noise of another build of the same name -------------------------------------------------
+
+
+def test_noise_of_another_build_of_the_same_name_is_refused(b, tmp_path, standin_blender):
+    other = tmp_path / "other" / "b"
+    standin_build(other, standin_blender, "--views", "5")
+    theirs = tmp_path / "n_other"
+    run_cli("noise", str(other), "--out", str(theirs), "--gains", "1", "--quiet")
+    ours = tmp_path / "n"
+    run_cli("noise", str(b), "--out", str(ours), "--gains", "1", "--quiet")
+    s = a_setting(b)
+    for argv in (
+        ["export", str(b), "--out", str(tmp_path / "data"), "--noise", str(theirs)],
+        ["card", str(b), "--out", str(tmp_path / "card.md"), "--noise", str(theirs)],
+        ["preview", str(s), "--noise", str(theirs), "--gain", "1", "--out",
+         str(tmp_path / "p.png")],
+    ):  # fmt: skip
+        refused(run_cli(*argv, check=False), "--noise", "not a noise output of this build")
+    assert not (tmp_path / "data").exists() and not (tmp_path / "p.png").exists()
+    # The build's own noise passes.
+    run_cli("export", str(b), "--out", str(tmp_path / "data"), "--noise", str(ours))
+    run_cli("card", str(b), "--out", str(tmp_path / "card.md"), "--noise", str(ours))
+    run_cli(
+        "preview", str(s), "--noise", str(ours), "--gain", "1", "--out", str(tmp_path / "p.png")
+    )

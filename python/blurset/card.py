@@ -100,23 +100,8 @@ def _objects(build: Path, settings: list[Path]) -> tuple[dict[str, dict], list[d
 def _noise_outputs(build: Path, given: list[Path] | None) -> list[tuple[Path, dict]]:
     """The noise outputs to describe: those given (each must be a finished noise output
     of this build), or the folders beside the build whose noise_dataset.json names it."""
-    name = build.resolve().name
     if given:
-        out = []
-        for p in given:
-            if outputs.kind_of(p) is not outputs.OutputKind.NOISE:
-                raise InputError(f"--noise is not a `blurset noise BUILD` output: {p}")
-            doc = outputs.read_record(p / layout.NOISE_DATASET)
-            if doc["build"] != name:
-                raise InputError(
-                    f"--noise was made from the build {doc['build']!r}, not from {name!r}: {p}"
-                )
-            if doc.get("counts") is None:
-                raise InputError(
-                    f"--noise is not finished (a noise run is writing or stopped): {p}"
-                )
-            out.append((p, doc))
-        return out
+        return [(p, outputs.noise_of_build(p, build)) for p in given]
     found = []
     for d in sorted(build.resolve().parent.iterdir()):
         try:
@@ -125,7 +110,7 @@ def _noise_outputs(build: Path, given: list[Path] | None) -> list[tuple[Path, di
             doc = outputs.read_record(d / layout.NOISE_DATASET)
         except (OSError, ValueError, InputError):
             continue  # a damaged folder beside the build is not described
-        if doc["build"] == name and doc.get("counts") is not None:
+        if doc.get("counts") is not None and outputs.noise_mismatch(doc, d, build) is None:
             found.append((d, doc))
     return found
 

@@ -102,20 +102,7 @@ def _gains(noise: Path, doc: dict, value: list[str] | None) -> list[str]:
 
 def _noise_output(noise: Path, build: Path) -> dict:
     """noise_dataset.json of a finished `blurset noise BUILD` output made from `build`."""
-    if outputs.kind_of(noise) is not outputs.OutputKind.NOISE:
-        raise InputError(
-            f"--noise is not a `blurset noise BUILD` output (noise_dataset.json): {noise}"
-        )
-    doc = outputs.read_record(noise / NOISE_DATASET)
-    if doc["build"] != build.name:
-        raise InputError(
-            f"--noise was made from the build {doc['build']!r}, not from {build.name!r}: {noise}"
-        )
-    if doc.get("counts") is None:
-        raise InputError(
-            f"--noise is not finished (a noise run is writing or was stopped): {noise}"
-        )
-    return doc
+    return outputs.noise_of_build(noise, build)
 
 
 def _scene_problem(src: Path, noise: bool) -> str | None:

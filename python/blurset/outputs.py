@@ -172,6 +172,66 @@ def finished_build(build: Path, option: str = "BUILD") -> _core.BuildState:
     return state
 
 
+def noise_mismatch(doc: dict, noise: Path, build: Path) -> str | None:
+    """Why the noise output `noise` (its noise_dataset.json: `doc`) was not made from `build`,
+    or None. Not the folder's name alone (two builds both named `build`): the build's
+    seed, every setting it noised being a complete setting of the build, and one noised
+    unit's poses_bounds.npy the same bytes as the build's (another build of the same
+    objects has other views, sizes or poses)."""
+    from blurset import layout
+
+    build = Path(build)
+    name = build.resolve().name
+    if doc.get("build") != name:
+        return f"made from the build {doc.get('build')!r}, not from {name!r}"
+    try:
+        seed = read_record(build / layout.DATASET).get("seed")
+    except (OSError, ValueError, InputError):
+        seed = None
+    if doc.get("build_seed") is not None and seed is not None and doc["build_seed"] != seed:
+        return f"made from a build of seed {doc['build_seed']}, this one has seed {seed}"
+    complete = set(_core.complete_settings(build))
+    noised = sorted((doc.get("seeds") or {}).keys())
+    foreign = [s for s in noised if s not in complete]
+    if foreign:
+        return f"it holds settings this build does not: {', '.join(foreign[:3])}"
+    for s in noised:
+        for level in sorted((doc.get("seeds") or {}).get(s) or {}):
+            ours = build / s / level / layout.POSES_BOUNDS
+            units = sorted((Path(noise) / s / level).glob("gain_*"))
+            for u in units:
+                theirs = u / layout.POSES_BOUNDS
+                if theirs.is_file() and ours.is_file():
+                    if theirs.read_bytes() != ours.read_bytes():
+                        return (
+                            f"{s}/{level}/{u.name}/{layout.POSES_BOUNDS} differs from the "
+                            "build's: another build of the same name"
+                        )
+                    return None
+    return None
+
+
+def noise_of_build(noise: Path, build: Path, option: str = "--noise") -> dict:
+    """noise_dataset.json of a finished `blurset noise BUILD` output made from `build`
+    (`noise_mismatch`); InputError naming `option` and the folder otherwise."""
+    from blurset import layout
+
+    noise = Path(noise)
+    if kind_of(noise) is not OutputKind.NOISE:
+        raise InputError(
+            f"{option} is not a `blurset noise BUILD` output (noise_dataset.json): {noise}"
+        )
+    doc = read_record(noise / layout.NOISE_DATASET)
+    why = noise_mismatch(doc, noise, build)
+    if why is not None:
+        raise InputError(f"{option} is not a noise output of this build ({why}): {noise}")
+    if doc.get("counts") is None:
+        raise InputError(
+            f"{option} is not finished (a noise run is writing or was stopped): {noise}"
+        )
+    return doc
+
+
 @contextlib.contextmanager
 def flock_file(lock_path: Path, on_busy: Callable[[str], None] | None = None) -> Iterator[None]:
     """Hold an exclusive flock on `lock_path`, writing who holds it into the file. When

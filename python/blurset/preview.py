@@ -290,6 +290,12 @@ def setting_figure(
             raise ConfigError(
                 "--noise and --gain go together (a noise output and one of its gains)"
             )
+        kind = outputs.kind_of(Path(noise)) if Path(noise).is_dir() else None
+        if kind is outputs.OutputKind.NOISE:
+            # Only noise made from this setting's build is shown beside it.
+            outputs.noise_of_build(Path(noise), setting.parent)
+        elif kind is not outputs.OutputKind.NOISE_SCENE:
+            raise InputError(f"--noise is not a blurset noise output: {noise}")
         for label, d in _noise_columns(Path(noise), name, levels, gain):
             columns.append((label, _noisy_files(d)))
     for _, files in columns:
