@@ -407,3 +407,20 @@ def test_noise_of_another_build_of_the_same_name_is_refused(b, tmp_path, standin
     run_cli(
         "preview", str(s), "--noise", str(ours), "--gain", "1", "--out", str(tmp_path / "p.png")
     )
+
+
+# -- a valid PNG of the wrong size ----------------------------------------------------------
+
+
+def test_open_scene_names_an_image_of_the_wrong_size(b):
+    from blurset.data import open_scene
+    from blurset.exceptions import InputError
+    from PIL import Image
+
+    s = a_setting(b)
+    png = sorted((s / "sharp" / "images").iterdir())[1]
+    Image.new("RGB", (7, 5)).save(png)
+    with pytest.raises(InputError, match=r"7x5 px.*" + png.name):
+        open_scene(b, s.name, "sharp")
+    with pytest.raises(InputError, match=png.name):
+        open_scene(b, s.name, "blur_1")  # the sharp images are the clean ones

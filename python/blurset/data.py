@@ -83,8 +83,19 @@ def _subdir(downsample: int) -> str:
     return layout.images_dir(downsample)
 
 
-def _read(files: list[Path]) -> np.ndarray:
-    return np.stack([_core.read_image(p)[..., :3] for p in files]).astype(np.float32) / 255.0
+def _read(files: list[Path], shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """The images, as floats in [0, 1]; InputError naming the first whose size differs
+    from the others' (or from `shape`, h × w)."""
+    arrays = []
+    for p in files:
+        a = _core.read_image(p)[..., :3]
+        want = shape or (arrays[0].shape[:2] if arrays else a.shape[:2])
+        if a.shape[:2] != tuple(want):
+            raise InputError(
+                f"image is {a.shape[1]}x{a.shape[0]} px, the scene's are {want[1]}x{want[0]}: {p}"
+            )
+        arrays.append(a)
+    return np.stack(arrays).astype(np.float32) / 255.0
 
 
 def _cameras(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -166,7 +177,8 @@ def open_scene(
     cv, gl = _cameras(rows)
     if pose == "mean" and level != layout.SHARP:
         cv, gl = _mean_cameras(sdir, level, n)
-    images, clean = _read(image_files), _read(clean_files)
+    images = _read(image_files)
+    clean = _read(clean_files, images.shape[1:3])
     h, w = images.shape[1:3]
     # hwf holds the full size (LLFF); the focal length scales with the size read.
     focal = rows[0, 14] * w / rows[0, 9]
