@@ -86,7 +86,7 @@ def _subdir(downsample: int) -> str:
 def _read(files: list[Path], shape: tuple[int, ...] | None = None) -> np.ndarray:
     """The images, as floats in [0, 1]; InputError naming the first whose size differs
     from the others' (or from `shape`, h × w)."""
-    arrays = []
+    arrays: list[np.ndarray] = []
     for p in files:
         a = _core.read_image(p)[..., :3]
         want = shape or (arrays[0].shape[:2] if arrays else a.shape[:2])
