@@ -33,6 +33,20 @@ class ConfigValueError(ValueError):
 def check_downsample(factors: list[int]) -> None:
     """ConfigValueError unless the factors are distinct integers in 2..=64."""
 
+def preset_values(name: str) -> dict[str, Any]:
+    """What preset `name` sets, option name -> value (ValueError: no such preset)."""
+
+def target_next_round(
+    config: BuildConfig,
+    *,
+    frames: int,
+    spent_per_frame: int,
+    rounds: int,
+    mse: float | None = None,
+) -> int | None:
+    """Samples per frame and half of an image's next round under the config's target, or
+    None when it is done (`mse`: the last estimate; None before the pilot)."""
+
 _OptionKind: TypeAlias = Literal[
     "switch",
     "int",
@@ -127,6 +141,10 @@ class BuildConfigRecord(TypedDict):
     latent_sampling: Literal["subsets", "independent"]
     blur_budget: Literal["parity", "flat", "need"]
     denoise: Literal["none", "oidn"]
+    preset: Literal["paper", "balanced", "floor", "fast"] | None
+    target_psnr: float | None
+    target_pilot_samples: int
+    target_max_samples: int
     light_paths: Literal["auto", "fixed"]
     device: Literal["auto", "cpu", "optix", "cuda", "hip", "oneapi", "metal"]
     gpus: list[int] | None
@@ -271,6 +289,14 @@ class BuildConfig:
     def blur_budget(self) -> Literal["parity", "flat", "need"]: ...
     @property
     def denoise(self) -> Literal["none", "oidn"]: ...
+    @property
+    def preset(self) -> Literal["paper", "balanced", "floor", "fast"] | None: ...
+    @property
+    def target_psnr(self) -> float | None: ...
+    @property
+    def target_pilot_samples(self) -> int: ...
+    @property
+    def target_max_samples(self) -> int: ...
     @property
     def light_paths(self) -> Literal["auto", "fixed"]: ...
     @property
@@ -547,8 +573,19 @@ class Accumulator:
     @property
     def count(self) -> int:
         """Number of frames added so far."""
-    def add_exr(self, path: str | PathLike[str], origin: tuple[int, int] | None = None) -> None:
-        """Read an RGBA float EXR (alpha 1 when absent) and add it.
+    def merge(self, other: Accumulator) -> None:
+        """Add the frames of `other` (same size, plain, undenoised): the other half of an
+        image rendered to a target, each frame keeping its weight."""
+    def add_exr(
+        self,
+        path: str | PathLike[str],
+        origin: tuple[int, int] | None = None,
+        *,
+        weight: float = 1.0,
+    ) -> None:
+        """Read an RGBA float EXR (alpha 1 when absent) and add it, counted `weight` times
+        in the mean (positive, finite: its samples, where an image's frames render
+        different counts).
 
         With `origin` = (x0, y0) the file is a render cropped to its region: its pixel
         (0, 0) is pixel (x0, y0) of the image (rows from the top), it must fit inside, and
@@ -762,6 +799,43 @@ def image_error(
     float32 (H, W, 4) premultiplied linear RGBA; `psnr` is of the sRGB image composited
     over `background` (peak 1), capped at 200 dB for identical images."""
 
+@final
+class ObjectError:
+    """Error on the object's pixels (alpha > 0 in either image; DESIGN §8)."""
+
+    @property
+    def psnr(self) -> float:
+        """PSNR (dB, peak 1) of the sRGB image over the background, on object pixels."""
+    @property
+    def mse(self) -> float: ...
+    @property
+    def coverage(self) -> float:
+        """Fraction of the frame that is object pixels."""
+    @property
+    def object_px(self) -> int: ...
+
+def object_error(
+    image: npt.NDArray[np.float32],
+    reference: npt.NDArray[np.float32],
+    *,
+    background: tuple[float, float, float] = ...,
+) -> ObjectError:
+    """Error of `image` against `reference` (float32 (H, W, 4) premultiplied linear RGBA)
+    on the pixels covered in either: a whole-frame PSNR reads 10·log10(1/coverage) high."""
+
+def half_noise(
+    half_a: npt.NDArray[np.float32],
+    half_b: npt.NDArray[np.float32],
+    *,
+    background: tuple[float, float, float] = ...,
+) -> ObjectError:
+    """The render noise of the mean of two independent halves of an image, estimated from
+    them: MSE(half_a, half_b) / 4 on object pixels."""
+
+def spread(values: list[float]) -> rec.Spread:
+    """The worst value, the 5th percentile (nearest rank) and the mean of per-image
+    figures."""
+
 def pareto_front(seconds: list[float], psnr: list[float]) -> list[bool]:
     """Which (seconds, psnr) points no other point beats in both (ties count as beaten
     only when the other is strictly better in one)."""
@@ -827,6 +901,16 @@ class Plan:
         as the worker takes them: {view, level, c2w, seed, samples?, sample_offset?,
         sample_sequence?, out, motion?}; `pin`: BuildConfig.cycles_samples; the blur
         renders of `sharp_views` are left out (their levels get the sharp image)."""
+    def round_renders(
+        self,
+        exr_dir: str | PathLike[str],
+        pin: int,
+        sharp_views: list[int],
+        rounds: list[rec.ImageRound],
+    ) -> list[rec.Render]:
+        """The renders of `rounds` of a target-driven build: each round of one image, its
+        frames per half as consecutive blocks of a `pin`-sample sequence on the half's
+        seed (`half`: 0 or 1), one render call per image, round and plan call."""
     def level_renders(
         self, view: int, level: int, prefix: str, pin: int | None = None
     ) -> list[rec.Render]:
@@ -854,6 +938,7 @@ class Plan:
         light_paths: rec.LightPathsRecord | None = None,
         device: rec.DeviceRecord | None = None,
         denoiser: rec.DenoiserRecord | None = None,
+        images: list[tuple[int, str, rec.ImageRender]] | None = None,
     ) -> None:
         """Write the setting's meta.json: this plan, the build config, the object as the
         worker reported it, the timings, the QA of every view and, with --check-poses, the

@@ -5,6 +5,33 @@ blurset.stubgen from blurset-core's JSON Schemas (`make schemas`); do not edit."
 
 from typing import Any, Literal, NotRequired, TypedDict
 
+class ImageRound(TypedDict):
+    """One round of one image: its view and level, how many samples per frame and half it adds and how many each frame rendered before, and which round it is (EXR names)."""
+
+    add_per_frame: int
+    level: str
+    round: int
+    spent_per_frame: int
+    view: int
+
+class ImageRender(TypedDict):
+    """How one image of a target-driven build was rendered (`views[].images[<level dir>]`)."""
+
+    coverage: float
+    pilot_psnr_db: float
+    reached: bool
+    render_psnr_db: float
+    rounds: int
+    samples: int
+
+class Spread(TypedDict):
+    """The worst value, the 5th percentile (nearest rank) and the mean of per-image figures (PSNR: higher is better), for a verdict on many images that the mean alone would hide."""
+
+    mean: float
+    n: int
+    p5: float
+    worst: float
+
 class Motion(TypedDict):
     """The camera path of one Cycles motion blur render."""
 
@@ -16,6 +43,7 @@ class Render(TypedDict):
 
     c2w: list[list[float]]
     call: NotRequired[int | None]
+    half: NotRequired[int | None]
     level: str
     motion: NotRequired[Motion | None]
     out: str
@@ -406,6 +434,8 @@ class LightPathsRecord(TypedDict):
     transparency: bool
     unlit_only: bool
 
+Preset = Literal["paper", "balanced", "floor", "fast"]
+
 class RenderRecord(TypedDict):
     """How the images were rendered and encoded."""
 
@@ -428,9 +458,12 @@ class RenderRecord(TypedDict):
     latents: Any
     light_paths: NotRequired[LightPathsRecord | None]
     linear: NotRequired[bool]
+    preset: NotRequired[Preset | None]
     samples_per_latent: NotRequired[int | None]
     samples_total: NotRequired[int | None]
     sharp_samples: int
+    target_is: NotRequired[str]
+    target_psnr_db: NotRequired[float | None]
 
 class MetaLatent(TypedDict):
     """A latent frame as meta.json records it (its camera matrix follows from r, φ, θ)."""
@@ -486,6 +519,7 @@ class MetaView(TypedDict):
     depth_range: float
     far: float
     flatness: float
+    images: NotRequired[dict[str, ImageRender]]
     index: int
     levels: dict[str, LevelPlan2]
     near: float

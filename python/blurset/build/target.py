@@ -30,6 +30,7 @@ class _Image:
     spent: int = 0
     rounds: int = 0
     estimate: Any = None  # _core.ObjectError of the last round
+    pilot_db: float = 0.0
 
     def record(self, target: float) -> dict[str, Any]:
         e = self.estimate
@@ -37,6 +38,7 @@ class _Image:
             "samples": 2 * self.frames * self.spent,
             "rounds": self.rounds,
             "render_psnr_db": round(float(e.psnr), 3),
+            "pilot_psnr_db": round(self.pilot_db, 3),
             "coverage": round(float(e.coverage), 6),
             "reached": bool(e.psnr >= target - 0.25),
         }
@@ -129,4 +131,6 @@ def render_to_target(
                 im.estimate = _core.half_noise(
                     a.mean(), b.mean(), background=tuple(cfg.background)
                 )
+                if im.rounds == 1:
+                    im.pilot_db = float(im.estimate.psnr)
     return records, n_renders

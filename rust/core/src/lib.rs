@@ -72,7 +72,7 @@ pub use crate::dataset::outputs::{
     build_state, claim, mark_text, output_kind, owned_entries, remove_owned, superseded_settings,
     text_owner, BuildState, Claim, OutputKind, TextOwner,
 };
-pub use crate::dataset::read::{check_shape, read_record, Record};
+pub use crate::dataset::read::{check_shape, parse_record, read_record, Record};
 pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
 pub use crate::dataset::schema::{
     schema, schema_file, value_schemas, write_record, StatsFile, SCHEMA_RECORDS,

@@ -135,6 +135,9 @@ pub struct ImageRender {
     /// Its render PSNR (dB, peak 1, sRGB over the background, on its object's pixels),
     /// estimated from its two halves after the last round.
     pub render_psnr_db: f64,
+    /// The estimate after the pilot round, from which the samples it needed were
+    /// extrapolated.
+    pub pilot_psnr_db: f64,
     /// Fraction of the frame that is object pixels (alpha > 0 in either half).
     pub coverage: f64,
     /// The estimate is at the target (within 0.25 dB); false: the sample cap or the round
@@ -443,7 +446,9 @@ impl Meta {
         let n = self.views.len();
         for (view, level, record) in images {
             let v = self.views.get_mut(view).ok_or_else(|| {
-                Error::Shape(format!("image record of view {view}: the setting has {n} views"))
+                Error::Shape(format!(
+                    "image record of view {view}: the setting has {n} views"
+                ))
             })?;
             v.images.insert(level, record);
         }

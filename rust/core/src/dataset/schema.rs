@@ -69,13 +69,17 @@ pub fn schema(record: Record) -> serde_json::Value {
 /// dict: the stub's TypedDicts (python/blurset/_records.pyi, `make schemas`) are made
 /// from these, so a dict crossing the FFI has the type the core gives it.
 pub fn value_schemas() -> Vec<(&'static str, serde_json::Value)> {
-    use super::meta::{ObjectRecord, Timings};
+    use super::meta::{ImageRender, ObjectRecord, Timings};
     use super::records::DatasetDoc;
     use super::stats::BuildStats;
     use crate::plan::renders::Render;
     use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan};
+    use crate::plan::target::ImageRound;
     use schemars::schema_for;
     vec![
+        ("ImageRound", schema_for!(ImageRound).to_value()),
+        ("ImageRender", schema_for!(ImageRender).to_value()),
+        ("Spread", schema_for!(crate::metrics::Spread).to_value()),
         ("Render", schema_for!(Render).to_value()),
         ("SettingPlan", schema_for!(SettingPlan).to_value()),
         ("LevelPlan", schema_for!(LevelPlan).to_value()),

@@ -9,12 +9,12 @@ use super::choices::{
     choice, BlurBudget, BlurMethod, Denoise, Device, Executor, LatentPositions, LatentSampling,
     LightPaths, Preset, TrajectoryAnchor,
 };
-use super::presets::preset_values;
-use super::target::TargetRule;
 use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
+use super::presets::preset_values;
 use super::sampling::SamplingConfig;
 use super::spec::{check, specs, Kind, OptionValue, Raw, Spec};
 use super::spec::{config_error, convert};
+use super::target::TargetRule;
 use super::weights::Guards;
 use crate::error::Result;
 use crate::ground::names::{self, test_views};

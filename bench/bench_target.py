@@ -1,0 +1,284 @@
+"""target: is a `--target-psnr` build's per-image estimate honest, on models no number was
+chosen from (issue 37, DESIGN §8)?
+
+For each held-out model (../shared/data's textured panel, 2CylinderEngine and BoxTextured,
+none of which any preset or threshold was fitted to, and the three demo objects), one
+setting of BLURSET_BENCH_TARGET_VIEWS views is built at BLURSET_BENCH_TARGET_RES px with
+`--target-psnr T` (every view renders its blurry images too). Each image's own frames are
+then rendered again, undenoised, at BLURSET_BENCH_TARGET_REF times its samples as two
+halves on other Cycles seeds: the reference. On the object's pixels (alpha > 0 in the image
+or the reference), the image's measured render MSE is its MSE against the reference less
+the reference's own noise, MSE(r₁, r₂) / 4 (independent seeds: the two add).
+
+Per model: the share of images measuring ≥ T − 0.5 dB, the share whose estimate
+(meta.json's render_psnr_db) is within 1 dB of the measurement, the worst image, the 5th
+percentile and the mean, the coverage, and the samples spent against the least that
+reaches T (the measured MSE at N samples extrapolated as 1 / N); beside it, what one fixed
+count per image kind (sharp, blur_l) that reaches T on every image of every model would
+cost each model. Timings are the build's own, per view, on a machine that may be busy:
+the bench asserts none.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+RES = int(os.environ.get("BLURSET_BENCH_TARGET_RES", "128"))
+VIEWS = int(os.environ.get("BLURSET_BENCH_TARGET_VIEWS", "5"))
+TARGET = float(os.environ.get("BLURSET_BENCH_TARGET_DB", "45"))
+REF = int(os.environ.get("BLURSET_BENCH_TARGET_REF", "8"))
+SEED = 5
+SALTS = (0x5BD1E995, 0x2545F491)
+HELD_OUT = ("textured_panel_blender_reexport", "khronos_2CylinderEngine", "khronos_BoxTextured")
+
+
+def _glbs(work: Path) -> list[Path]:
+    env = os.environ.get("BLURSET_BENCH_GLBS")
+    if env:
+        return [Path(p) for p in env.split(",") if p]
+    data = HERE.parent.parent / "shared" / "data" / "glb"
+    found = [data / f"{n}.glb" for n in HELD_OUT if (data / f"{n}.glb").exists()]
+    from blurset.demo import make_demo_objects
+
+    return found + list(make_demo_objects(work / "demo_objects"))
+
+
+def _config(out: Path, glb: Path):
+    from blurset.config import make_config
+
+    return make_config(
+        {},
+        {
+            "objects": [str(glb)],
+            "out": out,
+            "views": VIEWS,
+            "resolution": RES,
+            "settings_per_object": 1,
+            "seed": SEED,
+            "write_linear": True,
+            "blurry_test_views": True,
+            "preset": "balanced",
+            "target_psnr": TARGET,
+            "device": os.environ.get("BLURSET_BENCH_DEVICE", "cpu").lower(),
+        },
+    )
+
+
+def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
+    """Per (view, level dir): (reference, its own noise MSE on object pixels)."""
+    from blurset import _core
+    from blurset.plan import plan_setting, seed_for
+    from blurset.worker_client import Worker
+
+    per_frame = {}
+    for v in meta["views"]:
+        for level, r in v["images"].items():
+            per_frame[(v["index"], level)] = r["samples"]
+    out = {}
+    with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
+        info = w.load(glb, work / "v.npy")
+        verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
+        plan = plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
+                            bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
+        images: dict[tuple[int, str], list[dict]] = {}
+        for f in plan.renders(str(work / "r"), cfg.cycles_samples, sharp_views=[]):
+            images.setdefault((f["view"], f["level"]), []).append(f)
+        # One Cycles sequence length for every render of this worker (Cycles never shrinks
+        # its pattern within a process): the longest half of any reference.
+        pin = max(REF * per_frame[k] // 2 for k in images)
+        for key, frames in images.items():
+            m = len(frames)
+            s = REF * per_frame[key] // (2 * m)  # per frame and half
+            halves = []
+            for salt in SALTS:
+                acc = _core.Accumulator(RES, RES)
+                half = []
+                for k, f in enumerate(frames):
+                    g = {x: f[x] for x in ("c2w", "region", "call", "motion") if f.get(x) is not None}
+                    g.update(seed=(f["seed"] ^ salt) & 0x7FFFFFFF, samples=s,
+                             sample_offset=k * s, sample_sequence=pin,
+                             out=str(work / f"ref_{k:04d}.exr"))  # fmt: skip
+                    half.append(g)
+
+                def on_frame(_i: int, path: str, origin, acc=acc) -> None:
+                    acc.add_exr(path, origin)
+                    os.unlink(path)
+
+                w.render(half, resolution=RES, fov_deg=cfg.fov_deg, samples=s,
+                         on_frame=on_frame, crop=True)  # fmt: skip
+                halves.append(acc.mean())
+            r1, r2 = halves
+            noise = _core.object_error(r1, r2).mse / 4.0
+            out[key] = ((r1 + r2) / 2.0, noise)
+    return out
+
+
+def _db(mse: float) -> float:
+    return 200.0 if mse <= 0 else min(200.0, -10.0 * math.log10(mse))
+
+
+def measure_model(glb: Path, work: Path) -> dict:
+    from blurset import _core, layout
+    from blurset.build import build
+    from blurset.image import read_exr
+
+    out = work / f"build_{glb.stem}"
+    cfg = _config(out, glb)
+    t0 = time.perf_counter()
+    summary = build(cfg, progress=False)
+    wall = time.perf_counter() - t0
+    if summary["settings_complete"] != 1:
+        raise RuntimeError(f"bench build of {glb.name} failed: {summary['failures']}")
+    (setting,) = [d for d in out.iterdir() if (d / ".complete").exists()]
+    meta = json.loads((setting / "meta.json").read_text())
+    refs = _references(cfg, glb, setting, meta, work)
+    target_mse = 10 ** (-TARGET / 10)
+    rows = []
+    for v in meta["views"]:
+        for level, rec in sorted(v["images"].items()):
+            name = layout.image_name(v["index"], len(meta["views"])).replace(".png", ".exr")
+            image = read_exr(setting / level / "linear" / name)
+            ref, ref_noise = refs[(v["index"], level)]
+            e = _core.object_error(image, ref)
+            mse = max(e.mse - ref_noise, 1e-20)
+            rows.append(
+                {
+                    "view": v["index"],
+                    "level": level,
+                    "samples": rec["samples"],
+                    "estimate_db": rec["render_psnr_db"],
+                    "measured_db": round(_db(mse), 3),
+                    "reference_noise_db": round(_db(ref_noise), 2),
+                    "coverage": rec["coverage"],
+                    "least_samples": rec["samples"] * mse / target_mse,
+                }
+            )
+    return {
+        "model": glb.stem,
+        "images": rows,
+        "build_s": round(wall, 2),
+        "render_s_per_view": round(
+            (meta["timings"]["sharp_s"] + meta["timings"]["blur_s"]) / len(meta["views"]), 3
+        ),
+    }
+
+
+def summarize(models: list[dict]) -> list[dict]:
+    from blurset import _core
+
+    # One fixed count per image kind that reaches the target on every image of every model.
+    fixed: dict[str, float] = {}
+    for m in models:
+        for r in m["images"]:
+            fixed[r["level"]] = max(fixed.get(r["level"], 0.0), r["least_samples"])
+    out = []
+    for m in models:
+        rows = m["images"]
+        measured = [r["measured_db"] for r in rows]
+        s = _core.spread(measured)
+        spent = sum(r["samples"] for r in rows)
+        least = sum(r["least_samples"] for r in rows)
+        over = [r["samples"] / r["least_samples"] for r in rows if r["least_samples"] > 0]
+        out.append(
+            {
+                "model": m["model"],
+                "images": len(rows),
+                "at_target_share": sum(x >= TARGET - 0.5 for x in measured) / len(rows),
+                "estimate_within_1db_share": sum(
+                    abs(r["estimate_db"] - r["measured_db"]) <= 1.0 for r in rows
+                )
+                / len(rows),
+                "estimate_error_db_max": round(
+                    max(abs(r["estimate_db"] - r["measured_db"]) for r in rows), 3
+                ),
+                "measured_worst_db": s["worst"],
+                "measured_p5_db": s["p5"],
+                "measured_mean_db": round(s["mean"], 3),
+                "coverage_mean": round(statistics.fmean(r["coverage"] for r in rows), 4),
+                "samples_spent": spent,
+                "samples_least": round(least),
+                "spent_over_least": round(spent / least, 3),
+                "spent_over_least_median_image": round(statistics.median(over), 3),
+                "spent_over_least_max_image": round(max(over), 3),
+                "fixed_count_samples": round(sum(fixed[r["level"]] for r in rows)),
+                "fixed_over_target": round(sum(fixed[r["level"]] for r in rows) / spent, 3),
+                "build_s": m["build_s"],
+                "render_s_per_view": m["render_s_per_view"],
+            }
+        )
+    return out
+
+
+def measure() -> dict:
+    with tempfile.TemporaryDirectory(prefix="blurset-bench-target-") as d:
+        work = Path(d)
+        models = [measure_model(g, work) for g in _glbs(work)]
+    return {
+        "resolution": RES,
+        "views": VIEWS,
+        "target_db": TARGET,
+        "reference_factor": REF,
+        "models": models,
+        "summary": summarize(models),
+        "load_average": os.getloadavg()[0],
+    }
+
+
+def run() -> list[dict]:
+    m = measure()
+    res = []
+    every = [r for mm in m["models"] for r in mm["images"]]
+    n = len(every)
+    honest = sum(abs(r["estimate_db"] - r["measured_db"]) <= 1.0 for r in every) / n
+    for row in m["summary"]:
+        res.append(
+            {
+                "name": f"target_{RES}px_{TARGET:g}db_{row['model']}",
+                "ratio": row["spent_over_least"],
+                "ratio_is": "samples a target-driven build spent over the least that reaches "
+                "the target (from converged references), this model",
+                "contender": f"--target-psnr {TARGET:g}: {row['samples_spent']} samples",
+                "baseline": f"least reaching {TARGET:g} dB: {row['samples_least']} samples; "
+                f"one fixed count for all models: {row['fixed_count_samples']}",
+                **row,
+                "resolution": RES,
+                "views_measured": VIEWS,
+                "target_db": TARGET,
+                "reference_factor": REF,
+            }
+        )
+    res.append(
+        {
+            "name": f"target_{RES}px_{TARGET:g}db_estimate",
+            "ratio": honest,
+            "ratio_is": "share of images whose estimated render PSNR is within 1 dB of the "
+            "measured one, every held-out model",
+            "contender": f"{n} images, {len(m['models'])} models",
+            "baseline": "converged references at "
+            f"{REF}x the samples, their own noise taken out",
+            "images": n,
+            "at_target_share": sum(r["measured_db"] >= TARGET - 0.5 for r in every) / n,
+            "per_image": {mm["model"]: mm["images"] for mm in m["models"]},
+            "resolution": RES,
+            "views_measured": VIEWS,
+            "target_db": TARGET,
+            "reference_factor": REF,
+            "load_average": m["load_average"],
+        }
+    )
+    return res
+
+
+if __name__ == "__main__":
+    json.dump(measure(), sys.stdout, indent=1, default=str)
+    print()

@@ -1,0 +1,185 @@
+"""Issue 37: every image rendered to a render-noise target (--target-psnr) and the named
+presets (--preset). Options and rules without renders; the properties of the images on
+real Blender renders at tiny sizes."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from blurset import _core
+from blurset.config import make_config
+from tests.conftest import run_cli
+
+# -- options, presets, the rule (no renders) ---------------------------------------------
+
+
+def _cfg(**flags):
+    return make_config({}, {"objects": ["x.glb"], "out": "/tmp/o", **flags})
+
+
+def test_a_preset_sets_targets_and_flags_beside_it_override_it():
+    floor = _cfg(preset="floor")
+    assert floor.preset == "floor" and floor.latents_auto
+    assert floor.target_psnr == pytest.approx(58.92)
+    assert floor.latent_positions == "stratified" and floor.max_ghost_px == 1.0
+    mine = _cfg(preset="floor", target_psnr=52.0, max_ghost_px=0.5)
+    assert (mine.target_psnr, mine.max_ghost_px, mine.preset) == (52.0, 0.5, "floor")
+    # The paper preset is the paper's construction: the defaults.
+    assert _cfg(preset="paper") == _cfg(preset=None).replace(preset="paper")
+    assert _cfg(preset="paper").target_psnr is None
+    # Every accuracy preset is a target, never a sample count.
+    for name in ("balanced", "floor", "fast"):
+        sets = _core.preset_values(name)
+        assert "target_psnr" in sets and not any("samples" in k for k in sets)
+
+
+def test_a_preset_in_toml_and_any_case(tmp_path):
+    from blurset.config import load_toml
+
+    f = tmp_path / "b.toml"
+    f.write_text('preset = "FAST"\nobjects = ["x.glb"]\nout = "o"\n')
+    cfg = make_config(load_toml(f), {})
+    assert cfg.preset == "fast" and cfg.target_psnr == 40.0 and cfg.max_ghost_px == 2.0
+
+
+def test_the_demo_under_a_preset_keeps_the_preset_and_its_small_size():
+    cfg = make_config({}, {"demo": True, "out": "/tmp/o", "preset": "fast"})
+    assert cfg.latents_auto and cfg.target_psnr == 40.0 and cfg.views == 17
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [
+        (["--preset", "floor", "--samples-total", "100"], "--samples-total"),
+        (["--target-psnr", "50", "--sharp-samples", "100"], "--sharp-samples"),
+        (["--target-psnr", "50", "--denoise", "oidn"], "--denoise"),
+        (["--target-pilot-samples", "8"], "--target-pilot-samples"),
+        (["--target-psnr", "5"], "--target-psnr"),
+        (["--target-psnr", "50", "--target-pilot-samples", "64", "--target-max-samples", "32"],
+         "--target-pilot-samples"),
+    ],
+)
+def test_bad_target_options_one_line(tmp_path, args, option):
+    p = run_cli("build", "--demo", "--out", str(tmp_path / "o"), *args, check=False)
+    assert p.returncode == 2, p.stderr
+    assert option in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_next_round_extrapolates_from_the_estimate():
+    cfg = _cfg(target_psnr=40.0, target_pilot_samples=32)
+    # The pilot: 16 samples a half, split over the frames (at least one each).
+    assert _core.target_next_round(cfg, frames=1, spent_per_frame=0, rounds=0) == 16
+    assert _core.target_next_round(cfg, frames=5, spent_per_frame=0, rounds=0) == 4
+    # 10x the target's MSE after 16: 10x the samples (aimed 0.2 dB above the target).
+    add = _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=1e-3)
+    assert 16 + add == math.ceil(160 * 10**0.02)
+    more = _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=3e-3)
+    assert more > add
+    assert _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=9e-5) is None
+
+
+def test_half_noise_on_object_pixels_only():
+    rng = np.random.default_rng(0)
+    a = np.zeros((32, 32, 4), np.float32)
+    a[8:24, 8:24] = 0.5
+    a[8:24, 8:24, 3] = 1.0
+    b = a.copy()
+    b[8:24, 8:24, :3] += rng.normal(0, 0.01, (16, 16, 3)).astype(np.float32)
+    e = _core.half_noise(a, b)
+    assert e.object_px == 256 and e.coverage == pytest.approx(0.25)
+    whole = _core.image_error(a, b)
+    # The whole frame reads 10·log10(1/coverage) high; the half estimate 6 dB above MSE.
+    assert whole.psnr - _core.object_error(a, b).psnr == pytest.approx(10 * math.log10(4))
+    assert e.psnr - _core.object_error(a, b).psnr == pytest.approx(10 * math.log10(4))
+
+
+# -- real renders ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def box(tmp_path_factory) -> Path:
+    from blurset.demo import make_demo_objects
+
+    return make_demo_objects(tmp_path_factory.mktemp("objects"), seed=0)[0]
+
+
+def _build(out: Path, glb: Path, *extra: str, config: Path | None = None) -> dict:
+    args = ["build", "--objects", str(glb), "--out", str(out), "--views", "3",
+            "--levels", "1,4", "--resolution", "32", "--settings-per-object", "1",
+            "--seed", "3", "--quiet", *extra]  # fmt: skip
+    if config is not None:
+        args += ["--config", str(config)]
+    run_cli(*args)
+    (s,) = [d for d in out.iterdir() if (d / ".complete").exists()]
+    return json.loads((s / "meta.json").read_text()) | {"_dir": s}
+
+
+@pytest.mark.blender
+def test_target_build_records_every_image_and_gives_the_same_bytes_twice(tmp_path, box):
+    a = _build(tmp_path / "a", box, "--preset", "fast")
+    b = _build(tmp_path / "b", box, "--preset", "fast")
+    assert a["render"]["target_psnr_db"] == 40.0 and a["render"]["preset"] == "fast"
+    for v in a["views"]:
+        levels = ["sharp"] if v["index"] in a["test_views"] else ["sharp", "blur_1", "blur_4"]
+        assert sorted(v["images"]) == sorted(levels)
+        for rec in v["images"].values():
+            assert rec["samples"] >= 2 and rec["rounds"] >= 1 and 0 < rec["coverage"] < 1
+            assert rec["reached"] == (rec["render_psnr_db"] >= 40.0 - 0.25)
+    # Same command, same bytes: the rounds follow from rendered pixels only.
+    assert [v["images"] for v in a["views"]] == [v["images"] for v in b["views"]]
+    def images(out: Path) -> list[str]:
+        lines = (out / "MANIFEST.sha256").read_text().splitlines()
+        return [x for x in lines if x.endswith((".png", ".npy"))]
+
+    assert len(images(tmp_path / "a")) > 20
+    assert images(tmp_path / "a") == images(tmp_path / "b")
+
+
+@pytest.mark.blender
+def test_an_image_that_needs_more_gets_more(tmp_path, box):
+    lo = _build(tmp_path / "lo", box, "--target-psnr", "38", "--latents", "auto",
+                "--latent-positions", "stratified")  # fmt: skip
+    hi = _build(tmp_path / "hi", box, "--target-psnr", "44", "--latents", "auto",
+                "--latent-positions", "stratified")  # fmt: skip
+    for vl, vh in zip(lo["views"], hi["views"], strict=True):
+        for level, rec in vl["images"].items():
+            # 6 dB more accuracy: about 4x the samples (the pilot is shared).
+            assert vh["images"][level]["samples"] > 2 * rec["samples"], (level, rec)
+    # Within one build: the samples an image got follow from its own pilot estimate
+    # (variance as 1 / samples, aimed 0.2 dB above the target), so a noisier image
+    # at the pilot gets more.
+    for v in hi["views"]:
+        for level, rec in v["images"].items():
+            if rec["rounds"] != 2:
+                continue
+            m = 1 if level == "sharp" else v["levels"][level.removeprefix("blur_")]["latents"]
+            pilot = max(1, math.ceil(16 / m))
+            need = pilot * 10 ** ((44.2 - rec["pilot_psnr_db"]) / 10)
+            assert rec["samples"] == pytest.approx(2 * m * need, abs=2 * m + 0.01 * need * m)
+
+
+@pytest.mark.blender
+def test_a_pair_at_zero_motion_reaches_the_target_at_equal_samples(tmp_path, box):
+    toml = tmp_path / "still.toml"
+    toml.write_text("delta0 = 0.0\n")
+    meta = _build(tmp_path / "z", box, "--target-psnr", "42", "--latents", "auto",
+                  "--latent-positions", "stratified", config=toml)  # fmt: skip
+    s = meta["_dir"]
+    for v in meta["views"]:
+        if v["index"] in meta["test_views"]:
+            continue
+        sharp = v["images"]["sharp"]
+        for level in ("blur_1", "blur_4"):
+            assert v["levels"][level.removeprefix("blur_")]["latents"] == 1
+            assert v["images"][level]["samples"] == sharp["samples"]
+            assert v["images"][level]["render_psnr_db"] == sharp["render_psnr_db"]
+            name = f"{v['index']:03d}.png"
+            assert (s / level / "images" / name).read_bytes() == (
+                s / "sharp" / "images" / name
+            ).read_bytes()
