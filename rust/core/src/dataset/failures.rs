@@ -16,11 +16,13 @@ use std::path::Path;
 /// The records of a failures.jsonl (none when the file is absent) and the number of
 /// lines skipped because they are not a JSON object with a string `uid`.
 pub fn read_records(path: &Path) -> Result<(Vec<Value>, usize)> {
-    let text = match std::fs::read_to_string(path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok((Vec::new(), 0)),
-        Err(e) => return Err(Error::io("cannot read failures", path, e)),
+    let Some(bytes) = super::read::read_limited(path, "failures.jsonl")? else {
+        return Ok((Vec::new(), 0));
     };
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let e = std::io::Error::new(std::io::ErrorKind::InvalidData, e);
+        Error::io("cannot read failures", path, e)
+    })?;
     let mut records = Vec::new();
     let mut skipped = 0;
     for line in text.lines().filter(|l| !l.trim().is_empty()) {

@@ -6,6 +6,7 @@
 //! columns into OpenGL [right, up, backwards] themselves.
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
+use crate::ground::limits::{self, MAX_POSE_ROWS};
 use crate::ground::names::image_name;
 use crate::plan::sampling::SettingPlan;
 use glam::DMat4;
@@ -85,6 +86,17 @@ fn header_field<'a>(header: &'a str, key: &str) -> Option<&'a str> {
 
 /// Read `poses_bounds.npy` (float64 or float32, N × 17, C order).
 pub fn read_poses_bounds(path: &Path) -> Result<Vec<PoseRow>> {
+    // A file past MAX_POSE_ROWS of float64 (and a header) is refused before it is read.
+    let most = (MAX_POSE_ROWS * 17 * 8 + (1 << 16)) as u64;
+    let len = std::fs::metadata(path)
+        .map_err(|e| Error::io("cannot read pose file", path, e))?
+        .len();
+    limits::check("file of bytes", len, most, "MAX_POSE_ROWS rows of float64").map_err(
+        |reason| Error::PoseFormat {
+            reason,
+            path: path.into(),
+        },
+    )?;
     let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read pose file", path, e))?;
     parse_poses_bounds(&bytes).map_err(|reason| Error::PoseFormat {
         reason,
@@ -126,6 +138,12 @@ pub fn parse_poses_bounds(bytes: &[u8]) -> std::result::Result<Vec<PoseRow>, Str
         return Err(format!("shape {shape:?}, expected (N, 17)"));
     }
     let n = shape[0];
+    limits::check(
+        &format!("shape ({n}, 17), rows"),
+        n as u64,
+        MAX_POSE_ROWS as u64,
+        "MAX_POSE_ROWS",
+    )?;
     let data = &bytes[hstart + hlen..];
     let width = match descr {
         "<f8" => 8,
@@ -440,6 +458,34 @@ mod tests {
         let mut v2 = valid_npy(2);
         v2[6] = 2; // version 2 with a header length past the end
         assert!(parse_poses_bounds(&v2).is_err());
+    }
+
+    #[test]
+    fn a_file_promising_more_rows_than_the_limit_is_refused_named() -> Result<()> {
+        let mut b = valid_npy(1);
+        let text = String::from_utf8_lossy(&b[10..]).replace("(1, 17)", "(2000000, 17)");
+        b.truncate(10);
+        b.extend_from_slice(text.as_bytes());
+        let e = parse_poses_bounds(&b).err().unwrap_or_default();
+        assert!(
+            e.contains("over the limit of 1048576 (MAX_POSE_ROWS)"),
+            "{e}"
+        );
+        // A file larger than the most rows could fill is not read at all (sparse here).
+        let p = tmp("huge.npy");
+        let f = std::fs::File::create(&p).map_err(|e| Error::io("create", &p, e))?;
+        f.set_len(200 << 20)
+            .map_err(|e| Error::io("set_len", &p, e))?;
+        let e = read_poses_bounds(&p)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            e.contains("MAX_POSE_ROWS rows of float64") && e.contains("huge.npy"),
+            "{e}"
+        );
+        let _ = std::fs::remove_file(&p);
+        Ok(())
     }
 
     // The reader's fuzz harness in `cargo test`: arbitrary bytes and mutations of a

@@ -7,6 +7,7 @@
 //! [`Error::Input`] naming the file and the field (`splits.json: train: invalid type:
 //! integer `5`, expected a sequence`), never a crash further down.
 use crate::error::{Error, Result};
+use crate::ground::limits::{self, MAX_RECORD_BYTES};
 use crate::ground::names::files;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
@@ -293,18 +294,57 @@ pub fn read_record(path: &Path, record: Record) -> Result<serde_json::Value> {
         reason,
         path: path.into(),
     };
-    let text = match std::fs::read(path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(bad(format!("{name} not found")))
-        }
-        Err(e) => return Err(Error::io("cannot read", path, e)),
+    let Some(text) = read_limited(path, name)? else {
+        return Err(bad(format!("{name} not found")));
     };
-    let value: serde_json::Value = serde_json::from_slice(&text)
-        .map_err(|e| bad(format!("{name} is not readable JSON ({e})")))?;
-    check_shape(&value, record)
-        .map_err(|what| bad(format!("{name} has the wrong shape: {what}")))?;
+    parse_record(&text, record).map_err(bad)
+}
+
+/// A record held in memory: the JSON value when it has the record's shape, otherwise
+/// the reason (for the caller to pair with its file). Arbitrary bytes give an error,
+/// never a panic (fuzzed).
+pub fn parse_record(
+    bytes: &[u8],
+    record: Record,
+) -> std::result::Result<serde_json::Value, String> {
+    let name = record.file_name();
+    let value: serde_json::Value =
+        serde_json::from_slice(bytes).map_err(|e| format!("{name} is not readable JSON ({e})"))?;
+    check_shape(&value, record).map_err(|what| format!("{name} has the wrong shape: {what}"))?;
     Ok(value)
+}
+
+/// The bytes of the record file `name` at `path` (None when there is none), refused
+/// with an error naming the limit past [`MAX_RECORD_BYTES`], before they are read.
+pub(crate) fn read_limited(path: &Path, name: &str) -> Result<Option<Vec<u8>>> {
+    use std::io::Read;
+    let io = |e| Error::io("cannot read", path, e);
+    let f = match std::fs::File::open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(io(e)),
+    };
+    let too_large = |len: u64| {
+        limits::check(
+            &format!("{name}: size in bytes"),
+            len,
+            MAX_RECORD_BYTES,
+            "MAX_RECORD_BYTES",
+        )
+        .map_err(|reason| Error::Input {
+            reason,
+            path: path.into(),
+        })
+    };
+    let len = f.metadata().map_err(io)?.len();
+    too_large(len)?;
+    let mut out = Vec::with_capacity(len as usize);
+    // A file that grows while it is read stops at the limit too.
+    f.take(MAX_RECORD_BYTES + 1)
+        .read_to_end(&mut out)
+        .map_err(io)?;
+    too_large(out.len() as u64)?;
+    Ok(Some(out))
 }
 
 #[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
@@ -362,5 +402,117 @@ mod tests {
         assert!(e.starts_with("splits.json not found"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
         Ok(())
+    }
+
+    #[test]
+    fn a_record_over_the_limit_is_refused_named_before_it_is_read() -> Result<()> {
+        let dir = std::env::temp_dir().join(format!("blurset-read-big-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io("mkdir", &dir, e))?;
+        let p = dir.join("dataset.json");
+        // Sparse: no disk space, and read, 1 GiB of zero bytes.
+        let f = std::fs::File::create(&p).map_err(|e| Error::io("create", &p, e))?;
+        f.set_len(MAX_RECORD_BYTES + 1)
+            .map_err(|e| Error::io("set_len", &p, e))?;
+        let e = read_record(&p, Record::Dataset).unwrap_err().to_string();
+        assert!(
+            e.starts_with("dataset.json: size in bytes: 1073741825, over the limit of 1073741824 (MAX_RECORD_BYTES)")
+                && e.contains("dataset.json\""),
+            "{e}"
+        );
+        let e = crate::dataset::failures::read_records(&p)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("(MAX_RECORD_BYTES)") && e.contains("dataset.json"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    /// A valid record of each kind, the seeds of the fuzz harness.
+    fn seeds() -> Vec<(Record, Vec<u8>)> {
+        let docs = [
+            (
+                Record::Splits,
+                json!({"view_stride": 16, "train": ["a_000"], "test": ["b_000"],
+                                    "test_views": {"a_000": [0, 16]}}),
+            ),
+            (
+                Record::Meta,
+                json!({"uid": "a", "theta0_deg": 0.0, "resolution": [8, 8],
+                                  "levels": ["sharp"], "views": [{"index": 0, "levels":
+                                  {"blur_3": {"w_l": 0.5, "latents": 6}}}]}),
+            ),
+            (
+                Record::Export,
+                json!({"kind": "blurset export", "scenes": {"a": "b"},
+                                    "owns": ["x"]}),
+            ),
+            (
+                Record::Noise,
+                json!({"gain": 1.0, "seed": 3, "sigma_read": 0.1,
+                                   "sigma_shot": 0.2, "source": {}, "files": [
+                                   {"view": 0, "frame": 0, "image": "a", "linear": "b"}]}),
+            ),
+        ];
+        docs.into_iter()
+            .map(|(r, d)| (r, serde_json::to_vec(&d).unwrap()))
+            .collect()
+    }
+
+    #[test]
+    fn the_seeds_are_valid() {
+        for (r, b) in seeds() {
+            assert!(parse_record(&b, r).is_ok(), "{r:?}");
+        }
+    }
+
+    // The reader's fuzz harness in `cargo test` (rust/fuzz/fuzz_targets/records.rs runs
+    // it longer): arbitrary bytes and mutations of valid records give a value or an
+    // error, never a panic, and a value it gives has the record's shape.
+    mod fuzz {
+        use super::*;
+        use proptest::prelude::*;
+
+        const RECORDS: [Record; 8] = [
+            Record::Meta,
+            Record::Splits,
+            Record::Dataset,
+            Record::NoiseDataset,
+            Record::Noise,
+            Record::NoiseScene,
+            Record::Export,
+            Record::Stats,
+        ];
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(2000))]
+            #[test]
+            fn arbitrary_bytes_never_panic(
+                r in 0usize..8,
+                bytes in proptest::collection::vec(any::<u8>(), 0..300),
+            ) {
+                let _ = parse_record(&bytes, RECORDS[r]);
+            }
+
+            #[test]
+            fn mutated_records_never_panic(
+                which in 0usize..4,
+                edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..6),
+                cut in any::<prop::sample::Index>(),
+            ) {
+                let (r, mut b) = seeds().swap_remove(which);
+                for (at, v) in edits {
+                    let i = at.index(b.len());
+                    b[i] = v;
+                }
+                let keep = cut.index(b.len() + 1);
+                b.truncate(keep);
+                if let Ok(v) = parse_record(&b, r) {
+                    prop_assert!(check_shape(&v, r).is_ok());
+                }
+            }
+        }
     }
 }

@@ -3,6 +3,7 @@
 //! a 16-bit input is not silently truncated) and writing PNGs.
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
+use crate::ground::limits::{self, MAX_IMAGE_ALLOC, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 use image::{DynamicImage, ImageDecoder, ImageEncoder, ImageReader};
 use std::path::Path;
 
@@ -98,7 +99,27 @@ pub fn image_info(path: &Path) -> Result<(u32, u32, usize, u32)> {
     Ok((w, h, channels, bits))
 }
 
-/// Decode an image file (format guessed from its bytes) into 8- or 16-bit samples.
+/// Refuse an image header promising a side past [`MAX_IMAGE_SIDE`] or more than
+/// [`MAX_IMAGE_PIXELS`], before its pixels are allocated.
+fn check_size(w: u32, h: u32) -> std::result::Result<(), String> {
+    let what = format!("header promises a {w}x{h} image");
+    limits::check(
+        &format!("{what}, side"),
+        u64::from(w.max(h)),
+        u64::from(MAX_IMAGE_SIDE),
+        "MAX_IMAGE_SIDE",
+    )?;
+    limits::check(
+        &format!("{what}, pixels"),
+        u64::from(w) * u64::from(h),
+        MAX_IMAGE_PIXELS,
+        "MAX_IMAGE_PIXELS",
+    )
+}
+
+/// Decode an image file (format guessed from its bytes) into 8- or 16-bit samples,
+/// within the limits of `ground::limits` (the decoder allocates at most
+/// [`MAX_IMAGE_ALLOC`]).
 pub fn read_image(path: &Path) -> Result<Image> {
     let bad = |reason: String| Error::Image {
         reason,
@@ -108,8 +129,14 @@ pub fn read_image(path: &Path) -> Result<Image> {
         .map_err(|e| Error::io("cannot open image", path, e))?
         .with_guessed_format()
         .map_err(|e| Error::io("cannot read image", path, e))?;
-    let img = reader.decode().map_err(|e| bad(e.to_string()))?;
-    let (w, h) = (img.width(), img.height());
+    let mut reader = reader;
+    let mut lim = image::Limits::default();
+    lim.max_alloc = Some(MAX_IMAGE_ALLOC);
+    reader.limits(lim);
+    let decoder = reader.into_decoder().map_err(|e| bad(e.to_string()))?;
+    let (w, h) = decoder.dimensions();
+    check_size(w, h).map_err(bad)?;
+    let img = DynamicImage::from_decoder(decoder).map_err(|e| bad(e.to_string()))?;
     let (channels, samples) = match img {
         DynamicImage::ImageLuma8(b) => (1, Samples::U8(b.into_raw())),
         DynamicImage::ImageLumaA8(b) => (2, Samples::U8(b.into_raw())),
@@ -198,6 +225,54 @@ mod tests {
                 assert_eq!(image_info(&p)?, (5, 3, channels, bits));
                 let _ = std::fs::remove_file(&p);
             }
+        }
+        Ok(())
+    }
+
+    /// The CRC-32 of a PNG chunk (type and data).
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in bytes {
+            c ^= u32::from(b);
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+
+    #[test]
+    fn a_header_promising_more_than_the_limit_is_refused_named() -> Result<()> {
+        let img = Image::new(4, 4, 3, Samples::U8(vec![7; 48]))?;
+        let png = png_bytes(&img)?;
+        for (w, h, limit) in [
+            (20000u32, 20000u32, "(MAX_IMAGE_PIXELS)"),
+            (70000, 1, "(MAX_IMAGE_SIDE)"),
+        ] {
+            // IHDR: length at 8, type at 12, width and height at 16 and 20, CRC at 29.
+            let mut b = png.clone();
+            b[16..20].copy_from_slice(&w.to_be_bytes());
+            b[20..24].copy_from_slice(&h.to_be_bytes());
+            let crc = crc32(&b[12..29]);
+            b[29..33].copy_from_slice(&crc.to_be_bytes());
+            let p = tmp(&format!("huge{w}.png"));
+            std::fs::write(&p, &b).map_err(|e| Error::io("write", &p, e))?;
+            assert_eq!(image_info(&p)?.0, w, "the header is read as patched");
+            let err = read_image(&p)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(
+                err.contains(&format!("header promises a {w}x{h} image"))
+                    && err.contains(limit)
+                    && err.contains(&format!("huge{w}.png")),
+                "{err}"
+            );
+            let _ = std::fs::remove_file(&p);
         }
         Ok(())
     }

@@ -41,6 +41,10 @@ pub fn decode_passes(bytes: &[u8], path: &Path) -> Result<Passes> {
         reason,
         path: path.to_path_buf(),
     };
+    // The crate allocates every channel from the header's size: check it first.
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
+        .map_err(|e| bad(format!("EXR: {e}")))?;
+    super::read::check_sizes(&meta).map_err(bad)?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()

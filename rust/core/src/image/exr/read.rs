@@ -10,6 +10,7 @@
 //! Blocks are decoded in parallel on the rayon pool; each block also reports whether it
 //! held a NaN or inf, so the accumulator needs no second pass to refuse such a frame.
 use crate::error::{Error, Result};
+use crate::ground::limits::{self, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 use crate::image::CH;
 use exr::block::chunk::{Chunk, CompressedBlock};
 use exr::block::UncompressedBlock;
@@ -46,6 +47,49 @@ pub fn read_exr(path: &Path) -> Result<Frame> {
         height: d.height as u32,
         rgba,
     })
+}
+
+/// Decode an EXR file held in memory (as [`read_exr`]; errors name it `<bytes>`).
+/// Arbitrary bytes give a frame or an error, never a panic nor an allocation past
+/// [`MAX_IMAGE_PIXELS`] (fuzzed).
+pub fn decode_exr(bytes: &[u8]) -> Result<Frame> {
+    let mut rgba = Vec::new();
+    let d = decode_rgba(bytes, Path::new("<bytes>"), &mut rgba)?;
+    Ok(Frame {
+        width: d.width as u32,
+        height: d.height as u32,
+        rgba,
+    })
+}
+
+/// Refuse a file whose headers promise a layer past [`MAX_IMAGE_SIDE`] or
+/// [`MAX_IMAGE_PIXELS`], before anything of that size is allocated: the reason, for
+/// the caller to pair with its file.
+pub(crate) fn check_sizes(meta: &MetaData) -> std::result::Result<(), String> {
+    for h in &meta.headers {
+        let (w, ht) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
+        let side = u64::from(MAX_IMAGE_SIDE);
+        let what = format!("EXR header promises a {w}x{ht} layer");
+        limits::check(&format!("{what}, side"), w.max(ht), side, "MAX_IMAGE_SIDE")?;
+        limits::check(
+            &format!("{what}, pixels"),
+            w * ht,
+            MAX_IMAGE_PIXELS,
+            "MAX_IMAGE_PIXELS",
+        )?;
+    }
+    Ok(())
+}
+
+/// The blocks of the full-resolution level of a layer (scan-line blocks or tiles).
+fn level0_blocks(header: &Header, width: usize, height: usize) -> usize {
+    match header.blocks {
+        BlockDescription::ScanLines => height.div_ceil(header.compression.scan_lines_per_block()),
+        BlockDescription::Tiles(t) => {
+            width.div_ceil(t.tile_size.width().max(1))
+                * height.div_ceil(t.tile_size.height().max(1))
+        }
+    }
 }
 
 /// Read a whole file into `buf`, reusing its memory; on Unix the two halves are read
@@ -98,6 +142,7 @@ pub(crate) fn decode_rgba(bytes: &[u8], path: &Path, rgba: &mut Vec<f32>) -> Res
     let exr_err = |e: exr::error::Error| bad(format!("EXR: {e}"));
     let reader = exr::block::read(Cursor::new(bytes), false).map_err(exr_err)?;
     let meta = reader.meta_data().clone();
+    check_sizes(&meta).map_err(bad)?;
 
     let has_rgb = |h: &Header| {
         ["R", "G", "B"]
@@ -176,6 +221,15 @@ pub(crate) fn decode_rgba(bytes: &[u8], path: &Path, rgba: &mut Vec<f32>) -> Res
                     .collect()
             }
         };
+        // A file with fewer blocks than its header's size needs is refused before the
+        // frame is allocated.
+        let need = level0_blocks(header, width, height);
+        if blocks.len() < need {
+            return Err(bad(format!(
+                "{} scan-line blocks for a {width}x{height} image, expected {need}",
+                blocks.len()
+            )));
+        }
         // Every value of the frame is written (a missing block is an error), so a
         // buffer of the right size is reused as it is.
         if rgba.len() != n {
@@ -185,6 +239,13 @@ pub(crate) fn decode_rgba(bytes: &[u8], path: &Path, rgba: &mut Vec<f32>) -> Res
         decode_scanlines(&blocks, header, &slots, width, height, rgba).map_err(bad)?
     } else {
         let chunks = read_chunks(reader, layer).map_err(exr_err)?;
+        let need = level0_blocks(header, width, height);
+        if chunks.len() < need {
+            return Err(bad(format!(
+                "{} blocks for a {width}x{height} image, expected {need}",
+                chunks.len()
+            )));
+        }
         rgba.clear();
         rgba.resize(n, if has_alpha { 0.0 } else { 1.0 });
         decode_generic(chunks, &meta, header, &slots, width, rgba).map_err(bad)?;
@@ -770,5 +831,132 @@ mod tests {
             .unwrap_or_default();
         assert!(e.contains("bad.exr") && e.contains("ZIP block"), "{e}");
         Ok(())
+    }
+
+    /// `file` (scan lines, `lines` a block) with its data and display windows set to
+    /// `w` x `h` and the chunk count to match: the header's size.
+    fn resized(file: &[u8], lines: i32, w: i32, h: i32) -> Vec<u8> {
+        let mut out = file.to_vec();
+        let name = b"chunkCount\0int\0";
+        if let Some(i) = out.windows(name.len()).position(|x| x == name) {
+            let at = i + name.len() + 4;
+            out[at..at + 4].copy_from_slice(&((h + lines - 1) / lines).to_le_bytes());
+        }
+        for name in [&b"dataWindow\0box2i\0"[..], &b"displayWindow\0box2i\0"[..]] {
+            let at = out
+                .windows(name.len())
+                .position(|x| x == name)
+                .map(|i| i + name.len() + 4)
+                .unwrap_or_else(|| panic!("no {name:?}"));
+            out[at + 8..at + 12].copy_from_slice(&(w - 1).to_le_bytes());
+            out[at + 12..at + 16].copy_from_slice(&(h - 1).to_le_bytes());
+        }
+        out
+    }
+
+    #[test]
+    fn a_header_promising_more_than_the_limit_is_refused_named() -> Result<()> {
+        let path = Path::new("huge.exr");
+        let mut out = Vec::new();
+        for compression in [Compression::ZIP16, Compression::PIZ] {
+            let file = sample_file(compression, Blocks::ScanLines, false)?;
+            let lines = compression.scan_lines_per_block() as i32;
+            let resized = |w, h| resized(&file, lines, w, h);
+            // 20000 x 20000 = 4e8 pixels (6.4 GB as RGBA f32) from a file of a few KB.
+            let e = decode_rgba(&resized(20000, 20000), path, &mut out)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(
+                e.contains("EXR header promises a 20000x20000 layer, pixels: 400000000, over the limit of 268435456 (MAX_IMAGE_PIXELS)")
+                    && e.contains("huge.exr"),
+                "{e}"
+            );
+            assert!(out.capacity() < 1 << 20, "allocated before refusing");
+            let e = decode_rgba(&resized(70000, 1), path, &mut out)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(
+                e.contains("(MAX_IMAGE_SIDE)") && e.contains("huge.exr"),
+                "{e}"
+            );
+            // Under the limits, a header larger than the file's blocks is refused before
+            // the frame is allocated (16384 x 16384 would be 4 GiB).
+            let e = decode_rgba(&resized(16384, 16384), path, &mut out)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(e.contains("huge.exr"), "{e}");
+            assert!(out.capacity() < 1 << 20, "allocated before refusing");
+        }
+        // The guide-pass reader refuses it too, before the crate allocates its channels.
+        let file = sample_file(Compression::ZIP16, Blocks::ScanLines, false)?;
+        let e = super::super::passes::decode_passes(&resized(&file, 16, 20000, 20000), path)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            e.contains("(MAX_IMAGE_PIXELS)") && e.contains("huge.exr"),
+            "{e}"
+        );
+        Ok(())
+    }
+
+    // The reader's fuzz harness in `cargo test` (rust/fuzz/fuzz_targets/exr.rs runs it
+    // longer): arbitrary bytes and mutations of valid files of each codec give a frame
+    // or an error, never a panic.
+    mod fuzz {
+        use super::*;
+        use proptest::prelude::*;
+
+        fn seeds() -> &'static [Vec<u8>] {
+            static SEEDS: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
+            SEEDS.get_or_init(|| {
+                let mut v = Vec::new();
+                for c in [
+                    Compression::Uncompressed,
+                    Compression::ZIP16,
+                    Compression::RLE,
+                ] {
+                    for b in [Blocks::ScanLines, Blocks::Tiles(Vec2(16, 8))] {
+                        v.extend(sample_file(c, b, false).ok());
+                    }
+                }
+                v
+            })
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(1000))]
+            #[test]
+            fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+                let mut prefixed = 20_000_630i32.to_le_bytes().to_vec();
+                prefixed.extend_from_slice(&[2, 0, 0, 0]);
+                prefixed.extend_from_slice(&bytes);
+                let _ = decode_exr(&bytes);
+                let _ = decode_exr(&prefixed);
+            }
+
+            #[test]
+            fn mutated_files_never_panic(
+                which in 0usize..6,
+                edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+                cut in any::<prop::sample::Index>(),
+            ) {
+                let seeds = seeds();
+                let mut b = seeds[which % seeds.len()].clone();
+                // Most edits land in the header, where the sizes are.
+                for (at, v) in edits {
+                    let i = at.index(b.len().min(400));
+                    b[i] = v;
+                }
+                let keep = b.len() - cut.index(b.len() / 4 + 1);
+                b.truncate(keep);
+                if let Ok(f) = decode_exr(&b) {
+                    prop_assert_eq!(f.rgba.len(), f.width as usize * f.height as usize * CH);
+                }
+            }
+        }
     }
 }
