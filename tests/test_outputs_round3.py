@@ -424,3 +424,12 @@ def test_open_scene_names_an_image_of_the_wrong_size(b):
         open_scene(b, s.name, "sharp")
     with pytest.raises(InputError, match=png.name):
         open_scene(b, s.name, "blur_1")  # the sharp images are the clean ones
+
+
+def test_noise_frames_past_the_limit_is_refused_before_anything(b, tmp_path):
+    out = tmp_path / "n"
+    line = refused(
+        run_cli("noise", str(b), "--out", str(out), "--frames", "100000000", check=False),
+        "--frames 100000000",
+    )
+    assert "256" in line and not out.exists()

@@ -16,6 +16,10 @@ pub const LLFF_N_GAINS: [f64; 6] = [1.0, 2.0, 4.0, 8.0, 16.0, 20.0];
 /// A count of at least one with no upper bound of its own.
 const AT_LEAST_ONE: Spec = Spec::int(1, u32::MAX as i128);
 
+/// The most noisy frames per view: a burst of KPN's 8 many times over, and a bound on
+/// the names and files one run plans (100 000 000 grew past 3 GB before writing any).
+pub const MAX_FRAMES: u32 = 256;
+
 /// The options of `blurset noise`, declared once: `name: Type = default, range,
 /// shapes|run { flags, help, … }` ([`crate::plan::options::Meta`]). The table is a
 /// macro so that one list makes the struct here and the binding's getters
@@ -45,7 +49,7 @@ macro_rules! noise_options {
     profile: NoiseProfile = NoiseProfile::Paper, choice::<NoiseProfile>(), shapes {
         help: "paper: random white balance per scene; nan: none (parity with NAN's evaluation)",
     };
-    frames: u32 = 1, AT_LEAST_ONE, shapes {
+    frames: u32 = 1, Spec::int(1, MAX_FRAMES as i128), shapes {
         help: "independent noisy frames per view",
     };
     /// KPN's synthetic test file (.npz) whose sigmas NAN used.
@@ -188,6 +192,11 @@ mod tests {
     #[test]
     fn a_bad_value_names_its_option() {
         assert!(err("frames", Raw::Int(0)).starts_with("frames 0:"));
+        let e = err("frames", Raw::Int(100_000_000));
+        assert!(
+            e.starts_with("frames 100000000:") && e.contains("256"),
+            "{e}"
+        );
         assert!(err("white_level", Raw::Float(2.0)).starts_with("white_level "));
         assert!(err("seed", Raw::Int(-1)).starts_with("seed -1:"));
         assert!(err("factor", Raw::Int(0)).starts_with("factor 0:"));
