@@ -735,6 +735,52 @@ mod tests {
         Ok(())
     }
 
+    #[test]
+    fn noise_owns_only_its_gain_folders_a_users_folder_inside_a_level_is_kept() -> Result<()> {
+        // A build's noise output: the gain folders are its units; a folder of the
+        // user's beside them (inside a level) is not, and --overwrite keeps it.
+        let d = tmp("noise-level");
+        write(
+            &d.join("noise_dataset.json"),
+            r#"{"build": "b", "params": {}}"#,
+        );
+        write(&d.join("a_000/blur_3/gain_4/noise.json"), "{}");
+        write(&d.join("a_000/blur_3/gain_8.partial/x.png"), "x");
+        write(&d.join("a_000/blur_3/my_notes/n.txt"), "mine");
+        write(&d.join("a_000/blur_3/gain_notes.txt"), "mine");
+        let owned = owned_entries(&d, OutputKind::Noise)?;
+        assert_eq!(
+            owned,
+            [
+                "noise_dataset.json",
+                "a_000/blur_3/gain_4",
+                "a_000/blur_3/gain_8.partial"
+            ]
+        );
+        remove_owned(&d, OutputKind::Noise)?;
+        assert_eq!(
+            std::fs::read_to_string(d.join("a_000/blur_3/my_notes/n.txt")).ok(),
+            Some("mine".into())
+        );
+        assert!(d.join("a_000/blur_3/gain_notes.txt").is_file());
+        assert!(!d.join("a_000/blur_3/gain_4").exists());
+        // One noisy scene: likewise at its top.
+        let s = tmp("noise-scene-level");
+        write(
+            &s.join("noise_scene.json"),
+            r#"{"kind": "blurset noise", "gains": []}"#,
+        );
+        write(&s.join("gain_2/noise.json"), "{}");
+        write(&s.join("images/mine.png"), "mine");
+        assert_eq!(
+            owned_entries(&s, OutputKind::NoiseScene)?,
+            ["noise_scene.json", "gain_2"]
+        );
+        let _ = std::fs::remove_dir_all(&d);
+        let _ = std::fs::remove_dir_all(&s);
+        Ok(())
+    }
+
     fn setting(d: &Path, name: &str, uid: &str, source: &str) {
         write(
             &d.join(name).join("meta.json"),

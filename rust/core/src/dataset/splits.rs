@@ -285,6 +285,22 @@ mod tests {
     }
 
     #[test]
+    fn the_build_stride_picks_the_test_views_of_every_setting() -> Result<()> {
+        // The stride is the build's (`--test-view-stride`), not the paper's 16: every
+        // setting holds out views 0, s, 2s, … below its view count, and records s.
+        for stride in [1usize, 5, 8, 16, 40] {
+            let s = make_splits(&entries(3, 2), stride, &frac(0.2), true, 0)?;
+            assert_eq!(s.view_stride, stride);
+            for (setting, views) in &s.test_views {
+                let want: Vec<usize> = (0..34).step_by(stride).collect();
+                assert_eq!(views, &want, "{setting}, stride {stride}");
+            }
+            assert_eq!(s.test_views.len(), 6);
+        }
+        Ok(())
+    }
+
+    #[test]
     fn objects_never_straddle_and_choice_is_seeded() -> Result<()> {
         let e = entries(10, 4);
         let s = make_splits(&e, 16, &frac(0.2), true, 1)?;
