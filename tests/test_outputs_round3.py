@@ -433,3 +433,23 @@ def test_noise_frames_past_the_limit_is_refused_before_anything(b, tmp_path):
         "--frames 100000000",
     )
     assert "256" in line and not out.exists()
+
+
+# -- readers of a damaged build ------------------------------------------------------------
+
+
+def test_card_noise_and_stats_do_not_call_a_damaged_build_whole(b, tmp_path):
+    s = a_setting(b)
+    meta = json.loads((s / layout.META).read_text())
+    meta["views"] = meta["views"] * 1000  # a meta.json promising 4000 views
+    (s / layout.META).write_text(json.dumps(meta))
+    for argv in (
+        ["card", str(b), "--out", str(tmp_path / "card.md")],
+        ["noise", str(b), "--out", str(tmp_path / "n"), "--gains", "1"],
+    ):
+        line = refused(run_cli(*argv, check=False), "damaged setting", s.name)
+        assert "4000" in line, line
+    assert not (tmp_path / "card.md").exists() and not (tmp_path / "n").exists()
+    p = run_cli("stats", str(b), "--out", str(tmp_path / "st"))
+    assert f"damaged settings: {s.name}" in p.stdout
+    assert "not finished" in (tmp_path / "st" / "report.md").read_text()

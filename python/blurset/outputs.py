@@ -169,7 +169,30 @@ def finished_build(build: Path, option: str = "BUILD") -> _core.BuildState:
             f"{'; …' if len(state.provisional) > 1 else ''}): let its run end, or rerun "
             f"`blurset build` with the same options to finish it: {build}"
         )
+    damaged = damaged_settings(build, state.complete)
+    if damaged:
+        name, problem = damaged[0]
+        raise InputError(
+            f"{option} has a damaged setting ({name}: {problem}"
+            f"{f'; and {len(damaged) - 1} more' if len(damaged) > 1 else ''}): rerun "
+            f"`blurset build` with the same options to redo it (`blurset verify` lists "
+            f"everything): {build}"
+        )
     return state
+
+
+def damaged_settings(build: Path, complete: list[str]) -> list[tuple[str, str]]:
+    """(setting, what is wrong) of every complete setting of `build` that the cheap check
+    of a rerun would redo (a missing image or level, a truncated pose file, a meta.json
+    promising more views than the folder holds)."""
+    from blurset import layout
+
+    out = []
+    for name in complete:
+        problem = layout.setting_problem(Path(build) / name)
+        if problem is not None:
+            out.append((name, problem))
+    return out
 
 
 def noise_mismatch(doc: dict, noise: Path, build: Path) -> str | None:

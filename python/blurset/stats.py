@@ -534,7 +534,14 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     document = build_stats(build)  # names what is not a build, before anything is written
     # Stats may read a running build: they say what they describe.
-    provisional = outputs.build_state(build).provisional
+    state = outputs.build_state(build)
+    provisional = list(state.provisional)
+    damaged = outputs.damaged_settings(build, state.complete)
+    if damaged:
+        # Counted from their meta.json all the same: said, not passed off as whole.
+        shown = ", ".join(f"{n} ({p})" for n, p in damaged[:3])
+        more = f" and {len(damaged) - 3} more" if len(damaged) > 3 else ""
+        provisional.append(f"damaged settings: {shown}{more}")
     # What the figures and the summary read: the document and whether it is provisional.
     stats: dict[str, Any] = {**document.to_dict(), "provisional": provisional}
     t_read = time.perf_counter() - t0
