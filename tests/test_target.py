@@ -76,11 +76,16 @@ def test_next_round_extrapolates_from_the_estimate():
     # The pilot: 16 samples a half, split over the frames (at least one each).
     assert _core.target_next_round(cfg, frames=1, spent_per_frame=0, rounds=0) == 16
     assert _core.target_next_round(cfg, frames=5, spent_per_frame=0, rounds=0) == 4
-    # 10x the target's MSE after 16: 10x the samples (aimed 0.2 dB above the target).
-    add = _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=1e-3)
-    assert 16 + add == math.ceil(160 * 10**0.02)
-    more = _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=3e-3)
-    assert more > add
+    # 5x the target's MSE after 16: 5x the samples (aimed 0.2 dB above the target).
+    add = _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=5e-4)
+    assert 16 + add == math.ceil(80 * 10**0.02)
+    # Far from it: at most 8x before the fall of the noise is seen, then the fitted fall.
+    more = _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=1e-2)
+    assert 16 + more == 128
+    fit = _core.target_next_round(
+        cfg, frames=1, spent_per_frame=128, rounds=2, mse=1e-2 / 8**1.5, previous=(16, 1e-2)
+    )
+    assert 128 + fit == math.ceil(128 * (1e-2 / 8**1.5 / 10**-4.02) ** (1 / 1.5))
     assert _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=9e-5) is None
 
 
@@ -147,21 +152,31 @@ def test_an_image_that_needs_more_gets_more(tmp_path, box):
                 "--latent-positions", "stratified")  # fmt: skip
     hi = _build(tmp_path / "hi", box, "--target-psnr", "44", "--latents", "auto",
                 "--latent-positions", "stratified")  # fmt: skip
+    total = {"lo": 0, "hi": 0}
     for vl, vh in zip(lo["views"], hi["views"], strict=True):
         for level, rec in vl["images"].items():
-            # 6 dB more accuracy: about 4x the samples (the pilot is shared).
-            assert vh["images"][level]["samples"] > 2 * rec["samples"], (level, rec)
+            # 6 dB more accuracy: never fewer samples, and more in all (the pilot is
+            # shared; an image whose noise falls faster than 1 / samples overshoots the
+            # lower target, so not 4x each).
+            assert vh["images"][level]["samples"] >= rec["samples"], (level, rec)
+            assert vh["images"][level]["render_psnr_db"] >= 44 - 0.25
+            total["lo"] += rec["samples"]
+            total["hi"] += vh["images"][level]["samples"]
+    assert total["hi"] > 1.5 * total["lo"], total
     # Within one build: the samples an image got follow from its own pilot estimate
-    # (variance as 1 / samples, aimed 0.2 dB above the target), so a noisier image
-    # at the pilot gets more.
+    # (variance as 1 / samples, aimed 0.2 dB above the target, at most 8x the pilot in
+    # one step), so a noisier image at the pilot gets more.
+    checked = 0
     for v in hi["views"]:
         for level, rec in v["images"].items():
             if rec["rounds"] != 2:
                 continue
             m = 1 if level == "sharp" else v["levels"][level.removeprefix("blur_")]["latents"]
             pilot = max(1, math.ceil(16 / m))
-            need = pilot * 10 ** ((44.2 - rec["pilot_psnr_db"]) / 10)
+            need = min(pilot * 10 ** ((44.2 - rec["pilot_psnr_db"]) / 10), 8 * pilot)
             assert rec["samples"] == pytest.approx(2 * m * need, abs=2 * m + 0.01 * need * m)
+            checked += 1
+    assert checked > 0
 
 
 @pytest.mark.blender

@@ -43,9 +43,11 @@ def target_next_round(
     spent_per_frame: int,
     rounds: int,
     mse: float | None = None,
+    previous: tuple[int, float] | None = None,
 ) -> int | None:
     """Samples per frame and half of an image's next round under the config's target, or
-    None when it is done (`mse`: the last estimate; None before the pilot)."""
+    None when it is done (`mse`: the last estimate, None before the pilot; `previous`:
+    samples per frame and half and the MSE of the estimate before it)."""
 
 _OptionKind: TypeAlias = Literal[
     "switch",

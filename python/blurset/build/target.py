@@ -30,6 +30,7 @@ class _Image:
     spent: int = 0
     rounds: int = 0
     estimate: Any = None  # _core.ObjectError of the last round
+    previous: tuple[int, float] | None = None  # (spent, mse) of the round before
     pilot_db: float = 0.0
 
     def record(self, target: float) -> dict[str, Any]:
@@ -92,6 +93,7 @@ def render_to_target(
                     spent_per_frame=im.spent,
                     rounds=im.rounds,
                     mse=None if im.estimate is None else im.estimate.mse,
+                    previous=im.previous,
                 )
                 if add is None:
                     a, b = im.halves
@@ -125,6 +127,8 @@ def render_to_target(
             n_renders += len(renders)
             for key, add in adds.items():
                 im = group[key]
+                if im.estimate is not None:
+                    im.previous = (im.spent, float(im.estimate.mse))
                 im.spent += add
                 im.rounds += 1
                 a, b = im.halves

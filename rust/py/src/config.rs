@@ -392,15 +392,17 @@ fn preset_values<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict
 
 /// Samples per frame and half of an image's next round under the config's target, or
 /// None when the image is done (core `TargetRule::next_round`; `mse`: the last estimate,
-/// None before the pilot).
+/// None before the pilot; `previous`: (samples per frame and half, MSE) of the estimate
+/// before it).
 #[pyfunction]
-#[pyo3(signature = (config, *, frames, spent_per_frame, rounds, mse = None))]
+#[pyo3(signature = (config, *, frames, spent_per_frame, rounds, mse = None, previous = None))]
 fn target_next_round(
     config: PyRef<'_, BuildConfig>,
     frames: u32,
     spent_per_frame: u32,
     rounds: u32,
     mse: Option<f64>,
+    previous: Option<(u32, f64)>,
 ) -> PyResult<Option<u32>> {
     let rule = config
         .0
@@ -411,6 +413,7 @@ fn target_next_round(
         spent_per_frame,
         rounds,
         mse,
+        previous,
     }))
 }
 

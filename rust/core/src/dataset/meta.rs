@@ -273,9 +273,11 @@ impl RenderRecord {
                      halves on independent seeds, each half's frames taking consecutive \
                      blocks of one {}-sample Cycles sequence; after a pilot of {} samples \
                      its render noise is MSE(half 1, half 2) / 4 on its object pixels, the \
-                     samples it still needs are extrapolated as 1 / samples, and it stops \
-                     once the estimate is within 0.25 dB of the target (at most {} samples, \
-                     4 rounds); the image is the mean of its halves",
+                     samples it still needs are extrapolated as samples^-alpha (alpha 1 and \
+                     at most 8x the samples from the pilot alone, alpha fitted in [1, 2] \
+                     from two estimates), and it stops once the estimate is within 0.25 dB \
+                     of the target (at most {} samples, 6 rounds); the image is the mean \
+                     of its halves",
                     t.sequence(),
                     t.pilot_samples,
                     t.max_samples
