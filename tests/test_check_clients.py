@@ -96,5 +96,7 @@ def test_json_never_replaces_a_file_it_did_not_write(cc, tmp_path, capsys):
     own.write_text(
         json.dumps({"python": "py", "versions": [], "ran": [], "scenes": [], "phases": []})
     )
-    with pytest.raises(FileNotFoundError):  # past the claim: the export is absent
-        cc.main([*args, "--json", str(own)])
+    capsys.readouterr()
+    assert cc.main([*args, "--json", str(own)]) == 2  # past the claim: the export is absent
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "export.json" in line and str(tmp_path / "none") in line, line

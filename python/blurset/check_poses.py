@@ -1197,9 +1197,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         # Before COLMAP runs: a report never replaces a file it did not write, nor lands
         # in what it checks or in any blurset output.
+        outputs.claim_report(args.json, is_report, "--json")
         layout.refuse_overlap(args.json, [path], "--json")
         outputs.refuse_inside_output(args.json, "--json")
-        outputs.claim_report(args.json, is_report, "--json")
     if is_setting(path):
         if args.level != "all":
             _check_level_name(args.level)
