@@ -144,6 +144,16 @@ def test_target_build_records_every_image_and_gives_the_same_bytes_twice(tmp_pat
 
     assert len(images(tmp_path / "a")) > 20
     assert images(tmp_path / "a") == images(tmp_path / "b")
+    # stats and the card show the distributions of what each image cost and reached.
+    run_cli("stats", str(tmp_path / "a"), "--out", str(tmp_path / "st"))
+    st = json.loads((tmp_path / "st" / "stats.json").read_text())
+    n_images = sum(len(v["images"]) for v in a["views"])
+    assert sum(x is not None for xs in st["render_psnr"].values() for x in xs) == n_images
+    assert sorted(st["image_samples"], key=int) == ["0", "1", "4"]
+    assert (tmp_path / "st" / "render_psnr.png").stat().st_size > 1000
+    run_cli("card", str(tmp_path / "a"), "--out", str(tmp_path / "card.md"))
+    card = (tmp_path / "card.md").read_text()
+    assert "| preset | - | fast |" in card and "render PSNR dB (worst, 5th pct, median)" in card
 
 
 @pytest.mark.blender

@@ -318,6 +318,40 @@ def make_card(
     return "\n".join(out)
 
 
+def _render_table(metas: list[dict], levels: list[str], target: Any) -> list[str]:
+    """Under --target-psnr: per level, what the images cost and reached (the worst
+    image and the 5th percentile beside the median: a mean would hide the worst)."""
+    from blurset import _core
+
+    rows = [
+        f"Every image was rendered until its render PSNR on the object's pixels, estimated "
+        f"from two independent halves of its samples, reached {_fmt(target)} dB.",
+        "",
+        "| level | images | samples (median, max) | render PSNR dB (worst, 5th pct, median) "
+        "| reached |",
+        "|---|---|---|---|---|",
+    ]
+    for lvl in levels:
+        recs = [
+            im
+            for meta in metas
+            for v in meta.get("views", [])
+            if isinstance(im := (v.get("images") or {}).get(lvl), dict)
+        ]
+        if not recs:
+            continue
+        n = [r["samples"] for r in recs]
+        db = [r["render_psnr_db"] for r in recs]
+        sp = _core.spread(db)
+        reached = sum(bool(r.get("reached")) for r in recs)
+        rows.append(
+            f"| {lvl} | {len(recs)} | {statistics.median(n):.0f}, {max(n)} | "
+            f"{sp['worst']:.1f}, {sp['p5']:.1f}, {statistics.median(db):.1f} | "
+            f"{reached} of {len(recs)} |"
+        )
+    return [*rows, ""]
+
+
 def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> list[str]:
     sampling = m0.get("sampling") or {}
     render = m0.get("render") or {}
@@ -347,6 +381,8 @@ def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> 
         ("Cycles samples per latent frame", render.get("samples_per_latent")),
         ("blurry sample budget", render.get("blur_budget")),
         ("Cycles samples of a sharp image", render.get("sharp_samples")),
+        ("preset", render.get("preset", cfg.get("preset"))),
+        ("render PSNR target per image (dB, object pixels)", render.get("target_psnr_db")),
         ("denoiser", _denoiser(render, cfg)),
         ("background", _fmt(render.get("background", cfg.get("background")))),
         ("seed", cfg.get("seed")),
@@ -370,6 +406,11 @@ def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> 
         "",
         *_level_table(metas, levels),
         "",
+        *(
+            _render_table(metas, levels, render["target_psnr_db"])
+            if render.get("target_psnr_db") is not None
+            else []
+        ),
     ]
 
 

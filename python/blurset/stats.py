@@ -58,6 +58,16 @@ FIGURES = {
         "largest bounding-box corner motion  (px at build resolution)",
         "views",
     ),
+    "render_psnr": (
+        "Render PSNR per image (level 0: sharp)",
+        "estimated render PSNR on the object's pixels  (dB)",
+        "images",
+    ),
+    "image_samples": (
+        "Samples per image (level 0: sharp)",
+        "Cycles samples, every latent frame and both halves  (samples)",
+        "images",
+    ),
 }
 FACTORS = [  # (quantity, panel title, x label with unit)
     ("flatness", "Flatness F", "F = (f − n) / max(d)  (ratio)"),
@@ -223,13 +233,16 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
         ("blur_weight", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
         ("latent_frames", lambda ax, v, q: _bars(ax, v)),
         ("motion_px", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
+        # --target-psnr builds only: what each image cost and reached.
+        ("render_psnr", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
+        ("image_samples", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
     ]
     blurry = f"{n_set} settings"
     if c.get("sharp_copy_views"):
         blurry += f"; {c['sharp_copy_views']} held-out sharp copies left out"
     for name, draw in per_level:
-        by_level = stats[name]
-        if name == "motion_px" and not by_level:
+        by_level = stats.get(name) or {}
+        if name in ("motion_px", "render_psnr", "image_samples") and not by_level:
             continue
         title, xlabel, ylabel = FIGURES[name]
         levels = sorted(by_level, key=int) or ["-"]
@@ -248,7 +261,10 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
             values = by_level.get(lvl, [])
             n = sum(x is not None for x in values)
             draw(ax, values, f"{name}_{lvl}")
-            panel = f"level {lvl} ({n} blurry views)" if by_level else "no blur levels (sharp only)"
+            per_image = name in ("render_psnr", "image_samples")
+            what = f"{n} images" if per_image else f"{n} blurry views"
+            label = "sharp" if per_image and lvl == "0" else f"level {lvl}"
+            panel = f"{label} ({what})" if by_level else "no blur levels (sharp only)"
             ax.set(title=panel, xlabel=xlabel, ylabel=ylabel)
         fig.suptitle(f"{title} — {blurry}")
         _save(fig, out_dir / f"{name}.png")
@@ -306,8 +322,8 @@ def write_csvs(stats: dict, out_dir: Path) -> list[Path]:
     """views.csv (one row per view), settings.csv, summary.csv, counts.csv."""
     per_level = [
         (f"{name}_{lvl}", stats[name][lvl])
-        for name in ("blur_weight", "latent_frames", "motion_px")
-        for lvl in sorted(stats[name], key=int)
+        for name in ("blur_weight", "latent_frames", "motion_px", "render_psnr", "image_samples")
+        for lvl in sorted(stats.get(name) or {}, key=int)
     ]
     view_cols = ["scene_range", "flatness", "depth_range", "orientation", "w_u"]
     settings = stats["settings"]

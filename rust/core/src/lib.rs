@@ -20,14 +20,14 @@ pub use crate::error::{Error, Result};
 pub use crate::rng::seed_for;
 
 // What one setting renders: views, trajectories, levels, latent frames.
+pub use crate::plan::choices::{Choice, Preset};
 pub use crate::plan::config::BuildConfig;
 pub use crate::plan::options::OptionInfo;
-pub use crate::plan::choices::{Choice, Preset};
 pub use crate::plan::presets::{preset_values, FLOOR_PSNR_DB};
 pub use crate::plan::renders::{level_renders, Motion, Render};
-pub use crate::plan::target::{round_renders, ImageRound, ImageState, TargetRule};
 pub use crate::plan::sampling::{plan_setting, LevelPlan, SamplingConfig, SettingPlan};
 pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
+pub use crate::plan::target::{round_renders, ImageRound, ImageState, TargetRule};
 
 // Linear frames in, encoded images out; image files; render QA.
 pub use crate::image::accumulate::Accumulator;
@@ -65,8 +65,8 @@ pub use crate::dataset::manifest::{
     ManifestProblem, MANIFEST,
 };
 pub use crate::dataset::meta::{
-    read_exposure_ends, read_mean_poses, write_json, DeviceRecord, ImageRender, LightPathsRecord, Meta,
-    ObjectRecord, Pose, Timings,
+    read_exposure_ends, read_mean_poses, write_json, DeviceRecord, ImageRender, LightPathsRecord,
+    Meta, ObjectRecord, Pose, Timings,
 };
 pub use crate::dataset::outputs::{
     build_state, claim, mark_text, output_kind, owned_entries, remove_owned, superseded_settings,

@@ -271,6 +271,7 @@ pub fn pareto_front(seconds: &[f64], psnr: &[f64]) -> Result<Vec<bool>> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
 mod tests {
     use super::*;
 

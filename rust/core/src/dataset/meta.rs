@@ -486,6 +486,13 @@ pub struct ReadLevel {
     pub motion_px: Option<f64>,
 }
 
+/// How an image of a target-driven build was rendered, as the statistics read it.
+#[derive(Debug, Deserialize)]
+pub struct ReadImage {
+    pub samples: u64,
+    pub render_psnr_db: f64,
+}
+
 #[derive(Debug, Deserialize)]
 pub struct ReadView {
     pub index: u64,
@@ -497,6 +504,9 @@ pub struct ReadView {
     pub w_u: f64,
     #[serde(default)]
     pub levels: BTreeMap<String, ReadLevel>,
+    /// `--target-psnr` builds: per level directory.
+    #[serde(default)]
+    pub images: BTreeMap<String, ReadImage>,
 }
 
 /// The fields of [`Meta`] the statistics use (older metas may lack `levels`).

@@ -29,6 +29,7 @@ use super::layout::MARKER;
 use super::layout::{self, Scan};
 use super::meta::{ReadLevel as MetaLevel, ReadMeta as Meta};
 use crate::error::{Error, Result};
+use crate::ground::names::parse_level_dir;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
@@ -84,6 +85,18 @@ pub const QUANTITIES: &[(&str, &str, &str)] = &[
         "motion_px",
         "px",
         "largest screen motion of a bounding-box corner over the trajectory at level l (one per blurry view)",
+    ),
+    (
+        "render_psnr",
+        "dB",
+        "render PSNR of an image on its object's pixels, estimated from its two halves \
+         (--target-psnr builds; level 0 is the sharp image; one per rendered image)",
+    ),
+    (
+        "image_samples",
+        "samples",
+        "Cycles samples an image rendered, every latent frame and both halves \
+         (--target-psnr builds; level 0 is the sharp image; one per rendered image)",
     ),
 ];
 
@@ -216,6 +229,11 @@ pub struct BuildStats {
     pub blur_weight: BTreeMap<u32, Vec<Option<f64>>>,
     pub latent_frames: BTreeMap<u32, Vec<Option<u64>>>,
     pub motion_px: BTreeMap<u32, Vec<Option<f64>>>,
+    /// `--target-psnr` builds (absent otherwise): per level, 0 the sharp image.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub render_psnr: BTreeMap<u32, Vec<Option<f64>>>,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub image_samples: BTreeMap<u32, Vec<Option<u64>>>,
 }
 
 // -- the formulas ----------------------------------------------------------------------
@@ -294,6 +312,8 @@ struct ViewRecord {
     orientation: f64,
     w_u: f64,
     levels: BTreeMap<u32, MetaLevel>,
+    /// Under a target: (samples, estimated render PSNR) per level, 0 the sharp image.
+    images: BTreeMap<u32, (u64, f64)>,
 }
 
 struct SettingRecord {
@@ -387,6 +407,16 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
                 v.far, v.near
             )
         })?;
+        let mut images = BTreeMap::new();
+        for (dir, im) in &v.images {
+            let l = parse_level_dir(dir).ok_or_else(|| {
+                input_error(
+                    format!("bad meta.json (view {i}: image of {dir:?}, not a level directory)"),
+                    &path,
+                )
+            })?;
+            images.insert(l, (im.samples, im.render_psnr_db));
+        }
         views.push(ViewRecord {
             index: i,
             scene_range: sr,
@@ -395,6 +425,7 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
             orientation: v.orientation,
             w_u: v.w_u,
             levels,
+            images,
         });
     }
     // Older metas lack `levels`: sharp plus the blur levels the views record.
@@ -531,7 +562,10 @@ fn assemble(
             .iter()
             .map(|&l| (l, Vec::with_capacity(n_views)))
             .collect(),
+        render_psnr: BTreeMap::new(),
+        image_samples: BTreeMap::new(),
     };
+    let with_sharp: Vec<u32> = std::iter::once(0).chain(levels.iter().copied()).collect();
     for (k, r) in records.into_iter().enumerate() {
         for v in &r.views {
             st.view_setting.push(k);
@@ -553,12 +587,21 @@ fn assemble(
                     .or_default()
                     .push(lp.and_then(|x| x.motion_px));
             }
+            for &l in &with_sharp {
+                let im = v.images.get(&l);
+                st.render_psnr.entry(l).or_default().push(im.map(|x| x.1));
+                st.image_samples.entry(l).or_default().push(im.map(|x| x.0));
+            }
         }
         st.scene_dimension.push(r.scene_dimension);
         st.settings.push(r.info);
     }
     // A level nobody recorded motion for (older metas) has no motion column.
     st.motion_px.retain(|_, v| v.iter().any(Option::is_some));
+    // Builds without a target record no image renders.
+    st.render_psnr.retain(|_, v| v.iter().any(Option::is_some));
+    st.image_samples
+        .retain(|_, v| v.iter().any(Option::is_some));
 
     let complete_uids: BTreeSet<&str> = st.settings.iter().map(|s| s.uid.as_str()).collect();
     st.failures = failures;
@@ -652,6 +695,21 @@ fn summaries(st: &BuildStats) -> Vec<Summary> {
             &format!("motion_px_{l}"),
             unit_of("motion_px"),
             &present(v),
+        ));
+    }
+    for (l, v) in &st.render_psnr {
+        out.push(summarize(
+            &format!("render_psnr_{l}"),
+            unit_of("render_psnr"),
+            &present(v),
+        ));
+    }
+    for (l, v) in &st.image_samples {
+        let n: Vec<f64> = v.iter().flatten().map(|&x| x as f64).collect();
+        out.push(summarize(
+            &format!("image_samples_{l}"),
+            unit_of("image_samples"),
+            &n,
         ));
     }
     out

@@ -196,6 +196,7 @@ pub fn round_renders(base: &[Render], rounds: &[ImageRound], sequence: u32) -> V
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
 mod tests {
     use super::*;
 
@@ -244,7 +245,10 @@ mod tests {
     #[test]
     fn the_first_step_is_bounded_and_the_second_fits_the_exponent() {
         // 100x the target after the pilot: at most 8x the samples before the fall is seen.
-        assert_eq!(RULE.next_round(&state(1, 16, 1, Some(1e-2))), Some(16 * 8 - 16));
+        assert_eq!(
+            RULE.next_round(&state(1, 16, 1, Some(1e-2))),
+            Some(16 * 8 - 16)
+        );
         // From 16 to 128 samples the MSE fell 8^1.5 times: α = 1.5, so the rest of the
         // way (10^0.5 · 10^0.02 in MSE) needs that to the power 1/1.5.
         let s = ImageState {
