@@ -76,7 +76,7 @@ def _config(out: Path, glb: Path):
 
 def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
     """Per (view, level dir): (reference, its own noise MSE on object pixels)."""
-    from blurset import _core
+    from blurset import image
     from blurset.plan import plan_setting, seed_for
     from blurset.worker_client import Worker
 
@@ -101,10 +101,12 @@ def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
             s = REF * per_frame[key] // (2 * m)  # per frame and half
             halves = []
             for salt in SALTS:
-                acc = _core.Accumulator(RES, RES)
+                acc = image.Accumulator(RES, RES)
                 half = []
                 for k, f in enumerate(frames):
-                    g = {x: f[x] for x in ("c2w", "region", "call", "motion") if f.get(x) is not None}
+                    g = {
+                        x: f[x] for x in ("c2w", "region", "call", "motion") if f.get(x) is not None
+                    }
                     g.update(seed=(f["seed"] ^ salt) & 0x7FFFFFFF, samples=s,
                              sample_offset=k * s, sample_sequence=pin,
                              out=str(work / f"ref_{k:04d}.exr"))  # fmt: skip
@@ -118,7 +120,7 @@ def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
                          on_frame=on_frame, crop=True)  # fmt: skip
                 halves.append(acc.mean())
             r1, r2 = halves
-            noise = _core.object_error(r1, r2).mse / 4.0
+            noise = image.object_error(r1, r2).mse / 4.0
             out[key] = ((r1 + r2) / 2.0, noise)
     return out
 
@@ -128,7 +130,7 @@ def _db(mse: float) -> float:
 
 
 def measure_model(glb: Path, work: Path) -> dict:
-    from blurset import _core, layout
+    from blurset import image, layout
     from blurset.build import build
     from blurset.image import read_exr
 
@@ -147,9 +149,9 @@ def measure_model(glb: Path, work: Path) -> dict:
     for v in meta["views"]:
         for level, rec in sorted(v["images"].items()):
             name = layout.image_name(v["index"], len(meta["views"])).replace(".png", ".exr")
-            image = read_exr(setting / level / "linear" / name)
+            img = read_exr(setting / level / "linear" / name)
             ref, ref_noise = refs[(v["index"], level)]
-            e = _core.object_error(image, ref)
+            e = image.object_error(img, ref)
             mse = max(e.mse - ref_noise, 1e-20)
             rows.append(
                 {
@@ -174,7 +176,7 @@ def measure_model(glb: Path, work: Path) -> dict:
 
 
 def summarize(models: list[dict]) -> list[dict]:
-    from blurset import _core
+    from blurset import image
 
     # One fixed count per image kind that reaches the target on every image of every model.
     fixed: dict[str, float] = {}
@@ -185,7 +187,7 @@ def summarize(models: list[dict]) -> list[dict]:
     for m in models:
         rows = m["images"]
         measured = [r["measured_db"] for r in rows]
-        s = _core.spread(measured)
+        s = image.spread(measured)
         spent = sum(r["samples"] for r in rows)
         least = sum(r["least_samples"] for r in rows)
         over = [r["samples"] / r["least_samples"] for r in rows if r["least_samples"] > 0]
@@ -264,8 +266,7 @@ def run() -> list[dict]:
             "ratio_is": "share of images whose estimated render PSNR is within 1 dB of the "
             "measured one, every held-out model",
             "contender": f"{n} images, {len(m['models'])} models",
-            "baseline": "converged references at "
-            f"{REF}x the samples, their own noise taken out",
+            "baseline": f"converged references at {REF}x the samples, their own noise taken out",
             "images": n,
             "at_target_share": sum(r["measured_db"] >= TARGET - 0.5 for r in every) / n,
             "per_image": {mm["model"]: mm["images"] for mm in m["models"]},

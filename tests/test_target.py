@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from blurset import _core
+from blurset import image, plan
 from blurset.config import make_config
+
 from tests.conftest import run_cli
 
 # -- options, presets, the rule (no renders) ---------------------------------------------
@@ -34,7 +34,7 @@ def test_a_preset_sets_targets_and_flags_beside_it_override_it():
     assert _cfg(preset="paper").target_psnr is None
     # Every accuracy preset is a target, never a sample count.
     for name in ("balanced", "floor", "fast"):
-        sets = _core.preset_values(name)
+        sets = plan.preset_values(name)
         assert "target_psnr" in sets and not any("samples" in k for k in sets)
 
 
@@ -60,8 +60,10 @@ def test_the_demo_under_a_preset_keeps_the_preset_and_its_small_size():
         (["--target-psnr", "50", "--denoise", "oidn"], "--denoise"),
         (["--target-pilot-samples", "8"], "--target-pilot-samples"),
         (["--target-psnr", "5"], "--target-psnr"),
-        (["--target-psnr", "50", "--target-pilot-samples", "64", "--target-max-samples", "32"],
-         "--target-pilot-samples"),
+        (
+            ["--target-psnr", "50", "--target-pilot-samples", "64", "--target-max-samples", "32"],
+            "--target-pilot-samples",
+        ),
     ],
 )
 def test_bad_target_options_one_line(tmp_path, args, option):
@@ -74,19 +76,19 @@ def test_bad_target_options_one_line(tmp_path, args, option):
 def test_next_round_extrapolates_from_the_estimate():
     cfg = _cfg(target_psnr=40.0, target_pilot_samples=32)
     # The pilot: 16 samples a half, split over the frames (at least one each).
-    assert _core.target_next_round(cfg, frames=1, spent_per_frame=0, rounds=0) == 16
-    assert _core.target_next_round(cfg, frames=5, spent_per_frame=0, rounds=0) == 4
+    assert plan.target_next_round(cfg, frames=1, spent_per_frame=0, rounds=0) == 16
+    assert plan.target_next_round(cfg, frames=5, spent_per_frame=0, rounds=0) == 4
     # 5x the target's MSE after 16: 5x the samples (aimed 0.2 dB above the target).
-    add = _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=5e-4)
+    add = plan.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=5e-4)
     assert 16 + add == math.ceil(80 * 10**0.02)
     # Far from it: at most 8x before the fall of the noise is seen, then the fitted fall.
-    more = _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=1e-2)
+    more = plan.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=1e-2)
     assert 16 + more == 128
-    fit = _core.target_next_round(
+    fit = plan.target_next_round(
         cfg, frames=1, spent_per_frame=128, rounds=2, mse=1e-2 / 8**1.5, previous=(16, 1e-2)
     )
     assert 128 + fit == math.ceil(128 * (1e-2 / 8**1.5 / 10**-4.02) ** (1 / 1.5))
-    assert _core.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=9e-5) is None
+    assert plan.target_next_round(cfg, frames=1, spent_per_frame=16, rounds=1, mse=9e-5) is None
 
 
 def test_half_noise_on_object_pixels_only():
@@ -96,12 +98,12 @@ def test_half_noise_on_object_pixels_only():
     a[8:24, 8:24, 3] = 1.0
     b = a.copy()
     b[8:24, 8:24, :3] += rng.normal(0, 0.01, (16, 16, 3)).astype(np.float32)
-    e = _core.half_noise(a, b)
+    e = image.half_noise(a, b)
     assert e.object_px == 256 and e.coverage == pytest.approx(0.25)
-    whole = _core.image_error(a, b)
+    whole = image.image_error(a, b)
     # The whole frame reads 10·log10(1/coverage) high; the half estimate 6 dB above MSE.
-    assert whole.psnr - _core.object_error(a, b).psnr == pytest.approx(10 * math.log10(4))
-    assert e.psnr - _core.object_error(a, b).psnr == pytest.approx(10 * math.log10(4))
+    assert whole.psnr - image.object_error(a, b).psnr == pytest.approx(10 * math.log10(4))
+    assert e.psnr - image.object_error(a, b).psnr == pytest.approx(10 * math.log10(4))
 
 
 # -- real renders ------------------------------------------------------------------------
@@ -138,6 +140,7 @@ def test_target_build_records_every_image_and_gives_the_same_bytes_twice(tmp_pat
             assert rec["reached"] == (rec["render_psnr_db"] >= 40.0 - 0.25)
     # Same command, same bytes: the rounds follow from rendered pixels only.
     assert [v["images"] for v in a["views"]] == [v["images"] for v in b["views"]]
+
     def images(out: Path) -> list[str]:
         lines = (out / "MANIFEST.sha256").read_text().splitlines()
         return [x for x in lines if x.endswith((".png", ".npy"))]

@@ -15,8 +15,10 @@ from blurset._core import (
     default_sampling_config,
     make_splits,
     plan_setting,
+    preset_values,
     seed_for,
     seeded_subset,
+    target_next_round,
     test_views,
 )
 
@@ -29,7 +31,9 @@ __all__ = [
     "default_sampling_config",
     "make_splits",
     "plan_setting",
+    "preset_values",
     "seed_for",
     "seeded_subset",
+    "target_next_round",
     "test_views",
 ]

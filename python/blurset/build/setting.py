@@ -164,7 +164,7 @@ def render_setting(
     t1 = time.time()
     # Cropped EXRs: only the pixels the region traced cross the disk.
     common = {"resolution": res, "fov_deg": cfg.fov_deg, "crop": True, "guides": guides}
-    images: dict[tuple[int, str], dict[str, Any]] = {}
+    images: dict[tuple[int, str], _records.ImageRender] = {}
     n_rendered = len(frames)
     if cfg.target_psnr is not None:
         images, n_rendered, t_sharp, t_blur = _render_targeted(
@@ -252,7 +252,7 @@ def _render_targeted(
     progress: Progress,
     common: dict[str, Any],
     bound: int,
-) -> tuple[dict[tuple[int, str], dict[str, Any]], int, float, float]:
+) -> tuple[dict[tuple[int, str], _records.ImageRender], int, float, float]:
     """Every image to the config's target (build/target.py): the sharp images first, QA,
     then the blurry ones. The progress bar counts renders up to the setting's share.
     Returns each image's record, the renders, and the seconds of each phase."""

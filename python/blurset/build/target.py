@@ -12,10 +12,13 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from blurset import _core
 from blurset.config import BuildConfig
+
+if TYPE_CHECKING:
+    from blurset._records import ImageRender, ImageRound
 
 # Images whose halves are in flight at once (two accumulators each): 8 MB a half at 512 px.
 GROUP = 8
@@ -33,7 +36,7 @@ class _Image:
     previous: tuple[int, float] | None = None  # (spent, mse) of the round before
     pilot_db: float = 0.0
 
-    def record(self, target: float) -> dict[str, Any]:
+    def record(self, target: float) -> ImageRender:
         e = self.estimate
         return {
             "samples": 2 * self.frames * self.spent,
@@ -43,6 +46,25 @@ class _Image:
             "coverage": round(float(e.coverage), 6),
             "reached": bool(e.psnr >= target - 0.25),
         }
+
+
+def _adder(
+    renders: list[dict],
+    group: dict[tuple[int, str], _Image],
+    adds: dict[tuple[int, str], int],
+    on_render: Callable[[], None],
+) -> Callable[[int, str, tuple[int, int] | None], None]:
+    """The worker's on_frame of one round: each EXR into its image's half, weighted by
+    the samples each of its frames rendered this round, then deleted."""
+
+    def on_frame(i: int, path: str, origin: tuple[int, int] | None) -> None:
+        r = renders[i]
+        key = (r["view"], r["level"])
+        group[key].halves[r["half"]].add_exr(path, origin, weight=float(adds[key]))
+        Path(path).unlink()
+        on_render()
+
+    return on_frame
 
 
 def frame_counts(renders: Iterable[dict]) -> dict[tuple[int, str], int]:
@@ -65,14 +87,17 @@ def render_to_target(
     finish: Callable[[tuple[int, str], Any], None],
     on_render: Callable[[], None],
     common: dict[str, Any],
-) -> tuple[dict[tuple[int, str], dict[str, Any]], int]:
+) -> tuple[dict[tuple[int, str], ImageRender], int]:
     """Render the images `keys` (each of `frames[key]` latent frames) to the config's
     target, a group at a time; `finish(key, accumulator)` gets each finished image (its
     halves merged) as soon as it is done. Returns each image's record and the renders."""
+    if cfg.target_psnr is None or cfg.cycles_samples is None:
+        raise ValueError("render_to_target needs a config with target_psnr")
     target = float(cfg.target_psnr)
     pin = int(cfg.cycles_samples)
     res = cfg.resolution
-    records: dict[tuple[int, str], dict[str, Any]] = {}
+    bg = (cfg.background[0], cfg.background[1], cfg.background[2])
+    records: dict[tuple[int, str], ImageRender] = {}
     n_renders = 0
     for start in range(0, len(keys), GROUP):
         group = {
@@ -85,7 +110,7 @@ def render_to_target(
             for k in keys[start : start + GROUP]
         }
         while group:
-            rounds = []
+            rounds: list[ImageRound] = []
             for key, im in list(group.items()):
                 add = _core.target_next_round(
                     cfg,
@@ -114,27 +139,25 @@ def render_to_target(
             if not rounds:
                 break
             renders = plan.round_renders(exr_dir, pin, sharp_views, rounds)
-            adds = {(r["view"], r["level"]): r["add_per_frame"] for r in rounds}
+            adds: dict[tuple[int, str], int] = {
+                (r["view"], r["level"]): r["add_per_frame"] for r in rounds
+            }
 
-            def on_frame(i: int, path: str, origin: tuple[int, int] | None) -> None:
-                r = renders[i]
-                key = (r["view"], r["level"])
-                group[key].halves[r["half"]].add_exr(path, origin, weight=float(adds[key]))
-                Path(path).unlink()
-                on_render()
-
-            worker.render(renders, samples=1, on_frame=on_frame, **common)
+            worker.render(
+                renders,
+                samples=1,
+                on_frame=_adder(renders, group, adds, on_render),
+                **common,
+            )
             n_renders += len(renders)
-            for key, add in adds.items():
+            for key, n_add in adds.items():
                 im = group[key]
                 if im.estimate is not None:
                     im.previous = (im.spent, float(im.estimate.mse))
-                im.spent += add
+                im.spent += n_add
                 im.rounds += 1
                 a, b = im.halves
-                im.estimate = _core.half_noise(
-                    a.mean(), b.mean(), background=tuple(cfg.background)
-                )
+                im.estimate = _core.half_noise(a.mean(), b.mean(), background=bg)
                 if im.rounds == 1:
                     im.pilot_db = float(im.estimate.psnr)
     return records, n_renders
