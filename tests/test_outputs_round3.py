@@ -453,3 +453,18 @@ def test_card_noise_and_stats_do_not_call_a_damaged_build_whole(b, tmp_path):
     p = run_cli("stats", str(b), "--out", str(tmp_path / "st"))
     assert f"damaged settings: {s.name}" in p.stdout
     assert "not finished" in (tmp_path / "st" / "report.md").read_text()
+
+
+def test_a_valid_png_of_the_wrong_size_is_damage_the_rerun_redoes(b, tmp_path, standin_blender):
+    from PIL import Image
+
+    s = a_setting(b)
+    png = sorted((s / "sharp" / "images").iterdir())[1]
+    Image.new("RGB", (7, 5)).save(png)
+    problem = f"sharp/images/{png.name} is 7x5 px, not 32x32"
+    assert layout.setting_problem(s) == problem
+    refused(run_cli("export", str(b), "--out", str(tmp_path / "data"), check=False), s.name)
+    assert not (tmp_path / "data").exists()
+    proc = standin_build(b, standin_blender)
+    assert f"redoing {s.name}: {problem}" in proc.stderr
+    assert layout.setting_problem(s) is None

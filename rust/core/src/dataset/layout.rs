@@ -111,6 +111,9 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
         #[serde(default)]
         downsample: Vec<u32>,
         render: Option<Render>,
+        /// Width and height of `images/` (`images_<f>/`: each divided by f).
+        #[serde(default)]
+        resolution: Option<[u32; 2]>,
     }
     let mut out = Vec::new();
     let meta = setting.join(files::META);
@@ -131,6 +134,7 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
         levels,
         downsample,
         render,
+        resolution,
     } = match serde_json::from_slice::<Counts>(&text) {
         Ok(c) => c,
         Err(e) => {
@@ -155,9 +159,10 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
             });
             continue;
         }
-        let subdirs = std::iter::once(files::IMAGES.to_string())
-            .chain(downsample.iter().map(|&f| images_dir(f)));
-        for sub in subdirs {
+        let subdirs = std::iter::once((files::IMAGES.to_string(), 1))
+            .chain(downsample.iter().map(|&f| (images_dir(f), f.max(1))));
+        for (sub, factor) in subdirs {
+            let want = resolution.map(|[w, h]| (w / factor, h / factor));
             let images = files_with(&d.join(&sub), "png");
             if images.len() != views {
                 let path = format!("{lvl}/{sub}");
@@ -168,10 +173,22 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
                 });
             }
             for (name, p) in &images {
+                let path = format!("{lvl}/{sub}/{name}");
                 let Some(what) = png_problem(p) else {
+                    // A whole PNG of another size than meta.json's (a valid image put in
+                    // its place) is damage too: the loaders stack the images.
+                    if let (Some((w, h)), Some(got)) = (want, png_size(p)) {
+                        if got != (w, h) {
+                            let what = format!("{}x{} px, not {w}x{h}", got.0, got.1);
+                            out.push(SettingProblem {
+                                message: format!("{path} is {what}"),
+                                path,
+                                what,
+                            });
+                        }
+                    }
                     continue;
                 };
-                let path = format!("{lvl}/{sub}/{name}");
                 out.push(SettingProblem {
                     message: format!("{path} is {}", what.split(" (").next().unwrap_or(what)),
                     path,
@@ -234,6 +251,19 @@ pub fn png_problem(path: &Path) -> Option<&'static str> {
         PngState::NotPng => Some("not a whole PNG"),
         PngState::Truncated => Some("truncated (no PNG end chunk)"),
     }
+}
+
+/// Width and height from a PNG's IHDR chunk (the first, by the format), read without
+/// decoding; None when the file does not start with one.
+fn png_size(path: &Path) -> Option<(u32, u32)> {
+    use std::io::Read;
+    let mut head = [0u8; 24];
+    std::fs::File::open(path).ok()?.read_exact(&mut head).ok()?;
+    if &head[..8] != PNG_MAGIC || &head[12..16] != b"IHDR" {
+        return None;
+    }
+    let be = |b: &[u8]| u32::from_be_bytes([b[0], b[1], b[2], b[3]]);
+    Some((be(&head[16..20]), be(&head[20..24])))
 }
 
 enum PngState {
