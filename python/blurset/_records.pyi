@@ -390,11 +390,13 @@ class BuildStats(TypedDict):
     depth_range: list[float]
     failures: list[Failure]
     flatness: list[float]
+    image_samples: NotRequired[dict[str, list[int | None]]]
     incomplete: list[str]
     latent_frames: dict[str, list[int | None]]
     motion_px: dict[str, list[float | None]]
     orientation: list[float]
     quantities: list[Quantity]
+    render_psnr: NotRequired[dict[str, list[float | None]]]
     scene_dimension: list[float]
     scene_range: list[float]
     schema: str
@@ -676,11 +678,13 @@ class StatsRecord(TypedDict):
     failures: list[Failure]
     flatness: list[float]
     generated: str
+    image_samples: NotRequired[dict[str, list[int | None]]]
     incomplete: list[str]
     latent_frames: dict[str, list[int | None]]
     motion_px: dict[str, list[float | None]]
     orientation: list[float]
     quantities: list[Quantity]
+    render_psnr: NotRequired[dict[str, list[float | None]]]
     scene_dimension: list[float]
     scene_range: list[float]
     schema: str
