@@ -1,7 +1,9 @@
 """The docs: every `DESIGN §n` the code cites exists in docs/design.md, the README stays a
-short first read, user pages carry no project history, and the generators of the CLI
-reference, the file-format pages and the benchmark pages work on the real parser,
-schemas/ and bench/results.json (`make docs` runs them, then `mkdocs build --strict`)."""
+short first read, user pages carry no project history, every benchmark figure README.md
+and docs/guide/*.md quote is a marker filled from bench/results.json, and the generators
+of the CLI reference, the file-format pages and the benchmark pages work on the real
+parser, schemas/ and bench/results.json (`make docs` runs them, then `mkdocs build
+--strict`)."""
 
 from __future__ import annotations
 
@@ -104,15 +106,63 @@ def test_benchmark_pages_plot_every_result(tmp_path, monkeypatch) -> None:
     pytest.importorskip("matplotlib")
     bench = _gen("bench")
     monkeypatch.setattr(bench, "OUT", tmp_path / "bench")
-    assert bench.main() == 0
+    assert bench.main(figures_too=False) == 0
     pages = "".join(p.read_text() for p in (tmp_path / "bench").glob("*.md"))
     for r in json.loads((ROOT / "bench" / "results.json").read_text()):
         light = bench.LIGHT.match(r["name"])
         gain = bench.GAIN.match(r["name"])
+        target = bench.TARGET.match(r["name"])
         shown = (
             r["name"] in pages
             or (light and f"| {light['glb']} |" in pages)
             or (gain and f"| `{gain['glb']}` | {gain['res']} |" in pages)
+            or (target and f"| `{target['model']}` |" in pages)
         )
         assert shown or bench.PRESETS.match(r["name"]), r["name"]
     assert list((tmp_path / "bench").glob("*.png"))
+
+
+def test_every_quoted_benchmark_figure_is_a_marker_filled_from_results() -> None:
+    """README.md and docs/guide/*.md: each marker shows what bench/results.json gives, and
+    no benchmark-looking number stands outside a marker but the allowed definitions."""
+    figures = _gen("figures")
+    assert figures.problems() == []
+    texts = [p.read_text() for p in figures.pages()]
+    assert sum(len(figures.MARKER.findall(t)) for t in texts) >= 20, "the scan found too few"
+    assert figures.unused_allowed(texts) == []
+
+
+def test_a_hand_typed_or_stale_figure_fails(tmp_path) -> None:
+    """Plant figures in temp copies of the real pages: the check must name each."""
+    figures = _gen("figures")
+    results = figures.load()
+    readme = tmp_path / "README.md"
+    speed = tmp_path / "speed.md"
+    readme.write_text(
+        (ROOT / "README.md").read_text()
+        + "\nThe floor preset is 7.3× faster, at 61.2 dB, 12 settings per hour, 95 %.\n"
+    )
+    text = (ROOT / "docs" / "guide" / "speed.md").read_text()
+    m = next(figures.MARKER.finditer(text))
+    wrong = "99.9" if m["value"] != "99.9" else "11.1"
+    speed.write_text(
+        text[: m.start("value")]
+        + wrong
+        + text[m.end("value") :]
+        + "\n<!-- fig no_such_result ratio .1f -->3.0<!-- /fig -->×\n"
+        + "<!-- fig settings_per_hour_paper no_such_field .1f -->3.0<!-- /fig -->×\n"
+    )
+    assert figures.problems([readme, speed], results) != []
+    found = "\n".join(figures.problems([readme, speed], results))
+    for planted in ("'7.3×'", "'61.2 dB'", "'12 settings per hour'", "'95 %'"):
+        assert planted in found, planted
+    assert f"the page says {wrong!r}" in found
+    assert "no result 'no_such_result'" in found
+    assert "has no field 'no_such_field'" in found
+    # In code, in a marker or as an allowed definition a number is not a stray.
+    assert figures.strays("`--target-psnr 45`\n```sh\n3 dB\n```\nthe floor, 58.92 dB") == []
+    # make docs rewrites the stale marker from the results; the missing ones stay named.
+    bad = figures.update([speed], results)
+    assert len(bad) == 2
+    assert "the page says" not in "\n".join(figures.problems([speed], results))
+    assert figures.rewrite(speed.read_text(), results)[0] == speed.read_text()

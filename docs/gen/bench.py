@@ -25,6 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import figures  # noqa: E402
 from common import sanitize  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -44,6 +45,7 @@ COST = re.compile(
 )
 LIGHT = re.compile(r"^light_paths_(?P<glb>.+)$")
 GAIN = re.compile(r"^denoise_gain_(?P<glb>.+)_(?P<res>\d+)px$")
+TARGET = re.compile(r"^target_(?P<res>\d+)px_(?P<db>[\d.]+)db_(?P<model>.+)$")
 NOT_PRESETS = {"settings_per_hour_2_vs_1_workers"}
 
 plt.rcParams.update({"figure.dpi": 110, "font.size": 9, "axes.grid": True, "grid.alpha": 0.3})
@@ -604,6 +606,127 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
     return out
 
 
+# ------------------------------------------------------------------------ render targets
+
+TARGET_COLUMNS = [
+    ("images", "images", "d"),
+    ("at_target_share", "at target − 0.5 dB", ".0%"),
+    ("estimate_within_1db_share", "estimate within 1 dB", ".0%"),
+    ("measured_worst_db", "worst, dB", ".1f"),
+    ("measured_p5_db", "5th pct, dB", ".1f"),
+    ("measured_mean_db", "mean, dB", ".1f"),
+    ("coverage_mean", "coverage", ".0%"),
+    ("spent_over_least", "samples / least", ".2f"),
+    ("fixed_over_target", "fixed count / target", ".2f"),
+]
+
+
+def targets_page(rs: list[dict]) -> list[str]:
+    """Builds with `--target-psnr`, judged image by image against converged references
+    on models no number was chosen from (bench/bench_target.py)."""
+    out = [
+        "# Render targets",
+        "",
+        "A build with `--target-psnr T` renders every image until its own estimate of its",
+        "render noise, on the object's pixels, reaches T. `bench/bench_target.py` builds one",
+        "setting of each held-out model (models no preset, threshold or sample count was",
+        "chosen from) with a target, renders each image's own frames again at many times",
+        "its samples as two halves on other seeds (the reference, its own noise taken out),",
+        "and measures every image against it on the object's pixels. Per model: the share",
+        "of images measuring at least T − 0.5 dB, the share whose estimate (meta.json's",
+        "`render_psnr_db`) is within 1 dB of the measurement, the worst image, the 5th",
+        "percentile and the mean; the mean coverage (the object's share of the frame); the",
+        "samples spent over the least that reaches T (the measured noise extrapolated as",
+        "1 / samples, summed over the images); and what one fixed count per image kind",
+        "(sharp, blur_l) that reaches T on every image of every model would cost, over",
+        "what the target spent. The guide [Speed or accuracy](../guide/speed.md) says what",
+        "a target promises.",
+        "",
+    ]
+    per_model = [r for r in rs if TARGET.match(r["name"])["model"] != "estimate"]
+    overall = {r["name"]: r for r in rs if TARGET.match(r["name"])["model"] == "estimate"}
+    if not per_model:
+        return out + ["No `target_*` result in bench/results.json yet."]
+    runs: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in per_model:
+        m = TARGET.match(r["name"])
+        runs[(m["res"], m["db"])].append(r)
+    for (res, db), group in sorted(runs.items(), key=lambda kv: (int(kv[0][0]), kv[0][1])):
+        first = group[0]
+        out += [
+            f"## {db} dB at {res} px",
+            "",
+            f"{_fmt(first.get('views_measured'))} views a model, references at "
+            f"{_fmt(first.get('reference_factor'))}× the samples.",
+            "",
+        ]
+        est = overall.get(f"target_{res}px_{db}db_estimate")
+        if est:
+            out += [
+                f"Over all {est.get('images')} images of the {len(group)} models: "
+                f"{est.get('at_target_share', 0):.0%} measure at least {float(db) - 0.5:g} dB, "
+                f"and {est.get('ratio', 0):.0%} of the estimates are within 1 dB of the "
+                f"measurement (`{est['name']}`).",
+                "",
+            ]
+        head = ["model", *[t for _, t, _ in TARGET_COLUMNS]]
+        out += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+        for r in sorted(group, key=lambda r: r["name"]):
+            cells = [f"`{TARGET.match(r['name'])['model']}`"]
+            for k, _, fmt in TARGET_COLUMNS:
+                v = r.get(k)
+                cells.append(format(v, fmt) if isinstance(v, (int, float)) else "")
+            out.append("| " + " | ".join(cells) + " |")
+        out.append("")
+        if est and isinstance(est.get("per_image"), dict):
+            out += _target_plot(est["per_image"], float(db), f"targets_{res}_{db}.png")
+        more = [
+            ("spent_over_least_median_image", "samples over the least, median image"),
+            ("spent_over_least_max_image", "samples over the least, worst image"),
+            ("estimate_error_db_max", "largest |estimate − measured|, dB"),
+            ("render_s_per_view", "render time per view, s (the machine may be busy)"),
+        ]
+        table = ["| model | " + " | ".join(t for _, t in more) + " |"]
+        table.append("|" + " --- |" * (len(more) + 1))
+        for r in sorted(group, key=lambda r: r["name"]):
+            table.append(
+                f"| `{TARGET.match(r['name'])['model']}` | "
+                + " | ".join(_fmt(r.get(k)) for k, _ in more)
+                + " |"
+            )
+        out += _collapsed("More per model", table)
+    return out
+
+
+def _target_plot(per_image: dict, target: float, png: str) -> list[str]:
+    """Each image's estimate against its measurement, per model."""
+    fig, ax = plt.subplots(figsize=(5.6, 4.2))
+    lo, hi = math.inf, -math.inf
+    for i, (model, rows) in enumerate(sorted(per_image.items())):
+        xs = [r["measured_db"] for r in rows]
+        ys = [r["estimate_db"] for r in rows]
+        if not xs:
+            continue
+        lo, hi = min(lo, *xs, *ys), max(hi, *xs, *ys)
+        ax.scatter(xs, ys, s=14, color=f"C{i % 10}", label=model)
+    if not math.isfinite(lo):
+        plt.close(fig)
+        return []
+    ax.plot([lo, hi], [lo, hi], color="grey", lw=0.8)
+    ax.fill_between([lo, hi], [lo - 1, hi - 1], [lo + 1, hi + 1], color="grey", alpha=0.15)
+    ax.axvline(target - 0.5, ls=":", color="grey")
+    ax.set_xlabel("measured render PSNR on the object's pixels, dB")
+    ax.set_ylabel("estimate (meta.json), dB")
+    ax.legend(fontsize=7)
+    return [
+        "Every image: its estimate against its measurement (the band is ± 1 dB, the dotted",
+        "line the target − 0.5 dB).",
+        "",
+        _save(fig, png),
+        "",
+    ]
+
+
 # ---------------------------------------------------------------------------------- index
 
 
@@ -651,12 +774,14 @@ def index_page(
     return out
 
 
-def main() -> int:
+def main(figures_too: bool = True) -> int:
+    """The benchmark pages, then (`figures_too`) the figures quoted in README.md and the
+    guides rewritten from the same results (docs/gen/figures.py)."""
     results = json.loads(RESULTS.read_text())
     if OUT.exists():
         shutil.rmtree(OUT)
     OUT.mkdir(parents=True)
-    presets, parity, noise, cost, light, gain, other = [], [], [], [], [], [], []
+    presets, parity, noise, cost, light, gain, target, other = [], [], [], [], [], [], [], []
     for r in results:
         n = r["name"]
         if PRESETS.match(n) and n not in NOT_PRESETS:
@@ -671,6 +796,8 @@ def main() -> int:
             light.append(r)
         elif GAIN.match(n):
             gain.append(r)
+        elif TARGET.match(n):
+            target.append(r)
         else:
             other.append(r)
     pages = [
@@ -687,13 +814,21 @@ def main() -> int:
             len(parity) + len(noise),
         ),
         ("render-cost.md", "Render cost", render_cost_page(cost, light), len(cost) + len(light)),
+        ("targets.md", "Render targets", targets_page(target), len(target)),
     ]
     for name, _, lines, _ in pages:
         (OUT / name).write_text("\n".join(lines).rstrip() + "\n")
     index = index_page(results, other, [(p, t, n) for p, t, _, n in pages])
     (OUT / "index.md").write_text("\n".join(index).rstrip() + "\n")
     print(f"wrote {len(pages) + 1} benchmark pages in {OUT}", file=sys.stderr)
-    return 0
+    if not figures_too:
+        return 0
+    by_name = {r["name"]: r for r in results}
+    bad = figures.update(results=by_name)
+    bad += figures.problems(results=by_name)
+    for b in bad:
+        print(f"figures: {b}", file=sys.stderr)
+    return 1 if bad else 0
 
 
 if __name__ == "__main__":
