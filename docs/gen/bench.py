@@ -616,8 +616,8 @@ TARGET_COLUMNS = [
     ("measured_p5_db", "5th pct, dB", ".1f"),
     ("measured_mean_db", "mean, dB", ".1f"),
     ("coverage_mean", "coverage", ".0%"),
-    ("spent_over_least", "samples / least", ".2f"),
-    ("fixed_over_target", "fixed count / target", ".2f"),
+    ("spent_over_least", "samples spent / least", ".2f"),
+    ("fixed_over_target", "one fixed count / target", ".2f"),
 ]
 
 
@@ -683,7 +683,7 @@ def targets_page(rs: list[dict]) -> list[str]:
         more = [
             ("spent_over_least_median_image", "samples over the least, median image"),
             ("spent_over_least_max_image", "samples over the least, worst image"),
-            ("estimate_error_db_max", "largest |estimate − measured|, dB"),
+            ("estimate_error_db_max", "largest estimate error, dB"),
             ("render_s_per_view", "render time per view, s (the machine may be busy)"),
         ]
         table = ["| model | " + " | ".join(t for _, t in more) + " |"]
