@@ -61,12 +61,12 @@ FIGURES = {
     "render_psnr": (
         "Render PSNR per image (level 0: sharp)",
         "estimated render PSNR on the object's pixels  (dB)",
-        "images",
+        "rendered images",
     ),
     "image_samples": (
         "Samples per image (level 0: sharp)",
         "Cycles samples, every latent frame and both halves  (samples)",
-        "images",
+        "rendered images",
     ),
 }
 FACTORS = [  # (quantity, panel title, x label with unit)
