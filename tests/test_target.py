@@ -47,6 +47,19 @@ def test_a_preset_in_toml_and_any_case(tmp_path):
     assert cfg.preset == "fast" and cfg.target_psnr == 40.0 and cfg.max_ghost_px == 2.0
 
 
+def test_an_empty_out_in_toml_is_refused_by_name(tmp_path):
+    from blurset.config import load_toml
+    from blurset.exceptions import ConfigError
+
+    f = tmp_path / "b.toml"
+    f.write_text('out = ""\nobjects = ["x.glb"]\n')
+    with pytest.raises(ConfigError, match=r"b.toml: out is empty"):
+        make_config(load_toml(f), {}, config_path=f)
+    p = run_cli("build", "--config", str(f), check=False)
+    assert p.returncode == 2 and "out is empty" in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
+
+
 def test_the_demo_under_a_preset_keeps_the_preset_and_its_small_size():
     cfg = make_config({}, {"demo": True, "out": "/tmp/o", "preset": "fast"})
     assert cfg.latents_auto and cfg.target_psnr == 40.0 and cfg.views == 17

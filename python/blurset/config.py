@@ -177,6 +177,13 @@ def make_config(
     flags = _layer(flag_values, flag)
     origin.update({k: flag(k) for k in flags})
     given.update(flags)
+    for k in ("out", "objaverse_dir", "blender"):
+        # Path("") is the current folder: an empty path from a file would write there.
+        if isinstance(given.get(k), str | Path) and not str(given[k]).strip():
+            where = origin.get(k, flag(k))
+            raise ConfigError(
+                f"{where} is empty (it would mean the current folder): give a file or folder"
+            )
     values.update(given)
     _under_preset(values, given)
     values.setdefault("demo", False)
