@@ -145,6 +145,8 @@ def test_licenses_filter_skips_before_rendering(tmp_path):
         "MANIFEST.sha256", "dataset.json", "failures.jsonl", "splits.json",
     ]  # fmt: skip
     assert not list(out.glob(".work-*"))
+    # Skipped by request is not failed: dataset.json counts none.
+    assert json.loads((out / "dataset.json").read_text())["counts"]["objects_failed"] == 0
 
 
 @pytest.mark.blender
