@@ -679,6 +679,7 @@ def targets_page(rs: list[dict]) -> list[str]:
             out.append("| " + " | ".join(cells) + " |")
         out.append("")
         if est and isinstance(est.get("per_image"), dict):
+            out += _target_misses(est["per_image"])
             out += _target_plot(est["per_image"], float(db), f"targets_{res}_{db}.png")
         more = [
             ("spent_over_least_median_image", "samples over the least, median image"),
@@ -696,6 +697,28 @@ def targets_page(rs: list[dict]) -> list[str]:
             )
         out += _collapsed("More per model", table)
     return out
+
+
+def _target_misses(per_image: dict) -> list[str]:
+    """Which way the estimates that miss by more than 1 dB err: under the measurement is
+    the safe side (the image is better than its record says)."""
+    errors = [
+        r["estimate_db"] - r["measured_db"]
+        for rows in per_image.values()
+        for r in rows
+        if isinstance(r.get("estimate_db"), (int, float))
+        and isinstance(r.get("measured_db"), (int, float))
+    ]
+    misses = [e for e in errors if abs(e) > 1.0]
+    if not errors:
+        return []
+    under = sum(e < 0 for e in misses)
+    return [
+        f"Of the {len(misses)} estimates more than 1 dB off, {under} are under the measurement",
+        f"(the image is better than its record says) and {len(misses) - under} over it; the",
+        f"estimate errs by {min(errors):+.2f} to {max(errors):+.2f} dB (estimate − measured).",
+        "",
+    ]
 
 
 def _target_plot(per_image: dict, target: float, png: str) -> list[str]:

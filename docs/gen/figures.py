@@ -45,6 +45,8 @@ ALLOWED: list[tuple[str, str]] = [
     (r"(?<![.\d])(?:40|50) dB", "the targets of fast and balanced, set and not measured"),
     (r"10·log10\(1/coverage\) dB", "the coverage correction, a formula"),
     (r"\b3 dB at half coverage", "10·log10(2), arithmetic"),
+    (r"within 0\.5 dB of\s+the target", "the bar an image is judged by"),
+    (r"within 1 dB\b", "the bar an estimate is judged by"),
     (r"\(600 s\)", "the default of --timeout"),
     (r"1\.05 × the\s+bounding sphere", "a guard constant of the trajectory"),
     (r"< 0\.2 % of the pixels|> 2 % of the frame border", "preview's thresholds"),
