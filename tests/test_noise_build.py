@@ -422,18 +422,20 @@ def test_bad_input_one_line_nothing_written(linear_build, tmp_path):
     for args, fragments in cases:
         one_line_error(run_cli("noise", *args, "--out", str(out), check=False), *fragments)
         assert not out.exists()
-    # A build without one linear image: --source linear names the missing file.
+    # A build without one linear image is a damaged build: noise refuses it, naming the
+    # setting and the folder that lacks the file (issue 34: damaged builds are refused).
     broken = tmp_path / "broken"
     shutil.copytree(linear_build, broken)
     (broken / "demo_box_000" / "blur_3" / "linear" / "005.exr").unlink()
     p = run_cli("noise", str(broken), "--out", str(out), "--gains", "1", "--source", "linear",
                 check=False)  # fmt: skip
-    one_line_error(p, "005.exr", "--keep-linear")
+    one_line_error(p, "demo_box_000", "blur_3/linear", "16 of 17")
     assert not out.exists()
-    # auto falls back to the PNGs when a level lacks its linear images.
-    run_cli("noise", str(broken), "--out", str(out), "--gains", "1", "--levels", "blur_3")
-    assert json.loads((out / "noise_dataset.json").read_text())["params"]["source"] == "png"
-    shutil.rmtree(out)
+    # Whatever the source: a damaged build is not noised from its PNGs instead.
+    p = run_cli("noise", str(broken), "--out", str(out), "--gains", "1", "--levels", "blur_3",
+                check=False)  # fmt: skip
+    one_line_error(p, "demo_box_000", "blur_3/linear")
+    assert not out.exists()
     (broken / "dataset.json").write_text("{ not json")
     one_line_error(run_cli("noise", str(broken), "--out", str(out), check=False), "dataset.json")
     assert not out.exists()

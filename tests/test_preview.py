@@ -153,7 +153,7 @@ def test_preview_bad_input_one_line(linear_build, tmp_path):
     cases = [
         ([str(tmp_path / "nope")], "nope"),
         ([str(s), "--gain", "4"], "--noise"),
-        ([str(s), "--noise", str(tmp_path), "--gain", "3"], "gain_3"),
+        ([str(s), "--noise", str(tmp_path), "--gain", "3"], "not a blurset noise output"),
         ([str(s / "sharp")], "meta.json"),
         ([str(linear_build), "--gain", "4"], "--noise"),
     ]
