@@ -46,6 +46,7 @@ COST = re.compile(
 LIGHT = re.compile(r"^light_paths_(?P<glb>.+)$")
 GAIN = re.compile(r"^denoise_gain_(?P<glb>.+)_(?P<res>\d+)px$")
 TARGET = re.compile(r"^target_(?P<res>\d+)px_(?P<db>[\d.]+)db_(?P<model>.+)$")
+SPEED = re.compile(r"^target_speed_(?P<res>\d+)px_(?P<model>.+)$")
 NOT_PRESETS = {"settings_per_hour_2_vs_1_workers"}
 
 plt.rcParams.update({"figure.dpi": 110, "font.size": 9, "axes.grid": True, "grid.alpha": 0.3})
@@ -699,6 +700,38 @@ def targets_page(rs: list[dict]) -> list[str]:
     return out
 
 
+def speed_lines(rs: list[dict]) -> list[str]:
+    """Settings per hour at equal accuracy (bench/bench_target_speed.py): per model, the
+    paper preset against target builds at its worst and median measured image."""
+    if not rs:
+        return []
+    out = [
+        "## Speed at equal accuracy",
+        "",
+        "`bench/bench_target_speed.py` builds each held-out model with the paper preset,",
+        "measures the render PSNR of each of its images on the object's pixels (a second",
+        "render on other seeds), then builds it with `--preset balanced --target-psnr T` at T",
+        "= the paper images' worst (every image at least as accurate as the paper's worst)",
+        "and at their median, side by side in one run. Settings per hour are extrapolated to",
+        "a setting's 34 views from the views built (worker start and object load included).",
+        "",
+        "| result | model | views | paper: worst / median dB | paper settings/h "
+        "| T = worst: settings/h (×) | T = median: settings/h (×) |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in sorted(rs, key=lambda r: r["name"]):
+        p = r.get("paper_measured") or {}
+        w, m = r.get("at_paper_worst") or {}, r.get("at_paper_median") or {}
+        out.append(
+            f"| `{r['name']}` | `{r.get('model')}` | {_fmt(r.get('views_measured'))} | "
+            f"{_fmt(p.get('worst_db'))} / {_fmt(p.get('median_db'))} | "
+            f"{_fmt(r.get('paper_settings_per_hour'))} | "
+            f"{_fmt(w.get('settings_per_hour'))} ({_fmt(w.get('ratio'))}×) | "
+            f"{_fmt(m.get('settings_per_hour'))} ({_fmt(m.get('ratio'))}×) |"
+        )
+    return [*out, ""]
+
+
 def _target_misses(per_image: dict) -> list[str]:
     """Which way the estimates that miss by more than 1 dB err: under the measurement is
     the safe side (the image is better than its record says)."""
@@ -805,6 +838,7 @@ def main(figures_too: bool = True) -> int:
         shutil.rmtree(OUT)
     OUT.mkdir(parents=True)
     presets, parity, noise, cost, light, gain, target, other = [], [], [], [], [], [], [], []
+    speed: list[dict] = []
     for r in results:
         n = r["name"]
         if PRESETS.match(n) and n not in NOT_PRESETS:
@@ -821,6 +855,8 @@ def main(figures_too: bool = True) -> int:
             gain.append(r)
         elif TARGET.match(n):
             target.append(r)
+        elif SPEED.match(n):
+            speed.append(r)
         else:
             other.append(r)
     pages = [
@@ -837,7 +873,12 @@ def main(figures_too: bool = True) -> int:
             len(parity) + len(noise),
         ),
         ("render-cost.md", "Render cost", render_cost_page(cost, light), len(cost) + len(light)),
-        ("targets.md", "Render targets", targets_page(target), len(target)),
+        (
+            "targets.md",
+            "Render targets",
+            targets_page(target) + speed_lines(speed),
+            len(target) + len(speed),
+        ),
     ]
     for name, _, lines, _ in pages:
         (OUT / name).write_text("\n".join(lines).rstrip() + "\n")
