@@ -42,18 +42,23 @@ SALTS = (0x5BD1E995, 0x2545F491)
 HELD_OUT = ("textured_panel_blender_reexport", "khronos_2CylinderEngine", "khronos_BoxTextured")
 
 
-def _glbs(work: Path) -> list[Path]:
+def held_out_glbs(work: Path | None) -> list[Path]:
+    """BLURSET_BENCH_GLBS, else ../shared/data's held-out models, then (with a `work`
+    folder to write them in) the demo objects."""
     env = os.environ.get("BLURSET_BENCH_GLBS")
     if env:
         return [Path(p) for p in env.split(",") if p]
     data = HERE.parent.parent / "shared" / "data" / "glb"
     found = [data / f"{n}.glb" for n in HELD_OUT if (data / f"{n}.glb").exists()]
+    if work is None:
+        return found
     from blurset.demo import make_demo_objects
 
     return found + list(make_demo_objects(work / "demo_objects"))
 
 
-def _config(out: Path, glb: Path):
+def config(out: Path, glb: Path, res: int, views: int, **flags):
+    """One setting of `glb`, every view rendering its blurry images, linear EXRs kept."""
     from blurset.config import make_config
 
     return make_config(
@@ -61,15 +66,14 @@ def _config(out: Path, glb: Path):
         {
             "objects": [str(glb)],
             "out": out,
-            "views": VIEWS,
-            "resolution": RES,
+            "views": views,
+            "resolution": res,
             "settings_per_object": 1,
             "seed": SEED,
             "write_linear": True,
             "blurry_test_views": True,
-            "preset": "balanced",
-            "target_psnr": TARGET,
             "device": os.environ.get("BLURSET_BENCH_DEVICE", "cpu").lower(),
+            **flags,
         },
     )
 
@@ -135,7 +139,7 @@ def measure_model(glb: Path, work: Path) -> dict:
     from blurset.image import read_exr
 
     out = work / f"build_{glb.stem}"
-    cfg = _config(out, glb)
+    cfg = config(out, glb, RES, VIEWS, preset="balanced", target_psnr=TARGET)
     t0 = time.perf_counter()
     summary = build(cfg, progress=False)
     wall = time.perf_counter() - t0
@@ -224,7 +228,7 @@ def summarize(models: list[dict]) -> list[dict]:
 def measure() -> dict:
     with tempfile.TemporaryDirectory(prefix="blurset-bench-target-") as d:
         work = Path(d)
-        models = [measure_model(g, work) for g in _glbs(work)]
+        models = [measure_model(g, work) for g in held_out_glbs(work)]
     return {
         "resolution": RES,
         "views": VIEWS,

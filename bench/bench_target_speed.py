@@ -33,37 +33,14 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 RES = int(os.environ.get("BLURSET_BENCH_SPEED_RES", "128"))
 VIEWS = int(os.environ.get("BLURSET_BENCH_SPEED_VIEWS", "2"))
-SEED = 5
 SALT = 0x5BD1E995
-HELD_OUT = ("textured_panel_blender_reexport", "khronos_2CylinderEngine", "khronos_BoxTextured")
-
-
-def _glbs() -> list[Path]:
-    env = os.environ.get("BLURSET_BENCH_GLBS")
-    if env:
-        return [Path(p) for p in env.split(",") if p]
-    data = HERE.parent.parent / "shared" / "data" / "glb"
-    return [data / f"{n}.glb" for n in HELD_OUT if (data / f"{n}.glb").exists()]
 
 
 def _config(out: Path, glb: Path, **flags):
-    from blurset.config import make_config
+    sys.path.insert(0, str(HERE))
+    from bench_target import config
 
-    return make_config(
-        {},
-        {
-            "objects": [str(glb)],
-            "out": out,
-            "views": VIEWS,
-            "resolution": RES,
-            "settings_per_object": 1,
-            "seed": SEED,
-            "write_linear": True,
-            "blurry_test_views": True,
-            "device": os.environ.get("BLURSET_BENCH_DEVICE", "cpu").lower(),
-            **flags,
-        },
-    )
+    return config(out, glb, RES, VIEWS, **flags)
 
 
 def _build(cfg) -> tuple[float, Path, dict]:
@@ -159,7 +136,10 @@ def measure_model(glb: Path, work: Path) -> dict:
 def run() -> list[dict]:
     res = []
     with tempfile.TemporaryDirectory(prefix="blurset-bench-speed-") as d:
-        for glb in _glbs():
+        sys.path.insert(0, str(HERE))
+        from bench_target import held_out_glbs
+
+        for glb in held_out_glbs(None):
             m = measure_model(glb, Path(d))
             res.append(
                 {
