@@ -8,7 +8,7 @@ RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pypro
 
 PYTEST := $(PY) -m pytest -q
 
-.PHONY: venv develop demo test test-fast test-rust test-py test-packaging lint typecheck fmt schemas stub docs bench bench-gpu clean
+.PHONY: venv develop demo test test-fast test-rust test-py test-packaging fuzz lint typecheck fmt schemas stub docs bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -43,6 +43,19 @@ test-rust:
 
 test-py: venv
 	$(PYTEST) -m "not packaging" tests
+
+# Coverage-guided fuzzing of the readers of untrusted files (EXR, the JSON records,
+# poses_bounds.npy; rust/fuzz), each for FUZZ_SECONDS: CI runs it after `make test`.
+# libFuzzer needs nightly flags: RUSTC_BOOTSTRAP lets the stable toolchain take them.
+FUZZ_SECONDS ?= 20
+FUZZ_TARGETS := exr records poses_bounds
+fuzz:
+	command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked
+	RUSTC_BOOTSTRAP=1 cargo fuzz build --fuzz-dir rust/fuzz
+	for t in $(FUZZ_TARGETS); do \
+	  RUSTC_BOOTSTRAP=1 cargo fuzz run --fuzz-dir rust/fuzz $$t -- \
+	    -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 || exit 1; \
+	done
 
 test-packaging: venv
 	$(PYTEST) -m packaging tests
