@@ -54,6 +54,13 @@ os.environ.setdefault("BLURSET_STATE_DIR", tempfile.mkdtemp(prefix="blurset-stat
 BUILD_FIXTURES = {"demo_build", "linear_build", "noised", "demo_setting"}
 
 
+def skip_or_fail_in_ci(msg: str) -> None:
+    """Skip a test whose means this machine lacks; under CI, which has them all, fail."""
+    if IN_CI:
+        pytest.fail(f"CI=true: {msg}")
+    pytest.skip(msg)
+
+
 def shared(*parts: str) -> Path:
     """A path under ../shared/data, or skip the test when it is absent (fail under CI)."""
     p = SHARED_DATA.joinpath(*parts)
