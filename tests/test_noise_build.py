@@ -356,24 +356,25 @@ def test_partial_unit_redone_and_new_gain_added(noised, tmp_path):
 
 
 def test_killed_run_resumes_to_the_same_bytes(noised, tmp_path):
-    """SIGKILL after the first unit is complete; the rerun finishes the rest, and the
+    """SIGKILL inside the second unit (its noisy images written, no gain of it complete:
+    BLURSET_NOISE_FAULT, a known point, not a race); the rerun finishes the rest, and the
     result equals an uninterrupted run byte for byte (markers aside)."""
+    import os
+    import signal
     import subprocess
     import sys
-    import time
 
     build, lin, _ = noised
     out = tmp_path / "killed"
     args = [sys.executable, "-m", "blurset.cli", "noise", str(build), "--out", str(out),
             "--gains", *GAINS, "--seed", SEED, "--quiet"]  # fmt: skip
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 120
-    while not list(out.glob("*/*/gain_*/.complete")) and time.monotonic() < deadline:
-        time.sleep(0.005)
-    proc.kill()
-    proc.wait()
+    env = dict(os.environ, BLURSET_NOISE_FAULT="kill_in:2")
+    proc = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    # The first unit (one setting's level, every gain) is complete; the second is not.
     done = len(list(out.glob("*/*/gain_*/.complete")))
-    assert 0 < done < 30, done
+    assert done == len(GAINS), done
+    assert list(out.rglob("*.partial")), "the killed unit left its partial folders"
     p = run_cli("noise", str(build), "--out", str(out), "--gains", *GAINS, "--seed", SEED)
     assert f"{30 - done} scene(s) written, {done} complete skipped" in p.stdout, p.stdout
     assert not list(out.rglob("*.partial"))

@@ -26,7 +26,9 @@ inverted (`--source png`). Both share the same draws, so they differ only by wha
 
 from __future__ import annotations
 
+import os
 import shutil
+import signal
 import sys
 import time
 from dataclasses import dataclass
@@ -271,8 +273,31 @@ def _noise_json(
     )
 
 
+# Fault injection, as the worker's BLURSET_WORKER_FAULT: "kill_in:K" SIGKILLs this
+# process inside the K-th unit it writes, once that unit's noisy images are on disk and
+# before any of its gains is complete, so a test of the resume kills at a known point
+# instead of racing the run.
+FAULT = "BLURSET_NOISE_FAULT"
+
+
+def _fault_unit() -> int | None:
+    spec = os.environ.get(FAULT, "")
+    kind, _, k = spec.partition(":")
+    if kind != "kill_in" or not k.isdigit():
+        if spec:
+            raise ConfigError(f"{FAULT}={spec!r}: expected kill_in:K")
+        return None
+    return int(k)
+
+
 def _write_unit(
-    unit: Unit, gains_sigmas, wb, params: dict, cfg: _core.NoiseConfig, build: Path
+    unit: Unit,
+    gains_sigmas,
+    wb,
+    params: dict,
+    cfg: _core.NoiseConfig,
+    build: Path,
+    die: bool = False,
 ) -> None:
     unit.dst.mkdir(parents=True, exist_ok=True)
     partials = {g: layout.partial_dir(unit.dst / gain_name(g)) for g in unit.pending}
@@ -301,6 +326,8 @@ def _write_unit(
             )
         else:
             interruptible(_core.noise_write_variants, unit.sources, unit.names, variants, **common)
+        if die:
+            os.kill(os.getpid(), signal.SIGKILL)
         # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the
         # build's rows already hold the written resolution and focal length.
         rows = np.repeat(unit.rows, cfg.frames, axis=0)
@@ -429,9 +456,10 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
         todo = [u for u in units if u.pending]
         skipped = sum(len(gains) - len(u.pending) for u in units)
         show = not cfg.quiet and sys.stderr.isatty()
+        fault = _fault_unit()
         for n, u in enumerate(todo, 1):
             wb = _core.noise_white_balance(u.seed) if cfg.profile == "paper" else None
-            _write_unit(u, gains_sigmas, wb, params, cfg, build)
+            _write_unit(u, gains_sigmas, wb, params, cfg, build, die=n == fault)
             written += len(u.pending)
             if show:
                 print(f"\r{n}/{len(todo)} levels noised", end="", file=sys.stderr, flush=True)
