@@ -353,7 +353,7 @@ class Worker:
         *,
         resolution: int,
         fov_deg: float,
-        samples: int,
+        samples: int | None = None,
         on_frame: Callable[[int, str, tuple[int, int] | None], None] | None = None,
         exr_codec: str | None = None,
         noise_threshold: float | None = None,
@@ -363,7 +363,8 @@ class Worker:
     ) -> dict[str, Any]:
         """Render frames ({"c2w": 4x4 row-major, "seed": int, "out": EXR path}) in order.
 
-        A frame may carry its own "samples", a sample block ("sample_offset",
+        `samples` is the count of every frame that carries none; without it, each frame
+        must carry its own. A frame may carry its own "samples", a sample block ("sample_offset",
         "sample_sequence": Cycles sample subsets), and "motion": {"steps": n, "keys":
         [c2w …]} to be one Cycles motion blur render along 2^n + 1 camera keys, a
         "region" [x0, y0, x1, y1) of pixels that can see the object (the plan's; the rest
@@ -380,6 +381,12 @@ class Worker:
         (an Accumulator made with guides=True reads them).
         Returns the worker's final reply ({"done": n, "jobs": render calls}).
         """
+        if samples is None:
+            bare = [i for i, f in enumerate(frames) if f.get("samples") is None]
+            if bare:
+                raise ValueError(f"render: frame {bare[0]} carries no samples and the call none")
+            # The protocol's call-level count, which every frame's own overrides.
+            samples = int(frames[0]["samples"]) if frames else 1
         payload = []
         for f in frames:
             item: dict[str, Any] = {

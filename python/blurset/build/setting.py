@@ -182,7 +182,6 @@ def render_setting(
         if blur_idx:
             worker.render(
                 [frames[i] for i in blur_idx],
-                samples=cfg.samples,
                 on_frame=lambda j, p, o: on_frame(blur_idx[j], p, o),
                 **common,
             )

@@ -145,7 +145,6 @@ def render_to_target(
 
             worker.render(
                 renders,
-                samples=1,
                 on_frame=_adder(renders, group, adds, on_render),
                 **common,
             )
