@@ -45,10 +45,22 @@ def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig, prog=None) -> Non
     under that object's lock: another process may be writing them now). And settings
     whose source file now has another id (`objs` is every object of the build, all
     shards): one source file, one set of settings. Call under build_lock."""
+    current = [(o.uid, o.rel or o.path.name) for o in objs]
+    superseded = _core.superseded_settings(out, current)
+    # A superseded setting holds only what a build writes: a user's file there (a note)
+    # is named before anything is removed, never deleted with it.
+    for setting, source, now in superseded:
+        foreign = layout.not_written_by_build(out / setting)
+        if foreign:
+            raise ConfigError(
+                f"--out/{setting} holds {foreign[0]}, which the build did not write and "
+                f"would delete with the setting (its source file {source} now has the id "
+                f"{now}): move it out of the setting folder, then rerun (nothing was "
+                f"changed): {out / setting / foreign[0]}"
+            )
     # Only blurset's own temp names: a user's `.notes.tmp1` in OUT is not ours to delete.
     layout.remove_stale_temps(out, list(SHARED_FILES))
-    current = [(o.uid, o.rel or o.path.name) for o in objs]
-    for setting, source, now in _core.superseded_settings(out, current):
+    for setting, source, now in superseded:
         shutil.rmtree(out / setting)
         say = prog.write if prog is not None else print
         say(f"removed {setting}: its source file {source} now has the id {now} (a name it shares)")
