@@ -27,6 +27,11 @@ BASISU = "KHR_texture_basisu"
 
 BLACK = 1e-6
 
+# The largest JSON chunk a GLB may declare: a glTF document is kilobytes to a few
+# megabytes (the data lives in the BIN chunk); past this the header is taken as hostile
+# and refused before anything of its size is read.
+MAX_GLB_JSON_BYTES = 256 * 1024 * 1024
+
 
 class GlbError(ValueError):
     """The file is not a GLB this tool can read; the message is one line: `reason`, then
@@ -38,38 +43,70 @@ class GlbError(ValueError):
 
 
 def read_glb(path: str) -> tuple[dict, bytes | None]:
-    """The JSON document and the BIN chunk (or None) of a binary glTF file."""
+    """The JSON document and the BIN chunk (or None) of a binary glTF file. The file is
+    not trusted: every length its header declares is checked before anything of that
+    size is read (the total against the file's real size, a chunk against the bytes
+    left, the JSON chunk against MAX_GLB_JSON_BYTES), so a hostile or truncated header
+    is a GlbError naming the file, never a huge allocation or a traceback."""
     with open(path, "rb") as f:
-        data = f.read()
-    if len(data) < 20 or data[:4] != GLB_MAGIC:
-        raise GlbError("not a binary glTF (GLB) file", path)
-    version, total = struct.unpack_from("<II", data, 4)
-    if version != 2:
-        raise GlbError(f"glTF version {version} is not supported (need 2)", path)
-    if total > len(data):
-        raise GlbError(f"truncated GLB ({len(data)} of {total} bytes)", path)
-    offset = 12
-    doc = None
-    bin_chunk = None
-    while offset + 8 <= total:
-        length, ctype = struct.unpack_from("<II", data, offset)
-        body = data[offset + 8 : offset + 8 + length]
-        if len(body) != length:
-            raise GlbError(f"truncated GLB chunk at byte {offset}", path)
-        if ctype == CHUNK_JSON and doc is None:
-            try:
-                text = body.decode("utf-8")
-            except UnicodeDecodeError as e:
+        size = os.fstat(f.fileno()).st_size
+        head = f.read(12)
+        if len(head) < 12 or head[:4] != GLB_MAGIC:
+            raise GlbError("not a binary glTF (GLB) file", path)
+        version, total = struct.unpack_from("<II", head, 4)
+        if version != 2:
+            raise GlbError(f"glTF version {version} is not supported (need 2)", path)
+        if total > size:
+            raise GlbError(
+                f"truncated GLB: its header declares {total} bytes, the file has {size}", path
+            )
+        if total < 20:
+            raise GlbError(f"GLB header declares {total} bytes, too few for one chunk", path)
+        offset = 12
+        doc = None
+        bin_chunk = None
+        while offset + 8 <= total:
+            chunk_head = f.read(8)
+            if len(chunk_head) != 8:
+                raise GlbError(f"truncated GLB chunk header at byte {offset}", path)
+            length, ctype = struct.unpack("<II", chunk_head)
+            left = total - offset - 8
+            if ctype == CHUNK_JSON and doc is None and length > MAX_GLB_JSON_BYTES:
                 raise GlbError(
-                    f"the JSON chunk is not UTF-8 (glTF requires UTF-8; byte {e.start})", path
-                ) from None
-            try:
-                doc = json.loads(text)
-            except ValueError as e:
-                raise GlbError(f"GLB JSON chunk is not valid JSON ({e})", path) from None
-        elif ctype == CHUNK_BIN and bin_chunk is None:
-            bin_chunk = body
-        offset += 8 + length
+                    f"GLB JSON chunk of {length} bytes is larger than the limit "
+                    f"MAX_GLB_JSON_BYTES ({MAX_GLB_JSON_BYTES})",
+                    path,
+                )
+            if length > left:
+                raise GlbError(
+                    f"truncated GLB chunk at byte {offset}: it declares {length} bytes, "
+                    f"{left} remain",
+                    path,
+                )
+            wanted = (ctype == CHUNK_JSON and doc is None) or (
+                ctype == CHUNK_BIN and bin_chunk is None
+            )
+            if not wanted:  # another chunk (allowed by the spec): skipped, not read
+                f.seek(length, os.SEEK_CUR)
+                offset += 8 + length
+                continue
+            body = f.read(length)
+            if len(body) != length:
+                raise GlbError(f"truncated GLB chunk at byte {offset}", path)
+            if ctype == CHUNK_JSON:
+                try:
+                    text = body.decode("utf-8")
+                except UnicodeDecodeError as e:
+                    raise GlbError(
+                        f"the JSON chunk is not UTF-8 (glTF requires UTF-8; byte {e.start})", path
+                    ) from None
+                try:
+                    doc = json.loads(text)
+                except (ValueError, RecursionError) as e:
+                    raise GlbError(f"GLB JSON chunk is not valid JSON ({e})", path) from None
+            else:
+                bin_chunk = body
+            offset += 8 + length
     if not isinstance(doc, dict):
         raise GlbError("GLB has no JSON chunk", path)
     return doc, bin_chunk
