@@ -131,14 +131,11 @@ class EmptyPathError(BlursetError):
 
 def _nonempty(option: str, convert: Any, output: bool = False) -> Any:
     def check(text: str) -> Any:
-        if not text.strip():
-            # Path("") is the current folder: an empty value would write there.
-            raise EmptyPathError(
-                f"{option} is empty (it would mean the current folder): give a file or folder"
-            )
-        if output and Path(text).is_symlink() and not Path(text).exists():
-            # Resolved, it would name (and create) the link's target anywhere on disk.
-            raise EmptyPathError(f"{option} is a link to nothing: {text}")
+        from blurset.outputs import path_problem
+
+        # The same check as a config file's path (config.make_config).
+        if (problem := path_problem(text, output=output)) is not None:
+            raise EmptyPathError(f"{option} {problem}")
         return convert(text)
 
     check.__name__ = getattr(convert, "__name__", "path")  # argparse names it in errors
@@ -165,11 +162,71 @@ def subcommands(
     return dict(sub.choices)
 
 
+# Put before a value that starts with '-' of an option taking several values, so that
+# argparse takes it as a value; main() removes it after parsing.
+_DASH_MARK = " "
+
+
+def _dash_values(parser: argparse.ArgumentParser, argv: list[str]) -> tuple[list[str], set[str]]:
+    """`--shard -1/2` → `--shard=-1/2`: a value that starts with '-' after an option that
+    takes one reaches the option's own check (argparse would call it a missing value, as
+    it does for anything but a plain negative number); after an option that takes
+    several (`--gains -1e-3 2`), each such word up to the next option is marked as a
+    value. A word that is an option of the command is left alone. Returns the words and
+    the dests whose values main() must unmark."""
+    command = next((i for i, a in enumerate(argv) if a in COMMANDS), None)
+    if command is None:
+        return argv, set()
+    known = subcommands(parser)[argv[command]]._option_string_actions
+
+    def is_option(word: str) -> bool:
+        return word == "--" or word.split("=", 1)[0] in known
+
+    out, dashed = argv[: command + 1], set()
+    i = command + 1
+    while i < len(argv):
+        word = argv[i]
+        out.append(word)
+        i += 1
+        if word == "--":
+            out += argv[i:]
+            break
+        action = known.get(word)
+        if action is None or action.nargs == 0:
+            continue
+        if action.nargs is None:
+            if i < len(argv) and argv[i].startswith("-") and not is_option(argv[i]):
+                out[-1] = f"{word}={argv[i]}"
+                i += 1
+            continue
+        # Several values: argparse takes every word up to the next option.
+        while i < len(argv) and not is_option(argv[i]):
+            value = argv[i]
+            if value.startswith("-"):
+                value = _DASH_MARK + value
+                dashed.add(action.dest)
+            out.append(value)
+            i += 1
+    return out, dashed
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         # Building the parser imports every command (numpy, matplotlib …): a Ctrl-C in
         # that first second is a stop like any other, not a traceback.
-        args = make_parser().parse_args(argv)
+        parser = make_parser()
+        given = sys.argv[1:] if argv is None else list(argv)
+        given, dashed = _dash_values(parser, given)
+        args = parser.parse_args(given)
+        for dest in dashed:  # the values kept from argparse's option matching
+            setattr(
+                args,
+                dest,
+                [
+                    v[len(_DASH_MARK) :] if v.startswith(_DASH_MARK) else v
+                    for v in getattr(args, dest)
+                ],
+            )
     except EmptyPathError as e:
         command = next((a for a in (sys.argv[1:] if argv is None else argv) if a in COMMANDS), "")
         print(f"blurset {command}: error: {e}".replace("  ", " "), file=sys.stderr)

@@ -12,7 +12,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from blurset import _core
+from blurset import _core, outputs
 from blurset.exceptions import ConfigError
 from blurset.options import Options, parse_downsample, parse_indices, parse_levels
 
@@ -178,12 +178,12 @@ def make_config(
     origin.update({k: flag(k) for k in flags})
     given.update(flags)
     for k in ("out", "objaverse_dir", "blender"):
-        # Path("") is the current folder: an empty path from a file would write there.
-        if isinstance(given.get(k), str | Path) and not str(given[k]).strip():
-            where = origin.get(k, flag(k))
-            raise ConfigError(
-                f"{where} is empty (it would mean the current folder): give a file or folder"
-            )
+        # The same check as the flags' (cli._refuse_empty_paths): an empty path, an
+        # output that is a link to nothing.
+        if isinstance(given.get(k), str | Path):
+            problem = outputs.path_problem(given[k], output=k == "out")
+            if problem is not None:
+                raise ConfigError(f"{origin.get(k, flag(k))} {problem}")
     values.update(given)
     _under_preset(values, given)
     values.setdefault("demo", False)

@@ -35,6 +35,20 @@ OutputKind = _core.OutputKind
 BuildState = _core.BuildState
 
 
+def path_problem(value: str | Path, *, output: bool = False) -> str | None:
+    """What is wrong with a path a user gave (a flag or a TOML key), as the words after
+    its name, or None: an empty path (Path("") is the current folder: it would write
+    there), or, for an output (`output`), a link to nothing (resolved, it would name and
+    create the link's target anywhere on disk). The one check of both the flags and the
+    config file."""
+    text = str(value)
+    if not text.strip():
+        return "is empty (it would mean the current folder): give a file or folder"
+    if output and Path(text).is_symlink() and not Path(text).exists():
+        return f"is a link to nothing: {text}"
+    return None
+
+
 def kind_of(path: Path) -> _core.OutputKind | None:
     """The kind of blurset output `path` is, from its record (None: not an output)."""
     return _core.output_kind(Path(path))

@@ -353,8 +353,8 @@ def claim(out: Path) -> None:
     build, any other output, a folder of other files, a folder inside an output) is
     refused by name: ConfigError."""
     outputs.refuse_inside_output(out, "--out")
-    if out.is_symlink() and not out.exists():
-        raise ConfigError(f"--out is a link to nothing: {out}")
+    if (problem := outputs.path_problem(out, output=True)) is not None:
+        raise ConfigError(f"--out {problem}")
     if not out.exists():
         return
     if not out.is_dir():
