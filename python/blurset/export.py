@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from blurset import __version__, _core, layout, outputs
-from blurset.exceptions import ConfigError, InputError
+from blurset.exceptions import ConfigError, InputError, reason_of
 
 EXPORT = outputs.OutputKind.EXPORT
 EXPORT_FILE = EXPORT.record
@@ -106,16 +106,18 @@ def _noise_output(noise: Path, build: Path) -> dict:
 
 
 def _scene_problem(src: Path, noise: bool) -> str | None:
-    """What is wrong with a noise unit on the cheap (a build's settings get the rerun's own
-    check, layout.setting_problem): its images against its pose rows."""
+    """What is wrong with a scene to export on the cheap (a build's settings also get the
+    rerun's own check, layout.setting_problem): its pose rows, read as the core reads
+    them (bounds that are no depth interval are refused, never passed on), and a noise
+    unit's images against them."""
+    try:
+        rows = len(_core.read_poses_bounds(src / layout.POSES_BOUNDS))
+    except (OSError, ValueError) as e:
+        return f"{layout.POSES_BOUNDS} does not read: {reason_of(e)}"
     if not noise:
         return None
     images = src / layout.IMAGES
     n = len([p for p in images.iterdir() if p.suffix == ".png"]) if images.is_dir() else 0
-    try:
-        rows = len(_core.read_poses_bounds(src / layout.POSES_BOUNDS))
-    except (OSError, ValueError) as e:
-        return f"poses_bounds.npy does not read ({e.__class__.__name__})"
     return None if n == rows else f"{n} images for {rows} pose rows"
 
 
@@ -174,7 +176,12 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
                 if noise and not layout.is_complete(src):
                     raise InputError(f"--noise has no complete {src.name} here: {src}")
                 if problem := _scene_problem(src, noise is not None):
-                    raise InputError(f"--noise scene {rel} is damaged ({problem}): {src}")
+                    if noise:
+                        raise InputError(f"--noise scene {rel} is damaged ({problem}): {src}")
+                    raise InputError(
+                        f"the build's setting {name} is damaged ({problem}): "
+                        f"{src / layout.POSES_BOUNDS}"
+                    )
                 if args.target != "geonerf":
                     sources[scene] = src
                     scenes[scene] = rel

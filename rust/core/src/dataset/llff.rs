@@ -57,16 +57,40 @@ fn npy_bytes(rows: &[PoseRow]) -> Vec<u8> {
     out
 }
 
-/// Write `poses_bounds.npy` atomically. Non-finite values are refused: a NaN in a
-/// pose file silently poisons training.
+/// What is wrong with row `i` (view `i`) of a pose file, or None: every value finite
+/// (a NaN silently poisons training), hwf positive (loaders divide by the focal
+/// length), and bounds with 0 < near < far (loaders sample rays between the two: an
+/// empty, reversed or negative interval, such as near = far = -1 for "unknown", breaks
+/// them). The one check of the writer and the reader.
+fn row_problem(i: usize, row: &PoseRow) -> Option<String> {
+    if let Some(j) = row.iter().position(|v| !v.is_finite()) {
+        return Some(format!("row {i} column {j} is not finite"));
+    }
+    if let Some((name, v)) = [("height", row[4]), ("width", row[9]), ("focal", row[14])]
+        .into_iter()
+        .find(|(_, v)| *v <= 0.0)
+    {
+        return Some(format!("row {i}: {name} {v} (hwf must be positive)"));
+    }
+    let (near, far) = (row[15], row[16]);
+    if !(near > 0.0 && far > near) {
+        return Some(format!(
+            "row {i} (view {i}): near {near} and far {far} are no depth bounds \
+             (need 0 < near < far)"
+        ));
+    }
+    None
+}
+
+/// Write `poses_bounds.npy` atomically. A row the reader would refuse (`row_problem`:
+/// a value not finite, no camera, bounds not 0 < near < far) is refused, named, and
+/// nothing is written.
 pub fn write_poses_bounds(path: &Path, rows: &[PoseRow]) -> Result<()> {
-    for (i, r) in rows.iter().enumerate() {
-        if let Some(j) = r.iter().position(|v| !v.is_finite()) {
-            return Err(Error::PoseFormat {
-                reason: format!("row {i} column {j} is not finite"),
-                path: path.into(),
-            });
-        }
+    if let Some(reason) = rows.iter().enumerate().find_map(|(i, r)| row_problem(i, r)) {
+        return Err(Error::PoseFormat {
+            reason,
+            path: path.into(),
+        });
     }
     write_atomic(path, &npy_bytes(rows))
 }
@@ -171,15 +195,8 @@ pub fn parse_poses_bounds(bytes: &[u8]) -> std::result::Result<Vec<PoseRow>, Str
                 _ => return Err("short value".into()),
             };
         }
-        if let Some(j) = row.iter().position(|v| !v.is_finite()) {
-            return Err(format!("row {i} column {j} is not finite"));
-        }
-        // hwf: a camera of no size or no focal length is no camera (loaders divide by f).
-        if let Some((name, v)) = [("height", row[4]), ("width", row[9]), ("focal", row[14])]
-            .into_iter()
-            .find(|(_, v)| *v <= 0.0)
-        {
-            return Err(format!("row {i}: {name} {v} (hwf must be positive)"));
+        if let Some(reason) = row_problem(i, &row) {
+            return Err(reason);
         }
         rows.push(row);
     }
@@ -544,6 +561,9 @@ mod tests {
     #[test]
     fn a_camera_without_focal_length_is_refused_by_row() {
         let mut rows = vec![[1.0; 17]; 3];
+        for r in &mut rows {
+            r[16] = 2.0; // far beyond near
+        }
         rows[2][14] = 0.0;
         let err = parse_poses_bounds(&npy_bytes(&rows)).unwrap_err();
         assert_eq!(err, "row 2: focal 0 (hwf must be positive)");
@@ -551,6 +571,38 @@ mod tests {
         rows[1][9] = -4.0;
         let err = parse_poses_bounds(&npy_bytes(&rows)).unwrap_err();
         assert!(err.starts_with("row 1: width -4"), "{err}");
+    }
+
+    #[test]
+    fn bounds_that_are_no_depth_interval_are_refused_named_and_not_written() {
+        let mut good = [1.0; 17];
+        good[16] = 2.0;
+        for (near, far) in [
+            (-1.0, -1.0),
+            (0.0, 1.0),
+            (2.0, 2.0),
+            (3.0, 1.0),
+            (-2.0, 5.0),
+        ] {
+            let mut rows = vec![good; 3];
+            rows[1][15] = near;
+            rows[1][16] = far;
+            let p = tmp(&format!("bounds{near}_{far}.npy"));
+            let err = write_poses_bounds(&p, &rows)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(
+                err.contains("row 1 (view 1)")
+                    && err.contains("0 < near < far")
+                    && err.contains(&p.display().to_string()),
+                "{err}"
+            );
+            assert!(!p.exists(), "{near} {far}: written");
+            let read = parse_poses_bounds(&npy_bytes(&rows)).unwrap_err();
+            assert!(read.starts_with("row 1 (view 1): near"), "{read}");
+        }
+        assert!(parse_poses_bounds(&npy_bytes(&[good])).is_ok());
     }
 
     #[test]
