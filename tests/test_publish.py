@@ -462,8 +462,8 @@ def test_manifest_format_is_gnu_sha256sum(tmp_path):
     (root / "a" / "b" / "c.png").write_bytes(b"\x89PNg")
     (root / "extra.txt").write_text("late")
     assert publish.check_manifest(root) == [
-        ("a/b/c.png", "checksum mismatch"),
-        ("extra.txt", "not in MANIFEST.sha256"),
+        ("a/b/c.png", "mismatch", "checksum mismatch"),
+        ("extra.txt", "unlisted", "not in MANIFEST.sha256"),
     ]
     bad = tmp_path / "bad"
     bad.mkdir()

@@ -49,6 +49,20 @@ def target_next_round(
     None when it is done (`mse`: the last estimate, None before the pilot; `previous`:
     samples per frame and half and the MSE of the estimate before it)."""
 
+# The kinds of what is wrong with a file (layout.rs Fault, manifest.rs ManifestProblem).
+SettingFault: TypeAlias = Literal[
+    "missing",
+    "unreadable",
+    "level_missing",
+    "count",
+    "size",
+    "not_png",
+    "png_truncated",
+    "empty",
+    "truncated",
+]
+ManifestFault: TypeAlias = Literal["missing", "mismatch", "unlisted"]
+
 _OptionKind: TypeAlias = Literal[
     "switch",
     "int",
@@ -514,9 +528,9 @@ def is_complete(dir: str | PathLike[str]) -> bool:
 def setting_problem(setting: str | PathLike[str]) -> str | None:
     """What is missing or damaged in a complete setting (checked cheaply), or None."""
 
-def setting_problems(setting: str | PathLike[str]) -> list[tuple[str, str]]:
+def setting_problems(setting: str | PathLike[str]) -> list[tuple[str, SettingFault, str]]:
     """Every problem of a complete setting the cheap check finds: (path relative to
-    the setting, what is wrong), in the order the check meets them."""
+    the setting, its kind, what is wrong in words), in the order the check meets them."""
 
 def png_problem(path: str | PathLike[str]) -> str | None:
     """What is wrong with a PNG read without decoding (signature, end chunk), or None."""
@@ -1128,9 +1142,10 @@ def update_manifest(root: str | PathLike[str], rels: list[str]) -> int:
     """Rehash these files (relative to `root`) into its existing manifest, dropping
     those no longer there; returns the number of files listed."""
 
-def check_manifest(root: str | PathLike[str]) -> list[tuple[str, str]]:
-    """(relative path, problem) of each file that does not match root/MANIFEST.sha256:
-    `missing`, `checksum mismatch` or `not in MANIFEST.sha256`, sorted by path.
+def check_manifest(root: str | PathLike[str]) -> list[tuple[str, ManifestFault, str]]:
+    """(relative path, kind, what is wrong) of each file that does not match
+    root/MANIFEST.sha256: `missing`, `mismatch` (checksum mismatch) or `unlisted` (not in
+    MANIFEST.sha256), sorted by path.
     Raises FileNotFoundError without a manifest, InputError naming a bad line."""
 
 def check_images(items: list[tuple[str | PathLike[str], int, int]]) -> list[str | None]:

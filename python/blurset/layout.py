@@ -193,9 +193,10 @@ def setting_problem(setting: Path) -> str | None:
     return _core.setting_problem(setting)
 
 
-def setting_problems(setting: Path) -> list[tuple[str, str]]:
+def setting_problems(setting: Path) -> list[tuple[str, _core.SettingFault, str]]:
     """Every problem the check of setting_problem finds (it reports the first): (path
-    relative to the setting, what is wrong); `blurset verify` lists them all."""
+    relative to the setting, its kind, what is wrong in words); `blurset verify` lists
+    them all."""
     return _core.setting_problems(setting)
 
 

@@ -114,7 +114,8 @@ def refresh_manifest(written: list[Path]) -> None:
         _core.update_manifest(root, rels)
 
 
-def check_manifest(root: Path) -> list[tuple[str, str]]:
-    """(relative path, problem) of every file that does not match the manifest:
-    `missing`, `checksum mismatch`, or `not in MANIFEST.sha256`."""
+def check_manifest(root: Path) -> list[tuple[str, _core.ManifestFault, str]]:
+    """(relative path, kind, what is wrong) of every file that does not match the
+    manifest: kinds `missing`, `mismatch` (checksum mismatch), `unlisted` (not in
+    MANIFEST.sha256)."""
     return _core.check_manifest(Path(root))

@@ -56,9 +56,16 @@ class Report:
     unit: str = "settings"
     images: int = 0
     manifest_files: int | None = None
+    # Files that should not be there at all, and where in `problems` that is said: their
+    # one problem (_one_per_file).
+    strays: dict[str, int] = field(default_factory=dict)
 
     def bad(self, rel: str | Path, what: str) -> None:
         self.problems.append((str(rel), what))
+
+    def stray(self, rel: str | Path, what: str) -> None:
+        self.strays[str(rel)] = len(self.problems)
+        self.bad(rel, what)
 
     def note(self, rel: str | Path, what: str) -> None:
         self.notes.append((str(rel), what))
@@ -104,7 +111,7 @@ def _expect_files(
         if n not in present:
             report.bad(rel / n, "missing")
     for n in sorted(present - set(names)):
-        report.bad(rel / n, f"not a file of this {what} folder")
+        report.stray(rel / n, f"not a file of this {what} folder")
     return [folder / n for n in names if n in present]
 
 
@@ -122,11 +129,11 @@ def setting_problems(
     rep = Report(root)
     name = setting.relative_to(root)
     cheap = layout.setting_problems(setting)
-    for rel, what in cheap:
+    for rel, kind, what in cheap:
         # A wrong count of images is named file by file below.
-        if not what.startswith("holds "):
+        if kind != "count":
             rep.bad(name / rel, what)
-    flagged = {rel for rel, _ in cheap}
+    flagged = {rel for rel, _, _ in cheap}
     if layout.META in flagged:
         return rep.problems, []
     meta = _read_json(root, f"{name}/meta.json", rep)
@@ -166,7 +173,7 @@ def setting_problems(
         elif rows != n:
             rep.bad((d / layout.POSES_BOUNDS).relative_to(root), f"{rows} rows, expected {n}")
     if layout.TRANSFORMS in flagged:
-        return _one_per_file(rep.problems), to_decode
+        return _one_per_file(rep), to_decode
     tf = _read_json(root, f"{name}/transforms.json", rep)
     if tf is not None:
         frames = tf.get("frames") if isinstance(tf, dict) else None
@@ -183,17 +190,16 @@ def setting_problems(
             }
             if named != want:
                 rep.bad(f"{name}/transforms.json", "its file_paths are not this setting's images")
-    return _one_per_file(rep.problems), to_decode
+    return _one_per_file(rep), to_decode
 
 
-def _one_per_file(problems: list[tuple[str, str]]) -> list[tuple[str, str]]:
+def _one_per_file(rep: Report) -> list[tuple[str, str]]:
     """One problem per file: a file that should not be there at all says so, instead of
     what the cheap check found wrong with it."""
-    stray = {rel for rel, what in problems if what.startswith("not a file of this")}
     return [
         (rel, what)
-        for rel, what in problems
-        if rel not in stray or what.startswith("not a file of this")
+        for i, (rel, what) in enumerate(rep.problems)
+        if rep.strays.get(rel, i) == i
     ]
 
 
@@ -374,8 +380,8 @@ def _check_manifest(root: Path, rep: Report, *, finished: bool) -> None:
         rep.bad(publish.MANIFEST, reason_of(e))
         return
     rep.manifest_files = len(publish.manifest_files(root))
-    for rel, what in found:
-        if what.startswith("not in"):
+    for rel, kind, what in found:
+        if kind == "unlisted":
             rep.note(rel, f"{what} (added after it was written)")
         else:
             rep.bad(rel, f"{what} (MANIFEST.sha256)")

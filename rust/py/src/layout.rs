@@ -113,19 +113,19 @@ fn setting_problem(py: Python<'_>, setting: PathBuf) -> Option<String> {
 }
 
 /// Every problem of a complete setting the cheap check finds: (path relative to the
-/// setting, what is wrong), in the order the check meets them.
+/// setting, its kind, what is wrong in words), in the order the check meets them.
 #[pyfunction]
-fn setting_problems(py: Python<'_>, setting: PathBuf) -> Vec<(String, String)> {
+fn setting_problems(py: Python<'_>, setting: PathBuf) -> Vec<(String, &'static str, String)> {
     py.detach(|| core::setting_problems(&setting))
         .into_iter()
-        .map(|p| (p.path, p.what))
+        .map(|p| (p.path, p.fault.kind(), p.fault.what()))
         .collect()
 }
 
 /// What is wrong with a PNG read without decoding (signature, end chunk), or None.
 #[pyfunction]
-fn png_problem(path: PathBuf) -> Option<&'static str> {
-    core::png_problem(&path)
+fn png_problem(path: PathBuf) -> Option<String> {
+    core::png_fault(&path).map(|f| f.what())
 }
 
 /// The complete setting directory names of a build, sorted.

@@ -28,13 +28,17 @@ fn update_manifest(py: Python<'_>, root: PathBuf, rels: Vec<String>) -> PyResult
     crate::run_detached(py, || core::update_manifest(&root, &rels))
 }
 
-/// [(relative path, problem)] of the files that do not match root/MANIFEST.sha256.
+/// [(relative path, kind, what is wrong)] of the files that do not match
+/// root/MANIFEST.sha256 (kinds: missing, mismatch, unlisted).
 #[pyfunction]
-fn check_manifest(py: Python<'_>, root: PathBuf) -> PyResult<Vec<(String, String)>> {
+fn check_manifest(
+    py: Python<'_>,
+    root: PathBuf,
+) -> PyResult<Vec<(String, &'static str, &'static str)>> {
     let problems = crate::run_detached(py, || core::check_manifest(&root))?;
     Ok(problems
         .into_iter()
-        .map(|(p, what)| (p, what.as_str().to_string()))
+        .map(|(p, what)| (p, what.kind(), what.as_str()))
         .collect())
 }
 

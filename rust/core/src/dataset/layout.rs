@@ -62,23 +62,92 @@ const PNG_MAGIC: &[u8; 8] = b"\x89PNG\r\n\x1a\n";
 /// Bytes of one `poses_bounds.npy` row (17 float64).
 const POSE_ROW_BYTES: u64 = 17 * 8;
 
+/// What is wrong with one file or folder of a complete setting: a kind with its facts;
+/// the words are made from it ([`Fault::what`]), so callers match kinds, never text.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// Not there (a file).
+    Missing,
+    /// There but not readable as what it should be (the reason).
+    Unreadable(String),
+    /// A level folder meta.json lists is not there.
+    LevelMissing,
+    /// A folder holds `have` of the `want` files (`of`: "images", "EXRs").
+    Count {
+        have: usize,
+        want: usize,
+        of: &'static str,
+    },
+    /// A whole PNG of another size than meta.json's.
+    Size { got: (u32, u32), want: (u32, u32) },
+    /// Not a PNG at all.
+    NotPng,
+    /// A PNG without its end chunk (cut short).
+    PngTruncated,
+    /// An empty file.
+    Empty,
+    /// A file shorter than what it must hold.
+    Truncated,
+}
+
+impl Fault {
+    /// The kind's name, as the bindings give it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Fault::Missing => "missing",
+            Fault::Unreadable(_) => "unreadable",
+            Fault::LevelMissing => "level_missing",
+            Fault::Count { .. } => "count",
+            Fault::Size { .. } => "size",
+            Fault::NotPng => "not_png",
+            Fault::PngTruncated => "png_truncated",
+            Fault::Empty => "empty",
+            Fault::Truncated => "truncated",
+        }
+    }
+
+    /// What is wrong, in words (`blurset verify`'s line after the path).
+    pub fn what(&self) -> String {
+        match self {
+            Fault::Missing => "missing".into(),
+            Fault::Unreadable(why) => format!("unreadable ({why})"),
+            Fault::LevelMissing => "level folder missing".into(),
+            Fault::Count { have, want, of } => format!("holds {have} of {want} {of}"),
+            Fault::Size { got, want } => {
+                format!("{}x{} px, not {}x{}", got.0, got.1, want.0, want.1)
+            }
+            Fault::NotPng => "not a whole PNG".into(),
+            Fault::PngTruncated => "truncated (no PNG end chunk)".into(),
+            Fault::Empty => "empty".into(),
+            Fault::Truncated => "truncated".into(),
+        }
+    }
+}
+
 /// One problem of a complete setting found by the cheap check: the file or folder
-/// (relative to the setting, `/`-separated), what is wrong with it, and the sentence a
-/// rerun prints when it redoes the setting.
-#[derive(Clone, Debug, PartialEq)]
+/// (relative to the setting, `/`-separated) and what is wrong with it.
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct SettingProblem {
     pub path: String,
-    pub what: String,
-    pub message: String,
+    pub fault: Fault,
 }
 
 impl SettingProblem {
-    fn new(path: impl Into<String>, what: impl Into<String>) -> Self {
-        let (path, what) = (path.into(), what.into());
+    fn new(path: impl Into<String>, fault: Fault) -> Self {
         SettingProblem {
-            message: format!("{path} is {what}"),
-            path,
-            what,
+            path: path.into(),
+            fault,
+        }
+    }
+
+    /// The sentence a rerun prints when it redoes the setting.
+    pub fn message(&self) -> String {
+        let path = &self.path;
+        match &self.fault {
+            Fault::LevelMissing => format!("level folder {path}/ is missing"),
+            Fault::Count { .. } => format!("{path} {}", self.fault.what()),
+            Fault::PngTruncated => format!("{path} is truncated"),
+            f => format!("{path} is {}", f.what()),
         }
     }
 }
@@ -91,7 +160,7 @@ pub fn setting_problem(setting: &Path) -> Option<String> {
     setting_problems(setting)
         .into_iter()
         .next()
-        .map(|p| p.message)
+        .map(|p| p.message())
 }
 
 /// Every problem [`setting_problem`] checks for (it reports the first): `blurset verify`
@@ -120,12 +189,12 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
     let text = match std::fs::read(&meta) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return vec![SettingProblem::new(files::META, "missing")]
+            return vec![SettingProblem::new(files::META, Fault::Missing)]
         }
         Err(e) => {
             return vec![SettingProblem::new(
                 files::META,
-                format!("unreadable ({})", e.kind()),
+                Fault::Unreadable(e.kind().to_string()),
             )]
         }
     };
@@ -140,23 +209,19 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
         Err(e) => {
             return vec![SettingProblem::new(
                 files::META,
-                format!("unreadable ({e})"),
+                Fault::Unreadable(e.to_string()),
             )]
         }
     };
     let views = views.len();
     let linear = render.is_some_and(|r| r.linear);
     if !setting.join("transforms.json").is_file() {
-        out.push(SettingProblem::new("transforms.json", "missing"));
+        out.push(SettingProblem::new("transforms.json", Fault::Missing));
     }
     for lvl in &levels {
         let d = setting.join(lvl);
         if !d.is_dir() {
-            out.push(SettingProblem {
-                path: lvl.clone(),
-                what: "level folder missing".into(),
-                message: format!("level folder {lvl}/ is missing"),
-            });
+            out.push(SettingProblem::new(lvl.clone(), Fault::LevelMissing));
             continue;
         }
         let subdirs = std::iter::once((files::IMAGES.to_string(), 1))
@@ -165,50 +230,45 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
             let want = resolution.map(|[w, h]| (w / factor, h / factor));
             let images = files_with(&d.join(&sub), "png");
             if images.len() != views {
-                let path = format!("{lvl}/{sub}");
-                out.push(SettingProblem {
-                    what: format!("holds {} of {views} images", images.len()),
-                    message: format!("{path} holds {} of {views} images", images.len()),
-                    path,
-                });
+                let fault = Fault::Count {
+                    have: images.len(),
+                    want: views,
+                    of: "images",
+                };
+                out.push(SettingProblem::new(format!("{lvl}/{sub}"), fault));
             }
             for (name, p) in &images {
                 let path = format!("{lvl}/{sub}/{name}");
-                let Some(what) = png_problem(p) else {
+                let Some(fault) = png_fault(p) else {
                     // A whole PNG of another size than meta.json's (a valid image put in
                     // its place) is damage too: the loaders stack the images.
                     if let (Some((w, h)), Some(got)) = (want, png_size(p)) {
                         if got != (w, h) {
-                            let what = format!("{}x{} px, not {w}x{h}", got.0, got.1);
-                            out.push(SettingProblem {
-                                message: format!("{path} is {what}"),
-                                path,
-                                what,
-                            });
+                            let fault = Fault::Size { got, want: (w, h) };
+                            out.push(SettingProblem::new(path, fault));
                         }
                     }
                     continue;
                 };
-                out.push(SettingProblem {
-                    message: format!("{path} is {}", what.split(" (").next().unwrap_or(what)),
-                    path,
-                    what: what.into(),
-                });
+                out.push(SettingProblem::new(path, fault));
             }
         }
         if linear {
             let exrs = files_with(&d.join(files::LINEAR), "exr");
             if exrs.len() != views {
-                let path = format!("{lvl}/linear");
-                out.push(SettingProblem {
-                    what: format!("holds {} of {views} EXRs", exrs.len()),
-                    message: format!("{path} holds {} of {views} EXRs", exrs.len()),
-                    path,
-                });
+                let fault = Fault::Count {
+                    have: exrs.len(),
+                    want: views,
+                    of: "EXRs",
+                };
+                out.push(SettingProblem::new(format!("{lvl}/linear"), fault));
             }
             for (name, p) in &exrs {
                 if std::fs::metadata(p).map_or(true, |m| m.len() == 0) {
-                    out.push(SettingProblem::new(format!("{lvl}/linear/{name}"), "empty"));
+                    out.push(SettingProblem::new(
+                        format!("{lvl}/linear/{name}"),
+                        Fault::Empty,
+                    ));
                 }
             }
         }
@@ -216,10 +276,10 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
         match std::fs::metadata(d.join(files::POSES_BOUNDS)) {
             Ok(m) if m.is_file() => {
                 if m.len() < views as u64 * POSE_ROW_BYTES + 16 {
-                    out.push(SettingProblem::new(npy, "truncated"));
+                    out.push(SettingProblem::new(npy, Fault::Truncated));
                 }
             }
-            _ => out.push(SettingProblem::new(npy, "missing")),
+            _ => out.push(SettingProblem::new(npy, Fault::Missing)),
         }
     }
     out
@@ -245,11 +305,11 @@ fn files_with(dir: &Path, ext: &str) -> Vec<(String, PathBuf)> {
 
 /// What is wrong with a PNG file, read without decoding (its signature and its last
 /// chunk, IEND: a file cut short by a full disk or a killed copy has none), or None.
-pub fn png_problem(path: &Path) -> Option<&'static str> {
+pub fn png_fault(path: &Path) -> Option<Fault> {
     match png_state(path) {
         PngState::Whole => None,
-        PngState::NotPng => Some("not a whole PNG"),
-        PngState::Truncated => Some("truncated (no PNG end chunk)"),
+        PngState::NotPng => Some(Fault::NotPng),
+        PngState::Truncated => Some(Fault::PngTruncated),
     }
 }
 
@@ -508,7 +568,7 @@ mod tests {
         put("sharp/linear/000.exr", b"")?;
         let all: Vec<(String, String)> = setting_problems(&dir)
             .into_iter()
-            .map(|p| (p.path, p.what))
+            .map(|p| (p.path, p.fault.what()))
             .collect();
         let want = [
             ("sharp/images/001.png", "truncated (no PNG end chunk)"),

@@ -207,6 +207,16 @@ pub enum ManifestProblem {
 }
 
 impl ManifestProblem {
+    /// The kind's name, as the bindings give it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ManifestProblem::Missing => "missing",
+            ManifestProblem::Mismatch => "mismatch",
+            ManifestProblem::Unlisted => "unlisted",
+        }
+    }
+
+    /// What is wrong, in words.
     pub fn as_str(&self) -> &'static str {
         match self {
             ManifestProblem::Missing => "missing",
