@@ -197,9 +197,7 @@ def _one_per_file(rep: Report) -> list[tuple[str, str]]:
     """One problem per file: a file that should not be there at all says so, instead of
     what the cheap check found wrong with it."""
     return [
-        (rel, what)
-        for i, (rel, what) in enumerate(rep.problems)
-        if rep.strays.get(rel, i) == i
+        (rel, what) for i, (rel, what) in enumerate(rep.problems) if rep.strays.get(rel, i) == i
     ]
 
 
