@@ -244,3 +244,16 @@ def test_a_build_records_a_hostile_glb_by_its_file_and_goes_on(tmp_path):
     }
     for r in recs:
         assert r["path"].endswith(f"{r['uid']}.glb") and HOSTILE[r["uid"]][1] in r["reason"], r
+
+
+# -- what the build capped is said on the command line (issue 36) --------------------------
+
+
+def test_test_settings_capped_by_the_build_is_said(tmp_path, standin_blender):
+    out = tmp_path / "t"
+    proc = standin_build(out, standin_blender, "--test-settings", "52")
+    test = json.loads((out / layout.SPLITS).read_text())["test"]
+    assert len(test) == 5  # 6 settings: one stays train
+    assert "--test-settings 52: 5 test settings, as the build has 6 complete" in proc.stderr
+    proc = standin_build(tmp_path / "u", standin_blender, "--test-settings", "2")
+    assert "--test-settings" not in proc.stderr

@@ -47,6 +47,14 @@ def run(args: argparse.Namespace) -> int:
     if summary["settings_failed"]:
         line += f", {summary['settings_failed']} settings failed QA"
     print(f"{line} -> {cfg.out}", file=sys.stderr)
+    asked, got = cfg.test_settings, summary["test_settings"]
+    if asked is not None and got < asked:
+        # The core keeps one setting for training at least: say so, not only in splits.json.
+        print(
+            f"  --test-settings {asked}: {got} test settings, as the build has "
+            f"{summary['settings_complete']} complete and one at least stays train",
+            file=sys.stderr,
+        )
     for f in summary["failures"][:5]:
         where = f.get("setting") or f["uid"]
         print(f"  {where}: {f['stage']}: {f['reason']}", file=sys.stderr)

@@ -198,4 +198,4 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     _core.write_dataset_json(out / layout.DATASET, dataset)
     # Last: the checksums of everything above (another shard's finalize rewrites it).
     publish.write_manifest(out)
-    return {"settings_complete": len(complete), "failures": kept}
+    return {"settings_complete": len(complete), "failures": kept, "test_settings": len(splits.test)}
