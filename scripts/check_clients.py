@@ -35,6 +35,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -313,7 +314,8 @@ class _Reads:
     of its functions and otherwise is that module."""
 
     def __init__(self, module, name: str) -> None:
-        self._module, self._name, self.paths = module, name, []
+        self._module, self._name = module, name
+        self.paths: list[str] = []
 
     def __getattr__(self, attr):
         fn = getattr(self._module, attr)
@@ -344,6 +346,7 @@ def _versions(*names: str) -> list[tuple[str, str]]:
         try:
             out.append((n, importlib.metadata.version(n)))
         except importlib.metadata.PackageNotFoundError:  # imported from the checkout
+            assert mod.__file__ is not None  # a module or a package's __init__, not a namespace
             out.append((n, f"from {Path(mod.__file__).parent.parent}"))
     return out
 
@@ -365,7 +368,7 @@ def _ibrnet_like(p: dict, pkg: str, config: str) -> dict:
     import imageio
     from config import config_parser  # the client's config.py
 
-    llff_test = __import__(f"{pkg}.data_loaders.llff_test", fromlist=["x"])
+    llff_test: Any = __import__(f"{pkg}.data_loaders.llff_test", fromlist=["x"])
     llff_utils = __import__(f"{pkg}.data_loaders.llff_data_utils", fromlist=["x"])
     export, doc = Path(p["export"]), p["doc"]
     notes = []
@@ -713,7 +716,8 @@ def _nerfstudio(p: dict) -> dict:
     from nerfstudio.data.datasets.base_dataset import InputDataset
 
     export, doc = Path(p["export"]), p["doc"]
-    scenes, phases, notes = [], [], []
+    scenes, phases = [], []
+    notes: list[str] = []
     for df in (None, 4):
         draws, axis_miss = [], []
         for key in sorted(doc["scenes"]):
