@@ -474,6 +474,16 @@ EXPORT: str
 STATS: str
 IMAGES: str
 LINEAR: str
+DEMO_OBJECTS: str
+
+def work_dir(uid: str) -> str:
+    """The private folder an object's worker writes its scratch in (`.work-<uid>`)."""
+
+def object_lock(uid: str) -> str:
+    """The lock a build holds while it builds one object (`.lock-<uid>`)."""
+
+def linear_name(image: str) -> str:
+    """The linear EXR of an image (`007.png` → `007.exr`)."""
 
 def images_dir(factor: int) -> str:
     """The image folder at downsampling factor `factor` (`images`, `images_4`)."""

@@ -36,6 +36,13 @@ STATS: str = _core.STATS
 IMAGES: str = _core.IMAGES
 LINEAR: str = _core.LINEAR
 MANIFEST: str = _core.MANIFEST
+# A build's private names: its demo objects, its lock, and per object a lock and a
+# scratch folder (the core's; no other module spells them).
+DEMO_OBJECTS: str = _core.DEMO_OBJECTS
+BUILD_LOCK: str = _core.OutputKind.BUILD.lock_name
+work_dir = _core.work_dir
+object_lock = _core.object_lock
+linear_name = _core.linear_name
 
 
 def images_dir(factor: int) -> str:

@@ -149,7 +149,7 @@ def setting_problems(
     render = meta.get("render") if isinstance(meta.get("render"), dict) else {}
     factors = meta.get("downsample") or []
     images = [layout.image_name(i, n) for i in indices]
-    exrs = [i.replace(".png", ".exr") for i in images]
+    exrs = [layout.linear_name(i) for i in images]
     to_decode: list[tuple[Path, int, int]] = []
     for level in levels:
         d = setting / level

@@ -50,7 +50,7 @@ def all_objects(cfg: BuildConfig) -> list[ObjectSpec]:
     if cfg.demo:
         from blurset.demo import make_demo_objects
 
-        demo_dir = out_dir(cfg) / ".demo_objects"
+        demo_dir = out_dir(cfg) / layout.DEMO_OBJECTS
         entries += [str(p) for p in make_demo_objects(demo_dir, seed=cfg.seed)]
     objs = sorted(
         resolve_objects(

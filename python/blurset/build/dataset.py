@@ -31,7 +31,7 @@ SHARED_FILES = (layout.FAILURES, layout.SPLITS, layout.DATASET, layout.MANIFEST)
 @contextlib.contextmanager
 def build_lock(out: Path):
     """Serialize the writes shared by every process building into OUT."""
-    with open(out / ".lock", "a") as f:
+    with open(out / layout.BUILD_LOCK, "a") as f:
         fcntl.flock(f, fcntl.LOCK_EX)
         try:
             yield

@@ -58,7 +58,7 @@ def _copy_sharp(setting: Path, views: list[int], n_views: int, cfg: BuildConfig)
         name = layout.image_name(view, n_views)
         files = [(d, name) for d in subdirs]
         if cfg.write_linear:
-            files.append((layout.LINEAR, name.replace(".png", ".exr")))
+            files.append((layout.LINEAR, layout.linear_name(name)))
         for level in cfg.level_dirs[1:]:
             for d, f in files:
                 (setting / level / d).mkdir(exist_ok=True)  # linear/: no view rendered
@@ -141,7 +141,7 @@ def render_setting(
         for f in cfg.downsample:
             a.write_png(partial / level / layout.images_dir(f) / name, background=bg, downsample=f)
         if cfg.write_linear:
-            a.write_exr(partial / level / layout.LINEAR / name.replace(".png", ".exr"))
+            a.write_exr(partial / level / layout.LINEAR / layout.linear_name(name))
         if level == layout.SHARP:
             qa[view] = _core.frame_qa(a.mean())
 

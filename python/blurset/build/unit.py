@@ -59,7 +59,7 @@ class ObjectUnit:
         # The Cycles backend (or AUTO) and GPU indices the worker renders on.
         self.device = device
         self.out = out_dir(cfg)
-        self.work = self.out / f".work-{obj.uid}"
+        self.work = self.out / layout.work_dir(obj.uid)
         self.result = ObjectResult(
             uid=obj.uid, local={"uid": obj.uid, "path": str(obj.path), "rel": obj.rel}
         )
@@ -289,7 +289,7 @@ def object_lock(out: Path, uid: str, say):
             say(f"waiting: {out / uid}_* is being built by {holder}")
             said.append(True)
 
-    with outputs.flock_file(out / f".lock-{uid}", wait):
+    with outputs.flock_file(out / layout.object_lock(uid), wait):
         yield
 
 

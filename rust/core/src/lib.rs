@@ -86,8 +86,9 @@ pub use crate::ground::license::{
 };
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
-    files, gain_name, image_name, images_dir, level_dir, level_dirs, linear_dir, parse_level_dir,
-    setting_name, sort_level_dirs, theta0s, SHARP,
+    files, gain_name, image_name, images_dir, level_dir, level_dirs, linear_dir, linear_name,
+    object_lock, parse_level_dir, setting_name, sort_level_dirs, theta0s, work_dir,
+    OBJECT_LOCK_PREFIX, SHARP, WORK_PREFIX,
 };
 
 // Image error against a reference and the speed/quality front.

@@ -106,6 +106,24 @@ fn is_complete(dir: PathBuf) -> bool {
     core::is_complete(&dir)
 }
 
+/// The private folder an object's worker writes its scratch in (`.work-<uid>`).
+#[pyfunction]
+fn work_dir(uid: &str) -> String {
+    core::work_dir(uid)
+}
+
+/// The lock a build holds while it builds one object (`.lock-<uid>`).
+#[pyfunction]
+fn object_lock(uid: &str) -> String {
+    core::object_lock(uid)
+}
+
+/// The linear EXR of an image (`007.png` → `007.exr`).
+#[pyfunction]
+fn linear_name(image: &str) -> String {
+    core::linear_name(image)
+}
+
 /// What is missing or damaged in a complete setting (checked cheaply), or None.
 #[pyfunction]
 fn setting_problem(py: Python<'_>, setting: PathBuf) -> Option<String> {
@@ -193,10 +211,14 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
         ("STATS", files::STATS),
         ("IMAGES", files::IMAGES),
         ("LINEAR", files::LINEAR),
+        ("DEMO_OBJECTS", files::DEMO_OBJECTS),
     ] {
         m.add(name, value)?;
     }
     m.add_function(wrap_pyfunction!(images_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(work_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(object_lock, m)?)?;
+    m.add_function(wrap_pyfunction!(linear_name, m)?)?;
     m.add_function(wrap_pyfunction!(linear_dir, m)?)?;
     m.add_function(wrap_pyfunction!(setting_name, m)?)?;
     m.add_function(wrap_pyfunction!(theta0s, m)?)?;

@@ -10,7 +10,7 @@
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
 use crate::ground::names::{files, images_dir};
-use crate::ground::names::{sort_level_dirs, SHARP};
+use crate::ground::names::{sort_level_dirs, SHARP, WORK_PREFIX};
 use std::path::{Path, PathBuf};
 
 /// The marker a setting directory gets last, when it is complete.
@@ -391,7 +391,7 @@ pub fn scan(out: &Path) -> Result<Scan> {
             s.is_build = true;
         }
         if name.starts_with('.') || !path.is_dir() {
-            if name.starts_with(".work-") || name == ".demo_objects" {
+            if name.starts_with(WORK_PREFIX) || name == files::DEMO_OBJECTS {
                 s.is_build = true;
             }
             continue;

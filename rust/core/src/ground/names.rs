@@ -37,6 +37,30 @@ pub mod files {
     pub const IMAGES: &str = "images";
     /// The full-size linear EXRs of a level (`--write-linear`).
     pub const LINEAR: &str = "linear";
+    /// A build's demo objects (`--demo`), written beside its settings.
+    pub const DEMO_OBJECTS: &str = ".demo_objects";
+}
+
+/// The private folder an object's worker writes its scratch in (`.work-<uid>`).
+pub fn work_dir(uid: &str) -> String {
+    format!("{WORK_PREFIX}{uid}")
+}
+
+/// What every object's scratch folder name starts with.
+pub const WORK_PREFIX: &str = ".work-";
+
+/// The lock a build holds while it builds one object (`.lock-<uid>`).
+pub fn object_lock(uid: &str) -> String {
+    format!("{OBJECT_LOCK_PREFIX}{uid}")
+}
+
+/// What every object lock's name starts with.
+pub const OBJECT_LOCK_PREFIX: &str = ".lock-";
+
+/// The linear EXR of an image (`007.png` → `007.exr`), in a level's `linear/`.
+pub fn linear_name(image: &str) -> String {
+    let stem = image.strip_suffix(".png").unwrap_or(image);
+    format!("{stem}.exr")
 }
 
 /// The image folder at downsampling factor `factor`: `images` at 1, else `images_<f>`
@@ -161,5 +185,20 @@ fn format_g(x: f64) -> String {
     } else {
         let sign = if exp < 0 { '-' } else { '+' };
         format!("{}e{sign}{:02}", strip(mant), exp.abs())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn private_names_of_a_build() {
+        assert_eq!(work_dir("abc"), ".work-abc");
+        assert!(work_dir("abc").starts_with(WORK_PREFIX));
+        assert_eq!(object_lock("abc"), ".lock-abc");
+        assert!(object_lock("abc").starts_with(OBJECT_LOCK_PREFIX));
+        assert_eq!(linear_name("007.png"), "007.exr");
+        assert_eq!(linear_name(&image_name(7, 1500)), "0007.exr");
     }
 }
