@@ -18,6 +18,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import OpenEXR
@@ -55,7 +56,7 @@ def render_frames(directory: Path, n: int = FRAMES, size: int = SIZE) -> list[Pa
     from blurset.worker_client import Worker
 
     glb = make_demo_objects(directory / "objs", seed=0)[0]
-    frames = []
+    frames: list[dict[str, Any]] = []
     for i in range(n):
         theta = math.radians(30.0 + 4.0 * i / n)  # a level-4-sized sweep
         phi, r = math.radians(60.0), 2.6
@@ -81,6 +82,7 @@ def baseline(paths: list[Path], out: Path, background=(1.0, 1.0, 1.0)) -> None:
         if acc is None:
             acc = np.zeros(rgba.shape, np.float64)
         acc += rgba
+    assert acc is not None  # at least one frame
     mean = acc / len(paths)
     rgb = mean[..., :3] + (1.0 - np.clip(mean[..., 3:], 0.0, 1.0)) * np.asarray(background)
     x = np.clip(rgb, 0.0, 1.0)
@@ -99,7 +101,10 @@ def median_times(a, b, repeats: int = REPEATS, cpu: dict | None = None) -> tuple
     """Medians of `repeats` interleaved runs of two thunks, so load from other processes
     on a shared machine hits both sides alike. If `cpu` is given, the medians of the
     process CPU time (all threads) of each side go to cpu["a"], cpu["b"]."""
-    ta, tb, ca, cb = [], [], [], []
+    ta: list[float] = []
+    tb: list[float] = []
+    ca: list[float] = []
+    cb: list[float] = []
     for _ in range(repeats):
         for fn, times, cpus in ((a, ta, ca), (b, tb, cb)):
             c0, t0 = time.process_time(), time.perf_counter()

@@ -75,12 +75,13 @@ def measure() -> dict:
                             "light_paths"
                         ]
                         f = dict(frame, out=str(work / f"{mode}.exr"))
+                        assert w._proc is not None  # loaded: the worker runs
                         c0, t0 = _proc_cpu(w._proc.pid), time.perf_counter()
                         w.render([f], resolution=RES, fov_deg=cfg.fov_deg, samples=SAMPLES)
                         times[mode].append((time.perf_counter() - t0, _proc_cpu(w._proc.pid) - c0))
                         img[mode] = np.asarray(read_exr(work / f"{mode}.exr"))
-                e = image_error(img["auto"], img["fixed"])
-                err = {"psnr": e.psnr}
+                diff = image_error(img["auto"], img["fixed"])
+                err = {"psnr": diff.psnr}
                 med = {m: [statistics.median(x[i] for x in v) for i in (0, 1)]
                        for m, v in times.items()}  # fmt: skip
                 out["objects"][name] = {

@@ -48,7 +48,7 @@ BUILD_ARGS = (
 )  # fmt: skip
 
 
-def cli(*args: str) -> None:
+def cli(*args: object) -> None:
     proc = subprocess.run(
         [sys.executable, "-m", "blurset.cli", *map(str, args)], capture_output=True, text=True
     )
@@ -191,7 +191,7 @@ def run() -> list[dict]:
         for bg in ("white", "black"):
             if bg not in builds and not (given and bg == "black"):
                 builds[bg] = make_build(root, bg)
-        times = {"linear": [], "png": []}
+        times: dict[str, list[float]] = {"linear": [], "png": []}
         for bg, build in builds.items():
             for gamma in ("srgb", "2.2"):
                 outs = {}

@@ -67,7 +67,10 @@ def median_times(a, b, repeats: int = REPEATS, cpu: dict | None = None) -> tuple
     """Medians of interleaved runs, so load from other processes hits both sides alike.
     If `cpu` is given, the medians of the process CPU time (all threads) of each side
     go to cpu["a"], cpu["b"]."""
-    ta, tb, ca, cb = [], [], [], []
+    ta: list[float] = []
+    tb: list[float] = []
+    ca: list[float] = []
+    cb: list[float] = []
     for _ in range(repeats):
         for fn, times, cpus in ((a, ta, ca), (b, tb, cb)):
             c0, t0 = time.process_time(), time.perf_counter()

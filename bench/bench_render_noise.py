@@ -21,6 +21,7 @@ import os
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +31,7 @@ FACTOR = 8  # converged renders: FACTOR × the image's own budget
 ADAPTIVE = 0.01  # Cycles noise threshold of the adaptive-sampling check
 DEVICE = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")
 
-PRESETS = {
+PRESETS: dict[str, tuple[dict[str, Any], int]] = {
     # name: (build options of the blurry image, sharp samples)
     "paper": ({"latents": 34, "samples": 32}, 1088),
     "balanced": (

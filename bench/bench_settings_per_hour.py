@@ -397,6 +397,7 @@ def measure() -> dict:
                 samples = runs[top][0]["samples"]
                 plain = {k: v for k, v in PRESETS[top].items() if k != "denoise"}
                 split = any(PRESETS[n].get("denoise") == "oidn" for n in names)
+                noise: dict  # the reference's noise per image: none without a reference
                 if set(names) <= NO_RENDER_REF:
                     ref, k, noise = None, 1, {}
                 else:

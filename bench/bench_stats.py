@@ -24,6 +24,7 @@ import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -31,6 +32,9 @@ sys.path.insert(0, str(ROOT))
 from blurset.stats import build_stats  # noqa: E402
 
 from tests.conftest import write_synthetic_build  # noqa: E402
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 SETTINGS = 10_000
 REPEATS = 3
@@ -46,8 +50,10 @@ def python_aggregate(build: Path) -> dict:
         and not e.name.endswith(".partial")
         and os.path.isfile(os.path.join(e.path, ".complete"))
     )
-    cols = defaultdict(list)
-    per_level = defaultdict(lambda: defaultdict(list))
+    cols: defaultdict[str, list[float]] = defaultdict(list)
+    per_level: defaultdict[str, defaultdict[str, list[float]]] = defaultdict(
+        lambda: defaultdict(list)
+    )
     uids, images = set(), 0
     for n in names:
         with open(build / n / "meta.json", "rb") as f:
@@ -78,13 +84,14 @@ def python_aggregate(build: Path) -> dict:
     }
 
 
-def rust_aggregate(build: Path) -> dict:
+def rust_aggregate(build: Path) -> _records.BuildStats:
     return build_stats(build).to_dict()
 
 
 def median_times(a, b, repeats: int = REPEATS) -> tuple[float, float]:
     """Medians of interleaved runs, so load from other processes hits both sides alike."""
-    ta, tb = [], []
+    ta: list[float] = []
+    tb: list[float] = []
     for _ in range(repeats):
         for fn, times in ((a, ta), (b, tb)):
             t0 = time.perf_counter()

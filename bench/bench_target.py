@@ -29,8 +29,12 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 HERE = Path(__file__).resolve().parent
 RES = int(os.environ.get("BLURSET_BENCH_TARGET_RES", "128"))
@@ -94,7 +98,7 @@ def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
         verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
         plan = plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
                             bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
-        images: dict[tuple[int, str], list[dict]] = {}
+        images: dict[tuple[int, str], list[_records.Render]] = {}
         for f in plan.renders(str(work / "r"), cfg.cycles_samples, sharp_views=[]):
             images.setdefault((f["view"], f["level"]), []).append(f)
         # One Cycles sequence length for every render of this worker (Cycles never shrinks
@@ -108,7 +112,7 @@ def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
                 acc = image.Accumulator(RES, RES)
                 half = []
                 for k, f in enumerate(frames):
-                    g = {
+                    g: dict[str, Any] = {
                         x: f[x] for x in ("c2w", "region", "call", "motion") if f.get(x) is not None
                     }
                     g.update(seed=(f["seed"] ^ salt) & 0x7FFFFFFF, samples=s,

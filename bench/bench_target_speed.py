@@ -27,8 +27,12 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 HERE = Path(__file__).resolve().parent
 RES = int(os.environ.get("BLURSET_BENCH_SPEED_RES", "128"))
@@ -70,7 +74,7 @@ def _paper_noise(cfg, glb: Path, setting: Path, work: Path) -> dict:
         verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
         plan = plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
                             bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
-        images: dict[tuple[int, str], list[dict]] = {}
+        images: dict[tuple[int, str], list[_records.Render]] = {}
         for f in plan.renders(str(work / "r"), cfg.cycles_samples, sharp_views=[]):
             images.setdefault((f["view"], f["level"]), []).append(f)
         for (view, level), frames in images.items():
@@ -83,8 +87,9 @@ def _paper_noise(cfg, glb: Path, setting: Path, work: Path) -> dict:
                 os.unlink(path)
 
             samples = cfg.effective_sharp_samples if level == "sharp" else cfg.samples
-            w.render(frames, resolution=RES, fov_deg=cfg.fov_deg, samples=samples,
-                     on_frame=on_frame, crop=True)  # fmt: skip
+            # Worker.render takes plain dicts (it only reads them): copies of the records.
+            w.render([dict(f) for f in frames], resolution=RES, fov_deg=cfg.fov_deg,
+                     samples=samples, on_frame=on_frame, crop=True)  # fmt: skip
             name = layout.image_name(view, VIEWS).replace(".png", ".exr")
             first = read_exr(setting / level / "linear" / name)
             e = image.object_error(first, acc.mean())

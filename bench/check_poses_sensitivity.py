@@ -149,18 +149,18 @@ def table(rows: list[dict]) -> str:
     head = f"{'object':<10} {'level':<7} {'px':>4} " + " ".join(f"{k:>16}" for k in counts)
     out = [head, "-" * len(head)]
     key = lambda r: (r["object"], LEVELS.index(r["level"]), r["size_px"])  # noqa: E731
-    seen = {}
+    seen: dict[tuple[str, int, int], dict[int, dict]] = {}  # (object, level, px): views: row
     for r in sorted(rows, key=key):
         seen.setdefault(key(r), {})[r["views"]] = r
     for (obj, lv, size), cells in seen.items():
         txt = []
         for k in counts:
-            r = cells.get(k)
-            if r is None:
+            row = cells.get(k)
+            if row is None:
                 txt.append(f"{'':>16}")
                 continue
-            v = {"pass": "pass", "fail": "FAIL"}.get(r["verdict"], "n/c")
-            c = f"{r['planted_caught']}/{r['planted_tried']}" if r["planted_tried"] else "-"
+            v = {"pass": "pass", "fail": "FAIL"}.get(row["verdict"], "n/c")
+            c = f"{row['planted_caught']}/{row['planted_tried']}" if row["planted_tried"] else "-"
             txt.append(f"{v + ' ' + c:>16}")
         out.append(f"{obj:<10} {LEVELS[lv]:<7} {size:>4} " + " ".join(txt))
     out.append(

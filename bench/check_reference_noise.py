@@ -23,8 +23,9 @@ import numpy as np
 os.environ.setdefault("BLURSET_BENCH_REF_CAP", "1000000")  # K = 32, uncapped
 HERE = Path(__file__).resolve().parent
 _spec = importlib.util.spec_from_file_location("sph", HERE / "bench_settings_per_hour.py")
+assert _spec is not None and _spec.loader is not None  # a .py file: always a spec and a loader
 sph = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(sph)  # type: ignore[union-attr]
+_spec.loader.exec_module(sph)
 
 
 def main(preset_name: str, glb: Path) -> dict:

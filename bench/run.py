@@ -78,6 +78,7 @@ def main() -> int:
         if only and path.stem not in only:
             continue
         spec = importlib.util.spec_from_file_location(path.stem, path)
+        assert spec is not None and spec.loader is not None  # a .py file: a spec and a loader
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
         for r in mod.run():
