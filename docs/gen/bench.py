@@ -56,6 +56,14 @@ def _cell(text: object) -> str:
     return sanitize(" ".join(str(text).split())).replace("|", "\\|")
 
 
+def _match(pattern: re.Pattern[str], name: str) -> re.Match[str]:
+    """A result name's fields: main() sorts every result into its section by these
+    patterns, so each name a section reads matches its pattern."""
+    m = pattern.match(name)
+    assert m is not None, name
+    return m
+
+
 def _machine(results: list[dict]) -> str:
     """What the results were measured on, from their `device` fields."""
     seen = []
@@ -126,7 +134,7 @@ def presets_page(rs: list[dict]) -> list[str]:
     size's ratios are to the paper preset of its own run."""
     by_res: dict[str, list[dict]] = defaultdict(list)
     for r in rs:
-        by_res[PRESETS.match(r["name"])["res"] or ""].append(r)
+        by_res[_match(PRESETS, r["name"])["res"] or ""].append(r)
     out = _presets_section(by_res.pop("", []))
     for res in sorted(by_res, key=int):
         out += _presets_section(by_res[res], res)
@@ -141,7 +149,7 @@ def _paper_of(r: dict) -> float:
 
 
 def _presets_section(rs: list[dict], res: str = "") -> list[str]:
-    rows = {PRESETS.match(r["name"])["preset"]: r for r in rs}
+    rows = {_match(PRESETS, r["name"])["preset"]: r for r in rs}
     if res:
         # One table per run: results of earlier runs at this size stay, each with the ratio
         # to its own run's paper preset (whose own entry the newest run replaced).
@@ -161,7 +169,7 @@ def _presets_section(rs: list[dict], res: str = "") -> list[str]:
         ]
         for n, key in enumerate(order):
             group = runs[key]
-            g_rows = {PRESETS.match(r["name"])["preset"]: r for r in group}
+            g_rows = {_match(PRESETS, r["name"])["preset"]: r for r in group}
             objects = sorted({o for r in group for o in r.get("objects", [])})
             where = f"{res} px" if n == 0 else f"{res} px, earlier run {n}"
             ref = group[0].get("reference", "not recorded")
@@ -373,7 +381,7 @@ def denoise_gain_lines(rs: list[dict]) -> list[str]:
         "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in sorted(rs, key=lambda r: (r.get("resolution", 0), r["name"])):
-        m = GAIN.match(r["name"])
+        m = _match(GAIN, r["name"])
         samples = r.get("samples", [])
         detail = r.get("oidn_detail", [])
         det = f"{min(detail):.3f}–{max(detail):.3f}" if detail else ""
@@ -420,7 +428,7 @@ def render_noise_page(parity: list[dict], noise: list[dict]) -> list[str]:
         ]
         by_preset: dict[str, dict] = defaultdict(lambda: defaultdict(dict))
         for r in parity:
-            m = PARITY.match(r["name"])
+            m = _match(PARITY, r["name"])
             by_preset[m["preset"]][int(m["level"])][m["budget"]] = r
         presets = sorted(by_preset, key=lambda p: (p != "paper", p))
         fig, axes = plt.subplots(1, len(presets), figsize=(4.6 * len(presets), 3.4), sharey=True)
@@ -483,7 +491,7 @@ def render_noise_page(parity: list[dict], noise: list[dict]) -> list[str]:
         ]
         groups: dict[tuple[str, str], dict[str, float]] = defaultdict(dict)
         for r in noise:
-            m = NOISE.match(r["name"])
+            m = _match(NOISE, r["name"])
             groups[(m["preset"], m["motion"].replace("_trajectory", ""))][m["scheme"]] = r["ratio"]
         schemes = sorted({s for g in groups.values() for s in g})
         keys = sorted(groups, key=lambda k: (k[0] != "paper", k))
@@ -587,7 +595,7 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
             "whether the pixels came out identical:",
             "",
         ]
-        names = [LIGHT.match(r["name"])["glb"] for r in light]
+        names = [_match(LIGHT, r["name"])["glb"] for r in light]
         fig, ax = plt.subplots(figsize=(8, 0.4 * len(light) + 1))
         cpu = [r.get("cpu_ratio", r["ratio"]) for r in light]
         ax.barh(names[::-1], cpu[::-1], color="#795548")
@@ -598,9 +606,9 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
             "| GLB | CPU ratio | identical pixels | bounces (auto) |",
             "| --- | --- | --- | --- |",
         ]
-        for n, r in zip(names, light, strict=True):
+        for glb, r in zip(names, light, strict=True):
             out.append(
-                f"| {n} | {r.get('cpu_ratio', r['ratio']):.2f}× | "
+                f"| {glb} | {r.get('cpu_ratio', r['ratio']):.2f}× | "
                 f"{'yes' if r.get('identical_pixels') else 'no'} | "
                 f"{_cell(r.get('contender', '').split(':')[0])} |"
             )
@@ -644,13 +652,13 @@ def targets_page(rs: list[dict]) -> list[str]:
         "a target promises.",
         "",
     ]
-    per_model = [r for r in rs if TARGET.match(r["name"])["model"] != "estimate"]
-    overall = {r["name"]: r for r in rs if TARGET.match(r["name"])["model"] == "estimate"}
+    per_model = [r for r in rs if _match(TARGET, r["name"])["model"] != "estimate"]
+    overall = {r["name"]: r for r in rs if _match(TARGET, r["name"])["model"] == "estimate"}
     if not per_model:
         return out + ["No `target_*` result in bench/results.json yet."]
     runs: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for r in per_model:
-        m = TARGET.match(r["name"])
+        m = _match(TARGET, r["name"])
         runs[(m["res"], m["db"])].append(r)
     for (res, db), group in sorted(runs.items(), key=lambda kv: (int(kv[0][0]), kv[0][1])):
         first = group[0]
@@ -673,7 +681,7 @@ def targets_page(rs: list[dict]) -> list[str]:
         head = ["model", *[t for _, t, _ in TARGET_COLUMNS]]
         out += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
         for r in sorted(group, key=lambda r: r["name"]):
-            cells = [f"`{TARGET.match(r['name'])['model']}`"]
+            cells = [f"`{_match(TARGET, r['name'])['model']}`"]
             for k, _, fmt in TARGET_COLUMNS:
                 v = r.get(k)
                 cells.append(format(v, fmt) if isinstance(v, (int, float)) else "")
@@ -692,7 +700,7 @@ def targets_page(rs: list[dict]) -> list[str]:
         table.append("|" + " --- |" * (len(more) + 1))
         for r in sorted(group, key=lambda r: r["name"]):
             table.append(
-                f"| `{TARGET.match(r['name'])['model']}` | "
+                f"| `{_match(TARGET, r['name'])['model']}` | "
                 + " | ".join(_fmt(r.get(k)) for k, _ in more)
                 + " |"
             )

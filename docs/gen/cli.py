@@ -22,7 +22,7 @@ OUT = DOCS / "reference" / "cli.md"
 WIDTH = 88
 
 
-def _cell(text: str) -> str:
+def _cell(text: object) -> str:
     return sanitize(" ".join(str(text).split())).replace("|", "\\|")
 
 
