@@ -68,7 +68,7 @@ lint: venv
 	$(PY) -m mypy.stubtest blurset._core --allowlist stubtest_allowlist.txt
 	$(MAKE) typecheck
 
-# mypy on python/blurset ([tool.mypy] in pyproject.toml): zero errors.
+# mypy on python/blurset, bench, scripts and docs/gen ([tool.mypy] in pyproject.toml): zero errors.
 typecheck: venv
 	$(PY) -m mypy
 
