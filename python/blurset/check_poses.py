@@ -313,13 +313,6 @@ def _refuse_used_workdir(workdir: Path) -> None:
         )
 
 
-def _run_colmap(image_dir: Path, names: list[str], intrinsics, workdir: Path):
-    """SIFT, exhaustive matching and incremental mapping (seed 0) with fixed intrinsics.
-    Returns (features per image name, the largest reconstruction or None)."""
-    session = _Colmap(image_dir, names, intrinsics, workdir)
-    return session.features, session.map(0)
-
-
 # --------------------------------------------------------------------------- alignment
 
 

@@ -19,7 +19,7 @@
 use super::layout::{scan, PARTIAL_SUFFIX};
 use super::read::{check_shape, read_record, Record};
 use crate::error::{Error, Result};
-use crate::ground::names::files;
+use crate::ground::names::{files, OBJECT_LOCK_PREFIX};
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
@@ -418,7 +418,7 @@ pub fn build_state(out: &Path) -> Result<BuildState> {
     let mut why = Vec::new();
     let running: Vec<String> = list(out)?
         .into_iter()
-        .filter_map(|(n, _)| n.strip_prefix(".lock-").map(String::from))
+        .filter_map(|(n, _)| n.strip_prefix(OBJECT_LOCK_PREFIX).map(String::from))
         .filter(|uid| !uid.is_empty())
         .collect();
     if !running.is_empty() {
