@@ -87,10 +87,9 @@ def _paper_noise(cfg, glb: Path, setting: Path, work: Path) -> dict:
                 os.unlink(path)
 
             samples = cfg.effective_sharp_samples if level == "sharp" else cfg.samples
-            # Worker.render takes plain dicts (it only reads them): copies of the records.
-            w.render([dict(f) for f in frames], resolution=RES, fov_deg=cfg.fov_deg,
+            w.render(frames, resolution=RES, fov_deg=cfg.fov_deg,
                      samples=samples, on_frame=on_frame, crop=True)  # fmt: skip
-            name = layout.image_name(view, VIEWS).replace(".png", ".exr")
+            name = layout.linear_name(layout.image_name(view, VIEWS))
             first = read_exr(setting / level / "linear" / name)
             e = image.object_error(first, acc.mean())
             out[(view, level)] = 200.0 if e.mse == 0 else float(-10.0 * np.log10(e.mse / 2.0))

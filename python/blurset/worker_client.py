@@ -20,7 +20,7 @@ import tempfile
 import threading
 import time
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any, NoReturn
 
@@ -349,7 +349,7 @@ class Worker:
 
     def render(
         self,
-        frames: list[dict[str, Any]],
+        frames: Sequence[Mapping[str, Any]],
         *,
         resolution: int,
         fov_deg: float,
