@@ -156,7 +156,7 @@ def measure_model(glb: Path, work: Path) -> dict:
     rows = []
     for v in meta["views"]:
         for level, rec in sorted(v["images"].items()):
-            name = layout.image_name(v["index"], len(meta["views"])).replace(".png", ".exr")
+            name = layout.linear_name(layout.image_name(v["index"], len(meta["views"])))
             img = read_exr(setting / level / "linear" / name)
             ref, ref_noise = refs[(v["index"], level)]
             e = image.object_error(img, ref)
