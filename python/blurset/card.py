@@ -538,7 +538,7 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.out or build / "README.md"
     if out.suffix.lower() != ".md":
         raise ConfigError(f"--out {out}: a dataset card is a Markdown file (.md)")
-    layout.refuse_inside_settings(out)
+    outputs.refuse_inside_settings(out)
     # The card of A never lands in B (B's manifest would list it, its README describe A).
     outputs.refuse_inside_output(out, "--out", within=build)
     if out.is_dir():

@@ -1184,14 +1184,14 @@ def run(args: argparse.Namespace) -> int:
     if workdir:
         # COLMAP's database and model go into a folder of their own: never into the
         # scene or setting checked (its images_<f>/ …), nor into any blurset output.
-        layout.refuse_overlap(workdir, [path], "--workdir")
+        outputs.refuse_overlap(workdir, [path], "--workdir")
         outputs.refuse_inside_output(workdir, "--workdir", include_self=True)
         _refuse_used_workdir(workdir)
     if args.json:
         # Before COLMAP runs: a report never replaces a file it did not write, nor lands
         # in what it checks or in any blurset output.
         outputs.claim_report(args.json, is_report, "--json")
-        layout.refuse_overlap(args.json, [path], "--json")
+        outputs.refuse_overlap(args.json, [path], "--json")
         outputs.refuse_inside_output(args.json, "--json")
     if is_setting(path):
         if args.level != "all":

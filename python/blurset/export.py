@@ -310,7 +310,7 @@ def _refuse_overlap(out: Path, doc: dict, inputs: list[Path]) -> None:
     for i in inputs:
         r = Path(i).resolve()
         if o == r or o.is_relative_to(r):
-            layout.refuse_overlap(out, [i])
+            outputs.refuse_overlap(out, [i])
         if r.is_relative_to(o):
             top = doc["scenes_dir"] if doc["scenes_dir"] != "." else None
             mine = [top] if top else list(doc["scenes"])
@@ -351,7 +351,7 @@ def run(args) -> int:
     doc, sources = plan(args)
     inputs = [args.build] + ([args.noise] if args.noise else [])
     _refuse_overlap(out, doc, inputs)
-    layout.refuse_inside_settings(out)
+    outputs.refuse_inside_settings(out)
     outputs.claim(out, EXPORT, "--out")  # refused before the lock creates anything
     with outputs.lock(out, EXPORT):
         # Claimed again under the lock: another export may have finished meanwhile.

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from blurset import _core
+from blurset.exceptions import InputError
 
 MARKER: str = _core.MARKER
 PARTIAL_SUFFIX: str = _core.PARTIAL_SUFFIX
@@ -213,47 +214,6 @@ def png_problem(path: Path) -> str | None:
     return _core.png_problem(path)
 
 
-def refuse_overlap(out: Path, inputs: list[Path], option: str = "--out") -> None:
-    """An output may not be, lie inside or contain any input: writing (or replacing with
-    --overwrite) would destroy what it reads. ConfigError names both."""
-    from blurset.exceptions import ConfigError
-
-    o = Path(out).resolve()
-    for i in inputs:
-        r = Path(i).resolve()
-        if o == r:
-            raise ConfigError(f"{option} is an input of this command: {out}")
-        if o.is_relative_to(r):
-            raise ConfigError(f"{option} lies inside the input {str(i)!r}: {out}")
-        if r.is_relative_to(o):
-            raise ConfigError(f"{option} contains the input {str(i)!r}: {out}")
-
-
-def setting_of(path: Path) -> Path | None:
-    """The build setting directory `path` lies in (a folder with meta.json whose parent
-    is a build, by the output owner's one rule), or None."""
-    from blurset import outputs
-
-    p = Path(path).resolve()
-    for d in [p, *p.parents]:
-        if (d / "meta.json").is_file() and outputs.kind_of(d.parent) is outputs.OutputKind.BUILD:
-            return d
-    return None
-
-
-def refuse_inside_settings(out: Path, option: str = "--out", allow: tuple[str, ...] = ()) -> None:
-    """Outputs of previews and statistics never go into a build's settings (they would
-    replace dataset images or add files to an LLFF folder); `allow` names the files a
-    setting may take at its top (e.g. preview.png)."""
-    from blurset.exceptions import ConfigError
-
-    o = Path(out).resolve()
-    s = setting_of(o if o.exists() else o.parent)
-    if s is None or (o.parent == s and o.name in allow):
-        return
-    raise ConfigError(f"{option} lies inside the build setting {str(s)!r}: {out}")
-
-
 def _pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -311,8 +271,6 @@ def write_json(path: Path, data: Any, *, indent: int = 1) -> None:
 
 def read_json(path: Path, what: str | None = None) -> Any:
     """JSON of a file blurset wrote; InputError names the file when it is missing or bad."""
-    from blurset.exceptions import InputError
-
     what = what or path.name
     try:
         return json.loads(path.read_text())

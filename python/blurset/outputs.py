@@ -28,7 +28,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from blurset import _core
+from blurset import _core, layout
 from blurset.exceptions import ConfigError, InputError
 
 OutputKind = _core.OutputKind
@@ -157,8 +157,6 @@ def write_schemas(folder: Path) -> list[Path]:
     schemas/ folder); returns the files."""
     import json
 
-    from blurset import layout
-
     out = []
     for name, schema in record_schemas().items():
         layout.write_text_atomic(Path(folder) / name, json.dumps(schema, indent=2) + "\n")
@@ -199,8 +197,6 @@ def damaged_settings(build: Path, complete: list[str]) -> list[tuple[str, str]]:
     """(setting, what is wrong) of every complete setting of `build` that the cheap check
     of a rerun would redo (a missing image or level, a truncated pose file, a meta.json
     promising more views than the folder holds)."""
-    from blurset import layout
-
     out = []
     for name in complete:
         problem = layout.setting_problem(Path(build) / name)
@@ -215,8 +211,6 @@ def noise_mismatch(doc: dict, noise: Path, build: Path) -> str | None:
     seed, every setting it noised being a complete setting of the build, and one noised
     unit's poses_bounds.npy the same bytes as the build's (another build of the same
     objects has other views, sizes or poses)."""
-    from blurset import layout
-
     build = Path(build)
     name = build.resolve().name
     if doc.get("build") != name:
@@ -251,8 +245,6 @@ def noise_mismatch(doc: dict, noise: Path, build: Path) -> str | None:
 def noise_of_build(noise: Path, build: Path, option: str = "--noise") -> dict:
     """noise_dataset.json of a finished `blurset noise BUILD` output made from `build`
     (`noise_mismatch`); InputError naming `option` and the folder otherwise."""
-    from blurset import layout
-
     noise = Path(noise)
     if kind_of(noise) is not OutputKind.NOISE:
         raise InputError(
@@ -359,8 +351,6 @@ def write_marked_text(
     `command` did not write, or that someone edited since, is replaced only with
     `force`, and then kept beside it as `<name>.bak`, whose path is returned;
     otherwise ConfigError names the file."""
-    from blurset import layout
-
     path = Path(path)
     owner = _core.text_owner(path, command)
     backup = None
@@ -383,3 +373,41 @@ def write_marked_text(
         layout.write_bytes_atomic(backup, path.read_bytes())
     layout.write_text_atomic(path, _core.mark_text(text, command))
     return backup
+
+
+# -- where an output may be: never over its inputs, never inside a build's setting -----
+
+
+def refuse_overlap(out: Path, inputs: list[Path], option: str = "--out") -> None:
+    """An output may not be, lie inside or contain any input: writing (or replacing with
+    --overwrite) would destroy what it reads. ConfigError names both."""
+    o = Path(out).resolve()
+    for i in inputs:
+        r = Path(i).resolve()
+        if o == r:
+            raise ConfigError(f"{option} is an input of this command: {out}")
+        if o.is_relative_to(r):
+            raise ConfigError(f"{option} lies inside the input {str(i)!r}: {out}")
+        if r.is_relative_to(o):
+            raise ConfigError(f"{option} contains the input {str(i)!r}: {out}")
+
+
+def setting_of(path: Path) -> Path | None:
+    """The build setting directory `path` lies in (a folder with meta.json whose parent
+    is a build, by the output owner's one rule), or None."""
+    p = Path(path).resolve()
+    for d in [p, *p.parents]:
+        if (d / layout.META).is_file() and kind_of(d.parent) is OutputKind.BUILD:
+            return d
+    return None
+
+
+def refuse_inside_settings(out: Path, option: str = "--out", allow: tuple[str, ...] = ()) -> None:
+    """Outputs of previews and statistics never go into a build's settings (they would
+    replace dataset images or add files to an LLFF folder); `allow` names the files a
+    setting may take at its top (e.g. preview.png)."""
+    o = Path(out).resolve()
+    s = setting_of(o if o.exists() else o.parent)
+    if s is None or (o.parent == s and o.name in allow):
+        return
+    raise ConfigError(f"{option} lies inside the build setting {str(s)!r}: {out}")

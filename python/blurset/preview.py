@@ -448,7 +448,7 @@ def run(args) -> int:
         if args.out.suffix.lower() not in IMAGE_FORMATS:
             raise ConfigError(f"--out {args.out}: the figure is an image: .png, .jpg or .webp")
         # A figure never replaces a dataset image or lands in a level folder.
-        layout.refuse_inside_settings(args.out, allow=("preview.png",))
+        outputs.refuse_inside_settings(args.out, allow=("preview.png",))
         # Only the build the figure shows may hold it: never another build or a noise
         # output (their manifests would list it and `verify` certify it).
         own = path if outputs.kind_of(path) is outputs.OutputKind.BUILD else path.parent

@@ -545,7 +545,7 @@ def run(args: argparse.Namespace) -> int:
             f"a build: {build}"
         )
     out_dir = (args.out or build / "stats").expanduser().absolute()
-    layout.refuse_inside_settings(out_dir)
+    outputs.refuse_inside_settings(out_dir)
     outputs.refuse_inside_output(out_dir, "--out", within=build)
     t0 = time.perf_counter()
     document = build_stats(build)  # names what is not a build, before anything is written

@@ -328,8 +328,8 @@ def run_tradeoff(args: argparse.Namespace) -> dict:
     if not glb.is_file():
         raise ConfigError(f"--object: no such file {str(glb)!r}")
     out = Path(args.out)
-    layout.refuse_overlap(out, [glb])
-    layout.refuse_inside_settings(out)
+    outputs.refuse_overlap(out, [glb])
+    outputs.refuse_inside_settings(out)
     claim(out)  # refused before anything is created
     out.mkdir(parents=True, exist_ok=True)
 

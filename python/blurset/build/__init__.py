@@ -39,7 +39,7 @@ def check_out(out: Path, cfg: BuildConfig) -> None:
     kind of output or a folder of other files); it never is, holds or lies in an input."""
     outputs.claim(out, outputs.OutputKind.BUILD, "--out")
     inputs = [Path(e[1:] if e.startswith("@") else e) for e in cfg.objects]
-    layout.refuse_overlap(out, [p for p in inputs if p.exists()])
+    outputs.refuse_overlap(out, [p for p in inputs if p.exists()])
 
 
 def all_objects(cfg: BuildConfig) -> list[ObjectSpec]:

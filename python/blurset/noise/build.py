@@ -443,8 +443,8 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
         for s in settings
         for lvl in levels
     ]
-    layout.refuse_overlap(out, [build])
-    layout.refuse_inside_settings(out)
+    outputs.refuse_overlap(out, [build])
+    outputs.refuse_inside_settings(out)
     outputs.claim(out, NOISE, "--out")  # refused before the lock creates anything
     with outputs.lock(out, NOISE):
         _prepare_out(out, build, params, cfg.overwrite)

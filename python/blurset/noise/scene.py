@@ -122,8 +122,8 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
     if bad is not None:
         raise ConfigError(f"--downsample {bad}: does not divide the image size {width}x{height}")
 
-    layout.refuse_overlap(out, [scene])
-    layout.refuse_inside_settings(out)
+    outputs.refuse_overlap(out, [scene])
+    outputs.refuse_inside_settings(out)
     if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not cfg.overwrite:
         raise ConfigError(
             f"--out is a noise output already (pass --overwrite to replace it): {out}"
