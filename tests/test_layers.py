@@ -103,3 +103,35 @@ def test_the_check_sees_the_imports() -> None:
     assert ("plan", "sampling") in edges[("plan", "config")]
     assert ("plan", "camera") in edges[("image", "qa")]
     assert set(LAYERS) == {p.name if p.is_dir() else p.stem for p in SRC.iterdir()} - {"lib"}
+
+
+PY_SRC = SRC.parents[1] / "py" / "src"
+
+
+def test_no_circles_between_binding_files() -> None:
+    """The bindings (rust/py/src) too: a file uses another's items (`crate::<file>::`),
+    never round a circle (config.rs and sampling.rs once used each other's)."""
+    files = {p.stem for p in PY_SRC.glob("*.rs")} - {"lib"}
+    graph = {
+        f: set(re.findall(r"\bcrate::(\w+)", (PY_SRC / f"{f}.rs").read_text())) & files - {f}
+        for f in files
+    }
+    assert "config" in graph["sampling"]  # the reader sees the uses
+    circles = []
+
+    def visit(f: str, stack: list[str], state: dict[str, int]) -> None:
+        state[f] = 1
+        stack.append(f)
+        for d in sorted(graph[f]):
+            if state.get(d) == 1:
+                circles.append(" -> ".join([*stack[stack.index(d) :], d]))
+            elif d not in state:
+                visit(d, stack, state)
+        stack.pop()
+        state[f] = 2
+
+    state: dict[str, int] = {}
+    for f in sorted(graph):
+        if f not in state:
+            visit(f, [], state)
+    assert not circles, circles

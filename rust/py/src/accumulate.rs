@@ -278,7 +278,7 @@ impl PyDenoiser {
 
     /// What meta.json records of this denoiser.
     fn record<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        crate::sampling::to_py(py, &self.inner.record())
+        crate::convert::to_py(py, &self.inner.record())
     }
 
     /// Denoise a float32 (H, W, 3) colour image with its (H, W, 3) albedo and normal.

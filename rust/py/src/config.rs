@@ -7,6 +7,8 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 use std::collections::BTreeMap;
 
+use crate::convert::{from_py, to_py};
+
 /// A Python value as given, before the core checks its type and range.
 fn raw(v: &Bound<'_, PyAny>) -> PyResult<core::Raw> {
     Ok(if v.is_none() {
@@ -79,7 +81,7 @@ macro_rules! py_config {
             $(
                 #[getter]
                 fn $name<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-                    crate::sampling::to_py(py, &self.0.$name)
+                    crate::convert::to_py(py, &self.0.$name)
                 }
             )*
 
@@ -200,12 +202,12 @@ blurset_core::build_options!(py_config {
     /// dataset.json's `config` record: every option, `latents` = "auto" under latents
     /// auto, and `effective_sharp_samples`.
     fn record<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        crate::sampling::to_py(py, &self.0.record())
+        crate::convert::to_py(py, &self.0.record())
     }
 
     /// The sampling sub-config every setting's plan is made with.
-    fn sampling(&self) -> crate::sampling::SamplingConfig {
-        crate::sampling::SamplingConfig(self.0.sampling())
+    fn sampling(&self) -> SamplingConfig {
+        SamplingConfig(self.0.sampling())
     }
 
     fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String,))> {
@@ -297,7 +299,7 @@ impl OptionDecl {
     /// levels, factors, indices, rgb, count_or_auto, fraction_or_ids.
     #[getter]
     fn kind<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        crate::sampling::to_py(py, &self.0.kind)
+        crate::convert::to_py(py, &self.0.kind)
     }
     /// None is a value of it.
     #[getter]
@@ -316,7 +318,7 @@ impl OptionDecl {
     /// The default, as dataset.json records it.
     #[getter]
     fn default<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        crate::sampling::to_py(py, &self.0.default)
+        crate::convert::to_py(py, &self.0.default)
     }
     /// What a None default means, in words.
     #[getter]
@@ -326,12 +328,12 @@ impl OptionDecl {
     /// The default under --demo, when it has its own.
     #[getter]
     fn demo<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        crate::sampling::to_py(py, &self.0.demo)
+        crate::convert::to_py(py, &self.0.demo)
     }
     /// The value a recorded config without this option was made with.
     #[getter]
     fn before<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        crate::sampling::to_py(py, &self.0.before)
+        crate::convert::to_py(py, &self.0.before)
     }
     #[getter]
     fn help(&self) -> &'static str {
@@ -421,8 +423,55 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(preset_values, m)?)?;
     m.add_function(wrap_pyfunction!(target_next_round, m)?)?;
     m.add_class::<BuildConfig>()?;
+    m.add_class::<SamplingConfig>()?;
+    m.add_function(wrap_pyfunction!(default_sampling_config, m)?)?;
     m.add_class::<NoiseConfig>()?;
     m.add_class::<OptionDecl>()?;
     m.add_function(wrap_pyfunction!(check_downsample, m)?)?;
     Ok(())
+}
+
+/// The sampling of a setting's plan (views, trajectory, levels, latents, samples).
+///
+/// `SamplingConfig(**values)` takes the fields of `to_dict()` over the paper's defaults;
+/// ConfigValueError names an option out of range.
+#[pyclass(
+    frozen,
+    eq,
+    skip_from_py_object,
+    name = "SamplingConfig",
+    module = "blurset._core"
+)]
+#[derive(Clone, PartialEq)]
+pub struct SamplingConfig(pub core::SamplingConfig);
+
+#[pymethods]
+impl SamplingConfig {
+    #[new]
+    #[pyo3(signature = (**values))]
+    fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let cfg: core::SamplingConfig = match values {
+            Some(d) => from_py("sampling config", d.as_any())?,
+            None => core::SamplingConfig::default(),
+        };
+        cfg.validate().map_err(crate::error::to_pyerr)?;
+        Ok(SamplingConfig(cfg))
+    }
+
+    /// The fields as a dict (what meta.json records as `sampling`).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, &self.0)
+    }
+
+    /// The most latent frames one blurry image can have.
+    #[getter]
+    fn max_latents(&self) -> usize {
+        self.0.max_latents()
+    }
+}
+
+/// The paper's sampling settings.
+#[pyfunction]
+fn default_sampling_config() -> SamplingConfig {
+    SamplingConfig(core::SamplingConfig::default())
 }

@@ -18,7 +18,7 @@ fn current_failures(
     let done: BTreeSet<String> = complete.into_iter().collect();
     let (records, skipped) = crate::run_detached(py, || core::read_failure_records(&path))?;
     let now = core::current_failures(&records, &done, theta0s.as_deref());
-    Ok((crate::sampling::to_py(py, &now)?, skipped))
+    Ok((crate::convert::to_py(py, &now)?, skipped))
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -181,14 +181,14 @@ fn write_atomic(py: Python<'_>, path: PathBuf, data: &[u8]) -> PyResult<()> {
 /// missing fields are errors).
 #[pyfunction]
 fn write_dataset_json(py: Python<'_>, path: PathBuf, doc: &Bound<'_, PyAny>) -> PyResult<()> {
-    let doc: core::DatasetDoc = crate::sampling::from_py("dataset.json", doc)?;
+    let doc: core::DatasetDoc = crate::convert::from_py("dataset.json", doc)?;
     crate::run_detached(py, || core::write_dataset(&path, &doc))
 }
 
 /// Write a noisy scene's noise.json; `doc` must match the core's NoiseDoc.
 #[pyfunction]
 fn write_noise_json(py: Python<'_>, path: PathBuf, doc: &Bound<'_, PyAny>) -> PyResult<()> {
-    let doc: core::NoiseDoc = crate::sampling::from_py("noise.json", doc)?;
+    let doc: core::NoiseDoc = crate::convert::from_py("noise.json", doc)?;
     crate::run_detached(py, || core::write_noise(&path, &doc))
 }
 

@@ -4,6 +4,7 @@ use pyo3::prelude::*;
 
 mod accumulate;
 mod config;
+mod convert;
 mod error;
 mod failures;
 mod layout;

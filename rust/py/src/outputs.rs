@@ -199,7 +199,7 @@ fn write_record(
     value: &Bound<'_, PyAny>,
 ) -> PyResult<()> {
     let kind = record_of(record)?;
-    let value: serde_json::Value = crate::sampling::from_py(record, value)?;
+    let value: serde_json::Value = crate::convert::from_py(record, value)?;
     crate::run_detached(py, || core::write_record(&path, kind, value))
 }
 

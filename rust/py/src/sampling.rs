@@ -1,73 +1,13 @@
 //! Sampling and the plan of a setting. A plan stays a Rust object: Python asks it for
 //! its render list and has it write the poses and meta.json; `to_dict` is for reading.
-use crate::config::BuildConfig;
+use crate::config::{BuildConfig, SamplingConfig};
+use crate::convert::{from_py, to_py};
 use crate::qa::FrameQa;
 use blurset_core as core;
 use numpy::PyReadonlyArray2;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
-use pythonize::{depythonize, pythonize};
 use std::path::PathBuf;
-
-pub(crate) fn to_py<'py, T: serde::Serialize>(
-    py: Python<'py>,
-    value: &T,
-) -> PyResult<Bound<'py, PyAny>> {
-    pythonize(py, value).map_err(|e| PyValueError::new_err(e.to_string()))
-}
-
-pub(crate) fn from_py<T: serde::de::DeserializeOwned>(
-    what: &str,
-    obj: &Bound<'_, PyAny>,
-) -> PyResult<T> {
-    depythonize(obj).map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
-}
-
-/// The sampling of a setting's plan (views, trajectory, levels, latents, samples).
-///
-/// `SamplingConfig(**values)` takes the fields of `to_dict()` over the paper's defaults;
-/// ConfigValueError names an option out of range.
-#[pyclass(
-    frozen,
-    eq,
-    skip_from_py_object,
-    name = "SamplingConfig",
-    module = "blurset._core"
-)]
-#[derive(Clone, PartialEq)]
-pub struct SamplingConfig(pub core::SamplingConfig);
-
-#[pymethods]
-impl SamplingConfig {
-    #[new]
-    #[pyo3(signature = (**values))]
-    fn new(values: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let cfg: core::SamplingConfig = match values {
-            Some(d) => from_py("sampling config", d.as_any())?,
-            None => core::SamplingConfig::default(),
-        };
-        cfg.validate().map_err(crate::error::to_pyerr)?;
-        Ok(SamplingConfig(cfg))
-    }
-
-    /// The fields as a dict (what meta.json records as `sampling`).
-    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        to_py(py, &self.0)
-    }
-
-    /// The most latent frames one blurry image can have.
-    #[getter]
-    fn max_latents(&self) -> usize {
-        self.0.max_latents()
-    }
-}
-
-/// The paper's sampling settings.
-#[pyfunction]
-fn default_sampling_config() -> SamplingConfig {
-    SamplingConfig(core::SamplingConfig::default())
-}
 
 /// The seed of setting `index` of object `uid` under the build seed.
 #[pyfunction]
@@ -391,11 +331,9 @@ fn seeded_subset(ids: Vec<String>, k: usize, seed: u64) -> Vec<String> {
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<SamplingConfig>()?;
     m.add_class::<Plan>()?;
     m.add_class::<Splits>()?;
     m.add_function(wrap_pyfunction!(seeded_subset, m)?)?;
-    m.add_function(wrap_pyfunction!(default_sampling_config, m)?)?;
     m.add_function(wrap_pyfunction!(seed_for, m)?)?;
     m.add_function(wrap_pyfunction!(plan_setting, m)?)?;
     m.add_function(wrap_pyfunction!(write_scene_transforms, m)?)?;

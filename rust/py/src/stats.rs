@@ -1,5 +1,5 @@
 //! Build statistics (`blurset stats`): one core call, the document as a frozen object.
-use crate::sampling::to_py;
+use crate::convert::to_py;
 use blurset_core as core;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;

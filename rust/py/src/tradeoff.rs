@@ -133,7 +133,7 @@ fn half_noise(
 #[pyfunction]
 fn spread(py: Python<'_>, values: Vec<f64>) -> PyResult<Bound<'_, PyAny>> {
     let s = core::spread(&values).map_err(crate::error::to_pyerr)?;
-    crate::sampling::to_py(py, &s)
+    crate::convert::to_py(py, &s)
 }
 
 /// Which points (seconds, psnr) are Pareto-optimal (faster or better than every other).
