@@ -71,28 +71,34 @@ def test_no_module_imports_a_layer_above_it() -> None:
     assert not bad, bad
 
 
-def test_no_circles_between_files() -> None:
-    edges = _edges()
-    # A module's own mod.rs (its parent) holds shared items, not a dependency circle.
-    graph = {m: {d for d in ds if d != m[: len(d)]} for m, ds in edges.items()}
-    circles = []
-    state: dict[tuple[str, ...], int] = {}
+def circles(graph: dict[str, set[str]]) -> list[str]:
+    """Every circle a depth-first walk of `graph` (node -> the nodes it uses) meets, as
+    "a -> b -> a" (the one walk for the core, the bindings and the Python package)."""
+    found: list[str] = []
+    state: dict[str, int] = {}
 
-    def visit(m: tuple[str, ...], stack: list[tuple[str, ...]]) -> None:
-        state[m] = 1
-        stack.append(m)
-        for d in graph.get(m, ()):
+    def visit(n: str, stack: list[str]) -> None:
+        state[n] = 1
+        stack.append(n)
+        for d in sorted(graph.get(n, ())):
             if state.get(d) == 1:
-                circles.append(" -> ".join("/".join(x) for x in [*stack[stack.index(d) :], d]))
+                found.append(" -> ".join([*stack[stack.index(d) :], d]))
             elif d not in state:
                 visit(d, stack)
         stack.pop()
-        state[m] = 2
+        state[n] = 2
 
-    for m in sorted(graph):
-        if m not in state:
-            visit(m, [])
-    assert not circles, circles
+    for n in sorted(graph):
+        if n not in state:
+            visit(n, [])
+    return found
+
+
+def test_no_circles_between_files() -> None:
+    edges = _edges()
+    # A module's own mod.rs (its parent) holds shared items, not a dependency circle.
+    graph = {"/".join(m): {"/".join(d) for d in ds if d != m[: len(d)]} for m, ds in edges.items()}
+    assert not circles(graph), circles(graph)
 
 
 def test_the_check_sees_the_imports() -> None:
@@ -117,21 +123,4 @@ def test_no_circles_between_binding_files() -> None:
         for f in files
     }
     assert "config" in graph["sampling"]  # the reader sees the uses
-    circles = []
-
-    def visit(f: str, stack: list[str], state: dict[str, int]) -> None:
-        state[f] = 1
-        stack.append(f)
-        for d in sorted(graph[f]):
-            if state.get(d) == 1:
-                circles.append(" -> ".join([*stack[stack.index(d) :], d]))
-            elif d not in state:
-                visit(d, stack, state)
-        stack.pop()
-        state[f] = 2
-
-    state: dict[str, int] = {}
-    for f in sorted(graph):
-        if f not in state:
-            visit(f, [], state)
-    assert not circles, circles
+    assert not circles(graph), circles(graph)

@@ -7,6 +7,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from tests.test_layers import circles
+
 PKG = Path(__file__).resolve().parents[1] / "python" / "blurset"
 
 
@@ -39,25 +41,7 @@ def _edges() -> dict[str, set[str]]:
 
 
 def test_no_circles_between_modules() -> None:
-    edges = _edges()
-    circles: list[str] = []
-    state: dict[str, int] = {}
-
-    def visit(m: str, stack: list[str]) -> None:
-        state[m] = 1
-        stack.append(m)
-        for d in sorted(edges[m]):
-            if state.get(d) == 1:
-                circles.append(" -> ".join([*stack[stack.index(d) :], d]))
-            elif d not in state:
-                visit(d, stack)
-        stack.pop()
-        state[m] = 2
-
-    for m in sorted(edges):
-        if m not in state:
-            visit(m, [])
-    assert not circles, circles
+    assert not circles(_edges()), circles(_edges())
 
 
 def test_the_check_sees_the_imports() -> None:
