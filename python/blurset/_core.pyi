@@ -960,7 +960,7 @@ class Plan:
         object: rec.ObjectRecord,
         timings: rec.Timings,
         qa: list[FrameQa],
-        pose_check: dict[str, Any] | None = None,
+        pose_check: rec.PoseCheck | None = None,
         light_paths: rec.LightPathsRecord | None = None,
         device: rec.DeviceRecord | None = None,
         denoiser: rec.DenoiserRecord | None = None,

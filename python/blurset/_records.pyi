@@ -219,6 +219,19 @@ class DatasetCounts(TypedDict):
     settings: int
     settings_failed: int
 
+PoseCheck = TypedDict(
+    "PoseCheck",
+    {
+        "meaning": NotRequired[str | None],
+        "median_center_err_rel": NotRequired[float | None],
+        "median_rot_err_deg": NotRequired[float | None],
+        "pass": bool,
+        "registered": NotRequired[int | None],
+        "total": NotRequired[int | None],
+        "verdict": str,
+    },
+)
+
 class DeviceRecord(TypedDict):
     """What a worker rendered on."""
 
@@ -242,7 +255,7 @@ class DatasetDoc(TypedDict):
     created: str
     levels: list[str]
     name: str
-    pose_checks: NotRequired[dict[str, Any] | None]
+    pose_checks: NotRequired[dict[str, PoseCheck] | None]
     render_devices: NotRequired[list[DeviceRecord]]
     seconds: float
     seed: int
@@ -544,7 +557,7 @@ class MetaRecord(TypedDict):
     fov_deg: float
     levels: list[str]
     object: ObjectRecord
-    pose_check: NotRequired[Any]
+    pose_check: NotRequired[PoseCheck | None]
     radius: float
     render: RenderRecord
     resolution: list[int]

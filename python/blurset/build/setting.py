@@ -207,7 +207,7 @@ def render_setting(
         "frames": n_rendered,
     }
 
-    def write_meta(pose_check: dict[str, Any] | None = None) -> None:
+    def write_meta(pose_check: _records.PoseCheck | None = None) -> None:
         plan.write_meta(
             partial / layout.META,
             config=cfg,
@@ -278,7 +278,7 @@ def _render_targeted(
     return images, n + n_blur, t_sharp, time.time() - t1 - t_sharp
 
 
-def _pose_check(setting_dir: Path) -> dict:
+def _pose_check(setting_dir: Path) -> _records.PoseCheck:
     """The COLMAP verdict of the sharp level (DESIGN §6), compact for meta.json."""
     from blurset.check_poses import check_setting
 
@@ -286,13 +286,12 @@ def _pose_check(setting_dir: Path) -> dict:
         rep = check_setting(setting_dir, levels=[layout.SHARP])[layout.SHARP]
     except Exception as e:  # the check must never cost the setting itself
         return {"verdict": f"error: {e}", "pass": False}
-    keep = (
-        "verdict",
-        "meaning",
-        "pass",
-        "registered",
-        "total",
-        "median_rot_err_deg",
-        "median_center_err_rel",
-    )
-    return {k: rep.get(k) for k in keep}
+    return {
+        "verdict": rep["verdict"],
+        "meaning": rep.get("meaning"),
+        "pass": bool(rep["pass"]),
+        "registered": rep.get("registered"),
+        "total": rep.get("total"),
+        "median_rot_err_deg": rep.get("median_rot_err_deg"),
+        "median_center_err_rel": rep.get("median_center_err_rel"),
+    }

@@ -66,7 +66,7 @@ pub use crate::dataset::manifest::{
 };
 pub use crate::dataset::meta::{
     read_exposure_ends, read_mean_poses, write_json, DeviceRecord, ImageRender, LightPathsRecord,
-    Meta, ObjectRecord, Pose, Timings,
+    Meta, ObjectRecord, Pose, PoseCheck, Timings,
 };
 pub use crate::dataset::outputs::{
     build_state, claim, mark_text, output_kind, owned_entries, remove_owned, superseded_settings,

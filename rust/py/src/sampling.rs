@@ -148,7 +148,7 @@ impl Plan {
         let mut meta = core::Meta::new(&self.0, &config.0, object, timings, &qa)
             .map_err(crate::error::to_pyerr)?;
         meta.pose_check = pose_check
-            .map(|p| from_py::<serde_json::Value>("pose_check", p))
+            .map(|p| from_py::<core::PoseCheck>("pose_check", p))
             .transpose()?;
         meta.render.light_paths = typed("light_paths", light_paths)?;
         meta.render.device = typed("device", device)?;

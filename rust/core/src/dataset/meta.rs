@@ -175,6 +175,32 @@ pub struct LightPathsRecord {
     pub unlit_only: bool,
 }
 
+/// The COLMAP verdict of a setting's sharp level (`--check-poses`, DESIGN §6), as
+/// meta.json and dataset.json keep it: blurset.check_poses's report, compact.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PoseCheck {
+    /// The verdict's name (pass, fail, degenerate, …), or `error: <why>` when the check
+    /// could not run (it never costs the setting itself).
+    pub verdict: String,
+    /// What the verdict means, in words.
+    #[serde(default)]
+    pub meaning: Option<String>,
+    /// Whether the poses were recovered within the bar.
+    pub pass: bool,
+    /// Views COLMAP registered, of `total`.
+    #[serde(default)]
+    pub registered: Option<u32>,
+    #[serde(default)]
+    pub total: Option<u32>,
+    /// Median rotation error of the registered views (degrees).
+    #[serde(default)]
+    pub median_rot_err_deg: Option<f64>,
+    /// Median camera-centre error, relative to the camera's distance.
+    #[serde(default)]
+    pub median_center_err_rel: Option<f64>,
+}
+
 /// What a worker rendered on.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -394,9 +420,9 @@ pub struct Meta {
     pub object: ObjectRecord,
     pub timings: Timings,
     pub blurset_version: String,
-    /// The COLMAP verdict of the sharp level (`--check-poses`), as blurset.check_poses gives it.
+    /// The COLMAP verdict of the sharp level (`--check-poses`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub pose_check: Option<serde_json::Value>,
+    pub pose_check: Option<PoseCheck>,
 }
 
 impl Meta {

@@ -1,7 +1,7 @@
 //! The documents beside the images (DESIGN §4): `dataset.json` of a build and
 //! `noise.json` of a noisy scene. Their schema lives here; Python supplies the values
 //! (a dict checked against these structs: an unknown or missing field is an error).
-use super::meta::{write_json, DeviceRecord};
+use super::meta::{write_json, DeviceRecord, PoseCheck};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -50,7 +50,7 @@ pub struct DatasetDoc {
     pub seconds: f64,
     /// The COLMAP verdict per setting, when the build checked poses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub pose_checks: Option<BTreeMap<String, serde_json::Value>>,
+    pub pose_checks: Option<BTreeMap<String, PoseCheck>>,
 }
 
 /// The white balance of a noisy scene (one draw per scene).
