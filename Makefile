@@ -8,7 +8,7 @@ RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pypro
 
 PYTEST := $(PY) -m pytest -q
 
-.PHONY: venv develop demo test test-fast test-rust test-py test-packaging fuzz lint typecheck fmt schemas stub docs bench bench-gpu clean
+.PHONY: venv develop demo test test-fast test-quick test-rust test-py test-packaging fuzz lint typecheck fmt schemas stub docs bench bench-gpu clean
 
 venv: $(SO_STAMP)
 
@@ -40,6 +40,11 @@ test-fast: test-rust venv
 # --release: the dependencies maturin compiled for the extension module are reused.
 test-rust:
 	cargo test --release -p blurset-core --quiet
+
+# Every Python test but the long end-to-end builds (marked slow) and packaging: real
+# renders included, for checking a change to the render path before the full run.
+test-quick: test-rust venv
+	$(PYTEST) -m "not slow and not packaging" tests
 
 test-py: venv
 	$(PYTEST) -m "not packaging" tests
