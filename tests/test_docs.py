@@ -166,3 +166,40 @@ def test_a_hand_typed_or_stale_figure_fails(tmp_path) -> None:
     assert len(bad) == 2
     assert "the page says" not in "\n".join(figures.problems([speed], results))
     assert figures.rewrite(speed.read_text(), results)[0] == speed.read_text()
+
+
+def test_no_absolute_machine_path_in_docs_or_readme() -> None:
+    """README.md, ARCHITECTURE.md, docs/**/*.md and the page generators in docs/gen spell no
+    path of the machine they were made on (a transcript shows relative paths)."""
+    check = _gen("check")
+    pages = check.machine_path_pages()
+    assert ROOT / "README.md" in pages and ROOT / "ARCHITECTURE.md" in pages
+    assert len([p for p in pages if p.suffix == ".md"]) >= 20, "the scan found too few pages"
+    assert check.machine_path_problems() == []
+
+
+def test_a_planted_machine_path_fails(tmp_path, monkeypatch) -> None:
+    check = _gen("check")
+    page = ROOT / "docs" / "training" / "ibrnet.md"
+    text = page.read_text()
+    planted = tmp_path / "ibrnet.md"
+    planted.write_text(text + "\n```sh\npython train.py --rootdir /work/main/foo\n```\n")
+    monkeypatch.setattr(check, "machine_path_pages", lambda: [planted])
+    assert any("'/work/main/foo'" in p for p in check.machine_path_problems())
+    for bad in (
+        "/home/alice/ibrnet",
+        "/Users/bob/data",
+        "/tmp/pytest-of-x/p0/out",
+        "/tmp/tmpab12cd/x",
+    ):
+        assert check.machine_paths(f"see `{bad}` here"), bad
+    # Examples a reader adapts, relative paths and a lock file directly in /tmp are fine.
+    for fine in (
+        "/path/to/IBRNet",
+        "~/IBRNet",
+        "ROOT/data/tmp/x",
+        "flock /tmp/blurset-blender.lock",
+        "/usr/bin/python3",
+        "$HOME/work/x",
+    ):
+        assert check.machine_paths(fine) == [], fine

@@ -6,6 +6,11 @@
   repository point at files that exist.
 - Pages a user reads (README.md and docs/, generated pages included) name no issue of
   the project, no date, no load average and no commit hash.
+- No page a user reads (README.md, ARCHITECTURE.md, docs/ and the generators under
+  docs/gen that write pages) spells an absolute path of the machine it was made on: a
+  home or work folder, a user folder, or a nested or generated temporary folder. A
+  transcript shows relative paths, or `~`, or `/path/to/...`; a single well-known file
+  such as a lock directly under the temporary folder is an example, not a machine path.
 """
 
 from __future__ import annotations
@@ -111,8 +116,43 @@ def history_problems() -> list[str]:
     return problems
 
 
+# An absolute path of a machine: not inside a longer word or path (`ROOT/data/...` is
+# relative), starting at a folder that only exists on the machine that wrote it. Under the
+# temporary folder: a nested path or a name tempfile/pytest make; a single file directly in
+# it (a lock every reader may make) is allowed. ([f], [m]: so this source does not match.)
+MACHINE_PATH = re.compile(
+    r"(?<![\w.~/$}-])"
+    r"(?:/(?:work|root|mnt|srv|Volumes|private|scratch)/[^\s`'\")\]]*"
+    r"|/(?:home|Users)/[A-Za-z0-9_.-]+"
+    r"|/var/[f]olders/"
+    r"|/t[m]p/(?:[^\s/`'\")\]]+/|pytest-of-|tmp[a-z0-9_]{4,}|bash_jobs)"
+    r"|[A-Za-z]:\\Users\\)"
+)
+
+
+def machine_path_pages() -> list[Path]:
+    docs = sorted((ROOT / "docs").rglob("*.md")) + sorted((ROOT / "docs" / "gen").glob("*.py"))
+    return [ROOT / "README.md", ROOT / "ARCHITECTURE.md"] + docs
+
+
+def machine_paths(text: str) -> list[tuple[int, str]]:
+    """(line, path) of each absolute machine path in text."""
+    return [(text.count("\n", 0, m.start()) + 1, m.group(0)) for m in MACHINE_PATH.finditer(text)]
+
+
+def machine_path_problems(pages: list[Path] | None = None) -> list[str]:
+    problems = []
+    for page in machine_path_pages() if pages is None else pages:
+        for line, path in machine_paths(page.read_text()):
+            problems.append(
+                f"{page.relative_to(ROOT) if page.is_relative_to(ROOT) else page}:{line}: "
+                f"absolute machine path {path!r} (show a relative path, ~ or /path/to/...)"
+            )
+    return problems
+
+
 def main() -> int:
-    problems = missing_sections() + readme_problems() + history_problems()
+    problems = missing_sections() + readme_problems() + history_problems() + machine_path_problems()
     for p in problems:
         print(f"docs check: {p}", file=sys.stderr)
     if not problems:
