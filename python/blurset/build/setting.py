@@ -89,114 +89,51 @@ def render_setting(
     progress: Progress,
 ) -> Path:
     """Plan, render, accumulate and write one setting; returns its final directory."""
-    out = out_dir(cfg)
-    final = out / job.name
+    final = out_dir(cfg) / job.name
     partial = layout.partial_dir(final)
     shutil.rmtree(partial, ignore_errors=True)
     exr_dir = partial / ".frames"
     exr_dir.mkdir(parents=True)
     t0 = time.time()
-    seed = _core.seed_for(cfg.seed, job.obj.uid, job.index)
     plan = _core.plan_setting(
         cfg,
         uid=job.obj.uid,
         theta0_deg=job.theta0_deg,
-        seed=seed,
+        seed=_core.seed_for(cfg.seed, job.obj.uid, job.index),
         bbox_dims=info["bbox_dims"],
         vertices=verts,
     )
-    n_views = plan.n_views
-    sharp = cfg.sharp_views(n_views)
+    sharp = cfg.sharp_views(plan.n_views)
     # Under sample subsets every render of the build takes a block of one Cycles sequence
     # length, so no pixel depends on what the worker rendered before (a resume equals an
     # uninterrupted build).
     frames = plan.renders(exr_dir, cfg.cycles_samples, sharp_views=sharp)
-    keys = [(f["view"], f["level"]) for f in frames]
-    need: dict[tuple[int, str], int] = {}
-    for k in keys:
-        need[k] = need.get(k, 0) + 1
     for d in cfg.level_dirs:
         for sub in [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]:
             (partial / d / sub).mkdir(parents=True)
-    acc: dict[tuple[int, str], Any] = {}
-    res = cfg.resolution
-    qa: dict[int, Any] = {}
-    # --denoise oidn: the frames carry their guide passes, every finished image (a
-    # blurry mean or the sharp render) is denoised once by the driver (issue 28).
-    guides = cfg.denoise == "oidn"
-    den = None
-    if guides:
-        from blurset.denoise import denoiser, device_for
-
-        den = denoiser(device_for(str((info.get("device") or {}).get("backend") or cfg.device)))
-
-    def finish(key: tuple[int, str], a: Any) -> None:
-        """Write a finished image (the mean of its frames) and its copies; QA a sharp one."""
-        if den is not None:
-            a.denoise(den)
-        view, level = key
-        name = layout.image_name(view, n_views)
-        bg = cfg.background
-        a.write_png(partial / level / layout.IMAGES / name, background=bg)
-        for f in cfg.downsample:
-            a.write_png(partial / level / layout.images_dir(f) / name, background=bg, downsample=f)
-        if cfg.write_linear:
-            a.write_exr(partial / level / layout.LINEAR / layout.linear_name(name))
-        if level == layout.SHARP:
-            qa[view] = _core.frame_qa(a.mean())
-
-    def on_frame(i: int, path: str, origin: tuple[int, int] | None) -> None:
-        key = keys[i]
-        a = acc.get(key)
-        if a is None:
-            a = acc[key] = _core.Accumulator(res, res, guides=guides)
-        a.add_exr(path, origin)
-        os.unlink(path)
-        if a.count == need[key]:
-            finish(key, a)
-            del acc[key]
-        progress.frame_done()
-
+    images = _Images(partial, plan.n_views, cfg, info, frames, progress)
     t_plan = time.time() - t0
-    # The sharp render gets its own (larger) sample count: render it separately.
-    sharp_idx = [i for i, k in enumerate(keys) if k[1] == layout.SHARP]
-    blur_idx = [i for i, k in enumerate(keys) if k[1] != layout.SHARP]
-    t1 = time.time()
     # Cropped EXRs: only the pixels the region traced cross the disk.
-    common = {"resolution": res, "fov_deg": cfg.fov_deg, "crop": True, "guides": guides}
-    images: dict[tuple[int, str], _records.ImageRender] = {}
+    common = {"resolution": cfg.resolution, "fov_deg": cfg.fov_deg, "crop": True}
+    common["guides"] = images.guides
+    records: dict[tuple[int, str], _records.ImageRender] = {}
     n_rendered = len(frames)
     if cfg.target_psnr is not None:
-        images, n_rendered, t_sharp, t_blur = _render_targeted(
-            plan, cfg, worker, exr_dir, sharp, keys, finish, qa, progress, common, len(frames)
-        )
+        records, n_rendered, t_sharp, t_blur = _render_targeted(
+            plan, cfg, worker, exr_dir, sharp, images.keys, images.finish, images.qa,
+            progress, common, len(frames),
+        )  # fmt: skip
     else:
-        worker.render(
-            [frames[i] for i in sharp_idx],
-            samples=cfg.effective_sharp_samples,
-            on_frame=lambda j, p, o: on_frame(sharp_idx[j], p, o),
-            **common,
-        )
-        _raise_on_qa(qa)
-        t_sharp = time.time() - t1
-        if blur_idx:
-            worker.render(
-                [frames[i] for i in blur_idx],
-                on_frame=lambda j, p, o: on_frame(blur_idx[j], p, o),
-                **common,
-            )
-        t_blur = time.time() - t1 - t_sharp
-    if acc:
-        raise BlursetError(f"{len(acc)} view/level images incomplete after rendering")
+        t_sharp, t_blur = _render_fixed(cfg, worker, frames, images, common)
+    if images.open:
+        raise BlursetError(f"{len(images.open)} view/level images incomplete after rendering")
     # --latents auto / motion blur render fewer frames than the bar's per-setting bound.
     progress.frame_done(frames_per_setting(cfg) - len(frames))
     shutil.rmtree(exr_dir)
-    _copy_sharp(partial, sharp, n_views, cfg)
+    _copy_sharp(partial, sharp, plan.n_views, cfg)
+    test_views = _core.test_views(plan.n_views, cfg.view_stride)
     plan.write_poses(
-        partial,
-        cfg.level_dirs,
-        test_views=_core.test_views(n_views, cfg.view_stride),
-        sharp_test_views=not cfg.blurry_test_views,
+        partial, cfg.level_dirs, test_views=test_views, sharp_test_views=not cfg.blurry_test_views
     )
     timings: _records.Timings = {
         "plan_s": round(t_plan, 3),
@@ -206,6 +143,107 @@ def render_setting(
         "total_s": round(time.time() - t0, 3),
         "frames": n_rendered,
     }
+    _write_records(job, cfg, plan, partial, info, images, timings, records, progress)
+    layout.publish(partial, final)
+    return final
+
+
+class _Images:
+    """The images of a setting as their frames arrive: each view/level's accumulator,
+    written (and denoised, and QA'd if sharp) once it holds all its frames."""
+
+    def __init__(
+        self,
+        partial: Path,
+        n_views: int,
+        cfg: BuildConfig,
+        info: dict,
+        frames: list[Any],
+        progress: Progress,
+    ) -> None:
+        self.partial, self.n_views, self.cfg, self.progress = partial, n_views, cfg, progress
+        self.keys: list[tuple[int, str]] = [(f["view"], f["level"]) for f in frames]
+        self.need: dict[tuple[int, str], int] = {}
+        for k in self.keys:
+            self.need[k] = self.need.get(k, 0) + 1
+        self.open: dict[tuple[int, str], Any] = {}
+        self.qa: dict[int, Any] = {}
+        # --denoise oidn: the frames carry their guide passes, every finished image (a
+        # blurry mean or the sharp render) is denoised once by the driver (issue 28).
+        self.guides = cfg.denoise == "oidn"
+        self.den = None
+        if self.guides:
+            from blurset.denoise import denoiser, device_for
+
+            backend = (info.get("device") or {}).get("backend") or cfg.device
+            self.den = denoiser(device_for(str(backend)))
+
+    def finish(self, key: tuple[int, str], a: Any) -> None:
+        """Write a finished image (the mean of its frames) and its copies; QA a sharp one."""
+        if self.den is not None:
+            a.denoise(self.den)
+        view, level = key
+        name = layout.image_name(view, self.n_views)
+        level_dir, bg = self.partial / level, self.cfg.background
+        a.write_png(level_dir / layout.IMAGES / name, background=bg)
+        for f in self.cfg.downsample:
+            a.write_png(level_dir / layout.images_dir(f) / name, background=bg, downsample=f)
+        if self.cfg.write_linear:
+            a.write_exr(level_dir / layout.LINEAR / layout.linear_name(name))
+        if level == layout.SHARP:
+            self.qa[view] = _core.frame_qa(a.mean())
+
+    def on_frame(self, i: int, path: str, origin: tuple[int, int] | None) -> None:
+        key = self.keys[i]
+        a = self.open.get(key)
+        if a is None:
+            res = self.cfg.resolution
+            a = self.open[key] = _core.Accumulator(res, res, guides=self.guides)
+        a.add_exr(path, origin)
+        os.unlink(path)
+        if a.count == self.need[key]:
+            self.finish(key, a)
+            del self.open[key]
+        self.progress.frame_done()
+
+
+def _render_fixed(
+    cfg: BuildConfig, worker: Any, frames: list[Any], images: _Images, common: dict[str, Any]
+) -> tuple[float, float]:
+    """The plan's frames at their sample counts: the sharp renders first (their own,
+    larger count), QA, then the blur renders. The seconds of each phase."""
+    sharp_idx = [i for i, k in enumerate(images.keys) if k[1] == layout.SHARP]
+    blur_idx = [i for i, k in enumerate(images.keys) if k[1] != layout.SHARP]
+    t1 = time.time()
+    worker.render(
+        [frames[i] for i in sharp_idx],
+        samples=cfg.effective_sharp_samples,
+        on_frame=lambda j, p, o: images.on_frame(sharp_idx[j], p, o),
+        **common,
+    )
+    _raise_on_qa(images.qa)
+    t_sharp = time.time() - t1
+    if blur_idx:
+        worker.render(
+            [frames[i] for i in blur_idx],
+            on_frame=lambda j, p, o: images.on_frame(blur_idx[j], p, o),
+            **common,
+        )
+    return t_sharp, time.time() - t1 - t_sharp
+
+
+def _write_records(
+    job: SettingJob,
+    cfg: BuildConfig,
+    plan: Any,
+    partial: Path,
+    info: dict,
+    images: _Images,
+    timings: _records.Timings,
+    records: dict[tuple[int, str], _records.ImageRender],
+    progress: Progress,
+) -> None:
+    """meta.json (with the COLMAP verdict under --check-poses) and the preview."""
 
     def write_meta(pose_check: _records.PoseCheck | None = None) -> None:
         plan.write_meta(
@@ -213,12 +251,12 @@ def render_setting(
             config=cfg,
             object=_object_record(job.obj, info),
             timings=timings,
-            qa=[qa[v] for v in range(n_views)],
+            qa=[images.qa[v] for v in range(images.n_views)],
             pose_check=pose_check,
             light_paths=info.get("light_paths"),
             device=info.get("device"),
-            denoiser=den.record() if den is not None else None,
-            images=[(v, level, r) for (v, level), r in sorted(images.items())] or None,
+            denoiser=images.den.record() if images.den is not None else None,
+            images=[(v, level, r) for (v, level), r in sorted(records.items())] or None,
         )
 
     write_meta()
@@ -228,8 +266,6 @@ def render_setting(
         from blurset.preview import write_build_preview
 
         write_build_preview(partial, warn=progress.write)
-    layout.publish(partial, final)
-    return final
 
 
 def _raise_on_qa(qa: dict[int, Any]) -> None:
