@@ -68,6 +68,7 @@ def test_user_pages_name_no_issue_date_load_or_commit() -> None:
 def test_cli_reference_covers_every_command_and_option(tmp_path, monkeypatch) -> None:
     cli_gen = _gen("cli")
     monkeypatch.setattr(cli_gen, "OUT", tmp_path / "cli.md")
+    monkeypatch.setattr(cli_gen, "GUIDES", [])
     assert cli_gen.main() == 0
     page = (tmp_path / "cli.md").read_text()
     from blurset.cli import subcommands
@@ -85,6 +86,29 @@ def test_cli_reference_covers_every_command_and_option(tmp_path, monkeypatch) ->
     for d in BUILD.decls:
         if not d.flags and not d.via:
             assert f"| `{d.name}` |" in page, d.name
+
+
+def test_build_guide_synopsis_is_the_generated_one() -> None:
+    """docs/guide/build.md's synopsis is what docs/gen/cli.py makes from the parser and the
+    option declarations (`make docs` rewrites it), and names every option of `blurset build`."""
+    cli_gen = _gen("cli")
+    page = ROOT / "docs" / "guide" / "build.md"
+    text = page.read_text()
+    blocks = list(cli_gen.SYNOPSIS.finditer(text))
+    assert [m["name"] for m in blocks] == ["build"], "build.md holds no generated synopsis"
+    assert blocks[0]["body"] == cli_gen.synopsis("build"), "stale synopsis: run make docs"
+    assert cli_gen.rewrite_synopses(text) == text
+    from blurset.cli import subcommands
+
+    for action in subcommands()["build"]._actions:
+        if isinstance(action, argparse._HelpAction) or "--debug" in action.option_strings:
+            continue
+        assert f"[{action.option_strings[0]}" in blocks[0]["body"] or (
+            f"| {action.option_strings[0]}" in blocks[0]["body"]
+        ), action.option_strings
+    # A hand edit of the block is found.
+    edited = text.replace("[--quiet]", "")
+    assert cli_gen.rewrite_synopses(edited) == text
 
 
 def test_a_page_per_schema_listing_every_field(tmp_path, monkeypatch) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -20,6 +21,12 @@ from common import sanitize  # noqa: E402
 DOCS = Path(__file__).resolve().parents[1]
 OUT = DOCS / "reference" / "cli.md"
 WIDTH = 88
+# Guide pages whose synopsis of a command is generated: a block
+# `<!-- synopsis NAME -->` ```sh … ``` `<!-- /synopsis -->` that main() rewrites.
+GUIDES = [DOCS / "guide" / "build.md"]
+SYNOPSIS = re.compile(
+    r"(<!-- synopsis (?P<name>[a-z-]+) -->\n```sh\n)(?P<body>.*?)(```\n<!-- /synopsis -->)", re.S
+)
 
 
 def _cell(text: object) -> str:
@@ -123,6 +130,66 @@ def _toml_only_table() -> list[str]:
     return lines
 
 
+def _synopsis_value(parser: argparse.ArgumentParser, a: argparse.Action, decls: dict) -> str:
+    """An option's value in a synopsis: its choices, else its declared default (what a
+    user most often types), else its metavar."""
+    if a.nargs == 0:
+        return ""
+    if a.choices is not None:
+        return "|".join(str(c) for c in a.choices)
+    d = decls.get(a.dest)
+    default = getattr(d, "default", None)
+    if default is not None and default is not False and default != []:
+        if isinstance(default, (list, tuple)):
+            sep = " " if a.nargs in ("+", "*") else ","
+            return sep.join(f"{x:g}" if isinstance(x, float) else str(x) for x in default) + (
+                " …" if sep == " " else ""
+            )
+        return f"{default:g}" if isinstance(default, float) else str(default)
+    return _value(parser, a)
+
+
+def synopsis(name: str) -> str:
+    """`blurset NAME` and every option of its parser (the core's declarations for build),
+    `[--flag VALUE]`, exclusive options as `[--a A | --b B]`, wrapped at WIDTH."""
+    from blurset.cli import subcommands
+
+    p = subcommands()[name]
+    decls = {}
+    if name == "build":
+        from blurset.config import BUILD
+
+        decls = {d.name: d for d in BUILD.decls}
+    exclusive = {id(a): g for g in p._mutually_exclusive_groups for a in g._group_actions}
+    parts: list[str] = []
+    done: set[int] = set()
+    for a in p._actions:
+        if id(a) in done or isinstance(a, argparse._HelpAction) or "--debug" in a.option_strings:
+            continue
+        if a.help == argparse.SUPPRESS:
+            continue
+        group = exclusive[id(a)]._group_actions if id(a) in exclusive else [a]
+        items = []
+        for b in group:
+            done.add(id(b))
+            value = _synopsis_value(p, b, decls)
+            flag = b.option_strings[0] if b.option_strings else ""
+            items.append(" ".join(x for x in (flag, value) if x))
+        text = " | ".join(items)
+        parts.append(text if not group[0].option_strings else f"[{text}]")
+    lines = [f"blurset {name}"]
+    for part in parts:  # an option is never split across lines
+        if len(lines[-1]) + 1 + len(part) > WIDTH:
+            lines.append("  " + part)
+        else:
+            lines[-1] += " " + part
+    return "\n".join(lines) + "\n"
+
+
+def rewrite_synopses(text: str) -> str:
+    return SYNOPSIS.sub(lambda m: m.group(1) + synopsis(m["name"]) + m.group(4), text)
+
+
 def _help_lines(p: argparse.ArgumentParser) -> list[str]:
     return [sanitize(line) for line in p.format_help().rstrip().split("\n")]
 
@@ -180,6 +247,12 @@ def main() -> int:
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(reference())
     print(f"wrote {OUT}", file=sys.stderr)
+    for page in GUIDES:
+        text = page.read_text()
+        new = rewrite_synopses(text)
+        if new != text:
+            page.write_text(new)
+            print(f"wrote the synopsis in {page}", file=sys.stderr)
     return 0
 
 
