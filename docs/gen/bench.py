@@ -151,52 +151,34 @@ def _paper_of(r: dict) -> float:
 def _presets_section(rs: list[dict], res: str = "") -> list[str]:
     rows = {_match(PRESETS, r["name"])["preset"]: r for r in rs}
     if res:
-        # One table per run: results of earlier runs at this size stay, each with the ratio
-        # to its own run's paper preset (whose own entry the newest run replaced).
-        runs: dict[float, list[dict]] = defaultdict(list)
-        for r in rs:
-            runs[_paper_of(r)].append(r)
+        # The newest run at this size: the results measured against its paper preset
+        # (an earlier run's results are history, which git keeps).
         newest = _paper_of(rows["paper"]) if "paper" in rows else None
-        order = sorted(runs, key=lambda k: (k != newest, k))
-        out = [
+        group = [r for r in rs if _paper_of(r) == newest] if newest is not None else rs
+        g_rows = {_match(PRESETS, r["name"])["preset"]: r for r in group}
+        objects = sorted({o for r in group for o in r.get("objects", [])})
+        ref = group[0].get("reference", "not recorded")
+        denoised = any("'denoise': 'oidn'" in r.get("contender", "") for r in group)
+        corrected = any("reference_noise_psnr_blur_db" in r for r in group)
+        if denoised and not corrected:
+            ref += (
+                "; a denoised image was scored as measured, its reference's own noise "
+                "counted against it: its render PSNR reads low"
+            )
+        return [
             "",
             f"## At {res} px",
             "",
-            f"Separate runs at {res} px: each ratio is to the paper preset of the run that "
-            "measured it. An empty render PSNR was not measured (the paper preset's render "
-            "reference costs as much as its build); the bar then takes the paper preset to "
-            "be above the floor.",
+            f"One run at {res} px: each ratio is to that run's paper preset. An empty render "
+            "PSNR was not measured (the paper preset's render reference costs as much as its "
+            "build); the bar then takes the paper preset to be above the floor.",
+            "",
+            f"The run ({', '.join(f'`{o}`' for o in objects)}; "
+            f"{_fmt(group[0].get('views_measured'))} view, "
+            f"{_fmt(group[0].get('repeats'))} repeat; references: {ref}).",
+            "",
+            *_presets_table(g_rows, f"presets_{res}.png", f"{res} px"),
         ]
-        for n, key in enumerate(order):
-            group = runs[key]
-            g_rows = {_match(PRESETS, r["name"])["preset"]: r for r in group}
-            objects = sorted({o for r in group for o in r.get("objects", [])})
-            where = f"{res} px" if n == 0 else f"{res} px, earlier run {n}"
-            ref = group[0].get("reference", "not recorded")
-            head = (
-                f"The run ({', '.join(f'`{o}`' for o in objects)}; "
-                if n == 0
-                else f"### Earlier run {n} at {res} px\n\n"
-                f"Its paper preset made {key:.3f} settings/h ({', '.join(f'`{o}`' for o in objects)}; "
-            )
-            denoised = any("'denoise': 'oidn'" in r.get("contender", "") for r in group)
-            corrected = any("reference_noise_psnr_blur_db" in r for r in group)
-            if denoised and not corrected:
-                ref += (
-                    "; a denoised image was scored as measured, its reference's own noise "
-                    "counted against it: its render PSNR reads low"
-                )
-            out += [
-                "",
-                head + f"{_fmt(group[0].get('views_measured'))} view, "
-                f"{_fmt(group[0].get('repeats'))} repeat; references: "
-                f"{ref}).",
-                "",
-                *_presets_table(
-                    g_rows, f"presets_{res}{'' if n == 0 else f'_run{n}'}.png", where, n == 0
-                ),
-            ]
-        return out
     out = [
         "# Presets: settings per hour and accuracy",
         "",
@@ -214,6 +196,29 @@ def _presets_section(rs: list[dict], res: str = "") -> list[str]:
     return out + _presets_table(rows, "presets.png", "")
 
 
+def _log_x(ax) -> None:
+    """A log x-axis labelled at 1, 2 and 5 of each decade in plain numbers, no minor
+    labels: matplotlib's default labels every minor tick of a short range in scientific
+    notation, and they print over each other."""
+    ax.set_xscale("log")
+    ax.xaxis.set_major_locator(matplotlib.ticker.LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.xaxis.set_minor_locator(matplotlib.ticker.LogLocator(base=10, subs=tuple(range(2, 10))))
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+
+
+# Short column headers, so the table fits a page without scrolling sideways; the line
+# under the table says what they mean.
+PRESET_COLUMNS = [
+    ("psnr_blur_db", "blur dB"),
+    ("psnr_sharp_db", "sharp dB"),
+    ("render_psnr_blur_db", "blur render dB"),
+    ("render_psnr_sharp_db", "sharp render dB"),
+    ("detail_ratio_blur", "blur detail"),
+    ("detail_ratio_sharp", "sharp detail"),
+]
+
+
 def _presets_table(rows: dict, png: str, res: str, explain: bool = True) -> list[str]:
     out: list[str] = []
     names = sorted(rows, key=lambda p: (p != "paper", -rows[p].get("settings_per_hour", 0)))
@@ -221,8 +226,7 @@ def _presets_table(rows: dict, png: str, res: str, explain: bool = True) -> list
     fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.6))
     ax = axes[0]
     ax.barh(names[::-1], sph[::-1], color="#3f51b5")
-    ax.set_xscale("log")
-    ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    _log_x(ax)
     ax.set_xlabel("settings per hour (log)")
     for y, v in enumerate(sph[::-1]):
         ax.text(v, y, f" {v:.2f}", va="center", fontsize=8)
@@ -256,34 +260,34 @@ def _presets_table(rows: dict, png: str, res: str, explain: bool = True) -> list
     ax.scatter([], [], marker="o", color="grey", label="blurry images")
     ax.scatter([], [], marker="s", color="grey", label="sharp images")
     ax.axhline(PNG_FLOOR_DB, ls=":", color="grey", label="8-bit floor")
-    ax.set_xscale("log")
-    ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    _log_x(ax)
     ax.set_xlabel("settings per hour (log)")
     ax.set_ylabel("PSNR against the reference, dB")
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3)
     out += [_save(fig, png), ""]
-    extra = [
-        ("psnr_blur_db", "blurry PSNR, dB"),
-        ("psnr_sharp_db", "sharp PSNR, dB"),
-        ("render_psnr_blur_db", "blurry render PSNR, dB"),
-        ("render_psnr_sharp_db", "sharp render PSNR, dB"),
-        ("detail_ratio_blur", "blurry detail ratio"),
-        ("detail_ratio_sharp", "sharp detail ratio"),
-        ("resolution", "px"),
-    ]
-    cols = [(k, t) for k, t in extra if any(k in rows[p] for p in names)]
+    cols = [c for c in PRESET_COLUMNS if any(c[0] in rows[p] for p in names)]
+    sizes = sorted({rows[p]["resolution"] for p in names if "resolution" in rows[p]})
     paper = any(rows[p].get("ratio") for p in names)
-    head = ["preset", "settings / hour"] + (["× paper"] if paper else []) + [t for _, t in cols]
+    head = ["preset", "settings/h"] + (["× paper"] if paper else []) + [t for _, t in cols]
+    if len(sizes) > 1:
+        head.append("px")
     out += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for p in names:
         r = rows[p]
         cells = [f"`{p}`", _fmt(r.get("settings_per_hour"))]
         if paper:
-            # Each result's own ratio: to the paper preset of the run that measured it (a
-            # preset re-measured later keeps its run's ratio).
+            # Each result's own ratio: to the paper preset of the run that measured it.
             cells.append(f"{r['ratio']:.1f}×" if r.get("ratio") else "")
         cells += [_fmt(r.get(k), 1 if "db" in k else 2) for k, _ in cols]
+        if len(sizes) > 1:
+            cells.append(_fmt(r.get("resolution")))
         out.append("| " + " | ".join(cells) + " |")
+    size = f" Every preset at {sizes[0]} px." if len(sizes) == 1 else ""
+    out += [
+        "",
+        "blur / sharp: the blurry / sharp images; dB: their PSNR against the reference;"
+        " render dB: the render PSNR; detail: the detail ratio." + size,
+    ]
     out += ["", "What each preset ran:", ""]
     for p in names:
         out.append(f"- `{p}`: {_flags(rows[p].get('contender', ''))}")
