@@ -793,116 +793,16 @@ pub fn plan_setting(
         focal,
         size: cfg.resolution as f64,
     };
+    let ctx = Setting {
+        cfg,
+        seed,
+        theta0_deg,
+        radius,
+        r_min,
+        screen: &screen,
+    };
     let views = (0..cfg.views)
-        .map(|index| {
-            let v = sample_view(cfg, seed, theta0_deg, index);
-            let c2w = orbit_c2w(radius, v.phi_deg, v.theta_deg);
-            let (near, far) = depth_range(&c2w, vertices);
-            let w = scene_weight(near, far, bbox_dims, &cfg.guards);
-            let sharp_seed = frame_seed(seed, index, 0, 0);
-            let levels = cfg
-                .levels
-                .iter()
-                .map(|&level| {
-                    // Subsets share the view's seed, so every level's frames and the
-                    // sharp render draw from one sample sequence.
-                    let latent_seed = |k: usize| match cfg.latent_sampling {
-                        LatentSampling::Subsets => sharp_seed,
-                        LatentSampling::Independent => frame_seed(seed, index, level, k),
-                    };
-                    let (w_l, _) = sample_level_m(cfg, seed, index, level, w.w_u, 0);
-                    let seg = Segment {
-                        open: cfg.trajectory.t_open(),
-                        r: radius,
-                        phi_deg: v.phi_deg,
-                        theta_deg: v.theta_deg,
-                        trajectory: &v.trajectory,
-                        w_l,
-                        r_min,
-                    };
-                    let (open, close) = seg.ends();
-                    let motion_px = motion(&screen.points(&open), &screen.points(&close));
-                    let plan = match cfg.blur_method {
-                        BlurMethod::Average => {
-                            let draw = |m| sample_level_m(cfg, seed, index, level, w.w_u, m).1;
-                            let (ts, max_gap_px) =
-                                latent_positions(cfg, draw, &seg, &screen, motion_px);
-                            let (sample_sequence, offsets) =
-                                cfg.sample_blocks_at(ts.len(), motion_px);
-                            let latent_frames: Vec<LatentFrame> = ts
-                                .iter()
-                                .enumerate()
-                                .map(|(k, &t)| {
-                                    let ((r, phi, theta), m) = seg.at(t);
-                                    LatentFrame {
-                                        t,
-                                        r,
-                                        phi_deg: phi,
-                                        theta_deg: theta,
-                                        seed: latent_seed(k),
-                                        sample_offset: offsets[k],
-                                        c2w: rows(&m),
-                                    }
-                                })
-                                .collect();
-                            let mean_t = ts.iter().sum::<f64>() / ts.len().max(1) as f64;
-                            LevelPlan {
-                                w_l,
-                                latents: ts.len(),
-                                motion_px,
-                                max_gap_px,
-                                method: BlurMethod::Average,
-                                samples_per_frame: cfg.samples_per_frame_at(ts.len(), motion_px),
-                                latent_sampling: cfg.latent_sampling,
-                                sample_sequence,
-                                latent_frames,
-                                motion_blur: None,
-                                mean_pose: seg.mean_pose(mean_t),
-                            }
-                        }
-                        BlurMethod::MotionBlur => {
-                            let (motion_steps, interpolation_error_px, keys) =
-                                motion_keys(&seg, &screen);
-                            LevelPlan {
-                                w_l,
-                                latents: 1,
-                                motion_px,
-                                max_gap_px: 0.0,
-                                method: BlurMethod::MotionBlur,
-                                samples_per_frame: cfg.samples_per_frame(1),
-                                latent_sampling: cfg.latent_sampling,
-                                sample_sequence: cfg.samples_per_frame(1),
-                                latent_frames: Vec::new(),
-                                motion_blur: Some(MotionBlurPlan {
-                                    seed: latent_seed(0),
-                                    motion_steps,
-                                    interpolation_error_px,
-                                    keys,
-                                }),
-                                mean_pose: seg.mean_pose(seg.open + 0.5),
-                            }
-                        }
-                    };
-                    (level.to_string(), plan)
-                })
-                .collect();
-            ViewPlan {
-                index,
-                r: radius,
-                phi_deg: v.phi_deg,
-                theta_deg: v.theta_deg,
-                near: bounds(near, far, &cfg.guards).0,
-                far: bounds(near, far, &cfg.guards).1,
-                flatness: w.flatness,
-                depth_range: w.depth_range,
-                orientation: w.orientation,
-                w_u: w.w_u,
-                trajectory: v.trajectory,
-                sharp_seed,
-                c2w: rows(&c2w),
-                levels,
-            }
-        })
+        .map(|index| ctx.view(index, vertices, bbox_dims))
         .collect();
     Ok(SettingPlan {
         uid: uid.to_string(),
@@ -918,6 +818,142 @@ pub fn plan_setting(
         views,
         object_box: Some(vertex_box(vertices)),
     })
+}
+
+/// What every view of one setting shares while it is planned.
+struct Setting<'a> {
+    cfg: &'a SamplingConfig,
+    seed: u64,
+    theta0_deg: f64,
+    radius: f64,
+    r_min: f64,
+    screen: &'a Screen,
+}
+
+impl Setting<'_> {
+    /// View `index`: its camera, depth bounds, scene weight and every blur level.
+    fn view(&self, index: usize, vertices: &[[f32; 3]], bbox_dims: [f64; 3]) -> ViewPlan {
+        let cfg = self.cfg;
+        let v = sample_view(cfg, self.seed, self.theta0_deg, index);
+        let c2w = orbit_c2w(self.radius, v.phi_deg, v.theta_deg);
+        let (near, far) = depth_range(&c2w, vertices);
+        let w = scene_weight(near, far, bbox_dims, &cfg.guards);
+        let sharp_seed = frame_seed(self.seed, index, 0, 0);
+        let levels = cfg
+            .levels
+            .iter()
+            .map(|&level| {
+                let plan = self.level(index, level, &v, w.w_u, sharp_seed);
+                (level.to_string(), plan)
+            })
+            .collect();
+        let (near, far) = bounds(near, far, &cfg.guards);
+        ViewPlan {
+            index,
+            r: self.radius,
+            phi_deg: v.phi_deg,
+            theta_deg: v.theta_deg,
+            near,
+            far,
+            flatness: w.flatness,
+            depth_range: w.depth_range,
+            orientation: w.orientation,
+            w_u: w.w_u,
+            trajectory: v.trajectory,
+            sharp_seed,
+            c2w: rows(&c2w),
+            levels,
+        }
+    }
+
+    /// One blur level of a view: its segment of the trajectory, then its latent frames
+    /// (average) or its motion keys (motion blur).
+    fn level(
+        &self,
+        index: usize,
+        level: u32,
+        v: &ViewSample,
+        w_u: f64,
+        sharp_seed: u32,
+    ) -> LevelPlan {
+        let cfg = self.cfg;
+        let (w_l, _) = sample_level_m(cfg, self.seed, index, level, w_u, 0);
+        let seg = Segment {
+            open: cfg.trajectory.t_open(),
+            r: self.radius,
+            phi_deg: v.phi_deg,
+            theta_deg: v.theta_deg,
+            trajectory: &v.trajectory,
+            w_l,
+            r_min: self.r_min,
+        };
+        let (open, close) = seg.ends();
+        let motion_px = motion(&self.screen.points(&open), &self.screen.points(&close));
+        // Subsets share the view's seed, so every level's frames and the sharp render
+        // draw from one sample sequence.
+        let latent_seed = |k: usize| match cfg.latent_sampling {
+            LatentSampling::Subsets => sharp_seed,
+            LatentSampling::Independent => frame_seed(self.seed, index, level, k),
+        };
+        match cfg.blur_method {
+            BlurMethod::Average => {
+                let draw = |m| sample_level_m(cfg, self.seed, index, level, w_u, m).1;
+                let (ts, max_gap_px) = latent_positions(cfg, draw, &seg, self.screen, motion_px);
+                let (sample_sequence, offsets) = cfg.sample_blocks_at(ts.len(), motion_px);
+                let latent_frames: Vec<LatentFrame> = ts
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &t)| {
+                        let ((r, phi, theta), m) = seg.at(t);
+                        LatentFrame {
+                            t,
+                            r,
+                            phi_deg: phi,
+                            theta_deg: theta,
+                            seed: latent_seed(k),
+                            sample_offset: offsets[k],
+                            c2w: rows(&m),
+                        }
+                    })
+                    .collect();
+                let mean_t = ts.iter().sum::<f64>() / ts.len().max(1) as f64;
+                LevelPlan {
+                    w_l,
+                    latents: ts.len(),
+                    motion_px,
+                    max_gap_px,
+                    method: BlurMethod::Average,
+                    samples_per_frame: cfg.samples_per_frame_at(ts.len(), motion_px),
+                    latent_sampling: cfg.latent_sampling,
+                    sample_sequence,
+                    latent_frames,
+                    motion_blur: None,
+                    mean_pose: seg.mean_pose(mean_t),
+                }
+            }
+            BlurMethod::MotionBlur => {
+                let (motion_steps, interpolation_error_px, keys) = motion_keys(&seg, self.screen);
+                LevelPlan {
+                    w_l,
+                    latents: 1,
+                    motion_px,
+                    max_gap_px: 0.0,
+                    method: BlurMethod::MotionBlur,
+                    samples_per_frame: cfg.samples_per_frame(1),
+                    latent_sampling: cfg.latent_sampling,
+                    sample_sequence: cfg.samples_per_frame(1),
+                    latent_frames: Vec::new(),
+                    motion_blur: Some(MotionBlurPlan {
+                        seed: latent_seed(0),
+                        motion_steps,
+                        interpolation_error_px,
+                        keys,
+                    }),
+                    mean_pose: seg.mean_pose(seg.open + 0.5),
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
