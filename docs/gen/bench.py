@@ -317,9 +317,10 @@ def _verdicts(rows: dict, names: list[str], res: str = "", explain: bool = True)
             "A preset is a cheaper way to make the paper's pairs when every check holds",
             "(means over the images of all objects; the bench's `verdict`):",
             "",
-            *[f"- **{k}**: {t}" for k, t in VERDICT_CHECKS.items()],
+            *[f"- **{k.replace('_', ' ')}**: {t}" for k, t in VERDICT_CHECKS.items()],
         ]
-    head = ["preset", *VERDICT_CHECKS, "all"]
+    # Spaces, not the keys' underscores: a header can wrap, and the table fits the page.
+    head = ["preset", *(k.replace("_", " ") for k in VERDICT_CHECKS), "all"]
     out += ["", "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for p in judged:
         v = rows[p]["verdict"]
