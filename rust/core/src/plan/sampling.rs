@@ -889,71 +889,98 @@ impl Setting<'_> {
         };
         let (open, close) = seg.ends();
         let motion_px = motion(&self.screen.points(&open), &self.screen.points(&close));
-        // Subsets share the view's seed, so every level's frames and the sharp render
-        // draw from one sample sequence.
-        let latent_seed = |k: usize| match cfg.latent_sampling {
-            LatentSampling::Subsets => sharp_seed,
-            LatentSampling::Independent => frame_seed(self.seed, index, level, k),
+        let at = LevelAt {
+            index,
+            level,
+            w_u,
+            sharp_seed,
+            motion_px,
         };
         match cfg.blur_method {
-            BlurMethod::Average => {
-                let draw = |m| sample_level_m(cfg, self.seed, index, level, w_u, m).1;
-                let (ts, max_gap_px) = latent_positions(cfg, draw, &seg, self.screen, motion_px);
-                let (sample_sequence, offsets) = cfg.sample_blocks_at(ts.len(), motion_px);
-                let latent_frames: Vec<LatentFrame> = ts
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &t)| {
-                        let ((r, phi, theta), m) = seg.at(t);
-                        LatentFrame {
-                            t,
-                            r,
-                            phi_deg: phi,
-                            theta_deg: theta,
-                            seed: latent_seed(k),
-                            sample_offset: offsets[k],
-                            c2w: rows(&m),
-                        }
-                    })
-                    .collect();
-                let mean_t = ts.iter().sum::<f64>() / ts.len().max(1) as f64;
-                LevelPlan {
-                    w_l,
-                    latents: ts.len(),
-                    motion_px,
-                    max_gap_px,
-                    method: BlurMethod::Average,
-                    samples_per_frame: cfg.samples_per_frame_at(ts.len(), motion_px),
-                    latent_sampling: cfg.latent_sampling,
-                    sample_sequence,
-                    latent_frames,
-                    motion_blur: None,
-                    mean_pose: seg.mean_pose(mean_t),
-                }
-            }
-            BlurMethod::MotionBlur => {
-                let (motion_steps, interpolation_error_px, keys) = motion_keys(&seg, self.screen);
-                LevelPlan {
-                    w_l,
-                    latents: 1,
-                    motion_px,
-                    max_gap_px: 0.0,
-                    method: BlurMethod::MotionBlur,
-                    samples_per_frame: cfg.samples_per_frame(1),
-                    latent_sampling: cfg.latent_sampling,
-                    sample_sequence: cfg.samples_per_frame(1),
-                    latent_frames: Vec::new(),
-                    motion_blur: Some(MotionBlurPlan {
-                        seed: latent_seed(0),
-                        motion_steps,
-                        interpolation_error_px,
-                        keys,
-                    }),
-                    mean_pose: seg.mean_pose(seg.open + 0.5),
-                }
-            }
+            BlurMethod::Average => self.average(&seg, &at),
+            BlurMethod::MotionBlur => self.motion_blur(&seg, &at),
         }
     }
+
+    /// Subsets share the view's seed, so every level's frames and the sharp render draw
+    /// from one sample sequence.
+    fn latent_seed(&self, at: &LevelAt, k: usize) -> u32 {
+        match self.cfg.latent_sampling {
+            LatentSampling::Subsets => at.sharp_seed,
+            LatentSampling::Independent => frame_seed(self.seed, at.index, at.level, k),
+        }
+    }
+
+    /// A level as the mean of latent frames along its segment.
+    fn average(&self, seg: &Segment, at: &LevelAt) -> LevelPlan {
+        let cfg = self.cfg;
+        let draw = |m| sample_level_m(cfg, self.seed, at.index, at.level, at.w_u, m).1;
+        let (ts, max_gap_px) = latent_positions(cfg, draw, seg, self.screen, at.motion_px);
+        let (sample_sequence, offsets) = cfg.sample_blocks_at(ts.len(), at.motion_px);
+        let latent_frames: Vec<LatentFrame> = ts
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| {
+                let ((r, phi, theta), m) = seg.at(t);
+                LatentFrame {
+                    t,
+                    r,
+                    phi_deg: phi,
+                    theta_deg: theta,
+                    seed: self.latent_seed(at, k),
+                    sample_offset: offsets[k],
+                    c2w: rows(&m),
+                }
+            })
+            .collect();
+        let mean_t = ts.iter().sum::<f64>() / ts.len().max(1) as f64;
+        LevelPlan {
+            w_l: seg.w_l,
+            latents: ts.len(),
+            motion_px: at.motion_px,
+            max_gap_px,
+            method: BlurMethod::Average,
+            samples_per_frame: cfg.samples_per_frame_at(ts.len(), at.motion_px),
+            latent_sampling: cfg.latent_sampling,
+            sample_sequence,
+            latent_frames,
+            motion_blur: None,
+            mean_pose: seg.mean_pose(mean_t),
+        }
+    }
+
+    /// A level as one Cycles motion-blur render along the segment's keys.
+    fn motion_blur(&self, seg: &Segment, at: &LevelAt) -> LevelPlan {
+        let cfg = self.cfg;
+        let (motion_steps, interpolation_error_px, keys) = motion_keys(seg, self.screen);
+        LevelPlan {
+            w_l: seg.w_l,
+            latents: 1,
+            motion_px: at.motion_px,
+            max_gap_px: 0.0,
+            method: BlurMethod::MotionBlur,
+            samples_per_frame: cfg.samples_per_frame(1),
+            latent_sampling: cfg.latent_sampling,
+            sample_sequence: cfg.samples_per_frame(1),
+            latent_frames: Vec::new(),
+            motion_blur: Some(MotionBlurPlan {
+                seed: self.latent_seed(at, 0),
+                motion_steps,
+                interpolation_error_px,
+                keys,
+            }),
+            mean_pose: seg.mean_pose(seg.open + 0.5),
+        }
+    }
+}
+
+/// Which level of which view is being planned, and what its segment measured.
+struct LevelAt {
+    index: usize,
+    level: u32,
+    w_u: f64,
+    sharp_seed: u32,
+    motion_px: f64,
 }
 
 #[cfg(test)]
