@@ -278,6 +278,10 @@ def main(argv: list[str] | None = None) -> int:
         "doc": doc,
         "nb_views": a.nb_views,
     }
+    # The child starts inside the checkout: a --python or --checkout given relative to
+    # here must still name the same files there (a bare name like python3 is PATH's).
+    python = str(Path(a.python).absolute()) if os.sep in a.python else a.python
+    checkout = str(a.checkout.absolute())
     with tempfile.TemporaryDirectory(prefix="check_clients.") as tmp:
         pin, pout = Path(tmp) / "params.json", Path(tmp) / "result.json"
         pin.write_text(json.dumps(params))
@@ -285,10 +289,9 @@ def main(argv: list[str] | None = None) -> int:
         env.pop("PYTHONPATH", None)
         try:
             proc = subprocess.run(
-                [a.python, str(Path(__file__).resolve()), a.client, str(export), "--checkout",
-                 str(a.checkout), "--python", a.python, "--child", a.client, str(pin),
-                 str(pout)],
-                cwd=a.checkout, env=env, capture_output=True, text=True,
+                [python, str(Path(__file__).resolve()), a.client, str(export), "--checkout",
+                 checkout, "--python", python, "--child", a.client, str(pin), str(pout)],
+                cwd=checkout, env=env, capture_output=True, text=True,
             )  # fmt: skip
         except OSError as e:
             print(f"check_clients: --python {a.python}: {e.strerror or e}", file=sys.stderr)

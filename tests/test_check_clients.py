@@ -80,6 +80,24 @@ def test_a_client_given_the_wrong_export_or_failing_says_so(cc, geonerf_export, 
     assert "ModuleNotFoundError" in capsys.readouterr().out
 
 
+def test_a_relative_python_and_checkout_are_the_ones_the_user_named(
+    cc, geonerf_export, tmp_path, capsys, monkeypatch
+):
+    """The docs' form, `--python env/bin/python --checkout GeoNeRF` from the folder
+    holding both: the child runs inside the checkout, where those relative paths would
+    name nothing; the client's own code is reached (here an empty checkout, so its
+    import fails and says so)."""
+    _, root = geonerf_export
+    (tmp_path / "env" / "bin").mkdir(parents=True)
+    (tmp_path / "env" / "bin" / "python").symlink_to(sys.executable)
+    (tmp_path / "GeoNeRF").mkdir()
+    monkeypatch.chdir(tmp_path)
+    args = ["--checkout", "GeoNeRF", "--python", "env/bin/python"]
+    assert cc.main(["geonerf", str(root), *args]) == 2
+    out = capsys.readouterr()
+    assert "ModuleNotFoundError" in out.out, out
+
+
 def test_json_never_replaces_a_file_it_did_not_write(cc, tmp_path, capsys):
     # Refused before anything runs (no export, checkout or Python is looked at): one line
     # naming --json and the file, its bytes unchanged; its own earlier report may go.
