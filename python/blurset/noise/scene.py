@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +72,54 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
     """The single-scene mode: SCENE is one LLFF scene."""
     assert cfg.out is not None  # a required flag
     out = Path(cfg.out)
+    _refuse_build_options(scene, cfg)
+    gains = gains_of(cfg)
+    kpn = kpn_path(cfg)
+    src = _read_scene(scene, cfg)
+    levels = noise_table(kpn)
+    outputs.refuse_overlap(out, [scene])
+    outputs.refuse_inside_settings(out)
+    if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not cfg.overwrite:
+        raise ConfigError(
+            f"--out is a noise output already (pass --overwrite to replace it): {out}"
+        )
+    with outputs.lock(out, NOISE_SCENE):
+        # Claimed again under the lock: another run may have written it meanwhile.
+        if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not cfg.overwrite:
+            raise ConfigError(f"--out is a noise output already (pass --overwrite): {out}")
+        # A killed run's staging tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
+        layout.remove_stale_temps(out, [STAGE])
+        tmp = layout.temp_path(out / STAGE)
+        shutil.rmtree(tmp, ignore_errors=True)
+        try:
+            gain_dirs = _write_gains(tmp, src, gains, (kpn, levels), cfg)
+            # The previous output's own entries make way (nothing else in OUT), then each
+            # gain moves in whole; the record comes last.
+            outputs.remove_owned(out, NOISE_SCENE)
+            for gdir in gain_dirs:
+                os.replace(gdir, out / gdir.name)
+            outputs.write_record(
+                out / NOISE_SCENE.record,
+                {
+                    "kind": "blurset noise scene",
+                    "blurset_version": __version__,
+                    "scene": scene.resolve().name,
+                    "gains": [gdir.name for gdir in gain_dirs],
+                    "seed": cfg.seed,
+                    "profile": cfg.profile,
+                },
+            )
+        finally:
+            remove_tree(tmp)
+    print(
+        f"blurset noise: wrote {len(gains)} scene(s) x {len(src.names)} images to {out} "
+        f"({', '.join(layout.gain_name(g) for g in gains)})"
+    )
+    return 0
+
+
+def _refuse_build_options(scene: Path, cfg: _core.NoiseConfig) -> None:
+    """The options that choose among a build's levels and views mean nothing here."""
     if cfg.levels is not None:
         raise ConfigError(f"--levels applies to a build (no dataset.json in {scene})")
     if cfg.noisy_test_views:
@@ -80,10 +129,28 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
         )
     if cfg.source != "auto":
         raise ConfigError(f"--source applies to a build (no dataset.json in {scene})")
-    gamma = cfg.gamma or "2.2"
-    gains = gains_of(cfg)
-    kpn = kpn_path(cfg)
 
+
+@dataclass
+class _Scene:
+    """An LLFF scene as the noise reads it: its images (headers checked), pose rows and
+    size, and what the output names and keeps clean."""
+
+    path: Path
+    image_dir: Path
+    rows: np.ndarray
+    sources: list[Path]
+    width: int
+    height: int
+    names: list[str]
+    clean: list[int]
+    downsample: list[int]
+
+
+def _read_scene(scene: Path, cfg: _core.NoiseConfig) -> _Scene:
+    """The scene's images and poses, refused whole before any pixel work: a missing
+    folder or file, a count that does not match, a size that differs, a --downsample
+    that does not divide it."""
     image_dir = scene / (layout.images_dir(cfg.factor) if cfg.factor else layout.IMAGES)
     if not image_dir.is_dir():
         raise InputError(f"image directory not found: {image_dir}")
@@ -91,7 +158,6 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
     if not poses_path.is_file():
         raise InputError(f"poses_bounds.npy not found: {poses_path}")
     rows = _core.read_poses_bounds(poses_path)
-
     sources = list_images(image_dir)
     if not sources:
         raise InputError(f"no .png/.jpg images in {image_dir}")
@@ -110,109 +176,85 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
             w0, h0 = sizes[sources[0]]
             raise InputError(f"image size {w}x{h} differs from {w0}x{h0} of {sources[0].name}: {p}")
     width, height = sizes[sources[0]]
-
-    levels = noise_table(kpn)
-    sigmas = gain_sigmas(gains, levels)
-    wb = _core.noise_white_balance(cfg.seed) if cfg.profile == "paper" else None
-    factor = cfg.factor or 1
-    names = output_names(sources, cfg.frames)
-    clean = every_kth(len(sources), cfg.clean_views)
     downsample = list(cfg.downsample or [])
     bad = next((f for f in downsample if width % f or height % f), None)
     if bad is not None:
         raise ConfigError(f"--downsample {bad}: does not divide the image size {width}x{height}")
-
-    outputs.refuse_overlap(out, [scene])
-    outputs.refuse_inside_settings(out)
-    if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not cfg.overwrite:
-        raise ConfigError(
-            f"--out is a noise output already (pass --overwrite to replace it): {out}"
-        )
-    with outputs.lock(out, NOISE_SCENE):
-        # Claimed again under the lock: another run may have written it meanwhile.
-        if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not cfg.overwrite:
-            raise ConfigError(f"--out is a noise output already (pass --overwrite): {out}")
-        # A killed run's staging tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
-        layout.remove_stale_temps(out, [STAGE])
-        tmp = layout.temp_path(out / STAGE)
-        shutil.rmtree(tmp, ignore_errors=True)
-        try:
-            variants = []
-            for g in gains:
-                sr, ss = sigmas[g]
-                variants.append((tmp / layout.gain_name(g), sr, ss, _core.noise_key(cfg.seed, g)))
-            interruptible(
-                _core.noise_write_variants,
-                sources,
-                names,
-                variants,
-                frames=cfg.frames,
-                gamma=gamma,
-                white_balance=wb,
-                white_level=cfg.white_level,
-                downsample=downsample,
-                clean_views=clean,
-            )
-            # The scene's own images_<f>/ are its clean images of that size (not with --factor).
-            small = {} if cfg.factor else {f: scene / layout.images_dir(f) for f in downsample}
-            for gdir, *_ in variants:
-                copy_clean(gdir, sources, names, cfg.frames, clean, small)
-            # Every frame of a view shares its pose: the rows repeat, so a burst stays a
-            # valid LLFF scene (N * frames images, N * frames rows).
-            out_rows = np.repeat(np.asarray(rows, dtype=np.float64), cfg.frames, axis=0)
-            out_rows[:, 4] = height
-            out_rows[:, 9] = width
-            out_rows[:, 14] = out_rows[:, 14] / factor
-            files = files_record([p.name for p in sources], names, cfg.frames, set(clean))
-            for g, (gdir, sr, ss, _key) in zip(gains, variants, strict=True):
-                _core.write_poses_bounds(gdir / layout.POSES_BOUNDS, out_rows)
-                doc = noise_json(
-                    gain=g,
-                    seed=cfg.seed,
-                    sigmas=(sr, ss),
-                    gamma=gamma,
-                    white_balance=wb,
-                    white_level=cfg.white_level,
-                    frames=cfg.frames,
-                    profile=cfg.profile,
-                    model=MODEL,
-                    levels={
-                        **table_record(levels, kpn),
-                        "file": kpn.name if kpn else None,
-                    },
-                    source={
-                        "scene": scene.resolve().name,
-                        "images": image_dir.name,
-                        "factor": factor,
-                        "resolution": [width, height],
-                    },
-                    downsample=downsample,
-                    clean_views=clean,
-                    rng="philox4x32-10, key derive_seed(seed, [fnv1a64('noise'), gain bits]), "
-                    "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
-                    files=files,
-                )
-                _core.write_noise_json(gdir / layout.NOISE, doc)
-            # The previous output's own entries make way (nothing else in OUT), then each
-            # gain moves in whole; the record comes last.
-            outputs.remove_owned(out, NOISE_SCENE)
-            for gdir, *_ in variants:
-                os.replace(gdir, out / gdir.name)
-            outputs.write_record(
-                out / NOISE_SCENE.record,
-                {
-                    "kind": "blurset noise scene",
-                    "blurset_version": __version__,
-                    "scene": scene.resolve().name,
-                    "gains": [gdir.name for gdir, *_ in variants],
-                    "seed": cfg.seed,
-                    "profile": cfg.profile,
-                },
-            )
-        finally:
-            remove_tree(tmp)
-    print(
-        f"blurset noise: wrote {len(gains)} scene(s) x {len(files)} images to {out} "
-        f"({', '.join(layout.gain_name(g) for g in gains)})"
+    return _Scene(
+        path=scene,
+        image_dir=image_dir,
+        rows=rows,
+        sources=sources,
+        width=width,
+        height=height,
+        names=output_names(sources, cfg.frames),
+        clean=every_kth(len(sources), cfg.clean_views),
+        downsample=downsample,
     )
-    return 0
+
+
+def _write_gains(
+    tmp: Path, src: _Scene, gains: list[float], table: tuple, cfg: _core.NoiseConfig
+) -> list[Path]:
+    """Every gain's noisy scene under `tmp` (images, clean copies, poses, noise.json),
+    with the noise levels of `table` (its file, its levels); their folders, in the order
+    of `gains`."""
+    gamma = cfg.gamma or "2.2"
+    kpn, levels = table
+    sigmas = gain_sigmas(gains, levels)
+    wb = _core.noise_white_balance(cfg.seed) if cfg.profile == "paper" else None
+    factor = cfg.factor or 1
+    variants = []
+    for g in gains:
+        sr, ss = sigmas[g]
+        variants.append((tmp / layout.gain_name(g), sr, ss, _core.noise_key(cfg.seed, g)))
+    interruptible(
+        _core.noise_write_variants,
+        src.sources,
+        src.names,
+        variants,
+        frames=cfg.frames,
+        gamma=gamma,
+        white_balance=wb,
+        white_level=cfg.white_level,
+        downsample=src.downsample,
+        clean_views=src.clean,
+    )
+    # The scene's own images_<f>/ are its clean images of that size (not with --factor).
+    small = {} if cfg.factor else {f: src.path / layout.images_dir(f) for f in src.downsample}
+    for gdir, *_ in variants:
+        copy_clean(gdir, src.sources, src.names, cfg.frames, src.clean, small)
+    # Every frame of a view shares its pose: the rows repeat, so a burst stays a valid
+    # LLFF scene (N * frames images, N * frames rows).
+    out_rows = np.repeat(np.asarray(src.rows, dtype=np.float64), cfg.frames, axis=0)
+    out_rows[:, 4] = src.height
+    out_rows[:, 9] = src.width
+    out_rows[:, 14] = out_rows[:, 14] / factor
+    files = files_record([p.name for p in src.sources], src.names, cfg.frames, set(src.clean))
+    for g, (gdir, sr, ss, _key) in zip(gains, variants, strict=True):
+        _core.write_poses_bounds(gdir / layout.POSES_BOUNDS, out_rows)
+        doc = noise_json(
+            gain=g,
+            seed=cfg.seed,
+            sigmas=(sr, ss),
+            gamma=gamma,
+            white_balance=wb,
+            white_level=cfg.white_level,
+            frames=cfg.frames,
+            profile=cfg.profile,
+            model=MODEL,
+            levels={**table_record(levels, kpn), "file": kpn.name if kpn else None},
+            source={
+                "scene": src.path.resolve().name,
+                "images": src.image_dir.name,
+                "factor": factor,
+                "resolution": [src.width, src.height],
+            },
+            downsample=src.downsample,
+            clean_views=src.clean,
+            rng="philox4x32-10, key derive_seed(seed, [fnv1a64('noise'), gain bits]), "
+            "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
+            files=files,
+        )
+        _core.write_noise_json(gdir / layout.NOISE, doc)
+    return [gdir for gdir, *_ in variants]
