@@ -816,10 +816,61 @@ def planted_errors(
 def _report(
     names, features, model: _Model, rot_ours, c_ours, *, plant: bool = True, streaks=None
 ) -> dict:
+    """The verdict on our poses from COLMAP's model of the same images: not checkable
+    (too few views registered, or a planted error would pass), fail (a view contradicts
+    the images), or pass."""
+    report, views = _empty_report(names, features, model)
+    n, reg = len(names), len(model.reg_idx)
+    if reg < MIN_REGISTERED_VIEWS:
+        report["reason"] = (
+            f"COLMAP registered {reg}/{n} views (median {report['median_features']} SIFT "
+            "features per image): too little texture or overlap for structure from motion"
+        )
+        report["meaning"] = (
+            "no verdict on the poses: COLMAP cannot reconstruct these images, so there is "
+            "nothing to compare them with"
+        )
+        return report
+    j = _judge(model, rot_ours, c_ours, streaks=streaks)
+    failed = _measure(report, views, model.reg_idx, j)
+    disagreement = ", ".join(
+        f"{views[i]['name']} (#{i}: features off by {views[i]['reproj_px']:.2f} px "
+        f"vs COLMAP's {views[i]['colmap_reproj_px']:.2f} px; COLMAP pose "
+        f"{views[i]['rot_err_deg']:.2f} deg, {views[i]['center_err_rel']:.1%} away)"
+        for i in failed
+    )
+    if reg / n < MIN_REGISTERED_FRACTION:
+        # Registration does not depend on our poses, only on the images: a partial
+        # model is weak evidence (measured: a 5-view model of a plain vase put correct
+        # poses 4 deg off), so it can neither pass nor fail the scene.
+        report["reason"] = (
+            f"only {reg}/{n} views registered (< {MIN_REGISTERED_FRACTION:.0%}, "
+            f"median {report['median_features']} SIFT features per image)"
+            + (f"; in that partial model: {disagreement}" if failed else "")
+        )
+        report["meaning"] = (
+            f"no verdict on the poses: COLMAP reconstructed only {reg}/{n} views, too "
+            "few to judge the scene"
+        )
+    elif failed:
+        report["verdict"] = "fail"
+        report["reason"] = f"{len(failed)} view(s) contradict the images: {disagreement}"
+        report["meaning"] = (
+            f"the poses are wrong: {len(failed)} view(s) cannot place their features where "
+            f"the images show them, while {reg - len(failed)}/{reg} views agree with "
+            "COLMAP's model"
+        )
+    else:
+        _judge_consistent(report, model, rot_ours, c_ours, j, streaks, plant=plant)
+    return report
+
+
+def _empty_report(names, features, model: _Model) -> tuple[dict[str, Any], list[dict]]:
+    """The report before any pose is judged (not checkable, nothing measured) and its
+    per-view entries."""
     n = len(names)
     feats = np.array([features.get(nm, 0) for nm in names])
     median_feats = int(np.median(feats))
-    reg_idx = model.reg_idx
     views = [
         {
             "index": i,
@@ -833,9 +884,9 @@ def _report(
         for i, nm in enumerate(names)
     ]
     report: dict[str, Any] = {
-        "registered": len(reg_idx),
+        "registered": len(model.reg_idx),
         "total": n,
-        "registered_fraction": len(reg_idx) / n,
+        "registered_fraction": len(model.reg_idx) / n,
         "median_features": median_feats,
         # COLMAP's own mean reprojection error over all its observations: how well its
         # reconstruction explains the features, independent of our poses.
@@ -850,18 +901,12 @@ def _report(
         "reason": "",
         "thresholds": _thresholds(),
     }
-    if len(reg_idx) < MIN_REGISTERED_VIEWS:
-        report["reason"] = (
-            f"COLMAP registered {len(reg_idx)}/{n} views (median {median_feats} SIFT "
-            "features per image): too little texture or overlap for structure from motion"
-        )
-        report["meaning"] = (
-            "no verdict on the poses: COLMAP cannot reconstruct these images, so there is "
-            "nothing to compare them with"
-        )
-        return report
+    return report, views
 
-    j = _judge(model, rot_ours, c_ours, streaks=streaks)
+
+def _measure(report: dict, views: list[dict], reg_idx, j: dict) -> list[int]:
+    """Each registered view's errors and the medians into the report; the views that
+    contradict the images, worst first."""
     rot_err, cen_err, px_ours, px_colmap = j["rot_err"], j["cen_err"], j["px_ours"], j["px_colmap"]
     for k, i in enumerate(reg_idx):
         views[i].update(
@@ -884,72 +929,51 @@ def _report(
     )
     failed.sort(key=lambda i: -np.nan_to_num(views[i]["reproj_px"], nan=np.inf))
     report["failed_views"] = [views[i]["name"] for i in failed]
-    disagreement = ", ".join(
-        f"{views[i]['name']} (#{i}: features off by {views[i]['reproj_px']:.2f} px "
-        f"vs COLMAP's {views[i]['colmap_reproj_px']:.2f} px; COLMAP pose "
-        f"{views[i]['rot_err_deg']:.2f} deg, {views[i]['center_err_rel']:.1%} away)"
-        for i in failed
-    )
-    reg = len(reg_idx)
+    return failed
+
+
+def _judge_consistent(
+    report: dict, model: _Model, rot_ours, c_ours, j: dict, streaks, *, plant: bool
+) -> None:
+    """Every registered view is consistent with the images: a pass if a planted error
+    of PLANT_DEG would be caught (the check is sensitive here), else not checkable."""
+    n, reg = report["total"], report["registered"]
     unregistered = (
         f"; the {n - reg} view(s) COLMAP did not register are not checked" if reg < n else ""
     )
-    if reg / n < MIN_REGISTERED_FRACTION:
-        # Registration does not depend on our poses, only on the images: a partial
-        # model is weak evidence (measured: a 5-view model of a plain vase put correct
-        # poses 4 deg off), so it can neither pass nor fail the scene.
-        report["reason"] = (
-            f"only {reg}/{n} views registered (< {MIN_REGISTERED_FRACTION:.0%}, "
-            f"median {median_feats} SIFT features per image)"
-            + (f"; in that partial model: {disagreement}" if failed else "")
-        )
+    report["reason"] = (
+        f"{reg}/{n} views registered and consistent with the images; "
+        f"{report['agree_with_colmap']}/{reg} within {ROT_THRESHOLD_DEG} deg and "
+        f"{CENTER_THRESHOLD_REL:.0%} of COLMAP's own poses"
+    )
+    colmap = _colmap_vs_ours(report, reg)
+    if not plant:
+        report["pass"] = True
+        report["verdict"] = "pass"
+        report["meaning"] = f"our poses explain the images in {reg}/{reg} views; {colmap}"
+        return
+    planted = planted_errors(model, rot_ours, c_ours, j, PLANT_DEG, streaks)
+    report["planted"] = planted
+    axes = ", ".join(f"{a} {c}" for a, c in planted["by_axis"].items())
+    sensitivity = (
+        f"a {PLANT_DEG:g}° error planted in one pose is caught in "
+        f"{planted['caught']}/{planted['tried']} cases ({axes})"
+    )
+    if planted["fraction"] >= PLANT_MIN_CAUGHT:
+        report["pass"] = True
+        report["verdict"] = "pass"
         report["meaning"] = (
-            f"no verdict on the poses: COLMAP reconstructed only {reg}/{n} views, too "
-            "few to judge the scene"
-        )
-    elif failed:
-        report["verdict"] = "fail"
-        report["reason"] = f"{len(failed)} view(s) contradict the images: {disagreement}"
-        report["meaning"] = (
-            f"the poses are wrong: {len(failed)} view(s) cannot place their features where "
-            f"the images show them, while {reg - len(failed)}/{reg} views agree with "
-            "COLMAP's model"
+            f"our poses explain the images as well as COLMAP's own model in {reg}/{reg} "
+            f"registered views, and {sensitivity}{unregistered}; {colmap}"
         )
     else:
-        report["reason"] = (
-            f"{reg}/{n} views registered and consistent with the images; "
-            f"{report['agree_with_colmap']}/{reg} within {ROT_THRESHOLD_DEG} deg and "
-            f"{CENTER_THRESHOLD_REL:.0%} of COLMAP's own poses"
+        report["verdict"] = f"not checkable: a {PLANT_DEG:g}° error would pass"
+        report["reason"] += f"; but {sensitivity}"
+        report["meaning"] = (
+            f"no verdict on the poses: they are consistent with the images, but at "
+            f"this image size and view count {sensitivity} (< {PLANT_MIN_CAUGHT:.0%}), "
+            "so a pass would not mean they are right"
         )
-        colmap = _colmap_vs_ours(report, reg)
-        if not plant:
-            report["pass"] = True
-            report["verdict"] = "pass"
-            report["meaning"] = f"our poses explain the images in {reg}/{reg} views; {colmap}"
-            return report
-        planted = planted_errors(model, rot_ours, c_ours, j, PLANT_DEG, streaks)
-        report["planted"] = planted
-        axes = ", ".join(f"{a} {c}" for a, c in planted["by_axis"].items())
-        sensitivity = (
-            f"a {PLANT_DEG:g}° error planted in one pose is caught in "
-            f"{planted['caught']}/{planted['tried']} cases ({axes})"
-        )
-        if planted["fraction"] >= PLANT_MIN_CAUGHT:
-            report["pass"] = True
-            report["verdict"] = "pass"
-            report["meaning"] = (
-                f"our poses explain the images as well as COLMAP's own model in {reg}/{reg} "
-                f"registered views, and {sensitivity}{unregistered}; {colmap}"
-            )
-        else:
-            report["verdict"] = f"not checkable: a {PLANT_DEG:g}° error would pass"
-            report["reason"] += f"; but {sensitivity}"
-            report["meaning"] = (
-                f"no verdict on the poses: they are consistent with the images, but at "
-                f"this image size and view count {sensitivity} (< {PLANT_MIN_CAUGHT:.0%}), "
-                "so a pass would not mean they are right"
-            )
-    return report
 
 
 def _colmap_vs_ours(report: dict, reg: int) -> str:
