@@ -159,7 +159,8 @@ def test_the_build_guides_synopsis_names_real_flags_with_the_core_defaults() -> 
     names is a flag of the parser, and a number it shows as the value of an option that
     has one is the core's default."""
     readme = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "build.md").read_text()
-    start = readme.index("```sh\nblurset build --objects")
+    # The generated block (docs/gen/cli.py writes it between these markers).
+    start = readme.index("```sh\nblurset build", readme.index("<!-- synopsis build -->"))
     synopsis = readme[start : readme.index("```", start + 5)]
     flags = {s for a in _build_parser()._actions for s in a.option_strings}
     named = re.findall(r"(--[a-z][a-z-]*)", synopsis)
