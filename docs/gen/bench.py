@@ -209,9 +209,13 @@ def _log_x(ax) -> None:
 
 # Short column headers, so the table fits a page without scrolling sideways; the line
 # under the table says what they mean.
+# Two tables of few columns each: one table of all of them scrolls sideways at 1280 px
+# (the page's content column is about 600 px wide beside the navigation).
 PRESET_COLUMNS = [
     ("psnr_blur_db", "blur dB"),
     ("psnr_sharp_db", "sharp dB"),
+]
+PRESET_QUALITY_COLUMNS = [
     ("render_psnr_blur_db", "blur render dB"),
     ("render_psnr_sharp_db", "sharp render dB"),
     ("detail_ratio_blur", "blur detail"),
@@ -282,6 +286,13 @@ def _presets_table(rows: dict, png: str, res: str, explain: bool = True) -> list
         if len(sizes) > 1:
             cells.append(_fmt(r.get("resolution")))
         out.append("| " + " | ".join(cells) + " |")
+    quality = [c for c in PRESET_QUALITY_COLUMNS if any(c[0] in rows[p] for p in names)]
+    if quality:
+        head = ["preset"] + [t for _, t in quality]
+        out += ["", "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+        for p in names:
+            cells = [f"`{p}`"] + [_fmt(rows[p].get(k), 1 if "db" in k else 2) for k, _ in quality]
+            out.append("| " + " | ".join(cells) + " |")
     size = f" Every preset at {sizes[0]} px." if len(sizes) == 1 else ""
     out += [
         "",
