@@ -215,14 +215,15 @@ def test_a_planted_machine_path_fails(tmp_path, monkeypatch) -> None:
         "/Users/bob/data",
         "/tmp/pytest-of-x/p0/out",
         "/tmp/tmpab12cd/x",
+        "flock /tmp/blurset-blender.lock",
     ):
         assert check.machine_paths(f"see `{bad}` here"), bad
-    # Examples a reader adapts, relative paths and a lock file directly in /tmp are fine.
+    # Examples a reader adapts, relative and home-relative paths are fine.
     for fine in (
         "/path/to/IBRNet",
         "~/IBRNet",
         "ROOT/data/tmp/x",
-        "flock /tmp/blurset-blender.lock",
+        "flock ~/.blurset-blender.lock",
         "/usr/bin/python3",
         "$HOME/work/x",
     ):
