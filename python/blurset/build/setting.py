@@ -114,8 +114,12 @@ def render_setting(
     images = _Images(partial, plan.n_views, cfg, info, frames, progress)
     t_plan = time.time() - t0
     # Cropped EXRs: only the pixels the region traced cross the disk.
-    common = {"resolution": cfg.resolution, "fov_deg": cfg.fov_deg, "crop": True}
-    common["guides"] = images.guides
+    common = {
+        "resolution": cfg.resolution,
+        "fov_deg": cfg.fov_deg,
+        "crop": True,
+        "guides": images.guides,
+    }
     records: dict[tuple[int, str], _records.ImageRender] = {}
     n_rendered = len(frames)
     if cfg.target_psnr is not None:

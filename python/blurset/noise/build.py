@@ -445,6 +445,7 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
     ]
     outputs.refuse_overlap(out, [build])
     outputs.refuse_inside_settings(out)
+    fault = _fault_unit()  # a bad spec is refused before anything is written
     outputs.claim(out, NOISE, "--out")  # refused before the lock creates anything
     with outputs.lock(out, NOISE):
         _prepare_out(out, build, params, cfg.overwrite)
@@ -456,7 +457,6 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
         todo = [u for u in units if u.pending]
         skipped = sum(len(gains) - len(u.pending) for u in units)
         show = not cfg.quiet and sys.stderr.isatty()
-        fault = _fault_unit()
         for n, u in enumerate(todo, 1):
             wb = _core.noise_white_balance(u.seed) if cfg.profile == "paper" else None
             _write_unit(u, gains_sigmas, wb, params, cfg, build, die=n == fault)

@@ -20,6 +20,7 @@ import numpy as np
 from blurset import __version__, _core, layout, outputs
 from blurset.exceptions import ConfigError, InputError
 from blurset.noise.params import (
+    NoiseTable,
     copy_clean,
     every_kth,
     files_record,
@@ -92,7 +93,7 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
         tmp = layout.temp_path(out / STAGE)
         shutil.rmtree(tmp, ignore_errors=True)
         try:
-            gain_dirs = _write_gains(tmp, src, gains, (kpn, levels), cfg)
+            gain_dirs = _write_gains(tmp, src, gains, kpn, levels, cfg)
             # The previous output's own entries make way (nothing else in OUT), then each
             # gain moves in whole; the record comes last.
             outputs.remove_owned(out, NOISE_SCENE)
@@ -194,13 +195,17 @@ def _read_scene(scene: Path, cfg: _core.NoiseConfig) -> _Scene:
 
 
 def _write_gains(
-    tmp: Path, src: _Scene, gains: list[float], table: tuple, cfg: _core.NoiseConfig
+    tmp: Path,
+    src: _Scene,
+    gains: list[float],
+    kpn: Path | None,
+    levels: NoiseTable,
+    cfg: _core.NoiseConfig,
 ) -> list[Path]:
     """Every gain's noisy scene under `tmp` (images, clean copies, poses, noise.json),
-    with the noise levels of `table` (its file, its levels); their folders, in the order
-    of `gains`."""
+    with the noise levels read from `kpn` (None: the built-in table); their folders, in
+    the order of `gains`."""
     gamma = cfg.gamma or "2.2"
-    kpn, levels = table
     sigmas = gain_sigmas(gains, levels)
     wb = _core.noise_white_balance(cfg.seed) if cfg.profile == "paper" else None
     factor = cfg.factor or 1
