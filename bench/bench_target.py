@@ -13,7 +13,8 @@ the reference's own noise, MSE(r₁, r₂) / 4 (independent seeds: the two add).
 Per model: the share of images measuring ≥ T − 0.5 dB, the share whose estimate
 (meta.json's render_psnr_db) is within 1 dB of the measurement, the worst image, the 5th
 percentile and the mean, the coverage, and the samples spent against the least that
-reaches T (the measured MSE at N samples extrapolated as 1 / N); beside it, what one fixed
+reaches T (the measured MSE at N samples extrapolated with the fall measured between the
+image and a probe: the same construction at half its samples); beside it, what one fixed
 count per image kind (sharp, blur_l) that reaches T on every image of every model would
 cost each model. Timings are the build's own, per view, on a machine that may be busy:
 the bench asserts none.
@@ -43,6 +44,7 @@ TARGET = float(os.environ.get("BLURSET_BENCH_TARGET_DB", "45"))
 REF = int(os.environ.get("BLURSET_BENCH_TARGET_REF", "8"))
 SEED = 5
 SALTS = (0x5BD1E995, 0x2545F491)
+PROBE_SALTS = (0x27D4EB2F, 0x165667B1)
 HELD_OUT = ("textured_panel_blender_reexport", "khronos_2CylinderEngine", "khronos_BoxTextured")
 
 
@@ -82,9 +84,40 @@ def config(out: Path, glb: Path, res: int, views: int, **flags):
     )
 
 
-def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
-    """Per (view, level dir): (reference, its own noise MSE on object pixels)."""
+def _halves(w, frames: list, per_frame: int, salts: tuple[int, int], pin: int, cfg, work: Path):
+    """`frames` rendered as two halves of `per_frame` samples a frame, on the seeds `salts`
+    make of the plan's: (their mean, its own noise MSE on object pixels)."""
     from blurset import image
+
+    halves = []
+    for salt in salts:
+        acc = image.Accumulator(RES, RES)
+        half = []
+        for k, f in enumerate(frames):
+            g: dict[str, Any] = {
+                x: f[x] for x in ("c2w", "region", "call", "motion") if f.get(x) is not None
+            }
+            g.update(seed=(f["seed"] ^ salt) & 0x7FFFFFFF, samples=per_frame,
+                     sample_offset=k * per_frame, sample_sequence=pin,
+                     out=str(work / f"ref_{k:04d}.exr"))  # fmt: skip
+            half.append(g)
+
+        def on_frame(_i: int, path: str, origin, acc=acc) -> None:
+            acc.add_exr(path, origin)
+            os.unlink(path)
+
+        w.render(half, resolution=RES, fov_deg=cfg.fov_deg, samples=per_frame,
+                 on_frame=on_frame, crop=True)  # fmt: skip
+        halves.append(acc.mean())
+    r1, r2 = halves
+    return (r1 + r2) / 2.0, image.object_error(r1, r2).mse / 4.0
+
+
+def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
+    """Per (view, level dir): (reference, its own noise MSE on object pixels, probe, the
+    probe's samples). The probe is the image's construction at half its samples (two
+    halves on other seeds): with the image, it measures how fast this image's noise falls
+    with samples, so the least that reaches the target is found from measurements."""
     from blurset.plan import plan_setting, seed_for
     from blurset.worker_client import Worker
 
@@ -102,35 +135,30 @@ def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
         for f in plan.renders(str(work / "r"), cfg.cycles_samples, sharp_views=[]):
             images.setdefault((f["view"], f["level"]), []).append(f)
         # One Cycles sequence length for every render of this worker (Cycles never shrinks
-        # its pattern within a process): the longest half of any reference.
-        pin = max(REF * per_frame[k] // 2 for k in images)
+        # its pattern within a process): the build's, or the longest half of a reference.
+        pin = max(cfg.target_max_samples // 2, *(REF * per_frame[k] // 2 for k in images))
         for key, frames in images.items():
             m = len(frames)
-            s = REF * per_frame[key] // (2 * m)  # per frame and half
-            halves = []
-            for salt in SALTS:
-                acc = image.Accumulator(RES, RES)
-                half = []
-                for k, f in enumerate(frames):
-                    g: dict[str, Any] = {
-                        x: f[x] for x in ("c2w", "region", "call", "motion") if f.get(x) is not None
-                    }
-                    g.update(seed=(f["seed"] ^ salt) & 0x7FFFFFFF, samples=s,
-                             sample_offset=k * s, sample_sequence=pin,
-                             out=str(work / f"ref_{k:04d}.exr"))  # fmt: skip
-                    half.append(g)
-
-                def on_frame(_i: int, path: str, origin, acc=acc) -> None:
-                    acc.add_exr(path, origin)
-                    os.unlink(path)
-
-                w.render(half, resolution=RES, fov_deg=cfg.fov_deg, samples=s,
-                         on_frame=on_frame, crop=True)  # fmt: skip
-                halves.append(acc.mean())
-            r1, r2 = halves
-            noise = image.object_error(r1, r2).mse / 4.0
-            out[key] = ((r1 + r2) / 2.0, noise)
+            ref, noise = _halves(w, frames, REF * per_frame[key] // (2 * m), SALTS, pin, cfg, work)
+            half = per_frame[key] // (4 * m)
+            probe = None
+            if half >= 1:
+                probe = _halves(w, frames, half, PROBE_SALTS, pin, cfg, work)[0], 4 * m * half
+            out[key] = (ref, noise, probe)
     return out
+
+
+def _least(samples: int, frames: int, mse: float, probe_mse: float | None, probe_n: int):
+    """The least samples whose image reaches TARGET, from the image's measured MSE at its
+    samples and (when it could be halved) the probe's at fewer: the noise falls as
+    samples^-α between the two (α held in [1, 2], as the rule holds it); one sample a frame
+    and half is the least any image renders."""
+    alpha = 1.0
+    if probe_mse is not None and probe_n < samples and probe_mse > 0:
+        alpha = math.log(probe_mse / mse) / math.log(samples / probe_n)
+        alpha = min(2.0, max(1.0, alpha))
+    least = samples * (mse / 10 ** (-TARGET / 10)) ** (1.0 / alpha)
+    return max(float(2 * frames), least), alpha
 
 
 def _db(mse: float) -> float:
@@ -158,9 +186,15 @@ def measure_model(glb: Path, work: Path) -> dict:
         for level, rec in sorted(v["images"].items()):
             name = layout.linear_name(layout.image_name(v["index"], len(meta["views"])))
             img = read_exr(setting / level / "linear" / name)
-            ref, ref_noise = refs[(v["index"], level)]
+            ref, ref_noise, probe = refs[(v["index"], level)]
             e = image.object_error(img, ref)
             mse = max(e.mse - ref_noise, 1e-20)
+            frames = 1 if level == "sharp" else v["levels"][level.removeprefix("blur_")]["latents"]
+            probe_mse, probe_n = None, 0
+            if probe is not None:
+                probe_mse = max(image.object_error(probe[0], ref).mse - ref_noise, 1e-20)
+                probe_n = probe[1]
+            least, alpha = _least(rec["samples"], frames, mse, probe_mse, probe_n)
             rows.append(
                 {
                     "view": v["index"],
@@ -170,7 +204,11 @@ def measure_model(glb: Path, work: Path) -> dict:
                     "measured_db": round(_db(mse), 3),
                     "reference_noise_db": round(_db(ref_noise), 2),
                     "coverage": rec["coverage"],
-                    "least_samples": rec["samples"] * mse / target_mse,
+                    "least_samples": round(least, 1),
+                    "least_samples_one_over_n": round(rec["samples"] * mse / target_mse, 1),
+                    "alpha": round(alpha, 3),
+                    "rounds": rec["rounds"],
+                    "frames": frames,
                 }
             )
     return {

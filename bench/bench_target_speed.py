@@ -14,8 +14,16 @@ BLURSET_BENCH_SPEED_RES px, every view rendering its blurry images:
    accuracy, the ratio) and T their median (every image at least as accurate as the
    paper preset's median one). Settings per hour: 3600 / the build's wall time over its
    views, × views / 34 (a setting's 34 views), the worker start and object load included.
+4. `--preset floor` (every image to the 8-bit floor, 58.92 dB) is timed the same way:
+   whatever it costs on the model (on a hard model more than the paper preset).
 The rows say what each image reached (the paper's measured, the targets' estimated:
-worst, 5th percentile, median).
+worst, 5th percentile, median). Every build is also scored against the continuous blur
+(64 stratified frames x 16 samples; the sharp image at 1,024 samples, other seeds), on
+object pixels: PSNR of the blurry and sharp images (mean and worst) and the detail ratio
+(high-frequency energy over the reference's; < 1 smoothed). Where the time goes: each
+build's samples and render calls per view (a target image renders each frame once per
+half and round), and per model a least-squares fit of seconds = a x calls + b x samples
+over its four builds.
 """
 
 from __future__ import annotations
@@ -27,7 +35,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,6 +46,8 @@ HERE = Path(__file__).resolve().parent
 RES = int(os.environ.get("BLURSET_BENCH_SPEED_RES", "128"))
 VIEWS = int(os.environ.get("BLURSET_BENCH_SPEED_VIEWS", "2"))
 SALT = 0x5BD1E995
+CONT_SALT = 0x3C6EF372
+CONTINUOUS = (64, 16)  # stratified frames x samples; the sharp reference: their product
 
 
 def _config(out: Path, glb: Path, **flags):
@@ -60,40 +70,112 @@ def _build(cfg) -> tuple[float, Path, dict]:
     return wall, setting, json.loads((setting / "meta.json").read_text())
 
 
-def _paper_noise(cfg, glb: Path, setting: Path, work: Path) -> dict:
-    """Per (view, level dir): the paper image's render PSNR on object pixels, from a
-    second render of its frames on other seeds."""
+def _plan(cfg, glb: Path, w, work: Path):
+    from blurset.plan import plan_setting, seed_for
+
+    info = w.load(glb, work / "v.npy")
+    verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
+    return plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
+                        bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
+
+
+def _render(w, frames: list, samples: int, cfg) -> np.ndarray:
+    from blurset import image
+
+    acc = image.Accumulator(RES, RES)
+
+    def on_frame(_i: int, path: str, origin) -> None:
+        acc.add_exr(path, origin)
+        os.unlink(path)
+
+    w.render(frames, resolution=RES, fov_deg=cfg.fov_deg, samples=samples,
+             on_frame=on_frame, crop=True)  # fmt: skip
+    return acc.mean()
+
+
+def _continuous(glb: Path, work: Path) -> dict:
+    """Per (view, level dir): the continuous blur of each level and the sharp view at as
+    many samples (premultiplied linear RGBA), on seeds no build uses."""
+    from blurset.worker_client import Worker
+
+    frames_n, samples = CONTINUOUS
+    cfg = _config(work / "unused", glb, latents=frames_n, latent_positions="stratified",
+                  samples=samples, blur_budget="flat")  # fmt: skip
+    refs = {}
+    with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
+        plan = _plan(cfg, glb, w, work)
+        for v in plan.to_dict()["views"]:
+            sharp = [{"c2w": v["c2w"], "seed": (v["sharp_seed"] ^ CONT_SALT) & 0x7FFFFFFF,
+                      "out": str(work / "c.exr")}]  # fmt: skip
+            refs[(v["index"], "sharp")] = _render(w, sharp, frames_n * samples, cfg)
+            for lvl in v["levels"]:
+                frames = plan.level_renders(v["index"], int(lvl), str(work / "c"))
+                for f in frames:
+                    f["seed"] = (f["seed"] ^ CONT_SALT) & 0x7FFFFFFF
+                refs[(v["index"], f"blur_{lvl}")] = _render(w, frames, 1, cfg)
+    return refs
+
+
+def _against_continuous(setting: Path, cont: dict) -> dict:
+    """A build's images against the continuous references, on object pixels."""
     from blurset import image, layout
     from blurset.image import read_exr
-    from blurset.plan import plan_setting, seed_for
+
+    per: dict[str, dict[str, list[float]]] = {"blur": {}, "sharp": {}}
+    for (view, level), ref in cont.items():
+        name = layout.linear_name(layout.image_name(view, VIEWS))
+        img = read_exr(setting / level / "linear" / name)
+        acc = per["sharp" if level == "sharp" else "blur"]
+        acc.setdefault("psnr", []).append(image.object_error(img, ref).psnr)
+        acc.setdefault("detail", []).append(image.image_error(img, ref).detail_ratio)
+    out: dict[str, Any] = {}
+    for kind, xs in per.items():
+        out[f"{kind}_vs_continuous_mean_db"] = round(statistics.fmean(xs["psnr"]), 2)
+        out[f"{kind}_vs_continuous_worst_db"] = round(min(xs["psnr"]), 2)
+        out[f"detail_ratio_{kind}"] = round(statistics.fmean(xs["detail"]), 3)
+        out[f"detail_ratio_{kind}_range"] = [round(min(xs["detail"]), 3),
+                                             round(max(xs["detail"]), 3)]  # fmt: skip
+    return out
+
+
+def _target_work(meta: dict) -> dict:
+    """Samples and render calls per view of a target build: every round renders each of an
+    image's frames once per half."""
+    samples = calls = 0
+    for v in meta["views"]:
+        for level, im in v["images"].items():
+            m = 1 if level == "sharp" else v["levels"][level.removeprefix("blur_")]["latents"]
+            samples += im["samples"]
+            calls += 2 * m * im["rounds"]
+    return {"samples_per_view": samples / VIEWS, "calls_per_view": calls / VIEWS}
+
+
+def _paper_noise(cfg, glb: Path, setting: Path, work: Path) -> tuple[dict, dict]:
+    """Per (view, level dir): the paper image's render PSNR on object pixels, from a
+    second render of its frames on other seeds; and the paper build's samples and render
+    calls per view."""
+    from blurset import image, layout
+    from blurset.image import read_exr
     from blurset.worker_client import Worker
 
     out = {}
+    work_n = {"samples_per_view": 0.0, "calls_per_view": 0.0}
     with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
-        info = w.load(glb, work / "v.npy")
-        verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
-        plan = plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
-                            bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
+        plan = _plan(cfg, glb, w, work)
         images: dict[tuple[int, str], list[_records.Render]] = {}
         for f in plan.renders(str(work / "r"), cfg.cycles_samples, sharp_views=[]):
             images.setdefault((f["view"], f["level"]), []).append(f)
         for (view, level), frames in images.items():
-            acc = image.Accumulator(RES, RES)
             for f in frames:
                 f["seed"] = (f["seed"] ^ SALT) & 0x7FFFFFFF
-
-            def on_frame(_i: int, path: str, origin, acc=acc) -> None:
-                acc.add_exr(path, origin)
-                os.unlink(path)
-
             samples = cfg.effective_sharp_samples if level == "sharp" else cfg.samples
-            w.render(frames, resolution=RES, fov_deg=cfg.fov_deg,
-                     samples=samples, on_frame=on_frame, crop=True)  # fmt: skip
+            work_n["samples_per_view"] += sum(f.get("samples") or samples for f in frames) / VIEWS
+            work_n["calls_per_view"] += len(frames) / VIEWS
             name = layout.linear_name(layout.image_name(view, VIEWS))
             first = read_exr(setting / level / "linear" / name)
-            e = image.object_error(first, acc.mean())
+            e = image.object_error(first, _render(w, frames, samples, cfg))
             out[(view, level)] = 200.0 if e.mse == 0 else float(-10.0 * np.log10(e.mse / 2.0))
-    return out
+    return out, work_n
 
 
 def _spread(xs: list[float]) -> dict:
@@ -104,35 +186,52 @@ def _spread(xs: list[float]) -> dict:
             "median_db": round(statistics.median(xs), 2)}  # fmt: skip
 
 
+def _time_split(builds: list[dict]) -> dict:
+    """seconds per view = a x calls + b x samples, least squares over the model's builds:
+    what a render call costs beside its samples."""
+    x = np.array([[b["calls_per_view"], b["samples_per_view"]] for b in builds], dtype=float)
+    y = np.array([b["build_s"] / VIEWS for b in builds], dtype=float)
+    (a, b), *_ = np.linalg.lstsq(x, y, rcond=None)
+    return {"s_per_call": round(float(a), 4), "s_per_ksample": round(float(b) * 1000, 4)}
+
+
 def measure_model(glb: Path, work: Path) -> dict:
+    per_hour = lambda s: 3600.0 / (s * 34 / VIEWS)  # noqa: E731
+    cont = _continuous(glb, work)
     paper_cfg = _config(work / f"paper_{glb.stem}", glb, preset="paper")
     paper_s, paper_dir, _ = _build(paper_cfg)
-    noise = _paper_noise(paper_cfg, glb, paper_dir, work)
+    noise, paper_work = _paper_noise(paper_cfg, glb, paper_dir, work)
     measured = list(noise.values())
-    per_hour = lambda s: 3600.0 / (s * 34 / VIEWS)  # noqa: E731
+    paper = {"build_s": round(paper_s, 2), **paper_work, **_against_continuous(paper_dir, cont)}
     row = {
         "model": glb.stem,
         "paper_measured": _spread(measured),
         "paper_build_s": round(paper_s, 2),
         "paper_settings_per_hour": round(per_hour(paper_s), 4),
+        "paper": paper,
     }
-    for what, target in (("worst", min(measured)), ("median", statistics.median(measured))):
-        target = round(target, 2)
-        cfg = _config(work / f"target_{what}_{glb.stem}", glb, preset="balanced",
-                      target_psnr=target)  # fmt: skip
-        target_s, _, meta = _build(cfg)
+    builds = [paper]
+    runs = [("worst", {"preset": "balanced", "target_psnr": round(min(measured), 2)}),
+            ("median", {"preset": "balanced",
+                        "target_psnr": round(statistics.median(measured), 2)}),
+            ("floor", {"preset": "floor"})]  # fmt: skip
+    for what, flags in runs:
+        cfg = _config(work / f"target_{what}_{glb.stem}", glb, **flags)
+        target_s, setting, meta = _build(cfg)
         est = [im["render_psnr_db"] for v in meta["views"] for im in v["images"].values()]
-        row[f"at_paper_{what}"] = {
-            "target_db": target,
+        entry = {
+            "target_db": cfg.target_psnr,
             "estimated": _spread(est),
             "build_s": round(target_s, 2),
             "settings_per_hour": round(per_hour(target_s), 4),
             "ratio": round(paper_s / target_s, 3),
-            "samples_per_view": sum(
-                im["samples"] for v in meta["views"] for im in v["images"].values()
-            )
-            / VIEWS,
+            **_target_work(meta),
+            **_against_continuous(setting, cont),
         }
+        entry["sample_ratio"] = round(paper_work["samples_per_view"] / entry["samples_per_view"], 3)
+        row["at_floor" if what == "floor" else f"at_paper_{what}"] = entry
+        builds.append(entry)
+    row["time_split"] = _time_split(builds)
     row["ratio"] = row["at_paper_worst"]["ratio"]
     return row
 
