@@ -62,7 +62,9 @@ def measure(res: int = RESOLUTION) -> dict:
     too). The converged references come from another worker."""
     from blurset.demo import make_demo_objects
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.tradeoff import REFERENCE_SEED_SALT, _render_image, _sharp
+    from blurset.tradeoff.render import REFERENCE_SEED_SALT
+    from blurset.tradeoff.render import render_image as _render_image
+    from blurset.tradeoff.render import sharp_frames as _sharp
     from blurset.worker_client import Worker
 
     out: dict = {"resolution": res, "reference_factor": REF, "rows": {}}
