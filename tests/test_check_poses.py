@@ -185,7 +185,7 @@ def serve_models(monkeypatch, fern_colmap, shift: dict[int, int]) -> None:
                     rec.image(i).name = names[(names.index(name) + k) % len(names)]
             return rec
 
-    monkeypatch.setattr(check_poses, "_Colmap", Stored)
+    monkeypatch.setattr(check_poses.check, "_Colmap", Stored)
 
 
 def test_a_degenerate_first_model_is_mapped_again_and_a_good_run_decides(fern_colmap, monkeypatch):

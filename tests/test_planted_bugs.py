@@ -151,7 +151,7 @@ def test_a_pass_needs_90_percent_of_planted_errors_caught(monkeypatch):
     pytest.importorskip("pycolmap")
     from tests.test_check_poses import BLURRY_BOX, judge_stored_blur
 
-    monkeypatch.setattr(check_poses, "PLANT_DEG", 1.0)
+    monkeypatch.setattr(check_poses.verdict, "PLANT_DEG", 1.0)
     r = judge_stored_blur(BLURRY_BOX)
     planted = r["planted"]
     assert 0 < planted["caught"] < check_poses.PLANT_MIN_CAUGHT * planted["tried"], planted
