@@ -661,8 +661,9 @@ def targets_page(rs: list[dict]) -> list[str]:
         "of images measuring at least T − 0.5 dB, the share whose estimate (meta.json's",
         "`render_psnr_db`) is within 1 dB of the measurement, the worst image, the 5th",
         "percentile and the mean; the mean coverage (the object's share of the frame); the",
-        "samples spent over the least that reaches T (the measured noise extrapolated as",
-        "1 / samples, summed over the images); and what one fixed count per image kind",
+        "samples spent over the least that reaches T (each image's measured noise",
+        "extrapolated along the fall measured between it and a probe, the same image at half",
+        "its samples, summed over the images); and what one fixed count per image kind",
         "(sharp, blur_l) that reaches T on every image of every model would cost, over",
         "what the target spent. The guide [Speed or accuracy](../guide/speed.md) says what",
         "a target promises.",
@@ -726,7 +727,8 @@ def targets_page(rs: list[dict]) -> list[str]:
 
 def speed_lines(rs: list[dict]) -> list[str]:
     """Settings per hour at equal accuracy (bench/bench_target_speed.py): per model, the
-    paper preset against target builds at its worst and median measured image."""
+    paper preset against target builds at its worst and median measured image, and the
+    floor preset; each build's accuracy against the continuous blur; where the time goes."""
     if not rs:
         return []
     out = [
@@ -736,22 +738,69 @@ def speed_lines(rs: list[dict]) -> list[str]:
         "measures the render PSNR of each of its images on the object's pixels (a second",
         "render on other seeds), then builds it with `--preset balanced --target-psnr T` at T",
         "= the paper images' worst (every image at least as accurate as the paper's worst)",
-        "and at their median, side by side in one run. Settings per hour are extrapolated to",
-        "a setting's 34 views from the views built (worker start and object load included).",
+        "and at their median, and with `--preset floor` (every image to the 8-bit floor),",
+        "side by side in one run. Settings per hour are extrapolated to a setting's 34 views",
+        "from the views built (worker start and object load included).",
         "",
         "| result | model | views | paper: worst / median dB | paper settings/h "
-        "| T = worst: settings/h (×) | T = median: settings/h (×) |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| T = worst: settings/h (×) | T = median: settings/h (×) | floor: settings/h (×) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
+    builds = (("paper", "paper"), ("at_paper_worst", "T = worst"),
+              ("at_paper_median", "T = median"), ("at_floor", "floor"))  # fmt: skip
     for r in sorted(rs, key=lambda r: r["name"]):
         p = r.get("paper_measured") or {}
-        w, m = r.get("at_paper_worst") or {}, r.get("at_paper_median") or {}
+        cells = [
+            f"`{r['name']}`",
+            f"`{r.get('model')}`",
+            _fmt(r.get("views_measured")),
+            f"{_fmt(p.get('worst_db'))} / {_fmt(p.get('median_db'))}",
+            _fmt(r.get("paper_settings_per_hour")),
+        ]
+        for key, _ in builds[1:]:
+            b = r.get(key) or {}
+            cells.append(f"{_fmt(b.get('settings_per_hour'))} ({_fmt(b.get('ratio'))}×)")
+        out.append("| " + " | ".join(cells) + " |")
+    out.append("")
+    quality = [r for r in rs if isinstance(r.get("paper"), dict)]
+    if not quality:
+        return out
+    out += [
+        "Each build against the continuous blur (64 stratified frames × 16 samples; the",
+        "sharp image at 1,024 samples), on object pixels: the blurry images' mean and worst",
+        "PSNR, the sharp images' mean, and the detail ratio (high-frequency energy over the",
+        "reference's, blurry / sharp: under 1 is texture smoothed away, over 1 noise on top);",
+        "then the work per view: samples, render calls (a target image renders each frame",
+        "once per half and round) and the paper preset's samples over the build's.",
+        "",
+        "| model | build | blurry mean / worst dB | sharp dB | detail blurry / sharp "
+        "| samples / view | calls / view | paper samples / these |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in sorted(quality, key=lambda r: r["name"]):
+        for key, label in builds:
+            b = r.get(key) or {}
+            out.append(
+                f"| `{r.get('model')}` | {label} | "
+                f"{_fmt(b.get('blur_vs_continuous_mean_db'))} / "
+                f"{_fmt(b.get('blur_vs_continuous_worst_db'))} | "
+                f"{_fmt(b.get('sharp_vs_continuous_mean_db'))} | "
+                f"{_fmt(b.get('detail_ratio_blur'))} / {_fmt(b.get('detail_ratio_sharp'))} | "
+                f"{_fmt(b.get('samples_per_view'))} | {_fmt(b.get('calls_per_view'))} | "
+                f"{_fmt(b.get('sample_ratio', 1.0 if key == 'paper' else None))} |"
+            )
+    out += [
+        "",
+        "Where the time goes: seconds per view fitted, per model, as a × render calls +",
+        "b × samples over its four builds (least squares).",
+        "",
+        "| model | s per render call | s per 1,000 samples |",
+        "| --- | --- | --- |",
+    ]
+    for r in sorted(quality, key=lambda r: r["name"]):
+        t = r.get("time_split") or {}
         out.append(
-            f"| `{r['name']}` | `{r.get('model')}` | {_fmt(r.get('views_measured'))} | "
-            f"{_fmt(p.get('worst_db'))} / {_fmt(p.get('median_db'))} | "
-            f"{_fmt(r.get('paper_settings_per_hour'))} | "
-            f"{_fmt(w.get('settings_per_hour'))} ({_fmt(w.get('ratio'))}×) | "
-            f"{_fmt(m.get('settings_per_hour'))} ({_fmt(m.get('ratio'))}×) |"
+            f"| `{r.get('model')}` | {_fmt(t.get('s_per_call'))} | {_fmt(t.get('s_per_ksample'))} |"
         )
     return [*out, ""]
 
