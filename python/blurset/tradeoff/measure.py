@@ -98,6 +98,23 @@ class _References:
     def detail_of(self, a: Any, b: Any) -> float:
         return float(_core.image_error(a, b, background=self.ref_cfg.background).detail_ratio)
 
+    def scores(
+        self, mean: Any, converged: Any, sharp: tuple[float, float], factor: int
+    ) -> dict[str, Any]:
+        """A row's accuracy columns, in the row's column order: against the reference,
+        against its own converged render (render noise), and its sharp image's; one
+        place, so a denoised row and its undenoised twin are scored alike."""
+        err = _core.image_error(mean, self.ref, background=self.ref_cfg.background)
+        return {
+            "psnr": round(err.psnr, 3),
+            "psnr_linear": round(err.psnr_linear, 3),
+            "render_psnr": round(self.psnr_of(mean, converged), 3),
+            "sharp_render_psnr": round(sharp[0], 3),
+            "detail_ratio": round(self.detail_of(mean, converged), 4),
+            "sharp_detail_ratio": round(sharp[1], 4),
+            "render_reference_factor": factor,
+        }
+
 
 def measure(args: argparse.Namespace, pre: Preset, glb: Path, out: Path) -> dict:
     work = out / ".work"
@@ -208,7 +225,6 @@ def _candidate_row(
     cfg = s.config(c)
     frames, lp = s.plan_level(cfg)
     mean, t = render_image(w, frames, lp, pre.resolution, cfg.fov_deg)
-    err = _core.image_error(mean, refs.ref, background=cfg.background)
     key = (c.method, tuple(f["t"] for f in lp["latent_frames"]))
     if key not in refs.converged:
         frames_ref, lp_ref = s.plan_level(
@@ -239,14 +255,10 @@ def _candidate_row(
         "samples_total": lp["samples_per_frame"] * lp["latents"],
         "budget": c.samples_total,
         "seconds": round(t["seconds"], 3),
-        "psnr": round(err.psnr, 3),
-        "psnr_linear": round(err.psnr_linear, 3),
-        "render_psnr": round(refs.psnr_of(mean, refs.converged[key]), 3),
-        "sharp_render_psnr": round(refs.sharp_at[c.samples_total][0], 3),
         "denoise": "none",
-        "detail_ratio": round(refs.detail_of(mean, refs.converged[key]), 4),
-        "sharp_detail_ratio": round(refs.sharp_at[c.samples_total][1], 4),
-        "render_reference_factor": RENDER_REFERENCE_FACTOR,
+        **refs.scores(
+            mean, refs.converged[key], refs.sharp_at[c.samples_total], RENDER_REFERENCE_FACTOR
+        ),
         "cpu_seconds": round(t["cpu_seconds"], 3),
         "max_gap_px": round(lp["max_gap_px"], 4),
         "pareto": "",
@@ -276,18 +288,13 @@ def _denoised_row(
             refs.psnr_of(sharp, refs.sharp_ref_d),
             refs.detail_of(sharp, refs.sharp_ref_d),
         )
-    err = _core.image_error(dmean, refs.ref)
     return {
         **row,
         "seconds": round(t["seconds"], 3),
-        "psnr": round(err.psnr, 3),
-        "psnr_linear": round(err.psnr_linear, 3),
-        "render_psnr": round(refs.psnr_of(dmean, refs.converged_d[key]), 3),
-        "sharp_render_psnr": round(refs.sharp_d[c.samples_total][0], 3),
         "denoise": "oidn",
-        "detail_ratio": round(refs.detail_of(dmean, refs.converged_d[key]), 4),
-        "sharp_detail_ratio": round(refs.sharp_d[c.samples_total][1], 4),
-        "render_reference_factor": DENOISED_REFERENCE_FACTOR,
+        **refs.scores(
+            dmean, refs.converged_d[key], refs.sharp_d[c.samples_total], DENOISED_REFERENCE_FACTOR
+        ),
         "cpu_seconds": "",
         "label": row["label"] + " +oidn",
     }
