@@ -33,7 +33,7 @@ class ConfigValueError(ValueError):
 def check_downsample(factors: list[int]) -> None:
     """ConfigValueError unless the factors are distinct integers in 2..=64."""
 
-def preset_values(name: str) -> dict[str, Any]:
+def preset_values(name: str) -> dict[str, bool | int | float | str]:
     """What preset `name` sets, option name -> value (ValueError: no such preset)."""
 
 def target_next_round(
