@@ -96,6 +96,31 @@ def test_export_of_another_build_needs_overwrite_and_keeps_the_rest(b, tmp_path)
     assert all(p.name.endswith("__blur_1") for p in (data / "nerf_llff_data").iterdir())
 
 
+def test_a_noise_export_does_not_replace_the_clean_one_by_itself(b, tmp_path):
+    """IBRNet and GNT read one root's data/ only: the blur + noise scenes go to a second
+    root. An export with another --noise (or none) where the clean one is names that
+    root and --overwrite, and changes nothing; the second root takes it."""
+    data, noise = tmp_path / "root" / "data", tmp_path / "n"
+    run_cli("noise", str(b), "--out", str(noise), "--gains", "4", "--levels", "blur_1",
+            "--quiet")  # fmt: skip
+    run_cli("export", str(b), "--out", str(data), "--levels", "blur_1")
+    clean = sorted(p.name for p in (data / "nerf_llff_data").iterdir())
+    line = one_error_line(
+        run_cli("export", str(b), "--noise", str(noise), "--out", str(data), check=False),
+        "without --noise", "'n'", "ROOTN/data", "--rootdir ROOTN", "--overwrite",
+    )  # fmt: skip
+    assert str(data) in line
+    assert sorted(p.name for p in (data / "nerf_llff_data").iterdir()) == clean
+    run_cli("export", str(b), "--noise", str(noise), "--out", str(tmp_path / "rootn" / "data"))
+    noisy = sorted(p.name for p in (tmp_path / "rootn" / "data" / "nerf_llff_data").iterdir())
+    assert noisy == [f"{n}__gain_4" for n in clean]
+    # The reverse too, and --overwrite replaces.
+    rootn = tmp_path / "rootn" / "data"
+    one_error_line(run_cli("export", str(b), "--out", str(rootn), check=False), "'n'")
+    run_cli("export", str(b), "--out", str(rootn), "--levels", "blur_1", "--overwrite")
+    assert sorted(p.name for p in (rootn / "nerf_llff_data").iterdir()) == clean
+
+
 def test_export_out_as_a_dangling_link_is_one_line(b, tmp_path):
     link = tmp_path / "gone"
     link.symlink_to(tmp_path / "nowhere")

@@ -69,8 +69,8 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace an export of another build in --out (a re-export of the same build "
-        "replaces its own scenes without it)",
+        help="replace an export of another build, or of another --noise (or none), in --out "
+        "(a re-export of the same build and --noise replaces its own scenes without it)",
     )
 
 
@@ -359,6 +359,21 @@ def run(args) -> int:
         return _replace(out, doc, sources, how, args.build.resolve(), overwrite=args.overwrite)
 
 
+def _other_noise(was: str | None, now: str | None, out: Path) -> str:
+    """Why an export of the build with another --noise (or none) does not replace the one
+    in OUT by itself: a loader reads one root, so clean and noisy scenes need two."""
+
+    def of(noise: str | None) -> str:
+        return f"the noise output {noise!r}" if noise else "the build without --noise"
+
+    return (
+        f"--out holds the export of {of(was)}; this export of {of(now)} would replace it. "
+        "To keep both, give this one its own root (IBRNet and GNT read only "
+        "<rootdir>/data/nerf_llff_data/: --out ROOTN/data, then --rootdir ROOTN), or "
+        f"--overwrite to replace it: {out}"
+    )
+
+
 def _replace(
     out: Path, doc: dict, sources: dict[str, Path], how: str, build_root: Path, overwrite: bool
 ) -> int:
@@ -380,6 +395,8 @@ def _replace(
                 f"--out holds an export of the build {was_of!r}: give another --out, "
                 f"or --overwrite to replace that export: {out}"
             )
+        if old.get("state") != "replacing" and old.get("noise") != doc["noise"] and not overwrite:
+            raise ConfigError(_other_noise(old.get("noise"), doc["noise"], out))
     owned = set(outputs.owned_entries(out, EXPORT)) if old is not None else set()
     new = [_entry(doc, s) for s in doc["scenes"]] + ["train.txt", "test.txt", EXPORT_FILE]
     for rel in new:
