@@ -15,7 +15,9 @@ only hook is a wrapper around its image reader that records which files it opens
 The report: the scenes the client found, the images and poses it read, their shapes
 and focal length, the held-out views it chooses, and for every degraded scene (a blur
 level or a gain) whether a target or a source it draws is a sharp copy, i.e. the same
-bytes as an image of the setting's sharp level. Expected: for IBRNet, GNT, NAN and
+bytes as an image of the setting's sharp level; and in the gain scenes of a noise export,
+whether an image it draws is noise-free (the bytes of the build's image of that level:
+only the clean held-out views may be). Expected: for IBRNet, GNT, NAN and
 Deblur-NeRF with the export's llffhold, the held-out targets are the sharp views and no
 source is; for GeoNeRF on a `--for geonerf` export no source is ever sharp; for
 nerfstudio no train image is. The exit status is 0 when the expectations hold, 1 when
@@ -70,15 +72,18 @@ def _find_build(export: Path, doc: dict) -> Path | None:
     return None
 
 
+def _level_digests(build: Path, level: str) -> set[str]:
+    """The digests of a level's images (`setting/level` of the build), at every size."""
+    lvl = build / level
+    out = {_digest(p) for d in lvl.glob("images*") for p in d.glob("*.png")}
+    if not out:
+        raise SystemExit(f"check_clients: no images in {lvl}")
+    return out
+
+
 def _sharp_digests(build: Path, settings: set[str]) -> dict[str, set[str]]:
     """Per setting, the digests of its sharp level's images, at every size."""
-    out: dict[str, set[str]] = {}
-    for s in sorted(settings):
-        lvl = build / s / SHARP
-        out[s] = {_digest(p) for d in lvl.glob("images*") for p in d.glob("*.png")}
-        if not out[s]:
-            raise SystemExit(f"check_clients: no sharp images in {lvl}")
-    return out
+    return {s: _level_digests(build, f"{s}/{SHARP}") for s in sorted(settings)}
 
 
 def _scene_of(path: str, root: Path, keys: set[str]) -> str | None:
@@ -121,6 +126,21 @@ def analyse(client: str, export: Path, doc: dict, build: Path, result: dict) -> 
         parts = doc["scenes"][key].split("/")
         return parts[1] != SHARP or len(parts) > 2  # a blur level, or a gain
 
+    # A gain scene (an export with --noise) reads noisy images: one with the bytes of an
+    # image of the build's own level (setting/level) is a noise-free copy.
+    clean: dict[str, set[str]] = {}
+
+    def gain(key: str) -> bool:
+        return len(doc["scenes"][key].split("/")) > 2
+
+    def is_noise_free(path: str, key: str) -> bool:
+        level = "/".join(doc["scenes"][key].split("/")[:2])
+        if level not in clean:
+            clean[level] = _level_digests(build, level)
+        if path not in digests:
+            digests[path] = _digest(Path(path))
+        return digests[path] in clean[level]
+
     lines = [
         f"check_clients: {client} on {export} (export for {doc['for']}, llffhold "
         f"{doc['llffhold']}, {len(doc['scenes'])} scenes: {len(doc['train'])} train, "
@@ -156,6 +176,7 @@ def analyse(client: str, export: Path, doc: dict, build: Path, result: dict) -> 
         n_t = n_s = n_t_deg = n_s_deg = t_sharp = s_sharp = 0
         target_in_sources = 0
         scenes_with_sharp: set[str] = set()
+        n_t_gain = n_s_gain = t_clean = s_clean = 0
         for d in draws:
             key = _scene_of(d["dir"], scenes_root, keys)
             if key is None:
@@ -164,6 +185,11 @@ def analyse(client: str, export: Path, doc: dict, build: Path, result: dict) -> 
             n_s += len(d["sources"])
             if d["target"] in d["sources"]:
                 target_in_sources += 1
+            if gain(key):
+                n_t_gain += 1
+                n_s_gain += len(d["sources"])
+                t_clean += d["target"] is not None and is_noise_free(d["target"], key)
+                s_clean += sum(is_noise_free(s, key) for s in d["sources"])
             if not degraded(key):
                 continue
             n_t_deg += 1
@@ -199,6 +225,21 @@ def analyse(client: str, export: Path, doc: dict, build: Path, result: dict) -> 
                 f"{v.expect(ok, phase['name'] + ' sources')})"
             )
         lines.append(s_line)
+        if n_t_gain:
+            # Held-out targets stay clean (blurset noise keeps the test views clean):
+            # judged by the sharp check above; every other image read is noisy.
+            g_line = (
+                f"  gain scenes: {n_t_gain} targets, {t_clean} of them noise-free; "
+                f"{n_s_gain} sources, {s_clean} of them noise-free"
+            )
+            for what, n, judged in (
+                ("targets", t_clean, exp.get("targets_sharp") is False),
+                ("sources", s_clean, exp.get("sources_sharp") is False),
+            ):
+                if judged:
+                    said = v.expect(n == 0, f"{phase['name']} noise-free {what}")
+                    g_line += f" ({what} expected 0: {said})"
+            lines.append(g_line)
         if target_in_sources:
             lines.append(f"  the target itself is among the sources in {target_in_sources} draws")
         for note in phase.get("notes", []):
@@ -260,6 +301,16 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"check_clients: {a.client} reads an export --for {' or '.join(WANTS[a.client])}, "
             f"this one is --for {doc.get('for')}: {export}",
+            file=sys.stderr,
+        )
+        return 2
+    if a.client in ("ibrnet", "gnt") and export.name != "data":
+        # Their datasets read <rootdir>/data/nerf_llff_data/ and nothing else: an export
+        # beside ROOT/data (ROOT/data_noisy, say) is never read by --rootdir ROOT.
+        print(
+            f"check_clients: {a.client} reads only <rootdir>/data/nerf_llff_data/, so an "
+            f"export in {export.name}/ is never read: export into ROOT/data (blur + noise "
+            f"scenes into a second root, ROOTN/data, read with --rootdir ROOTN): {a.export}",
             file=sys.stderr,
         )
         return 2
@@ -375,11 +426,6 @@ def _ibrnet_like(p: dict, pkg: str, config: str) -> dict:
     llff_utils = __import__(f"{pkg}.data_loaders.llff_data_utils", fromlist=["x"])
     export, doc = Path(p["export"]), p["doc"]
     notes = []
-    if export.name != "data":
-        raise SystemExit(
-            f"{pkg} reads <rootdir>/data/nerf_llff_data/: export to a folder named data, not "
-            f"{export.name}"
-        )
     argv = ["--config", config, "--rootdir", str(export.parent)]
     argv += ["--train_dataset", "llff_test", "--eval_dataset", "llff_test"]
     argv += ["--train_scenes", *doc["train"]] if doc["train"] else []

@@ -118,3 +118,120 @@ def test_json_never_replaces_a_file_it_did_not_write(cc, tmp_path, capsys):
     assert cc.main([*args, "--json", str(own)]) == 2  # past the claim: the export is absent
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "export.json" in line and str(tmp_path / "none") in line, line
+
+
+# -- the IBRNet/GNT noise recipe: blur + noise scenes in a second root ---------------------
+
+# A stand-in of IBRNet's checkout, for CI (which has neither IBRNet nor torch): its
+# reading rules as llff_test.py has them (every folder of <rootdir>/data/nerf_llff_data/
+# a scene, images_4/, i_test = arange(N)[::llffhold], sources from the other views), and
+# torch and imageio as far as check_clients uses them. The real loader's run is on the
+# IBRNet page (docs/training/ibrnet.md).
+FAKE_IBRNET = {
+    "config.py": """
+import argparse
+def config_parser():
+    p = argparse.ArgumentParser()
+    for o in ("--config", "--rootdir", "--train_dataset", "--eval_dataset"):
+        p.add_argument(o)
+    p.add_argument("--train_scenes", nargs="+", default=[])
+    p.add_argument("--eval_scenes", nargs="+", default=[])
+    p.add_argument("--llffhold", type=int, default=8)
+    p.add_argument("--num_source_views", type=int, default=4)
+    return p
+""",
+    "torch.py": "__version__ = 'stand-in'\ndef manual_seed(i): pass\n",
+    "imageio.py": """
+import numpy as np
+from PIL import Image
+__version__ = 'stand-in'
+def imread(path):
+    return np.asarray(Image.open(path))
+""",
+    "ibrnet/__init__.py": "",
+    "ibrnet/data_loaders/__init__.py": "",
+    "ibrnet/data_loaders/llff_data_utils.py": """
+import os
+import numpy as np
+def load_llff_data(basedir, load_imgs=False, factor=4):
+    rows = np.load(os.path.join(basedir, 'poses_bounds.npy'))
+    d = os.path.join(basedir, 'images_{}'.format(factor))
+    files = [os.path.join(d, f) for f in sorted(os.listdir(d))]
+    return None, rows[:, :15].reshape(-1, 3, 5), rows[:, 15:], None, None, files
+def batch_parse_llff_poses(poses):
+    intr = np.zeros((len(poses), 4, 4))
+    intr[:, 0, 0] = poses[:, 2, 4] / 4
+    return intr, poses
+""",
+    "ibrnet/data_loaders/llff_test.py": """
+import os
+import numpy as np
+import imageio
+from .llff_data_utils import load_llff_data
+class LLFFTestDataset:
+    def __init__(self, args, mode, scenes=()):
+        root = os.path.join(args.rootdir, 'data/nerf_llff_data/')
+        self.render_rgb_files, self.sources = [], []
+        for scene in scenes or os.listdir(root):
+            _, _, _, _, _, files = load_llff_data(os.path.join(root, scene), factor=4)
+            test = list(range(len(files)))[::args.llffhold]
+            train = [f for i, f in enumerate(files) if i not in test]
+            render = train if mode == 'train' else [files[i] for i in test]
+            self.render_rgb_files += render
+            self.sources += [[f for f in train if f != r][:args.num_source_views]
+                             for r in render]
+    def __getitem__(self, i):
+        rgb = imageio.imread(self.render_rgb_files[i])
+        src = np.stack([imageio.imread(f) for f in self.sources[i]])
+        return {'rgb': rgb, 'src_rgbs': src}
+""",
+}
+
+
+def test_the_ibrnet_noise_recipe_reads_noisy_scenes_from_a_second_root(
+    cc, tmp_path, standin_blender, capsys
+):
+    """The docs' recipe: the clean export in ROOT/data, the blur + noise export in a
+    second root ROOTN/data, read with --rootdir ROOTN. IBRNet's dataset (here its
+    stand-in) reads the gain scenes only, every image it draws noisy but the clean
+    held-out targets; a noise-free image among them fails the check; an export beside
+    ROOT/data, which --rootdir ROOT never reads, is refused by name."""
+    b, noise = tmp_path / "b", tmp_path / "n"
+    standin_build(b, standin_blender, "--views", "17")
+    run_cli("noise", str(b), "--out", str(noise), "--gains", "4", "--levels", "blur_1",
+            "--quiet")  # fmt: skip
+    run_cli("export", str(b), "--out", str(tmp_path / "root" / "data"), "--levels", "blur_1")
+    rootn = tmp_path / "rootn" / "data"
+    run_cli("export", str(b), "--noise", str(noise), "--out", str(rootn))
+    checkout = tmp_path / "IBRNet"
+    for rel, text in FAKE_IBRNET.items():
+        (checkout / rel).parent.mkdir(parents=True, exist_ok=True)
+        (checkout / rel).write_text(text.lstrip())
+    args = ["--checkout", str(checkout), "--python", sys.executable, "--build", str(b)]
+    read = tmp_path / "read.json"
+    assert cc.main(["ibrnet", str(rootn), *args, "--json", str(read)]) == 0, capsys.readouterr()
+    out = capsys.readouterr().out
+    assert f"rootdir {rootn.parent}" in out and "verdict: ok" in out, out
+    n = len(json.loads((rootn / "export.json").read_text())["scenes"])
+    dirs = {s["dir"] for s in json.loads(read.read_text())["scenes"]}
+    assert len(dirs) == n and all(d.endswith("__blur_1__gain_4") for d in dirs), dirs
+    assert all(Path(d).parent == rootn / "nerf_llff_data" for d in dirs), dirs
+    # Validation (the held-out targets stay clean), then training: every image noisy.
+    val, train = [line for line in out.splitlines() if "gain scenes:" in line]
+    assert "sources, 0 of them noise-free (sources expected 0: ok)" in val, val
+    assert "targets, 0 of them noise-free;" in train and "sources, 0 of them noise-free" in train
+    assert "(targets expected 0: ok) (sources expected 0: ok)" in train, train
+    # A source with the bytes of the build's own (noise-free) image: FAILED.
+    setting = json.loads((b / "splits.json").read_text())["train"][0]
+    noisy = sorted((noise / setting / "blur_1" / "gain_4" / "images_4").glob("*.png"))[1]
+    clean = sorted((b / setting / "blur_1" / "images_4").glob("*.png"))[1]
+    noisy.write_bytes(clean.read_bytes())
+    assert cc.main(["ibrnet", str(rootn), *args]) == 1
+    out = capsys.readouterr().out
+    assert "verdict: FAILED" in out and "noise-free sources" in out, out
+    # The noise beside the clean export (ROOT/data_noisy): IBRNet never reads it.
+    beside = tmp_path / "root" / "data_noisy"
+    run_cli("export", str(b), "--noise", str(noise), "--out", str(beside))
+    assert cc.main(["ibrnet", str(beside), *args]) == 2
+    err = capsys.readouterr().err
+    assert "never read" in err and "ROOTN/data" in err and "--rootdir ROOTN" in err, err
