@@ -126,6 +126,21 @@ def _fmt(x: object, digits: int = 2) -> str:
     return "" if x is None else str(x)
 
 
+def _count(x: object) -> str:
+    """A count recorded as a mean (samples, calls per view): whole, with thousands marked."""
+    return f"{round(x):,}" if isinstance(x, int | float) else ""
+
+
+def _calls_share(t: dict, build: dict) -> float | None:
+    """The fitted share of a build's seconds per view that its render calls cost."""
+    a, b = t.get("s_per_call"), t.get("s_per_ksample")
+    calls, samples = build.get("calls_per_view"), build.get("samples_per_view")
+    if a is None or b is None or calls is None or samples is None:
+        return None
+    call_s, sample_s = float(a) * calls, float(b) * samples / 1000.0
+    return call_s / (call_s + sample_s) if call_s + sample_s > 0 else None
+
+
 # ----------------------------------------------------------------------------- presets
 
 
@@ -786,21 +801,26 @@ def speed_lines(rs: list[dict]) -> list[str]:
                 f"{_fmt(b.get('blur_vs_continuous_worst_db'))} | "
                 f"{_fmt(b.get('sharp_vs_continuous_mean_db'))} | "
                 f"{_fmt(b.get('detail_ratio_blur'))} / {_fmt(b.get('detail_ratio_sharp'))} | "
-                f"{_fmt(b.get('samples_per_view'))} | {_fmt(b.get('calls_per_view'))} | "
+                f"{_count(b.get('samples_per_view'))} | {_count(b.get('calls_per_view'))} | "
                 f"{_fmt(b.get('sample_ratio', 1.0 if key == 'paper' else None))} |"
             )
     out += [
         "",
         "Where the time goes: seconds per view fitted, per model, as a × render calls +",
-        "b × samples over its four builds (least squares).",
+        "b × samples over its four builds (least squares), and the share of a view's",
+        "fitted time its render calls take in the paper build and in the T = worst build",
+        "(a target renders every frame once per half and round).",
         "",
-        "| model | s per render call | s per 1,000 samples |",
-        "| --- | --- | --- |",
+        "| model | s per render call | s per 1,000 samples | calls' share: paper | calls' share: T = worst |",
+        "| --- | --- | --- | --- | --- |",
     ]
     for r in sorted(quality, key=lambda r: r["name"]):
         t = r.get("time_split") or {}
+        shares = [_calls_share(t, r.get(k) or {}) for k in ("paper", "at_paper_worst")]
         out.append(
-            f"| `{r.get('model')}` | {_fmt(t.get('s_per_call'))} | {_fmt(t.get('s_per_ksample'))} |"
+            f"| `{r.get('model')}` | {_fmt(t.get('s_per_call'), 3)} | {_fmt(t.get('s_per_ksample'))} | "
+            + " | ".join("" if x is None else f"{x:.0%}" for x in shares)
+            + " |"
         )
     return [*out, ""]
 
