@@ -549,7 +549,10 @@ def complete_settings(build: str | PathLike[str]) -> list[str]:
     """The complete setting directory names of a build, sorted."""
 
 def publish(partial: str | PathLike[str], final_dir: str | PathLike[str], stamp: str) -> None:
-    """Write the marker (holding `stamp`) into `partial` and rename it to `final_dir`."""
+    """Write the marker (holding `stamp`) into `partial` and put it at `final_dir`."""
+
+def replace_dir(new: str | PathLike[str], dst: str | PathLike[str]) -> None:
+    """Put the folder `new` at `dst`, the old one renamed aside, then removed."""
 
 def temp_path(path: str | PathLike[str]) -> Path:
     """The temp path an atomic write of `path` goes through (`.<name>.tmp<pid>`)."""

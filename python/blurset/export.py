@@ -447,12 +447,10 @@ def _replace(
         # Old scenes (and a scene folder of another target) make way, one rename each.
         for k, rel in enumerate(sorted(owned - set(new))):
             os.replace(out / rel, trash / str(k))
-        for k, scene in enumerate(doc["scenes"]):
+        for scene in doc["scenes"]:
             dst = out / _entry(doc, scene)
             dst.parent.mkdir(parents=True, exist_ok=True)
-            if dst.exists() or dst.is_symlink():
-                os.replace(dst, trash / f"new{k}")
-            os.replace(stage / scene, dst)
+            layout.replace_dir(stage / scene, dst)
         for split in ("train", "test"):
             layout.write_text_atomic(out / f"{split}.txt", "".join(f"{n}\n" for n in doc[split]))
         outputs.write_record(out / EXPORT_FILE, doc)

@@ -147,6 +147,12 @@ def publish(partial: Path, final: Path) -> None:
     _core.publish(partial, final, time.strftime("%Y-%m-%dT%H:%M:%S"))
 
 
+def replace_dir(new: Path, dst: Path) -> None:
+    """Put the folder `new` at `dst`, replacing what is there (the core's one rule: the
+    old entry renamed aside, the new one renamed in, then the old one removed)."""
+    _core.replace_dir(new, dst)
+
+
 def _is_folder_of(name: str, base: str) -> bool:
     """`base` or `base_<f>` (images, images_8, linear_4)."""
     return name == base or (name.startswith(base + "_") and name[len(base) + 1 :].isdigit())

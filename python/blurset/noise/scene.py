@@ -10,7 +10,6 @@ of an earlier noise output, nothing else in OUT, and never a build or a foreign 
 
 from __future__ import annotations
 
-import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -98,7 +97,7 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
             # gain moves in whole; the record comes last.
             outputs.remove_owned(out, NOISE_SCENE)
             for gdir in gain_dirs:
-                os.replace(gdir, out / gdir.name)
+                layout.replace_dir(gdir, out / gdir.name)
             outputs.write_record(
                 out / NOISE_SCENE.record,
                 {

@@ -80,7 +80,7 @@ pub use crate::dataset::schema::{
 pub use crate::dataset::splits::{make_splits, seeded_subset, Holdout, SettingEntry, Splits};
 pub use crate::dataset::stats::{build_stats, BuildStats};
 pub use crate::dataset::verify::{check_images, ImageCheck};
-pub use crate::ground::atomic::write_atomic;
+pub use crate::ground::atomic::{replace_dir, write_atomic};
 pub use crate::ground::license::{
     allowed as license_allowed, canonical as canonical_license, spdx_ids, spdx_of,
 };

@@ -152,10 +152,16 @@ fn complete_settings(py: Python<'_>, build: PathBuf) -> PyResult<Vec<String>> {
     crate::run_detached(py, || core::complete_settings(&build))
 }
 
-/// Write the marker (holding `stamp`) into `partial` and rename it to `final_dir`.
+/// Write the marker (holding `stamp`) into `partial` and put it at `final_dir`.
 #[pyfunction]
 fn publish(py: Python<'_>, partial: PathBuf, final_dir: PathBuf, stamp: &str) -> PyResult<()> {
     crate::run_detached(py, || core::publish(&partial, &final_dir, stamp))
+}
+
+/// Put the folder `new` at `dst`, the old one renamed aside, then removed.
+#[pyfunction]
+fn replace_dir(py: Python<'_>, new: PathBuf, dst: PathBuf) -> PyResult<()> {
+    crate::run_detached(py, || core::replace_dir(&new, &dst))
 }
 
 /// The temp path an atomic write of `path` goes through (`.<name>.tmp<pid>`).
@@ -238,6 +244,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(setting_problems, m)?)?;
     m.add_function(wrap_pyfunction!(png_problem, m)?)?;
     m.add_function(wrap_pyfunction!(publish, m)?)?;
+    m.add_function(wrap_pyfunction!(replace_dir, m)?)?;
     m.add_function(wrap_pyfunction!(temp_path, m)?)?;
     m.add_function(wrap_pyfunction!(parse_temp_name, m)?)?;
     m.add_function(wrap_pyfunction!(write_atomic, m)?)?;

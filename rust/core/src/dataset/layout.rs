@@ -8,7 +8,7 @@
 //!   directory (never a `*.partial` one) holds the marker;
 //! - a build's setting directories are scanned once, here ([`scan`]).
 use crate::error::{Error, Result};
-use crate::ground::atomic::write_atomic;
+use crate::ground::atomic::{replace_dir, write_atomic};
 use crate::ground::names::{files, images_dir};
 use crate::ground::names::{sort_level_dirs, SHARP, WORK_PREFIX};
 use std::path::{Path, PathBuf};
@@ -47,15 +47,11 @@ pub fn is_complete(dir: &Path) -> bool {
     !partial && dir.join(MARKER).is_file()
 }
 
-/// Write the marker (holding `stamp`) into `partial`, then rename it to `final_dir`,
-/// replacing an older one: the last step of a setting or noise unit.
+/// Write the marker (holding `stamp`) into `partial`, then put it at `final_dir`,
+/// replacing an older one ([`replace_dir`]): the last step of a setting or noise unit.
 pub fn publish(partial: &Path, final_dir: &Path, stamp: &str) -> Result<()> {
     write_atomic(&partial.join(MARKER), format!("{stamp}\n").as_bytes())?;
-    if final_dir.exists() {
-        std::fs::remove_dir_all(final_dir)
-            .map_err(|e| Error::io("cannot replace", final_dir, e))?;
-    }
-    std::fs::rename(partial, final_dir).map_err(|e| Error::io("cannot publish", final_dir, e))
+    replace_dir(partial, final_dir)
 }
 
 const PNG_MAGIC: &[u8; 8] = b"\x89PNG\r\n\x1a\n";
