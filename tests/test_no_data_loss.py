@@ -76,6 +76,12 @@ def test_a_killed_noise_runs_temp_tree_is_removed_by_the_next_run(fern_copy, tmp
     mine.write_text("keep me")
     run_cli("noise", str(fern_copy), "--factor", "8", "--gains", "1", "--out", str(out))
     assert not stale.exists() and mine.read_text() == "keep me"
+    # An old gain a killed run had moved aside while replacing it goes with the rerun.
+    aside = out / f".gain_1.tmp{dead.pid}"
+    (aside / "images").mkdir(parents=True)
+    run_cli("noise", str(fern_copy), "--factor", "8", "--gains", "1", "--out", str(out),
+            "--overwrite")  # fmt: skip
+    assert not aside.exists() and mine.read_text() == "keep me"
     assert sorted(p.name for p in out.iterdir()) == [".notes.tmp1", "gain_1", "noise_scene.json"]
 
 

@@ -258,9 +258,14 @@ def test_an_up_to_date_export_removes_what_a_killed_export_left(b, tmp_path):
     stale = data / f".export.old.tmp{dead.pid}"
     (stale / "0").mkdir(parents=True)
     (stale / "0" / "big.png").write_bytes(b"x" * 1000)
+    # The old scene a killed export had moved aside while putting the new one in place.
+    rec = outputs.read_record(data / "export.json")
+    scene = sorted(rec["scenes"])[0]
+    aside = data / rec["scenes_dir"] / f".{scene}.tmp{dead.pid}"
+    (aside / "images").mkdir(parents=True)
     p = run_cli("export", str(b), "--out", str(data), "--for", "nerfstudio")
     assert "up to date" in p.stdout
-    assert not stale.exists()
+    assert not stale.exists() and not aside.exists()
 
 
 # -- a user's file inside a setting a rerun redoes ------------------------------------
@@ -280,6 +285,20 @@ def test_a_rerun_that_redoes_a_damaged_setting_keeps_a_users_files_in_it(b, stan
     assert (s / "notes.txt").read_text() == "my notes"
     assert (s / "sharp" / "README").read_text() == "about this level"
     assert f"kept {s.name}/notes.txt" in proc.stderr
+
+
+def test_a_rerun_removes_the_old_setting_a_killed_publish_left_aside(b, standin_blender):
+    s = a_setting(b)
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    # What a kill inside replace_dir leaves: the new setting in place, the old one aside.
+    aside = b / f".{s.name}.tmp{dead.pid}"
+    shutil.copytree(s, aside)
+    mine = b / f".{s.name}.tmp1"  # a live pid's (init): not a killed run's, kept
+    mine.mkdir()
+    standin_build(b, standin_blender)
+    assert not aside.exists() and mine.is_dir()
+    assert layout.setting_problem(s) is None
 
 
 def test_build_out_a_dangling_link_is_refused_and_its_target_not_made(tmp_path, standin_blender):

@@ -383,6 +383,9 @@ def _replace(
     # A killed export's staged scenes and the old ones it moved aside (GBs with --copy)
     # go first, also when the export is otherwise up to date.
     layout.remove_stale_temps(out, [STAGE, TRASH])
+    # (and an old scene a killed replace_dir had moved aside, beside the new one)
+    for parent in {(out / _entry(doc, s)).parent for s in doc["scenes"]}:
+        layout.remove_stale_temps(parent, list(doc["scenes"]))
     if how == "same":
         old = outputs.read_record(out / EXPORT_FILE)
         if old == doc:

@@ -59,7 +59,9 @@ def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig, prog=None) -> Non
                 f"changed): {out / setting / foreign[0]}"
             )
     # Only blurset's own temp names: a user's `.notes.tmp1` in OUT is not ours to delete.
-    layout.remove_stale_temps(out, list(SHARED_FILES))
+    # A setting's is the old setting a killed publish had moved aside (replace_dir).
+    settings = [p.name for p in layout.complete_settings(out)]
+    layout.remove_stale_temps(out, [*SHARED_FILES, *settings])
     for setting, source, now in superseded:
         shutil.rmtree(out / setting)
         say = prog.write if prog is not None else print

@@ -229,6 +229,9 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
         outputs.write_record(out / DATASET_FILE, {"build": build.resolve().name, "params": params})
     for stale in out.glob("*/*/gain_*.partial"):
         shutil.rmtree(stale, ignore_errors=True)
+    # The old unit a killed publish had moved aside (replace_dir), beside the new one.
+    for level in {g.parent for g in out.glob("*/*/gain_*")}:
+        layout.remove_stale_temps(level, [g.name for g in level.glob("gain_*")])
 
 
 def _noise_json(

@@ -88,7 +88,8 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
         if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not cfg.overwrite:
             raise ConfigError(f"--out is a noise output already (pass --overwrite): {out}")
         # A killed run's staging tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
-        layout.remove_stale_temps(out, [STAGE])
+        # (and an old gain a killed replace_dir had moved aside)
+        layout.remove_stale_temps(out, [STAGE, *(g.name for g in out.glob("gain_*"))])
         tmp = layout.temp_path(out / STAGE)
         shutil.rmtree(tmp, ignore_errors=True)
         try:
