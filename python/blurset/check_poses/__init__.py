@@ -45,6 +45,7 @@ from blurset.check_poses.cli import _summary, _table, add_arguments, is_report, 
 from blurset.check_poses.colmap import COLMAP_DATABASE, _Colmap
 from blurset.check_poses.judge import _judge, planted_errors
 from blurset.check_poses.model import _Model, _streak_residuals, _Tracks
+from blurset.check_poses.report import PoseReport, ViewResult
 from blurset.check_poses.scene import _load_scene, exposure_ends, mean_latent_poses
 from blurset.check_poses.thresholds import (
     CENTER_THRESHOLD_REL,
@@ -77,11 +78,13 @@ __all__ = [
     "PLANT_AXES",
     "PLANT_DEG",
     "PLANT_MIN_CAUGHT",
+    "PoseReport",
     "REPROJ_RATIO",
     "REPROJ_SLACK_PX",
     "RERUN_SEEDS",
     "ROT_THRESHOLD_DEG",
     "STREAK_FORGIVEN",
+    "ViewResult",
     "_Colmap",
     "_Model",
     "_Tracks",

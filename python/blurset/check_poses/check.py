@@ -6,11 +6,13 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import cast
 
 from blurset import layout
 from blurset.check_poses.align import _align
 from blurset.check_poses.colmap import _Colmap
 from blurset.check_poses.model import _Model
+from blurset.check_poses.report import ColmapRun, PoseReport
 from blurset.check_poses.scene import _load_scene, exposure_ends, mean_latent_poses
 from blurset.check_poses.thresholds import (
     CENTER_THRESHOLD_REL,
@@ -23,7 +25,9 @@ from blurset.check_poses.verdict import _beside_written, _finite, _fmt, _report
 from blurset.exceptions import ConfigError, InputError
 
 
-def check_scene(scene_dir: Path, *, factor: int | None = None, workdir: Path | None = None) -> dict:
+def check_scene(
+    scene_dir: Path, *, factor: int | None = None, workdir: Path | None = None
+) -> PoseReport:
     """Run COLMAP on one LLFF scene and compare its poses with `poses_bounds.npy`.
 
     Returns the JSON report: registered, total, median_features, colmap_mean_reproj_px,
@@ -64,12 +68,12 @@ def check_scene(scene_dir: Path, *, factor: int | None = None, workdir: Path | N
         "colmap": round(t1 - t0 + t_map, 3),
         "compare": round(time.perf_counter() - t1 - t_map, 3),
     }
-    return _finite(report)
+    return cast(PoseReport, _finite(report))
 
 
 def _decide(
     session: _Colmap, model: _Model, names: list[str], ours, streaks=None
-) -> tuple[dict, _Model, float]:
+) -> tuple[PoseReport, _Model, float]:
     """The report of `ours` against COLMAP's model, with a second opinion when most views
     contradict it: COLMAP maps again (RERUN_SEEDS, same database). A run that confirms
     every registered view decides (a degenerate first model must not fail good poses);
@@ -89,7 +93,7 @@ def _decide(
             (seed, m, _report(names, session.features, m, *ours, plant=False, streaks=streaks))
         )
     t_map = time.perf_counter() - t0
-    runs = [
+    runs: list[ColmapRun] = [
         {"seed": seed, "registered": r["registered"], "consistent": r.get("consistent")}
         for seed, _, r in models
     ]
@@ -118,7 +122,7 @@ def _decide(
     return report, model, t_map
 
 
-def _contradicted(report: dict, n_models: int, stable: bool, first: str) -> None:
+def _contradicted(report: PoseReport, n_models: int, stable: bool, first: str) -> None:
     """Most views contradict every COLMAP run: the poses are wrong when the runs agree
     with one another (`stable`), else COLMAP's model is degenerate (not checkable)."""
     if stable:
@@ -133,18 +137,20 @@ def _contradicted(report: dict, n_models: int, stable: bool, first: str) -> None
         )
         return
     report.update(
-        verdict="not checkable: degenerate COLMAP model",
-        failed_views=[],
-        reason=f"{first}; COLMAP mapped again with seeds "
-        f"{', '.join(map(str, RERUN_SEEDS))} and the runs disagree with one another and "
-        f"with our poses ({', '.join(_fmt(r['consistent'], 'd') for r in report['colmap_runs'])} of "
-        f"{report['registered']} views consistent)",
-        meaning="no verdict on the poses: COLMAP found no stable model of these images "
-        "(its runs disagree with one another), so a disagreement with it says nothing",
+        {
+            "verdict": "not checkable: degenerate COLMAP model",
+            "failed_views": [],
+            "reason": f"{first}; COLMAP mapped again with seeds "
+            f"{', '.join(map(str, RERUN_SEEDS))} and the runs disagree with one another and "
+            f"with our poses ({', '.join(_fmt(r['consistent'], 'd') for r in report['colmap_runs'])} of "
+            f"{report['registered']} views consistent)",
+            "meaning": "no verdict on the poses: COLMAP found no stable model of these images "
+            "(its runs disagree with one another), so a disagreement with it says nothing",
+        }
     )
 
 
-def _wholesale(report: dict) -> bool:
+def _wholesale(report: PoseReport) -> bool:
     """Most registered views contradict COLMAP's model (of a checkable registration)."""
     reg = report["registered"]
     return (
@@ -183,10 +189,10 @@ def is_setting(path: Path) -> bool:
 
 def check_setting(
     setting_dir: Path, levels: Sequence[str] = ("sharp",), *, factor: int | None = None
-) -> dict[str, dict]:
+) -> dict[str, PoseReport]:
     """`check_scene` on each requested level directory of a build setting."""
     setting_dir = Path(setting_dir)
-    out = {}
+    out: dict[str, PoseReport] = {}
     for level in levels:
         _check_level_name(level)
         scene = setting_dir / level

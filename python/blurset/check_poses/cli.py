@@ -10,6 +10,7 @@ from blurset import layout, outputs
 from blurset.check_poses import colmap
 from blurset.check_poses.check import _check_level_name, check_scene, is_setting
 from blurset.check_poses.colmap import _refuse_used_workdir
+from blurset.check_poses.report import PoseReport
 from blurset.check_poses.thresholds import (
     MIN_REGISTERED_FRACTION,
 )
@@ -50,9 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
 
 
-def _summary(label: str, r: dict) -> str:
+def _summary(label: str, r: PoseReport) -> str:
     """The verdict and what it means on the first line, then the numbers and the reason."""
-    secs = sum(r["seconds"].values())
+    secs = r["seconds"]["colmap"] + r["seconds"]["compare"]
     against = " (vs mean latent pose)" if r.get("pose_reference") == "mean_latent" else ""
     return (
         f"{label}: {r['verdict']} — {r.get('meaning', '')}\n"
@@ -83,25 +84,30 @@ TABLE_COLUMNS = [
 ]
 
 
-def _table(reports: dict[str, dict]) -> str:
+def _table(reports: dict[str, PoseReport]) -> str:
     """What blur changes in SfM first (registered views, SIFT features per image, COLMAP's
     own reprojection error, each against sharp), then the pose errors: against the mean
     latent pose (which decides a blur level), against the written pose, and the offset
     from the one to the other."""
     head = " ".join(format(name, spec) for name, spec in TABLE_COLUMNS) + "  verdict"
     rows = [head, "-" * len(head)]
-    sharp = reports.get(layout.SHARP, {})
+    sharp = reports.get(layout.SHARP)
     for level, r in reports.items():
-        written = r.get("written_pose", {}).get("median_rot_err_deg", r["median_rot_err_deg"])
+        wp = r.get("written_pose")
+        written = r["median_rot_err_deg"] if wp is None else wp["median_rot_err_deg"]
         feats, reproj = r["median_features"], r.get("colmap_mean_reproj_px")
         enough = r["registered"] >= MIN_REGISTERED_FRACTION * r["total"]
         cells = [
             level,
             f"{r['registered']}/{r['total']}",
-            f"{feats}{_change(level, feats, sharp.get('median_features'), False)}",
+            f"{feats}{_change(level, feats, sharp and sharp['median_features'], False)}",
             _fmt(reproj, ".2f")
             # A model of a few registered views has a small error of its own: no ratio.
-            + (_change(level, reproj, sharp.get("colmap_mean_reproj_px"), True) if enough else ""),
+            + (
+                _change(level, reproj, sharp and sharp["colmap_mean_reproj_px"], True)
+                if enough
+                else ""
+            ),
             _fmt(r["median_rot_err_deg"], ".3f"),
             _fmt(written, ".3f"),
             _fmt(r.get("median_written_to_mean_deg"), ".3f"),
@@ -160,7 +166,8 @@ def run(args: argparse.Namespace) -> int:
             # Every level's folder before the first COLMAP run: nothing half done.
             for level in levels:
                 _refuse_used_workdir(workdir / level)
-        reports = {}
+        data: PoseReport | dict[str, PoseReport]
+        reports: dict[str, PoseReport] = {}
         for level in levels:
             scene = path / level
             if not scene.is_dir():

@@ -8,6 +8,7 @@ import numpy as np
 
 from blurset.check_poses.align import _align
 from blurset.check_poses.model import _Model
+from blurset.check_poses.report import Planted, PlantedMiss
 from blurset.check_poses.thresholds import (
     CENTER_THRESHOLD_REL,
     PLANT_AXES,
@@ -74,14 +75,14 @@ def _axis_rotation(deg: float, axis: int) -> np.ndarray:
 
 def planted_errors(
     model: _Model, rot_ours, c_ours, base: dict, deg: float = 5.0, streaks=None
-) -> dict:
+) -> Planted:
     """Whether the check catches a `deg` rotation error in one pose: each registered view
     in turn is turned by `deg` about its camera's x (tilt), y (pan) and z (roll: the
     optical axis) axes and judged against the same COLMAP model (which sees only the
     images, so it is the model a wrong pose would meet). Caught: that view is no longer
     consistent with the images. `base` is the judgement of the unchanged poses."""
     caught: dict[str, list[Any]] = {axis: [] for axis in PLANT_AXES}
-    missed = []
+    missed: list[PlantedMiss] = []
     for k, i in enumerate(model.reg_idx):
         for a, axis in enumerate(PLANT_AXES):
             turn = _axis_rotation(deg, a)

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from blurset.check_poses.align import _angle_deg
 from blurset.check_poses.judge import _judge, planted_errors
 from blurset.check_poses.model import _Model
+from blurset.check_poses.report import PoseReport, Thresholds, ViewResult, WrittenPose
 from blurset.check_poses.thresholds import (
     CENTER_THRESHOLD_REL,
     EXIT_FAIL,
@@ -26,7 +25,7 @@ from blurset.check_poses.thresholds import (
 )
 
 
-def _thresholds() -> dict:
+def _thresholds() -> Thresholds:
     return {
         "reproj_ratio": REPROJ_RATIO,
         "reproj_slack_px": REPROJ_SLACK_PX,
@@ -57,7 +56,7 @@ def _thresholds() -> dict:
 
 def _report(
     names, features, model: _Model, rot_ours, c_ours, *, plant: bool = True, streaks=None
-) -> dict:
+) -> PoseReport:
     """The verdict on our poses from COLMAP's model of the same images: not checkable
     (too few views registered, or a planted error would pass), fail (a view contradicts
     the images), or pass."""
@@ -107,13 +106,13 @@ def _report(
     return report
 
 
-def _empty_report(names, features, model: _Model) -> tuple[dict[str, Any], list[dict]]:
+def _empty_report(names, features, model: _Model) -> tuple[PoseReport, list[ViewResult]]:
     """The report before any pose is judged (not checkable, nothing measured) and its
     per-view entries."""
     n = len(names)
     feats = np.array([features.get(nm, 0) for nm in names])
     median_feats = int(np.median(feats))
-    views = [
+    views: list[ViewResult] = [
         {
             "index": i,
             "name": nm,
@@ -125,7 +124,7 @@ def _empty_report(names, features, model: _Model) -> tuple[dict[str, Any], list[
         }
         for i, nm in enumerate(names)
     ]
-    report: dict[str, Any] = {
+    report: PoseReport = {
         "registered": len(model.reg_idx),
         "total": n,
         "registered_fraction": len(model.reg_idx) / n,
@@ -146,36 +145,45 @@ def _empty_report(names, features, model: _Model) -> tuple[dict[str, Any], list[
     return report, views
 
 
-def _measure(report: dict, views: list[dict], reg_idx, j: dict) -> list[int]:
+def _measure(report: PoseReport, views: list[ViewResult], reg_idx, j: dict) -> list[int]:
     """Each registered view's errors and the medians into the report; the views that
     contradict the images, worst first."""
     rot_err, cen_err, px_ours, px_colmap = j["rot_err"], j["cen_err"], j["px_ours"], j["px_colmap"]
     for k, i in enumerate(reg_idx):
         views[i].update(
-            rot_err_deg=float(rot_err[k]),
-            center_err_rel=float(cen_err[k]),
-            reproj_px=float(px_ours[k]),
-            colmap_reproj_px=float(px_colmap[k]),
-            agrees_with_colmap=bool(j["agrees"][k]),
-            ok=bool(j["ok"][k]),
+            {
+                "rot_err_deg": float(rot_err[k]),
+                "center_err_rel": float(cen_err[k]),
+                "reproj_px": float(px_ours[k]),
+                "colmap_reproj_px": float(px_colmap[k]),
+                "agrees_with_colmap": bool(j["agrees"][k]),
+                "ok": bool(j["ok"][k]),
+            }
         )
     failed = [i for i in reg_idx if not views[i]["ok"]]
     report.update(
-        median_rot_err_deg=float(np.median(rot_err)),
-        median_center_err_rel=float(np.median(cen_err)),
-        median_reproj_px=float(np.nanmedian(px_ours)),
-        median_colmap_reproj_px=float(np.nanmedian(px_colmap)),
-        agree_with_colmap=int(j["agrees"].sum()),
-        consistent=len(reg_idx) - len(failed),
-        scene_distance=j["scale"],
+        {
+            "median_rot_err_deg": float(np.median(rot_err)),
+            "median_center_err_rel": float(np.median(cen_err)),
+            "median_reproj_px": float(np.nanmedian(px_ours)),
+            "median_colmap_reproj_px": float(np.nanmedian(px_colmap)),
+            "agree_with_colmap": int(j["agrees"].sum()),
+            "consistent": len(reg_idx) - len(failed),
+            "scene_distance": j["scale"],
+        }
     )
-    failed.sort(key=lambda i: -np.nan_to_num(views[i]["reproj_px"], nan=np.inf))
+    failed.sort(key=lambda i: -_worst_first(views[i].get("reproj_px")))
     report["failed_views"] = [views[i]["name"] for i in failed]
     return failed
 
 
+def _worst_first(px: float | None) -> float:
+    """A view's reprojection error to sort by: one that could not be measured is worst."""
+    return np.inf if px is None or np.isnan(px) else px
+
+
 def _judge_consistent(
-    report: dict, model: _Model, rot_ours, c_ours, j: dict, streaks, *, plant: bool
+    report: PoseReport, model: _Model, rot_ours, c_ours, j: dict, streaks, *, plant: bool
 ) -> None:
     """Every registered view is consistent with the images: a pass if a planted error
     of PLANT_DEG would be caught (the check is sensitive here), else not checkable."""
@@ -218,7 +226,7 @@ def _judge_consistent(
         )
 
 
-def _colmap_vs_ours(report: dict, reg: int) -> str:
+def _colmap_vs_ours(report: PoseReport, reg: int) -> str:
     """How COLMAP's own poses compare with ours, in words."""
     agree = report["agree_with_colmap"]
     if 2 * agree > reg:
@@ -230,7 +238,7 @@ def _colmap_vs_ours(report: dict, reg: int) -> str:
     )
 
 
-def _beside_written(report: dict, written: dict, ours, mean) -> dict:
+def _beside_written(report: PoseReport, written: PoseReport, ours, mean) -> PoseReport:
     """The mean-pose report (it decides), with the written pose's errors and the offset
     from the written pose to the mean latent pose beside it, per view and as medians."""
     (rot_w, c_w), (rot_m, c_m) = ours, mean
@@ -242,18 +250,26 @@ def _beside_written(report: dict, written: dict, ours, mean) -> dict:
         report["views"], written["views"], offset_deg, offset_rel, strict=True
     ):
         v.update(
-            written_rot_err_deg=w["rot_err_deg"],
-            written_center_err_rel=w["center_err_rel"],
-            written_ok=w["ok"],
-            written_to_mean_deg=float(deg),
-            written_to_mean_rel=float(rel),
+            {
+                "written_rot_err_deg": w["rot_err_deg"],
+                "written_center_err_rel": w["center_err_rel"],
+                "written_ok": w["ok"],
+                "written_to_mean_deg": float(deg),
+                "written_to_mean_rel": float(rel),
+            }
         )
-    keep = (
-        "verdict pass median_rot_err_deg median_center_err_rel median_reproj_px "
-        "agree_with_colmap failed_views reason"
-    ).split()
-    report["written_pose"] = {k: written.get(k) for k in keep}
-    report["written_pose"]["ok_views"] = sum(bool(v["ok"]) for v in written["views"])
+    written_pose: WrittenPose = {
+        "verdict": written["verdict"],
+        "pass": written["pass"],
+        "median_rot_err_deg": written["median_rot_err_deg"],
+        "median_center_err_rel": written["median_center_err_rel"],
+        "median_reproj_px": written.get("median_reproj_px"),
+        "agree_with_colmap": written.get("agree_with_colmap"),
+        "failed_views": written["failed_views"],
+        "reason": written["reason"],
+        "ok_views": sum(bool(v["ok"]) for v in written["views"]),
+    }
+    report["written_pose"] = written_pose
     report["pose_reference"] = "mean_latent"
     report["median_written_to_mean_deg"] = float(np.median(offset_deg))
     report["median_written_to_mean_rel"] = float(np.median(offset_rel))
@@ -261,7 +277,7 @@ def _beside_written(report: dict, written: dict, ours, mean) -> dict:
         report["reason"] += (
             f" (against the mean latent poses; the written poses are "
             f"{_fmt(written.get('median_rot_err_deg'), '.2f')} deg off, "
-            f"{report['written_pose']['ok_views']}/{written['registered']} consistent; "
+            f"{written_pose['ok_views']}/{written['registered']} consistent; "
             f"written-to-mean offset median {report['median_written_to_mean_deg']:.2f} deg)"
         )
     return report
@@ -278,7 +294,7 @@ def _finite(x):
     return x
 
 
-def exit_code(report: dict) -> int:
+def exit_code(report: PoseReport) -> int:
     """0 pass, 1 fail (poses disagree), 3 not checkable."""
     if report["pass"]:
         return EXIT_PASS
