@@ -112,10 +112,9 @@ def files_record(
 
 
 def every_kth(n_views: int, k: int | None) -> list[int]:
-    """Views 0, K, 2K … (`--clean-views K`); none when K is None."""
-    if k is None:
-        return []
-    return list(range(0, n_views, k))
+    """Views 0, K, 2K … (`--clean-views K`): the core's held-out view rule; none when K
+    is None."""
+    return [] if k is None else _core.test_views(n_views, k)
 
 
 def copy_clean(
