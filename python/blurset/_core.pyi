@@ -701,7 +701,7 @@ def read_image(path: str | PathLike[str]) -> npt.NDArray[np.uint8] | npt.NDArray
     """Decode PNG (8/16-bit) or JPEG to (H, W, C), C in 1..4, in the file's own depth."""
 
 def noise_image(
-    image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16],
+    image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16] | npt.NDArray[np.float32],
     *,
     sigma_read: float,
     sigma_shot: float,
@@ -714,7 +714,8 @@ def noise_image(
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8] | npt.NDArray[np.uint16]]:
     """One noisy frame: (linear float32 (H, W, 3|4), processed image of the input's
     dtype and shape, alpha copied). Bit-identical to what `blurset noise` writes for
-    view `view`, frame `frame` with key `noise_key(seed, gain)`."""
+    view `view`, frame `frame` with key `noise_key(seed, gain)`. A float32 (H, W, 3)
+    image is composited linear light (a build's EXR), processed to uint8."""
 
 def noise_clean_linear(
     image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16],
@@ -734,13 +735,15 @@ def noise_write_variants(
     gamma: str = "2.2",
     white_balance: tuple[float, float] | None = None,
     white_level: float = 1.0,
+    background: tuple[float, float, float] | None = None,
     downsample: list[int] = ...,
     clean_views: list[int] = ...,
 ) -> None:
     """Write images/<name>.png and linear/<name>.exr of every (out_dir, sigma_read,
     sigma_shot, key) variant; `names` holds len(sources) * frames stems, view-major;
     images_<f>/ and linear_<f>/ for each `downsample` factor (noise drawn at that size);
-    the views in `clean_views` stay clean (sigma 0)."""
+    the views in `clean_views` stay clean (sigma 0). With a `background` the sources
+    are a build's linear EXRs, composited over it."""
 
 # --- noise on a build, from linear light (rust/py/src/noise_linear.rs) ---------------
 
@@ -760,36 +763,6 @@ def noise_clean_from_linear(
     white_level: float = 1.0,
 ) -> npt.NDArray[np.float32]:
     """The clean values y = white_level * clip(L, 0, 1) / wb of the linear path."""
-
-def noise_image_linear(
-    image: npt.NDArray[np.float32],
-    *,
-    sigma_read: float,
-    sigma_shot: float,
-    key: int,
-    view: int = 0,
-    frame: int = 0,
-    gamma: str = "2.2",
-    white_balance: tuple[float, float] | None = None,
-    white_level: float = 1.0,
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
-    """One noisy frame from composited linear RGB (H, W, 3): (linear float32, processed
-    uint8), with the same standard normals as `noise_image` for the same key/view/frame."""
-
-def noise_write_variants_linear(
-    sources: list[str | PathLike[str]],
-    names: list[str],
-    variants: list[tuple[str | PathLike[str], float, float, int]],
-    *,
-    frames: int = 1,
-    gamma: str = "2.2",
-    white_balance: tuple[float, float] | None = None,
-    white_level: float = 1.0,
-    background: tuple[float, float, float] = ...,
-    downsample: list[int] = ...,
-    clean_views: list[int] = ...,
-) -> None:
-    """`noise_write_variants` from a build's linear EXRs (composited over `background`)."""
 
 def thumbnail_qa(
     image: npt.NDArray[np.uint8], *, background: tuple[float, float, float] = ...

@@ -318,17 +318,16 @@ def _write_unit(
             "downsample": params["downsample"],
             "clean_views": unit.clean_views,
         }
-        if params["source"] == "linear":
-            interruptible(
-                _core.noise_write_variants_linear,
-                unit.sources,
-                unit.names,
-                variants,
-                background=unit.background,
-                **common,
-            )
-        else:
-            interruptible(_core.noise_write_variants, unit.sources, unit.names, variants, **common)
+        # The linear EXRs are composited over the build's background, as its PNGs were.
+        background = unit.background if params["source"] == "linear" else None
+        interruptible(
+            _core.noise_write_variants,
+            unit.sources,
+            unit.names,
+            variants,
+            background=background,
+            **common,
+        )
         if die:
             os.kill(os.getpid(), signal.SIGKILL)
         # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the

@@ -1,9 +1,12 @@
 //! Bindings of the core's noise kernel and image files: conversion and
 //! one core call each.
 use crate::run_detached;
-use blurset_core::{self as core, Gamma, Image, NoiseLevels, NoiseModel, Samples, WhiteBalance};
+use blurset_core::{
+    self as core, Gamma, Image, LinearRgb, NoiseLevels, NoiseModel, Samples, WhiteBalance,
+};
 use numpy::{
-    PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+    PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray3, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -93,7 +96,8 @@ fn image_from_py(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
         )
     } else {
         return Err(PyTypeError::new_err(
-            "image must be a numpy array of dtype uint8 or uint16",
+            "image must be a numpy array of dtype uint8 or uint16 (codes), or float32 of \
+             shape (H, W, 3) (linear light)",
         ));
     };
     Image::new(w, h, c, samples).map_err(value_err)
@@ -105,6 +109,66 @@ fn image_to_py(py: Python<'_>, img: Image) -> PyResult<Py<PyAny>> {
         Samples::U8(v) => PyArray1::from_vec(py, v).reshape(shape)?.into_py_any(py),
         Samples::U16(v) => PyArray1::from_vec(py, v).reshape(shape)?.into_py_any(py),
     }
+}
+
+pub(crate) fn background_rgb(bg: (f64, f64, f64)) -> PyResult<[f64; 3]> {
+    let b = [bg.0, bg.1, bg.2];
+    if b.iter().any(|v| !v.is_finite()) {
+        return Err(PyValueError::new_err(format!(
+            "background must be finite linear RGB, got {bg:?}"
+        )));
+    }
+    Ok(b)
+}
+
+/// A float32 (H, W, 3) array as a core linear image (copied).
+pub(crate) fn linear_from_py(image: PyReadonlyArray3<'_, f32>) -> PyResult<LinearRgb> {
+    let shape = image.shape();
+    if shape[2] != 3 {
+        return Err(PyValueError::new_err(format!(
+            "linear image must have shape (H, W, 3), got {shape:?}"
+        )));
+    }
+    let data = match image.as_slice() {
+        Ok(s) => s.to_vec(),
+        Err(_) => image.as_array().iter().copied().collect(),
+    };
+    LinearRgb::new(shape[1] as u32, shape[0] as u32, data).map_err(value_err)
+}
+
+pub(crate) fn rgb_to_py(
+    py: Python<'_>,
+    width: u32,
+    height: u32,
+    v: Vec<f32>,
+) -> PyResult<Py<PyAny>> {
+    PyArray1::from_vec(py, v)
+        .reshape([height as usize, width as usize, 3])?
+        .into_py_any(py)
+}
+
+/// One noisy frame from a linear float32 (H, W, 3) image (`noise_image` on linear light):
+/// (linear float32 (H, W, 3), processed uint8 (H, W, 3)).
+pub(crate) fn noise_frame_linear(
+    py: Python<'_>,
+    image: PyReadonlyArray3<'_, f32>,
+    m: &core::NoiseModel,
+    key: u64,
+    stream: u64,
+) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
+    let img = linear_from_py(image)?;
+    let noisy = run_detached(py, || core::add_noise_linear(&img, m, key, stream))?;
+    let Samples::U8(codes) = noisy.processed.samples else {
+        return Err(PyValueError::new_err("processed image is not 8-bit"));
+    };
+    let (w, h) = (img.width as usize, img.height as usize);
+    let processed = PyArray1::from_vec(py, codes)
+        .reshape([h, w, 3])?
+        .into_py_any(py)?;
+    Ok((
+        rgb_to_py(py, img.width, img.height, noisy.linear)?,
+        processed,
+    ))
 }
 
 /// (log10 σ_read(1), read step, log10 σ_shot(1), shot step) of blurset's default table.
@@ -165,7 +229,8 @@ fn read_image(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyAny>> {
 }
 
 /// One noisy frame of one view: (linear float32 (H, W, 3|4), processed array of the
-/// input's dtype and shape with alpha copied).
+/// input's dtype and shape with alpha copied). A float32 (H, W, 3) image is composited
+/// linear light (a build's EXR): the same draws, processed to uint8.
 #[pyfunction]
 #[pyo3(signature = (image, *, sigma_read, sigma_shot, key, view=0, frame=0, gamma="2.2", white_balance=None, white_level=1.0))]
 #[allow(clippy::too_many_arguments)]
@@ -181,9 +246,12 @@ fn noise_image(
     white_balance: Option<(f64, f64)>,
     white_level: f64,
 ) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
-    let img = image_from_py(image)?;
     let m = model(sigma_read, sigma_shot, gamma, white_balance, white_level)?;
     let stream = core::noise_stream_id(view, frame);
+    if let Ok(linear) = image.extract::<PyReadonlyArray3<'_, f32>>() {
+        return noise_frame_linear(py, linear, &m, key, stream);
+    }
+    let img = image_from_py(image)?;
     let noisy = run_detached(py, || core::add_noise(&img, &m, key, stream))?;
     let (h, w) = (img.height as usize, img.width as usize);
     let linear = PyArray1::from_vec(py, noisy.linear)
@@ -217,8 +285,9 @@ fn noise_clean_linear(
 /// Write every variant of a scene: `variants` holds (out_dir, sigma_read, sigma_shot,
 /// key) per gain; `names` the `len(sources) * frames` output stems, view-major;
 /// `downsample` the factors of `images_<f>/` copies; `clean_views` the views left clean.
+/// With a `background` the sources are a build's linear EXRs, composited over it.
 #[pyfunction]
-#[pyo3(signature = (sources, names, variants, *, frames=1, gamma="2.2", white_balance=None, white_level=1.0, downsample=Vec::new(), clean_views=Vec::new()))]
+#[pyo3(signature = (sources, names, variants, *, frames=1, gamma="2.2", white_balance=None, white_level=1.0, background=None, downsample=Vec::new(), clean_views=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 fn noise_write_variants(
     py: Python<'_>,
@@ -229,16 +298,19 @@ fn noise_write_variants(
     gamma: &str,
     white_balance: Option<(f64, f64)>,
     white_level: f64,
+    background: Option<(f64, f64, f64)>,
     downsample: Vec<u32>,
     clean_views: Vec<usize>,
 ) -> PyResult<()> {
+    let bg = background.map(background_rgb).transpose()?;
     let variants = variants_from_py(variants, gamma, white_balance, white_level)?;
     let opts = core::VariantOptions {
         downsample,
         clean_views: clean_views.into_iter().collect(),
     };
-    run_detached(py, || {
-        core::write_variants(&sources, &names, frames, &variants, &opts)
+    run_detached(py, || match bg {
+        Some(bg) => core::write_variants_linear(&sources, &names, frames, &variants, bg, &opts),
+        None => core::write_variants(&sources, &names, frames, &variants, &opts),
     })
 }
 
