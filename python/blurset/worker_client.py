@@ -155,6 +155,12 @@ class Worker:
         self._lines: queue.Queue[bytes | None] = queue.Queue()
         self._start()
 
+    @classmethod
+    def in_folder(cls, work: Path, **kw: Any) -> Worker:
+        """A worker that keeps its log (worker.log) and scratch files in `work`: what a
+        build's object and a tradeoff run leave for the user to read when it fails."""
+        return cls(log_path=work / "worker.log", workdir=work / "scratch", **kw)
+
     # -- process management ---------------------------------------------------------
 
     def _start(self) -> None:

@@ -243,12 +243,11 @@ class ObjectUnit:
         shutil.rmtree(work, ignore_errors=True)
         work.mkdir(parents=True)
         t0 = time.monotonic()
-        with Worker(
+        with Worker.in_folder(
+            work,
             blender=cfg.blender,
             threads=cfg.threads,
             timeout=cfg.timeout,
-            log_path=work / "worker.log",
-            workdir=work / "scratch",
             deadline=deadline,
             device=self.device[0],
             gpus=self.device[1],

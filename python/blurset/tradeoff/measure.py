@@ -126,12 +126,8 @@ def measure(args: argparse.Namespace, pre: Preset, glb: Path, out: Path) -> dict
     cands = candidates(pre)
     rows: list[dict[str, Any]] = []
     t_start = time.time()
-    with Worker(
-        blender=args.blender,
-        threads=args.threads,
-        timeout=args.timeout,
-        log_path=work / "worker.log",
-        workdir=work / "scratch",
+    with Worker.in_folder(
+        work, blender=args.blender, threads=args.threads, timeout=args.timeout
     ) as w:
         info = w.load(glb, work / "vertices.npy")
         verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)

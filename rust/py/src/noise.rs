@@ -121,19 +121,28 @@ pub(crate) fn background_rgb(bg: (f64, f64, f64)) -> PyResult<[f64; 3]> {
     Ok(b)
 }
 
-/// A float32 (H, W, 3) array as a core linear image (copied).
-pub(crate) fn linear_from_py(image: PyReadonlyArray3<'_, f32>) -> PyResult<LinearRgb> {
+/// (width, height, pixels) of an (H, W, 3) array (copied); `what` names it in the error.
+pub(crate) fn rgb_from_py<T: numpy::Element + Copy>(
+    image: &PyReadonlyArray3<'_, T>,
+    what: &str,
+) -> PyResult<(u32, u32, Vec<T>)> {
     let shape = image.shape();
     if shape[2] != 3 {
         return Err(PyValueError::new_err(format!(
-            "linear image must have shape (H, W, 3), got {shape:?}"
+            "{what} must have shape (H, W, 3), got {shape:?}"
         )));
     }
     let data = match image.as_slice() {
         Ok(s) => s.to_vec(),
         Err(_) => image.as_array().iter().copied().collect(),
     };
-    LinearRgb::new(shape[1] as u32, shape[0] as u32, data).map_err(value_err)
+    Ok((shape[1] as u32, shape[0] as u32, data))
+}
+
+/// A float32 (H, W, 3) array as a core linear image (copied).
+pub(crate) fn linear_from_py(image: PyReadonlyArray3<'_, f32>) -> PyResult<LinearRgb> {
+    let (w, h, data) = rgb_from_py(&image, "linear image")?;
+    LinearRgb::new(w, h, data).map_err(value_err)
 }
 
 pub(crate) fn rgb_to_py(

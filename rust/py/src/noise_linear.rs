@@ -1,9 +1,8 @@
 //! Bindings of the core's noise from linear images: conversion and one core call each.
-use crate::noise::{background_rgb, linear_from_py, model, rgb_to_py, value_err};
+use crate::noise::{background_rgb, linear_from_py, model, rgb_from_py, rgb_to_py, value_err};
 use crate::run_detached;
 use blurset_core as core;
-use numpy::{PyReadonlyArray3, PyUntypedArrayMethods};
-use pyo3::exceptions::PyValueError;
+use numpy::PyReadonlyArray3;
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
@@ -48,18 +47,9 @@ fn thumbnail_qa(
     image: PyReadonlyArray3<'_, u8>,
     background: (f64, f64, f64),
 ) -> PyResult<(f64, f64, f64)> {
-    let shape = image.shape();
-    if shape[2] != 3 {
-        return Err(PyValueError::new_err(format!(
-            "image must have shape (H, W, 3), got {shape:?}"
-        )));
-    }
-    let data = match image.as_slice() {
-        Ok(s) => s.to_vec(),
-        Err(_) => image.as_array().iter().copied().collect(),
-    };
+    let (w, h, data) = rgb_from_py(&image, "image")?;
     let bg = background_rgb(background)?;
-    let qa = core::thumbnail_qa(shape[1] as u32, shape[0] as u32, &data, bg).map_err(value_err)?;
+    let qa = core::thumbnail_qa(w, h, &data, bg).map_err(value_err)?;
     Ok((qa.coverage, qa.object_luma, qa.border))
 }
 
