@@ -740,6 +740,12 @@ def targets_page(rs: list[dict]) -> list[str]:
     return out
 
 
+def _at(r: dict) -> str:
+    """A speed row's size beside its model where it is not the default 128 px."""
+    res = r.get("resolution")
+    return f" at {res} px" if res and res != 128 else ""
+
+
 def speed_lines(rs: list[dict]) -> list[str]:
     """Settings per hour at equal accuracy (bench/bench_target_speed.py): per model, the
     paper preset against target builds at its worst and median measured image, and the
@@ -773,8 +779,10 @@ def speed_lines(rs: list[dict]) -> list[str]:
             _fmt(r.get("paper_settings_per_hour")),
         ]
         for key, _ in builds[1:]:
-            b = r.get(key) or {}
-            cells.append(f"{_fmt(b.get('settings_per_hour'))} ({_fmt(b.get('ratio'))}×)")
+            b = r.get(key)
+            cells.append(
+                f"{_fmt(b.get('settings_per_hour'))} ({_fmt(b.get('ratio'))}×)" if b else "not run"
+            )
         out.append("| " + " | ".join(cells) + " |")
     out.append("")
     quality = [r for r in rs if isinstance(r.get("paper"), dict)]
@@ -794,9 +802,11 @@ def speed_lines(rs: list[dict]) -> list[str]:
     ]
     for r in sorted(quality, key=lambda r: r["name"]):
         for key, label in builds:
-            b = r.get(key) or {}
+            b = r.get(key)
+            if not b:
+                continue  # (a run that left this build out: a 512 px run on 2 cores)
             out.append(
-                f"| `{r.get('model')}` | {label} | "
+                f"| `{r.get('model')}`{_at(r)} | {label} | "
                 f"{_fmt(b.get('blur_vs_continuous_mean_db'))} / "
                 f"{_fmt(b.get('blur_vs_continuous_worst_db'))} | "
                 f"{_fmt(b.get('sharp_vs_continuous_mean_db'))} | "
@@ -815,10 +825,12 @@ def speed_lines(rs: list[dict]) -> list[str]:
         "| --- | --- | --- | --- | --- |",
     ]
     for r in sorted(quality, key=lambda r: r["name"]):
-        t = r.get("time_split") or {}
+        t = r.get("time_split")
+        if not t:
+            continue  # (fewer builds than the fit's two unknowns need)
         shares = [_calls_share(t, r.get(k) or {}) for k in ("paper", "at_paper_worst")]
         out.append(
-            f"| `{r.get('model')}` | {_fmt(t.get('s_per_call'), 3)} | {_fmt(t.get('s_per_ksample'))} | "
+            f"| `{r.get('model')}`{_at(r)} | {_fmt(t.get('s_per_call'), 3)} | {_fmt(t.get('s_per_ksample'))} | "
             + " | ".join("" if x is None else f"{x:.0%}" for x in shares)
             + " |"
         )
