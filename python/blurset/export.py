@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 import shutil
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -121,21 +122,35 @@ def _scene_problem(src: Path, noise: bool) -> str | None:
     return None if n == rows else f"{n} images for {rows} pose rows"
 
 
-def plan(args) -> tuple[dict, dict[str, Path]]:
-    """What the export holds (export.json: scene name → its source, relative to the
-    build or the noise output, and the lists), and each scene's source folder."""
+@dataclass
+class _Inputs:
+    """What an export reads: the build, the noise output, and the levels, gains, image
+    factors and held-out images it will hold."""
+
+    build: Path
+    noise: Path | None
+    complete: list[str]
+    splits: dict
+    levels: list[str]
+    gains: list[str]
+    factors: list[int]
+    held: str
+
+
+def _inputs(args) -> _Inputs:
+    """The build and the noise output read, and every option checked against them."""
     build: Path = args.build.resolve()
     state = outputs.finished_build(build)
     dataset = outputs.read_record(build / layout.DATASET)
     splits = outputs.read_record(build / layout.SPLITS)
-    config = dataset["config"]
     noise = args.noise.resolve() if args.noise else None
     if args.gains and noise is None:
         raise ConfigError("--gains needs --noise (a `blurset noise BUILD` output)")
     available = dataset.get("levels") or [layout.SHARP]
-    factors = config.get("downsample") or []
+    factors = dataset["config"].get("downsample") or []
     held = splits.get("test_view_images") or "blurry"
     gains: list[str] = []
+    frames = 1
     if noise:  # the levels, factors and test views of the noise output
         noised = _noise_output(noise, build)
         available = [lvl for lvl in available if lvl in noised["levels"]]
@@ -143,9 +158,9 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
         factors = params.get("downsample") or []
         held = held if params.get("clean_views") == "test_views" else "noisy"
         gains = _gains(noise, noised, args.gains)
+        frames = int(params.get("frames", 1))
     levels = _levels(args.levels, available)
-    test = set(splits["test"])
-    if args.target == "geonerf" and noise and int(noised["params"].get("frames", 1)) != 1:
+    if args.target == "geonerf" and frames != 1:
         raise ConfigError(
             "--for geonerf: GeoNeRF reads one image per view; --noise holds several noisy "
             "frames per view (blurset noise --frames)"
@@ -155,72 +170,100 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
             "--for geonerf: GeoNeRF reads images_4/, which this build has not: build with "
             "--downsample 4"
         )
-    sources: dict[str, Path] = {}
-    scenes: dict[str, str] = {}
-    views: dict[str, list[int]] = {}
-    train_list: list[str] = []
-    test_list: list[str] = []
-    for name in state.complete:
-        setting = build / name
+    return _Inputs(build, noise, state.complete, splits, levels, gains, factors, held)
+
+
+def _source(inp: _Inputs, name: str, rel: str) -> Path:
+    """The folder a scene is made from (a level of the build, or a gain of the noise
+    output), refused by name when it is missing or damaged."""
+    src = (inp.noise or inp.build) / rel
+    if inp.noise and not layout.is_complete(src):
+        raise InputError(f"--noise has no complete {src.name} here: {src}")
+    if problem := _scene_problem(src, inp.noise is not None):
+        if inp.noise:
+            raise InputError(f"--noise scene {rel} is damaged ({problem}): {src}")
+        raise InputError(
+            f"the build's setting {name} is damaged ({problem}): {src / layout.POSES_BOUNDS}"
+        )
+    return src
+
+
+@dataclass
+class _Scenes:
+    """The scenes of an export: each one's source folder and its path relative to the
+    build or noise output, the views of a GeoNeRF scene, and the two lists."""
+
+    sources: dict[str, Path] = field(default_factory=dict)
+    rels: dict[str, str] = field(default_factory=dict)
+    views: dict[str, list[int]] = field(default_factory=dict)
+    train: list[str] = field(default_factory=list)
+    test: list[str] = field(default_factory=list)
+
+    def add(self, scene: str, src: Path, rel: str, test: bool) -> None:
+        self.sources[scene] = src
+        self.rels[scene] = rel
+        (self.test if test else self.train).append(scene)
+
+
+def _scenes(inp: _Inputs, target: str) -> _Scenes:
+    """Every scene of every complete setting, level and gain."""
+    out = _Scenes()
+    test = set(inp.splits["test"])
+    for name in inp.complete:
+        setting = inp.build / name
         if problem := layout.setting_problem(setting):
             raise InputError(
                 f"the build's setting {name} is damaged ({problem}): `blurset verify` lists "
                 f"what is wrong, a rerun of the build redoes it: {setting}"
             )
-        held_out = [int(v) for v in splits["test_views"].get(name, [])]
-        for level in levels:
-            rels = [f"{name}/{level}/{g}" for g in gains] if noise else [f"{name}/{level}"]
+        held_out = [int(v) for v in inp.splits["test_views"].get(name, [])]
+        for level in inp.levels:
+            rels = [f"{name}/{level}/{g}" for g in inp.gains] if inp.noise else [f"{name}/{level}"]
             for rel in rels:
-                scene = rel.replace("/", "__")
-                src = (noise or build) / rel
-                if noise and not layout.is_complete(src):
-                    raise InputError(f"--noise has no complete {src.name} here: {src}")
-                if problem := _scene_problem(src, noise is not None):
-                    if noise:
-                        raise InputError(f"--noise scene {rel} is damaged ({problem}): {src}")
-                    raise InputError(
-                        f"the build's setting {name} is damaged ({problem}): "
-                        f"{src / layout.POSES_BOUNDS}"
-                    )
-                if args.target != "geonerf":
-                    sources[scene] = src
-                    scenes[scene] = rel
-                    (test_list if name in test else train_list).append(scene)
+                scene, src = rel.replace("/", "__"), _source(inp, name, rel)
+                if target != "geonerf":
+                    out.add(scene, src, rel, name in test)
                     continue
                 # Held-out views of a degraded scene hold clean copies (unless the build
                 # rendered them blurry): GeoNeRF must never draw one as a source.
-                clean_held = level != layout.SHARP and held in ("sharp", "clean")
+                clean_held = level != layout.SHARP and inp.held in ("sharp", "clean")
                 for sc, vs in _geonerf_scenes(scene, src, held_out, clean_held, name in test):
-                    sources[sc] = src
-                    scenes[sc] = rel
-                    views[sc] = vs
-                    (test_list if name in test else train_list).append(sc)
-    if not scenes:
-        raise InputError(f"nothing to export (no complete setting with {levels}): {args.build}")
+                    out.add(sc, src, rel, name in test)
+                    out.views[sc] = vs
+    return out
+
+
+def plan(args) -> tuple[dict, dict[str, Path]]:
+    """What the export holds (export.json: scene name → its source, relative to the
+    build or the noise output, and the lists), and each scene's source folder."""
+    inp = _inputs(args)
+    sc = _scenes(inp, args.target)
+    if not sc.rels:
+        raise InputError(f"nothing to export (no complete setting with {inp.levels}): {args.build}")
     doc = {
         "kind": "blurset export",
         "blurset_version": __version__,
         "for": args.target,
         # Outputs by their folder's name, sources relative to them: no builder paths.
-        "build": build.name,
-        "noise": noise.name if noise else None,
-        "levels": levels,
-        "gains": gains,
+        "build": inp.build.name,
+        "noise": inp.noise.name if inp.noise else None,
+        "levels": inp.levels,
+        "gains": inp.gains,
         "copy": bool(args.copy),
-        "llffhold": splits["view_stride"],
-        "factors": factors,
-        "test_view_images": held,
+        "llffhold": inp.splits["view_stride"],
+        "factors": inp.factors,
+        "test_view_images": inp.held,
         "scenes_dir": SCENES_DIR[args.target],
-        "scenes": scenes,
-        "train": sorted(train_list),
-        "test": sorted(test_list),
+        "scenes": sc.rels,
+        "train": sorted(sc.train),
+        "test": sorted(sc.test),
     }
-    if views:
+    if sc.views:
         # Which views each GeoNeRF scene holds, in its order; a test scene's first is its
         # target, whose image is the sharp level's (the clean ground truth).
-        doc["views"] = views
+        doc["views"] = sc.views
         doc["target_images"] = layout.SHARP
-    return doc, sources
+    return doc, sc.sources
 
 
 def _geonerf_scenes(
