@@ -851,6 +851,12 @@ def _target_misses(per_image: dict) -> list[str]:
     if not errors:
         return []
     under = sum(e < 0 for e in misses)
+    if not misses:
+        return [
+            f"No estimate is more than 1 dB off: the estimate errs by {min(errors):+.2f} to",
+            f"{max(errors):+.2f} dB (estimate − measured).",
+            "",
+        ]
     return [
         f"Of the {len(misses)} estimates more than 1 dB off, {under} are under the measurement",
         f"(the image is better than its record says) and {len(misses) - under} over it; the",
