@@ -422,29 +422,47 @@ def _replace(
 ) -> int:
     """Put the export's entries in place, replacing only what the previous export here
     wrote; everything else in OUT stays as it is."""
-    old: dict | None = None
-    # A killed export's staged scenes and the old ones it moved aside (GBs with --copy)
-    # go first, also when the export is otherwise up to date.
-    layout.remove_stale_temps(out, [STAGE, TRASH])
-    # (and an old scene a killed replace_dir had moved aside, beside the new one)
-    for parent in {(out / _entry(doc, s)).parent for s in doc["scenes"]}:
-        layout.remove_stale_temps(parent, list(doc["scenes"]))
-    if how == "same":
-        old = outputs.read_record(out / EXPORT_FILE)
-        if old == doc:
-            _say(doc, out, "up to date")
-            return 0
-        # (an export.json of an older blurset names the build by its absolute path)
-        was_of = Path(str(old.get("build"))).name if old.get("build") else doc["build"]
-        if was_of != doc["build"] and not overwrite:
-            raise ConfigError(
-                f"--out holds an export of the build {was_of!r}: give another --out, "
-                f"or --overwrite to replace that export: {out}"
-            )
-        if old.get("state") != "replacing" and old.get("noise") != doc["noise"] and not overwrite:
-            raise ConfigError(_other_noise(old.get("noise"), doc["noise"], out))
+    _sweep_stale(out, doc)
+    old = outputs.read_record(out / EXPORT_FILE) if how == "same" else None
+    if old == doc:
+        _say(doc, out, "up to date")
+        return 0
+    if old is not None:
+        _refuse_other_export(old, doc, out, overwrite)
     owned = set(outputs.owned_entries(out, EXPORT)) if old is not None else set()
     new = [_entry(doc, s) for s in doc["scenes"]] + ["train.txt", "test.txt", EXPORT_FILE]
+    _refuse_foreign(out, doc, owned, new)
+    _put_in_place(out, doc, sources, build_root, owned, new)
+    _say(doc, out, "written")
+    return 0
+
+
+def _sweep_stale(out: Path, doc: dict) -> None:
+    """A killed export's staged scenes and the old ones it moved aside (GBs with --copy)
+    go first, also when the export is otherwise up to date; and an old scene a killed
+    replace_dir had moved aside, beside the new one."""
+    layout.remove_stale_temps(out, [STAGE, TRASH])
+    for parent in {(out / _entry(doc, s)).parent for s in doc["scenes"]}:
+        layout.remove_stale_temps(parent, list(doc["scenes"]))
+
+
+def _refuse_other_export(old: dict, doc: dict, out: Path, overwrite: bool) -> None:
+    """An export of another build, or with another --noise, is not replaced by itself."""
+    # (an export.json of an older blurset names the build by its absolute path)
+    was_of = Path(str(old.get("build"))).name if old.get("build") else doc["build"]
+    if was_of != doc["build"] and not overwrite:
+        raise ConfigError(
+            f"--out holds an export of the build {was_of!r}: give another --out, "
+            f"or --overwrite to replace that export: {out}"
+        )
+    if old.get("state") != "replacing" and old.get("noise") != doc["noise"] and not overwrite:
+        raise ConfigError(_other_noise(old.get("noise"), doc["noise"], out))
+
+
+def _refuse_foreign(out: Path, doc: dict, owned: set[str], new: list[str]) -> None:
+    """Nothing an earlier export did not write is replaced, and a scene folder that makes
+    way holds only what an export writes: a user's file there (a note) is named, never
+    deleted with it."""
     for rel in new:
         p = out / rel
         if (p.exists() or p.is_symlink()) and rel not in owned:
@@ -454,8 +472,6 @@ def _replace(
             )
     if doc["scenes_dir"] != "." and (out / doc["scenes_dir"]).is_file():
         raise ConfigError(f"--out holds a file {doc['scenes_dir']}: {out}")
-    # A scene folder that makes way holds only what an export writes: a user's file
-    # there (a note) is named, never deleted with it.
     for rel in sorted(owned):
         if rel in ("train.txt", "test.txt", EXPORT_FILE):
             continue
@@ -466,6 +482,18 @@ def _replace(
                 f"with the scene: move it out of the scene folder, then rerun (nothing was "
                 f"changed): {out}"
             )
+
+
+def _put_in_place(
+    out: Path,
+    doc: dict,
+    sources: dict[str, Path],
+    build_root: Path,
+    owned: set[str],
+    new: list[str],
+) -> None:
+    """Every scene staged, then the old entries out and the new ones in (replace_dir),
+    the lists and the record last."""
     stage, trash = layout.temp_path(out / STAGE), layout.temp_path(out / TRASH)
     for t in (stage, trash):
         shutil.rmtree(t, ignore_errors=True)
@@ -503,8 +531,6 @@ def _replace(
     finally:
         for t in (stage, trash):
             shutil.rmtree(t, ignore_errors=True)
-    _say(doc, out, "written")
-    return 0
 
 
 def _say(doc: dict, out: Path, what: str) -> None:
