@@ -46,6 +46,29 @@ def kill_all() -> None:
         w.kill()
 
 
+def _frame_item(f: Mapping[str, Any]) -> dict[str, Any]:
+    """One frame of a render request as the worker protocol spells it."""
+    item: dict[str, Any] = {
+        "c2w": _matrix(f["c2w"]),
+        "seed": int(f["seed"]),
+        "out": str(Path(f["out"]).resolve()),
+    }
+    if f.get("samples") is not None:
+        item["samples"] = int(f["samples"])
+    if f.get("sample_offset") is not None:
+        item["sample_offset"] = int(f["sample_offset"])
+        item["sample_sequence"] = int(f["sample_sequence"])
+    if f.get("motion"):
+        m = f["motion"]
+        item["motion"] = {"steps": int(m["steps"]), "keys": [_matrix(k) for k in m["keys"]]}
+    if f.get("region") is not None:
+        item["region"] = [int(x) for x in f["region"]]
+    for key in ("call", "view", "level"):  # which render call renders it
+        if f.get(key) is not None:
+            item[key] = f[key]
+    return item
+
+
 class WorkerError(BlursetError):
     """An object-level failure (bad GLB, render QA, crash); the message is one line.
 
@@ -393,33 +416,12 @@ class Worker:
                 raise ValueError(f"render: frame {bare[0]} carries no samples and the call none")
             # The protocol's call-level count, which every frame's own overrides.
             samples = int(frames[0]["samples"]) if frames else 1
-        payload = []
-        for f in frames:
-            item: dict[str, Any] = {
-                "c2w": _matrix(f["c2w"]),
-                "seed": int(f["seed"]),
-                "out": str(Path(f["out"]).resolve()),
-            }
-            if f.get("samples") is not None:
-                item["samples"] = int(f["samples"])
-            if f.get("sample_offset") is not None:
-                item["sample_offset"] = int(f["sample_offset"])
-                item["sample_sequence"] = int(f["sample_sequence"])
-            if f.get("motion"):
-                m = f["motion"]
-                item["motion"] = {"steps": int(m["steps"]), "keys": [_matrix(k) for k in m["keys"]]}
-            if f.get("region") is not None:
-                item["region"] = [int(x) for x in f["region"]]
-            for key in ("call", "view", "level"):  # which render call renders it
-                if f.get(key) is not None:
-                    item[key] = f[key]
-            payload.append(item)
         msg: dict[str, Any] = {
             "cmd": "render",
             "resolution": int(resolution),
             "fov_deg": float(fov_deg),
             "samples": int(samples),
-            "frames": payload,
+            "frames": [_frame_item(f) for f in frames],
         }
         if exr_codec is not None:
             msg["exr_codec"] = str(exr_codec)
@@ -432,6 +434,13 @@ class Worker:
         if guides:
             msg["guides"] = True
         self._send(msg)
+        return self._await_render(len(frames), on_frame)
+
+    def _await_render(
+        self, n: int, on_frame: Callable[[int, str, tuple[int, int] | None], None] | None
+    ) -> dict[str, Any]:
+        """The replies of one render request: each frame on disk to `on_frame`, then the
+        final reply, which must count all `n` frames."""
         while True:
             msg = self._receive_in_sync()
             if "frame" in msg:
@@ -446,10 +455,8 @@ class Worker:
                 continue
             if not msg.get("ok"):
                 raise WorkerError(f"render failed: {msg.get('reason', 'unknown')}")
-            if msg.get("done") != len(frames):
-                raise WorkerError(
-                    f"render: worker reported {msg.get('done')} of {len(frames)} frames"
-                )
+            if msg.get("done") != n:
+                raise WorkerError(f"render: worker reported {msg.get('done')} of {n} frames")
             return msg
 
     def close(self) -> None:
