@@ -259,8 +259,32 @@ def make_card(
     }
     m0 = metas[0]
     res = m0.get("resolution") or [cfg.get("resolution")] * 2
-    views = len(m0.get("views", []))
     out: list[str] = [yaml_header(header), f"# {name}", ""]
+    out += _contents(name, dataset, splits, m0, levels, res)
+    if any((s / layout.SHARP / layout.LINEAR).is_dir() for s in settings[:1]):
+        out += [
+            "Each level also holds `linear/<view>.exr`: the linear premultiplied RGBA "
+            "image before compositing and sRGB.",
+            "",
+        ]
+    out += _construction(cfg, m0, metas, levels)
+    for path, doc in noise_docs:
+        out += _noise_section(path, doc)
+    out += _loading(levels, splits.get("view_stride") or cfg.get("view_stride") or 16)
+    if previews:
+        out += _previews(build, settings, card_dir or build)
+    out += _attribution(objects, licences)
+    out += ["## Citation", "", "```bibtex", BIBTEX, "```", ""]
+    return "\n".join(out)
+
+
+def _contents(
+    name: str, dataset: dict, splits: dict, m0: dict, levels: list[str], res: list
+) -> list[str]:
+    """What the dataset is, what it holds, its splits and its layout."""
+    counts = dataset.get("counts") or {}
+    views = len(m0.get("views", []))
+    out: list[str] = []
     out += [
         "Multi-view images of 3D objects with realistic camera motion blur at several "
         "levels, with sharp ground truth and LLFF poses, for training and evaluating "
@@ -301,21 +325,7 @@ def make_card(
         "```",
         "",
     ]
-    if any((s / layout.SHARP / layout.LINEAR).is_dir() for s in settings[:1]):
-        out += [
-            "Each level also holds `linear/<view>.exr`: the linear premultiplied RGBA "
-            "image before compositing and sRGB.",
-            "",
-        ]
-    out += _construction(cfg, m0, metas, levels)
-    for path, doc in noise_docs:
-        out += _noise_section(path, doc)
-    out += _loading(levels, splits.get("view_stride") or cfg.get("view_stride") or 16)
-    if previews:
-        out += _previews(build, settings, card_dir or build)
-    out += _attribution(objects, licences)
-    out += ["## Citation", "", "```bibtex", BIBTEX, "```", ""]
-    return "\n".join(out)
+    return out
 
 
 def _render_table(metas: list[dict], levels: list[str], target: Any) -> list[str]:
