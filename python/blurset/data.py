@@ -153,20 +153,7 @@ def open_scene(
         raise InputError(f"setting {setting!r} has no level {level!r}: {sdir / level}")
     sub = _subdir(downsample)
     n = len(np.asarray(_core.read_poses_bounds(sdir / level / layout.POSES_BOUNDS)))
-    names = [layout.image_name(i, n) for i in range(n)]
-    meta = None
-    if gain is None:
-        scene_dir = sdir / level
-    else:
-        if noise is None:
-            raise InputError("gain needs noise= (a `blurset noise BUILD` output folder)")
-        scene_dir = Path(noise) / setting / level / layout.gain_name(gain)
-        if not layout.is_complete(scene_dir):
-            raise InputError(f"no complete noisy scene of gain {gain:g}: {scene_dir}")
-        meta = layout.read_json(scene_dir / layout.NOISE, layout.NOISE)
-        # One file per view: frame 0 of a burst.
-        by_view = {f["view"]: Path(f["image"]).name for f in meta["files"] if f["frame"] == 0}
-        names = [by_view[i] for i in range(n)]
+    scene_dir, names, meta = _scene_dir(sdir, setting, level, n, gain, noise)
     image_files = [scene_dir / sub / name for name in names]
     clean_files = [sdir / layout.SHARP / sub / layout.image_name(i, n) for i in range(n)]
     for p in (*image_files, *clean_files):
@@ -183,12 +170,7 @@ def open_scene(
     # hwf holds the full size (LLFF); the focal length scales with the size read.
     focal = rows[0, 14] * w / rows[0, 9]
     k = np.array([[focal, 0, w / 2], [0, focal, h / 2], [0, 0, 1]], dtype=np.float64)
-    splits = build / layout.SPLITS
-    held = None
-    if splits.is_file():
-        held = layout.read_json(splits, layout.SPLITS).get("test_views", {}).get(setting)
-    if held is None:
-        held = layout.read_json(sdir / layout.META, layout.META).get("test_views", [])
+    held = _held_out(build, setting)
     test = np.array(sorted(held), dtype=np.int64)
     train = np.array([i for i in range(n) if i not in set(held)], dtype=np.int64)
     return Scene(
@@ -210,6 +192,36 @@ def open_scene(
         noise=meta,
         pose=pose,
     )
+
+
+def _scene_dir(
+    sdir: Path, setting: str, level: str, n: int, gain: float | None, noise: str | Path | None
+) -> tuple[Path, list[str], dict | None]:
+    """The folder a scene's images are read from (the level, or its noisy copy of
+    `gain`), their file names, one per view, and the copy's noise.json (None for the
+    level itself)."""
+    if gain is None:
+        return sdir / level, [layout.image_name(i, n) for i in range(n)], None
+    if noise is None:
+        raise InputError("gain needs noise= (a `blurset noise BUILD` output folder)")
+    scene_dir = Path(noise) / setting / level / layout.gain_name(gain)
+    if not layout.is_complete(scene_dir):
+        raise InputError(f"no complete noisy scene of gain {gain:g}: {scene_dir}")
+    meta = layout.read_json(scene_dir / layout.NOISE, layout.NOISE)
+    # One file per view: frame 0 of a burst.
+    by_view = {f["view"]: Path(f["image"]).name for f in meta["files"] if f["frame"] == 0}
+    return scene_dir, [by_view[i] for i in range(n)], meta
+
+
+def _held_out(build: Path, setting: str) -> list[int]:
+    """A setting's held-out views: the build's splits.json, else its own meta.json."""
+    splits = build / layout.SPLITS
+    held = None
+    if splits.is_file():
+        held = layout.read_json(splits, layout.SPLITS).get("test_views", {}).get(setting)
+    if held is None:
+        held = layout.read_json(build / setting / layout.META, layout.META).get("test_views", [])
+    return held
 
 
 def list_scenes(build: str | Path) -> list[tuple[str, str]]:
