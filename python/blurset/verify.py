@@ -257,6 +257,19 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
         source = (meta.get("object") or {}).get("path")
         if source:
             made_from.setdefault(source, set()).add(str(meta["uid"]))
+    _one_source_one_id(rep, made_from)
+    rep.settings = len(complete)
+    _decode(todo, root, rep, decode)
+    _check_dataset(rep, dataset, complete, n_images, uids)
+    _check_splits(root, rep, complete)
+    finished = not outputs.build_state(root).provisional
+    _check_manifest(root, rep, finished=finished)
+    return rep
+
+
+def _one_source_one_id(rep: Report, made_from: dict[str, set[str]]) -> None:
+    """One source file, one set of settings: two ids made from one file is a build that
+    kept a setting its source file no longer has."""
     for source, ids in sorted(made_from.items()):
         if len(ids) > 1:
             rep.bad(
@@ -264,32 +277,43 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
                 f"one source file made the settings of {len(ids)} ids ({', '.join(sorted(ids))}): "
                 "a rerun of the build removes the stale ones",
             )
-    rep.settings = len(complete)
-    _decode(todo, root, rep, decode)
+
+
+def _check_dataset(
+    rep: Report, dataset: dict, complete: list[Path], n_images: int, uids: set[str]
+) -> None:
+    """dataset.json's counts and settings against what is on disk (not for a build that
+    has not finished)."""
     if dataset.get("provisional"):
         rep.note(layout.DATASET, "provisional: the build has not finished (counts not compared)")
-    elif dataset:
-        counts = dataset.get("counts")
-        if not isinstance(counts, dict):
-            counts = {}
-        on_disk = {"settings": len(complete), "images": n_images, "objects": len(uids)}
-        for key, have in on_disk.items():
-            if counts.get(key) != have:
-                rep.bad(layout.DATASET, f"counts.{key} is {counts.get(key)}, {have} on disk")
-        listed = dataset.get("settings")
-        names = [s.name for s in complete]
-        if isinstance(listed, list) and sorted(map(str, listed)) != names:
-            gone = sorted(set(map(str, listed)) - set(names))
-            new = sorted(set(names) - set(map(str, listed)))
-            what = "; ".join(
-                x
-                for x in (
-                    f"lists {', '.join(gone[:5])} not on disk" if gone else "",
-                    f"does not list {', '.join(new[:5])}" if new else "",
-                )
-                if x
+        return
+    if not dataset:
+        return
+    counts = dataset.get("counts")
+    if not isinstance(counts, dict):
+        counts = {}
+    on_disk = {"settings": len(complete), "images": n_images, "objects": len(uids)}
+    for key, have in on_disk.items():
+        if counts.get(key) != have:
+            rep.bad(layout.DATASET, f"counts.{key} is {counts.get(key)}, {have} on disk")
+    listed = dataset.get("settings")
+    names = [s.name for s in complete]
+    if isinstance(listed, list) and sorted(map(str, listed)) != names:
+        gone = sorted(set(map(str, listed)) - set(names))
+        new = sorted(set(names) - set(map(str, listed)))
+        what = "; ".join(
+            x
+            for x in (
+                f"lists {', '.join(gone[:5])} not on disk" if gone else "",
+                f"does not list {', '.join(new[:5])}" if new else "",
             )
-            rep.bad(layout.DATASET, f"settings: {what}")
+            if x
+        )
+        rep.bad(layout.DATASET, f"settings: {what}")
+
+
+def _check_splits(root: Path, rep: Report, complete: list[Path]) -> None:
+    """splits.json names only settings that are on disk."""
     splits = _read_json(root, layout.SPLITS, rep)
     if isinstance(splits, dict):
         settings_on_disk = {s.name for s in complete}
@@ -299,9 +323,6 @@ def verify_build(root: Path, *, decode: bool = True) -> Report:
                 rep.bad(
                     layout.SPLITS, f"{part} names settings not on disk: {', '.join(missing[:5])}"
                 )
-    finished = not outputs.build_state(root).provisional
-    _check_manifest(root, rep, finished=finished)
-    return rep
 
 
 # -- a noise output ---------------------------------------------------------------------
