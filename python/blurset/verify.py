@@ -152,7 +152,6 @@ def setting_problems(
     exrs = [layout.linear_name(i) for i in images]
     to_decode: list[tuple[Path, int, int]] = []
     for level in levels:
-        d = setting / level
         if level in flagged:  # the level folder is missing
             continue
         # images/ at full size, images_<f>/ at 1/f (the core checked f divides the size).
@@ -161,36 +160,48 @@ def setting_problems(
         ]
         if render.get("linear"):
             subs.append((layout.LINEAR, exrs, w, h))
-        for sub, names, sw, sh in subs:
-            for p in _expect_files(root, d / sub, names, rep, sub):
-                if f"{level}/{sub}/{p.name}" not in flagged:
-                    to_decode.append((p, sw, sh))
-        if f"{level}/poses_bounds.npy" in flagged:
-            continue
+        to_decode += _level_problems(root, setting / level, subs, n, flagged, rep)
+    if layout.TRANSFORMS in flagged:
+        return _one_per_file(rep), to_decode
+    _transforms_problems(
+        root, name, rep, n, [f"{lvl}/images/{i}" for lvl in levels for i in images]
+    )
+    return _one_per_file(rep), to_decode
+
+
+def _level_problems(
+    root: Path, d: Path, subs: list, n: int, flagged: set[str], rep: Report
+) -> list[tuple[Path, int, int]]:
+    """A level's image folders (`subs`: folder, file names, width, height) file by file
+    and its pose rows; the images to decode."""
+    level = d.name
+    to_decode: list[tuple[Path, int, int]] = []
+    for sub, names, sw, sh in subs:
+        for p in _expect_files(root, d / sub, names, rep, sub):
+            if f"{level}/{sub}/{p.name}" not in flagged:
+                to_decode.append((p, sw, sh))
+    if f"{level}/poses_bounds.npy" not in flagged:
         rows = _rows(d / layout.POSES_BOUNDS)
         if isinstance(rows, str):
             rep.bad((d / layout.POSES_BOUNDS).relative_to(root), rows)
         elif rows != n:
             rep.bad((d / layout.POSES_BOUNDS).relative_to(root), f"{rows} rows, expected {n}")
-    if layout.TRANSFORMS in flagged:
-        return _one_per_file(rep), to_decode
+    return to_decode
+
+
+def _transforms_problems(root: Path, name: Path, rep: Report, n: int, want: list[str]) -> None:
+    """transforms.json has one frame per view, naming this setting's images."""
     tf = _read_json(root, f"{name}/transforms.json", rep)
-    if tf is not None:
-        frames = tf.get("frames") if isinstance(tf, dict) else None
-        if not isinstance(frames, list) or len(frames) != n:
-            got = len(frames) if isinstance(frames, list) else "no"
-            rep.bad(f"{name}/transforms.json", f"{got} frames, expected {n}")
-        else:
-            want = {f"{lvl}/images/{i}" for lvl in levels for i in images}
-            named = {
-                p
-                for f in frames
-                if isinstance(f, dict)
-                for p in (f.get("file_paths") or {}).values()
-            }
-            if named != want:
-                rep.bad(f"{name}/transforms.json", "its file_paths are not this setting's images")
-    return _one_per_file(rep), to_decode
+    if tf is None:
+        return
+    frames = tf.get("frames") if isinstance(tf, dict) else None
+    if not isinstance(frames, list) or len(frames) != n:
+        got = len(frames) if isinstance(frames, list) else "no"
+        rep.bad(f"{name}/transforms.json", f"{got} frames, expected {n}")
+        return
+    named = {p for f in frames if isinstance(f, dict) for p in (f.get("file_paths") or {}).values()}
+    if named != set(want):
+        rep.bad(f"{name}/transforms.json", "its file_paths are not this setting's images")
 
 
 def _one_per_file(rep: Report) -> list[tuple[str, str]]:
