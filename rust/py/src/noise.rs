@@ -167,16 +167,9 @@ pub(crate) fn noise_frame_linear(
 ) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
     let img = linear_from_py(image)?;
     let noisy = run_detached(py, || core::add_noise_linear(&img, m, key, stream))?;
-    let Samples::U8(codes) = noisy.processed.samples else {
-        return Err(PyValueError::new_err("processed image is not 8-bit"));
-    };
-    let (w, h) = (img.width as usize, img.height as usize);
-    let processed = PyArray1::from_vec(py, codes)
-        .reshape([h, w, 3])?
-        .into_py_any(py)?;
     Ok((
         rgb_to_py(py, img.width, img.height, noisy.linear)?,
-        processed,
+        image_to_py(py, noisy.processed)?,
     ))
 }
 

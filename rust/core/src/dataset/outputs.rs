@@ -380,12 +380,7 @@ pub fn remove_owned(dir: &Path, kind: OutputKind) -> Result<Vec<String>> {
     let entries = owned_entries(dir, kind)?;
     for rel in &entries {
         let p = dir.join(rel);
-        let m = std::fs::symlink_metadata(&p).map_err(|e| Error::io("cannot read", &p, e))?;
-        if m.is_dir() {
-            std::fs::remove_dir_all(&p).map_err(|e| Error::io("cannot remove", &p, e))?;
-        } else {
-            std::fs::remove_file(&p).map_err(|e| Error::io("cannot remove", &p, e))?;
-        }
+        crate::ground::atomic::remove_entry(&p)?;
         // A unit's level and setting folders, when nothing else is left in them.
         let mut parent = p.parent();
         while let Some(d) = parent {

@@ -62,7 +62,7 @@ pub fn replace_dir(new: &Path, dst: &Path) -> Result<()> {
 }
 
 /// Remove a file, a symlink or a folder with everything in it; nothing there is fine.
-fn remove_entry(path: &Path) -> Result<()> {
+pub fn remove_entry(path: &Path) -> Result<()> {
     let res = match path.symlink_metadata() {
         Err(_) => return Ok(()),
         Ok(m) if m.is_dir() => std::fs::remove_dir_all(path),
