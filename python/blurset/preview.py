@@ -266,38 +266,19 @@ def setting_figure(
     setting = Path(setting)
     meta = _read_meta(setting)
     n = len(meta.get("views", []))
-    levels = list(meta["levels"])
-    gone = [lvl for lvl in levels if not (setting / lvl / layout.IMAGES).is_dir()]
-    if gone and not setting.name.endswith(layout.PARTIAL_SUFFIX):
-        raise InputError(
-            f"level {gone[0]} has no images/ folder (a damaged setting: `blurset verify` "
-            f"lists what is wrong): {setting / gone[0]}"
-        )
-    levels = [lvl for lvl in levels if lvl not in gone]  # a setting still being written
+    levels = _shown_levels(setting, meta)
     if not n or not levels:
         raise InputError(f"setting has no views or no level directories: {setting}")
     if rows < 1:
         raise ConfigError(f"--rows {rows}: must be at least 1")
     name = setting.name.removesuffix(".partial")
     views = choose_views(n, list(meta.get("test_views", [])), rows)
-    test = set(meta.get("test_views", []))
-    columns: list[tuple[str, dict[int, Path]]] = []
-    for lvl in levels:
-        files = {v: setting / lvl / layout.IMAGES / _core.image_name(v, n) for v in views}
-        columns.append((lvl, files))
+    columns = [
+        (lvl, {v: setting / lvl / layout.IMAGES / _core.image_name(v, n) for v in views})
+        for lvl in levels
+    ]
     if noise is not None or gain is not None:
-        if noise is None or gain is None:
-            raise ConfigError(
-                "--noise and --gain go together (a noise output and one of its gains)"
-            )
-        kind = outputs.kind_of(Path(noise)) if Path(noise).is_dir() else None
-        if kind is outputs.OutputKind.NOISE:
-            # Only noise made from this setting's build is shown beside it.
-            outputs.noise_of_build(Path(noise), setting.parent)
-        elif kind is not outputs.OutputKind.NOISE_SCENE:
-            raise InputError(f"--noise is not a blurset noise output: {noise}")
-        for label, d in _noise_columns(Path(noise), name, levels, gain):
-            columns.append((label, _noisy_files(d)))
+        columns += _noise_columns_of(setting, Path(noise) if noise else None, name, levels, gain)
     for _, files in columns:
         for v in views:
             if v not in files or not files[v].is_file():
@@ -305,11 +286,53 @@ def setting_figure(
     w0, h0 = Image.open(columns[0][1][views[0]]).size
     ts = tile_size(w0, h0, tile)
     size = grid_size(len(views), len(columns), ts)
+    res = meta.get("resolution", [w0, h0])
+    title = f"{name}   {n} views, {res[0]}x{res[1]} px"
+    fig = _draw_grid(title, columns, views, set(meta.get("test_views", [])), ts, size)
+    _save(fig, out)
+    return Figure(out, views, [c[0] for c in columns], ts, size)
+
+
+def _shown_levels(setting: Path, meta: dict) -> list[str]:
+    """The setting's levels that have their images/ folder: a finished setting without one
+    is damaged (refused); a setting still being written shows those it has."""
+    levels = list(meta["levels"])
+    gone = [lvl for lvl in levels if not (setting / lvl / layout.IMAGES).is_dir()]
+    if gone and not setting.name.endswith(layout.PARTIAL_SUFFIX):
+        raise InputError(
+            f"level {gone[0]} has no images/ folder (a damaged setting: `blurset verify` "
+            f"lists what is wrong): {setting / gone[0]}"
+        )
+    return [lvl for lvl in levels if lvl not in gone]
+
+
+def _noise_columns_of(
+    setting: Path, noise: Path | None, name: str, levels: list[str], gain: str | None
+) -> list[tuple[str, dict[int, Path]]]:
+    """The columns of one gain of a noise output shown beside the setting it was made from."""
+    if noise is None or gain is None:
+        raise ConfigError("--noise and --gain go together (a noise output and one of its gains)")
+    kind = outputs.kind_of(noise) if noise.is_dir() else None
+    if kind is outputs.OutputKind.NOISE:
+        # Only noise made from this setting's build is shown beside it.
+        outputs.noise_of_build(noise, setting.parent)
+    elif kind is not outputs.OutputKind.NOISE_SCENE:
+        raise InputError(f"--noise is not a blurset noise output: {noise}")
+    return [(label, _noisy_files(d)) for label, d in _noise_columns(noise, name, levels, gain)]
+
+
+def _draw_grid(
+    title: str,
+    columns: list[tuple[str, dict[int, Path]]],
+    views: list[int],
+    test: set[int],
+    ts: tuple[int, int],
+    size: tuple[int, int],
+) -> Image.Image:
+    """The figure: a title, a labelled column per level or gain, a row per view."""
     fig = Image.new("RGB", size, BG)
     draw = ImageDraw.Draw(fig)
     f_title, f_label, f_small = _font(16, bold=True), _font(13), _font(11)
-    res = meta.get("resolution", [w0, h0])
-    title = f"{name}   {n} views, {res[0]}x{res[1]} px"
     draw.text((PAD, 7), _fit(draw, title, f_title, size[0] - 2 * PAD), fill=INK, font=f_title)
     for c, (label, files) in enumerate(columns):
         x, y = cell_origin(0, c, ts)
@@ -325,8 +348,7 @@ def setting_figure(
         x, y = cell_origin(r, 0, ts)
         draw.text((PAD, y + 2), f"view {v:03d}", fill=INK, font=f_label)
         draw.text((PAD, y + 20), "test" if v in test else "train", fill=INK, font=f_small)
-    _save(fig, out)
-    return Figure(out, views, [c[0] for c in columns], ts, size)
+    return fig
 
 
 def write_build_preview(setting_dir: Path, warn=print) -> None:
