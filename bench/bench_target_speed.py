@@ -18,8 +18,8 @@ BLURSET_BENCH_SPEED_RES px, every view rendering its blurry images:
    whatever it costs on the model (on a hard model more than the paper preset).
 The rows say what each image reached (the paper's measured, the targets' estimated:
 worst, 5th percentile, median). Every build is also scored against the continuous blur
-(64 stratified frames x 16 samples; the sharp image at 1,024 samples, other seeds), on
-object pixels: PSNR of the blurry and sharp images (mean and worst) and the detail ratio
+(stratified frames no more than 0.5 px apart, half the presets' ghost bound, sharing
+1,024 samples; the sharp image at 1,024 samples; other seeds), on object pixels: PSNR of the blurry and sharp images (mean and worst) and the detail ratio
 (high-frequency energy over the reference's; < 1 smoothed). Where the time goes: each
 build's samples and render calls per view (a target image renders each frame once per
 half and round), and per model a least-squares fit of seconds = a x calls + b x samples
@@ -50,7 +50,11 @@ VIEWS = int(os.environ.get("BLURSET_BENCH_SPEED_VIEWS", "2"))
 RUNS = [r for r in os.environ.get("BLURSET_BENCH_SPEED_RUNS", "worst,median,floor").split(",") if r]
 SALT = 0x5BD1E995
 CONT_SALT = 0x3C6EF372
-CONTINUOUS = (64, 16)  # stratified frames x samples; the sharp reference: their product
+# The continuous reference: frames no more than this far apart on screen (px; finer than
+# any preset's bound, so the reference's own ghosts do not count as the build's detail),
+# sharing this many samples (at least one a frame); the sharp reference at as many.
+CONTINUOUS_GHOST_PX = 0.5
+CONTINUOUS_SAMPLES = 1024
 
 
 def _config(out: Path, glb: Path, **flags):
@@ -101,16 +105,16 @@ def _continuous(glb: Path, work: Path) -> dict:
     many samples (premultiplied linear RGBA), on seeds no build uses."""
     from blurset.worker_client import Worker
 
-    frames_n, samples = CONTINUOUS
-    cfg = _config(work / "unused", glb, latents=frames_n, latent_positions="stratified",
-                  samples=samples, blur_budget="flat")  # fmt: skip
+    cfg = _config(work / "unused", glb, latents_auto=True, latent_positions="stratified",
+                  max_ghost_px=CONTINUOUS_GHOST_PX, latents_max=4096,
+                  samples_total=CONTINUOUS_SAMPLES, blur_budget="flat")  # fmt: skip
     refs = {}
     with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
         plan = _plan(cfg, glb, w, work)
         for v in plan.to_dict()["views"]:
             sharp = [{"c2w": v["c2w"], "seed": (v["sharp_seed"] ^ CONT_SALT) & 0x7FFFFFFF,
                       "out": str(work / "c.exr")}]  # fmt: skip
-            refs[(v["index"], "sharp")] = _render(w, sharp, frames_n * samples, cfg)
+            refs[(v["index"], "sharp")] = _render(w, sharp, CONTINUOUS_SAMPLES, cfg)
             for lvl in v["levels"]:
                 frames = plan.level_renders(v["index"], int(lvl), str(work / "c"))
                 for f in frames:

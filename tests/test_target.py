@@ -38,6 +38,31 @@ def test_a_preset_sets_targets_and_flags_beside_it_override_it():
         assert "target_psnr" in sets and not any("samples" in k for k in sets)
 
 
+def test_an_accuracy_preset_keeps_its_ghost_bound_at_512_px():
+    """latents auto alone stops at 34 frames, which leave gaps of several pixels at level 4
+    of a 512 px view; a preset promises its bound, so it takes as many frames as that needs."""
+    cam = {"views": 4, "levels": [1, 4], "resolution": 512}
+    by_motion = plan.BuildConfig(**cam, latents_auto=True, latent_positions="stratified")
+    for name, bound in (("balanced", 1.0), ("fast", 2.0)):
+        cfg = _cfg(preset=name, **cam)
+        assert cfg.max_ghost_px == bound
+        gaps, frames = [], []
+        for c in (cfg, by_motion):
+            levels = [
+                lv
+                for v in plan.plan_setting(c, uid="box", theta0_deg=90.0, seed=5,
+                                           bbox_dims=[1.0, 0.7, 0.5],
+                                           vertices=np.zeros((0, 3), np.float32)).to_dict()["views"]
+                for lv in v["levels"].values()
+            ]  # fmt: skip
+            gaps.append(max(lv["max_gap_px"] for lv in levels))
+            frames.append(max(lv["latents"] for lv in levels))
+        assert gaps[0] <= bound < gaps[1], name
+        assert frames[0] > 34 == frames[1], name
+    # A cap given beside the preset is the user's and is kept.
+    assert _cfg(preset="floor", latents_max=34).latents_max == 34
+
+
 def test_a_preset_in_toml_and_any_case(tmp_path):
     from blurset.config import load_toml
 

@@ -4,18 +4,21 @@
 //! is rendered to on its object's pixels and a ghost bound between latent frames — never
 //! as sample counts, which fit only the objects they were chosen on.
 use super::choices::Preset;
-use super::spec::Raw;
+use super::spec::{Raw, MAX_COUNT};
 
 /// The 8-bit floor: a PNG's own quantization error, 1/(255²·12) in MSE (DESIGN §8).
 pub const FLOOR_PSNR_DB: f64 = 58.92;
 
 /// What `preset` sets, option by option (the paper preset: nothing, the defaults).
 pub fn preset_values(preset: Preset) -> Vec<(&'static str, Raw)> {
+    // The ghost bound is the promise, so no frame cap below it: 34 frames (latents auto's
+    // own cap) leave 9 px gaps at level 4 of a 512 px view.
     let by_motion = |ghost_px: f64| {
         vec![
             ("latents_auto", Raw::Bool(true)),
             ("latent_positions", Raw::Str("stratified".into())),
             ("max_ghost_px", Raw::Float(ghost_px)),
+            ("latents_max", Raw::Int(MAX_COUNT as i128)),
         ]
     };
     let target = |db: f64| ("target_psnr", Raw::Float(db));
