@@ -208,76 +208,88 @@ def _figure(panels: int):
     return fig, axes[:panels]
 
 
-def _save(fig, path: Path) -> None:
+def _save(fig, path: Path) -> Path:
     layout.write_figure(path, lambda f: fig.savefig(f, format="png", dpi=110))
+    return path
 
 
 def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Path]:
     """The PNG histograms; returns their paths in report order."""
     c = stats["counts"]
     n_set, n_views = c["settings"], c["views"]
-    written: list[Path] = []
-
-    def single(name: str, values: list, n_label: str) -> None:
-        title, xlabel, ylabel = FIGURES[name]
-        fig, (ax,) = _figure(1)
-        _hist(ax, values, max_bins, _median(stats, name))
-        ax.set(title=f"{title} — {n_label}", xlabel=xlabel, ylabel=ylabel)
-        _save(fig, out_dir / f"{name}.png")
-        written.append(out_dir / f"{name}.png")
-
-    single("scene_range", stats["scene_range"], f"{n_views} views, {n_set} settings")
-    single("scene_dimension", stats["scene_dimension"], f"{n_set} settings, {c['objects']} objects")
-
-    per_level = [
-        ("blur_weight", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
-        ("latent_frames", lambda ax, v, q: _bars(ax, v)),
-        ("motion_px", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
-        # --target-psnr builds only: what each image cost and reached.
-        ("render_psnr", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
-        ("image_samples", lambda ax, v, q: _hist(ax, v, max_bins, _median(stats, q))),
-    ]
+    written = [
+        _single_figure(stats, "scene_range", f"{n_views} views, {n_set} settings", out_dir, max_bins),
+        _single_figure(stats, "scene_dimension", f"{n_set} settings, {c['objects']} objects",
+                       out_dir, max_bins),
+    ]  # fmt: skip
     blurry = f"{n_set} settings"
     if c.get("sharp_copy_views"):
         blurry += f"; {c['sharp_copy_views']} held-out sharp copies left out"
-    for name, draw in per_level:
+    for name in PER_LEVEL:
         by_level = stats.get(name) or {}
-        if name in ("motion_px", "render_psnr", "image_samples") and not by_level:
+        # motion and the per-image figures exist only in builds that record them.
+        if name not in ("blur_weight", "latent_frames") and not by_level:
             continue
-        title, xlabel, ylabel = FIGURES[name]
-        levels = sorted(by_level, key=int) or ["-"]
-        one = constant([x for lvl in by_level for x in by_level[lvl]]) if by_level else None
-        if one is not None:
-            # One number at every level (a fixed --latents): one panel says it.
-            n = sum(x is not None for lvl in by_level for x in by_level[lvl])
-            fig, (ax,) = _figure(1)
-            _number(ax, one, f"every blurry image at levels {', '.join(levels)} ({n} images)")
-            ax.set(title=f"{title} — {blurry}")
-            _save(fig, out_dir / f"{name}.png")
-            written.append(out_dir / f"{name}.png")
-            continue
-        fig, axes = _figure(len(levels))
-        for ax, lvl in zip(axes, levels, strict=True):
-            values = by_level.get(lvl, [])
-            n = sum(x is not None for x in values)
-            draw(ax, values, f"{name}_{lvl}")
-            per_image = name in ("render_psnr", "image_samples")
-            what = f"{n} images" if per_image else f"{n} blurry views"
-            label = "sharp" if per_image and lvl == "0" else f"level {lvl}"
-            panel = f"{label} ({what})" if by_level else "no blur levels (sharp only)"
-            ax.set(title=panel, xlabel=xlabel, ylabel=ylabel)
-        fig.suptitle(f"{title} — {blurry}")
-        _save(fig, out_dir / f"{name}.png")
-        written.append(out_dir / f"{name}.png")
+        written.append(_per_level_figure(stats, name, blurry, out_dir, max_bins))
+    # The factors figure follows the blur weights in the report.
+    written.insert(
+        3, _factors_figure(stats, f"{n_views} views, {n_set} settings", out_dir, max_bins)
+    )
+    return written
 
+
+# The per-level figures, in report order; latent_frames as bars of counts, the rest as
+# histograms. render_psnr and image_samples come from --target-psnr builds only: what
+# each image cost and reached (level "0" is the sharp image).
+PER_LEVEL = ("blur_weight", "latent_frames", "motion_px", "render_psnr", "image_samples")
+PER_IMAGE = ("render_psnr", "image_samples")
+
+
+def _single_figure(stats: dict, name: str, n_label: str, out_dir: Path, max_bins: int) -> Path:
+    title, xlabel, ylabel = FIGURES[name]
+    fig, (ax,) = _figure(1)
+    _hist(ax, stats[name], max_bins, _median(stats, name))
+    ax.set(title=f"{title} — {n_label}", xlabel=xlabel, ylabel=ylabel)
+    return _save(fig, out_dir / f"{name}.png")
+
+
+def _factors_figure(stats: dict, n_label: str, out_dir: Path, max_bins: int) -> Path:
     fig, axes = _figure(len(FACTORS))
     for ax, (q, title, xlabel) in zip(axes, FACTORS, strict=True):
         _hist(ax, stats[q], max_bins, _median(stats, q))
         ax.set(title=title, xlabel=xlabel, ylabel="views")
-    fig.suptitle(f"{FIGURES['factors'][0]} — {n_views} views, {n_set} settings")
-    _save(fig, out_dir / "factors.png")
-    written.insert(3, out_dir / "factors.png")
-    return written
+    fig.suptitle(f"{FIGURES['factors'][0]} — {n_label}")
+    return _save(fig, out_dir / "factors.png")
+
+
+def _per_level_figure(stats: dict, name: str, blurry: str, out_dir: Path, max_bins: int) -> Path:
+    """One panel per level, or one number for all when every level has the same."""
+    by_level = stats.get(name) or {}
+    title, xlabel, ylabel = FIGURES[name]
+    levels = sorted(by_level, key=int) or ["-"]
+    one = constant([x for lvl in by_level for x in by_level[lvl]]) if by_level else None
+    if one is not None:
+        # One number at every level (a fixed --latents): one panel says it.
+        n = sum(x is not None for lvl in by_level for x in by_level[lvl])
+        fig, (ax,) = _figure(1)
+        _number(ax, one, f"every blurry image at levels {', '.join(levels)} ({n} images)")
+        ax.set(title=f"{title} — {blurry}")
+        return _save(fig, out_dir / f"{name}.png")
+    fig, axes = _figure(len(levels))
+    for ax, lvl in zip(axes, levels, strict=True):
+        values = by_level.get(lvl, [])
+        n = sum(x is not None for x in values)
+        if name == "latent_frames":
+            _bars(ax, values)
+        else:
+            _hist(ax, values, max_bins, _median(stats, f"{name}_{lvl}"))
+        per_image = name in PER_IMAGE
+        what = f"{n} images" if per_image else f"{n} blurry views"
+        label = "sharp" if per_image and lvl == "0" else f"level {lvl}"
+        panel = f"{label} ({what})" if by_level else "no blur levels (sharp only)"
+        ax.set(title=panel, xlabel=xlabel, ylabel=ylabel)
+    fig.suptitle(f"{title} — {blurry}")
+    return _save(fig, out_dir / f"{name}.png")
 
 
 # -- CSV -------------------------------------------------------------------------------
