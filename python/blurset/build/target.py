@@ -36,6 +36,34 @@ class _Image:
     previous: tuple[int, float] | None = None  # (spent, mse) of the round before
     pilot_db: float = 0.0
 
+    @classmethod
+    def new(cls, key: tuple[int, str], frames: int, res: int) -> _Image:
+        return cls(
+            key[0], key[1], frames, (_core.Accumulator(res, res), _core.Accumulator(res, res))
+        )
+
+    def next_round(self, cfg: BuildConfig) -> int | None:
+        """Samples per frame and half this image renders next (None: it is done)."""
+        return _core.target_next_round(
+            cfg,
+            frames=self.frames,
+            spent_per_frame=self.spent,
+            rounds=self.rounds,
+            mse=None if self.estimate is None else self.estimate.mse,
+            previous=self.previous,
+        )
+
+    def rendered(self, add: int, background: tuple[float, float, float]) -> None:
+        """A round of `add` samples per frame and half is in both halves: estimate anew."""
+        if self.estimate is not None:
+            self.previous = (self.spent, float(self.estimate.mse))
+        self.spent += add
+        self.rounds += 1
+        a, b = self.halves
+        self.estimate = _core.half_noise(a.mean(), b.mean(), background=background)
+        if self.rounds == 1:
+            self.pilot_db = float(self.estimate.psnr)
+
     def record(self, target: float) -> ImageRender:
         e = self.estimate
         return {
@@ -93,70 +121,40 @@ def render_to_target(
     halves merged) as soon as it is done. Returns each image's record and the renders."""
     if cfg.target_psnr is None or cfg.cycles_samples is None:
         raise ValueError("render_to_target needs a config with target_psnr")
-    target = float(cfg.target_psnr)
     pin = int(cfg.cycles_samples)
-    res = cfg.resolution
     bg = (cfg.background[0], cfg.background[1], cfg.background[2])
     records: dict[tuple[int, str], ImageRender] = {}
     n_renders = 0
     for start in range(0, len(keys), GROUP):
-        group = {
-            k: _Image(
-                k[0],
-                k[1],
-                frames[k],
-                (_core.Accumulator(res, res), _core.Accumulator(res, res)),
-            )
-            for k in keys[start : start + GROUP]
-        }
-        while group:
-            rounds: list[ImageRound] = []
-            for key, im in list(group.items()):
-                add = _core.target_next_round(
-                    cfg,
-                    frames=im.frames,
-                    spent_per_frame=im.spent,
-                    rounds=im.rounds,
-                    mse=None if im.estimate is None else im.estimate.mse,
-                    previous=im.previous,
-                )
-                if add is None:
-                    a, b = im.halves
-                    a.merge(b)
-                    records[key] = im.record(target)
-                    finish(key, a)
-                    del group[key]
-                    continue
-                rounds.append(
-                    {
-                        "view": im.view,
-                        "level": im.level,
-                        "spent_per_frame": im.spent,
-                        "add_per_frame": add,
-                        "round": im.rounds + 1,
-                    }
-                )
-            if not rounds:
-                break
+        group = {k: _Image.new(k, frames[k], cfg.resolution) for k in keys[start : start + GROUP]}
+        while rounds := _next_rounds(group, cfg, records, finish):
             renders = plan.round_renders(exr_dir, pin, sharp_views, rounds)
-            adds: dict[tuple[int, str], int] = {
-                (r["view"], r["level"]): r["add_per_frame"] for r in rounds
-            }
-
-            worker.render(
-                renders,
-                on_frame=_adder(renders, group, adds, on_render),
-                **common,
-            )
+            adds = {(r["view"], r["level"]): r["add_per_frame"] for r in rounds}
+            worker.render(renders, on_frame=_adder(renders, group, adds, on_render), **common)
             n_renders += len(renders)
-            for key, n_add in adds.items():
-                im = group[key]
-                if im.estimate is not None:
-                    im.previous = (im.spent, float(im.estimate.mse))
-                im.spent += n_add
-                im.rounds += 1
-                a, b = im.halves
-                im.estimate = _core.half_noise(a.mean(), b.mean(), background=bg)
-                if im.rounds == 1:
-                    im.pilot_db = float(im.estimate.psnr)
+            for key, add in adds.items():
+                group[key].rendered(add, bg)
     return records, n_renders
+
+
+def _next_rounds(
+    group: dict[tuple[int, str], _Image],
+    cfg: BuildConfig,
+    records: dict[tuple[int, str], ImageRender],
+    finish: Callable[[tuple[int, str], Any], None],
+) -> list[ImageRound]:
+    """The next round of every image of `group` that needs one; an image that is done
+    leaves the group: its halves merged go to `finish`, its record to `records`."""
+    rounds: list[ImageRound] = []
+    for key, im in list(group.items()):
+        add = im.next_round(cfg)
+        if add is None:
+            a, b = im.halves
+            a.merge(b)
+            records[key] = im.record(float(cfg.target_psnr or 0.0))
+            finish(key, a)
+            del group[key]
+            continue
+        rounds.append({"view": im.view, "level": im.level, "spent_per_frame": im.spent,
+                       "add_per_frame": add, "round": im.rounds + 1})  # fmt: skip
+    return rounds
