@@ -96,6 +96,20 @@ class ObjectUnit:
         return text
 
     def _run(self) -> ObjectResult:
+        pending = self._pending()
+        if not pending:
+            return self.result
+        t0 = time.monotonic()
+        if self._admit(t0, len(pending)):
+            self._render(pending, t0)
+        shutil.rmtree(self.work, ignore_errors=True)
+        return self.result
+
+    def _pending(self) -> list[SettingJob]:
+        """The object's settings still to render; the finished ones are recorded (and
+        drawn, under --previews, if an earlier run did not), and a killed run's scratch
+        and partial settings of this object are swept: its lock is held, so no other
+        process is writing them."""
         obj, cfg, progress, result = self.obj, self.cfg, self.progress, self.result
         jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
         pending = [j for j in jobs if not self._reusable(self.out / j.name)]
@@ -104,18 +118,18 @@ class ObjectUnit:
         if cfg.previews:
             from blurset.preview import write_build_preview
 
-            # A rerun with --previews also draws the settings an earlier run finished without.
             for name in result.settings:
                 if not (self.out / name / "preview.png").exists():
                     write_build_preview(self.out / name, warn=progress.write)
-        # A killed run's scratch (log, frames) and partial settings: this object's, and
-        # its lock is held, so no other process is writing them.
         shutil.rmtree(self.work, ignore_errors=True)
         for j in jobs:
             shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
-        if not pending:
-            return result
-        t0 = time.monotonic()
+        return pending
+
+    def _admit(self, t0: float, n_pending: int) -> bool:
+        """Fetch, pre-flight and licence: False (and a failure recorded) when the object
+        cannot be rendered. Whatever a file does here costs that file only."""
+        obj, cfg = self.obj, self.cfg
         self.stage = "fetch"
         try:
             if obj.source == "objaverse":
@@ -133,16 +147,23 @@ class ObjectUnit:
                     f"{','.join(cfg.licenses or [])}"
                 )
         except Exception as e:
-            # Whatever a file does to the fetch or the pre-flight costs that file only.
             if isinstance(
                 e, objaverse_cache.FetchError | preflight.PreflightError | LicenseRefused
             ):
                 reason = str(e)
             else:
                 reason = f"{type(e).__name__}: {' '.join(str(e).split())[:300]}"
-            result.failures.append(failure_record(obj, self.stage, reason, t0, 1))
-            progress.object_failed(len(pending))
-            return result
+            self.result.failures.append(failure_record(obj, self.stage, reason, t0, 1))
+            self.progress.object_failed(n_pending)
+            return False
+        return True
+
+    def _render(self, pending: list[SettingJob], t0: float) -> None:
+        """Render the pending settings, retrying a transient worker failure up to
+        --retries times; any other failure is recorded against this object only."""
+        from blurset.worker_client import WorkerError
+
+        obj, cfg, progress, result = self.obj, self.cfg, self.progress, self.result
         deadline = t0 + cfg.object_timeout if cfg.object_timeout > 0 else None
         attempt = 0
         while pending:
@@ -151,12 +172,10 @@ class ObjectUnit:
             try:
                 self._attempt(pending, deadline)
             except Exception as e:
-                from blurset.worker_client import WorkerError
-
                 for j in pending:
                     shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
                 if STOP.is_set():  # stopping: not this object's failure; a rerun redoes it
-                    break
+                    return
                 if disk_full(self.out, e):
                     # Not this object's fault, and every next one would fail the same way.
                     shutil.rmtree(self.work, ignore_errors=True)
@@ -171,9 +190,7 @@ class ObjectUnit:
                     reason = f"{type(e).__name__}: {e} [{tb}]"
                 result.failures.append(failure_record(obj, self.stage, reason, t0, attempt))
                 progress.object_failed(len(pending))
-                break
-        shutil.rmtree(self.work, ignore_errors=True)
-        return result
+                return
 
     def sha256(self) -> str:
         """sha256 of the object's file (hashed once per unit)."""
