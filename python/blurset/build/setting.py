@@ -91,46 +91,14 @@ def render_setting(
     """Plan, render, accumulate and write one setting; returns its final directory."""
     final = out_dir(cfg) / job.name
     partial = layout.partial_dir(final)
-    shutil.rmtree(partial, ignore_errors=True)
-    exr_dir = partial / ".frames"
-    exr_dir.mkdir(parents=True)
     t0 = time.time()
-    plan = _core.plan_setting(
-        cfg,
-        uid=job.obj.uid,
-        theta0_deg=job.theta0_deg,
-        seed=_core.seed_for(cfg.seed, job.obj.uid, job.index),
-        bbox_dims=info["bbox_dims"],
-        vertices=verts,
-    )
+    plan, frames, exr_dir = _plan(job, cfg, info, verts, partial)
     sharp = cfg.sharp_views(plan.n_views)
-    # Under sample subsets every render of the build takes a block of one Cycles sequence
-    # length, so no pixel depends on what the worker rendered before (a resume equals an
-    # uninterrupted build).
-    frames = plan.renders(exr_dir, cfg.cycles_samples, sharp_views=sharp)
-    for d in cfg.level_dirs:
-        for sub in [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]:
-            (partial / d / sub).mkdir(parents=True)
     images = _Images(partial, plan.n_views, cfg, info, frames, progress)
     t_plan = time.time() - t0
-    # Cropped EXRs: only the pixels the region traced cross the disk.
-    common = {
-        "resolution": cfg.resolution,
-        "fov_deg": cfg.fov_deg,
-        "crop": True,
-        "guides": images.guides,
-    }
-    records: dict[tuple[int, str], _records.ImageRender] = {}
-    n_rendered = len(frames)
-    if cfg.target_psnr is not None:
-        records, n_rendered, t_sharp, t_blur = _render_targeted(
-            plan, cfg, worker, exr_dir, sharp, images.keys, images.finish, images.qa,
-            progress, common, len(frames),
-        )  # fmt: skip
-    else:
-        t_sharp, t_blur = _render_fixed(cfg, worker, frames, images, common)
-    if images.open:
-        raise BlursetError(f"{len(images.open)} view/level images incomplete after rendering")
+    records, n_rendered, t_sharp, t_blur = _render(
+        plan, cfg, worker, exr_dir, sharp, frames, images, progress
+    )
     # --latents auto / motion blur render fewer frames than the bar's per-setting bound.
     progress.frame_done(frames_per_setting(cfg) - len(frames))
     shutil.rmtree(exr_dir)
@@ -150,6 +118,65 @@ def render_setting(
     _write_records(job, cfg, plan, partial, info, images, timings, records, progress)
     layout.publish(partial, final)
     return final
+
+
+def _plan(
+    job: SettingJob, cfg: BuildConfig, info: dict, verts: np.ndarray, partial: Path
+) -> tuple[_core.Plan, list[_records.Render], Path]:
+    """The setting's plan and its renders, in a fresh partial folder with every level's
+    image folders; returns (plan, renders, the folder the frames' EXRs land in)."""
+    shutil.rmtree(partial, ignore_errors=True)
+    exr_dir = partial / ".frames"
+    exr_dir.mkdir(parents=True)
+    plan = _core.plan_setting(
+        cfg,
+        uid=job.obj.uid,
+        theta0_deg=job.theta0_deg,
+        seed=_core.seed_for(cfg.seed, job.obj.uid, job.index),
+        bbox_dims=info["bbox_dims"],
+        vertices=verts,
+    )
+    # Under sample subsets every render of the build takes a block of one Cycles sequence
+    # length, so no pixel depends on what the worker rendered before (a resume equals an
+    # uninterrupted build).
+    frames = plan.renders(exr_dir, cfg.cycles_samples, sharp_views=cfg.sharp_views(plan.n_views))
+    for d in cfg.level_dirs:
+        for sub in [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]:
+            (partial / d / sub).mkdir(parents=True)
+    return plan, frames, exr_dir
+
+
+def _render(
+    plan: _core.Plan,
+    cfg: BuildConfig,
+    worker: Any,
+    exr_dir: Path,
+    sharp: list[int],
+    frames: list[_records.Render],
+    images: _Images,
+    progress: Progress,
+) -> tuple[dict[tuple[int, str], _records.ImageRender], int, float, float]:
+    """Every image of the setting rendered into `images`, to a target or at the fixed
+    counts: (the images' target records, renders made, sharp seconds, blurry seconds)."""
+    # Cropped EXRs: only the pixels the region traced cross the disk.
+    common = {
+        "resolution": cfg.resolution,
+        "fov_deg": cfg.fov_deg,
+        "crop": True,
+        "guides": images.guides,
+    }
+    records: dict[tuple[int, str], _records.ImageRender] = {}
+    n_rendered = len(frames)
+    if cfg.target_psnr is not None:
+        records, n_rendered, t_sharp, t_blur = _render_targeted(
+            plan, cfg, worker, exr_dir, sharp, images.keys, images.finish, images.qa,
+            progress, common, len(frames),
+        )  # fmt: skip
+    else:
+        t_sharp, t_blur = _render_fixed(cfg, worker, frames, images, common)
+    if images.open:
+        raise BlursetError(f"{len(images.open)} view/level images incomplete after rendering")
+    return records, n_rendered, t_sharp, t_blur
 
 
 class _Images:
