@@ -114,22 +114,10 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     # same shared path) write where the driver reads.
     cfg = cfg.replace(out=str(out_dir(cfg).resolve()))
     out = out_dir(cfg)
-    if cfg.denoise == "oidn":  # a missing OIDN fails before anything is written
-        from blurset.denoise import denoiser, device_for
-
-        denoiser(device_for(cfg.device))
-    # Bad entries, unknown test objects, a missing Blender or device fail before anything
-    # is written (the demo's objects, written into OUT, are checked once they are).
-    if cfg.demo:
-        resolve_objects(list(cfg.objects), cache=objaverse(cfg))
-        everything = None
-    else:
-        everything = all_objects(cfg)
-    check_blender(cfg)
-    check_out(out, cfg)
-    slots = devices.plan_local(cfg) if cfg.executor == "local" else []
+    everything, slots = _check(cfg, out)
     out.mkdir(parents=True, exist_ok=True)
-    # Every object of the build (all shards), for the sweep's one-file-one-set rule.
+    # Every object of the build (all shards), for the sweep's one-file-one-set rule; the
+    # demo's are written into OUT now.
     every = everything if everything is not None else all_objects(cfg)
     objs = job_objects(cfg, every)
     n_settings = len(objs) * len(cfg.theta0s)
@@ -143,9 +131,41 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
             "and are skipped (each is checked first; one that is not whole is redone)"
         )
     _report_missing(objs, cfg, prog)
+    t0 = time.time()
+    new_settings = _run_objects(objs, cfg, prog, slots, out)
+    with build_lock(out):
+        summary = finalize(out, cfg, time.time() - t0)
+    return _summary(summary, objs, new_settings)
+
+
+def _check(cfg: BuildConfig, out: Path) -> tuple[list[ObjectSpec] | None, list]:
+    """Everything that can fail before a byte is written: bad entries, unknown test
+    objects, a missing Blender, device or OIDN, an OUT of another kind. Returns every
+    object of the build (None for the demo, whose objects are not written yet) and the
+    local executor's device slots."""
+    if cfg.denoise == "oidn":
+        from blurset.denoise import denoiser, device_for
+
+        denoiser(device_for(cfg.device))
+    if cfg.demo:
+        # The demo's objects are written into OUT, and checked once they are.
+        resolve_objects(list(cfg.objects), cache=objaverse(cfg))
+        everything = None
+    else:
+        everything = all_objects(cfg)
+    check_blender(cfg)
+    check_out(out, cfg)
+    slots = devices.plan_local(cfg) if cfg.executor == "local" else []
+    return everything, slots
+
+
+def _run_objects(
+    objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress, slots: list, out: Path
+) -> int:
+    """Every object rendered by the configured executor; each result's failures and
+    local record appended under the build lock as it arrives. Returns the settings new."""
     new_settings = 0
     lock = threading.Lock()
-    t0 = time.time()
 
     def on_result(res: ObjectResult) -> None:
         nonlocal new_settings
@@ -165,8 +185,11 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
             run_ray(objs, cfg, prog, on_result)
         else:
             run_local(objs, cfg, prog, on_result, slots)
-    with build_lock(out):
-        summary = finalize(out, cfg, time.time() - t0)
+    return new_settings
+
+
+def _summary(summary: dict, objs: list[ObjectSpec], new_settings: int) -> dict:
+    """The build's summary, its failures those of this run's objects (a shard's own)."""
     mine = {o.uid for o in objs}
     failed = [r for r in summary["failures"] if r["uid"] in mine]
     summary["objects"] = len(objs)
