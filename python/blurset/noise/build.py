@@ -302,66 +302,84 @@ def _write_unit(
     build: Path,
     die: bool = False,
 ) -> None:
+    """Every pending gain of `unit` written under its partial folder, each published
+    once whole; an error removes the partial folders this call started."""
     unit.dst.mkdir(parents=True, exist_ok=True)
     partials = {g: layout.partial_dir(unit.dst / gain_name(g)) for g in unit.pending}
     for p in partials.values():
         shutil.rmtree(p, ignore_errors=True)
     try:
-        variants = [
-            (partials[g], *gains_sigmas[g], _core.noise_key(unit.seed, g)) for g in unit.pending
-        ]
-        common = {
-            "frames": cfg.frames,
-            "gamma": params["gamma"],
-            "white_balance": wb,
-            "white_level": cfg.white_level,
-            "downsample": params["downsample"],
-            "clean_views": unit.clean_views,
-        }
-        # The linear EXRs are composited over the build's background, as its PNGs were.
-        background = unit.background if params["source"] == "linear" else None
-        interruptible(
-            _core.noise_write_variants,
-            unit.sources,
-            unit.names,
-            variants,
-            background=background,
-            **common,
-        )
+        _write_images(unit, partials, gains_sigmas, wb, params, cfg)
         if die:
             os.kill(os.getpid(), signal.SIGKILL)
-        # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the
-        # build's rows already hold the written resolution and focal length.
-        rows = np.repeat(unit.rows, cfg.frames, axis=0)
-        small = {f: unit.src / layout.images_dir(f) for f in params["downsample"]}
-        setting_transforms = unit.src.parent / layout.TRANSFORMS
-        files = [
-            (v, f"images/{unit.names[v * cfg.frames + k]}.png")
-            for v in range(len(unit.pngs))
-            for k in range(cfg.frames)
-        ]
         for g in unit.pending:
-            part = partials[g]
-            copy_clean(part, unit.pngs, unit.names, cfg.frames, unit.clean_views, small)
-            _core.write_poses_bounds(part / layout.POSES_BOUNDS, rows)
-            _core.write_scene_transforms(
-                part / layout.TRANSFORMS,
-                setting_transforms,
-                files,
-                test_views=unit.test_views,
-                level=unit.level,
-                gain=g,
-                test_view_images="clean" if unit.clean_views else "noisy",
-            )
-            sr, ss = gains_sigmas[g]
-            _core.write_noise_json(
-                part / layout.NOISE, _noise_json(unit, g, sr, ss, wb, params, cfg, build)
-            )
-            layout.publish(part, unit.dst / gain_name(g))
+            _write_scene_files(unit, partials[g], g, gains_sigmas[g], wb, params, cfg, build)
+            layout.publish(partials[g], unit.dst / gain_name(g))
     except BaseException:
         for p in partials.values():
             remove_tree(p)
         raise
+
+
+def _write_images(
+    unit: Unit, partials: dict[float, Path], gains_sigmas, wb, params: dict, cfg: _core.NoiseConfig
+) -> None:
+    """The noisy images of every pending gain, one pass over the unit's sources."""
+    variants = [
+        (partials[g], *gains_sigmas[g], _core.noise_key(unit.seed, g)) for g in unit.pending
+    ]
+    # The linear EXRs are composited over the build's background, as its PNGs were.
+    background = unit.background if params["source"] == "linear" else None
+    interruptible(
+        _core.noise_write_variants,
+        unit.sources,
+        unit.names,
+        variants,
+        background=background,
+        frames=cfg.frames,
+        gamma=params["gamma"],
+        white_balance=wb,
+        white_level=cfg.white_level,
+        downsample=params["downsample"],
+        clean_views=unit.clean_views,
+    )
+
+
+def _write_scene_files(
+    unit: Unit,
+    part: Path,
+    g: float,
+    sigmas: tuple[float, float],
+    wb,
+    params: dict,
+    cfg: _core.NoiseConfig,
+    build: Path,
+) -> None:
+    """What makes a gain's images an LLFF scene: the clean views' own files, the poses,
+    transforms.json and noise.json."""
+    # Every frame of a view shares its pose (a burst stays a valid LLFF scene); the
+    # build's rows already hold the written resolution and focal length.
+    rows = np.repeat(unit.rows, cfg.frames, axis=0)
+    small = {f: unit.src / layout.images_dir(f) for f in params["downsample"]}
+    files = [
+        (v, f"images/{unit.names[v * cfg.frames + k]}.png")
+        for v in range(len(unit.pngs))
+        for k in range(cfg.frames)
+    ]
+    copy_clean(part, unit.pngs, unit.names, cfg.frames, unit.clean_views, small)
+    _core.write_poses_bounds(part / layout.POSES_BOUNDS, rows)
+    _core.write_scene_transforms(
+        part / layout.TRANSFORMS,
+        unit.src.parent / layout.TRANSFORMS,
+        files,
+        test_views=unit.test_views,
+        level=unit.level,
+        gain=g,
+        test_view_images="clean" if unit.clean_views else "noisy",
+    )
+    _core.write_noise_json(
+        part / layout.NOISE, _noise_json(unit, g, *sigmas, wb, params, cfg, build)
+    )
 
 
 def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
@@ -406,9 +424,8 @@ def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
     return doc
 
 
-def run(build: Path, cfg: _core.NoiseConfig) -> int:
-    assert cfg.out is not None  # a required flag
-    out = Path(cfg.out)
+def _refuse_scene_options(cfg: _core.NoiseConfig) -> None:
+    """The options that pick a scene's images or held-out views mean nothing here."""
     if cfg.factor is not None:
         raise ConfigError("--factor: a build has no images_<F>/ directories; omit it")
     if cfg.clean_views is not None:
@@ -416,6 +433,36 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
             "--clean-views applies to a scene: a build keeps its own test views clean "
             "(splits.json), or none with --noisy-test-views"
         )
+
+
+def _write_pending(
+    units: list[Unit],
+    gains_sigmas,
+    params: dict,
+    cfg: _core.NoiseConfig,
+    build: Path,
+    fault: int | None,
+) -> int:
+    """Every unit's pending gains, a unit at a time (a count on a terminal); returns the
+    gain scenes written."""
+    written = 0
+    todo = [u for u in units if u.pending]
+    show = not cfg.quiet and sys.stderr.isatty()
+    for n, u in enumerate(todo, 1):
+        wb = _core.noise_white_balance(u.seed) if cfg.profile == "paper" else None
+        _write_unit(u, gains_sigmas, wb, params, cfg, build, die=n == fault)
+        written += len(u.pending)
+        if show:
+            print(f"\r{n}/{len(todo)} levels noised", end="", file=sys.stderr, flush=True)
+    if show and todo:
+        print(file=sys.stderr)
+    return written
+
+
+def run(build: Path, cfg: _core.NoiseConfig) -> int:
+    assert cfg.out is not None  # a required flag
+    out = Path(cfg.out)
+    _refuse_scene_options(cfg)
     gains = gains_of(cfg)
     # A build still being written (or stopped) would be noised half, with stale splits.
     complete = outputs.finished_build(build, "SCENE").complete
@@ -455,18 +502,8 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
         for u in units:
             u.pending = [g for g in gains if not layout.is_complete(u.dst / gain_name(g))]
         layout.write_text_atomic(out / layout.SPLITS, (build / layout.SPLITS).read_text())
-        written = 0
-        todo = [u for u in units if u.pending]
         skipped = sum(len(gains) - len(u.pending) for u in units)
-        show = not cfg.quiet and sys.stderr.isatty()
-        for n, u in enumerate(todo, 1):
-            wb = _core.noise_white_balance(u.seed) if cfg.profile == "paper" else None
-            _write_unit(u, gains_sigmas, wb, params, cfg, build, die=n == fault)
-            written += len(u.pending)
-            if show:
-                print(f"\r{n}/{len(todo)} levels noised", end="", file=sys.stderr, flush=True)
-        if show and todo:
-            print(file=sys.stderr)
+        written = _write_pending(units, gains_sigmas, params, cfg, build, fault)
         doc = _finalize(out, build, params, dataset)
         publish.write_manifest(out)
     print(

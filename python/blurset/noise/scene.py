@@ -13,6 +13,7 @@ from __future__ import annotations
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from blurset.noise.params import (
     table_record,
 )
 from blurset.stop import interruptible, remove_tree
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
 NOISE_SCENE = outputs.OutputKind.NOISE_SCENE
@@ -227,39 +231,56 @@ def _write_gains(
     )
     # The scene's own images_<f>/ are its clean images of that size (not with --factor).
     small = {} if cfg.factor else {f: src.path / layout.images_dir(f) for f in src.downsample}
-    for gdir, *_ in variants:
-        copy_clean(gdir, src.sources, src.names, cfg.frames, src.clean, small)
-    # Every frame of a view shares its pose: the rows repeat, so a burst stays a valid
-    # LLFF scene (N * frames images, N * frames rows).
-    out_rows = np.repeat(np.asarray(src.rows, dtype=np.float64), cfg.frames, axis=0)
-    out_rows[:, 4] = src.height
-    out_rows[:, 9] = src.width
-    out_rows[:, 14] = out_rows[:, 14] / factor
-    files = files_record([p.name for p in src.sources], src.names, cfg.frames, set(src.clean))
+    rows = _rows(src, cfg.frames, factor)
     for g, (gdir, sr, ss, _key) in zip(gains, variants, strict=True):
-        _core.write_poses_bounds(gdir / layout.POSES_BOUNDS, out_rows)
-        doc = noise_json(
-            gain=g,
-            seed=cfg.seed,
-            sigmas=(sr, ss),
-            gamma=gamma,
-            white_balance=wb,
-            white_level=cfg.white_level,
-            frames=cfg.frames,
-            profile=cfg.profile,
-            model=MODEL,
-            levels={**table_record(levels, kpn), "file": kpn.name if kpn else None},
-            source={
-                "scene": src.path.resolve().name,
-                "images": src.image_dir.name,
-                "factor": factor,
-                "resolution": [src.width, src.height],
-            },
-            downsample=src.downsample,
-            clean_views=src.clean,
-            rng="philox4x32-10, key derive_seed(seed, [fnv1a64('noise'), gain bits]), "
-            "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
-            files=files,
-        )
+        copy_clean(gdir, src.sources, src.names, cfg.frames, src.clean, small)
+        _core.write_poses_bounds(gdir / layout.POSES_BOUNDS, rows)
+        doc = _noise_doc(src, g, (sr, ss), gamma, wb, kpn, levels, cfg)
         _core.write_noise_json(gdir / layout.NOISE, doc)
     return [gdir for gdir, *_ in variants]
+
+
+def _rows(src: _Scene, frames: int, factor: int) -> np.ndarray:
+    """The pose rows of a gain scene: every frame of a view shares its pose (a burst
+    stays a valid LLFF scene: N * frames images, N * frames rows); hwf says the written
+    size."""
+    rows = np.repeat(np.asarray(src.rows, dtype=np.float64), frames, axis=0)
+    rows[:, 4] = src.height
+    rows[:, 9] = src.width
+    rows[:, 14] = rows[:, 14] / factor
+    return rows
+
+
+def _noise_doc(
+    src: _Scene,
+    g: float,
+    sigmas: tuple[float, float],
+    gamma: str,
+    wb: tuple[float, float] | None,
+    kpn: Path | None,
+    levels: NoiseTable,
+    cfg: _core.NoiseConfig,
+) -> _records.NoiseDoc:
+    return noise_json(
+        gain=g,
+        seed=cfg.seed,
+        sigmas=sigmas,
+        gamma=gamma,
+        white_balance=wb,
+        white_level=cfg.white_level,
+        frames=cfg.frames,
+        profile=cfg.profile,
+        model=MODEL,
+        levels={**table_record(levels, kpn), "file": kpn.name if kpn else None},
+        source={
+            "scene": src.path.resolve().name,
+            "images": src.image_dir.name,
+            "factor": cfg.factor or 1,
+            "resolution": [src.width, src.height],
+        },
+        downsample=src.downsample,
+        clean_views=src.clean,
+        rng="philox4x32-10, key derive_seed(seed, [fnv1a64('noise'), gain bits]), "
+        "stream view<<32|frame, word = pixel*colour_channels + c; ziggurat normals",
+        files=files_record([p.name for p in src.sources], src.names, cfg.frames, set(src.clean)),
+    )
