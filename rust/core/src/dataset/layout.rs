@@ -163,119 +163,150 @@ pub fn setting_problem(setting: &Path) -> Option<String> {
 /// lists them all, then decodes what is there. Linear EXRs are checked (count, not
 /// empty) when meta.json's `render.linear` says they were kept.
 pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
-    #[derive(serde::Deserialize)]
-    struct Render {
-        #[serde(default)]
-        linear: bool,
-    }
-    #[derive(serde::Deserialize)]
-    struct Counts {
-        views: Vec<serde::de::IgnoredAny>,
-        levels: Vec<String>,
-        /// Factors of the `images_<f>/` copies (none in builds made before them).
-        #[serde(default)]
-        downsample: Vec<u32>,
-        render: Option<Render>,
-        /// Width and height of `images/` (`images_<f>/`: each divided by f).
-        #[serde(default)]
-        resolution: Option<[u32; 2]>,
-    }
-    let mut out = Vec::new();
-    let meta = setting.join(files::META);
-    let text = match std::fs::read(&meta) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return vec![SettingProblem::new(files::META, Fault::Missing)]
-        }
-        Err(e) => {
-            return vec![SettingProblem::new(
-                files::META,
-                Fault::Unreadable(e.kind().to_string()),
-            )]
-        }
-    };
-    let Counts {
-        views,
-        levels,
-        downsample,
-        render,
-        resolution,
-    } = match serde_json::from_slice::<Counts>(&text) {
+    let counts = match SettingCounts::read(setting) {
         Ok(c) => c,
-        Err(e) => {
-            return vec![SettingProblem::new(
-                files::META,
-                Fault::Unreadable(e.to_string()),
-            )]
-        }
+        Err(p) => return vec![p],
     };
-    let views = views.len();
-    let linear = render.is_some_and(|r| r.linear);
+    let mut out = Vec::new();
     if !setting.join("transforms.json").is_file() {
         out.push(SettingProblem::new("transforms.json", Fault::Missing));
     }
-    for lvl in &levels {
+    for lvl in &counts.levels {
         let d = setting.join(lvl);
         if !d.is_dir() {
             out.push(SettingProblem::new(lvl.clone(), Fault::LevelMissing));
             continue;
         }
         let subdirs = std::iter::once((files::IMAGES.to_string(), 1))
-            .chain(downsample.iter().map(|&f| (images_dir(f), f.max(1))));
+            .chain(counts.downsample.iter().map(|&f| (images_dir(f), f.max(1))));
         for (sub, factor) in subdirs {
-            let want = resolution.map(|[w, h]| (w / factor, h / factor));
-            let images = files_with(&d.join(&sub), "png");
-            if images.len() != views {
-                let fault = Fault::Count {
-                    have: images.len(),
-                    want: views,
-                    of: "images",
-                };
-                out.push(SettingProblem::new(format!("{lvl}/{sub}"), fault));
-            }
-            for (name, p) in &images {
-                let path = format!("{lvl}/{sub}/{name}");
-                let Some(fault) = png_fault(p) else {
-                    // A whole PNG of another size than meta.json's (a valid image put in
-                    // its place) is damage too: the loaders stack the images.
-                    if let (Some((w, h)), Some(got)) = (want, png_size(p)) {
-                        if got != (w, h) {
-                            let fault = Fault::Size { got, want: (w, h) };
-                            out.push(SettingProblem::new(path, fault));
-                        }
-                    }
-                    continue;
-                };
-                out.push(SettingProblem::new(path, fault));
-            }
+            let want = counts.resolution.map(|[w, h]| (w / factor, h / factor));
+            out.extend(image_problems(
+                &d.join(&sub),
+                &format!("{lvl}/{sub}"),
+                counts.views,
+                want,
+            ));
         }
-        if linear {
-            let exrs = files_with(&d.join(files::LINEAR), "exr");
-            if exrs.len() != views {
-                let fault = Fault::Count {
-                    have: exrs.len(),
-                    want: views,
-                    of: "EXRs",
-                };
-                out.push(SettingProblem::new(format!("{lvl}/linear"), fault));
-            }
-            for (name, p) in &exrs {
-                if std::fs::metadata(p).map_or(true, |m| m.len() == 0) {
-                    out.push(SettingProblem::new(
-                        format!("{lvl}/linear/{name}"),
-                        Fault::Empty,
-                    ));
-                }
-            }
+        if counts.linear {
+            out.extend(linear_problems(&d.join(files::LINEAR), lvl, counts.views));
         }
         let npy = format!("{lvl}/poses_bounds.npy");
         match std::fs::metadata(d.join(files::POSES_BOUNDS)) {
             Ok(m) if m.is_file() => {
-                if m.len() < views as u64 * POSE_ROW_BYTES + 16 {
+                if m.len() < counts.views as u64 * POSE_ROW_BYTES + 16 {
                     out.push(SettingProblem::new(npy, Fault::Truncated));
                 }
             }
             _ => out.push(SettingProblem::new(npy, Fault::Missing)),
+        }
+    }
+    out
+}
+
+/// What the cheap check needs of a setting's meta.json.
+struct SettingCounts {
+    views: usize,
+    levels: Vec<String>,
+    downsample: Vec<u32>,
+    /// Linear EXRs were kept (`render.linear`).
+    linear: bool,
+    resolution: Option<[u32; 2]>,
+}
+
+impl SettingCounts {
+    /// meta.json's counts, or the problem of a meta.json that is missing or unreadable.
+    fn read(setting: &Path) -> std::result::Result<Self, SettingProblem> {
+        #[derive(serde::Deserialize)]
+        struct Render {
+            #[serde(default)]
+            linear: bool,
+        }
+        #[derive(serde::Deserialize)]
+        struct Counts {
+            views: Vec<serde::de::IgnoredAny>,
+            levels: Vec<String>,
+            /// Factors of the `images_<f>/` copies (none in builds made before them).
+            #[serde(default)]
+            downsample: Vec<u32>,
+            render: Option<Render>,
+            /// Width and height of `images/` (`images_<f>/`: each divided by f).
+            #[serde(default)]
+            resolution: Option<[u32; 2]>,
+        }
+        let text = match std::fs::read(setting.join(files::META)) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(SettingProblem::new(files::META, Fault::Missing))
+            }
+            Err(e) => {
+                let fault = Fault::Unreadable(e.kind().to_string());
+                return Err(SettingProblem::new(files::META, fault));
+            }
+        };
+        let c = serde_json::from_slice::<Counts>(&text)
+            .map_err(|e| SettingProblem::new(files::META, Fault::Unreadable(e.to_string())))?;
+        Ok(SettingCounts {
+            views: c.views.len(),
+            levels: c.levels,
+            downsample: c.downsample,
+            linear: c.render.is_some_and(|r| r.linear),
+            resolution: c.resolution,
+        })
+    }
+}
+
+/// The problems of one images folder (`rel`, relative to the setting): a count other
+/// than `views`, a damaged PNG, or a whole one of another size than `want`.
+fn image_problems(
+    dir: &Path,
+    rel: &str,
+    views: usize,
+    want: Option<(u32, u32)>,
+) -> Vec<SettingProblem> {
+    let mut out = Vec::new();
+    let images = files_with(dir, "png");
+    if images.len() != views {
+        let fault = Fault::Count {
+            have: images.len(),
+            want: views,
+            of: "images",
+        };
+        out.push(SettingProblem::new(rel, fault));
+    }
+    for (name, p) in &images {
+        let path = format!("{rel}/{name}");
+        if let Some(fault) = png_fault(p) {
+            out.push(SettingProblem::new(path, fault));
+        } else if let (Some(want), Some(got)) = (want, png_size(p)) {
+            // A whole PNG of another size than meta.json's (a valid image put in its
+            // place) is damage too: the loaders stack the images.
+            if got != want {
+                out.push(SettingProblem::new(path, Fault::Size { got, want }));
+            }
+        }
+    }
+    out
+}
+
+/// The problems of a level's linear/ folder: a count other than `views`, an empty EXR.
+fn linear_problems(dir: &Path, lvl: &str, views: usize) -> Vec<SettingProblem> {
+    let mut out = Vec::new();
+    let exrs = files_with(dir, "exr");
+    if exrs.len() != views {
+        let fault = Fault::Count {
+            have: exrs.len(),
+            want: views,
+            of: "EXRs",
+        };
+        out.push(SettingProblem::new(format!("{lvl}/linear"), fault));
+    }
+    for (name, p) in &exrs {
+        if std::fs::metadata(p).map_or(true, |m| m.len() == 0) {
+            out.push(SettingProblem::new(
+                format!("{lvl}/linear/{name}"),
+                Fault::Empty,
+            ));
         }
     }
     out

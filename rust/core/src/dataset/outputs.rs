@@ -248,120 +248,128 @@ pub fn claim(dir: &Path, kind: OutputKind, option: &str) -> Result<Claim> {
 /// re-run or `--overwrite` may remove. Dot-prefixed temp names of a dead process are
 /// not listed here (`layout.remove_stale_temps` removes those).
 pub fn owned_entries(dir: &Path, kind: OutputKind) -> Result<Vec<String>> {
-    let exists = |rel: &str| dir.join(rel).exists();
-    let mut out: Vec<String> = Vec::new();
+    let present = |files: &[&str]| -> Vec<String> {
+        files
+            .iter()
+            .filter(|f| dir.join(f).exists())
+            .map(|f| f.to_string())
+            .collect()
+    };
     match kind {
-        OutputKind::Build => {
-            return Err(Error::Input {
-                reason: "a build is never replaced by another command".into(),
-                path: dir.into(),
-            })
-        }
+        OutputKind::Build => Err(Error::Input {
+            reason: "a build is never replaced by another command".into(),
+            path: dir.into(),
+        }),
         OutputKind::Noise => {
-            for f in [
+            let mut out = present(&[
                 Record::NoiseDataset.file_name(),
                 Record::Splits.file_name(),
                 super::manifest::MANIFEST,
-            ] {
-                if exists(f) {
-                    out.push(f.into());
-                }
-            }
-            // <setting>/<level>/gain_<g>[.partial]: the units, nothing else of those folders.
-            for (s, sp) in list(dir)? {
-                if s.starts_with('.') || !sp.is_dir() {
-                    continue;
-                }
-                for (l, lp) in list(&sp)? {
-                    if !lp.is_dir() {
-                        continue;
-                    }
-                    for (g, gp) in list(&lp)? {
-                        if g.starts_with("gain_") && gp.is_dir() {
-                            out.push(format!("{s}/{l}/{g}"));
-                        }
-                    }
-                }
-            }
+            ]);
+            out.extend(noise_units(dir)?);
+            Ok(out)
         }
         OutputKind::NoiseScene => {
-            if exists(Record::NoiseScene.file_name()) {
-                out.push(Record::NoiseScene.file_name().into());
-            }
+            let mut out = present(&[Record::NoiseScene.file_name()]);
             for (g, gp) in list(dir)? {
                 if g.starts_with("gain_") && gp.is_dir() {
                     out.push(g);
                 }
             }
+            Ok(out)
         }
         OutputKind::Export => {
             let rec = dir.join(Record::Export.file_name());
             if !rec.is_file() {
-                return Ok(out);
+                return Ok(Vec::new());
             }
-            let doc = read_record(&rec, Record::Export)?;
-            let scenes_dir = doc
-                .get("scenes_dir")
-                .and_then(|v| v.as_str())
-                .unwrap_or(".")
-                .to_string();
-            let names: Vec<String> = doc
-                .get("scenes")
-                .and_then(|v| v.as_object())
-                .map(|m| m.keys().cloned().collect())
-                .unwrap_or_default();
-            let mut rels = Vec::new();
-            if scenes_dir != "." && !safe_rel(&scenes_dir) {
-                return Err(Error::Input {
-                    reason: format!(
-                        "export.json has a scenes_dir outside its folder: {scenes_dir:?}"
-                    ),
-                    path: rec,
-                });
-            }
-            for n in names {
-                if !safe_rel(&n) {
-                    return Err(Error::Input {
-                        reason: format!("export.json names a scene outside its folder: {n:?}"),
-                        path: rec,
-                    });
-                }
-                rels.push(if scenes_dir == "." {
-                    n
-                } else {
-                    format!("{scenes_dir}/{n}")
-                });
-            }
-            // An export stopped while replacing: the entries it was about to own as well.
-            for v in doc
-                .get("owns")
-                .and_then(|v| v.as_array())
+            let mut out: Vec<String> = export_entries(&rec)?
                 .into_iter()
-                .flatten()
-            {
-                let rel = v.as_str().unwrap_or_default();
-                if !safe_rel(rel) {
-                    return Err(Error::Input {
-                        reason: format!("export.json owns an entry outside its folder: {rel:?}"),
-                        path: rec,
-                    });
-                }
-                rels.push(rel.to_string());
-            }
-            rels.sort();
-            rels.dedup();
-            out.extend(rels.into_iter().filter(|r| exists(r)));
-            for f in ["train.txt", "test.txt", Record::Export.file_name()] {
-                if exists(f) {
-                    out.push(f.into());
-                }
-            }
+                .filter(|r| dir.join(r).exists())
+                .collect();
+            out.extend(present(&[
+                "train.txt",
+                "test.txt",
+                Record::Export.file_name(),
+            ]));
+            Ok(out)
         }
-        OutputKind::Stats => {
-            // Statistics rewrite their own files in place and never remove any.
+        // Statistics rewrite their own files in place and never remove any.
+        OutputKind::Stats => Ok(Vec::new()),
+    }
+}
+
+/// A noise output's units, `<setting>/<level>/gain_<g>[.partial]`: nothing else of
+/// those folders.
+fn noise_units(dir: &Path) -> Result<Vec<String>> {
+    let mut out = Vec::new();
+    for (s, sp) in list(dir)? {
+        if s.starts_with('.') || !sp.is_dir() {
+            continue;
+        }
+        for (l, lp) in list(&sp)? {
+            if !lp.is_dir() {
+                continue;
+            }
+            for (g, gp) in list(&lp)? {
+                if g.starts_with("gain_") && gp.is_dir() {
+                    out.push(format!("{s}/{l}/{g}"));
+                }
+            }
         }
     }
     Ok(out)
+}
+
+/// The scene folders an export's record `rec` names, and the entries a stopped export
+/// was about to own (`owns`), sorted, each once; a name that leaves the folder is
+/// refused.
+fn export_entries(rec: &Path) -> Result<Vec<String>> {
+    let doc = read_record(rec, Record::Export)?;
+    let refuse = |what: &str, name: &str| Error::Input {
+        reason: format!("export.json {what} outside its folder: {name:?}"),
+        path: rec.into(),
+    };
+    let scenes_dir = doc
+        .get("scenes_dir")
+        .and_then(|v| v.as_str())
+        .unwrap_or(".")
+        .to_string();
+    if scenes_dir != "." && !safe_rel(&scenes_dir) {
+        return Err(refuse("has a scenes_dir", &scenes_dir));
+    }
+    let names: Vec<String> = doc
+        .get("scenes")
+        .and_then(|v| v.as_object())
+        .map(|m| m.keys().cloned().collect())
+        .unwrap_or_default();
+    let mut rels = Vec::new();
+    for n in names {
+        if !safe_rel(&n) {
+            return Err(refuse("names a scene", &n));
+        }
+        rels.push(if scenes_dir == "." {
+            n
+        } else {
+            format!("{scenes_dir}/{n}")
+        });
+    }
+    // An export stopped while replacing: the entries it was about to own as well.
+    for v in doc
+        .get("owns")
+        .and_then(|v| v.as_array())
+        .into_iter()
+        .flatten()
+    {
+        let rel = v.as_str().unwrap_or_default();
+        if !safe_rel(rel) {
+            return Err(refuse("owns an entry", rel));
+        }
+        rels.push(rel.to_string());
+    }
+    rels.sort();
+    rels.dedup();
+    Ok(rels)
 }
 
 /// A single path component that stays inside its folder.

@@ -436,6 +436,23 @@ impl BuildConfig {
     pub fn validate(&self) -> Result<()> {
         self.check_fields()?;
         self.sampling().validate()?;
+        self.check_executor()?;
+        self.check_outputs()?;
+        if let Some(t) = self.target_psnr {
+            self.check_target(t)?;
+        }
+        if self.latents_auto && self.blur_method == BlurMethod::MotionBlur {
+            return Err(config_error(
+                "latents",
+                "auto: the motion_blur method has no latent frames (one render per blurry image)"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Where the build runs: the options of one executor are refused under the other.
+    fn check_executor(&self) -> Result<()> {
         if self.ray_address.is_some() && self.executor != Executor::Ray {
             return Err(config_error(
                 "ray_address",
@@ -487,6 +504,12 @@ impl BuildConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// What the build writes: image copies that divide the resolution, one way to choose
+    /// the test settings.
+    fn check_outputs(&self) -> Result<()> {
         if let Some(f) = self
             .downsample
             .iter()
@@ -507,42 +530,38 @@ impl BuildConfig {
                 "and test_objects: give either N random test settings or test objects".into(),
             ));
         }
-        if let Some(t) = self.target_psnr {
-            if self.denoise != Denoise::None {
-                return Err(config_error(
-                    "denoise",
-                    format!(
-                        "{}: target_psnr {t} dB is an estimate of an image's render noise \
-                         from its own samples, which a denoiser's output is not",
-                        self.denoise
-                    ),
-                ));
-            }
-            if self.latent_sampling != LatentSampling::Subsets {
-                return Err(config_error(
-                    "latent_sampling",
-                    format!(
-                        "{}: target_psnr renders each image as blocks of one sequence per \
-                         half (subsets)",
-                        self.latent_sampling
-                    ),
-                ));
-            }
-            if self.target_pilot_samples > self.target_max_samples {
-                return Err(config_error(
-                    "target_pilot_samples",
-                    format!(
-                        "{}: more than target_max_samples {}",
-                        self.target_pilot_samples, self.target_max_samples
-                    ),
-                ));
-            }
-        }
-        if self.latents_auto && self.blur_method == BlurMethod::MotionBlur {
+        Ok(())
+    }
+
+    /// A render target `t` (dB) needs the images' own samples, in subsets, pilot ≤ cap.
+    fn check_target(&self, t: f64) -> Result<()> {
+        if self.denoise != Denoise::None {
             return Err(config_error(
-                "latents",
-                "auto: the motion_blur method has no latent frames (one render per blurry image)"
-                    .into(),
+                "denoise",
+                format!(
+                    "{}: target_psnr {t} dB is an estimate of an image's render noise \
+                     from its own samples, which a denoiser's output is not",
+                    self.denoise
+                ),
+            ));
+        }
+        if self.latent_sampling != LatentSampling::Subsets {
+            return Err(config_error(
+                "latent_sampling",
+                format!(
+                    "{}: target_psnr renders each image as blocks of one sequence per \
+                     half (subsets)",
+                    self.latent_sampling
+                ),
+            ));
+        }
+        if self.target_pilot_samples > self.target_max_samples {
+            return Err(config_error(
+                "target_pilot_samples",
+                format!(
+                    "{}: more than target_max_samples {}",
+                    self.target_pilot_samples, self.target_max_samples
+                ),
             ));
         }
         Ok(())
