@@ -12,6 +12,9 @@ use crate::plan::config::BuildConfig;
 use crate::plan::sampling::{
     rows, LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
 };
+use crate::plan::target::{
+    TargetRule, ACCEPT_BELOW_DB, AIM_ABOVE_DB, ALPHA_RANGE, FIRST_STEP_MAX, MAX_ROUNDS,
+};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -229,21 +232,7 @@ impl RenderRecord {
     pub fn of(cfg: &BuildConfig) -> Self {
         RenderRecord {
             engine: "CYCLES".into(),
-            // The count every latent frame renders, where one count holds for all of them.
-            samples_per_latent: match cfg.samples_total {
-                Some(_) => None,
-                None if cfg.blur_budget == BlurBudget::Need
-                    && cfg.blur_method == BlurMethod::Average =>
-                {
-                    None
-                }
-                None if cfg.blur_budget == BlurBudget::Parity
-                    && cfg.blur_method == BlurMethod::Average =>
-                {
-                    (!cfg.latents_auto).then(|| cfg.sampling().samples_per_frame(cfg.latents))
-                }
-                None => Some(cfg.samples),
-            },
+            samples_per_latent: samples_per_latent(cfg),
             samples_total: cfg.samples_total,
             blur_method: cfg.blur_method,
             latents: if cfg.latents_auto {
@@ -253,32 +242,9 @@ impl RenderRecord {
             },
             sharp_samples: cfg.effective_sharp_samples(),
             latent_sampling: cfg.latent_sampling,
-            latent_sampling_is: if cfg.latent_sampling == LatentSampling::Subsets {
-                "latent frame k of a level renders the Cycles samples [sample_offset, \
-                 sample_offset + samples_per_frame) of one sequence on the view's sharp_seed; \
-                 the sharp image renders its first sharp_samples; every render is a block of \
-                 a cycles_samples-sample Cycles sequence"
-            } else {
-                "every latent frame renders the first samples_per_frame samples of its own seed"
-            }
-            .into(),
+            latent_sampling_is: latent_sampling_is(cfg.latent_sampling).into(),
             blur_budget: cfg.blur_budget,
-            blur_budget_is: if cfg.blur_budget == BlurBudget::Need {
-                format!(
-                    "a blurry image of m >= 2 latent frames renders the sample budget times \
-                     1 + (m^{PARITY_EXPONENT} - 1) * min(1, motion_px / m / \
-                     {NEED_SATURATION_PX}) (rounded up per frame): the parity factor bought \
-                     by its screen motion between frames; sharp_samples is the budget itself"
-                )
-            } else if cfg.blur_budget == BlurBudget::Parity {
-                format!(
-                    "a blurry image of m >= 2 latent frames renders the sample budget times \
-                     m^{PARITY_EXPONENT} (rounded up per frame), so it carries no more render \
-                     noise than its sharp image; sharp_samples is the budget itself"
-                )
-            } else {
-                "a blurry image of m latent frames renders the sample budget split over them".into()
-            },
+            blur_budget_is: blur_budget_is(cfg.blur_budget),
             denoise: cfg.denoise,
             denoise_is: if cfg.denoise == Denoise::Oidn {
                 "Open Image Denoise (RT filter, quality high, hdr, albedo and normal guides \
@@ -293,23 +259,7 @@ impl RenderRecord {
             cycles_samples: cfg.cycles_samples(),
             preset: cfg.preset,
             target_psnr_db: cfg.target_psnr,
-            target_is: match cfg.target() {
-                Some(t) => format!(
-                    "each image (the sharp one and each blurry one) renders in rounds as two \
-                     halves on independent seeds, each half's frames taking consecutive \
-                     blocks of one {}-sample Cycles sequence; after a pilot of {} samples \
-                     its render noise is MSE(half 1, half 2) / 4 on its object pixels, the \
-                     samples it still needs are extrapolated as samples^-alpha (alpha 1 and \
-                     at most 8x the samples from the pilot alone, alpha fitted in [1, 2] \
-                     from two estimates), and it stops once the estimate is within 0.25 dB \
-                     of the target (at most {} samples, 6 rounds); the image is the mean \
-                     of its halves",
-                    t.sequence(),
-                    t.pilot_samples,
-                    t.max_samples
-                ),
-                None => String::new(),
-            },
+            target_is: cfg.target().map(|t| target_is(&t)).unwrap_or_default(),
             adaptive_sampling: false,
             light_paths: None,
             device: None,
@@ -320,6 +270,66 @@ impl RenderRecord {
             linear: cfg.write_linear,
         }
     }
+}
+
+/// The count every latent frame renders, where one count holds for all of them.
+fn samples_per_latent(cfg: &BuildConfig) -> Option<u32> {
+    let average = cfg.blur_method == BlurMethod::Average;
+    match cfg.samples_total {
+        Some(_) => None,
+        None if cfg.blur_budget == BlurBudget::Need && average => None,
+        None if cfg.blur_budget == BlurBudget::Parity && average => {
+            (!cfg.latents_auto).then(|| cfg.sampling().samples_per_frame(cfg.latents))
+        }
+        None => Some(cfg.samples),
+    }
+}
+
+fn latent_sampling_is(sampling: LatentSampling) -> &'static str {
+    if sampling == LatentSampling::Subsets {
+        "latent frame k of a level renders the Cycles samples [sample_offset, \
+         sample_offset + samples_per_frame) of one sequence on the view's sharp_seed; \
+         the sharp image renders its first sharp_samples; every render is a block of \
+         a cycles_samples-sample Cycles sequence"
+    } else {
+        "every latent frame renders the first samples_per_frame samples of its own seed"
+    }
+}
+
+fn blur_budget_is(budget: BlurBudget) -> String {
+    match budget {
+        BlurBudget::Need => format!(
+            "a blurry image of m >= 2 latent frames renders the sample budget times \
+             1 + (m^{PARITY_EXPONENT} - 1) * min(1, motion_px / m / \
+             {NEED_SATURATION_PX}) (rounded up per frame): the parity factor bought \
+             by its screen motion between frames; sharp_samples is the budget itself"
+        ),
+        BlurBudget::Parity => format!(
+            "a blurry image of m >= 2 latent frames renders the sample budget times \
+             m^{PARITY_EXPONENT} (rounded up per frame), so it carries no more render \
+             noise than its sharp image; sharp_samples is the budget itself"
+        ),
+        _ => "a blurry image of m latent frames renders the sample budget split over them".into(),
+    }
+}
+
+/// The rule of a target build in words, its numbers from the rule's own constants.
+fn target_is(t: &TargetRule) -> String {
+    let (alpha_lo, alpha_hi) = ALPHA_RANGE;
+    format!(
+        "each image (the sharp one and each blurry one) renders in rounds as two halves on \
+         independent seeds, each half's frames taking consecutive blocks of one {}-sample \
+         Cycles sequence; after a pilot of {} samples its render noise is MSE(half 1, \
+         half 2) / 4 on its object pixels, the samples it still needs are extrapolated as \
+         samples^-alpha (alpha {alpha_hi} and at most {FIRST_STEP_MAX}x the samples from the \
+         pilot alone, alpha fitted in [{alpha_lo}, {alpha_hi}] from two estimates, aimed \
+         {AIM_ABOVE_DB} dB above the target), and it stops once the estimate is within \
+         {ACCEPT_BELOW_DB} dB of the target (at most {} samples, {MAX_ROUNDS} rounds); the \
+         image is the mean of its halves",
+        t.sequence(),
+        t.pilot_samples,
+        t.max_samples
+    )
 }
 
 /// A latent frame as meta.json records it (its camera matrix follows from r, φ, θ).
