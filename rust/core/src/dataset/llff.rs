@@ -131,44 +131,12 @@ pub fn read_poses_bounds(path: &Path) -> Result<Vec<PoseRow>> {
 /// The rows of a `poses_bounds.npy` held in memory; the error is the reason, for the
 /// caller to pair with its file. Arbitrary bytes give an error, never a panic (fuzzed).
 pub fn parse_poses_bounds(bytes: &[u8]) -> std::result::Result<Vec<PoseRow>, String> {
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        return Err("not a .npy file".into());
-    }
-    let (hlen, hstart): (usize, usize) = match bytes[6] {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-            12,
-        ),
-        v => return Err(format!("unsupported .npy version {v}")),
-    };
-    let header = hstart
-        .checked_add(hlen)
-        .and_then(|end| bytes.get(hstart..end))
-        .and_then(|h| std::str::from_utf8(h).ok())
-        .ok_or("truncated header")?;
+    let (header, data) = npy_parts(bytes)?;
     let descr = header_field(header, "descr").ok_or("no descr")?;
     if header_field(header, "fortran_order") == Some("True") {
         return Err("Fortran order is not supported".into());
     }
-    let shape: Vec<usize> = header_field(header, "shape")
-        .ok_or("no shape")?
-        .split(',')
-        .filter(|s| !s.trim().is_empty())
-        .map(|s| s.trim().parse::<usize>())
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|_| "unreadable shape")?;
-    if shape.len() != 2 || shape[1] != 17 {
-        return Err(format!("shape {shape:?}, expected (N, 17)"));
-    }
-    let n = shape[0];
-    limits::check(
-        &format!("shape ({n}, 17), rows"),
-        n as u64,
-        MAX_POSE_ROWS as u64,
-        "MAX_POSE_ROWS",
-    )?;
-    let data = &bytes[hstart + hlen..];
+    let n = pose_rows_of(header)?;
     let width = match descr {
         "<f8" => 8,
         "<f4" => 4,
@@ -201,6 +169,49 @@ pub fn parse_poses_bounds(bytes: &[u8]) -> std::result::Result<Vec<PoseRow>, Str
         rows.push(row);
     }
     Ok(rows)
+}
+
+/// A .npy file's header text and the bytes after it.
+fn npy_parts(bytes: &[u8]) -> std::result::Result<(&str, &[u8]), String> {
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        return Err("not a .npy file".into());
+    }
+    let (hlen, hstart): (usize, usize) = match bytes[6] {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        2 | 3 if bytes.len() >= 12 => (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        ),
+        v => return Err(format!("unsupported .npy version {v}")),
+    };
+    let header = hstart
+        .checked_add(hlen)
+        .and_then(|end| bytes.get(hstart..end))
+        .and_then(|h| std::str::from_utf8(h).ok())
+        .ok_or("truncated header")?;
+    Ok((header, &bytes[hstart + hlen..]))
+}
+
+/// N of a header's shape (N, 17), within [`MAX_POSE_ROWS`].
+fn pose_rows_of(header: &str) -> std::result::Result<usize, String> {
+    let shape: Vec<usize> = header_field(header, "shape")
+        .ok_or("no shape")?
+        .split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| s.trim().parse::<usize>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| "unreadable shape")?;
+    if shape.len() != 2 || shape[1] != 17 {
+        return Err(format!("shape {shape:?}, expected (N, 17)"));
+    }
+    let n = shape[0];
+    limits::check(
+        &format!("shape ({n}, 17), rows"),
+        n as u64,
+        MAX_POSE_ROWS as u64,
+        "MAX_POSE_ROWS",
+    )?;
+    Ok(n)
 }
 
 fn c2w_from_rows(rows: &[[f64; 4]; 4]) -> DMat4 {
@@ -372,6 +383,36 @@ pub fn write_setting_poses(
     for level in level_dirs {
         write_poses_bounds(&setting_dir.join(level).join("poses_bounds.npy"), &rows)?;
     }
+    let doc = setting_transforms(plan, level_dirs);
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::Value(e.to_string()))?;
+    write_atomic(&setting_dir.join("transforms.json"), text.as_bytes())?;
+    let n = plan.views.len();
+    let files: Vec<(usize, String)> = plan
+        .views
+        .iter()
+        .map(|v| (v.index, format!("images/{}", image_name(v.index, n))))
+        .collect();
+    for level in level_dirs {
+        let fields = SceneFields {
+            level: level.clone(),
+            gain: None,
+            test_view_images: (level != "sharp")
+                .then(|| if sharp_test_views { "sharp" } else { "blurry" }.to_string()),
+        };
+        write_scene_doc(
+            &setting_dir.join(level).join("transforms.json"),
+            &doc,
+            &files,
+            test_views,
+            &fields,
+        )?;
+    }
+    Ok(())
+}
+
+/// The setting's transforms.json: the camera, and every view's pose at p with its
+/// image in every level.
+fn setting_transforms(plan: &SettingPlan, level_dirs: &[String]) -> serde_json::Value {
     let [w, h] = plan.resolution;
     let n = plan.views.len();
     let frames: Vec<serde_json::Value> = plan
@@ -394,7 +435,7 @@ pub fn write_setting_poses(
         })
         .collect();
     let fov = plan.fov_deg.to_radians();
-    let doc = serde_json::json!({
+    serde_json::json!({
         "convention": "OpenGL camera-to-world (x right, y up, z backwards); world +Z up; object centred at the origin, largest side 1",
         "camera_angle_x": fov,
         "camera_angle_y": fov,
@@ -406,30 +447,7 @@ pub fn write_setting_poses(
         "h": h,
         "levels": level_dirs.iter().map(|l| (l.clone(), serde_json::Value::from(format!("{l}/images")))).collect::<serde_json::Map<_, _>>(),
         "frames": frames,
-    });
-    let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::Value(e.to_string()))?;
-    write_atomic(&setting_dir.join("transforms.json"), text.as_bytes())?;
-    let files: Vec<(usize, String)> = plan
-        .views
-        .iter()
-        .map(|v| (v.index, format!("images/{}", image_name(v.index, n))))
-        .collect();
-    for level in level_dirs {
-        let fields = SceneFields {
-            level: level.clone(),
-            gain: None,
-            test_view_images: (level != "sharp")
-                .then(|| if sharp_test_views { "sharp" } else { "blurry" }.to_string()),
-        };
-        write_scene_doc(
-            &setting_dir.join(level).join("transforms.json"),
-            &doc,
-            &files,
-            test_views,
-            &fields,
-        )?;
-    }
-    Ok(())
+    })
 }
 
 #[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
