@@ -36,6 +36,10 @@ def check_downsample(factors: list[int]) -> None:
 def preset_values(name: str) -> dict[str, bool | int | float | str]:
     """What preset `name` sets, option name -> value (ValueError: no such preset)."""
 
+def target_reached(config: BuildConfig, mse: float) -> bool:
+    """Whether an image whose render noise (MSE on its object pixels) is `mse` is at the
+    config's target: within 0.25 dB under it, where its rounds stop."""
+
 def target_next_round(
     config: BuildConfig,
     *,

@@ -64,7 +64,7 @@ class _Image:
         if self.rounds == 1:
             self.pilot_db = float(self.estimate.psnr)
 
-    def record(self, target: float) -> ImageRender:
+    def record(self, cfg: BuildConfig) -> ImageRender:
         e = self.estimate
         return {
             "samples": 2 * self.frames * self.spent,
@@ -72,7 +72,7 @@ class _Image:
             "render_psnr_db": round(float(e.psnr), 3),
             "pilot_psnr_db": round(self.pilot_db, 3),
             "coverage": round(float(e.coverage), 6),
-            "reached": bool(e.psnr >= target - 0.25),
+            "reached": _core.target_reached(cfg, float(e.mse)),
         }
 
 
@@ -151,7 +151,7 @@ def _next_rounds(
         if add is None:
             a, b = im.halves
             a.merge(b)
-            records[key] = im.record(float(cfg.target_psnr or 0.0))
+            records[key] = im.record(cfg)
             finish(key, a)
             del group[key]
             continue

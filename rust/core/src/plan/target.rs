@@ -67,6 +67,12 @@ impl TargetRule {
         10f64.powf(-self.target_psnr_db / 10.0)
     }
 
+    /// Whether an image whose render noise is `mse` is at the target: within
+    /// [`ACCEPT_BELOW_DB`] under it (its record's `reached`, and where its rounds stop).
+    pub fn reached(&self, mse: f64) -> bool {
+        mse <= self.target_mse() * 10f64.powf(ACCEPT_BELOW_DB / 10.0)
+    }
+
     /// The Cycles sequence every render of a target-driven build takes its blocks of.
     pub fn sequence(&self) -> u32 {
         (self.max_samples / 2).max(1)
@@ -104,7 +110,7 @@ impl TargetRule {
         if s.rounds >= MAX_ROUNDS || s.spent_per_frame >= cap || !mse.is_finite() {
             return None;
         }
-        if mse <= target * 10f64.powf(ACCEPT_BELOW_DB / 10.0) {
+        if self.reached(mse) {
             return None;
         }
         let aim = target * 10f64.powf(-AIM_ABOVE_DB / 10.0);
@@ -274,6 +280,29 @@ mod tests {
         };
         let one_over_n = (32.0 * 1e-3 / (1e-4 * 10f64.powf(-0.02))).ceil() as u32;
         assert_eq!(RULE.next_round(&flat), Some(one_over_n - 32));
+    }
+
+    #[test]
+    fn reached_is_where_the_rounds_stop() {
+        let mse_at = |db: f64| 10f64.powf(-db / 10.0);
+        let target = RULE.target_psnr_db;
+        assert!(RULE.reached(mse_at(target + 3.0)));
+        assert!(RULE.reached(mse_at(target - ACCEPT_BELOW_DB + 0.01)));
+        assert!(!RULE.reached(mse_at(target - ACCEPT_BELOW_DB - 0.01)));
+        for db in [target - 0.26, target - 0.24, target + 1.0] {
+            let s = ImageState {
+                frames: 2,
+                spent_per_frame: 8,
+                rounds: 1,
+                mse: Some(mse_at(db)),
+                previous: None,
+            };
+            assert_eq!(
+                RULE.next_round(&s).is_none(),
+                RULE.reached(mse_at(db)),
+                "{db}"
+            );
+        }
     }
 
     #[test]
