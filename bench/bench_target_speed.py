@@ -216,6 +216,7 @@ def measure_model(glb: Path, work: Path) -> dict:
         "paper_build_s": round(paper_s, 2),
         "paper_settings_per_hour": round(per_hour(paper_s), 4),
         "paper": paper,
+        "continuous": {"max_gap_px": CONTINUOUS_GHOST_PX, "samples": CONTINUOUS_SAMPLES},
     }
     builds = [paper]
     runs = [("worst", {"preset": "balanced", "target_psnr": round(min(measured), 2)}),
@@ -236,6 +237,10 @@ def measure_model(glb: Path, work: Path) -> dict:
             **_against_continuous(setting, cont),
         }
         entry["sample_ratio"] = round(paper_work["samples_per_view"] / entry["samples_per_view"], 3)
+        # The ghost bound the preset promises, as the build's own plan recorded it.
+        entry["max_gap_px"] = round(
+            max(lv["max_gap_px"] for v in meta["views"] for lv in v["levels"].values()), 2
+        )
         row["at_floor" if what == "floor" else f"at_paper_{what}"] = entry
         builds.append(entry)
     # Two unknowns (per call, per sample): a fit needs more builds than that.

@@ -789,8 +789,10 @@ def speed_lines(rs: list[dict]) -> list[str]:
     if not quality:
         return out
     out += [
-        "Each build against the continuous blur (64 stratified frames × 16 samples; the",
-        "sharp image at 1,024 samples), on object pixels: the blurry images' mean and worst",
+        "Each build against the continuous blur (stratified frames at most 0.5 px apart on",
+        "screen sharing 1,024 samples, in rows marked *; in the others, measured before, 64",
+        "stratified frames × 16 samples; the sharp image at 1,024 samples), on object",
+        "pixels: the blurry images' mean and worst",
         "PSNR, the sharp images' mean, and the detail ratio (high-frequency energy over the",
         "reference's, blurry / sharp: under 1 is texture smoothed away, over 1 noise on top);",
         "then the work per view: samples, render calls (a target image renders each frame",
@@ -806,7 +808,7 @@ def speed_lines(rs: list[dict]) -> list[str]:
             if not b:
                 continue  # (a run that left this build out: a 512 px run on 2 cores)
             out.append(
-                f"| `{r.get('model')}`{_at(r)} | {label} | "
+                f"| `{r.get('model')}`{_at(r)}{'*' if r.get('continuous') else ''} | {label} | "
                 f"{_fmt(b.get('blur_vs_continuous_mean_db'))} / "
                 f"{_fmt(b.get('blur_vs_continuous_worst_db'))} | "
                 f"{_fmt(b.get('sharp_vs_continuous_mean_db'))} | "
