@@ -63,6 +63,23 @@ def test_an_accuracy_preset_keeps_its_ghost_bound_at_512_px():
     assert _cfg(preset="floor", latents_max=34).latents_max == 34
 
 
+def test_a_build_says_when_latents_max_breaks_the_ghost_bound(tmp_path, standin_blender):
+    """--latents auto with a cap below what the motion needs: every setting says so on the
+    command line (the gaps were only in meta.json); under a preset, no cap and no word."""
+    from tests.conftest import standin_build
+
+    capped = standin_build(tmp_path / "a", standin_blender, "--latents", "auto",
+                           "--latents-max", "2", "--levels", "4", "--resolution", "96")  # fmt: skip
+    said = [ln for ln in capped.stderr.splitlines() if "--latents-max 2 caps them" in ln]
+    assert len(said) == 6, capped.stderr  # the demo's 3 objects x 2 settings
+    meta = json.loads(next((tmp_path / "a").glob("demo_box_000/meta.json")).read_text())
+    assert max(lv["max_gap_px"] for v in meta["views"] for lv in v["levels"].values()) > 1.0
+    free = run_cli("build", "--demo", "--views", "4", "--levels", "4", "--resolution", "96",
+                   "--preset", "fast", "--quiet", "--blender", str(standin_blender),
+                   "--out", str(tmp_path / "b"))  # fmt: skip
+    assert "caps them" not in free.stderr
+
+
 def test_a_preset_in_toml_and_any_case(tmp_path):
     from blurset.config import load_toml
 

@@ -93,6 +93,7 @@ def render_setting(
     partial = layout.partial_dir(final)
     t0 = time.time()
     plan, frames, exr_dir = _plan(job, cfg, info, verts, partial)
+    _warn_ghosts(plan, cfg, job.name, progress)
     sharp = cfg.sharp_views(plan.n_views)
     images = _Images(partial, plan.n_views, cfg, info, frames, progress)
     t_plan = time.time() - t0
@@ -118,6 +119,26 @@ def render_setting(
     _write_records(job, cfg, plan, partial, info, images, timings, records, progress)
     layout.publish(partial, final)
     return final
+
+
+def _warn_ghosts(plan: _core.Plan, cfg: BuildConfig, name: str, progress: Progress) -> None:
+    """Say when --latents-max kept latents auto from its ghost bound: the gaps are in
+    meta.json, but a user who asked for the bound should not have to look for them."""
+    if not cfg.latents_auto:
+        return
+    over = [
+        (lp["max_gap_px"], v["index"], lvl)
+        for v in plan.to_dict()["views"]
+        for lvl, lp in v["levels"].items()
+        if lp["max_gap_px"] > cfg.max_ghost_px
+    ]
+    if over:
+        gap, view, lvl = max(over)
+        progress.write(
+            f"{name}: {len(over)} blurry images have latent frames more than --max-ghost-px "
+            f"{cfg.max_ghost_px:g} apart (up to {gap:.1f} px, level {lvl} of view {view}): "
+            f"--latents-max {cfg.latents_max} caps them (meta.json records max_gap_px)"
+        )
 
 
 def _plan(
