@@ -266,14 +266,7 @@ fn image_problems(
 ) -> Vec<SettingProblem> {
     let mut out = Vec::new();
     let images = files_with(dir, "png");
-    if images.len() != views {
-        let fault = Fault::Count {
-            have: images.len(),
-            want: views,
-            of: "images",
-        };
-        out.push(SettingProblem::new(rel, fault));
-    }
+    out.extend(count_problem(rel.into(), images.len(), views, "images"));
     for (name, p) in &images {
         let path = format!("{rel}/{name}");
         if let Some(fault) = png_fault(p) {
@@ -289,18 +282,26 @@ fn image_problems(
     out
 }
 
+/// A folder (`rel`) holding `have` files of a kind where there are `want` views.
+fn count_problem(
+    rel: String,
+    have: usize,
+    want: usize,
+    of: &'static str,
+) -> Option<SettingProblem> {
+    (have != want).then(|| SettingProblem::new(rel, Fault::Count { have, want, of }))
+}
+
 /// The problems of a level's linear/ folder: a count other than `views`, an empty EXR.
 fn linear_problems(dir: &Path, lvl: &str, views: usize) -> Vec<SettingProblem> {
     let mut out = Vec::new();
     let exrs = files_with(dir, "exr");
-    if exrs.len() != views {
-        let fault = Fault::Count {
-            have: exrs.len(),
-            want: views,
-            of: "EXRs",
-        };
-        out.push(SettingProblem::new(format!("{lvl}/linear"), fault));
-    }
+    out.extend(count_problem(
+        format!("{lvl}/linear"),
+        exrs.len(),
+        views,
+        "EXRs",
+    ));
     for (name, p) in &exrs {
         if std::fs::metadata(p).map_or(true, |m| m.len() == 0) {
             out.push(SettingProblem::new(
