@@ -19,8 +19,9 @@ BLURSET_BENCH_SPEED_RES px, every view rendering its blurry images:
 The rows say what each image reached (the paper's measured, the targets' estimated:
 worst, 5th percentile, median). Every build is also scored against the continuous blur
 (stratified frames no more than 0.5 px apart, half the presets' ghost bound, sharing
-1,024 samples; the sharp image at 1,024 samples; other seeds), on object pixels: PSNR of the blurry and sharp images (mean and worst) and the detail ratio
-(high-frequency energy over the reference's; < 1 smoothed). Where the time goes: each
+1,024 samples; the sharp image at 1,024 samples; other seeds), on object pixels: PSNR of
+the blurry and sharp images (mean and worst) and the detail ratio (high-frequency
+energy over the reference's; < 1 smoothed). Where the time goes: each
 build's samples and render calls per view (a target image renders each frame once per
 half and round), and per model a least-squares fit of seconds = a x calls + b x samples
 over its four builds.
@@ -100,14 +101,19 @@ def _render(w, frames: list, samples: int, cfg) -> np.ndarray:
     return acc.mean()
 
 
+def continuous_config(glb: Path, work: Path):
+    """The build config whose plan gives the continuous reference's frames and samples."""
+    return _config(work / "unused", glb, latents_auto=True, latent_positions="stratified",
+                   max_ghost_px=CONTINUOUS_GHOST_PX, latents_max=4096,
+                   samples_total=CONTINUOUS_SAMPLES, blur_budget="flat")  # fmt: skip
+
+
 def _continuous(glb: Path, work: Path) -> dict:
     """Per (view, level dir): the continuous blur of each level and the sharp view at as
     many samples (premultiplied linear RGBA), on seeds no build uses."""
     from blurset.worker_client import Worker
 
-    cfg = _config(work / "unused", glb, latents_auto=True, latent_positions="stratified",
-                  max_ghost_px=CONTINUOUS_GHOST_PX, latents_max=4096,
-                  samples_total=CONTINUOUS_SAMPLES, blur_budget="flat")  # fmt: skip
+    cfg = continuous_config(glb, work)
     refs = {}
     with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
         plan = _plan(cfg, glb, w, work)

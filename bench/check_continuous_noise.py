@@ -32,16 +32,13 @@ def main() -> dict:
     out = {}
     with tempfile.TemporaryDirectory() as d:
         work = Path(d)
-        cfg = b._config(work / "unused", GLB, latents_auto=True, latent_positions="stratified",
-                        max_ghost_px=b.CONTINUOUS_GHOST_PX, latents_max=4096,
-                        samples_total=b.CONTINUOUS_SAMPLES, blur_budget="flat")  # fmt: skip
+        cfg = b.continuous_config(GLB, work)
         with Worker(timeout=7200, workdir=work / "s", device="CPU") as w:
             plan = b._plan(cfg, GLB, w, work)
-            v = plan.to_dict()["views"][0]
             for lvl in (1, 4):
                 refs = []
                 for salt in (b.CONT_SALT, 0x1234567):
-                    frames = plan.level_renders(v["index"], lvl, str(work / "c"))
+                    frames = plan.level_renders(0, lvl, str(work / "c"))
                     for f in frames:
                         f["seed"] = (f["seed"] ^ salt) & 0x7FFFFFFF
                     refs.append(b._render(w, frames, 1, cfg))

@@ -71,6 +71,8 @@ def _field(entry: dict, node: ast.AST) -> object:
         return entry[node.id]
     if isinstance(node, ast.Attribute):
         return _field(entry, node.value)[node.attr]  # type: ignore[index]
+    if isinstance(node, ast.Subscript):  # a list field's item: range[0]
+        return _field(entry, node.value)[_field(entry, node.slice)]  # type: ignore[index]
     if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)):
         return node.value
     if isinstance(node, ast.BinOp) and type(node.op) in _OPS:

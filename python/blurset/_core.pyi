@@ -892,6 +892,9 @@ class Plan:
     def resolution(self) -> list[int]: ...
     @property
     def fov_deg(self) -> float: ...
+    def ghost_overruns(self) -> list[tuple[int, str, float]]:
+        """The blurry images latents auto left above its ghost bound (`latents_max`
+        stopped it): (view, level, largest gap px); none without latents auto."""
     def to_dict(self) -> rec.SettingPlan:
         """The whole plan as a dict (views[].levels["<l>"].latent_frames …), for reading."""
     def level(self, view: int, level: int) -> rec.LevelPlan:

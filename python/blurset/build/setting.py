@@ -124,16 +124,8 @@ def render_setting(
 def _warn_ghosts(plan: _core.Plan, cfg: BuildConfig, name: str, progress: Progress) -> None:
     """Say when --latents-max kept latents auto from its ghost bound: the gaps are in
     meta.json, but a user who asked for the bound should not have to look for them."""
-    if not cfg.latents_auto:
-        return
-    over = [
-        (lp["max_gap_px"], v["index"], lvl)
-        for v in plan.to_dict()["views"]
-        for lvl, lp in v["levels"].items()
-        if lp["max_gap_px"] > cfg.max_ghost_px
-    ]
-    if over:
-        gap, view, lvl = max(over)
+    if over := plan.ghost_overruns():
+        view, lvl, gap = max(over, key=lambda o: o[2])
         progress.write(
             f"{name}: {len(over)} blurry images have latent frames more than --max-ghost-px "
             f"{cfg.max_ghost_px:g} apart (up to {gap:.1f} px, level {lvl} of view {view}): "

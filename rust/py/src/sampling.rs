@@ -43,6 +43,12 @@ impl Plan {
         to_py(py, &self.0)
     }
 
+    /// The blurry images latents auto left above its ghost bound (`latents_max` stopped
+    /// it): (view, level, largest gap px), none without latents auto.
+    fn ghost_overruns(&self) -> Vec<(usize, String, f64)> {
+        self.0.ghost_overruns()
+    }
+
     /// One view's plan of one blur level as a dict (w_l, latents, motion_px, …).
     fn level<'py>(&self, py: Python<'py>, view: usize, level: u32) -> PyResult<Bound<'py, PyAny>> {
         to_py(py, self.level_plan(view, level)?)

@@ -467,6 +467,26 @@ pub struct SettingPlan {
     pub object_box: Option<[[f64; 3]; 2]>,
 }
 
+impl SettingPlan {
+    /// The blurry images whose latent frames are further apart than `max_ghost_px` under
+    /// latents auto (`latents_max` stopped the search first), as (view, level, gap px):
+    /// the gap rule of [`latent_positions`], asked of the finished plan.
+    pub fn ghost_overruns(&self) -> Vec<(usize, String, f64)> {
+        if !self.config.latents_auto {
+            return Vec::new();
+        }
+        self.views
+            .iter()
+            .flat_map(|v| {
+                v.levels
+                    .iter()
+                    .filter(|(_, lp)| lp.max_gap_px > self.config.max_ghost_px)
+                    .map(move |(l, lp)| (v.index, l.clone(), lp.max_gap_px))
+            })
+            .collect()
+    }
+}
+
 /// What one view draws before the object's depth is known.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewSample {
