@@ -308,8 +308,13 @@ def setup_scene(threads: int) -> None:
     # Render regions (the core's plan/region.rs) assume rays land at most this far from
     # their pixel: 1.5 px wide, i.e. 0.75 px around the pixel centre.
     c.pixel_filter_type = "BLACKMAN_HARRIS"
-    c.filter_width = 1.5
+    c.filter_width = FILTER_PX
 
+
+# The pixel filter of every colour render (Blackman-Harris, px), and of a geometry
+# render (set_passes): Cycles' smallest, so its one sample is at the pixel's centre.
+FILTER_PX = 1.5
+GEOMETRY_FILTER_PX = 0.01
 
 # The light paths of every object before issue 15 (`--light-paths fixed`).
 FIXED_BOUNCES = {
@@ -350,19 +355,30 @@ def set_light_paths(doc: dict, mode: str) -> dict:
     return {"mode": mode, **needs, "bounces": bounces}
 
 
-def set_guides(on: bool) -> None:
-    """Write Cycles' denoising guide passes (Denoising Albedo, Denoising Normal) beside
-    the combined pass, in a multi-layer EXR (the driver averages them with the colour and
-    denoises the mean once: issue 28); off: the single RGBA layer of every build before.
+def set_passes(guides: bool, geometry: bool = False) -> None:
+    """The passes every EXR of a render command holds beside the combined RGBA, in a
+    multi-layer EXR; neither: the single RGBA layer of every build before them.
+
+    guides: Cycles' denoising guide passes (Denoising Albedo, Denoising Normal; the driver
+    averages them with the colour and denoises the mean once: issue 28).
+    geometry: the Depth (along the camera's viewing axis) and Normal (world) data passes
+    of the surface each pixel's centre sees (issue 35). Cycles writes data passes from a
+    pixel's first sample only, so a geometry render takes one sample with a pixel filter
+    of GEOMETRY_FILTER_PX: that sample sits at the pixel's centre, and an edge pixel's
+    depth is one surface's, never a blend of the two sides.
     The EXR's depth and codec stay what they were."""
     scene = bpy.context.scene
     img = scene.render.image_settings
     codec, depth = img.exr_codec, img.color_depth
-    scene.view_layers[0].cycles.denoising_store_passes = bool(on)
+    layer = scene.view_layers[0]
+    layer.cycles.denoising_store_passes = bool(guides)
+    layer.use_pass_z = layer.use_pass_normal = bool(geometry)
+    scene.cycles.filter_width = GEOMETRY_FILTER_PX if geometry else FILTER_PX
+    multi = bool(guides or geometry)
     if hasattr(img, "media_type"):  # Blender >= 5.0 groups formats by media type
-        img.media_type = "MULTI_LAYER_IMAGE" if on else "IMAGE"
-    img.file_format = "OPEN_EXR_MULTILAYER" if on else "OPEN_EXR"
-    if not on:
+        img.media_type = "MULTI_LAYER_IMAGE" if multi else "IMAGE"
+    img.file_format = "OPEN_EXR_MULTILAYER" if multi else "OPEN_EXR"
+    if not multi:
         img.color_mode = "RGBA"
     img.color_depth = depth
     img.exr_codec = codec

@@ -22,7 +22,7 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
           "center":[..],"warnings":[..],"unlit_fixed":b,"light_paths":{..},
           "device":{"backend":..,"devices":[..],"kernel":..}, ...} | {"ok":false,"reason":..}
   {"cmd":"render","resolution":R,"fov_deg":F,"samples":S[,"exr_codec":"NONE"|"ZIP"|...]
-   [,"noise_threshold":T][,"batch":true][,"crop":true][,"guides":true],
+   [,"noise_threshold":T][,"batch":true][,"crop":true][,"guides":true][,"geometry":true],
    "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR[,"samples":S_i]
               [,"sample_offset":O,"sample_sequence":Q]
               [,"motion":{"steps":n,"keys":[c2w, ...]}][,"region":[x0,y0,x1,y1]]
@@ -35,6 +35,9 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
       "noise_threshold" turns Cycles adaptive sampling on for this command (off without).
       "guides" writes every EXR of this command as a multi-layer EXR with Cycles'
       denoising guide passes (albedo, normal) beside the combined RGBA (off without).
+      "geometry" writes every EXR of this command as a multi-layer EXR with the Depth and
+      Normal data passes of the surface each pixel's centre sees (one sample per pixel at
+      its centre: send "samples":1; blender_scene.set_passes).
       "region" (the core's plan/region.rs) restricts Cycles to the pixels that can see
       the object; the pixels are those of a whole render. With "crop", a frame rendered
       in a region writes only that region's pixels (those of the whole render, bit for
@@ -214,7 +217,7 @@ class Worker:
         if "exr_codec" in cmd:
             blender_scene.set_exr_codec(str(cmd["exr_codec"]))
         blender_scene.set_noise_threshold(cmd.get("noise_threshold"))
-        blender_scene.set_guides(bool(cmd.get("guides", False)))
+        blender_scene.set_passes(bool(cmd.get("guides", False)), bool(cmd.get("geometry", False)))
         batch = bool(cmd.get("batch", True)) and not self.animated
         crop = bool(cmd.get("crop", False))
         jobs = 0

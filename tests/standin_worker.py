@@ -177,6 +177,37 @@ class StandIn:
         out[hit, 3] = 1.0
         return out
 
+    def geometry(self, c2w: list[list[float]], res: int, fov_deg: float) -> dict:
+        """Depth (along the viewing axis; Cycles' 1e10 where nothing is hit) and world
+        normal of the box at each pixel centre, as the channels of a multi-layer EXR
+        holding Cycles' Depth and Normal passes (set_passes(geometry=True))."""
+        assert self.half is not None
+        m = np.asarray(c2w, dtype=np.float64)
+        t = math.tan(math.radians(fov_deg) / 2)
+        px = (np.arange(res) + 0.5) / res * 2 - 1
+        x, y = np.meshgrid(px * t, -px * t)
+        d = np.stack([x, y, -np.ones_like(x)], axis=-1) @ m[:3, :3].T
+        o = m[:3, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t0, t1 = (-self.half - o) / d, (self.half - o) / d
+        tmin = np.nanmax(np.minimum(t0, t1), axis=-1)
+        tmax = np.nanmin(np.maximum(t0, t1), axis=-1)
+        hit = (tmax >= tmin) & (tmax > 0)
+        rel = (o + d * tmin[..., None]) / self.half
+        axis = np.argmax(np.abs(rel), axis=-1)
+        normal = np.zeros((res, res, 3), dtype=np.float32)
+        sign = np.sign(np.take_along_axis(rel, axis[..., None], -1)[..., 0])
+        np.put_along_axis(normal, axis[..., None], sign[..., None].astype(np.float32), -1)
+        normal[~hit] = 0.0
+        # The camera ray's direction has z = -1 in the camera frame: its parameter at the
+        # hit is the depth along the viewing axis.
+        depth = np.where(hit, tmin, 1e10).astype(np.float32)
+        alpha = hit.astype(np.float32)
+        chans = {"ViewLayer.Depth.Z": depth, "ViewLayer.Combined.A": alpha}
+        for k, c in enumerate("XYZ"):
+            chans[f"ViewLayer.Normal.{c}"] = np.ascontiguousarray(normal[..., k])
+        return chans
+
     def render(self, cmd: dict) -> dict:
         if self.half is None:
             return {"ok": False, "reason": "render before a successful load"}
@@ -189,6 +220,14 @@ class StandIn:
         calls: set = set()
         for i, fr in enumerate(frames):
             t_start = time.perf_counter()
+            if cmd.get("geometry"):
+                import OpenEXR
+
+                os.makedirs(os.path.dirname(fr["out"]) or ".", exist_ok=True)
+                OpenEXR.File({}, self.geometry(fr["c2w"], res, fov)).write(fr["out"])
+                calls.add((fr.get("view"), fr.get("level"), i))
+                send({"frame": i, "out": fr["out"], "seconds": 0.0, "origin": None})
+                continue
             img = self.image(fr["c2w"], res, fov)
             region = None if fr.get("motion") else fr.get("region")
             origin = None

@@ -190,6 +190,7 @@ class BuildConfigRecord(TypedDict):
     test_settings: int | None
     blurry_test_views: bool
     downsample: list[int]
+    passes: list[str]
     workers: int
     threads: int
     executor: Literal["local", "ray"]
@@ -368,6 +369,8 @@ class BuildConfig:
     @property
     def downsample(self) -> list[int]: ...
     @property
+    def passes(self) -> list[str]: ...
+    @property
     def workers(self) -> int: ...
     @property
     def threads(self) -> int: ...
@@ -494,6 +497,16 @@ def images_dir(factor: int) -> str:
 
 def linear_dir(factor: int) -> str:
     """The linear EXR folder at downsampling factor `factor` (`linear`, `linear_4`)."""
+
+PASSES: list[str]
+"""The per-view outputs besides colour (`--passes`), in order: depth, normal, mask."""
+
+def pass_dir(kind: str, factor: int) -> str:
+    """The sharp level's folder of a pass at downsampling factor `factor` (`depth`,
+    `normals_4`, `masks`)."""
+
+def pass_file(kind: str, image: str) -> str:
+    """The file of an image's view in a pass's folder (`007.exr`; masks `007.png`)."""
 
 def setting_name(uid: str, theta0_deg: float) -> str:
     """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
@@ -641,6 +654,9 @@ class Accumulator:
     ) -> None:
         """Write the mean as 8-bit sRGB PNG over `background` (linear RGB), atomically;
         area-averaged over `downsample` x `downsample` blocks in linear light first."""
+    def write_mask(self, path: str | PathLike[str], *, downsample: int = 1) -> None:
+        """Write the object mask of the mean (8-bit PNG: 255 where coverage, area-averaged
+        over `downsample` x `downsample` blocks, is at least one half; else 0)."""
     def write_exr(self, path: str | PathLike[str]) -> None:
         """Write the linear mean as a ZIP-compressed RGBA float32 EXR, atomically."""
 
@@ -675,6 +691,25 @@ def srgb_encode(linear: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
 
 def read_exr(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
     """The first RGB(A) layer of an EXR as float32 (H, W, 4), values as stored."""
+
+# --- geometry (rust/py/src/geometry.rs) --------------------------------------------------
+
+def write_geometry(
+    render: str | PathLike[str],
+    *,
+    depth: str | PathLike[str] | None = None,
+    normal: str | PathLike[str] | None = None,
+) -> None:
+    """From a geometry render (Cycles' Depth and Normal passes) write the view's depth
+    EXR (one channel Y, world units along the viewing axis, 0: no surface) and/or normal
+    EXR (world-frame x, y, z in R, G, B; 0: no surface)."""
+
+def read_depth(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
+    """A depth EXR as float32 (H, W)."""
+
+def write_depth_millimetres(depth_exr: str | PathLike[str], png: str | PathLike[str]) -> None:
+    """A depth EXR as a 16-bit PNG in millimetres (0: no surface), nerfstudio's default
+    unit; a depth past 65.535 units is refused."""
 
 # --- noise (rust/py/src/noise.rs) ---------------------------------------------------
 

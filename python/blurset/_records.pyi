@@ -205,6 +205,7 @@ class Timings(TypedDict):
 
     blur_s: NotRequired[float | None]
     frames: NotRequired[int]
+    geometry_s: NotRequired[float | None]
     load_s: NotRequired[float | None]
     plan_s: NotRequired[float | None]
     sharp_s: NotRequired[float | None]
@@ -473,6 +474,8 @@ class RenderRecord(TypedDict):
     latents: Any
     light_paths: NotRequired[LightPathsRecord | None]
     linear: NotRequired[bool]
+    passes: NotRequired[list[str]]
+    passes_are: NotRequired[dict[str, str]]
     preset: NotRequired[Preset | None]
     samples_per_latent: NotRequired[int | None]
     samples_total: NotRequired[int | None]

@@ -56,6 +56,21 @@ def linear_dir(factor: int) -> str:
     return _core.linear_dir(factor)
 
 
+# The per-view outputs besides colour (`--passes`): depth, normal, mask.
+PASSES: tuple[str, ...] = tuple(_core.PASSES)
+
+
+def pass_dir(p: str, factor: int) -> str:
+    """The sharp level's folder of pass `p` at downsampling factor `factor` (`depth`,
+    `normals_4`, `masks`)."""
+    return _core.pass_dir(p, factor)
+
+
+def pass_file(p: str, image: str) -> str:
+    """The file of an image's view in pass `p`'s folder (`007.exr`; masks `007.png`)."""
+    return _core.pass_file(p, image)
+
+
 def setting_name(uid: str, theta0_deg: float) -> str:
     """`<uid>_<theta0>`, e.g. `chair_090`."""
     return _core.setting_name(uid, theta0_deg)

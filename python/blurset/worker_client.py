@@ -389,6 +389,7 @@ class Worker:
         batch: bool = True,
         crop: bool = False,
         guides: bool = False,
+        geometry: bool = False,
     ) -> dict[str, Any]:
         """Render frames ({"c2w": 4x4 row-major, "seed": int, "out": EXR path}) in order.
 
@@ -407,7 +408,9 @@ class Worker:
         `noise_threshold` turns on Cycles adaptive sampling. `batch` False renders every
         frame with its own render call instead of one animation job per run of frames.
         `guides` writes multi-layer EXRs with Cycles' denoising albedo and normal passes
-        (an Accumulator made with guides=True reads them).
+        (an Accumulator made with guides=True reads them). `geometry` writes multi-layer
+        EXRs with the Depth and Normal data passes at each pixel's centre (send samples
+        1; _core.write_geometry reads them).
         Returns the worker's final reply ({"done": n, "jobs": render calls}).
         """
         if samples is None:
@@ -433,6 +436,8 @@ class Worker:
             msg["crop"] = True
         if guides:
             msg["guides"] = True
+        if geometry:
+            msg["geometry"] = True
         self._send(msg)
         return self._await_render(len(frames), on_frame)
 

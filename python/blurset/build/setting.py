@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from blurset import _core, layout
+from blurset.build.geometry import render_geometry
 from blurset.config import BuildConfig, out_dir
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
@@ -102,6 +103,7 @@ def render_setting(
     )
     # --latents auto / motion blur render fewer frames than the bar's per-setting bound.
     progress.frame_done(frames_per_setting(cfg) - len(frames))
+    t_geometry = render_geometry(cfg, worker, frames, exr_dir, partial / layout.SHARP, plan.n_views)
     shutil.rmtree(exr_dir)
     _copy_sharp(partial, sharp, plan.n_views, cfg)
     test_views = _core.test_views(plan.n_views, cfg.view_stride)
@@ -112,6 +114,7 @@ def render_setting(
         "plan_s": round(t_plan, 3),
         "sharp_s": round(t_sharp, 3),
         "blur_s": round(t_blur, 3),
+        **({"geometry_s": round(t_geometry, 3)} if t_geometry else {}),
         "load_s": info.get("load_s"),
         "total_s": round(time.time() - t0, 3),
         "frames": n_rendered,
@@ -235,6 +238,11 @@ class _Images:
         if self.cfg.write_linear:
             a.write_exr(level_dir / layout.LINEAR / layout.linear_name(name))
         if level == layout.SHARP:
+            if "mask" in self.cfg.passes:
+                for f in [1, *self.cfg.downsample]:
+                    d = level_dir / layout.pass_dir("mask", f)
+                    d.mkdir(exist_ok=True)
+                    a.write_mask(d / layout.pass_file("mask", name), downsample=f)
             self.qa[view] = _core.frame_qa(a.mean())
 
     def on_frame(self, i: int, path: str, origin: tuple[int, int] | None) -> None:

@@ -34,6 +34,11 @@ pub use crate::image::accumulate::Accumulator;
 pub use crate::image::color::srgb_encode_slice;
 pub use crate::image::denoise::{DenoiseDevice, Denoiser, DenoiserRecord};
 pub use crate::image::exr::read::{decode_exr, read_exr, Frame};
+pub use crate::image::geometry::{
+    depth_millimetres, mask_from_coverage, read_depth_exr, read_geometry, write_depth_exr,
+    write_depth_millimetres, write_geometry, write_gray16_png, write_gray8_png, write_normal_exr,
+    Geometry,
+};
 pub use crate::image::io::{image_info, read_image, Image, Samples};
 pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
 
@@ -87,8 +92,8 @@ pub use crate::ground::license::{
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
     files, gain_name, image_name, images_dir, level_dir, level_dirs, linear_dir, linear_name,
-    object_lock, parse_level_dir, setting_name, sort_level_dirs, theta0s, work_dir,
-    OBJECT_LOCK_PREFIX, SHARP, WORK_PREFIX,
+    object_lock, parse_level_dir, pass_dir, pass_file, setting_name, sort_level_dirs, theta0s,
+    work_dir, OBJECT_LOCK_PREFIX, PASSES, SHARP, WORK_PREFIX,
 };
 
 // Image error against a reference and the speed/quality front.

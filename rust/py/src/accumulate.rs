@@ -204,6 +204,14 @@ impl PyAccumulator {
         })
     }
 
+    /// Write the object mask of the mean (255 where coverage is at least one half, area-
+    /// averaged `downsample` times first) as an 8-bit PNG.
+    #[pyo3(signature = (path, *, downsample = 1))]
+    fn write_mask(&self, py: Python<'_>, path: PathBuf, downsample: u32) -> PyResult<()> {
+        let inner = &self.inner;
+        run_detached(py, move || inner.write_mask(&path, downsample))
+    }
+
     /// Write the mean as a linear premultiplied RGBA float32 EXR.
     fn write_exr(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let inner = &self.inner;

@@ -82,6 +82,19 @@ fn images_dir(factor: u32) -> String {
     core::images_dir(factor)
 }
 
+/// The sharp level's folder of a pass at downsampling factor `factor` (`depth`,
+/// `normals_4`, `masks`).
+#[pyfunction]
+fn pass_dir(kind: &str, factor: u32) -> String {
+    core::pass_dir(kind, factor)
+}
+
+/// The file of an image's view in a pass's folder (`007.png` → `007.exr` or `007.png`).
+#[pyfunction]
+fn pass_file(kind: &str, image: &str) -> String {
+    core::pass_file(kind, image)
+}
+
 /// The linear EXR folder at downsampling factor `factor` (`linear`, `linear_4`).
 #[pyfunction]
 fn linear_dir(factor: u32) -> String {
@@ -226,6 +239,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(object_lock, m)?)?;
     m.add_function(wrap_pyfunction!(linear_name, m)?)?;
     m.add_function(wrap_pyfunction!(linear_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(pass_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(pass_file, m)?)?;
     m.add_function(wrap_pyfunction!(setting_name, m)?)?;
     m.add_function(wrap_pyfunction!(theta0s, m)?)?;
     m.add_function(wrap_pyfunction!(image_name, m)?)?;

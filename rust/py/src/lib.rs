@@ -7,6 +7,7 @@ mod config;
 mod convert;
 mod error;
 mod failures;
+mod geometry;
 mod layout;
 mod llff;
 mod noise;
@@ -37,6 +38,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     llff::register(m)?;
     sampling::register(m)?;
     accumulate::register(m)?;
+    geometry::register(m)?;
     noise::register(m)?;
     noise_linear::register(m)?;
     outputs::register(m)?;

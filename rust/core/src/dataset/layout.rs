@@ -9,7 +9,7 @@
 //! - a build's setting directories are scanned once, here ([`scan`]).
 use crate::error::{Error, Result};
 use crate::ground::atomic::{replace_dir, write_atomic};
-use crate::ground::names::{files, images_dir};
+use crate::ground::names::{files, images_dir, pass_dir};
 use crate::ground::names::{sort_level_dirs, SHARP, WORK_PREFIX};
 use std::path::{Path, PathBuf};
 
@@ -189,7 +189,11 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
             ));
         }
         if counts.linear {
-            out.extend(linear_problems(&d.join(files::LINEAR), lvl, counts.views));
+            let rel = format!("{lvl}/{}", files::LINEAR);
+            out.extend(exr_problems(&d.join(files::LINEAR), &rel, counts.views));
+        }
+        if lvl == SHARP {
+            out.extend(pass_problems(&d, &counts));
         }
         let npy = format!("{lvl}/poses_bounds.npy");
         match std::fs::metadata(d.join(files::POSES_BOUNDS)) {
@@ -204,6 +208,31 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
     out
 }
 
+/// The problems of the sharp level's `--passes` folders (`sharp`: its path): a count
+/// other than the views', an empty file, a damaged mask or one of another size.
+fn pass_problems(sharp: &Path, counts: &SettingCounts) -> Vec<SettingProblem> {
+    let mut out = Vec::new();
+    for pass in &counts.passes {
+        for factor in std::iter::once(1).chain(counts.downsample.iter().copied()) {
+            let sub = pass_dir(pass, factor);
+            let rel = format!("{SHARP}/{sub}");
+            if pass == "mask" {
+                let want = counts.resolution.map(|[w, h]| (w / factor, h / factor));
+                let mut found = image_problems(&sharp.join(&sub), &rel, counts.views, want);
+                for p in &mut found {
+                    if let Fault::Count { of, .. } = &mut p.fault {
+                        *of = "masks";
+                    }
+                }
+                out.extend(found);
+                continue;
+            }
+            out.extend(exr_problems(&sharp.join(&sub), &rel, counts.views));
+        }
+    }
+    out
+}
+
 /// What the cheap check needs of a setting's meta.json.
 struct SettingCounts {
     views: usize,
@@ -211,6 +240,8 @@ struct SettingCounts {
     downsample: Vec<u32>,
     /// Linear EXRs were kept (`render.linear`).
     linear: bool,
+    /// The sharp level's per-view outputs besides colour (`render.passes`).
+    passes: Vec<String>,
     resolution: Option<[u32; 2]>,
 }
 
@@ -221,6 +252,8 @@ impl SettingCounts {
         struct Render {
             #[serde(default)]
             linear: bool,
+            #[serde(default)]
+            passes: Vec<String>,
         }
         #[derive(serde::Deserialize)]
         struct Counts {
@@ -250,7 +283,8 @@ impl SettingCounts {
             views: c.views.len(),
             levels: c.levels,
             downsample: c.downsample,
-            linear: c.render.is_some_and(|r| r.linear),
+            linear: c.render.as_ref().is_some_and(|r| r.linear),
+            passes: c.render.map(|r| r.passes).unwrap_or_default(),
             resolution: c.resolution,
         })
     }
@@ -292,22 +326,15 @@ fn count_problem(
     (have != want).then(|| SettingProblem::new(rel, Fault::Count { have, want, of }))
 }
 
-/// The problems of a level's linear/ folder: a count other than `views`, an empty EXR.
-fn linear_problems(dir: &Path, lvl: &str, views: usize) -> Vec<SettingProblem> {
+/// The problems of a folder of EXRs (`rel`, relative to the setting: a level's linear/,
+/// the sharp level's depth/ and normals/): a count other than `views`, an empty file.
+fn exr_problems(dir: &Path, rel: &str, views: usize) -> Vec<SettingProblem> {
     let mut out = Vec::new();
     let exrs = files_with(dir, "exr");
-    out.extend(count_problem(
-        format!("{lvl}/linear"),
-        exrs.len(),
-        views,
-        "EXRs",
-    ));
+    out.extend(count_problem(rel.into(), exrs.len(), views, "EXRs"));
     for (name, p) in &exrs {
         if std::fs::metadata(p).map_or(true, |m| m.len() == 0) {
-            out.push(SettingProblem::new(
-                format!("{lvl}/linear/{name}"),
-                Fault::Empty,
-            ));
+            out.push(SettingProblem::new(format!("{rel}/{name}"), Fault::Empty));
         }
     }
     out

@@ -4,6 +4,7 @@
 use super::splits::test_views;
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
+use crate::ground::names;
 use crate::image::denoise::DenoiserRecord;
 use crate::image::qa::FrameQa;
 use crate::plan::camera::orbit_c2w;
@@ -59,6 +60,9 @@ pub struct Timings {
     pub plan_s: Option<f64>,
     pub sharp_s: Option<f64>,
     pub blur_s: Option<f64>,
+    /// The geometry renders of `--passes depth,normal` (absent without them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub geometry_s: Option<f64>,
     pub load_s: Option<f64>,
     pub total_s: Option<f64>,
     pub frames: usize,
@@ -114,6 +118,13 @@ pub struct RenderRecord {
     /// unchanged).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub linear: bool,
+    /// `--passes` (issue 35): the per-view outputs besides colour the sharp level holds
+    /// (`depth`, `normal`, `mask`), each described in `passes_are`; absent (as in a
+    /// default build and every build before them) when none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub passes: Vec<String>,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub passes_are: BTreeMap<String, String>,
     /// The `--preset` the build was asked for (the options it set are recorded as options).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preset: Option<Preset>,
@@ -268,7 +279,36 @@ impl RenderRecord {
             alpha: "premultiplied, averaged with colour, composited over background".into(),
             encoding: "sRGB (IEC 61966-2-1) of linear radiance, 8-bit PNG".into(),
             linear: cfg.write_linear,
+            passes: cfg.passes.clone(),
+            passes_are: cfg.passes.iter().map(|p| (p.clone(), pass_is(p))).collect(),
         }
+    }
+}
+
+/// What one `--passes` output holds, in words (meta.json's `render.passes_are`).
+fn pass_is(pass: &str) -> String {
+    let at = "per view in sharp/{dir}/ (and {dir}_<f>/ per --downsample factor, rendered \
+              at that size), named as its image";
+    let dir = |p: &str| names::pass_dir(p, 1);
+    match pass {
+        "depth" => format!(
+            "{}: float32 EXR, one channel Y: the distance, along the camera's viewing axis, \
+             of the surface the pixel's centre sees (the meaning of poses_bounds.npy's near \
+             and far), in world units; 0 where the pixel sees no surface",
+            at.replace("{dir}", &dir(pass))
+        ),
+        "normal" => format!(
+            "{}: float32 EXR, the unit normal (Cycles' shading normal) of the surface the \
+             pixel's centre sees, in the world frame, x y z in channels R G B; 0 where the \
+             pixel sees no surface",
+            at.replace("{dir}", &dir(pass))
+        ),
+        _ => format!(
+            "{}: 8-bit PNG, 255 where the sharp image covers at least half the pixel (its \
+             alpha, area-averaged to the size), else 0",
+            at.replace("{dir}", &dir(pass))
+                .replace(", rendered at that size", "")
+        ),
     }
 }
 

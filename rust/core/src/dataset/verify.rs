@@ -2,6 +2,7 @@
 //! and compare its size with the one its meta.json promises. (Which files must exist
 //! is decided by the caller from meta.json; this only reads pixels.)
 use crate::image::exr::read::read_exr;
+use crate::image::geometry::read_depth_exr;
 use crate::image::io::read_image;
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -15,7 +16,7 @@ pub struct ImageCheck {
 }
 
 /// What is wrong with each image (None when it decodes whole at its size), in order.
-/// `.exr` files are read as linear EXRs, anything else as PNG/JPEG.
+/// `.exr` files are read as linear EXRs (or depth EXRs), anything else as PNG/JPEG.
 pub fn check_images(items: &[ImageCheck]) -> Vec<Option<String>> {
     items.par_iter().map(check_one).collect()
 }
@@ -29,7 +30,14 @@ fn check_one(item: &ImageCheck) -> Option<String> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     let size = if is_exr {
-        read_exr(&item.path).map(|f| (f.width, f.height))
+        // A colour EXR (linear/, normals/), else a one-channel depth EXR (depth/).
+        read_exr(&item.path)
+            .map(|f| (f.width, f.height))
+            .or_else(|e| {
+                read_depth_exr(&item.path)
+                    .map(|(w, h, _)| (w as u32, h as u32))
+                    .map_err(|_| e)
+            })
     } else {
         read_image(&item.path).map(|i| (i.width, i.height))
     };

@@ -73,6 +73,35 @@ pub fn images_dir(factor: u32) -> String {
     }
 }
 
+/// The per-view outputs besides colour a build can write (`--passes`), in the order
+/// they are listed: depth along the viewing axis, world-space normals, object masks.
+pub const PASSES: [&str; 3] = ["depth", "normal", "mask"];
+
+/// The folder of a pass in the sharp level at downsampling factor `factor` (`depth`,
+/// `normals`, `masks`; `depth_4`, …, as `images_4` beside `images`).
+pub fn pass_dir(pass: &str, factor: u32) -> String {
+    let base = match pass {
+        "normal" => "normals",
+        "mask" => "masks",
+        other => other,
+    };
+    if factor <= 1 {
+        base.to_string()
+    } else {
+        format!("{base}_{factor}")
+    }
+}
+
+/// The file of view `image` (`007.png`) in a pass's folder: `007.exr` (depth, normals:
+/// float), `007.png` (masks: 8-bit).
+pub fn pass_file(pass: &str, image: &str) -> String {
+    if pass == "mask" {
+        image.to_string()
+    } else {
+        linear_name(image)
+    }
+}
+
 /// The linear EXR folder at downsampling factor `factor`: `linear` or `linear_<f>`.
 pub fn linear_dir(factor: u32) -> String {
     if factor <= 1 {

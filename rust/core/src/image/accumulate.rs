@@ -11,6 +11,7 @@ use super::denoise::Denoiser;
 use super::exr::passes::decode_passes;
 use super::exr::read::{decode_rgba, first_non_finite, read_into};
 use super::exr::write::write_exr;
+use super::geometry::{mask_from_coverage, write_gray8_png};
 use super::io::write_png_rgb8;
 use super::resample::area_mean;
 use super::{check_rgba_len, CH};
@@ -533,6 +534,13 @@ impl Accumulator {
     ) -> Result<()> {
         let rgb = self.encode_rgb8_downsampled(background, factor)?;
         write_png_rgb8(path, self.width / factor, self.height / factor, &rgb)
+    }
+
+    /// Write the object mask of the mean (its coverage, area-averaged `factor` times:
+    /// [`crate::image::geometry::mask_from_coverage`]) as an 8-bit PNG.
+    pub fn write_mask(&self, path: &Path, factor: u32) -> Result<()> {
+        let mask = mask_from_coverage(&self.mean()?, self.width, self.height, factor)?;
+        write_gray8_png(path, self.width / factor, self.height / factor, &mask)
     }
 
     /// Write the mean as a linear, premultiplied RGBA f32 EXR.

@@ -6,6 +6,7 @@ pub mod accumulate;
 pub mod color;
 pub mod denoise;
 pub mod exr;
+pub mod geometry;
 pub mod io;
 pub mod qa;
 pub mod resample;

@@ -4,7 +4,7 @@
 //! so neither imports the other for its ranges.
 use crate::error::{Error, Result};
 use crate::ground::license;
-use crate::ground::names::MAX_LEVEL;
+use crate::ground::names::{self, MAX_LEVEL};
 use serde::Serialize;
 use std::fmt;
 
@@ -85,6 +85,9 @@ pub enum Spec {
     StrList,
     /// Licence ids (ground::license::canonical), comma-separated or a list, at least one.
     Licenses,
+    /// Per-view outputs besides colour (ground::names::PASSES), comma-separated or a
+    /// list, or none.
+    Passes,
 }
 
 impl Spec {
@@ -146,6 +149,10 @@ impl Spec {
             Spec::Licenses => "must be licence ids, comma-separated or a list: SPDX ids such as \
                 cc-by-4.0, cc-by-sa-4.0, cc-by-nc-4.0, cc0-1.0, or other / unknown"
                 .into(),
+            Spec::Passes => format!(
+                "must be {}, comma-separated or a list (or none)",
+                names::PASSES.join(", ")
+            ),
         }
     }
 
@@ -331,6 +338,9 @@ impl OptionValue for Vec<String> {
         if *spec == Spec::Licenses {
             return licenses_from_raw(raw);
         }
+        if *spec == Spec::Passes {
+            return passes_from_raw(raw);
+        }
         match raw {
             Raw::Str(s) => Some(vec![s.clone()]),
             Raw::List(v) => v
@@ -348,26 +358,54 @@ impl OptionValue for Vec<String> {
     }
     fn kind(spec: &Spec) -> Kind {
         match spec {
-            Spec::Licenses => Kind::Text,
+            Spec::Licenses | Spec::Passes => Kind::Text,
             _ => Kind::Words,
         }
     }
 }
 
-/// `cc-by-4.0, CC0-1.0` or a list of ids → their canonical spellings, once each, in the
-/// order given; None when an id is unknown or none is given.
-fn licenses_from_raw(raw: &Raw) -> Option<Vec<String>> {
-    let items: Vec<&str> = match raw {
-        Raw::Str(s) => s.split(',').collect(),
+/// Items of a comma-separated string or a list of strings (None: another shape).
+fn text_items(raw: &Raw) -> Option<Vec<&str>> {
+    match raw {
+        Raw::Str(s) => Some(s.split(',').collect()),
         Raw::List(v) => v
             .iter()
             .map(|x| match x {
                 Raw::Str(s) => Some(s.as_str()),
                 _ => None,
             })
-            .collect::<Option<_>>()?,
-        _ => return None,
-    };
+            .collect(),
+        _ => None,
+    }
+}
+
+/// `depth,mask`, `none` or a list of pass names → the passes in their canonical order
+/// (names::PASSES), once each; None when a name is unknown.
+fn passes_from_raw(raw: &Raw) -> Option<Vec<String>> {
+    let items: Vec<&str> = text_items(raw)?
+        .into_iter()
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .collect();
+    if items.len() == 1 && items[0].eq_ignore_ascii_case("none") {
+        return Some(Vec::new());
+    }
+    let picked: Vec<usize> = items
+        .iter()
+        .map(|item| choice_index(&names::PASSES, item))
+        .collect::<Option<_>>()?;
+    Some(
+        (0..names::PASSES.len())
+            .filter(|i| picked.contains(i))
+            .map(|i| names::PASSES[i].to_string())
+            .collect(),
+    )
+}
+
+/// `cc-by-4.0, CC0-1.0` or a list of ids → their canonical spellings, once each, in the
+/// order given; None when an id is unknown or none is given.
+fn licenses_from_raw(raw: &Raw) -> Option<Vec<String>> {
+    let items = text_items(raw)?;
     let mut out: Vec<String> = Vec::new();
     for item in items.iter().filter(|s| !s.trim().is_empty()) {
         let id = license::canonical(item)?;

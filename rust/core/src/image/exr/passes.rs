@@ -20,23 +20,40 @@ pub struct Passes {
     pub normal: Vec<f32>,
 }
 
-/// Where a channel goes: (0 rgba | 1 albedo | 2 normal, channel index), by the end of
-/// its full name. A single-layer file's plain R, G, B, A count as the combined pass.
-fn slot(full: &str) -> Option<(usize, usize)> {
+/// A pass of a multi-layer render: its name in the file and its channels' letters, in
+/// the order they are stored per pixel.
+pub(crate) type PassSpec = (&'static str, &'static str);
+
+/// The combined pass and the denoiser's two guides.
+const GUIDES: [PassSpec; 3] = [
+    ("Combined", "RGBA"),
+    ("Denoising Albedo", "RGB"),
+    ("Denoising Normal", "XYZ"),
+];
+
+/// Where a channel goes among `passes`: (pass index, channel index), by the end of its
+/// full name. A single-layer file's plain R, G, B, A count as the combined pass.
+fn slot(passes: &[PassSpec], full: &str) -> Option<(usize, usize)> {
     let (pass, ch) = full.rsplit_once('.').unwrap_or(("Combined", full));
     let pass = pass.rsplit('.').next().unwrap_or(pass);
-    let pick = |names: &str| names.find(ch).filter(|_| ch.len() == 1);
-    match pass {
-        "Combined" => pick("RGBA").map(|c| (0, c)),
-        "Denoising Albedo" => pick("RGB").map(|c| (1, c)),
-        "Denoising Normal" => pick("XYZ").map(|c| (2, c)),
-        _ => None,
+    if ch.len() != 1 {
+        return None;
     }
+    let i = passes.iter().position(|(name, _)| *name == pass)?;
+    passes[i].1.find(ch).map(|c| (i, c))
 }
 
-/// Decode the EXR file `bytes` (`path` names it in errors) into its combined pass and
-/// guides; every pass must be there and of one size (alpha 1 when absent).
-pub fn decode_passes(bytes: &[u8], path: &Path) -> Result<Passes> {
+/// A decoded multi-layer file: its size and, per pass asked for, the values
+/// (interleaved, a pass's letters per pixel) and which of its channels were there.
+pub(crate) struct Decoded {
+    pub width: usize,
+    pub height: usize,
+    pub passes: Vec<(Vec<f32>, Vec<bool>)>,
+}
+
+/// Decode the EXR file `bytes` (`path` names it in errors) into the `passes` asked for,
+/// all of one size; a channel that is absent reads 1 for the combined alpha, else 0.
+pub(crate) fn decode_named(bytes: &[u8], path: &Path, passes: &[PassSpec]) -> Result<Decoded> {
     let bad = |reason: String| Error::Image {
         reason,
         path: path.to_path_buf(),
@@ -54,9 +71,10 @@ pub fn decode_passes(bytes: &[u8], path: &Path) -> Result<Passes> {
         .from_buffered(Cursor::new(bytes))
         .map_err(|e| bad(format!("EXR: {e}")))?;
     let mut size: Option<(usize, usize)> = None;
-    let mut bufs: [Vec<f32>; 3] = Default::default();
-    let mut seen = [[false; 4]; 3];
-    const WIDTH: [usize; 3] = [4, 3, 3];
+    let mut out: Vec<(Vec<f32>, Vec<bool>)> = passes
+        .iter()
+        .map(|(_, letters)| (Vec::new(), vec![false; letters.len()]))
+        .collect();
     for layer in &image.layer_data {
         let layer_name = layer
             .attributes
@@ -64,6 +82,7 @@ pub fn decode_passes(bytes: &[u8], path: &Path) -> Result<Passes> {
             .as_ref()
             .map(|t| t.to_string())
             .unwrap_or_default();
+        let (w, h) = (layer.size.width(), layer.size.height());
         for ch in &layer.channel_data.list {
             let name = ch.name.to_string();
             let full = if layer_name.is_empty() || name.starts_with(&layer_name) {
@@ -71,10 +90,9 @@ pub fn decode_passes(bytes: &[u8], path: &Path) -> Result<Passes> {
             } else {
                 format!("{layer_name}.{name}")
             };
-            let Some((pass, c)) = slot(&full) else {
+            let Some((pass, c)) = slot(passes, &full) else {
                 continue;
             };
-            let (w, h) = (layer.size.width(), layer.size.height());
             match size {
                 None => size = Some((w, h)),
                 Some(s) if s != (w, h) => {
@@ -85,40 +103,72 @@ pub fn decode_passes(bytes: &[u8], path: &Path) -> Result<Passes> {
                 }
                 _ => {}
             }
-            let buf = &mut bufs[pass];
-            let stride = WIDTH[pass];
+            let stride = passes[pass].1.len();
+            let (buf, seen) = &mut out[pass];
             if buf.is_empty() {
-                *buf = vec![if pass == 0 { 1.0 } else { 0.0 }; w * h * stride];
+                let fill = if passes[pass] == ("Combined", "RGBA") {
+                    1.0
+                } else {
+                    0.0
+                };
+                *buf = vec![fill; w * h * stride];
             }
-            let values: Box<dyn Iterator<Item = f32>> = match &ch.sample_data {
-                FlatSamples::F16(v) => Box::new(v.iter().map(|x| x.to_f32())),
-                FlatSamples::F32(v) => Box::new(v.iter().copied()),
-                FlatSamples::U32(v) => Box::new(v.iter().map(|&x| x as f32)),
-            };
-            for (dst, v) in buf.chunks_exact_mut(stride).zip(values) {
-                dst[c] = v;
-            }
-            seen[pass][c] = true;
+            copy_channel(&ch.sample_data, buf, stride, c);
+            seen[c] = true;
         }
     }
     let Some((width, height)) = size else {
-        return Err(bad("no combined pass (R, G, B channels)".into()));
+        return Err(bad("none of the passes asked for is in the file".into()));
     };
-    for (pass, what, n) in [
-        (0, "combined R, G, B", 3),
-        (1, "Denoising Albedo", 3),
-        (2, "Denoising Normal", 3),
-    ] {
-        if !seen[pass][..n].iter().all(|&s| s) {
-            return Err(bad(format!(
-                "no {what} pass: render with the denoising guides (denoise oidn)"
-            )));
+    for (buf, _) in &mut out {
+        if buf.is_empty() {
+            buf.resize(width * height, 0.0); // a pass with no channel: callers check `seen`
         }
     }
-    let [rgba, albedo, normal] = bufs;
-    Ok(Passes {
+    Ok(Decoded {
         width,
         height,
+        passes: out,
+    })
+}
+
+/// One channel's samples into every `stride`-th value of `buf` from offset `c`.
+fn copy_channel(samples: &FlatSamples, buf: &mut [f32], stride: usize, c: usize) {
+    let values: Box<dyn Iterator<Item = f32>> = match samples {
+        FlatSamples::F16(v) => Box::new(v.iter().map(|x| x.to_f32())),
+        FlatSamples::F32(v) => Box::new(v.iter().copied()),
+        FlatSamples::U32(v) => Box::new(v.iter().map(|&x| x as f32)),
+    };
+    for (dst, v) in buf.chunks_exact_mut(stride).zip(values) {
+        dst[c] = v;
+    }
+}
+
+/// Decode the EXR file `bytes` (`path` names it in errors) into its combined pass and
+/// guides; every pass must be there and of one size (alpha 1 when absent).
+pub fn decode_passes(bytes: &[u8], path: &Path) -> Result<Passes> {
+    let d = decode_named(bytes, path, &GUIDES)?;
+    for ((_, seen), what) in
+        d.passes
+            .iter()
+            .zip(["combined R, G, B", "Denoising Albedo", "Denoising Normal"])
+    {
+        if !seen[..3].iter().all(|&s| s) {
+            return Err(Error::Image {
+                reason: format!("no {what} pass: render with the denoising guides (denoise oidn)"),
+                path: path.to_path_buf(),
+            });
+        }
+    }
+    let mut bufs = d.passes.into_iter().map(|(b, _)| b);
+    let (rgba, albedo, normal) = (
+        bufs.next().unwrap_or_default(),
+        bufs.next().unwrap_or_default(),
+        bufs.next().unwrap_or_default(),
+    );
+    Ok(Passes {
+        width: d.width,
+        height: d.height,
         rgba,
         albedo,
         normal,
@@ -132,12 +182,14 @@ mod tests {
 
     #[test]
     fn channels_go_to_their_pass_by_name() {
+        let slot = |full: &str| slot(&GUIDES, full);
         assert_eq!(slot("ViewLayer.Combined.R"), Some((0, 0)));
         assert_eq!(slot("ViewLayer.Combined.A"), Some((0, 3)));
         assert_eq!(slot("A"), Some((0, 3)));
         assert_eq!(slot("ViewLayer.Denoising Albedo.B"), Some((1, 2)));
         assert_eq!(slot("ViewLayer.Denoising Normal.Y"), Some((2, 1)));
         assert_eq!(slot("ViewLayer.Denoising Depth.Z"), None);
+        assert_eq!(slot("ViewLayer.Normal.Y"), None);
         assert_eq!(slot("ViewLayer.Combined.RG"), None);
     }
 

@@ -1,0 +1,42 @@
+//! Bindings of the core's per-view geometry (issue 35): depth, normals, masks.
+use crate::run_detached;
+use blurset_core as core;
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+use std::path::PathBuf;
+
+/// From a geometry render (Cycles' Depth and Normal passes) write the view's depth EXR
+/// and/or normal EXR.
+#[pyfunction]
+#[pyo3(signature = (render, *, depth = None, normal = None))]
+fn write_geometry(
+    py: Python<'_>,
+    render: PathBuf,
+    depth: Option<PathBuf>,
+    normal: Option<PathBuf>,
+) -> PyResult<()> {
+    run_detached(py, move || {
+        core::write_geometry(&render, depth.as_deref(), normal.as_deref())
+    })
+}
+
+/// A depth EXR as float32 (H, W): world units along the viewing axis, 0 where no surface.
+#[pyfunction]
+fn read_depth(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, numpy::PyArray2<f32>>> {
+    let (w, h, depth) = run_detached(py, move || core::read_depth_exr(&path))?;
+    PyArray1::from_vec(py, depth).reshape([h, w])
+}
+
+/// A depth EXR as a 16-bit PNG in millimetres (0: no surface), nerfstudio's default.
+#[pyfunction]
+fn write_depth_millimetres(py: Python<'_>, depth_exr: PathBuf, png: PathBuf) -> PyResult<()> {
+    run_detached(py, move || core::write_depth_millimetres(&depth_exr, &png))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("PASSES", core::PASSES.to_vec())?;
+    m.add_function(wrap_pyfunction!(write_geometry, m)?)?;
+    m.add_function(wrap_pyfunction!(read_depth, m)?)?;
+    m.add_function(wrap_pyfunction!(write_depth_millimetres, m)?)?;
+    Ok(())
+}
