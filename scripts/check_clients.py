@@ -170,6 +170,9 @@ def analyse(client: str, export: Path, doc: dict, build: Path, result: dict) -> 
     lines.append(f"  held-out views it chooses: {summary('held_out')}")
     for note in result.get("notes", []):
         lines.append(f"  note: {note}")
+    # Checks the client's reader made of what else it read (depth, masks).
+    for c in result.get("checks", []):
+        lines.append(f"  {c['what']}: {c['detail']} ({v.expect(c['ok'], c['what'])})")
     # What each phase draws.
     for phase in result["phases"]:
         draws = phase["draws"]
@@ -767,6 +770,7 @@ def _nerfstudio(p: dict) -> dict:
     export, doc = Path(p["export"]), p["doc"]
     scenes, phases = [], []
     notes: list[str] = []
+    checks: list[dict] = []
     for df in (None, 4):
         draws, axis_miss = [], []
         for key in sorted(doc["scenes"]):
@@ -775,6 +779,8 @@ def _nerfstudio(p: dict) -> dict:
             parser = cfg.setup()
             out = {s: parser.get_dataparser_outputs(split=s) for s in ("train", "val", "test")}
             image = InputDataset(out["train"])[0]["image"]
+            if doc.get("passes"):
+                checks += _nerfstudio_passes(d, out["train"], df, doc["passes"])
             cams = out["train"].cameras
             c2w = cams.camera_to_worlds.to(torch.float64)
             o, ax = c2w[:, :3, 3], -c2w[:, :3, 2]  # OpenGL: the camera looks along -z
@@ -818,7 +824,48 @@ def _nerfstudio(p: dict) -> dict:
         "scenes": scenes,
         "phases": phases,
         "notes": notes,
+        "checks": _merge_checks(checks),
     }
+
+
+def _nerfstudio_passes(d: Path, outputs, df: int | None, passes: list[str]) -> list[dict]:
+    """nerfstudio's DepthDataset item of a scene's first train image: its depth (over
+    the parser's scale) against blurset's depth EXR of that view at that size, read by
+    OpenCV; its mask against the EXR's surface pixels."""
+    os.environ.setdefault("OPENCV_IO_ENABLE_OPENEXR", "1")  # before OpenCV's first EXR
+    import cv2
+    import numpy as np
+    from nerfstudio.data.datasets.depth_dataset import DepthDataset
+
+    item = DepthDataset(outputs)[0]
+    name = Path(outputs.image_filenames[0]).name
+    sub = "depth" if df is None else f"depth_{df}"
+    truth = cv2.imread(str(d / sub / Path(name).with_suffix(".exr")), cv2.IMREAD_ANYDEPTH)
+    checks = []
+    if "depth" in passes:
+        depth = item["depth_image"][..., 0].numpy() / float(outputs.dataparser_scale)
+        err = float(np.abs(depth - truth).max())
+        checks.append({"what": "DepthDataset depth_image / dataparser_scale = blurset's depth "
+                       "EXR (world units)", "ok": err <= 6e-4, "err": err})  # fmt: skip
+    if "mask" in passes:
+        agree = float((item["mask"][..., 0].numpy() == (truth > 0)).mean())
+        checks.append({"what": "InputDataset mask = the pixels with depth", "ok": agree >= 0.9,
+                       "agree": agree})  # fmt: skip
+    return checks
+
+
+def _merge_checks(checks: list[dict]) -> list[dict]:
+    """One line per kind of check: all must hold; the worst value found."""
+    out = []
+    for what in dict.fromkeys(c["what"] for c in checks):
+        cs = [c for c in checks if c["what"] == what]
+        ok = all(c["ok"] for c in cs)
+        if "err" in cs[0]:
+            detail = f"largest difference {max(c['err'] for c in cs):.2g} in {len(cs)} scenes"
+        else:
+            detail = f"lowest agreement {min(c['agree'] for c in cs):.3f} in {len(cs)} scenes"
+        out.append({"what": what, "ok": ok, "detail": detail})
+    return out
 
 
 def child(client: str, params: str, out: str) -> int:

@@ -661,6 +661,7 @@ ExportDoc = TypedDict(
         "levels": list[str],
         "llffhold": int,
         "noise": NotRequired[str | None],
+        "passes": NotRequired[list[str]],
         "scenes": dict[str, str],
         "scenes_dir": str,
         "target_images": NotRequired[str | None],

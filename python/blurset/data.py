@@ -6,6 +6,7 @@
     s.clean[s.train_views]    # their sharp versions: the restoration head's supervision
     s.images[s.test_views]    # the targets: sharp (Deblur-NeRF's convention)
     s.c2w_opencv, s.intrinsics, s.near, s.far
+    s.depth, s.normals, s.masks  # with `build --passes`, else None
 
 With `gain=` and `noise=` (a `blurset noise BUILD` output) the degraded images are that
 gain's noisy copies of the level (drawn at the size read). `clean` is always the sharp
@@ -72,6 +73,12 @@ class Scene:
     noise: dict | None = None
     #: Which pose the cameras are: "written" (poses_bounds.npy) or "mean" (meta.json).
     pose: str = "written"
+    #: With `--passes` (else None), per view at this size, of the sharp image at the
+    #: written pose p: depth (N, H, W) float32 along the viewing axis in world units (0:
+    #: no surface), normals (N, H, W, 3) float32 in the world frame, masks (N, H, W) bool.
+    depth: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    masks: np.ndarray | None = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -191,7 +198,32 @@ def open_scene(
         test_views=test,
         noise=meta,
         pose=pose,
+        **_passes(sdir, n, downsample),
     )
+
+
+def _passes(sdir: Path, n: int, downsample: int) -> dict[str, np.ndarray]:
+    """The `--passes` files of a setting at one size, as Scene's fields (none without)."""
+    meta = layout.read_json(sdir / layout.META, layout.META)
+    kinds = (meta.get("render") or {}).get("passes") or []
+    names = [layout.image_name(i, n) for i in range(n)]
+
+    def files(kind: str) -> list[Path]:
+        d = sdir / layout.SHARP / layout.pass_dir(kind, downsample)
+        out = [d / layout.pass_file(kind, name) for name in names]
+        for p in out:
+            if not p.is_file():
+                raise InputError(f"{kind} file not found (downsample {downsample}?): {p}")
+        return out
+
+    out: dict[str, np.ndarray] = {}
+    if "depth" in kinds:
+        out["depth"] = np.stack([_core.read_depth(p) for p in files("depth")])
+    if "normal" in kinds:
+        out["normals"] = np.stack([_core.read_exr(p)[..., :3] for p in files("normal")])
+    if "mask" in kinds:
+        out["masks"] = np.stack([_core.read_image(p)[..., 0] > 0 for p in files("mask")])
+    return out
 
 
 def _scene_dir(

@@ -36,6 +36,8 @@ STAGE, TRASH = "export", "export.old"
 # What each target reads: IBRNet's `<rootdir>/data/nerf_llff_data/<scene>` and NAN's
 # `DATA_DIR/nerf_llff_data/<scene>` list every entry of that folder as a scene, so
 # nothing else may lie there; nerfstudio takes any scene folder (`--data`).
+# nerfstudio's depth folder (its parser reads `depths_<f>/` when it downscales).
+NERFSTUDIO_DEPTHS = "depths"
 SCENES_DIR = {"llff": "nerf_llff_data", "nerfstudio": ".", "geonerf": "geonerf"}
 # GeoNeRF (data/llff.py) holds out every 8th image of a scene (hard-coded) and draws a
 # target's sources from all the others: a test scene is its target and the 7 nearest
@@ -135,6 +137,7 @@ class _Inputs:
     gains: list[str]
     factors: list[int]
     held: str
+    passes: list[str]
 
 
 def _inputs(args) -> _Inputs:
@@ -170,7 +173,8 @@ def _inputs(args) -> _Inputs:
             "--for geonerf: GeoNeRF reads images_4/, which this build has not: build with "
             "--downsample 4"
         )
-    return _Inputs(build, noise, state.complete, splits, levels, gains, factors, held)
+    passes = [] if args.target == "geonerf" else list(dataset["config"].get("passes") or [])
+    return _Inputs(build, noise, state.complete, splits, levels, gains, factors, held, passes)
 
 
 def _source(inp: _Inputs, name: str, rel: str) -> Path:
@@ -258,6 +262,8 @@ def plan(args) -> tuple[dict, dict[str, Path]]:
         "train": sorted(sc.train),
         "test": sorted(sc.test),
     }
+    if inp.passes:
+        doc["passes"] = inp.passes
     if sc.views:
         # Which views each GeoNeRF scene holds, in its order; a test scene's first is its
         # target, whose image is the sharp level's (the clean ground truth).
@@ -344,6 +350,40 @@ def _write_scene(d: Path, final: Path, src: Path, doc: dict) -> None:
                 continue  # a build from before per-level transforms.json
             raise InputError(f"missing {part} in the scene to export: {src}")
         _link(s, d / part, final / part, doc["copy"])
+
+
+def _write_passes(d: Path, final: Path, src: Path, sharp: Path, doc: dict) -> None:
+    """The build's `--passes` beside a scene's images: the sharp level's folders (depth/,
+    normals/, masks/ and their _<f> sizes; LLFF loaders ignore them), and for nerfstudio
+    its own: depth as 16-bit millimetre PNGs in depths/ (its default unit) and a
+    transforms.json whose frames name them (`depth_file_path`) and the masks
+    (`mask_path`), which its parser looks up in depths_<f>/ and masks_<f>/ when it
+    downscales."""
+    for kind in doc.get("passes") or []:
+        for f in [1, *doc["factors"]]:
+            sub = layout.pass_dir(kind, f)
+            if not (sharp / sub).is_dir():
+                raise InputError(f"missing {sub} in the build's sharp level: {sharp}")
+            _link(sharp / sub, d / sub, final / sub, doc["copy"])
+    if doc["for"] != "nerfstudio" or not doc.get("passes"):
+        return
+    tf = layout.read_json(src / layout.TRANSFORMS, layout.TRANSFORMS)
+    for frame in tf["frames"]:
+        name = Path(frame["file_path"]).name
+        if "depth" in doc["passes"]:
+            frame["depth_file_path"] = f"{NERFSTUDIO_DEPTHS}/{name}"
+        if "mask" in doc["passes"]:
+            frame["mask_path"] = f"{layout.pass_dir('mask', 1)}/{name}"
+    if "depth" in doc["passes"]:
+        for f in [1, *doc["factors"]]:
+            sub = NERFSTUDIO_DEPTHS if f == 1 else f"{NERFSTUDIO_DEPTHS}_{f}"
+            (d / sub).mkdir()
+            for frame in tf["frames"]:
+                name = Path(frame["file_path"]).name
+                exr = sharp / layout.pass_dir("depth", f) / layout.pass_file("depth", name)
+                _core.write_depth_millimetres(exr, d / sub / name)
+    (d / layout.TRANSFORMS).unlink()  # the level's (a link or a copy): this one is its own
+    layout.write_json(d / layout.TRANSFORMS, tf)
 
 
 def _refuse_overlap(out: Path, doc: dict, inputs: list[Path]) -> None:
@@ -503,7 +543,9 @@ def _put_in_place(
             if doc["for"] == "geonerf":
                 _write_geonerf_scene(stage / scene, final, src, doc, scene, build_root)
             else:
+                sharp = build_root / doc["scenes"][scene].split("/", 1)[0] / layout.SHARP
                 _write_scene(stage / scene, final, src, doc)
+                _write_passes(stage / scene, final, src, sharp, doc)
         # What this run may put in place is recorded first: an export stopped half-way
         # still owns every entry it wrote, and its rerun replaces them.
         outputs.write_record(

@@ -1,5 +1,5 @@
 """Images in and out of blurset-core: the running mean of linear frames (Accumulator),
-EXR/PNG/JPEG reading, the sRGB curve, render QA and the error against a reference.
+EXR/PNG/JPEG reading (and the depth EXRs of `build --passes`), the sRGB curve, render QA and the error against a reference.
 
 The public face of these bindings for scripts, tests and benchmarks (blurset._core is
 private to the package)."""
@@ -19,6 +19,7 @@ from blurset._core import (
     image_info,
     object_error,
     pareto_front,
+    read_depth,
     read_exr,
     read_image,
     spread,
@@ -39,6 +40,7 @@ __all__ = [
     "image_info",
     "object_error",
     "pareto_front",
+    "read_depth",
     "read_exr",
     "read_image",
     "spread",

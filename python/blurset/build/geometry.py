@@ -47,9 +47,13 @@ def render_geometry(
             for v, f in sorted(poses.items())
         ]
 
-        def write(j: int, path: str, _origin: Any, factor: int = factor, batch: list = batch) -> None:
+        def write(
+            j: int, path: str, _origin: Any, factor: int = factor, batch: list = batch
+        ) -> None:
             name = layout.image_name(batch[j]["view"], n_views)
-            out = {p: sharp / layout.pass_dir(p, factor) / layout.pass_file(p, name) for p in wanted}
+            out = {
+                p: sharp / layout.pass_dir(p, factor) / layout.pass_file(p, name) for p in wanted
+            }
             _core.write_geometry(Path(path), depth=out.get("depth"), normal=out.get("normal"))
             os.unlink(path)
 

@@ -315,6 +315,10 @@ pub struct ExportDoc {
     /// Where a GeoNeRF test scene's target image comes from (`sharp`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_images: Option<String>,
+    /// The build's `--passes` every scene carries beside its images (issue 35): the
+    /// sharp level's files at the written pose, which every level and gain shares.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub passes: Vec<String>,
 }
 
 /// The export.json an export writes before it moves its scenes into place: everything
