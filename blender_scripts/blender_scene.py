@@ -544,6 +544,24 @@ def apply_frame(fr: dict, resolution: int, fov_deg: float, samples: int) -> None
     )
     # Cycles takes a signed 32-bit seed; fold larger integers into that range.
     bpy.context.scene.cycles.seed = int(fr["seed"]) % (2**31)
+    set_dof(fr.get("dof"))
+
+
+def set_dof(dof: dict | None) -> None:
+    """A defocus frame's thin lens (issue 35): focus at "focus_distance" along the viewing
+    axis, an aperture of "aperture_radius" (world units); None: the pinhole camera of
+    every other frame. Blender takes the aperture as an f-number of the camera's focal
+    length (Cycles: radius = lens / (2 · f-number), lens in mm, world units metres)."""
+    cam = bpy.context.scene.camera.data
+    if not dof or float(dof["aperture_radius"]) <= 0.0:
+        cam.dof.use_dof = False
+        return
+    cam.dof.use_dof = True
+    cam.dof.focus_object = None
+    cam.dof.focus_distance = float(dof["focus_distance"])
+    cam.dof.aperture_fstop = cam.lens * 1e-3 / (2.0 * float(dof["aperture_radius"]))
+    cam.dof.aperture_blades = 0  # a round aperture: the circle of confusion is a disk
+    cam.dof.aperture_ratio = 1.0
 
 
 def scene_is_animated() -> bool:

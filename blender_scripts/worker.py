@@ -26,12 +26,15 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
    "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR[,"samples":S_i]
               [,"sample_offset":O,"sample_sequence":Q]
               [,"motion":{"steps":n,"keys":[c2w, ...]}][,"region":[x0,y0,x1,y1]]
+              [,"dof":{"focus_distance":s,"aperture_radius":R}]
               [,"call":C][,"view":V,"level":L]}, ...]}
       -> {"frame":i,"out":EXR,"seconds":t,"origin":[x0,y0]|null} per frame, then
          {"ok":true,"done":n,"jobs":j}
       A frame's "samples" overrides S; with "sample_offset" it renders the samples
       [O, O + S_i) of a Q-sample sequence (Cycles sample subsets). A frame with "motion" is
       one Cycles motion blur render along its 2^n + 1 keys (blender_scene.render_motion_blur).
+      A frame with "dof" renders through a thin lens focused at s with an aperture of
+      radius R (blender_scene.set_dof); without it, the pinhole camera.
       "noise_threshold" turns Cycles adaptive sampling on for this command (off without).
       "guides" writes every EXR of this command as a multi-layer EXR with Cycles'
       denoising guide passes (albedo, normal) beside the combined RGBA (off without).

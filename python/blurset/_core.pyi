@@ -190,6 +190,7 @@ class BuildConfigRecord(TypedDict):
     test_settings: int | None
     blurry_test_views: bool
     downsample: list[int]
+    defocus: list[int]
     passes: list[str]
     workers: int
     threads: int
@@ -369,6 +370,8 @@ class BuildConfig:
     @property
     def downsample(self) -> list[int]: ...
     @property
+    def defocus(self) -> list[int]: ...
+    @property
     def passes(self) -> list[str]: ...
     @property
     def workers(self) -> int: ...
@@ -525,6 +528,15 @@ def level_dirs(levels: list[int]) -> list[str]:
 
 def parse_level_dir(name: str) -> int | None:
     """The level of a level directory name (`sharp` -> 0, `blur_<l>` -> l), or None."""
+
+def defocus_dir(level: int) -> str:
+    """Directory of a defocus level (`defocus_<l>`)."""
+
+def parse_defocus_dir(name: str) -> int | None:
+    """The level of a defocus level's directory (`defocus_<l>` -> l), or None."""
+
+def is_level_dir(name: str) -> bool:
+    """Whether a name is a level directory a build writes (sharp, blur_<l>, defocus_<l>)."""
 
 def sort_level_dirs(names: list[str]) -> list[str]:
     """Level directory names in level order; other names are dropped."""
@@ -706,6 +718,13 @@ def write_geometry(
 
 def read_depth(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
     """A depth EXR as float32 (H, W)."""
+
+def circle_of_confusion(
+    depth: npt.NDArray[np.float32], focus: float, aperture_radius: float, focal_px: float
+) -> npt.NDArray[np.float64]:
+    """The circle of confusion (diameter, px) of each depth (0: no surface, gives 0) for a
+    thin lens focused at `focus` with an aperture of `aperture_radius` (world units) and a
+    focal length of `focal_px` pixels: meta.json's defocus levels' model."""
 
 def write_depth_millimetres(depth_exr: str | PathLike[str], png: str | PathLike[str]) -> None:
     """A depth EXR as a 16-bit PNG in millimetres (0: no surface), nerfstudio's default

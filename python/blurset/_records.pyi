@@ -32,6 +32,12 @@ class Spread(TypedDict):
     p5: float
     worst: float
 
+class Dof(TypedDict):
+    """The thin lens of a defocus render ([`super::defocus`])."""
+
+    aperture_radius: float
+    focus_distance: float
+
 class Motion(TypedDict):
     """The camera path of one Cycles motion blur render."""
 
@@ -43,6 +49,7 @@ class Render(TypedDict):
 
     c2w: list[list[float]]
     call: NotRequired[int | None]
+    dof: NotRequired[Dof | None]
     half: NotRequired[int | None]
     level: str
     motion: NotRequired[Motion | None]
@@ -73,6 +80,7 @@ class SamplingConfig(TypedDict):
 
     blur_budget: NotRequired[BlurBudget]
     blur_method: NotRequired[BlurMethod]
+    defocus: NotRequired[list[int]]
     delta0: NotRequired[float]
     fov_deg: NotRequired[float]
     guards: NotRequired[Guards]
@@ -92,6 +100,15 @@ class SamplingConfig(TypedDict):
     trajectory: NotRequired[TrajectoryAnchor]
     views: NotRequired[int]
     window_deg: NotRequired[float]
+
+class DefocusPlan(TypedDict):
+    """One defocus level of one view, as meta.json records it (`views[i].defocus[l]`)."""
+
+    aperture_radius: float
+    coc_px: list[float]
+    f_number: float
+    focus_distance: float
+    seed: int
 
 class LatentFrame(TypedDict):
     c2w: list[list[float]]
@@ -152,6 +169,7 @@ class ViewPlan(TypedDict):
     """One view of a setting; `L` is what each blur level records (the plan's [`LevelPlan`], or meta.json's record of it, which drops the latent cameras)."""
 
     c2w: list[list[float]]
+    defocus: NotRequired[dict[str, DefocusPlan]]
     depth_range: float
     far: float
     flatness: float
@@ -534,6 +552,7 @@ class MetaView(TypedDict):
     """A view as meta.json records it: the plan's view with its levels' records and the render QA of its sharp image."""
 
     c2w: list[list[float]]
+    defocus: NotRequired[dict[str, DefocusPlan]]
     depth_range: float
     far: float
     flatness: float

@@ -169,7 +169,7 @@ def open_scene(
     rows = np.asarray(_core.read_poses_bounds(scene_dir / layout.POSES_BOUNDS), np.float64)
     rows = rows[:: len(rows) // n] if len(rows) != n else rows
     cv, gl = _cameras(rows)
-    if pose == "mean" and level != layout.SHARP:
+    if pose == "mean" and level != layout.SHARP and not layout.is_defocus_dir(level):
         cv, gl = _mean_cameras(sdir, level, n)
     images = _read(image_files)
     clean = _read(clean_files, images.shape[1:3])

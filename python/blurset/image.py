@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from blurset._core import (
     Accumulator,
+    circle_of_confusion,
     FrameQa,
     ImageMetrics,
     ObjectError,
@@ -29,6 +30,7 @@ from blurset._core import (
 
 __all__ = [
     "Accumulator",
+    "circle_of_confusion",
     "FrameQa",
     "ImageMetrics",
     "ObjectError",

@@ -97,8 +97,19 @@ def level_dirs(levels: list[int]) -> list[str]:
 
 
 def is_level_dir(name: str) -> bool:
-    """`sharp` or `blur_<l>` with l in 1..64 (what `blurset build` can write)."""
-    return _core.parse_level_dir(name) is not None
+    """`sharp`, `blur_<l>` or `defocus_<l>` with l in 1..64 (what `blurset build` can
+    write)."""
+    return _core.is_level_dir(name)
+
+
+def defocus_dir(level: int) -> str:
+    """Directory of a defocus level (`defocus_<l>`)."""
+    return _core.defocus_dir(level)
+
+
+def is_defocus_dir(name: str) -> bool:
+    """`defocus_<l>`: a defocus level, whose cameras are the written poses."""
+    return _core.parse_defocus_dir(name) is not None
 
 
 def sort_level_dirs(names: list[str]) -> list[str]:

@@ -63,6 +63,12 @@ def _frame_item(f: Mapping[str, Any]) -> dict[str, Any]:
         item["motion"] = {"steps": int(m["steps"]), "keys": [_matrix(k) for k in m["keys"]]}
     if f.get("region") is not None:
         item["region"] = [int(x) for x in f["region"]]
+    if f.get("dof"):
+        d = f["dof"]
+        item["dof"] = {
+            "focus_distance": float(d["focus_distance"]),
+            "aperture_radius": float(d["aperture_radius"]),
+        }
     for key in ("call", "view", "level"):  # which render call renders it
         if f.get(key) is not None:
             item[key] = f[key]

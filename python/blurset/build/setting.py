@@ -265,7 +265,10 @@ def _render_fixed(
     """The plan's frames at their sample counts: the sharp renders first (their own,
     larger count), QA, then the blur renders. The seconds of each phase."""
     sharp_idx = [i for i, k in enumerate(images.keys) if k[1] == layout.SHARP]
+    # Defocus images render once each at the sharp image's count (issue 35).
+    defocus_idx = [i for i, k in enumerate(images.keys) if layout.is_defocus_dir(k[1])]
     blur_idx = [i for i, k in enumerate(images.keys) if k[1] != layout.SHARP]
+    blur_idx = [i for i in blur_idx if i not in set(defocus_idx)]
     t1 = time.time()
     worker.render(
         [frames[i] for i in sharp_idx],
@@ -279,6 +282,13 @@ def _render_fixed(
         worker.render(
             [frames[i] for i in blur_idx],
             on_frame=lambda j, p, o: images.on_frame(blur_idx[j], p, o),
+            **common,
+        )
+    if defocus_idx:
+        worker.render(
+            [frames[i] for i in defocus_idx],
+            samples=cfg.effective_sharp_samples,
+            on_frame=lambda j, p, o: images.on_frame(defocus_idx[j], p, o),
             **common,
         )
     return t_sharp, time.time() - t1 - t_sharp

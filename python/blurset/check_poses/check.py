@@ -204,4 +204,6 @@ def check_setting(
 
 def _check_level_name(level: str) -> None:
     if not layout.is_level_dir(level):
-        raise ConfigError(f"--level must be sharp, blur_<l> (l in 1..64) or all, got {level!r}")
+        raise ConfigError(
+            f"--level must be sharp, blur_<l> or defocus_<l> (l in 1..64) or all, got {level!r}"
+        )

@@ -86,7 +86,8 @@ def mean_latent_poses(scene_dir: Path, n: int):
     core), or None for a sharp level, a plain LLFF scene, or a build from before meta.json
     recorded them."""
     level = scene_dir.name
-    if level == layout.SHARP or not layout.is_level_dir(level):
+    # Sharp and defocus images are rendered at the written pose: no mean to report.
+    if level == layout.SHARP or layout.is_defocus_dir(level) or not layout.is_level_dir(level):
         return None
     if not (scene_dir.parent / layout.META).is_file():
         return None

@@ -22,6 +22,7 @@ pub use crate::rng::seed_for;
 // What one setting renders: views, trajectories, levels, latent frames.
 pub use crate::plan::choices::{Choice, Preset};
 pub use crate::plan::config::BuildConfig;
+pub use crate::plan::defocus::{circle_of_confusion, DefocusPlan};
 pub use crate::plan::options::OptionInfo;
 pub use crate::plan::presets::{preset_values, FLOOR_PSNR_DB};
 pub use crate::plan::renders::{level_renders, Motion, Render};
@@ -92,7 +93,7 @@ pub use crate::ground::license::{
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
     files, gain_name, image_name, images_dir, level_dir, level_dirs, linear_dir, linear_name,
-    object_lock, parse_level_dir, pass_dir, pass_file, setting_name, sort_level_dirs, theta0s,
+    object_lock, parse_level_dir, pass_dir, defocus_dir, parse_defocus_dir, is_level_dir, pass_file, setting_name, sort_level_dirs, theta0s,
     work_dir, OBJECT_LOCK_PREFIX, PASSES, SHARP, WORK_PREFIX,
 };
 

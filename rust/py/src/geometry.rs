@@ -1,7 +1,7 @@
 //! Bindings of the core's per-view geometry (issue 35): depth, normals, masks.
 use crate::run_detached;
 use blurset_core as core;
-use numpy::{PyArray1, PyArrayMethods};
+use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
@@ -33,10 +33,37 @@ fn write_depth_millimetres(py: Python<'_>, depth_exr: PathBuf, png: PathBuf) -> 
     run_detached(py, move || core::write_depth_millimetres(&depth_exr, &png))
 }
 
+/// The circle of confusion (diameter, pixels) of each depth (world units along the
+/// viewing axis; 0: no surface, which gets 0) for a lens of `aperture_radius` focused at
+/// `focus`, `focal_px` the focal length in pixels: meta.json's defocus levels' model.
+#[pyfunction]
+fn circle_of_confusion<'py>(
+    py: Python<'py>,
+    depth: numpy::PyReadonlyArrayDyn<'py, f32>,
+    focus: f64,
+    aperture_radius: f64,
+    focal_px: f64,
+) -> PyResult<Bound<'py, numpy::PyArrayDyn<f64>>> {
+    let shape = depth.shape().to_vec();
+    let out: Vec<f64> = depth
+        .as_array()
+        .iter()
+        .map(|&z| {
+            if z > 0.0 {
+                core::circle_of_confusion(f64::from(z), focus, aperture_radius, focal_px)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    PyArray1::from_vec(py, out).reshape(shape)
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("PASSES", core::PASSES.to_vec())?;
     m.add_function(wrap_pyfunction!(write_geometry, m)?)?;
     m.add_function(wrap_pyfunction!(read_depth, m)?)?;
     m.add_function(wrap_pyfunction!(write_depth_millimetres, m)?)?;
+    m.add_function(wrap_pyfunction!(circle_of_confusion, m)?)?;
     Ok(())
 }

@@ -40,6 +40,24 @@ fn parse_level_dir(name: &str) -> Option<u32> {
     core::parse_level_dir(name)
 }
 
+/// Directory of a defocus level (`defocus_<l>`).
+#[pyfunction]
+fn defocus_dir(level: u32) -> String {
+    core::defocus_dir(level)
+}
+
+/// The level of a defocus level's directory (`defocus_<l>` → l), or None.
+#[pyfunction]
+fn parse_defocus_dir(name: &str) -> Option<u32> {
+    core::parse_defocus_dir(name)
+}
+
+/// Whether a name is a level directory a build writes (sharp, blur_<l>, defocus_<l>).
+#[pyfunction]
+fn is_level_dir(name: &str) -> bool {
+    core::is_level_dir(name)
+}
+
 /// Level directory names in level order; other names are dropped.
 #[pyfunction]
 fn sort_level_dirs(names: Vec<String>) -> Vec<String> {
@@ -247,6 +265,9 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(level_dir, m)?)?;
     m.add_function(wrap_pyfunction!(level_dirs, m)?)?;
     m.add_function(wrap_pyfunction!(parse_level_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(defocus_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(parse_defocus_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(is_level_dir, m)?)?;
     m.add_function(wrap_pyfunction!(sort_level_dirs, m)?)?;
     m.add_function(wrap_pyfunction!(setting_levels, m)?)?;
     m.add_function(wrap_pyfunction!(read_mean_poses, m)?)?;

@@ -161,12 +161,47 @@ pub fn parse_level_dir(name: &str) -> Option<u32> {
         .filter(|l| (1..=MAX_LEVEL).contains(l))
 }
 
-/// Level directories sorted in level order (sharp first, then by number); names that
-/// are not level directories are dropped.
+/// What a defocus level's directory starts with (`defocus_<l>`, issue 35).
+pub const DEFOCUS_PREFIX: &str = "defocus_";
+
+/// Directory of defocus level `level` (1..=MAX_LEVEL): `defocus_<l>`.
+pub fn defocus_dir(level: u32) -> String {
+    format!("{DEFOCUS_PREFIX}{level}")
+}
+
+/// The level of a defocus level's directory (`defocus_<l>`, l in 1..=MAX_LEVEL without
+/// leading zeros); anything else → None.
+pub fn parse_defocus_dir(name: &str) -> Option<u32> {
+    let num = name.strip_prefix(DEFOCUS_PREFIX)?;
+    if num.is_empty() || num.starts_with('0') || !num.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    num.parse::<u32>()
+        .ok()
+        .filter(|l| (1..=MAX_LEVEL).contains(l))
+}
+
+/// Whether `name` is a level directory a build writes: `sharp`, `blur_<l>`, `defocus_<l>`.
+pub fn is_level_dir(name: &str) -> bool {
+    parse_level_dir(name).is_some() || parse_defocus_dir(name).is_some()
+}
+
+/// A level directory's place in level order: sharp, the blur levels by number, then the
+/// defocus levels by number.
+fn level_order(name: &str) -> Option<(u32, u32)> {
+    match parse_level_dir(name) {
+        Some(0) => Some((0, 0)),
+        Some(l) => Some((1, l)),
+        None => parse_defocus_dir(name).map(|l| (2, l)),
+    }
+}
+
+/// Level directories sorted in level order (sharp first, then the blur levels by number,
+/// then the defocus levels); names that are not level directories are dropped.
 pub fn sort_level_dirs<S: AsRef<str>>(names: &[S]) -> Vec<String> {
-    let mut v: Vec<(u32, String)> = names
+    let mut v: Vec<((u32, u32), String)> = names
         .iter()
-        .filter_map(|n| parse_level_dir(n.as_ref()).map(|l| (l, n.as_ref().to_string())))
+        .filter_map(|n| level_order(n.as_ref()).map(|l| (l, n.as_ref().to_string())))
         .collect();
     v.sort();
     v.into_iter().map(|(_, n)| n).collect()

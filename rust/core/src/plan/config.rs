@@ -265,6 +265,14 @@ macro_rules! build_options {
             (e.g. 4 8, or none)",
         before: Some(Vec::new()),
     };
+    /// Defocus levels (issue 35): `defocus_<l>/` beside the blur levels, depth of field
+    /// rendered by Cycles ([`super::defocus`]).
+    defocus: Vec<u32> = Vec::new(), Spec::Levels, shapes {
+        help: "defocus levels, e.g. 1,2,3,4: defocus_<l>/ beside the blur levels, each view \
+            focused inside the object's depth range and the largest circle of confusion on \
+            the object 2^l px at 512 px (scaled with --resolution); none by default",
+        before: Some(Vec::new()),
+    };
     /// Depth, normals and masks of every view, in the sharp level (issue 35): depth and
     /// normals from one extra one-sample render per view and size, masks from coverage.
     passes: Vec<String> = Vec::new(), Spec::Passes, shapes {
@@ -448,6 +456,17 @@ impl BuildConfig {
         self.check_outputs()?;
         if let Some(t) = self.target_psnr {
             self.check_target(t)?;
+            if !self.defocus.is_empty() {
+                return Err(config_error(
+                    "defocus",
+                    format!(
+                        "{:?}: defocus levels render at the sharp image's fixed sample count; \
+                         a render target (--target-psnr, or a preset that sets one) does not \
+                         drive them: drop one of the two",
+                        self.defocus
+                    ),
+                ));
+            }
         }
         if self.latents_auto && self.blur_method == BlurMethod::MotionBlur {
             return Err(config_error(
@@ -658,6 +677,7 @@ impl BuildConfig {
             samples_total: self.samples_total,
             latent_sampling: self.latent_sampling,
             blur_budget: self.blur_budget,
+            defocus: self.defocus.clone(),
         }
     }
 
@@ -714,7 +734,7 @@ impl BuildConfig {
 
     /// Renders of a setting (an upper bound with latents auto).
     pub fn frames_per_setting(&self) -> usize {
-        self.views * (1 + self.levels.len() * self.max_latents())
+        self.views * (1 + self.levels.len() * self.max_latents() + self.defocus.len())
     }
 
     /// The views whose blur levels hold a copy of the sharp image (the held-out views,
@@ -736,8 +756,11 @@ impl BuildConfig {
         }
     }
 
+    /// `sharp`, the blur levels' and then the defocus levels' directories.
     pub fn level_dirs(&self) -> Vec<String> {
-        names::level_dirs(&self.levels)
+        let mut dirs = names::level_dirs(&self.levels);
+        dirs.extend(self.defocus.iter().map(|&l| names::defocus_dir(l)));
+        dirs
     }
 
     pub fn theta0s(&self) -> Vec<f64> {

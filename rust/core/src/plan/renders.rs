@@ -2,7 +2,7 @@
 //! the driver streams the frames into accumulators (per view: sharp, then each level).
 use super::region::{call_cost_px, object_region, render_calls, Region};
 use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
-use crate::ground::names::{level_dir, SHARP};
+use crate::ground::names::{defocus_dir, level_dir, SHARP};
 use glam::{DMat4, DVec3};
 use serde::Serialize;
 use std::path::Path;
@@ -13,6 +13,15 @@ pub struct Motion {
     pub steps: u32,
     /// OpenGL camera-to-world matrices (row-major) at t_k = k / 2^steps.
     pub keys: Vec<[[f64; 4]; 4]>,
+}
+
+/// The thin lens of a defocus render ([`super::defocus`]).
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, schemars::JsonSchema)]
+pub struct Dof {
+    /// Distance of the plane in focus along the viewing axis (world units).
+    pub focus_distance: f64,
+    /// Radius of the lens aperture (world units).
+    pub aperture_radius: f64,
 }
 
 /// One render: the camera, its Cycles seed and samples, the EXR it writes, and the
@@ -48,6 +57,17 @@ pub struct Render {
     /// halves this render adds to (0 or 1); None: the image has one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub half: Option<u32>,
+    /// A defocus render's lens (issue 35); None: a pinhole camera.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dof: Option<Dof>,
+}
+
+impl Render {
+    /// A render that is a whole-image call of its own: a motion blur render, or a
+    /// defocus render, whose blur spills past the object's pinhole footprint.
+    fn whole(&self) -> bool {
+        self.motion.is_some() || self.dof.is_some()
+    }
 }
 
 /// The renders of one blurry image: its latent frames (average method) or its single
@@ -91,6 +111,7 @@ pub fn level_renders(
             region: None,
             call: None,
             half: None,
+            dof: None,
         }];
     }
     lp.latent_frames
@@ -111,6 +132,7 @@ pub fn level_renders(
                 region: None,
                 call: None,
                 half: None,
+                dof: None,
             }
         })
         .collect()
@@ -149,6 +171,7 @@ impl SettingPlan {
                 region: None,
                 call: None,
                 half: None,
+                dof: None,
             });
             if sharp_views.contains(&i) {
                 continue;
@@ -158,6 +181,28 @@ impl SettingPlan {
                 let prefix = exr_dir.join(format!("{i:04}_{key}"));
                 let prefix = prefix.display().to_string();
                 out.extend(level_renders(i, level, lp, &prefix, pin));
+            }
+            // Defocus levels: one render each at the sharp image's pose and samples.
+            for (key, d) in &v.defocus {
+                let level: u32 = key.parse().unwrap_or(0);
+                out.push(Render {
+                    view: i,
+                    level: defocus_dir(level),
+                    c2w: v.c2w,
+                    seed: d.seed,
+                    samples: None,
+                    sample_offset: pin.map(|_| 0),
+                    sample_sequence: pin,
+                    out: exr_dir.join(format!("{i:04}_d{key}.exr")).display().to_string(),
+                    motion: None,
+                    region: None,
+                    call: None,
+                    half: None,
+                    dof: Some(Dof {
+                        focus_distance: d.focus_distance,
+                        aperture_radius: d.aperture_radius,
+                    }),
+                });
             }
         }
         self.with_regions(out)
@@ -187,14 +232,14 @@ impl SettingPlan {
             let image = (renders[i].view, renders[i].level.clone());
             let mut j = i + 1;
             while j < renders.len()
-                && renders[i].motion.is_none()
-                && renders[j].motion.is_none()
+                && !renders[i].whole()
+                && !renders[j].whole()
                 && (renders[j].view, &renders[j].level) == (image.0, &image.1)
             {
                 j += 1;
             }
             let samples = renders[i].samples.unwrap_or(1);
-            let calls = if renders[i].motion.is_some() {
+            let calls = if renders[i].whole() {
                 vec![(i..j, None)]
             } else {
                 render_calls(&own[i..j], size, call_cost_px(samples))

@@ -5,6 +5,7 @@
 //! what is drawn (view, purpose), so changing the number of latents does not move the
 //! viewpoints, and dropping a level does not change the others.
 use super::camera::{clamp_polar, depth_range, focal_px, orbit_c2w};
+use super::defocus::{plan_view, DefocusPlan};
 use super::weights::{level_interval, scene_weight, Guards};
 use crate::error::{Error, Result};
 use crate::rng::{derive_seed, Stream};
@@ -99,6 +100,9 @@ pub struct SamplingConfig {
     pub samples_total: Option<u32>,
     pub latent_sampling: LatentSampling,
     pub blur_budget: BlurBudget,
+    /// Defocus levels (issue 35; [`super::defocus`]); none in a default build.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub defocus: Vec<u32>,
 }
 
 impl Default for SamplingConfig {
@@ -125,6 +129,7 @@ impl Default for SamplingConfig {
             samples_total: None,
             latent_sampling: LatentSampling::Subsets,
             blur_budget: BlurBudget::Parity,
+            defocus: Vec::new(),
         }
     }
 }
@@ -421,6 +426,9 @@ pub struct ViewPlan<L = LevelPlan> {
     /// OpenGL camera-to-world at p (the pose written for every level), row-major.
     pub c2w: [[f64; 4]; 4],
     pub levels: BTreeMap<String, L>,
+    /// Each defocus level's lens (issue 35), by level number; absent without them.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub defocus: BTreeMap<String, DefocusPlan>,
 }
 
 impl<L> ViewPlan<L> {
@@ -441,6 +449,7 @@ impl<L> ViewPlan<L> {
             sharp_seed: self.sharp_seed,
             c2w: self.c2w,
             levels: self.levels.iter().map(|(k, l)| (k.clone(), f(l))).collect(),
+            defocus: self.defocus.clone(),
         }
     }
 }
@@ -496,6 +505,9 @@ pub struct ViewSample {
 }
 
 const PURPOSE_VIEW: u64 = 0;
+/// The defocus stream of a view (its blur levels use purposes 1..=MAX_LEVEL); its renders'
+/// seeds are those of levels 1000 + l.
+const PURPOSE_DEFOCUS: u64 = 1000;
 
 fn stream_id(view: usize, purpose: u64) -> u64 {
     ((view as u64) << 32) | purpose
@@ -859,6 +871,15 @@ impl Setting<'_> {
         let (near, far) = depth_range(&c2w, vertices);
         let w = scene_weight(near, far, bbox_dims, &cfg.guards);
         let sharp_seed = frame_seed(self.seed, index, 0, 0);
+        let defocus = plan_view(
+            &cfg.defocus,
+            near.max(cfg.guards.near_floor),
+            far.max(cfg.guards.near_floor),
+            cfg.resolution,
+            cfg.fov_deg,
+            &mut Stream::new(self.seed, stream_id(index, PURPOSE_DEFOCUS)),
+            |level| frame_seed(self.seed, index, PURPOSE_DEFOCUS as u32 + level, 0),
+        );
         let levels = cfg
             .levels
             .iter()
@@ -883,6 +904,7 @@ impl Setting<'_> {
             sharp_seed,
             c2w: rows(&c2w),
             levels,
+            defocus,
         }
     }
 

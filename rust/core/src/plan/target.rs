@@ -340,6 +340,7 @@ mod tests {
             region: None,
             call,
             half: None,
+            dof: None,
         }
     }
 

@@ -1,0 +1,145 @@
+//! Defocus blur levels (issue 35): depth of field of a thin lens, which Cycles renders
+//! natively (one render, the aperture sampled by the path tracer; no latent frames).
+//!
+//! Per view a focus distance s is drawn uniformly inside the object's depth range
+//! [near, far] along the viewing axis, so part of the object is sharp. A point at depth z
+//! then spreads over a circle of confusion of diameter
+//!
+//! ```text
+//! c(z) = 2 · R · F · |1/z − 1/s|   pixels
+//! ```
+//!
+//! (R the aperture radius in world units, F the focal length in pixels): the thin lens
+//! with the lens at the camera centre, which is Cycles' model. Level l sets R so that the
+//! largest circle on the object, at near or far, is [`coc_px`]`(l)`: 2^l px at 512 px,
+//! scaled with the resolution (2, 4, 8, 16 px for levels 1–4), as the motion levels double
+//! their blur level to level.
+use crate::rng::Stream;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The width of the sensor the f-number refers to (Blender's default, 36 mm, fitted
+/// horizontally): only the recorded f-number depends on it, never an image.
+pub const SENSOR_WIDTH_MM: f64 = 36.0;
+
+/// The resolution the circle-of-confusion sizes are stated at.
+const COC_REFERENCE_PX: f64 = 512.0;
+
+/// The largest circle of confusion on the object (diameter, pixels) of defocus level
+/// `level` at `resolution` pixels wide: 2^level at 512 px, scaled with the resolution.
+pub fn coc_px(level: u32, resolution: u32) -> f64 {
+    2f64.powi(level.min(30) as i32) * f64::from(resolution) / COC_REFERENCE_PX
+}
+
+/// The circle of confusion (diameter, pixels) of a point at depth `z` along the viewing
+/// axis, for a lens of `aperture_radius` (world units) focused at `focus`, with a focal
+/// length of `focal_px` pixels.
+pub fn circle_of_confusion(z: f64, focus: f64, aperture_radius: f64, focal_px: f64) -> f64 {
+    2.0 * aperture_radius * focal_px * (1.0 / z - 1.0 / focus).abs()
+}
+
+/// One defocus level of one view, as meta.json records it (`views[i].defocus[l]`).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DefocusPlan {
+    /// Distance of the plane in focus along the viewing axis (world units): the view's,
+    /// the same at every level.
+    pub focus_distance: f64,
+    /// Radius of the lens aperture (world units).
+    pub aperture_radius: f64,
+    /// The f-number of that aperture for a [`SENSOR_WIDTH_MM`] sensor at the build's
+    /// field of view (focal length / aperture diameter).
+    pub f_number: f64,
+    /// The circle of confusion on the object (diameter, pixels): [smallest, largest]
+    /// over its depth range; 0 at the plane in focus, which lies inside it.
+    pub coc_px: [f64; 2],
+    /// Cycles seed of the render.
+    pub seed: u32,
+}
+
+/// The defocus levels of a view whose object spans depths [near, far] (its vertices,
+/// not the LLFF bounds), drawn from `stream`: the focus distance once, then each level's
+/// aperture. `seed(level)` gives each render its Cycles seed.
+pub fn plan_view(
+    levels: &[u32],
+    near: f64,
+    far: f64,
+    resolution: u32,
+    fov_deg: f64,
+    stream: &mut Stream,
+    seed: impl Fn(u32) -> u32,
+) -> BTreeMap<String, DefocusPlan> {
+    if levels.is_empty() {
+        return BTreeMap::new();
+    }
+    let focus = stream.uniform_in(near, far);
+    let half = (fov_deg.to_radians() / 2.0).tan();
+    let focal_px = f64::from(resolution) / (2.0 * half);
+    let lens_mm = SENSOR_WIDTH_MM / (2.0 * half);
+    // The largest |1/z − 1/s| on the object: at its near or its far end. An object with
+    // no depth extent is all in focus (a flat card facing the camera): no aperture
+    // blurs it, so none is set.
+    let spread = (1.0 / near - 1.0 / focus).max(1.0 / focus - 1.0 / far);
+    levels
+        .iter()
+        .map(|&level| {
+            let target = coc_px(level, resolution);
+            let radius = if spread > 0.0 {
+                target / (2.0 * focal_px * spread)
+            } else {
+                0.0
+            };
+            let largest = if spread > 0.0 { target } else { 0.0 };
+            let plan = DefocusPlan {
+                focus_distance: focus,
+                aperture_radius: radius,
+                f_number: if radius > 0.0 {
+                    lens_mm * 1e-3 / (2.0 * radius)
+                } else {
+                    f64::INFINITY
+                },
+                coc_px: [0.0, largest],
+                seed: seed(level),
+            };
+            (level.to_string(), plan)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_largest_circle_on_the_object_is_the_levels_size() {
+        let mut s = Stream::new(7, 1);
+        let plan = plan_view(&[1, 2, 3, 4], 1.5, 2.7, 512, 40.0, &mut s, |l| l);
+        let f = 512.0 / (2.0 * 20f64.to_radians().tan());
+        for (l, want) in [("1", 2.0), ("2", 4.0), ("3", 8.0), ("4", 16.0)] {
+            let p = &plan[l];
+            assert!(1.5 <= p.focus_distance && p.focus_distance <= 2.7);
+            let at = |z| circle_of_confusion(z, p.focus_distance, p.aperture_radius, f);
+            let largest = at(1.5).max(at(2.7));
+            assert!((largest - want).abs() < 1e-9, "{l}: {largest}");
+            assert!((p.coc_px[1] - want).abs() < 1e-12 && p.coc_px[0] == 0.0);
+            assert!(at(p.focus_distance) < 1e-12);
+            // f-number: focal length (mm) over the aperture's diameter (mm).
+            let lens_mm = 36.0 / (2.0 * 20f64.to_radians().tan());
+            assert!((p.f_number - lens_mm / (2.0 * p.aperture_radius * 1e3)).abs() < 1e-9);
+        }
+        // One focus per view; apertures double with the level.
+        assert_eq!(plan["1"].focus_distance, plan["4"].focus_distance);
+        assert!((plan["4"].aperture_radius / plan["1"].aperture_radius - 8.0).abs() < 1e-9);
+        // Scaled with the resolution: 4 px at 256 px for level 3.
+        assert!((coc_px(3, 256) - 4.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn an_object_without_depth_is_all_in_focus() {
+        let mut s = Stream::new(1, 2);
+        let plan = plan_view(&[2], 2.0, 2.0, 64, 40.0, &mut s, |_| 0);
+        assert_eq!(plan["2"].aperture_radius, 0.0);
+        assert_eq!(plan["2"].coc_px, [0.0, 0.0]);
+        assert!(plan_view(&[], 1.0, 2.0, 64, 40.0, &mut s, |_| 0).is_empty());
+    }
+}
