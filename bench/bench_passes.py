@@ -53,7 +53,9 @@ def measure(name: str, args: tuple[str, ...]) -> dict:
         for s in settings:
             geometry_s.append(json.loads((s / layout.META).read_text())["timings"]["geometry_s"])
         kinds = {
-            k: sum(_bytes(s / layout.SHARP / layout.pass_dir(k, f)) for s in settings for f in (1, 4))
+            k: sum(
+                _bytes(s / layout.SHARP / layout.pass_dir(k, f)) for s in settings for f in (1, 4)
+            )
             for k in layout.PASSES
         }
         n = len(settings)

@@ -419,6 +419,7 @@ class BuildStats(TypedDict):
     blur_weight: dict[str, list[float | None]]
     build: str
     counts: Counts
+    defocus_coc_px: NotRequired[dict[str, list[float | None]]]
     depth_range: list[float]
     failures: list[Failure]
     flatness: list[float]
@@ -710,6 +711,7 @@ class StatsRecord(TypedDict):
     blurset_version: str
     build: str
     counts: Counts
+    defocus_coc_px: NotRequired[dict[str, list[float | None]]]
     depth_range: list[float]
     failures: list[Failure]
     flatness: list[float]

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from blurset._core import (
     Accumulator,
-    circle_of_confusion,
     FrameQa,
     ImageMetrics,
     ObjectError,
     QaThresholds,
+    circle_of_confusion,
     default_qa_thresholds,
     frame_qa,
     half_noise,

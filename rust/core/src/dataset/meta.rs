@@ -583,6 +583,16 @@ pub struct ReadView {
     /// `--target-psnr` builds: per level directory.
     #[serde(default)]
     pub images: BTreeMap<String, ReadImage>,
+    /// `--defocus` builds: per defocus level.
+    #[serde(default)]
+    pub defocus: BTreeMap<String, ReadDefocus>,
+}
+
+/// A view's defocus level, as the statistics read it.
+#[derive(Debug, Deserialize)]
+pub struct ReadDefocus {
+    /// [smallest, largest] circle of confusion on the object, px.
+    pub coc_px: [f64; 2],
 }
 
 /// The fields of [`Meta`] the statistics use (older metas may lack `levels`).

@@ -87,6 +87,12 @@ pub const QUANTITIES: &[(&str, &str, &str)] = &[
         "largest screen motion of a bounding-box corner over the trajectory at level l (one per blurry view)",
     ),
     (
+        "defocus_coc_px",
+        "px",
+        "largest circle of confusion (diameter) on the object at defocus level l: 2^l px at \
+         512 px, scaled with the resolution (--defocus builds; one per defocused view)",
+    ),
+    (
         "render_psnr",
         "dB",
         "render PSNR of an image on its object's pixels, estimated from its two halves \
@@ -229,6 +235,10 @@ pub struct BuildStats {
     pub blur_weight: BTreeMap<u32, Vec<Option<f64>>>,
     pub latent_frames: BTreeMap<u32, Vec<Option<u64>>>,
     pub motion_px: BTreeMap<u32, Vec<Option<f64>>>,
+    /// `--defocus` builds (absent otherwise): per defocus level, the largest circle of
+    /// confusion on the object, null where the view holds the sharp image.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub defocus_coc_px: BTreeMap<u32, Vec<Option<f64>>>,
     /// `--target-psnr` builds (absent otherwise): per level, 0 the sharp image.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub render_psnr: BTreeMap<u32, Vec<Option<f64>>>,
@@ -314,6 +324,9 @@ struct ViewRecord {
     levels: BTreeMap<u32, MetaLevel>,
     /// Under a target: (samples, estimated render PSNR) per level, 0 the sharp image.
     images: BTreeMap<u32, (u64, f64)>,
+    /// Per defocus level, the largest circle of confusion on the object (px); none where
+    /// the view holds the sharp image.
+    defocus: BTreeMap<u32, f64>,
 }
 
 struct SettingRecord {
@@ -417,6 +430,16 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
             })?;
             images.insert(l, (im.samples, im.render_psnr_db));
         }
+        let mut defocus = BTreeMap::new();
+        for (key, d) in v.defocus.iter().filter(|_| !sharp_copy) {
+            let l: u32 = key.parse().map_err(|_| {
+                input_error(
+                    format!("bad meta.json (view {i}: defocus key {key:?} is not a number)"),
+                    &path,
+                )
+            })?;
+            defocus.insert(l, d.coc_px[1]);
+        }
         views.push(ViewRecord {
             index: i,
             scene_range: sr,
@@ -426,6 +449,7 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
             w_u: v.w_u,
             levels,
             images,
+            defocus,
         });
     }
     // Older metas lack `levels`: sharp plus the blur levels the views record.
@@ -562,9 +586,14 @@ fn assemble(
             .iter()
             .map(|&l| (l, Vec::with_capacity(n_views)))
             .collect(),
+        defocus_coc_px: BTreeMap::new(),
         render_psnr: BTreeMap::new(),
         image_samples: BTreeMap::new(),
     };
+    let defocus_levels: BTreeSet<u32> = records
+        .iter()
+        .flat_map(|r| r.views.iter().flat_map(|v| v.defocus.keys().copied()))
+        .collect();
     let with_sharp: Vec<u32> = std::iter::once(0).chain(levels.iter().copied()).collect();
     for (k, r) in records.into_iter().enumerate() {
         for v in &r.views {
@@ -586,6 +615,12 @@ fn assemble(
                     .entry(l)
                     .or_default()
                     .push(lp.and_then(|x| x.motion_px));
+            }
+            for &l in &defocus_levels {
+                st.defocus_coc_px
+                    .entry(l)
+                    .or_default()
+                    .push(v.defocus.get(&l).copied());
             }
             for &l in &with_sharp {
                 let im = v.images.get(&l);
@@ -694,6 +729,13 @@ fn summaries(st: &BuildStats) -> Vec<Summary> {
         out.push(summarize(
             &format!("motion_px_{l}"),
             unit_of("motion_px"),
+            &present(v),
+        ));
+    }
+    for (l, v) in &st.defocus_coc_px {
+        out.push(summarize(
+            &format!("defocus_coc_px_{l}"),
+            unit_of("defocus_coc_px"),
             &present(v),
         ));
     }

@@ -193,7 +193,10 @@ impl SettingPlan {
                     samples: None,
                     sample_offset: pin.map(|_| 0),
                     sample_sequence: pin,
-                    out: exr_dir.join(format!("{i:04}_d{key}.exr")).display().to_string(),
+                    out: exr_dir
+                        .join(format!("{i:04}_d{key}.exr"))
+                        .display()
+                        .to_string(),
                     motion: None,
                     region: None,
                     call: None,
