@@ -819,6 +819,11 @@ def _nerfstudio(p: dict) -> dict:
             "(data=scene, center_method='focus', downscale_factor=None | 4).setup()"
             ".get_dataparser_outputs('train' | 'val' | 'test')",
             "nerfstudio/data/datasets/base_dataset.py InputDataset(outputs)[0]",
+            *(
+                ["nerfstudio/data/datasets/depth_dataset.py DepthDataset(outputs)[0]"]
+                if doc.get("passes")
+                else []
+            ),
         ],
         "versions": _versions("nerfstudio", "torch", "imageio", "numpy"),
         "scenes": scenes,
