@@ -10,6 +10,10 @@ REF× the samples, another seed) over the sharp image's (against its own converg
 render), on the object's pixels, as bench_render_parity measures the motion levels
 (parity 1; 0.5 dB is 1.12). `ratio`: sharp seconds / defocus seconds per image (one
 render each), medians over the objects.
+
+defocus_cost_128px: the demo build at 128 px (17 views, levels 1–4) with and without
+`--defocus 1,2,3,4`, side by side (alternating, medians of REPEATS): seconds and bytes
+per setting (`ratio`: seconds without / with).
 """
 
 from __future__ import annotations
@@ -93,8 +97,43 @@ def measure() -> dict:
     return rows
 
 
+def measure_cost() -> dict:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_passes import REPEATS, _build, _bytes
+    from blurset import layout
+
+    args = ("--views", "17", "--resolution", "128")
+    off_s, on_s = [], []
+    with tempfile.TemporaryDirectory() as d:
+        for k in range(REPEATS):
+            off, on = Path(d) / f"off{k}", Path(d) / f"on{k}"
+            off_s.append(_build(off, *args))
+            on_s.append(_build(on, *args, "--defocus", "1,2,3,4"))
+        settings = layout.complete_settings(on)
+        n = len(settings)
+        levels = [f"defocus_{lvl}" for lvl in LEVELS]
+        per_level = sum(_bytes(s / lvl) for s in settings for lvl in levels) / n / len(levels)
+        off_b = sum(_bytes(s) for s in layout.complete_settings(off)) / n
+    med_off, med_on = statistics.median(off_s), statistics.median(on_s)
+    return {
+        "name": "defocus_cost_128px",
+        "ratio": round(med_off / med_on, 3),
+        "contender": "build --defocus 1,2,3,4",
+        "baseline": "the same build without --defocus",
+        "settings": n,
+        "seconds_per_setting_off": round(med_off / n, 2),
+        "seconds_per_setting_on": round(med_on / n, 2),
+        "bytes_per_setting_off": round(off_b),
+        "bytes_per_defocus_level": round(per_level),
+        "repeats": REPEATS,
+        "runs_s": {"off": [round(x, 1) for x in off_s], "on": [round(x, 1) for x in on_s]},
+    }
+
+
 def run() -> list[dict]:
-    out = []
+    out = [measure_cost()]
     for key, row in measure().items():
         mse, t = row["mse_vs_sharp"], row["seconds_vs_sharp"]
         out.append(

@@ -178,15 +178,16 @@ def test_exports_carry_the_passes_and_nerfstudio_gets_millimetres(passes_build, 
 
 @pytest.mark.blender
 def test_real_passes_land_on_the_mesh(tmp_path):
-    """Real Cycles renders of the demo objects and two textured models of ../shared/data:
+    """Real Cycles renders of the demo objects and the textured models of ../shared/data
+    (BoxTextured, MapPin, WaterBottle with its normal map, the thin panel):
     every depth pixel put back through the written pose lies on the mesh (the worker's
     own import and normalization, a BVH of its triangles) within a fraction of a pixel;
     normals are the mesh's (flat faces exactly; smooth shading and normal maps within a
     few degrees at the median) and face the camera; masks are the coverage; the same
     command writes the same depth and normal bytes."""
-    glbs = [
-        shared_if_present("glb", n) for n in ("khronos_BoxTextured.glb", "sketchfab_MapPin.glb")
-    ]
+    names = ("khronos_BoxTextured.glb", "sketchfab_MapPin.glb", "WaterBottle_blender_reexport.glb",
+             "textured_panel_blender_reexport.glb")  # fmt: skip
+    glbs = [shared_if_present("glb", n) for n in names]
     args = ["--views", "3", "--levels", "1", "--resolution", "48", "--samples", "8",
             "--settings-per-object", "1", "--quiet", *PASSES]  # fmt: skip
     out, models = tmp_path / "b", tmp_path / "models"
