@@ -24,6 +24,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -74,7 +75,7 @@ def measure() -> dict:
                 verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
                 p = plan_setting(cfg, uid="bench", theta0_deg=0.0, seed=11,
                                  bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
-                frames = [dict(f) for f in p.renders(str(work / "f"))]
+                frames: list[dict[str, Any]] = [dict(f) for f in p.renders(str(work / "f"))]
                 for f in frames:  # whole images, one render call each (view, level)
                     f.pop("region", None)
                     f.pop("call", None)

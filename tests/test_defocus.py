@@ -92,6 +92,10 @@ def test_noise_export_stats_and_check_poses_take_defocus_levels(defocus_build, t
     run_cli("stats", str(defocus_build), "--out", str(st))
     doc = json.loads((st / "stats.json").read_text())
     assert set(doc["defocus_coc_px"]) == {"1", "2"} and (st / "defocus_coc_px.png").is_file()
+    card = tmp_path / "card.md"
+    run_cli("card", str(defocus_build), "--out", str(card))
+    text = card.read_text()
+    assert "| defocus_2 | 0.25 |" in text and "`defocus_l` the same views" in text
     proc = run_cli("check-poses", str(defocus_build / setting), "--level", "defocus_1", check=False)
     assert "--level must be" not in proc.stderr, proc.stderr
 

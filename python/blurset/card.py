@@ -206,6 +206,8 @@ def _level_table(metas: list[dict], levels: list[str]) -> list[str]:
         if lvl == layout.SHARP:
             rows.append("| sharp | 0 | 0 | 1 (ground truth) |")
             continue
+        if layout.is_defocus_dir(lvl):
+            continue  # a lens, not a motion: _defocus_table
         key = lvl.partition("_")[2]
         w, px, m = [], [], []
         for meta in metas:
@@ -222,6 +224,33 @@ def _level_table(metas: list[dict], levels: list[str]) -> list[str]:
 
         rows.append(f"| {lvl} | {med(w)} | {med(px)} | {med(m)} |")
     return rows
+
+
+def _defocus_table(metas: list[dict], levels: list[str]) -> list[str]:
+    """The defocus levels: the largest circle of confusion on the object and the lens."""
+    defocus = [lvl for lvl in levels if layout.is_defocus_dir(lvl)]
+    if not defocus:
+        return []
+    rows = [
+        "Defocus levels (`defocus_l`): one Cycles depth-of-field render per view, focused at "
+        "a distance drawn inside the object's depth range, the aperture set so the largest "
+        "circle of confusion on the object is the one below (meta.json `views[].defocus`).",
+        "",
+        "| level | largest circle of confusion, px | f-number (median) |",
+        "|---|---|---|",
+    ]
+    for lvl in defocus:
+        key = lvl.partition("_")[2]
+        ds = [
+            v["defocus"][key]
+            for meta in metas
+            for v in meta.get("views", [])
+            if isinstance(v.get("defocus"), dict) and key in v["defocus"]
+        ]
+        coc = statistics.median(d["coc_px"][1] for d in ds) if ds else None
+        fn = statistics.median(d["f_number"] for d in ds) if ds else None
+        rows.append(f"| {lvl} | {_fmt(coc)} | {'-' if fn is None else format(fn, '.3g')} |")
+    return [*rows, ""]
 
 
 def make_card(
@@ -267,7 +296,13 @@ def make_card(
             "image before compositing and sRGB.",
             "",
         ]
+    passes = (m0.get("render") or {}).get("passes_are") or {}
+    if passes:
+        out += ["Per view, beside the sharp images (`build --passes`):", ""]
+        out += [f"- **{k}**: {what}" for k, what in passes.items()]
+        out += [""]
     out += _construction(cfg, m0, metas, levels)
+    out += _defocus_table(metas, levels)
     for path, doc in noise_docs:
         out += _noise_section(path, doc)
     out += _loading(levels, splits.get("view_stride") or cfg.get("view_stride") or 16)
@@ -302,7 +337,13 @@ def _contents(
         "",
         f"Images are {res[0]} x {res[1]} px sRGB PNG. Levels: {', '.join(levels)} "
         "(`sharp` is the ground truth of every view; `blur_l` the same views blurred at "
-        "level l).",
+        "level l"
+        + (
+            "; `defocus_l` the same views out of focus at level l"
+            if any(layout.is_defocus_dir(lvl) for lvl in levels)
+            else ""
+        )
+        + ").",
         "",
         "### Splits",
         "",
