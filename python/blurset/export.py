@@ -342,7 +342,9 @@ def _write_geonerf_scene(
 def _write_scene(d: Path, final: Path, src: Path, doc: dict) -> None:
     d.mkdir(parents=True)
     parts = [layout.IMAGES, *(layout.images_dir(f) for f in doc["factors"])]
-    parts += [layout.POSES_BOUNDS, layout.TRANSFORMS]
+    parts += [layout.POSES_BOUNDS]
+    # A nerfstudio scene with passes gets a transforms.json of its own (_write_passes).
+    parts += [] if _own_transforms(doc) else [layout.TRANSFORMS]
     for part in parts:
         s = src / part
         if not s.exists():
@@ -365,7 +367,7 @@ def _write_passes(d: Path, final: Path, src: Path, sharp: Path, doc: dict) -> No
             if not (sharp / sub).is_dir():
                 raise InputError(f"missing {sub} in the build's sharp level: {sharp}")
             _link(sharp / sub, d / sub, final / sub, doc["copy"])
-    if doc["for"] != "nerfstudio" or not doc.get("passes"):
+    if not _own_transforms(doc):
         return
     tf = layout.read_json(src / layout.TRANSFORMS, layout.TRANSFORMS)
     for frame in tf["frames"]:
@@ -382,8 +384,13 @@ def _write_passes(d: Path, final: Path, src: Path, sharp: Path, doc: dict) -> No
                 name = Path(frame["file_path"]).name
                 exr = sharp / layout.pass_dir("depth", f) / layout.pass_file("depth", name)
                 _core.write_depth_millimetres(exr, d / sub / name)
-    (d / layout.TRANSFORMS).unlink()  # the level's (a link or a copy): this one is its own
     layout.write_json(d / layout.TRANSFORMS, tf)
+
+
+def _own_transforms(doc: dict) -> bool:
+    """Whether each scene's transforms.json is written by the export (nerfstudio, with
+    depth or masks to name) instead of linked from the build."""
+    return doc["for"] == "nerfstudio" and bool({"depth", "mask"} & set(doc.get("passes") or []))
 
 
 def _refuse_overlap(out: Path, doc: dict, inputs: list[Path]) -> None:

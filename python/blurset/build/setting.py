@@ -159,6 +159,9 @@ def _plan(
     for d in cfg.level_dirs:
         for sub in [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]:
             (partial / d / sub).mkdir(parents=True)
+    if "mask" in cfg.passes:
+        for f in [1, *cfg.downsample]:
+            (partial / layout.SHARP / layout.pass_dir("mask", f)).mkdir()
     return plan, frames, exr_dir
 
 
@@ -240,9 +243,8 @@ class _Images:
         if level == layout.SHARP:
             if "mask" in self.cfg.passes:
                 for f in [1, *self.cfg.downsample]:
-                    d = level_dir / layout.pass_dir("mask", f)
-                    d.mkdir(exist_ok=True)
-                    a.write_mask(d / layout.pass_file("mask", name), downsample=f)
+                    mask = level_dir / layout.pass_dir("mask", f) / layout.pass_file("mask", name)
+                    a.write_mask(mask, downsample=f)
             self.qa[view] = _core.frame_qa(a.mean())
 
     def on_frame(self, i: int, path: str, origin: tuple[int, int] | None) -> None:
@@ -267,8 +269,8 @@ def _render_fixed(
     sharp_idx = [i for i, k in enumerate(images.keys) if k[1] == layout.SHARP]
     # Defocus images render once each at the sharp image's count (issue 35).
     defocus_idx = [i for i, k in enumerate(images.keys) if layout.is_defocus_dir(k[1])]
-    blur_idx = [i for i, k in enumerate(images.keys) if k[1] != layout.SHARP]
-    blur_idx = [i for i in blur_idx if i not in set(defocus_idx)]
+    rest = set(sharp_idx) | set(defocus_idx)
+    blur_idx = [i for i in range(len(images.keys)) if i not in rest]
     t1 = time.time()
     worker.render(
         [frames[i] for i in sharp_idx],

@@ -186,6 +186,7 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
                 &format!("{lvl}/{sub}"),
                 counts.views,
                 want,
+                "images",
             ));
         }
         if counts.linear {
@@ -218,13 +219,8 @@ fn pass_problems(sharp: &Path, counts: &SettingCounts) -> Vec<SettingProblem> {
             let rel = format!("{SHARP}/{sub}");
             if pass == "mask" {
                 let want = counts.resolution.map(|[w, h]| (w / factor, h / factor));
-                let mut found = image_problems(&sharp.join(&sub), &rel, counts.views, want);
-                for p in &mut found {
-                    if let Fault::Count { of, .. } = &mut p.fault {
-                        *of = "masks";
-                    }
-                }
-                out.extend(found);
+                let dir = sharp.join(&sub);
+                out.extend(image_problems(&dir, &rel, counts.views, want, "masks"));
                 continue;
             }
             out.extend(exr_problems(&sharp.join(&sub), &rel, counts.views));
@@ -290,17 +286,19 @@ impl SettingCounts {
     }
 }
 
-/// The problems of one images folder (`rel`, relative to the setting): a count other
-/// than `views`, a damaged PNG, or a whole one of another size than `want`.
+/// The problems of one folder of PNGs (`rel`, relative to the setting; `of`: what they
+/// are, "images" or "masks"): a count other than `views`, a damaged PNG, or a whole one
+/// of another size than `want`.
 fn image_problems(
     dir: &Path,
     rel: &str,
     views: usize,
     want: Option<(u32, u32)>,
+    of: &'static str,
 ) -> Vec<SettingProblem> {
     let mut out = Vec::new();
     let images = files_with(dir, "png");
-    out.extend(count_problem(rel.into(), images.len(), views, "images"));
+    out.extend(count_problem(rel.into(), images.len(), views, of));
     for (name, p) in &images {
         let path = format!("{rel}/{name}");
         if let Some(fault) = png_fault(p) {

@@ -1,8 +1,9 @@
 //! The expensive half of `blurset verify`: decode every image of a build in parallel
 //! and compare its size with the one its meta.json promises. (Which files must exist
 //! is decided by the caller from meta.json; this only reads pixels.)
-use crate::image::exr::read::read_exr;
-use crate::image::geometry::read_depth_exr;
+use crate::error::Error;
+use crate::image::exr::read::decode_exr;
+use crate::image::geometry::decode_depth_exr;
 use crate::image::io::read_image;
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -30,13 +31,18 @@ fn check_one(item: &ImageCheck) -> Option<String> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     let size = if is_exr {
-        // A colour EXR (linear/, normals/), else a one-channel depth EXR (depth/).
-        read_exr(&item.path)
-            .map(|f| (f.width, f.height))
-            .or_else(|e| {
-                read_depth_exr(&item.path)
-                    .map(|(w, h, _)| (w as u32, h as u32))
-                    .map_err(|_| e)
+        // A colour EXR (linear/, normals/), else a one-channel depth EXR (depth/): the
+        // file is read once for both.
+        std::fs::read(&item.path)
+            .map_err(|e| Error::io("cannot open EXR", &item.path, e))
+            .and_then(|bytes| {
+                decode_exr(&bytes)
+                    .map(|f| (f.width, f.height))
+                    .or_else(|e| {
+                        decode_depth_exr(&bytes, &item.path)
+                            .map(|(w, h, _)| (w as u32, h as u32))
+                            .map_err(|_| e)
+                    })
             })
     } else {
         read_image(&item.path).map(|i| (i.width, i.height))

@@ -5,6 +5,7 @@
 //! sample at the pixel centre, so a pixel's depth is the surface its centre sees, never
 //! a blend of an edge's two sides); the mask from the sharp image itself.
 use super::exr::passes::{decode_named, PassSpec};
+use super::exr::write::write_encoded;
 use super::resample::check_factor;
 use super::CH;
 use crate::error::{Error, Result};
@@ -92,16 +93,12 @@ fn float_exr(path: &Path, width: usize, height: usize, names: &[&str], data: &[f
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
     );
-    let mut buf = Cursor::new(Vec::new());
-    Image::from_layer(layer)
-        .write()
-        .non_parallel()
-        .to_buffered(&mut buf)
-        .map_err(|e| Error::Image {
-            reason: format!("cannot encode EXR: {e}"),
-            path: path.to_path_buf(),
-        })?;
-    write_atomic(path, buf.get_ref())
+    write_encoded(path, |buf| {
+        Image::from_layer(layer)
+            .write()
+            .non_parallel()
+            .to_buffered(buf)
+    })
 }
 
 /// The depth EXR of a view: one float channel ([`DEPTH_CHANNEL`]) in world units.
@@ -131,9 +128,14 @@ pub fn write_geometry(render: &Path, depth: Option<&Path>, normal: Option<&Path>
 /// Read a depth EXR back: (width, height, depth).
 pub fn read_depth_exr(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
     let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read", path, e))?;
+    decode_depth_exr(&bytes, path)
+}
+
+/// A depth EXR held in memory (`path` names it in errors): (width, height, depth).
+pub fn decode_depth_exr(bytes: &[u8], path: &Path) -> Result<(usize, usize, Vec<f32>)> {
     // A one-layer file's plain channel names count as the combined pass's.
     let spec: [PassSpec; 1] = [("Combined", DEPTH_CHANNEL)];
-    let d = decode_named(&bytes, path, &spec)?;
+    let d = decode_named(bytes, path, &spec)?;
     let (depth, seen) = d.passes.into_iter().next().unwrap_or_default();
     if !seen.first().copied().unwrap_or(false) {
         return Err(Error::Image {

@@ -20,14 +20,22 @@ pub fn write_exr(path: &Path, width: u32, height: u32, rgba: &[f32]) -> Result<(
         Encoding::SMALL_LOSSLESS,
         channels,
     );
+    write_encoded(path, |buf| {
+        Image::from_layer(layer).write().to_buffered(buf)
+    })
+}
+
+/// Write the EXR `encode` puts in a buffer to `path`, atomically; an encoder's error
+/// names the file.
+pub(crate) fn write_encoded(
+    path: &Path,
+    encode: impl FnOnce(&mut Cursor<Vec<u8>>) -> exr::error::UnitResult,
+) -> Result<()> {
     let mut buf = Cursor::new(Vec::new());
-    Image::from_layer(layer)
-        .write()
-        .to_buffered(&mut buf)
-        .map_err(|e| Error::Image {
-            reason: format!("cannot encode EXR: {e}"),
-            path: path.to_path_buf(),
-        })?;
+    encode(&mut buf).map_err(|e| Error::Image {
+        reason: format!("cannot encode EXR: {e}"),
+        path: path.to_path_buf(),
+    })?;
     write_atomic(path, buf.get_ref())
 }
 
