@@ -220,7 +220,7 @@ def _config(out: Path, glb: Path, **kw):
 
 
 def _build(out: Path, glb: Path, preset: dict) -> dict:
-    from blurset.build import build
+    from blurset.builder import build
 
     cfg = _config(out, glb, **preset)
     t0 = time.perf_counter()

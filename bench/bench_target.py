@@ -167,7 +167,7 @@ def _db(mse: float) -> float:
 
 def measure_model(glb: Path, work: Path) -> dict:
     from blurset import image, layout
-    from blurset.build import build
+    from blurset.builder import build
     from blurset.image import read_exr
 
     out = work / f"build_{glb.stem}"

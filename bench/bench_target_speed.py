@@ -73,7 +73,7 @@ def _config(out: Path, glb: Path, **flags):
 
 
 def _build(cfg) -> tuple[float, Path, dict]:
-    from blurset.build import build
+    from blurset.builder import build
 
     t0 = time.perf_counter()
     summary = build(cfg, progress=False)

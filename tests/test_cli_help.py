@@ -88,7 +88,7 @@ def test_build_resol_is_refused_on_the_command_line(capsys: pytest.CaptureFixtur
 
 
 def test_build_help_defaults_come_from_the_core() -> None:
-    from blurset.build.cli import default_text
+    from blurset.builder.cli import default_text
     from blurset.config import BuildConfig
 
     core = BuildConfig()

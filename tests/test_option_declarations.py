@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin
 
 from blurset import cli
-from blurset.build.cli import default_text
-from blurset.build.dataset import BEFORE_OPTION, RUN_OPTIONS
+from blurset.builder.cli import default_text
+from blurset.builder.dataset import BEFORE_OPTION, RUN_OPTIONS
 from blurset.config import BuildConfig
 
 OPTIONS = BuildConfig.options()

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 from blurset import cli, options
-from blurset.build.dataset import BEFORE_OPTION, RUN_OPTIONS, check_same_options
+from blurset.builder.dataset import BEFORE_OPTION, RUN_OPTIONS, check_same_options
 from blurset.config import BUILD, BuildConfig, load_toml, make_config
 from blurset.exceptions import ConfigError
 from blurset.options import Options

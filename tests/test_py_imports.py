@@ -49,5 +49,5 @@ def test_the_check_sees_the_imports() -> None:
     behind it)."""
     edges = _edges()
     assert "blurset.layout" in edges["blurset.outputs"]  # top level
-    assert "blurset.build.target" in edges["blurset.build.setting"]  # inside a function
+    assert "blurset.builder.target" in edges["blurset.builder.setting"]  # inside a function
     assert "blurset.exceptions" in edges["blurset.layout"]

@@ -33,7 +33,7 @@ RESUME = {
 
 # subcommand -> (module, one-line help)
 COMMANDS = {
-    "build": ("blurset.build.cli", "render an Objaverse-Blur style dataset from GLB objects"),
+    "build": ("blurset.builder.cli", "render an Objaverse-Blur style dataset from GLB objects"),
     "noise": (
         "blurset.noise.cli",
         "write reproducible noisy copies (LLFF-N style) of an LLFF scene or of a whole build",

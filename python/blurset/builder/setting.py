@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from blurset import _core, layout
-from blurset.build.geometry import render_geometry
+from blurset.builder.geometry import render_geometry
 from blurset.config import BuildConfig, out_dir
 from blurset.exceptions import BlursetError
 from blurset.objects import ObjectSpec
@@ -352,10 +352,10 @@ def _render_targeted(
     common: dict[str, Any],
     bound: int,
 ) -> tuple[dict[tuple[int, str], _records.ImageRender], int, float, float]:
-    """Every image to the config's target (build/target.py): the sharp images first, QA,
+    """Every image to the config's target (builder/target.py): the sharp images first, QA,
     then the blurry ones. The progress bar counts renders up to the setting's share.
     Returns each image's record, the renders, and the seconds of each phase."""
-    from blurset.build.target import frame_counts, render_to_target
+    from blurset.builder.target import frame_counts, render_to_target
 
     counts = frame_counts({"view": v, "level": lv} for v, lv in keys)
     order = list(dict.fromkeys(keys))

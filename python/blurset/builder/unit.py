@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from blurset import _core, attribution, layout, objaverse_cache, outputs, preflight
-from blurset.build.setting import SettingFailed, SettingJob, render_setting
+from blurset.builder.setting import SettingFailed, SettingJob, render_setting
 from blurset.config import BuildConfig, out_dir
 from blurset.devices import Device
 from blurset.exceptions import BlursetError

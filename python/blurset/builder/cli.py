@@ -31,7 +31,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
 
 
 def run(args: argparse.Namespace) -> int:
-    from blurset.build import build
+    from blurset.builder import build
 
     cfg = config_from_args(args)
     summary = build(cfg, progress=not args.quiet)

@@ -16,16 +16,16 @@ import time
 from pathlib import Path
 
 from blurset import _core, devices, layout, outputs, publish
-from blurset.build.dataset import (
+from blurset.builder.dataset import (
     append_failures,
     build_lock,
     check_same_options,
     finalize,
     sweep,
 )
-from blurset.build.executors import run_local, run_ray
-from blurset.build.setting import frames_per_setting
-from blurset.build.unit import ObjectResult, objaverse
+from blurset.builder.executors import run_local, run_ray
+from blurset.builder.setting import frames_per_setting
+from blurset.builder.unit import ObjectResult, objaverse
 from blurset.config import BuildConfig, flag, out_dir
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec, resolve_objects

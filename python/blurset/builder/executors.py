@@ -9,7 +9,7 @@ import queue
 from collections.abc import Callable
 
 from blurset import devices
-from blurset.build.unit import ObjectResult, build_object
+from blurset.builder.unit import ObjectResult, build_object
 from blurset.config import BuildConfig
 from blurset.devices import Device
 from blurset.exceptions import BlursetError

@@ -1,7 +1,7 @@
 """Depth and normals of every view (`--passes`, issue 35): one geometry render per view
 and image size, at the sharp image's pose and seed, written beside the sharp images.
 
-Masks need no render: they come from the sharp image's coverage (build/setting.py).
+Masks need no render: they come from the sharp image's coverage (builder/setting.py).
 """
 
 from __future__ import annotations
