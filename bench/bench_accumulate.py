@@ -14,7 +14,6 @@ the frames (one frame in memory at a time) and produce the same image.
 from __future__ import annotations
 
 import os
-import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -23,6 +22,7 @@ from typing import Any
 import numpy as np
 import OpenEXR
 from blurset.image import Accumulator
+from harness import median_times
 from PIL import Image
 
 FRAMES = 34  # the paper's m
@@ -97,25 +97,6 @@ def contender(paths: list[Path], out: Path, size: int = SIZE) -> None:
     acc.write_png(out)
 
 
-def median_times(a, b, repeats: int = REPEATS, cpu: dict | None = None) -> tuple[float, float]:
-    """Medians of `repeats` interleaved runs of two thunks, so load from other processes
-    on a shared machine hits both sides alike. If `cpu` is given, the medians of the
-    process CPU time (all threads) of each side go to cpu["a"], cpu["b"]."""
-    ta: list[float] = []
-    tb: list[float] = []
-    ca: list[float] = []
-    cb: list[float] = []
-    for _ in range(repeats):
-        for fn, times, cpus in ((a, ta, ca), (b, tb, cb)):
-            c0, t0 = time.process_time(), time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-            cpus.append(time.process_time() - c0)
-    if cpu is not None:
-        cpu["a"], cpu["b"] = statistics.median(ca), statistics.median(cb)
-    return statistics.median(ta), statistics.median(tb)
-
-
 def baseline_stages(paths: list[Path]) -> dict:
     """Where the baseline's time goes (one extra run, not part of the ratio)."""
     t0 = time.perf_counter()
@@ -153,6 +134,7 @@ def measure(name: str, codec: str, compression=None) -> dict:
         t_base, t_rust = median_times(
             lambda: baseline(paths, d / "base.png"),
             lambda: contender(paths, d / "rust.png"),
+            REPEATS,
             cpu=cpu,
         )
         stages = baseline_stages(paths)

@@ -54,6 +54,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from harness import proc_cpu
 
 RESOLUTION = int(os.environ.get("BLURSET_BENCH_RES", "512"))
 LATENTS = 34
@@ -64,11 +65,6 @@ DEVICE = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")  # a Cycles backend, or A
 CONTENT_FRAMES = (0, 11, 22, 33)  # latent frames rendered as sharp images (content cost)
 VIEWS = int(os.environ.get("BLURSET_BENCH_VIEWS", "6"))  # blurry vs sharp over a setting
 VIEW_REPEATS = 2
-
-
-def _proc_cpu(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _own_cpu() -> float:
@@ -111,7 +107,7 @@ class Timed:
             acc_s += time.perf_counter() - t
 
         self.frame_seconds.clear()
-        c0, o0, t0 = _proc_cpu(self.w._proc.pid), _own_cpu(), time.perf_counter()
+        c0, o0, t0 = proc_cpu(self.w._proc.pid), _own_cpu(), time.perf_counter()
         self.w.render(
             frames,
             resolution=self.res,
@@ -124,7 +120,7 @@ class Timed:
         )
         acc.write_png(self.work / "out.png")
         wall = time.perf_counter() - t0
-        cpu = _proc_cpu(self.w._proc.pid) - c0 + _own_cpu() - o0
+        cpu = proc_cpu(self.w._proc.pid) - c0 + _own_cpu() - o0
         render = sum(self.frame_seconds)
         return {
             "wall": wall,

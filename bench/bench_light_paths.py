@@ -20,6 +20,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from harness import proc_cpu
 
 HERE = Path(__file__).resolve().parent
 GLB_DIR = HERE.parent.parent / "shared" / "data" / "glb"
@@ -37,11 +38,6 @@ def _cases() -> list[tuple[str, Path, str]]:
     if mazda.is_file():
         cases.append((f"{mazda.stem}_emission", mazda, "emission"))
     return cases
-
-
-def _proc_cpu(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def measure() -> dict:
@@ -76,9 +72,9 @@ def measure() -> dict:
                         ]
                         f = dict(frame, out=str(work / f"{mode}.exr"))
                         assert w._proc is not None  # loaded: the worker runs
-                        c0, t0 = _proc_cpu(w._proc.pid), time.perf_counter()
+                        c0, t0 = proc_cpu(w._proc.pid), time.perf_counter()
                         w.render([f], resolution=RES, fov_deg=cfg.fov_deg, samples=SAMPLES)
-                        times[mode].append((time.perf_counter() - t0, _proc_cpu(w._proc.pid) - c0))
+                        times[mode].append((time.perf_counter() - t0, proc_cpu(w._proc.pid) - c0))
                         img[mode] = np.asarray(read_exr(work / f"{mode}.exr"))
                 diff = image_error(img["auto"], img["fixed"])
                 err = {"psnr": diff.psnr}

@@ -12,7 +12,6 @@ writes) is reported beside it.
 from __future__ import annotations
 
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -27,6 +26,7 @@ from blurset.noise.model import (
     noise_sigmas,
     noise_white_balance,
 )
+from harness import median_times
 from PIL import Image
 
 FERN = Path(__file__).resolve().parents[2] / "shared" / "data" / "llff" / "fern"
@@ -63,25 +63,6 @@ def contender(images, gains, wb):
     return out
 
 
-def median_times(a, b, repeats: int = REPEATS, cpu: dict | None = None) -> tuple[float, float]:
-    """Medians of interleaved runs, so load from other processes hits both sides alike.
-    If `cpu` is given, the medians of the process CPU time (all threads) of each side
-    go to cpu["a"], cpu["b"]."""
-    ta: list[float] = []
-    tb: list[float] = []
-    ca: list[float] = []
-    cb: list[float] = []
-    for _ in range(repeats):
-        for fn, times, cpus in ((a, ta, ca), (b, tb, cb)):
-            c0, t0 = time.process_time(), time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-            cpus.append(time.process_time() - c0)
-    if cpu is not None:
-        cpu["a"], cpu["b"] = statistics.median(ca), statistics.median(cb)
-    return statistics.median(ta), statistics.median(tb)
-
-
 def end_to_end() -> float:
     with tempfile.TemporaryDirectory(prefix="blurset-bench-noise-") as tmp:
         t0 = time.perf_counter()
@@ -108,7 +89,10 @@ def run() -> list[dict]:
     std_ratio = float(np.std(lin_c - y) / np.std(lin_b - y))
     cpu: dict = {}
     t_base, t_rust = median_times(
-        lambda: baseline(images, gains, wb, rng), lambda: contender(images, gains, wb), cpu=cpu
+        lambda: baseline(images, gains, wb, rng),
+        lambda: contender(images, gains, wb),
+        REPEATS,
+        cpu=cpu,
     )
     t_cli = end_to_end()
     n_values = sum(im.size for im in images) * len(gains)

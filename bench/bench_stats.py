@@ -30,6 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from blurset.stats import build_stats  # noqa: E402
+from harness import median_times  # noqa: E402
 
 from tests.conftest import write_synthetic_build  # noqa: E402
 
@@ -88,18 +89,6 @@ def rust_aggregate(build: Path) -> _records.BuildStats:
     return build_stats(build).to_dict()
 
 
-def median_times(a, b, repeats: int = REPEATS) -> tuple[float, float]:
-    """Medians of interleaved runs, so load from other processes hits both sides alike."""
-    ta: list[float] = []
-    tb: list[float] = []
-    for _ in range(repeats):
-        for fn, times in ((a, ta), (b, tb)):
-            t0 = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-    return statistics.median(ta), statistics.median(tb)
-
-
 def run() -> list[dict]:
     tmp = Path(tempfile.mkdtemp(prefix="blurset-bench-stats-"))
     try:
@@ -119,7 +108,9 @@ def run() -> list[dict]:
         t_rust_only = statistics.median(
             _timed(lambda: build_stats(build).to_dict()) for _ in range(REPEATS)
         )
-        t_py, t_rs = median_times(lambda: python_aggregate(build), lambda: rust_aggregate(build))
+        t_py, t_rs = median_times(
+            lambda: python_aggregate(build), lambda: rust_aggregate(build), REPEATS
+        )
         t0 = time.perf_counter()
         subprocess.run(
             [sys.executable, "-m", "blurset.cli", "stats", str(build), "--out",

@@ -28,11 +28,11 @@ import os
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from harness import plan_object, timed_build  # noqa: E402
 
 if TYPE_CHECKING:
     from blurset import _records
@@ -118,7 +118,6 @@ def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
     probe's samples). The probe is the image's construction at half its samples (two
     halves on other seeds): with the image, it measures how fast this image's noise falls
     with samples, so the least that reaches the target is found from measurements."""
-    from blurset.plan import plan_setting, seed_for
     from blurset.worker_client import Worker
 
     per_frame = {}
@@ -127,10 +126,7 @@ def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
             per_frame[(v["index"], level)] = r["samples"]
     out = {}
     with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
-        info = w.load(glb, work / "v.npy")
-        verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
-        plan = plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
-                            bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
+        plan = plan_object(cfg, glb, w, work)
         images: dict[tuple[int, str], list[_records.Render]] = {}
         for f in plan.renders(str(work / "r"), cfg.cycles_samples, sharp_views=[]):
             images.setdefault((f["view"], f["level"]), []).append(f)
@@ -167,18 +163,11 @@ def _db(mse: float) -> float:
 
 def measure_model(glb: Path, work: Path) -> dict:
     from blurset import image, layout
-    from blurset.builder import build
     from blurset.image import read_exr
 
     out = work / f"build_{glb.stem}"
     cfg = config(out, glb, RES, VIEWS, preset="balanced", target_psnr=TARGET)
-    t0 = time.perf_counter()
-    summary = build(cfg, progress=False)
-    wall = time.perf_counter() - t0
-    if summary["settings_complete"] != 1:
-        raise RuntimeError(f"bench build of {glb.name} failed: {summary['failures']}")
-    (setting,) = [d for d in out.iterdir() if (d / ".complete").exists()]
-    meta = json.loads((setting / "meta.json").read_text())
+    wall, setting, meta = timed_build(cfg)
     refs = _references(cfg, glb, setting, meta, work)
     target_mse = 10 ** (-TARGET / 10)
     rows = []

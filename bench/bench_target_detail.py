@@ -24,6 +24,7 @@ os.environ.setdefault("BLURSET_BENCH_SPEED_VIEWS", "1")
 sys.path.insert(0, str(HERE))
 import bench_target_speed as speed  # noqa: E402
 from bench_target import held_out_glbs  # noqa: E402
+from harness import timed_build  # noqa: E402
 
 
 def recorded_targets() -> dict[str, float]:
@@ -43,7 +44,7 @@ def run() -> list[dict]:
             cont = speed._continuous(glb, work)
             cfg = speed._config(work / "target", glb, preset="balanced",
                                 target_psnr=targets[glb.stem])  # fmt: skip
-            _, setting, meta = speed._build(cfg)
+            _, setting, meta = timed_build(cfg)
             scores = speed._against_continuous(setting, cont)
             res.append(
                 {

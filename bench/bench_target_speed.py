@@ -39,11 +39,13 @@ import os
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from harness import plan_object, render_mean, timed_build  # noqa: E402
 
 if TYPE_CHECKING:
     from blurset import _records
@@ -72,42 +74,6 @@ def _config(out: Path, glb: Path, **flags):
     return config(out, glb, RES, VIEWS, **flags)
 
 
-def _build(cfg) -> tuple[float, Path, dict]:
-    from blurset.builder import build
-
-    t0 = time.perf_counter()
-    summary = build(cfg, progress=False)
-    wall = time.perf_counter() - t0
-    if summary["settings_complete"] != 1:
-        raise RuntimeError(f"bench build failed: {summary['failures']}")
-    out = Path(cfg.out)
-    (setting,) = [d for d in out.iterdir() if (d / ".complete").exists()]
-    return wall, setting, json.loads((setting / "meta.json").read_text())
-
-
-def _plan(cfg, glb: Path, w, work: Path):
-    from blurset.plan import plan_setting, seed_for
-
-    info = w.load(glb, work / "v.npy")
-    verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
-    return plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
-                        bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
-
-
-def _render(w, frames: list, samples: int, cfg) -> np.ndarray:
-    from blurset import image
-
-    acc = image.Accumulator(RES, RES)
-
-    def on_frame(_i: int, path: str, origin) -> None:
-        acc.add_exr(path, origin)
-        os.unlink(path)
-
-    w.render(frames, resolution=RES, fov_deg=cfg.fov_deg, samples=samples,
-             on_frame=on_frame, crop=True)  # fmt: skip
-    return acc.mean()
-
-
 def continuous_config(glb: Path, work: Path):
     """The build config whose plan gives the continuous reference's frames and samples."""
     return _config(work / "unused", glb, latents_auto=True, latent_positions="stratified",
@@ -124,20 +90,20 @@ def _continuous(glb: Path, work: Path) -> dict:
     cfg = continuous_config(glb, work)
     refs: dict[tuple[int, str], list[np.ndarray]] = {}
     with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
-        plan = _plan(cfg, glb, w, work)
+        plan = plan_object(cfg, glb, w, work)
         for v in plan.to_dict()["views"]:
             for salt in (CONT_SALT, CONT_SALT2):
                 sharp = [{"c2w": v["c2w"], "seed": (v["sharp_seed"] ^ salt) & 0x7FFFFFFF,
                           "out": str(work / "c.exr")}]  # fmt: skip
                 refs.setdefault((v["index"], "sharp"), []).append(
-                    _render(w, sharp, CONTINUOUS_SAMPLES, cfg)
+                    render_mean(w, sharp, CONTINUOUS_SAMPLES, RES, cfg.fov_deg)
                 )
                 for lvl in v["levels"]:
                     frames = plan.level_renders(v["index"], int(lvl), str(work / "c"))
                     for f in frames:
                         f["seed"] = (f["seed"] ^ salt) & 0x7FFFFFFF
                     refs.setdefault((v["index"], f"blur_{lvl}"), []).append(
-                        _render(w, frames, 1, cfg)
+                        render_mean(w, frames, 1, RES, cfg.fov_deg)
                     )
     return refs
 
@@ -203,7 +169,7 @@ def _paper_noise(cfg, glb: Path, setting: Path, work: Path) -> tuple[dict, dict]
     out = {}
     work_n = {"samples_per_view": 0.0, "calls_per_view": 0.0}
     with Worker(timeout=7200, workdir=work / "scratch", device=cfg.device.upper()) as w:
-        plan = _plan(cfg, glb, w, work)
+        plan = plan_object(cfg, glb, w, work)
         images: dict[tuple[int, str], list[_records.Render]] = {}
         for f in plan.renders(str(work / "r"), cfg.cycles_samples, sharp_views=[]):
             images.setdefault((f["view"], f["level"]), []).append(f)
@@ -215,7 +181,7 @@ def _paper_noise(cfg, glb: Path, setting: Path, work: Path) -> tuple[dict, dict]
             work_n["calls_per_view"] += len(frames) / VIEWS
             name = layout.linear_name(layout.image_name(view, VIEWS))
             first = read_exr(setting / level / "linear" / name)
-            e = image.object_error(first, _render(w, frames, samples, cfg))
+            e = image.object_error(first, render_mean(w, frames, samples, RES, cfg.fov_deg))
             out[(view, level)] = 200.0 if e.mse == 0 else float(-10.0 * np.log10(e.mse / 2.0))
     return out, work_n
 
@@ -241,7 +207,7 @@ def measure_model(glb: Path, work: Path) -> dict:
     per_hour = lambda s: 3600.0 / (s * 34 / VIEWS)  # noqa: E731
     cont = _continuous(glb, work)
     paper_cfg = _config(work / f"paper_{glb.stem}", glb, preset="paper")
-    paper_s, paper_dir, _ = _build(paper_cfg)
+    paper_s, paper_dir, _ = timed_build(paper_cfg)
     noise, paper_work = _paper_noise(paper_cfg, glb, paper_dir, work)
     measured = list(noise.values())
     paper = {"build_s": round(paper_s, 2), **paper_work, **_against_continuous(paper_dir, cont)}
@@ -265,7 +231,7 @@ def measure_model(glb: Path, work: Path) -> dict:
             ("floor", {"preset": "floor"})]  # fmt: skip
     for what, flags in [(w, f) for w, f in runs if w in RUNS]:
         cfg = _config(work / f"target_{what}_{glb.stem}", glb, **flags)
-        target_s, setting, meta = _build(cfg)
+        target_s, setting, meta = timed_build(cfg)
         est = [im["render_psnr_db"] for v in meta["views"] for im in v["images"].values()]
         entry = {
             "target_db": cfg.target_psnr,

@@ -23,6 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_target_speed as b  # noqa: E402
 from blurset import image  # noqa: E402
 from blurset.worker_client import Worker  # noqa: E402
+from harness import plan_object, render_mean  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 GLB = HERE.parent.parent / "shared" / "data" / "glb" / "textured_panel_blender_reexport.glb"
@@ -34,14 +35,14 @@ def main() -> dict:
         work = Path(d)
         cfg = b.continuous_config(GLB, work)
         with Worker(timeout=7200, workdir=work / "s", device="CPU") as w:
-            plan = b._plan(cfg, GLB, w, work)
+            plan = plan_object(cfg, GLB, w, work)
             for lvl in (1, 4):
                 refs = []
                 for salt in (b.CONT_SALT, 0x1234567):
                     frames = plan.level_renders(0, lvl, str(work / "c"))
                     for f in frames:
                         f["seed"] = (f["seed"] ^ salt) & 0x7FFFFFFF
-                    refs.append(b._render(w, frames, 1, cfg))
+                    refs.append(render_mean(w, frames, 1, b.RES, cfg.fov_deg))
                 a, c = refs
                 r_avg = image.image_error((a + c) / 2, a).detail_ratio  # E(mean) / E(one)
                 out[lvl] = {

@@ -26,6 +26,7 @@ _spec = importlib.util.spec_from_file_location("sph", HERE / "bench_settings_per
 assert _spec is not None and _spec.loader is not None  # a .py file: always a spec and a loader
 sph = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(sph)
+from sph_references import denoised_mse, render_reference  # noqa: E402
 
 
 def main(preset_name: str, glb: Path) -> dict:
@@ -36,7 +37,9 @@ def main(preset_name: str, glb: Path) -> dict:
         work = Path(tmp)
         built = sph._build(work / "b", glb, preset)
         plain = {k: v for k, v in preset.items() if k != "denoise"}
-        ref, k, noise = sph._render_reference(glb, work, plain, built["samples"], True)
+        ref, k, noise = render_reference(
+            sph._config, glb, work, sph.RES, plain, built["samples"], True
+        )
         mse: dict[str, list[float]] = {}
         for (view, level), r in ref.items():
             img = np.ascontiguousarray(
@@ -45,9 +48,7 @@ def main(preset_name: str, glb: Path) -> dict:
             kind = "sharp" if level == "sharp" else "blur"
             e = image_error(img, r).mse
             mse.setdefault(f"{kind}_measured", []).append(e)
-            mse.setdefault(f"{kind}_corrected", []).append(
-                sph.denoised_mse(e, noise[(view, level)])
-            )
+            mse.setdefault(f"{kind}_corrected", []).append(denoised_mse(e, noise[(view, level)]))
             mse.setdefault(f"{kind}_reference_noise", []).append(noise[(view, level)])
     return {
         "preset": preset_name,
