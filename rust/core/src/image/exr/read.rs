@@ -903,6 +903,187 @@ mod tests {
         Ok(())
     }
 
+    /// A multi-layer render as Blender writes one: the combined pass and the guides in
+    /// one part (`ViewLayer.<pass>.<channel>`), or, with `parts`, one part a pass whose
+    /// last (the normal) is `odd` pixels wider than the others.
+    fn passes_file(parts: bool, odd: usize) -> Result<Vec<u8>> {
+        let (w, h) = (19usize, 11usize);
+        let v = |c: usize, i: usize| ((i * 5 + c * 11) % 89) as f32 / 16.0 - 1.0;
+        // (pass, its letters, the first value pattern, width)
+        let all = [
+            ("Combined", "RGBA", 0, w),
+            ("Denoising Albedo", "RGB", 4, w),
+            ("Denoising Normal", "XYZ", 7, w + odd),
+            ("Depth", "Z", 10, w),
+        ];
+        let encoding = Encoding {
+            compression: Compression::ZIP16,
+            blocks: Blocks::ScanLines,
+            line_order: LineOrder::Increasing,
+        };
+        let channels = |list: &[(&str, &str, usize, usize)], prefix: bool| {
+            let list = list
+                .iter()
+                .flat_map(|&(pass, letters, first, w)| {
+                    letters.chars().enumerate().map(move |(k, l)| {
+                        let name = if prefix {
+                            format!("{pass}.{l}")
+                        } else {
+                            l.to_string()
+                        };
+                        let c = first + k;
+                        AnyChannel::new(
+                            name.as_str(),
+                            FlatSamples::F32((0..w * h).map(|i| v(c, i)).collect()),
+                        )
+                    })
+                })
+                .collect();
+            AnyChannels::sort(SmallVec::from_vec(list))
+        };
+        let layers: Vec<_> = if parts {
+            all.iter()
+                .map(|p| {
+                    let name = format!("ViewLayer.{}", p.0);
+                    Layer::new(
+                        (p.3, h),
+                        LayerAttributes::named(name.as_str()),
+                        encoding,
+                        channels(&[*p], false),
+                    )
+                })
+                .collect()
+        } else {
+            vec![Layer::new(
+                (w, h),
+                LayerAttributes::named("ViewLayer"),
+                encoding,
+                channels(&all, true),
+            )]
+        };
+        let mut out = Cursor::new(Vec::new());
+        let bounds = exr::meta::attribute::IntegerBounds::from_dimensions((w, h));
+        Image::from_layers(exr::prelude::ImageAttributes::new(bounds), layers)
+            .write()
+            .non_parallel()
+            .to_buffered(&mut out)
+            .map_err(|e| Error::Value(e.to_string()))?;
+        Ok(out.into_inner())
+    }
+
+    /// The decoders' results on a fixed set of files (every codec and block layout, a
+    /// NaN, multi-layer renders, and seeded truncations and byte edits of each), folded
+    /// into one FNV-1a digest of the pixels, sizes, non-finite reports and error texts.
+    /// The digest moves only when what a file decodes to (or the error it gives) does.
+    fn decoding_digest() -> Result<(u64, [usize; 4])> {
+        // Frames and errors of decode_rgba, then of decode_named.
+        let mut outcomes = [0usize; 4];
+        let mut h = 0xCBF2_9CE4_8422_2325u64;
+        let mut fnv = |bytes: &[u8]| {
+            for &b in bytes {
+                h ^= u64::from(b);
+                h = h.wrapping_mul(0x0000_0100_0000_01B3);
+            }
+        };
+        let mut files = Vec::new();
+        for compression in [
+            Compression::Uncompressed,
+            Compression::ZIP1,
+            Compression::ZIP16,
+            Compression::RLE,
+            Compression::PIZ,
+        ] {
+            for blocks in [Blocks::ScanLines, Blocks::Tiles(Vec2(16, 8))] {
+                for nan in [false, true] {
+                    files.push(sample_file(compression, blocks, nan)?);
+                }
+            }
+        }
+        for (parts, odd) in [(false, 0), (true, 0), (true, 3)] {
+            files.push(passes_file(parts, odd)?);
+        }
+        let mut s = crate::rng::Stream::new(36, 0);
+        let mut inputs = files.clone();
+        for f in &files {
+            for _ in 0..24 {
+                let mut b = f.clone();
+                for _ in 0..1 + s.next_u64() % 4 {
+                    let i = (s.next_u64() as usize)
+                        % b.len().min(if s.next_u64() % 2 == 0 {
+                            400
+                        } else {
+                            usize::MAX
+                        });
+                    b[i] = s.next_u64() as u8;
+                }
+                if s.next_u64() % 2 == 0 {
+                    let keep = b.len() - (s.next_u64() as usize) % (b.len() / 3 + 1);
+                    b.truncate(keep);
+                }
+                inputs.push(b);
+            }
+        }
+        let path = Path::new("pinned.exr");
+        let mut rgba = Vec::new();
+        let specs: [&[super::super::passes::PassSpec]; 3] = [
+            &[
+                ("Combined", "RGBA"),
+                ("Denoising Albedo", "RGB"),
+                ("Denoising Normal", "XYZ"),
+            ],
+            &[("Depth", "Z"), ("Normal", "XYZ")],
+            &[("Combined", "RGB")],
+        ];
+        for b in &inputs {
+            let r = decode_rgba(b, path, &mut rgba);
+            outcomes[usize::from(r.is_err())] += 1;
+            match r {
+                Ok(d) => {
+                    fnv(format!(
+                        "{}x{} {:?}",
+                        d.width,
+                        d.height,
+                        d.non_finite.map(|(x, y, c, v)| (x, y, c, v.to_bits()))
+                    )
+                    .as_bytes());
+                    rgba.iter().for_each(|v| fnv(&v.to_bits().to_le_bytes()));
+                }
+                Err(e) => fnv(e.to_string().as_bytes()),
+            }
+            for spec in specs {
+                let r = super::super::passes::decode_named(b, path, spec);
+                outcomes[2 + usize::from(r.is_err())] += 1;
+                match r {
+                    Ok(d) => {
+                        fnv(format!("{}x{}", d.width, d.height).as_bytes());
+                        for (buf, seen) in &d.passes {
+                            fnv(format!("{seen:?}").as_bytes());
+                            buf.iter().for_each(|v| fnv(&v.to_bits().to_le_bytes()));
+                        }
+                    }
+                    // Which block's error the crate's parallel reader reports first
+                    // varies with the threads: its own words are left out.
+                    Err(e) => {
+                        let text = e.to_string();
+                        fnv(text
+                            .split_once("(EXR: ")
+                            .map_or(&*text, |(a, _)| a)
+                            .as_bytes())
+                    }
+                }
+            }
+        }
+        Ok((h, outcomes))
+    }
+
+    #[test]
+    fn decoding_is_pinned() -> Result<()> {
+        let (digest, outcomes) = decoding_digest()?;
+        assert_eq!(outcomes, [98, 477, 189, 1536]);
+        assert_eq!(digest, 0x1d38_9bb5_1445_546d, "{digest:#018x}");
+        Ok(())
+    }
+
     // The reader's fuzz harness in `cargo test` (rust/fuzz/fuzz_targets/exr.rs runs it
     // longer): arbitrary bytes and mutations of valid files of each codec give a frame
     // or an error, never a panic.
