@@ -58,23 +58,8 @@ pub(crate) fn decode_named(bytes: &[u8], path: &Path, passes: &[PassSpec]) -> Re
         reason,
         path: path.to_path_buf(),
     };
-    // The crate allocates every channel from the header's size: check it first.
-    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
-        .map_err(|e| bad(format!("EXR: {e}")))?;
-    super::read::check_sizes(&meta).map_err(bad)?;
-    let image = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .all_layers()
-        .all_attributes()
-        .from_buffered(Cursor::new(bytes))
-        .map_err(|e| bad(format!("EXR: {e}")))?;
-    let mut size: Option<(usize, usize)> = None;
-    let mut out: Vec<(Vec<f32>, Vec<bool>)> = passes
-        .iter()
-        .map(|(_, letters)| (Vec::new(), vec![false; letters.len()]))
-        .collect();
+    let image = read_layers(bytes).map_err(bad)?;
+    let mut gathered = Gathered::new(passes);
     for layer in &image.layer_data {
         let layer_name = layer
             .attributes
@@ -90,46 +75,103 @@ pub(crate) fn decode_named(bytes: &[u8], path: &Path, passes: &[PassSpec]) -> Re
             } else {
                 format!("{layer_name}.{name}")
             };
-            let Some((pass, c)) = slot(passes, &full) else {
-                continue;
-            };
-            match size {
-                None => size = Some((w, h)),
-                Some(s) if s != (w, h) => {
-                    return Err(bad(format!(
-                        "pass {full:?} is {w}x{h}, other passes are {}x{}",
-                        s.0, s.1
-                    )))
-                }
-                _ => {}
-            }
-            let stride = passes[pass].1.len();
-            let (buf, seen) = &mut out[pass];
-            if buf.is_empty() {
-                let fill = if passes[pass] == ("Combined", "RGBA") {
-                    1.0
-                } else {
-                    0.0
-                };
-                *buf = vec![fill; w * h * stride];
-            }
-            copy_channel(&ch.sample_data, buf, stride, c);
-            seen[c] = true;
+            gathered.add(&full, (w, h), &ch.sample_data).map_err(bad)?;
         }
     }
-    let Some((width, height)) = size else {
-        return Err(bad("none of the passes asked for is in the file".into()));
-    };
-    for (buf, _) in &mut out {
+    gathered.finish().map_err(bad)
+}
+
+/// A file's layers as the crate reads them: every channel, samples of any type.
+type Layers = exr::prelude::Image<exr::prelude::Layers<exr::prelude::AnyChannels<FlatSamples>>>;
+
+/// Every layer of the file at its full resolution.
+fn read_layers(bytes: &[u8]) -> std::result::Result<Layers, String> {
+    // The crate allocates every channel from the header's size: check it first.
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
+        .map_err(|e| format!("EXR: {e}"))?;
+    super::read::check_sizes(&meta)?;
+    exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes))
+        .map_err(|e| format!("EXR: {e}"))
+}
+
+/// The passes asked for, filled channel by channel: their values and which of their
+/// channels were there, and the one size they share.
+struct Gathered<'a> {
+    passes: &'a [PassSpec],
+    size: Option<(usize, usize)>,
+    out: Vec<(Vec<f32>, Vec<bool>)>,
+}
+
+impl<'a> Gathered<'a> {
+    fn new(passes: &'a [PassSpec]) -> Self {
+        Gathered {
+            passes,
+            size: None,
+            out: passes
+                .iter()
+                .map(|(_, letters)| (Vec::new(), vec![false; letters.len()]))
+                .collect(),
+        }
+    }
+
+    /// Place the channel named `full` (of a `w` x `h` layer) if it belongs to a pass
+    /// asked for; every such channel must be of the first one's size.
+    fn add(
+        &mut self,
+        full: &str,
+        (w, h): (usize, usize),
+        samples: &FlatSamples,
+    ) -> std::result::Result<(), String> {
+        let Some((pass, c)) = slot(self.passes, full) else {
+            return Ok(());
+        };
+        match self.size {
+            None => self.size = Some((w, h)),
+            Some(s) if s != (w, h) => {
+                return Err(format!(
+                    "pass {full:?} is {w}x{h}, other passes are {}x{}",
+                    s.0, s.1
+                ))
+            }
+            _ => {}
+        }
+        let stride = self.passes[pass].1.len();
+        let (buf, seen) = &mut self.out[pass];
         if buf.is_empty() {
-            buf.resize(width * height, 0.0); // a pass with no channel: callers check `seen`
+            let fill = if self.passes[pass] == ("Combined", "RGBA") {
+                1.0
+            } else {
+                0.0
+            };
+            *buf = vec![fill; w * h * stride];
         }
+        copy_channel(samples, buf, stride, c);
+        seen[c] = true;
+        Ok(())
     }
-    Ok(Decoded {
-        width,
-        height,
-        passes: out,
-    })
+
+    fn finish(self) -> std::result::Result<Decoded, String> {
+        let Some((width, height)) = self.size else {
+            return Err("none of the passes asked for is in the file".into());
+        };
+        let mut passes = self.out;
+        for (buf, _) in &mut passes {
+            if buf.is_empty() {
+                buf.resize(width * height, 0.0); // a pass with no channel: callers check `seen`
+            }
+        }
+        Ok(Decoded {
+            width,
+            height,
+            passes,
+        })
+    }
 }
 
 /// One channel's samples into every `stride`-th value of `buf` from offset `c`.
