@@ -74,6 +74,10 @@ pub use crate::dataset::meta::{
     read_exposure_ends, read_mean_poses, write_json, DeviceRecord, ImageRender, LightPathsRecord,
     Meta, ObjectRecord, Pose, PoseCheck, Timings,
 };
+pub use crate::dataset::noise_plan::{
+    plan_build as plan_noise_build, plan_scene as plan_noise_scene, NoiseGain, NoisePlan,
+    NoiseUnit, SEED_DERIVATION as NOISE_SEED_DERIVATION,
+};
 pub use crate::dataset::outputs::{
     build_state, claim, mark_text, output_kind, owned_entries, remove_owned, superseded_settings,
     text_owner, BuildState, Claim, OutputKind, TextOwner,
