@@ -100,66 +100,15 @@ impl Denoiser {
         // SAFETY: loading OIDN runs its initializers only (C++ static constructors).
         let lib = unsafe { libloading::Library::new(library) }
             .map_err(|e| bad(format!("cannot load Open Image Denoise ({e})")))?;
-        macro_rules! sym {
-            ($name:literal) => {
-                // SAFETY: the symbol is OIDN 2's function of this name and signature.
-                *unsafe { lib.get(concat!($name, "\0").as_bytes()) }
-                    .map_err(|e| bad(format!("not an OIDN 2 library: no {} ({e})", $name)))?
-            };
-        }
-        let api = Api {
-            new_device: sym!("oidnNewDevice"),
-            commit_device: sym!("oidnCommitDevice"),
-            release_device: sym!("oidnReleaseDevice"),
-            get_device_error: sym!("oidnGetDeviceError"),
-            get_device_int: sym!("oidnGetDeviceInt"),
-            new_buffer: sym!("oidnNewBuffer"),
-            release_buffer: sym!("oidnReleaseBuffer"),
-            write_buffer: sym!("oidnWriteBuffer"),
-            read_buffer: sym!("oidnReadBuffer"),
-            new_filter: sym!("oidnNewFilter"),
-            release_filter: sym!("oidnReleaseFilter"),
-            set_filter_image: sym!("oidnSetFilterImage"),
-            set_filter_bool: sym!("oidnSetFilterBool"),
-            set_filter_int: sym!("oidnSetFilterInt"),
-            commit_filter: sym!("oidnCommitFilter"),
-            execute_filter: sym!("oidnExecuteFilter"),
-        };
-        let kind = match device {
-            DenoiseDevice::Auto => DEVICE_TYPE_DEFAULT,
-            DenoiseDevice::Cpu => DEVICE_TYPE_CPU,
-        };
-        // SAFETY: OIDN C API calls with valid arguments; errors are read back below.
-        let dev = unsafe { (api.new_device)(kind) };
-        if dev.is_null() {
-            return Err(bad("no OIDN device could be created".into()));
-        }
-        // SAFETY: as above; the device is released if it failed to commit.
-        let (version, ty) = unsafe {
-            (api.commit_device)(dev);
-            if let Err(e) = device_error(&api, dev) {
-                (api.release_device)(dev);
-                return Err(bad(e.to_string()));
-            }
-            (
-                (api.get_device_int)(dev, cstr("version").as_ptr()),
-                (api.get_device_int)(dev, cstr("type").as_ptr()),
-            )
-        };
+        let api = load_api(&lib).map_err(bad)?;
+        let (dev, version, ty) = commit_device(&api, device).map_err(bad)?;
         Ok(Denoiser {
             _lib: lib,
             api,
             device: Mutex::new(DevicePtr(dev)),
             path: library.to_path_buf(),
             version,
-            device_type: match ty {
-                1 => "CPU",
-                2 => "SYCL",
-                3 => "CUDA",
-                4 => "HIP",
-                5 => "METAL",
-                _ => "unknown",
-            },
+            device_type: device_type_name(ty),
         })
     }
 
@@ -211,64 +160,17 @@ impl Denoiser {
         if n == 0 {
             return Ok(Vec::new());
         }
-        let bytes = n * 4;
-        let api = &self.api;
         let guard = self.device.lock().map_err(|_| poisoned())?;
-        let dev = guard.0;
+        let call = Call {
+            api: &self.api,
+            dev: guard.0,
+            w,
+            h,
+            bytes: n * 4,
+        };
         let mut out = vec![0.0f32; n];
-        // SAFETY: OIDN C API calls on a committed device with buffers of `bytes` bytes,
-        // images of w × h FLOAT3 pixels packed (strides 0 = packed); every handle is
-        // released by its `Owned` guard; host pointers are valid for `bytes` bytes.
-        unsafe {
-            let buffer = |data: &[f32]| -> Result<Owned<Buffer>> {
-                let b = (api.new_buffer)(dev, bytes);
-                if b.is_null() {
-                    return Err(Error::Value(format!(
-                        "OIDN could not allocate {bytes} bytes"
-                    )));
-                }
-                (api.write_buffer)(b, 0, bytes, data.as_ptr().cast());
-                Ok(Owned(b, api.release_buffer))
-            };
-            let bc = buffer(color)?;
-            let ba = buffer(albedo)?;
-            let bn = buffer(normal)?;
-            let bo = buffer(&out)?;
-            let image = |f: Filter, name: &str, b: Buffer| {
-                (api.set_filter_image)(f, cstr(name).as_ptr(), b, FORMAT_FLOAT3, w, h, 0, 0, 0)
-            };
-            let rt = || -> Result<Owned<Filter>> {
-                let f = (api.new_filter)(dev, cstr("RT").as_ptr());
-                if f.is_null() {
-                    return Err(Error::Value("OIDN has no RT filter".into()));
-                }
-                (api.set_filter_int)(f, cstr("quality").as_ptr(), QUALITY_HIGH);
-                Ok(Owned(f, api.release_filter))
-            };
-            // Prefilter the guides in place (Cycles' ACCURATE prefilter): an RT filter
-            // given only an auxiliary image denoises that image.
-            for (name, b) in [("albedo", &ba), ("normal", &bn)] {
-                let f = rt()?;
-                image(f.0, name, b.0);
-                image(f.0, "output", b.0);
-                (api.commit_filter)(f.0);
-                (api.execute_filter)(f.0);
-                drop(f);
-                device_error(api, dev)?;
-            }
-            let f = rt()?;
-            image(f.0, "color", bc.0);
-            image(f.0, "albedo", ba.0);
-            image(f.0, "normal", bn.0);
-            image(f.0, "output", bo.0);
-            (api.set_filter_bool)(f.0, cstr("hdr").as_ptr(), true);
-            (api.set_filter_bool)(f.0, cstr("cleanAux").as_ptr(), true);
-            (api.commit_filter)(f.0);
-            (api.execute_filter)(f.0);
-            device_error(api, dev)?;
-            (api.read_buffer)(bo.0, 0, bytes, out.as_mut_ptr().cast());
-            device_error(api, dev)?;
-        }
+        // SAFETY: a committed device, locked for the call; every slice holds n values.
+        unsafe { call.run(color, albedo, normal, &mut out)? };
         drop(guard);
         if let Some(i) = out.iter().position(|v| !v.is_finite()) {
             return Err(Error::Value(format!(
@@ -279,6 +181,166 @@ impl Denoiser {
             )));
         }
         Ok(out)
+    }
+}
+
+/// The OIDN 2 functions blurset calls, looked up in `lib` by name.
+fn load_api(lib: &libloading::Library) -> std::result::Result<Api, String> {
+    macro_rules! sym {
+        ($name:literal) => {
+            // SAFETY: the symbol is OIDN 2's function of this name and signature.
+            *unsafe { lib.get(concat!($name, "\0").as_bytes()) }
+                .map_err(|e| format!("not an OIDN 2 library: no {} ({e})", $name))?
+        };
+    }
+    Ok(Api {
+        new_device: sym!("oidnNewDevice"),
+        commit_device: sym!("oidnCommitDevice"),
+        release_device: sym!("oidnReleaseDevice"),
+        get_device_error: sym!("oidnGetDeviceError"),
+        get_device_int: sym!("oidnGetDeviceInt"),
+        new_buffer: sym!("oidnNewBuffer"),
+        release_buffer: sym!("oidnReleaseBuffer"),
+        write_buffer: sym!("oidnWriteBuffer"),
+        read_buffer: sym!("oidnReadBuffer"),
+        new_filter: sym!("oidnNewFilter"),
+        release_filter: sym!("oidnReleaseFilter"),
+        set_filter_image: sym!("oidnSetFilterImage"),
+        set_filter_bool: sym!("oidnSetFilterBool"),
+        set_filter_int: sym!("oidnSetFilterInt"),
+        commit_filter: sym!("oidnCommitFilter"),
+        execute_filter: sym!("oidnExecuteFilter"),
+    })
+}
+
+/// A new committed device of the kind asked for, with OIDN's version and device type
+/// number.
+fn commit_device(
+    api: &Api,
+    device: DenoiseDevice,
+) -> std::result::Result<(Device, i32, i32), String> {
+    let kind = match device {
+        DenoiseDevice::Auto => DEVICE_TYPE_DEFAULT,
+        DenoiseDevice::Cpu => DEVICE_TYPE_CPU,
+    };
+    // SAFETY: OIDN C API calls with valid arguments; errors are read back below.
+    let dev = unsafe { (api.new_device)(kind) };
+    if dev.is_null() {
+        return Err("no OIDN device could be created".into());
+    }
+    // SAFETY: as above; the device is released if it failed to commit.
+    unsafe {
+        (api.commit_device)(dev);
+        if let Err(e) = device_error(api, dev) {
+            (api.release_device)(dev);
+            return Err(e.to_string());
+        }
+        Ok((
+            dev,
+            (api.get_device_int)(dev, cstr("version").as_ptr()),
+            (api.get_device_int)(dev, cstr("type").as_ptr()),
+        ))
+    }
+}
+
+/// OIDN's name of its device type number (`OIDNDeviceType`).
+fn device_type_name(ty: i32) -> &'static str {
+    match ty {
+        1 => "CPU",
+        2 => "SYCL",
+        3 => "CUDA",
+        4 => "HIP",
+        5 => "METAL",
+        _ => "unknown",
+    }
+}
+
+/// One denoise on a locked device: OIDN buffers of `bytes` bytes, images of w × h
+/// FLOAT3 pixels packed (strides 0 = packed). Every handle is released by its `Owned`
+/// guard, on every path out.
+struct Call<'a> {
+    api: &'a Api,
+    dev: Device,
+    w: usize,
+    h: usize,
+    bytes: usize,
+}
+
+impl Call<'_> {
+    /// Colour, then guides prefiltered in place, then the colour filtered into `out`.
+    ///
+    /// SAFETY: `dev` is a committed device no other thread uses meanwhile; every slice
+    /// holds `bytes` bytes.
+    unsafe fn run(
+        &self,
+        color: &[f32],
+        albedo: &[f32],
+        normal: &[f32],
+        out: &mut [f32],
+    ) -> Result<()> {
+        let (api, dev) = (self.api, self.dev);
+        let bc = self.buffer(color)?;
+        let ba = self.buffer(albedo)?;
+        let bn = self.buffer(normal)?;
+        let bo = self.buffer(out)?;
+        // Prefilter the guides in place (Cycles' ACCURATE prefilter): an RT filter
+        // given only an auxiliary image denoises that image.
+        for (name, b) in [("albedo", &ba), ("normal", &bn)] {
+            let f = self.rt_filter()?;
+            self.image(f.0, name, b.0);
+            self.image(f.0, "output", b.0);
+            (api.commit_filter)(f.0);
+            (api.execute_filter)(f.0);
+            drop(f);
+            device_error(api, dev)?;
+        }
+        let f = self.rt_filter()?;
+        self.image(f.0, "color", bc.0);
+        self.image(f.0, "albedo", ba.0);
+        self.image(f.0, "normal", bn.0);
+        self.image(f.0, "output", bo.0);
+        (api.set_filter_bool)(f.0, cstr("hdr").as_ptr(), true);
+        (api.set_filter_bool)(f.0, cstr("cleanAux").as_ptr(), true);
+        (api.commit_filter)(f.0);
+        (api.execute_filter)(f.0);
+        device_error(api, dev)?;
+        (api.read_buffer)(bo.0, 0, self.bytes, out.as_mut_ptr().cast());
+        device_error(api, dev)
+    }
+
+    /// A device buffer holding a copy of `data`.
+    ///
+    /// SAFETY: as [`Call::run`].
+    unsafe fn buffer(&self, data: &[f32]) -> Result<Owned<Buffer>> {
+        let b = (self.api.new_buffer)(self.dev, self.bytes);
+        if b.is_null() {
+            return Err(Error::Value(format!(
+                "OIDN could not allocate {} bytes",
+                self.bytes
+            )));
+        }
+        (self.api.write_buffer)(b, 0, self.bytes, data.as_ptr().cast());
+        Ok(Owned(b, self.api.release_buffer))
+    }
+
+    /// A new `RT` filter at Cycles' `HIGH` quality.
+    ///
+    /// SAFETY: as [`Call::run`].
+    unsafe fn rt_filter(&self) -> Result<Owned<Filter>> {
+        let f = (self.api.new_filter)(self.dev, cstr("RT").as_ptr());
+        if f.is_null() {
+            return Err(Error::Value("OIDN has no RT filter".into()));
+        }
+        (self.api.set_filter_int)(f, cstr("quality").as_ptr(), QUALITY_HIGH);
+        Ok(Owned(f, self.api.release_filter))
+    }
+
+    /// Set the filter's image `name` to the buffer `b`.
+    ///
+    /// SAFETY: as [`Call::run`]; `f` and `b` are live handles of this call.
+    unsafe fn image(&self, f: Filter, name: &str, b: Buffer) {
+        let (w, h) = (self.w, self.h);
+        (self.api.set_filter_image)(f, cstr(name).as_ptr(), b, FORMAT_FLOAT3, w, h, 0, 0, 0)
     }
 }
 
