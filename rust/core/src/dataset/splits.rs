@@ -79,10 +79,9 @@ pub fn seeded_subset(ids: &[String], k: usize, seed: u64) -> Vec<String> {
 
 pub use crate::ground::names::test_views;
 
-/// The test settings chosen by `holdout` among `settings`: whole objects (a seeded
-/// round(fraction · objects), at least one and one left for training when there are two
-/// or more objects and the fraction is positive; or the objects listed), or N seeded
-/// random settings (at most all but one).
+/// The test settings chosen by `holdout` among `settings`, and the test objects: whole
+/// objects (drawn or listed: see [`drawn_objects`], [`listed_objects`]), or N seeded
+/// random settings (at most all but one) and no test object.
 fn chosen_settings(
     settings: &[SettingEntry],
     holdout: &Holdout,
@@ -94,57 +93,63 @@ fn chosen_settings(
         .collect::<BTreeSet<_>>()
         .into_iter()
         .collect();
-    let by_object = |chosen: &BTreeSet<String>| {
-        settings
-            .iter()
-            .filter(|s| chosen.contains(&s.object))
-            .map(|s| s.setting.clone())
-            .collect()
-    };
-    match holdout {
+    let chosen = match holdout {
         Holdout::Objects {
             list: Some(list), ..
-        } => {
-            if let Some(o) = list.iter().find(|o| !objects.contains(o)) {
-                return Err(Error::Value(format!(
-                    "test object {o:?} is not among the built objects"
-                )));
-            }
-            let chosen: BTreeSet<String> = list.iter().cloned().collect();
-            Ok((by_object(&chosen), chosen.into_iter().collect()))
-        }
+        } => listed_objects(&objects, list)?,
         Holdout::Objects {
             fraction,
             list: None,
-        } => {
-            if !(0.0..=1.0).contains(fraction) {
-                return Err(Error::Value(format!(
-                    "test fraction {fraction} is outside [0, 1]"
-                )));
-            }
-            let n = objects.len();
-            let mut k = (fraction * n as f64).round() as usize;
-            if n >= 2 && *fraction > 0.0 {
-                k = k.clamp(1, n - 1);
-            } else if n < 2 {
-                k = 0;
-            }
-            let chosen: BTreeSet<String> = seeded_order(&objects, seed, TEST_OBJECTS_STREAM)
-                .into_iter()
-                .take(k)
-                .collect();
-            Ok((by_object(&chosen), chosen.into_iter().collect()))
-        }
-        Holdout::Settings(n) => {
-            let names: Vec<String> = settings.iter().map(|s| s.setting.clone()).collect();
-            let k = (*n).min(names.len().saturating_sub(1));
-            let chosen = seeded_order(&names, seed, TEST_SETTINGS_STREAM)
-                .into_iter()
-                .take(k)
-                .collect();
-            Ok((chosen, Vec::new()))
-        }
+        } => drawn_objects(&objects, *fraction, seed)?,
+        Holdout::Settings(n) => return Ok((drawn_settings(settings, *n, seed), Vec::new())),
+    };
+    let test = settings
+        .iter()
+        .filter(|s| chosen.contains(&s.object))
+        .map(|s| s.setting.clone())
+        .collect();
+    Ok((test, chosen.into_iter().collect()))
+}
+
+/// The objects listed, each of which must have been built.
+fn listed_objects(objects: &[String], list: &[String]) -> Result<BTreeSet<String>> {
+    if let Some(o) = list.iter().find(|o| !objects.contains(o)) {
+        return Err(Error::Value(format!(
+            "test object {o:?} is not among the built objects"
+        )));
     }
+    Ok(list.iter().cloned().collect())
+}
+
+/// A seeded round(fraction · objects) of the objects: at least one, and one left for
+/// training, when there are two or more and the fraction is positive; none of one.
+fn drawn_objects(objects: &[String], fraction: f64, seed: u64) -> Result<BTreeSet<String>> {
+    if !(0.0..=1.0).contains(&fraction) {
+        return Err(Error::Value(format!(
+            "test fraction {fraction} is outside [0, 1]"
+        )));
+    }
+    let n = objects.len();
+    let mut k = (fraction * n as f64).round() as usize;
+    if n >= 2 && fraction > 0.0 {
+        k = k.clamp(1, n - 1);
+    } else if n < 2 {
+        k = 0;
+    }
+    Ok(seeded_order(objects, seed, TEST_OBJECTS_STREAM)
+        .into_iter()
+        .take(k)
+        .collect())
+}
+
+/// N seeded random settings, at most all but one.
+fn drawn_settings(settings: &[SettingEntry], n: usize, seed: u64) -> BTreeSet<String> {
+    let names: Vec<String> = settings.iter().map(|s| s.setting.clone()).collect();
+    let k = n.min(names.len().saturating_sub(1));
+    seeded_order(&names, seed, TEST_SETTINGS_STREAM)
+        .into_iter()
+        .take(k)
+        .collect()
 }
 
 /// Split settings into train and test by `holdout`, and hold out every
