@@ -27,7 +27,7 @@ use super::failures;
 #[cfg(test)]
 use super::layout::MARKER;
 use super::layout::{self, Scan};
-use super::meta::{ReadLevel as MetaLevel, ReadMeta as Meta};
+use super::meta::{ReadLevel as MetaLevel, ReadMeta as Meta, ReadView as MetaView};
 use crate::error::{Error, Result};
 use crate::ground::names::parse_level_dir;
 use rayon::prelude::*;
@@ -370,87 +370,10 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
     let mut sharp_copies = 0;
     let mut views = Vec::with_capacity(meta.views.len());
     for v in &meta.views {
-        let i = v.index;
-        check(v.near > 0.0, &path, || {
-            format!("view {i}: near {} must be > 0", v.near)
-        })?;
-        check(v.far >= v.near, &path, || {
-            format!("view {i}: far {} is below near {}", v.far, v.near)
-        })?;
-        for (what, x) in [
-            ("flatness", v.flatness),
-            ("depth_range", v.depth_range),
-            ("orientation", v.orientation),
-            ("w_u", v.w_u),
-        ] {
-            check(x >= 0.0, &path, || {
-                format!("view {i}: {what} {x} is negative")
-            })?;
-        }
         // A held-out view holding the sharp image at every blur level has no blur.
-        let sharp_copy = test_views_sharp && test_views.contains(&i);
+        let sharp_copy = test_views_sharp && test_views.contains(&v.index);
         sharp_copies += usize::from(sharp_copy);
-        let mut levels = BTreeMap::new();
-        for (key, lp) in &v.levels {
-            let l: u32 = key.parse().map_err(|_| {
-                input_error(
-                    format!("bad meta.json (view {i}: level key {key:?} is not a number)"),
-                    &path,
-                )
-            })?;
-            check(lp.w_l >= 0.0, &path, || {
-                format!("view {i} level {l}: w_l {} is negative", lp.w_l)
-            })?;
-            level_keys.insert(l);
-            if !sharp_copy {
-                levels.insert(
-                    l,
-                    MetaLevel {
-                        w_l: lp.w_l,
-                        latents: lp.latents,
-                        motion_px: lp.motion_px,
-                    },
-                );
-            }
-        }
-        let sr = scene_range(v.near, v.far);
-        check(sr.is_finite(), &path, || {
-            format!(
-                "view {i}: far / near = {} / {} is not finite",
-                v.far, v.near
-            )
-        })?;
-        let mut images = BTreeMap::new();
-        for (dir, im) in &v.images {
-            let l = parse_level_dir(dir).ok_or_else(|| {
-                input_error(
-                    format!("bad meta.json (view {i}: image of {dir:?}, not a level directory)"),
-                    &path,
-                )
-            })?;
-            images.insert(l, (im.samples, im.render_psnr_db));
-        }
-        let mut defocus = BTreeMap::new();
-        for (key, d) in v.defocus.iter().filter(|_| !sharp_copy) {
-            let l: u32 = key.parse().map_err(|_| {
-                input_error(
-                    format!("bad meta.json (view {i}: defocus key {key:?} is not a number)"),
-                    &path,
-                )
-            })?;
-            defocus.insert(l, d.coc_px[1]);
-        }
-        views.push(ViewRecord {
-            index: i,
-            scene_range: sr,
-            flatness: v.flatness,
-            depth_range: v.depth_range,
-            orientation: v.orientation,
-            w_u: v.w_u,
-            levels,
-            images,
-            defocus,
-        });
+        views.push(read_view(v, sharp_copy, &mut level_keys, &path)?);
     }
     // Older metas lack `levels`: sharp plus the blur levels the views record.
     let level_dirs = meta.levels.unwrap_or_else(|| {
@@ -479,6 +402,108 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
         },
         views,
         levels: level_keys,
+    })
+}
+
+/// One view of a meta.json at `path`, checked: its numbers, then its blur levels
+/// (their keys added to `level_keys`; none kept for a `sharp_copy`), its scene range,
+/// its images, its defocus levels.
+fn read_view(
+    v: &MetaView,
+    sharp_copy: bool,
+    level_keys: &mut BTreeSet<u32>,
+    path: &Path,
+) -> Result<ViewRecord> {
+    let i = v.index;
+    check(v.near > 0.0, path, || {
+        format!("view {i}: near {} must be > 0", v.near)
+    })?;
+    check(v.far >= v.near, path, || {
+        format!("view {i}: far {} is below near {}", v.far, v.near)
+    })?;
+    for (what, x) in [
+        ("flatness", v.flatness),
+        ("depth_range", v.depth_range),
+        ("orientation", v.orientation),
+        ("w_u", v.w_u),
+    ] {
+        check(x >= 0.0, path, || {
+            format!("view {i}: {what} {x} is negative")
+        })?;
+    }
+    let levels = read_view_levels(v, sharp_copy, level_keys, path)?;
+    let sr = scene_range(v.near, v.far);
+    check(sr.is_finite(), path, || {
+        format!(
+            "view {i}: far / near = {} / {} is not finite",
+            v.far, v.near
+        )
+    })?;
+    let mut images = BTreeMap::new();
+    for (dir, im) in &v.images {
+        let l = parse_level_dir(dir).ok_or_else(|| {
+            input_error(
+                format!("bad meta.json (view {i}: image of {dir:?}, not a level directory)"),
+                path,
+            )
+        })?;
+        images.insert(l, (im.samples, im.render_psnr_db));
+    }
+    let mut defocus = BTreeMap::new();
+    for (key, d) in v.defocus.iter().filter(|_| !sharp_copy) {
+        let l = level_key(key, i, "defocus", path)?;
+        defocus.insert(l, d.coc_px[1]);
+    }
+    Ok(ViewRecord {
+        index: i,
+        scene_range: sr,
+        flatness: v.flatness,
+        depth_range: v.depth_range,
+        orientation: v.orientation,
+        w_u: v.w_u,
+        levels,
+        images,
+        defocus,
+    })
+}
+
+/// A view's blur levels by number, each w_l checked; every key goes into `level_keys`
+/// (the levels the setting has), but a `sharp_copy` keeps none of its own.
+fn read_view_levels(
+    v: &MetaView,
+    sharp_copy: bool,
+    level_keys: &mut BTreeSet<u32>,
+    path: &Path,
+) -> Result<BTreeMap<u32, MetaLevel>> {
+    let i = v.index;
+    let mut levels = BTreeMap::new();
+    for (key, lp) in &v.levels {
+        let l = level_key(key, i, "level", path)?;
+        check(lp.w_l >= 0.0, path, || {
+            format!("view {i} level {l}: w_l {} is negative", lp.w_l)
+        })?;
+        level_keys.insert(l);
+        if !sharp_copy {
+            levels.insert(
+                l,
+                MetaLevel {
+                    w_l: lp.w_l,
+                    latents: lp.latents,
+                    motion_px: lp.motion_px,
+                },
+            );
+        }
+    }
+    Ok(levels)
+}
+
+/// A level's number from its key in view `i`'s `what` map (`level`, `defocus`).
+fn level_key(key: &str, i: u64, what: &str, path: &Path) -> Result<u32> {
+    key.parse().map_err(|_| {
+        input_error(
+            format!("bad meta.json (view {i}: {what} key {key:?} is not a number)"),
+            path,
+        )
     })
 }
 
@@ -548,8 +573,31 @@ fn assemble(
         .flat_map(|r| r.levels.iter().copied())
         .collect();
     let sharp_copy_views = records.iter().map(|r| r.sharp_copies).sum();
+    let mut st = no_views(out, scan.incomplete, records.len(), n_views, &levels);
+    add_views(&mut st, records, &levels);
+    // A level nobody recorded motion for (older metas) has no motion column.
+    st.motion_px.retain(|_, v| v.iter().any(Option::is_some));
+    // Builds without a target record no image renders.
+    st.render_psnr.retain(|_, v| v.iter().any(Option::is_some));
+    st.image_samples
+        .retain(|_, v| v.iter().any(Option::is_some));
+    st.failures = failures;
+    st.counts = counts(&st, n_views, sharp_copy_views, splits.as_ref());
+    st.summary = summaries(&st);
+    st
+}
+
+/// The statistics of the build at `out` before any view is added: its columns empty,
+/// each with room for `n_views` views (`settings` settings), a column per blur level.
+fn no_views(
+    out: &Path,
+    incomplete: Vec<String>,
+    settings: usize,
+    n_views: usize,
+    levels: &BTreeSet<u32>,
+) -> BuildStats {
     let col = || Vec::with_capacity(n_views);
-    let mut st = BuildStats {
+    BuildStats {
         schema: SCHEMA.to_string(),
         // The build by its folder's name: a published stats.json names no builder path.
         build: build_name(out),
@@ -563,33 +611,37 @@ fn assemble(
             })
             .collect(),
         summary: Vec::new(),
-        settings: Vec::with_capacity(records.len()),
-        incomplete: scan.incomplete,
+        settings: Vec::with_capacity(settings),
+        incomplete,
         failures: Vec::new(),
         view_setting: Vec::with_capacity(n_views),
         view_index: Vec::with_capacity(n_views),
         scene_range: col(),
-        scene_dimension: Vec::with_capacity(records.len()),
+        scene_dimension: Vec::with_capacity(settings),
         flatness: col(),
         depth_range: col(),
         orientation: col(),
         w_u: col(),
-        blur_weight: levels
-            .iter()
-            .map(|&l| (l, Vec::with_capacity(n_views)))
-            .collect(),
-        latent_frames: levels
-            .iter()
-            .map(|&l| (l, Vec::with_capacity(n_views)))
-            .collect(),
-        motion_px: levels
-            .iter()
-            .map(|&l| (l, Vec::with_capacity(n_views)))
-            .collect(),
+        blur_weight: per_level(levels, n_views),
+        latent_frames: per_level(levels, n_views),
+        motion_px: per_level(levels, n_views),
         defocus_coc_px: BTreeMap::new(),
         render_psnr: BTreeMap::new(),
         image_samples: BTreeMap::new(),
-    };
+    }
+}
+
+/// An empty column per level, each with room for `n_views` rows.
+fn per_level<T>(levels: &BTreeSet<u32>, n_views: usize) -> BTreeMap<u32, Vec<T>> {
+    levels
+        .iter()
+        .map(|&l| (l, Vec::with_capacity(n_views)))
+        .collect()
+}
+
+/// Every view of every setting, a row of each column; a per-level column has a row of
+/// every view (null where the view has no such level).
+fn add_views(st: &mut BuildStats, records: Vec<SettingRecord>, levels: &BTreeSet<u32>) {
     let defocus_levels: BTreeSet<u32> = records
         .iter()
         .flat_map(|r| r.views.iter().flat_map(|v| v.defocus.keys().copied()))
@@ -604,7 +656,7 @@ fn assemble(
             st.depth_range.push(v.depth_range);
             st.orientation.push(v.orientation);
             st.w_u.push(v.w_u);
-            for &l in &levels {
+            for &l in levels {
                 let lp = v.levels.get(&l);
                 st.blur_weight.entry(l).or_default().push(lp.map(|x| x.w_l));
                 st.latent_frames
@@ -631,15 +683,17 @@ fn assemble(
         st.scene_dimension.push(r.scene_dimension);
         st.settings.push(r.info);
     }
-    // A level nobody recorded motion for (older metas) has no motion column.
-    st.motion_px.retain(|_, v| v.iter().any(Option::is_some));
-    // Builds without a target record no image renders.
-    st.render_psnr.retain(|_, v| v.iter().any(Option::is_some));
-    st.image_samples
-        .retain(|_, v| v.iter().any(Option::is_some));
+}
 
+/// What the build holds and what failed; with a splits.json, what its test split holds
+/// and how many settings it does not list.
+fn counts(
+    st: &BuildStats,
+    n_views: usize,
+    sharp_copy_views: usize,
+    splits: Option<&SplitsDoc>,
+) -> Counts {
     let complete_uids: BTreeSet<&str> = st.settings.iter().map(|s| s.uid.as_str()).collect();
-    st.failures = failures;
     let failed_uids: BTreeSet<&str> = st.failures.iter().map(|f| f.uid.as_str()).collect();
     let mut c = Counts {
         objects: complete_uids.len(),
@@ -652,7 +706,7 @@ fn assemble(
         incomplete_settings: st.incomplete.len(),
         ..Counts::default()
     };
-    if let Some(sp) = &splits {
+    if let Some(sp) = splits {
         let test: BTreeSet<&str> = sp.test.iter().map(String::as_str).collect();
         let listed: BTreeSet<&str> = sp
             .train
@@ -684,9 +738,7 @@ fn assemble(
                 .count(),
         );
     }
-    st.counts = c;
-    st.summary = summaries(&st);
-    st
+    c
 }
 
 fn unit_of(q: &str) -> &'static str {
