@@ -63,6 +63,26 @@ pub struct Render {
 }
 
 impl Render {
+    /// A pinhole render of one still image at `c2w` with the caller's samples: whole
+    /// image, a call of its own, no halves, no lens, until the plan says otherwise.
+    fn still(view: usize, level: String, c2w: [[f64; 4]; 4], seed: u32, out: String) -> Render {
+        Render {
+            view,
+            level,
+            c2w,
+            seed,
+            samples: None,
+            sample_offset: None,
+            sample_sequence: None,
+            out,
+            motion: None,
+            region: None,
+            call: None,
+            half: None,
+            dof: None,
+        }
+    }
+
     /// A render that is a whole-image call of its own: a motion blur render, or a
     /// defocus render, whose blur spills past the object's pinhole footprint.
     fn whole(&self) -> bool {
@@ -94,24 +114,18 @@ pub fn level_renders(
     if let Some(mb) = &lp.motion_blur {
         let keys: Vec<_> = mb.keys.iter().map(|k| k.c2w).collect();
         let (sample_offset, sample_sequence) = block(0);
+        let first = Render::still(view, dir, keys[0], mb.seed, format!("{prefix}_mb.exr"));
         return vec![Render {
-            view,
-            level: dir,
-            c2w: keys[0],
-            seed: mb.seed,
             samples: Some(lp.samples_per_frame),
             sample_offset,
             sample_sequence,
-            out: format!("{prefix}_mb.exr"),
             motion: Some(Motion {
                 steps: mb.motion_steps,
                 keys,
             }),
             // The camera moves during the render, between its keys too: whole image.
             region: None,
-            call: None,
-            half: None,
-            dof: None,
+            ..first
         }];
     }
     lp.latent_frames
@@ -119,20 +133,12 @@ pub fn level_renders(
         .enumerate()
         .map(|(k, f)| {
             let (sample_offset, sample_sequence) = block(f.sample_offset);
+            let out = format!("{prefix}_{k:04}.exr");
             Render {
-                view,
-                level: dir.clone(),
-                c2w: f.c2w,
-                seed: f.seed,
                 samples: Some(lp.samples_per_frame),
                 sample_offset,
                 sample_sequence,
-                out: format!("{prefix}_{k:04}.exr"),
-                motion: None,
-                region: None,
-                call: None,
-                half: None,
-                dof: None,
+                ..Render::still(view, dir.clone(), f.c2w, f.seed, out)
             }
         })
         .collect()
@@ -158,20 +164,11 @@ impl SettingPlan {
         let mut out = Vec::new();
         for v in &self.views {
             let i = v.index;
+            let out_sharp = exr_dir.join(format!("{i:04}_s.exr")).display().to_string();
             out.push(Render {
-                view: i,
-                level: SHARP.into(),
-                c2w: v.c2w,
-                seed: v.sharp_seed,
-                samples: None,
                 sample_offset: pin.map(|_| 0),
                 sample_sequence: pin,
-                out: exr_dir.join(format!("{i:04}_s.exr")).display().to_string(),
-                motion: None,
-                region: None,
-                call: None,
-                half: None,
-                dof: None,
+                ..Render::still(i, SHARP.into(), v.c2w, v.sharp_seed, out_sharp)
             });
             if sharp_views.contains(&i) {
                 continue;
@@ -185,26 +182,21 @@ impl SettingPlan {
             // Defocus levels: one render each at the sharp image's pose and samples.
             for (key, d) in &v.defocus {
                 let level: u32 = key.parse().unwrap_or(0);
+                let exr = exr_dir.join(format!("{i:04}_d{key}.exr"));
                 out.push(Render {
-                    view: i,
-                    level: defocus_dir(level),
-                    c2w: v.c2w,
-                    seed: d.seed,
-                    samples: None,
                     sample_offset: pin.map(|_| 0),
                     sample_sequence: pin,
-                    out: exr_dir
-                        .join(format!("{i:04}_d{key}.exr"))
-                        .display()
-                        .to_string(),
-                    motion: None,
-                    region: None,
-                    call: None,
-                    half: None,
                     dof: Some(Dof {
                         focus_distance: d.focus_distance,
                         aperture_radius: d.aperture_radius,
                     }),
+                    ..Render::still(
+                        i,
+                        defocus_dir(level),
+                        v.c2w,
+                        d.seed,
+                        exr.display().to_string(),
+                    )
                 });
             }
         }
