@@ -46,7 +46,7 @@ def test_the_stubs_typed_dicts_are_the_cores():
     for name in ("Render", "SettingPlan", "LevelPlan", "DatasetDoc", "NoiseDoc", "BuildStats"):
         assert f"class {name}(TypedDict)" in text, name
     core_stub = (stubgen.STUB.parent / "_core.pyi").read_text()
-    assert "-> list[rec.Render]" in core_stub and "doc: rec.NoiseDoc" in core_stub
+    assert "-> list[rec.Render]" in core_stub and "def record(self) -> rec.NoiseDoc" in core_stub
 
 
 def test_the_shipped_schemas_are_the_cores():

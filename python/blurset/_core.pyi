@@ -596,9 +596,6 @@ def write_dataset_json(path: str | PathLike[str], doc: rec.DatasetDoc) -> None:
     """Write a build's dataset.json; `doc` must match the core's DatasetDoc (unknown or
     missing fields are errors)."""
 
-def write_noise_json(path: str | PathLike[str], doc: rec.NoiseDoc) -> None:
-    """Write a noisy scene's noise.json; `doc` must match the core's NoiseDoc."""
-
 # --- accumulate (rust/py/src/accumulate.rs) -----------------------------------------
 
 @final
@@ -802,6 +799,91 @@ def noise_write_variants(
     images_<f>/ and linear_<f>/ for each `downsample` factor (noise drawn at that size);
     the views in `clean_views` stay clean (sigma 0). With a `background` the sources
     are a build's linear EXRs, composited over it."""
+
+# --- the noise plan (rust/py/src/noise_plan.rs) ----------------------------------------
+
+NOISE_SEED_DERIVATION: str
+
+@final
+class NoiseGain:
+    """One gain of a unit: its folder, key, sigmas and noise.json."""
+
+    @property
+    def gain(self) -> float: ...
+    @property
+    def dir(self) -> str:
+        """`gain_<g>`."""
+    @property
+    def key(self) -> int: ...
+    @property
+    def sigma_read(self) -> float: ...
+    @property
+    def sigma_shot(self) -> float: ...
+    @property
+    def record(self) -> rec.NoiseDoc:
+        """The gain's noise.json, as written."""
+
+@final
+class NoiseUnit:
+    """One scene to noise (a scene, or a level of a build's setting)."""
+
+    @property
+    def setting(self) -> str | None: ...
+    @property
+    def level(self) -> str | None: ...
+    @property
+    def dst(self) -> Path:
+        """Where its gain folders go: OUT/<setting>/<level> of a build, OUT of a scene."""
+    @property
+    def seed(self) -> int: ...
+    @property
+    def images(self) -> int:
+        """Images each gain writes (views x frames)."""
+    @property
+    def clean_views(self) -> list[int]: ...
+    @property
+    def gains(self) -> list[NoiseGain]: ...
+    def pending(self) -> list[int]:
+        """The gains not yet complete in `dst` (indices into `gains`)."""
+    def write_images(self, dirs: list[tuple[int, str | PathLike[str]]]) -> None:
+        """The noisy images of the gains `dirs` names, as (gain index, folder)."""
+    def write_gain_files(self, gain: int, dir: str | PathLike[str]) -> None:
+        """The clean views' files, the poses, a build's transforms.json and noise.json of
+        gain `gain` in `dir`."""
+
+@final
+class NoisePlan:
+    """The plan of one `blurset noise` run (rust/core/src/dataset/noise_plan.rs)."""
+
+    @property
+    def source(self) -> Literal["linear", "png"]: ...
+    @property
+    def gamma(self) -> Literal["2.2", "srgb"]: ...
+    @property
+    def downsample(self) -> list[int]: ...
+    @property
+    def levels(self) -> list[str]: ...
+    @property
+    def units(self) -> list[NoiseUnit]: ...
+
+def plan_noise_scene(
+    scene: str | PathLike[str],
+    out: str | PathLike[str],
+    config: NoiseConfig,
+    levels: _NoiseLevelTable,
+) -> NoisePlan:
+    """The plan of `blurset noise SCENE` (one unit, its gain folders in `out`) under the
+    sigma table `levels`; InputError names a bad file, ConfigValueError the option."""
+
+def plan_noise_build(
+    build: str | PathLike[str],
+    out: str | PathLike[str],
+    settings: list[str],
+    config: NoiseConfig,
+    levels: _NoiseLevelTable,
+) -> NoisePlan:
+    """The plan of `blurset noise BUILD` over its complete `settings`, gains under
+    `out/<setting>/<level>/`; every unit is checked before any is written."""
 
 # --- noise on a build, from linear light (rust/py/src/noise_linear.rs) ---------------
 

@@ -12,10 +12,9 @@ from pathlib import Path
 
 from blurset import _core
 from blurset.exceptions import ConfigError, InputError
-from blurset.options import Options
+from blurset.noise.params import NOISE
 
 NoiseConfig = _core.NoiseConfig
-NOISE = Options(NoiseConfig.declarations())
 
 
 def add_arguments(parser) -> None:

@@ -83,7 +83,7 @@ pub use crate::dataset::outputs::{
     text_owner, BuildState, Claim, OutputKind, TextOwner,
 };
 pub use crate::dataset::read::{check_shape, parse_record, read_record, Record};
-pub use crate::dataset::records::{write_dataset, write_noise, DatasetDoc, NoiseDoc};
+pub use crate::dataset::records::{write_dataset, DatasetDoc};
 pub use crate::dataset::schema::{
     schema, schema_file, value_schemas, write_record, StatsFile, SCHEMA_RECORDS,
 };

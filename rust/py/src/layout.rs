@@ -222,13 +222,6 @@ fn write_dataset_json(py: Python<'_>, path: PathBuf, doc: &Bound<'_, PyAny>) -> 
     crate::run_detached(py, || core::write_dataset(&path, &doc))
 }
 
-/// Write a noisy scene's noise.json; `doc` must match the core's NoiseDoc.
-#[pyfunction]
-fn write_noise_json(py: Python<'_>, path: PathBuf, doc: &Bound<'_, PyAny>) -> PyResult<()> {
-    let doc: core::NoiseDoc = crate::convert::from_py("noise.json", doc)?;
-    crate::run_detached(py, || core::write_noise(&path, &doc))
-}
-
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MARKER", core::MARKER)?;
     m.add("PARTIAL_SUFFIX", core::PARTIAL_SUFFIX)?;
@@ -285,6 +278,5 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(parse_temp_name, m)?)?;
     m.add_function(wrap_pyfunction!(write_atomic, m)?)?;
     m.add_function(wrap_pyfunction!(write_dataset_json, m)?)?;
-    m.add_function(wrap_pyfunction!(write_noise_json, m)?)?;
     Ok(())
 }

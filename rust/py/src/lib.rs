@@ -12,6 +12,7 @@ mod layout;
 mod llff;
 mod noise;
 mod noise_linear;
+mod noise_plan;
 mod outputs;
 mod publish;
 mod qa;
@@ -41,6 +42,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     geometry::register(m)?;
     noise::register(m)?;
     noise_linear::register(m)?;
+    noise_plan::register(m)?;
     outputs::register(m)?;
     publish::register(m)?;
     qa::register(m)?;

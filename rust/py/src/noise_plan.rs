@@ -1,0 +1,192 @@
+//! Bindings of the core's noise plan: the plan of a run, its units and their gains as
+//! frozen classes, and a unit's two writers (GIL released).
+use crate::config::NoiseConfig;
+use crate::run_detached;
+use blurset_core as core;
+use pyo3::prelude::*;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+type Levels = (f64, f64, f64, f64);
+
+fn table((log10_read, read_step, log10_shot, shot_step): Levels) -> core::NoiseLevels {
+    core::NoiseLevels {
+        log10_read,
+        read_step,
+        log10_shot,
+        shot_step,
+    }
+}
+
+/// One gain of a unit: its folder, key, sigmas and noise.json.
+#[pyclass(frozen, name = "NoiseGain", module = "blurset._core")]
+pub struct NoiseGain(core::NoiseGain);
+
+#[pymethods]
+impl NoiseGain {
+    #[getter]
+    fn gain(&self) -> f64 {
+        self.0.gain
+    }
+    #[getter]
+    fn dir(&self) -> &str {
+        &self.0.dir
+    }
+    #[getter]
+    fn key(&self) -> u64 {
+        self.0.key
+    }
+    #[getter]
+    fn sigma_read(&self) -> f64 {
+        self.0.sigma_read
+    }
+    #[getter]
+    fn sigma_shot(&self) -> f64 {
+        self.0.sigma_shot
+    }
+    /// The gain's noise.json, as written.
+    #[getter]
+    fn record<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::convert::to_py(py, &self.0.record)
+    }
+}
+
+/// One scene to noise (a scene, or a level of a build's setting).
+#[pyclass(frozen, name = "NoiseUnit", module = "blurset._core")]
+pub struct NoiseUnit(Arc<core::NoiseUnit>);
+
+#[pymethods]
+impl NoiseUnit {
+    #[getter]
+    fn setting(&self) -> Option<&str> {
+        self.0.setting.as_deref()
+    }
+    #[getter]
+    fn level(&self) -> Option<&str> {
+        self.0.level.as_deref()
+    }
+    #[getter]
+    fn dst(&self) -> PathBuf {
+        self.0.dst.clone()
+    }
+    #[getter]
+    fn seed(&self) -> u64 {
+        self.0.seed
+    }
+    #[getter]
+    fn images(&self) -> usize {
+        self.0.names.len()
+    }
+    #[getter]
+    fn clean_views(&self) -> Vec<usize> {
+        self.0.clean_views.clone()
+    }
+    #[getter]
+    fn gains(&self) -> Vec<NoiseGain> {
+        self.0.gains.iter().cloned().map(NoiseGain).collect()
+    }
+
+    /// The gains not yet complete in `dst` (indices into `gains`).
+    fn pending(&self) -> Vec<usize> {
+        self.0.pending()
+    }
+
+    /// The noisy images of the gains `dirs` names, as (gain index, folder).
+    fn write_images(&self, py: Python<'_>, dirs: Vec<(usize, PathBuf)>) -> PyResult<()> {
+        let unit = Arc::clone(&self.0);
+        run_detached(py, move || unit.write_images(&dirs))
+    }
+
+    /// The clean views' files, the poses, a build's transforms.json and noise.json of
+    /// gain `gain` in `dir`.
+    fn write_gain_files(&self, py: Python<'_>, gain: usize, dir: PathBuf) -> PyResult<()> {
+        let unit = Arc::clone(&self.0);
+        run_detached(py, move || unit.write_gain_files(gain, &dir))
+    }
+}
+
+/// The plan of one `blurset noise` run.
+#[pyclass(frozen, name = "NoisePlan", module = "blurset._core")]
+pub struct NoisePlan {
+    plan: core::NoisePlan,
+    units: Vec<Arc<core::NoiseUnit>>,
+}
+
+impl From<core::NoisePlan> for NoisePlan {
+    fn from(mut plan: core::NoisePlan) -> Self {
+        let units = std::mem::take(&mut plan.units);
+        NoisePlan {
+            plan,
+            units: units.into_iter().map(Arc::new).collect(),
+        }
+    }
+}
+
+#[pymethods]
+impl NoisePlan {
+    #[getter]
+    fn source(&self) -> &str {
+        &self.plan.source
+    }
+    #[getter]
+    fn gamma(&self) -> &str {
+        &self.plan.gamma
+    }
+    #[getter]
+    fn downsample(&self) -> Vec<u32> {
+        self.plan.downsample.clone()
+    }
+    #[getter]
+    fn levels(&self) -> Vec<String> {
+        self.plan.levels.clone()
+    }
+    #[getter]
+    fn units(&self) -> Vec<NoiseUnit> {
+        self.units.iter().cloned().map(NoiseUnit).collect()
+    }
+}
+
+/// The plan of `blurset noise SCENE` (one unit, its gain folders in `out`), the σ table
+/// `levels`; bad input is one error naming the file or the option.
+#[pyfunction]
+fn plan_noise_scene(
+    py: Python<'_>,
+    scene: PathBuf,
+    out: PathBuf,
+    config: &NoiseConfig,
+    levels: Levels,
+) -> PyResult<NoisePlan> {
+    let cfg = config.0.clone();
+    let plan = run_detached(py, || {
+        core::plan_noise_scene(&scene, &out, &cfg, &table(levels))
+    })?;
+    Ok(plan.into())
+}
+
+/// The plan of `blurset noise BUILD` over its complete `settings`, gains under
+/// `out/<setting>/<level>/`.
+#[pyfunction]
+fn plan_noise_build(
+    py: Python<'_>,
+    build: PathBuf,
+    out: PathBuf,
+    settings: Vec<String>,
+    config: &NoiseConfig,
+    levels: Levels,
+) -> PyResult<NoisePlan> {
+    let cfg = config.0.clone();
+    let plan = run_detached(py, || {
+        core::plan_noise_build(&build, &out, &settings, &cfg, &table(levels))
+    })?;
+    Ok(plan.into())
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("NOISE_SEED_DERIVATION", core::NOISE_SEED_DERIVATION)?;
+    m.add_class::<NoisePlan>()?;
+    m.add_class::<NoiseUnit>()?;
+    m.add_class::<NoiseGain>()?;
+    m.add_function(wrap_pyfunction!(plan_noise_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(plan_noise_build, m)?)?;
+    Ok(())
+}
