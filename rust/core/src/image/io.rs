@@ -80,6 +80,14 @@ impl Image {
     }
 }
 
+/// A reader of the image file at `path`, its format guessed from its first bytes.
+fn open_reader(path: &Path) -> Result<ImageReader<std::io::BufReader<std::fs::File>>> {
+    ImageReader::open(path)
+        .map_err(|e| Error::io("cannot open image", path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io("cannot read image", path, e))
+}
+
 /// Width, height, channels and bits per sample from the file header only (cheap:
 /// used to validate a whole scene before any pixel is decoded).
 pub fn image_info(path: &Path) -> Result<(u32, u32, usize, u32)> {
@@ -87,11 +95,9 @@ pub fn image_info(path: &Path) -> Result<(u32, u32, usize, u32)> {
         reason,
         path: path.into(),
     };
-    let reader = ImageReader::open(path)
-        .map_err(|e| Error::io("cannot open image", path, e))?
-        .with_guessed_format()
-        .map_err(|e| Error::io("cannot read image", path, e))?;
-    let decoder = reader.into_decoder().map_err(|e| bad(e.to_string()))?;
+    let decoder = open_reader(path)?
+        .into_decoder()
+        .map_err(|e| bad(e.to_string()))?;
     let (w, h) = decoder.dimensions();
     let ct = decoder.color_type();
     let channels = ct.channel_count() as usize;
@@ -125,11 +131,7 @@ pub fn read_image(path: &Path) -> Result<Image> {
         reason,
         path: path.into(),
     };
-    let reader = ImageReader::open(path)
-        .map_err(|e| Error::io("cannot open image", path, e))?
-        .with_guessed_format()
-        .map_err(|e| Error::io("cannot read image", path, e))?;
-    let mut reader = reader;
+    let mut reader = open_reader(path)?;
     let mut lim = image::Limits::default();
     lim.max_alloc = Some(MAX_IMAGE_ALLOC);
     reader.limits(lim);
@@ -162,22 +164,19 @@ pub fn read_image(path: &Path) -> Result<Image> {
 /// Encode as PNG in the image's own sample depth.
 pub fn png_bytes(img: &Image) -> Result<Vec<u8>> {
     use image::ExtendedColorType as C;
-    let mut out = Vec::new();
-    let enc = image::codecs::png::PngEncoder::new(&mut out);
     let res = match &img.samples {
         Samples::U8(v) => {
             let ct = [C::L8, C::La8, C::Rgb8, C::Rgba8][img.channels - 1];
-            enc.write_image(v, img.width, img.height, ct)
+            encode_png(v, img.width, img.height, ct)
         }
         Samples::U16(v) => {
             let ct = [C::L16, C::La16, C::Rgb16, C::Rgba16][img.channels - 1];
             // PNG stores 16-bit samples big-endian; the encoder takes native bytes.
             let bytes: Vec<u8> = v.iter().flat_map(|s| s.to_ne_bytes()).collect();
-            enc.write_image(&bytes, img.width, img.height, ct)
+            encode_png(&bytes, img.width, img.height, ct)
         }
     };
-    res.map_err(|e| Error::Value(format!("PNG encoding failed: {e}")))?;
-    Ok(out)
+    res.map_err(|e| Error::Value(format!("PNG encoding failed: {e}")))
 }
 
 /// Encode an 8-bit RGB image as a PNG file, written atomically.
@@ -189,14 +188,26 @@ pub fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Resul
             rgb.len()
         )));
     }
-    let mut buf = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut buf)
-        .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
-        .map_err(|e| Error::Image {
+    let buf = encode_png(rgb, width, height, image::ExtendedColorType::Rgb8).map_err(|e| {
+        Error::Image {
             reason: format!("cannot encode PNG: {e}"),
             path: path.to_path_buf(),
-        })?;
+        }
+    })?;
     write_atomic(path, &buf)
+}
+
+/// The PNG file of `samples` (native bytes) laid out as `color`, with the encoder's
+/// default compression and filter.
+fn encode_png(
+    samples: &[u8],
+    width: u32,
+    height: u32,
+    color: image::ExtendedColorType,
+) -> image::ImageResult<Vec<u8>> {
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out).write_image(samples, width, height, color)?;
+    Ok(out)
 }
 
 #[cfg(test)]
