@@ -456,17 +456,11 @@ fn scene_unit(
         files: files_record(&written, &names, cfg.frames, &clean_views),
         ..common.base.clone()
     };
-    let mut rows = repeat_rows(&rows, cfg.frames);
-    for r in &mut rows {
-        (r[4], r[9], r[14]) = (h as f64, w as f64, r[14] / factor as f64);
-    }
     // A scene's own images_<f>/ hold its clean images of that size (not with --factor).
+    let own = |f: &u32| (*f, scene.join(images_dir(*f)));
     let small = match cfg.factor {
         Some(_) => Vec::new(),
-        None => downsample
-            .iter()
-            .map(|f| (*f, scene.join(images_dir(*f))))
-            .collect(),
+        None => downsample.iter().map(own).collect(),
     };
     Ok(NoiseUnit {
         setting: None,
@@ -477,7 +471,7 @@ fn scene_unit(
         sources,
         names,
         frames: cfg.frames,
-        rows,
+        rows: scene_rows(&rows, cfg.frames, (w, h), factor),
         background: None,
         gamma: common.gamma,
         white_balance: wb,
@@ -489,6 +483,15 @@ fn scene_unit(
         transforms: None,
         gains: common.gains(cfg.seed, &doc),
     })
+}
+
+/// A gain scene's rows: one per frame, hwf of the written size (`--factor` divides f).
+fn scene_rows(rows: &[PoseRow], frames: u32, (w, h): (u32, u32), factor: u32) -> Vec<PoseRow> {
+    let mut rows = repeat_rows(rows, frames);
+    for r in &mut rows {
+        (r[4], r[9], r[14]) = (h as f64, w as f64, r[14] / factor as f64);
+    }
+    rows
 }
 
 /// `sharp,blur_1,…` → level folders, in the build's order; an unknown or repeated one
@@ -583,19 +586,7 @@ pub fn plan_build(
             path: build.into(),
         });
     }
-    let linear = match cfg.source {
-        NoiseSource::Auto => {
-            let mut all = true;
-            for (s, l) in settings
-                .iter()
-                .flat_map(|s| levels.iter().map(move |l| (s, l)))
-            {
-                all = all && has_linear(&build.join(s).join(l))?;
-            }
-            all
-        }
-        source => source == NoiseSource::Linear,
-    };
+    let linear = reads_linear(build, settings, &levels, cfg.source)?;
     let gamma = cfg.gamma.unwrap_or(NoiseGamma::Srgb);
     let mut common = Common::of(cfg, table, gamma)?;
     common.base.clean = Some(if linear { CLEAN_LINEAR } else { CLEAN_PNG }.into());
@@ -625,6 +616,27 @@ pub fn plan_build(
         levels,
         units,
     })
+}
+
+/// Whether the units read the build's linear EXRs: `auto` when every chosen level of
+/// every setting has them.
+fn reads_linear(
+    build: &Path,
+    settings: &[String],
+    levels: &[String],
+    source: NoiseSource,
+) -> Result<bool> {
+    if source != NoiseSource::Auto {
+        return Ok(source == NoiseSource::Linear);
+    }
+    for s in settings {
+        for l in levels {
+            if !has_linear(&build.join(s).join(l))? {
+                return Ok(false);
+            }
+        }
+    }
+    Ok(true)
 }
 
 /// What every unit of a build shares.
@@ -661,28 +673,7 @@ impl BuildUnit<'_> {
     fn unit(&self, setting: &str, level: &str) -> Result<NoiseUnit> {
         let src = self.build.join(setting).join(level);
         let (background, test_views) = setting_meta(&self.build.join(setting))?;
-        let image_dir = src.join(files::IMAGES);
-        if !image_dir.is_dir() {
-            return Err(Error::Input {
-                reason: format!("level '{level}' has no images/ directory"),
-                path: image_dir,
-            });
-        }
-        let pngs = list_images(&image_dir)?;
-        if pngs.is_empty() {
-            return Err(Error::Input {
-                reason: "no .png/.jpg images".into(),
-                path: image_dir,
-            });
-        }
-        let rows = pose_rows(&src.join(files::POSES_BOUNDS), &pngs, &image_dir)?;
-        let (w, h, _, _) = image_info(&pngs[0])?;
-        check_divides(
-            &self.common.base.downsample,
-            (w, h),
-            &format!(": {}", src.display()),
-        )?;
-        one_size(&pngs)?;
+        let (pngs, rows, (w, h)) = self.read_level(&src, level)?;
         let sources = self.sources(&src, &pngs)?;
         let seed = scene_seed(self.cfg.seed, setting, level);
         let clean_views = if self.cfg.noisy_test_views {
@@ -692,15 +683,6 @@ impl BuildUnit<'_> {
         };
         let names = output_names(&pngs, self.cfg.frames);
         let wb = white_balance(self.cfg, seed);
-        let subdir = if self.linear {
-            files::LINEAR
-        } else {
-            files::IMAGES
-        };
-        let read: Vec<String> = sources
-            .iter()
-            .map(|p| format!("{level}/{subdir}/{}", file_name(p)))
-            .collect();
         let doc = NoiseDoc {
             seed,
             white_balance: wb_record(wb),
@@ -713,7 +695,12 @@ impl BuildUnit<'_> {
                 resolution: [w, h],
             },
             clean_views: clean_views.clone(),
-            files: files_record(&read, &names, self.cfg.frames, &clean_views),
+            files: files_record(
+                &self.read_names(level, &sources),
+                &names,
+                self.cfg.frames,
+                &clean_views,
+            ),
             ..self.common.base.clone()
         };
         let downsample = self.common.base.downsample.clone();
@@ -742,6 +729,45 @@ impl BuildUnit<'_> {
             transforms: Some(self.build.join(setting).join(files::TRANSFORMS)),
             gains: self.common.gains(seed, &doc),
         })
+    }
+
+    /// A level's images, pose rows and size; a missing or mismatched file is refused
+    /// here, naming it.
+    fn read_level(&self, src: &Path, level: &str) -> Result<Read> {
+        let image_dir = src.join(files::IMAGES);
+        if !image_dir.is_dir() {
+            return Err(Error::Input {
+                reason: format!("level '{level}' has no images/ directory"),
+                path: image_dir,
+            });
+        }
+        let pngs = list_images(&image_dir)?;
+        if pngs.is_empty() {
+            return Err(Error::Input {
+                reason: "no .png/.jpg images".into(),
+                path: image_dir,
+            });
+        }
+        let rows = pose_rows(&src.join(files::POSES_BOUNDS), &pngs, &image_dir)?;
+        let (w, h, _, _) = image_info(&pngs[0])?;
+        check_divides(
+            &self.common.base.downsample,
+            (w, h),
+            &format!(": {}", src.display()),
+        )?;
+        one_size(&pngs)?;
+        Ok((pngs, rows, (w, h)))
+    }
+
+    /// The clean files noise.json says each image came from, relative to the setting.
+    fn read_names(&self, level: &str, sources: &[PathBuf]) -> Vec<String> {
+        let subdir = if self.linear {
+            files::LINEAR
+        } else {
+            files::IMAGES
+        };
+        let name = |p: &PathBuf| format!("{level}/{subdir}/{}", file_name(p));
+        sources.iter().map(name).collect()
     }
 
     /// The clean images a level's noise reads: its PNGs, or their linear EXRs.
@@ -967,7 +993,22 @@ mod tests {
                 }
             ));
         }
-        // The noise.json written is the record, and a gain folder complete is not pending.
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn a_unit_writes_its_record_and_knows_what_is_pending() -> Result<()> {
+        let dir = scene("write", 5)?;
+        let c = cfg(&[
+            ("gains", gains(&["1", "4", "20"])),
+            ("frames", Raw::Int(2)),
+            ("clean_views", Raw::Int(3)),
+            ("downsample", Raw::List(vec![Raw::Int(2)])),
+        ])?;
+        let plan = plan_scene(&dir, &dir.join("out"), &c, &NoiseLevels::DEFAULT)?;
+        let u = &plan.units[0];
+        assert_eq!(u.pending(), vec![0, 1, 2]);
         let g = dir.join("out").join(&u.gains[1].dir);
         for sub in ["images", "images_2"] {
             std::fs::create_dir_all(g.join(sub)).map_err(|e| Error::io("mkdir", &g, e))?;
