@@ -307,16 +307,41 @@ pub struct LatentFrame {
     pub c2w: [[f64; 4]; 4],
 }
 
-/// One camera keyframe of the motion blur method: position t on the segment (as in
-/// `LatentFrame`).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
-pub struct MotionKey {
-    pub t: f64,
-    pub r: f64,
-    pub phi_deg: f64,
-    pub theta_deg: f64,
-    /// OpenGL camera-to-world, row-major.
-    pub c2w: [[f64; 4]; 4],
+/// A camera at position t on a blurry image's segment, by its orbit coordinates and its
+/// matrix: one field list for [`MotionKey`] and [`MeanPose`], which stay two types (and
+/// two schemas) because they mean different things.
+macro_rules! camera_on_segment {
+    ($(#[$doc:meta])* $name:ident) => {
+        $(#[$doc])*
+        #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+        pub struct $name {
+            pub t: f64,
+            pub r: f64,
+            pub phi_deg: f64,
+            pub theta_deg: f64,
+            /// OpenGL camera-to-world, row-major.
+            pub c2w: [[f64; 4]; 4],
+        }
+
+        impl $name {
+            /// The camera at `t`, given as [`Segment::at`] places it.
+            fn at(t: f64, ((r, phi_deg, theta_deg), m): ((f64, f64, f64), DMat4)) -> Self {
+                $name {
+                    t,
+                    r,
+                    phi_deg,
+                    theta_deg,
+                    c2w: rows(&m),
+                }
+            }
+        }
+    };
+}
+
+camera_on_segment! {
+    /// One camera keyframe of the motion blur method: position t on the segment (as in
+    /// `LatentFrame`).
+    MotionKey
 }
 
 /// The single render of a blurry image made by Cycles motion blur: the camera is
@@ -334,18 +359,12 @@ pub struct MotionBlurPlan<K = MotionKey> {
     pub keys: Vec<K>,
 }
 
-/// The camera at the mean latent position t̄ of a blurry image: the pose its content is
-/// centred on, which SfM recovers from it (DESIGN §12). The average method's t̄ is the
-/// mean of its drawn t; the motion blur method's exposure is uniform over the segment,
-/// so its t̄ is the segment's middle.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
-pub struct MeanPose {
-    pub t: f64,
-    pub r: f64,
-    pub phi_deg: f64,
-    pub theta_deg: f64,
-    /// OpenGL camera-to-world, row-major.
-    pub c2w: [[f64; 4]; 4],
+camera_on_segment! {
+    /// The camera at the mean latent position t̄ of a blurry image: the pose its content is
+    /// centred on, which SfM recovers from it (DESIGN §12). The average method's t̄ is the
+    /// mean of its drawn t; the motion blur method's exposure is uniform over the segment,
+    /// so its t̄ is the segment's middle.
+    MeanPose
 }
 
 /// One blur level of a view; `F` and `K` are its latent frames and motion keys (the
@@ -667,14 +686,7 @@ impl Segment<'_> {
     }
 
     fn mean_pose(&self, t: f64) -> MeanPose {
-        let ((r, phi_deg, theta_deg), m) = self.at(t);
-        MeanPose {
-            t,
-            r,
-            phi_deg,
-            theta_deg,
-            c2w: rows(&m),
-        }
+        MeanPose::at(t, self.at(t))
     }
 }
 
@@ -743,13 +755,7 @@ fn motion_keys(seg: &Segment, screen: &Screen) -> (u32, f64, Vec<MotionKey>) {
         let keys = cams
             .iter()
             .enumerate()
-            .map(|(k, ((r, phi, theta), m))| MotionKey {
-                t: t_of(k as f64),
-                r: *r,
-                phi_deg: *phi,
-                theta_deg: *theta,
-                c2w: rows(m),
-            })
+            .map(|(k, &cam)| MotionKey::at(t_of(k as f64), cam))
             .collect();
         out = (n, err, keys);
         if err <= MOTION_KEY_TOLERANCE_PX {
