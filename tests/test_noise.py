@@ -371,6 +371,35 @@ def test_burst_frames_sort_in_view_order(small_scene, tmp_path):
     assert not np.array_equal(frames[0], frames[1]) and not np.array_equal(frames[1], frames[2])
 
 
+def test_the_core_plan_is_what_the_command_writes(small_scene, tmp_path):
+    """The plan of a scene (issue 36) holds per gain the folder, key, sigmas and the
+    whole noise.json; the command writes exactly that record, and the rng it names is
+    the key the API reproduces."""
+    from blurset.exceptions import ConfigError
+    from blurset.noise.cli import NoiseConfig
+    from blurset.noise.model import plan_noise_scene
+    from blurset.noise.params import planned
+
+    cfg = NoiseConfig(gains=["1", "8"], factor=2, seed=3, clean_views=2, frames=2)
+    out = tmp_path / "out"
+    plan = plan_noise_scene(small_scene, out, cfg, noise_default_levels())
+    (unit,) = plan.units
+    assert (plan.gamma, unit.seed, unit.images, unit.clean_views) == ("2.2", 3, 8, [0, 2])
+    ok(blurset_noise(small_scene, "--factor", 2, "--gains", 1, 8, "--seed", 3,
+                     "--clean-views", 2, "--frames", 2, "--out", out))  # fmt: skip
+    for g in unit.gains:
+        assert (g.key, (g.sigma_read, g.sigma_shot)) == (
+            noise_key(3, g.gain),
+            noise_sigmas(g.gain, noise_default_levels()),
+        )
+        written = json.loads((out / g.dir / "noise.json").read_text())
+        assert written == json.loads(json.dumps(g.record))  # tuples as JSON arrays
+        assert written["rng"].startswith("philox4x32-10, key derive_seed(seed, [fnv1a64('noise')")
+    bad = NoiseConfig(gains=["1", "1.0000000001"], any_gain=True, factor=2)
+    with pytest.raises(ConfigError, match=r"^--gains 1 and 1.0000000001: both .* gain_1/$"):
+        planned(plan_noise_scene, small_scene, out, bad, noise_default_levels())
+
+
 def test_kpn_levels_follow_nans_mapping(small_scene, tmp_path):
     # A file in KPN's layout (our own numbers: KPN's file is not redistributable).
     levels = 10.0 ** np.array([-3.1, -2.8, -2.4, -2.1, -1.8, -1.5])

@@ -1,6 +1,7 @@
 """The sensor noise model of blurset-core (DESIGN §5): the σ(gain) table, white balance,
-the seeded keys, one noisy frame (from 8/16-bit images or from a build's linear light)
-and the writers of noisy scenes.
+the seeded keys, one noisy frame (from 8/16-bit images or from a build's linear light),
+the writers of noisy scenes, and the plan `blurset noise` writes (its units and gains,
+each gain's noise.json).
 
 The public face of these bindings for scripts, tests and benchmarks."""
 
@@ -23,6 +24,8 @@ from blurset._core import (
     noise_sigmas,
     noise_white_balance,
     noise_write_variants,
+    plan_noise_build,
+    plan_noise_scene,
     read_linear_composited,
 )
 
@@ -39,6 +42,8 @@ __all__ = [
     "noise_white_balance",
     "noise_write_variants",
     "noise_write_variants_linear",
+    "plan_noise_build",
+    "plan_noise_scene",
     "read_linear_composited",
 ]
 
