@@ -151,12 +151,7 @@ pub(crate) fn decode_rgba(bytes: &[u8], path: &Path, rgba: &mut Vec<f32>) -> Res
     if width == 0 || height == 0 {
         return Err(bad("empty image".into()));
     }
-    let non_finite = if decoded_here(header) {
-        decode_scanline_layer(bytes, reader, &meta, layer, &slots, rgba)
-    } else {
-        decode_with_the_crate(reader, &meta, layer, &slots, rgba)
-    }
-    .map_err(bad)?;
+    let non_finite = decode_layer(bytes, reader, &meta, layer, &slots, rgba).map_err(bad)?;
     Ok(Decoded {
         width,
         height,
@@ -241,9 +236,11 @@ fn decoded_here(header: &Header) -> bool {
             .all(|c| c.sampling == Vec2(1, 1))
 }
 
-/// Decode a layer that [`decoded_here`] accepts straight into `rgba`, reporting its
-/// first non-finite value.
-fn decode_scanline_layer(
+/// Decode the layer into `rgba` and find its first non-finite value: here when
+/// [`decoded_here`] says so, straight into the frame, else through the crate's
+/// decompressor. A file with fewer blocks than its header's size needs is refused
+/// before the frame is allocated.
+fn decode_layer(
     bytes: &[u8],
     reader: exr::block::reader::Reader<Cursor<&[u8]>>,
     meta: &MetaData,
@@ -253,6 +250,22 @@ fn decode_scanline_layer(
 ) -> std::result::Result<Option<NonFinite>, String> {
     let header = &meta.headers[layer];
     let (width, height) = (header.layer_size.width(), header.layer_size.height());
+    let need = level0_blocks(header, width, height);
+    let too_few = |have: usize, what: &str| {
+        format!("{have} {what} for a {width}x{height} image, expected {need}")
+    };
+    if !decoded_here(header) {
+        let chunks = read_chunks(reader, layer).map_err(exr_reason)?;
+        if chunks.len() < need {
+            return Err(too_few(chunks.len(), "blocks"));
+        }
+        // The crate's blocks write the channels the file has: a missing alpha reads 1.
+        let has_alpha = slots.contains(&Some(3));
+        rgba.clear();
+        rgba.resize(width * height * CH, if has_alpha { 0.0 } else { 1.0 });
+        decode_generic(chunks, meta, header, slots, width, rgba)?;
+        return Ok(first_non_finite(width, rgba));
+    }
     // Single-part files: the chunks are sliced out of `bytes` in place; a
     // multi-part file's chunks are cut (copied) by the crate.
     let owned;
@@ -271,14 +284,8 @@ fn decode_scanline_layer(
                 .collect()
         }
     };
-    // A file with fewer blocks than its header's size needs is refused before the
-    // frame is allocated.
-    let need = level0_blocks(header, width, height);
     if blocks.len() < need {
-        return Err(format!(
-            "{} scan-line blocks for a {width}x{height} image, expected {need}",
-            blocks.len()
-        ));
+        return Err(too_few(blocks.len(), "scan-line blocks"));
     }
     // Every value of the frame is written (a missing block is an error), so a
     // buffer of the right size is reused as it is.
@@ -288,33 +295,6 @@ fn decode_scanline_layer(
         rgba.resize(n, 0.0);
     }
     decode_scanlines(&blocks, header, slots, width, height, rgba)
-}
-
-/// Decode any other layout (tiles, PIZ, RLE, …) through the crate's decompressor, then
-/// look for its first non-finite value.
-fn decode_with_the_crate(
-    reader: exr::block::reader::Reader<Cursor<&[u8]>>,
-    meta: &MetaData,
-    layer: usize,
-    slots: &[Option<usize>],
-    rgba: &mut Vec<f32>,
-) -> std::result::Result<Option<NonFinite>, String> {
-    let header = &meta.headers[layer];
-    let (width, height) = (header.layer_size.width(), header.layer_size.height());
-    let chunks = read_chunks(reader, layer).map_err(exr_reason)?;
-    let need = level0_blocks(header, width, height);
-    if chunks.len() < need {
-        return Err(format!(
-            "{} blocks for a {width}x{height} image, expected {need}",
-            chunks.len()
-        ));
-    }
-    // The crate's blocks write the channels the file has: a missing alpha reads 1.
-    let has_alpha = slots.contains(&Some(3));
-    rgba.clear();
-    rgba.resize(width * height * CH, if has_alpha { 0.0 } else { 1.0 });
-    decode_generic(chunks, meta, header, slots, width, rgba)?;
-    Ok(first_non_finite(width, rgba))
 }
 
 /// The chunks of one layer's full-resolution level, cut (copied) by the `exr` crate.
@@ -797,6 +777,16 @@ mod tests {
         }
     }
 
+    /// Every codec and block layout the reader is tested on.
+    const CODECS: [Compression; 5] = [
+        Compression::Uncompressed,
+        Compression::ZIP1,
+        Compression::ZIP16,
+        Compression::RLE,
+        Compression::PIZ,
+    ];
+    const LAYOUTS: [Blocks; 2] = [Blocks::ScanLines, Blocks::Tiles(Vec2(16, 8))];
+
     /// A file with every sample type, an extra channel, a ragged last block and a NaN.
     fn sample_file(compression: Compression, blocks: Blocks, nan: bool) -> Result<Vec<u8>> {
         let (w, h) = (37usize, 23usize);
@@ -846,14 +836,8 @@ mod tests {
             .flat_map(|i| [v(0, i), (i % 1000) as f32, v(2, i), v(3, i)])
             .collect();
         let path = Path::new("sample.exr");
-        for compression in [
-            Compression::Uncompressed,
-            Compression::ZIP1,
-            Compression::ZIP16,
-            Compression::RLE,
-            Compression::PIZ,
-        ] {
-            for blocks in [Blocks::ScanLines, Blocks::Tiles(Vec2(16, 8))] {
+        for compression in CODECS {
+            for blocks in LAYOUTS {
                 let mut got = Vec::new();
                 let d = decode_rgba(&sample_file(compression, blocks, false)?, path, &mut got)?;
                 assert_eq!((d.width, d.height), (w, h));
@@ -1030,14 +1014,8 @@ mod tests {
     /// Every codec and block layout with and without a NaN, and multi-layer renders.
     fn pinned_files() -> Result<Vec<Vec<u8>>> {
         let mut files = Vec::new();
-        for compression in [
-            Compression::Uncompressed,
-            Compression::ZIP1,
-            Compression::ZIP16,
-            Compression::RLE,
-            Compression::PIZ,
-        ] {
-            for blocks in [Blocks::ScanLines, Blocks::Tiles(Vec2(16, 8))] {
+        for compression in CODECS {
+            for blocks in LAYOUTS {
                 for nan in [false, true] {
                     files.push(sample_file(compression, blocks, nan)?);
                 }
