@@ -13,6 +13,11 @@ The unit of work is one gain of one level of one setting. It is written under
 written: a rerun skips complete units and redoes partial ones; an error removes what
 the failing call had started and leaves complete units alone.
 
+blurset-core plans every unit before anything is written (`plan_noise_build`,
+rust/core/src/dataset/noise_plan.rs: inputs checked, seeds, keys, sigmas, each gain's
+noise.json) and writes it; this module schedules: the lock and the options record,
+partial folders, the fault injection, progress, publishing, noise_dataset.json.
+
 The seed of a (setting, level) is derived in blurset-core from the one `--seed`
 (`noise_scene_seed`) and plays the role of the single-scene `--seed`, so the PNG path
 of a unit is byte-identical to `blurset noise <build>/<setting>/<level> --seed <that
