@@ -5,22 +5,11 @@
 use blurset_core::{check_shape, parse_record, Record};
 use libfuzzer_sys::fuzz_target;
 
-const RECORDS: [Record; 8] = [
-    Record::Meta,
-    Record::Splits,
-    Record::Dataset,
-    Record::NoiseDataset,
-    Record::Noise,
-    Record::NoiseScene,
-    Record::Export,
-    Record::Stats,
-];
-
 fuzz_target!(|data: &[u8]| {
     let Some((&pick, bytes)) = data.split_first() else {
         return;
     };
-    let record = RECORDS[pick as usize % RECORDS.len()];
+    let record = Record::ALL[pick as usize % Record::ALL.len()];
     if let Ok(value) = parse_record(bytes, record) {
         assert!(check_shape(&value, record).is_ok());
     }

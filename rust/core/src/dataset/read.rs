@@ -50,20 +50,21 @@ impl Record {
         }
     }
 
+    /// Every record, in the order of their declaration.
+    pub const ALL: [Record; 8] = [
+        Record::Meta,
+        Record::Splits,
+        Record::Dataset,
+        Record::NoiseDataset,
+        Record::Noise,
+        Record::NoiseScene,
+        Record::Export,
+        Record::Stats,
+    ];
+
     /// The record of a file name, or None.
     pub fn of_name(name: &str) -> Option<Record> {
-        [
-            Record::Meta,
-            Record::Splits,
-            Record::Dataset,
-            Record::NoiseDataset,
-            Record::Noise,
-            Record::NoiseScene,
-            Record::Export,
-            Record::Stats,
-        ]
-        .into_iter()
-        .find(|r| r.file_name() == name)
+        Record::ALL.into_iter().find(|r| r.file_name() == name)
     }
 }
 
@@ -475,17 +476,6 @@ mod tests {
         use super::*;
         use proptest::prelude::*;
 
-        const RECORDS: [Record; 8] = [
-            Record::Meta,
-            Record::Splits,
-            Record::Dataset,
-            Record::NoiseDataset,
-            Record::Noise,
-            Record::NoiseScene,
-            Record::Export,
-            Record::Stats,
-        ];
-
         proptest! {
             #![proptest_config(ProptestConfig::with_cases(2000))]
             #[test]
@@ -493,7 +483,7 @@ mod tests {
                 r in 0usize..8,
                 bytes in proptest::collection::vec(any::<u8>(), 0..300),
             ) {
-                let _ = parse_record(&bytes, RECORDS[r]);
+                let _ = parse_record(&bytes, Record::ALL[r]);
             }
 
             #[test]
