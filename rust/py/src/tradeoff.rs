@@ -28,6 +28,23 @@ pub struct ImageMetrics {
     pub detail_ratio: f64,
 }
 
+/// A core figure of two premultiplied RGBA images over a background.
+type ObjectFigure = fn(&[f32], &[f32], [f64; 3]) -> core::Result<core::ObjectError>;
+
+/// A figure of two images (each with its name for errors) on the object's pixels over
+/// `background`: their shapes checked, `figure` run with the GIL released.
+fn object_figure(
+    py: Python<'_>,
+    [(a, a_name), (b, b_name)]: [(&PyReadonlyArray3<'_, f32>, &str); 2],
+    background: (f64, f64, f64),
+    figure: ObjectFigure,
+) -> PyResult<ObjectError> {
+    same_shape(a, b)?;
+    let (a, b) = (rgba(a, a_name)?, rgba(b, b_name)?);
+    let bg = [background.0, background.1, background.2];
+    Ok(crate::run_detached(py, || figure(a, b, bg))?.into())
+}
+
 /// Error of `image` against `reference` (float32 (H, W, 4), premultiplied linear RGBA):
 /// JSON with `psnr` (sRGB over the background), `psnr_linear`, `mse`, `mse_linear`.
 #[pyfunction]
@@ -106,10 +123,8 @@ fn object_error(
     reference: PyReadonlyArray3<'_, f32>,
     background: (f64, f64, f64),
 ) -> PyResult<ObjectError> {
-    same_shape(&image, &reference)?;
-    let (a, b) = (rgba(&image, "image")?, rgba(&reference, "reference")?);
-    let bg = [background.0, background.1, background.2];
-    Ok(crate::run_detached(py, || core::object_error(a, b, bg))?.into())
+    let pair = [(&image, "image"), (&reference, "reference")];
+    object_figure(py, pair, background, core::object_error)
 }
 
 /// The render noise of the mean of two independent halves of an image, estimated from
@@ -122,10 +137,8 @@ fn half_noise(
     half_b: PyReadonlyArray3<'_, f32>,
     background: (f64, f64, f64),
 ) -> PyResult<ObjectError> {
-    same_shape(&half_a, &half_b)?;
-    let (a, b) = (rgba(&half_a, "half_a")?, rgba(&half_b, "half_b")?);
-    let bg = [background.0, background.1, background.2];
-    Ok(crate::run_detached(py, || core::half_noise(a, b, bg))?.into())
+    let pair = [(&half_a, "half_a"), (&half_b, "half_b")];
+    object_figure(py, pair, background, core::half_noise)
 }
 
 /// The worst value, the 5th percentile and the mean of per-image figures (core `spread`):
