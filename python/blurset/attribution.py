@@ -50,26 +50,25 @@ def _text(v: Any) -> str | None:
     return " ".join(v.split()) if isinstance(v, str) and v.strip() else None
 
 
+def _texts(source: dict[str, Any], **fields: str) -> dict[str, str]:
+    """Each of our fields (a keyword) whose key in `source` (its value) holds text."""
+    return {ours: t for ours, key in fields.items() if (t := _text(source.get(key)))}
+
+
 def from_asset(asset: Any) -> dict[str, Any]:
     """The attribution a glTF `asset` object carries (only the fields it has)."""
     if not isinstance(asset, dict):
         return {}
-    out: dict[str, Any] = {}
     extras = asset.get("extras")
     if not isinstance(extras, dict):
         extras = {}
-    if title := _text(extras.get("title")):
-        out["title"] = title
+    out: dict[str, Any] = _texts(extras, title="title")
     if author := _text(extras.get("author")):
         out["author"], url = _split_name_url(author)
         if url:
             out["author_url"] = url
-    if lic := _text(extras.get("license")):
-        out["license_text"] = lic
-    if src := _text(extras.get("source")):
-        out["source_url"] = src
-    if copyright_ := _text(asset.get("copyright")):
-        out["copyright"] = copyright_
+    out |= _texts(extras, license_text="license", source_url="source")
+    out |= _texts(asset, copyright="copyright")
     return out
 
 
@@ -77,20 +76,14 @@ def from_objaverse_annotation(ann: Any) -> dict[str, Any]:
     """The attribution of one Objaverse 1.0 annotation record (Sketchfab's API fields)."""
     if not isinstance(ann, dict):
         return {}
-    out: dict[str, Any] = {}
-    if title := _text(ann.get("name")):
-        out["title"] = title
     user = ann.get("user")
     if not isinstance(user, dict):
         user = {}
+    out: dict[str, Any] = _texts(ann, title="name")
     if author := _text(user.get("displayName")) or _text(user.get("username")):
         out["author"] = author
-    if url := _text(user.get("profileUrl")):
-        out["author_url"] = url
-    if lic := _text(ann.get("license")):
-        out["license_text"] = lic
-    if src := _text(ann.get("viewerUrl")):
-        out["source_url"] = src
+    out |= _texts(user, author_url="profileUrl")
+    out |= _texts(ann, license_text="license", source_url="viewerUrl")
     return out
 
 
