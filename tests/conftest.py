@@ -332,3 +332,41 @@ def wait_for(cond, proc: subprocess.Popen, deadline_s: float = 300.0) -> None:
         if time.monotonic() > end:
             raise AssertionError(f"no event within {deadline_s} s")
         time.sleep(0.05)
+
+
+def tree(path: Path) -> dict[str, bytes]:
+    """Every file and link below `path` by its relative path: a file's bytes, a link's
+    target."""
+    return {
+        str(p.relative_to(path)): (
+            p.read_bytes() if not p.is_symlink() else os.readlink(p).encode()
+        )
+        for p in sorted(path.rglob("*"))
+        if p.is_file() or p.is_symlink()
+    }
+
+
+def one_error_line(proc, *words: str, code: int = 2) -> str:
+    """Exit `code` with one error line naming `words`: that line."""
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == code, proc.stderr
+    assert len(lines) == 1 and "error:" in lines[0], proc.stderr
+    for w in words:
+        assert w in lines[0], proc.stderr
+    return lines[0]
+
+
+def worker_pids(out: Path) -> list[int]:
+    """Pids of live worker processes (real or stand-in) working for the build at `out`."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+            state = (d / "stat").read_text().split(")")[-1].split()[0]
+        except OSError:
+            continue
+        if "worker.py" in cmd and str(out) in cmd and state != "Z":
+            pids.append(int(d.name))
+    return pids

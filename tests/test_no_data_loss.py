@@ -18,7 +18,14 @@ from blurset import layout
 from blurset.demo import make_demo_objects
 from PIL import Image
 
-from tests.conftest import run_cli, shared, skip_or_fail_in_ci, wait_until
+from tests.conftest import (
+    one_error_line,
+    run_cli,
+    shared,
+    skip_or_fail_in_ci,
+    wait_until,
+    worker_pids,
+)
 
 
 def tree(path: Path) -> dict[str, bytes]:
@@ -32,14 +39,6 @@ def fern_copy(tmp_path) -> Path:
     f1 = tmp_path / "f1"
     shutil.copytree(shared("llff", "fern"), f1)
     return f1
-
-
-def one_error_line(proc, *words: str) -> None:
-    lines = proc.stderr.strip().splitlines()
-    assert proc.returncode == 2, proc.stderr
-    assert len(lines) == 1 and "error:" in lines[0], proc.stderr
-    for w in words:
-        assert w in lines[0], proc.stderr
 
 
 # -- outputs never overlap inputs (D1, D2, D9) -------------------------------------------
@@ -178,22 +177,6 @@ def test_a_build_keeps_the_users_dotfiles_in_out(tmp_path):
 # -- signals: stop within ~1 s, no Blender left (H1, H2) -----------------------------------
 
 
-def workers_of(out: Path) -> list[int]:
-    """Pids of live Blender worker processes working for the build at `out`."""
-    pids = []
-    for d in Path("/proc").iterdir():
-        if not d.name.isdigit():
-            continue
-        try:
-            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-            state = (d / "stat").read_text().split(")")[-1].split()[0]
-        except OSError:
-            continue
-        if "worker.py" in cmd and str(out) in cmd and state != "Z":
-            pids.append(int(d.name))
-    return pids
-
-
 @pytest.fixture(scope="module")
 def objs(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("objs")
@@ -216,7 +199,7 @@ def start_build(objs: Path, out: Path, *extra: str) -> subprocess.Popen:
 def test_a_signal_stops_the_build_and_its_workers(objs, tmp_path, sig, workers, rerun):
     out = tmp_path / "out"
     proc = start_build(objs, out, "--workers", workers)
-    assert wait_until(lambda: len(workers_of(out)) == int(workers), 600), proc.stderr
+    assert wait_until(lambda: len(worker_pids(out)) == int(workers), 600), proc.stderr
     # Mid-build: a setting is in progress (an event, not a sleep). Its .partial folder
     # lives for the whole setting; a frame's EXR only until the driver adds it, which an
     # idle machine can finish between two polls.
@@ -225,7 +208,7 @@ def test_a_signal_stops_the_build_and_its_workers(objs, tmp_path, sig, workers, 
     _, err = proc.communicate(timeout=600)
     assert proc.returncode == 128 + sig, err
     # The workers die with the stop; generous deadlines, CI's machine is busy.
-    assert wait_until(lambda: workers_of(out) == [], 120), workers_of(out)
+    assert wait_until(lambda: worker_pids(out) == [], 120), worker_pids(out)
     # No failure was recorded for the objects that were stopped, and a rerun finishes.
     fails = out / "failures.jsonl"
     assert not fails.exists() or fails.read_text().strip() == ""
@@ -240,10 +223,10 @@ def test_a_signal_stops_the_build_and_its_workers(objs, tmp_path, sig, workers, 
 def test_a_killed_build_leaves_no_blender_behind(objs, tmp_path):
     out = tmp_path / "out"
     proc = start_build(objs, out)
-    assert wait_until(lambda: len(workers_of(out)) == 1, 600), proc.stderr
+    assert wait_until(lambda: len(worker_pids(out)) == 1, 600), proc.stderr
     proc.kill()  # SIGKILL: no handler runs; the worker must die with its parent
     proc.wait()
-    assert wait_until(lambda: workers_of(out) == [], 120), workers_of(out)
+    assert wait_until(lambda: worker_pids(out) == [], 120), worker_pids(out)
 
 
 def test_a_worker_flooding_stdout_still_times_out(tmp_path):
@@ -304,7 +287,7 @@ def test_a_full_disk_stops_the_build_naming_it(objs, small_disk):
 def test_two_identical_builds_at_once_take_turns_per_object(objs, tmp_path):
     out = tmp_path / "out"
     first = start_build(objs, out)
-    assert wait_until(lambda: len(workers_of(out)) == 1, 120), first.stderr
+    assert wait_until(lambda: len(worker_pids(out)) == 1, 120), first.stderr
     second = start_build(objs, out)
     _, err1 = first.communicate(timeout=900)
     _, err2 = second.communicate(timeout=900)

@@ -19,26 +19,18 @@ import pytest
 from blurset import layout, outputs, publish
 from blurset.demo import make_demo_objects
 
-from tests.conftest import ROOT, copy_build, run_cli, shared, standin_build, wait_for, wait_until
-
-
-def tree(path: Path) -> dict[str, bytes]:
-    return {
-        str(p.relative_to(path)): (
-            p.read_bytes() if not p.is_symlink() else os.readlink(p).encode()
-        )
-        for p in sorted(path.rglob("*"))
-        if p.is_file() or p.is_symlink()
-    }
-
-
-def one_error_line(proc, *words: str, code: int = 2) -> str:
-    lines = proc.stderr.strip().splitlines()
-    assert proc.returncode == code, proc.stderr
-    assert len(lines) == 1 and "error:" in lines[0], proc.stderr
-    for w in words:
-        assert w in lines[0], proc.stderr
-    return lines[0]
+from tests.conftest import (
+    ROOT,
+    copy_build,
+    one_error_line,
+    run_cli,
+    shared,
+    standin_build,
+    tree,
+    wait_for,
+    wait_until,
+    worker_pids,
+)
 
 
 @pytest.fixture
@@ -295,7 +287,7 @@ def test_a_killed_rerun_is_provisional_until_a_rerun_finishes(tmp_path, standin_
         proc.wait()
     assert (out / ".lock-late").exists()  # SIGKILL leaves it: the build is interrupted
     # The worker dies with its build (PR_SET_PDEATHSIG), the stand-in as the real one.
-    assert wait_until(lambda: not workers_in(out)), workers_in(out)
+    assert wait_until(lambda: not worker_pids(out)), worker_pids(out)
     one_error_line(run_cli("export", str(out), "--out", str(tmp_path / "e"), check=False),
                    "not finished")  # fmt: skip
     run_cli("build", "--demo", "--objects", str(extra), *STANDIN_REST,
@@ -308,20 +300,6 @@ def test_a_killed_rerun_is_provisional_until_a_rerun_finishes(tmp_path, standin_
 
 STANDIN_REST = ("--views", "4", "--levels", "1,2", "--latents", "2", "--samples", "2",
                 "--resolution", "32", "--settings-per-object", "2", "--quiet")  # fmt: skip
-
-
-def workers_in(out: Path) -> list[int]:
-    """Pids of live worker processes (real or stand-in) working for the build at `out`."""
-    pids = []
-    for d in Path("/proc").iterdir():
-        try:
-            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-            state = (d / "stat").read_text().split(")")[-1].split()[0]
-        except OSError:
-            continue
-        if "worker.py" in cmd and str(out) in cmd and state != "Z":
-            pids.append(int(d.name))
-    return pids
 
 
 def test_export_refuses_a_damaged_setting(b, tmp_path):

@@ -5,7 +5,6 @@ reproduction, with real commands; the builds are stand-in builds (no Blender ren
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -14,27 +13,7 @@ from pathlib import Path
 import pytest
 from blurset import layout, outputs
 
-from tests.conftest import copy_build, run_cli, standin_build
-
-
-def tree(path: Path) -> dict[str, bytes]:
-    return {
-        str(p.relative_to(path)): (
-            p.read_bytes() if not p.is_symlink() else os.readlink(p).encode()
-        )
-        for p in sorted(path.rglob("*"))
-        if p.is_file() or p.is_symlink()
-    }
-
-
-def refused(proc, *words: str) -> str:
-    """Exit 2 with one error line naming `words`."""
-    lines = proc.stderr.strip().splitlines()
-    assert proc.returncode == 2, proc.stderr
-    assert len(lines) == 1 and "error:" in lines[0], proc.stderr
-    for w in words:
-        assert w in lines[0], proc.stderr
-    return lines[0]
+from tests.conftest import copy_build, one_error_line, run_cli, standin_build, tree
 
 
 @pytest.fixture
@@ -78,10 +57,10 @@ def test_tradeoff_refuses_a_build_and_a_folder_it_does_not_own(b, tmp_path):
     (b / ".work").mkdir()
     (b / ".work" / "mine.txt").write_text("keep")
     before = tree(b)
-    refused(tradeoff(b, glb), "--out", "build", str(b))
+    one_error_line(tradeoff(b, glb), "--out", "build", str(b))
     assert tree(b) == before
     # Inside a build (not a setting): refused too.
-    refused(tradeoff(b / "sub", glb), "--out", "lies inside the blurset build")
+    one_error_line(tradeoff(b / "sub", glb), "--out", "lies inside the blurset build")
     assert not (b / "sub").exists() and tree(b) == before
     # A folder of the user's: its .work and images/ are not tradeoff's.
     mine = tmp_path / "mine"
@@ -90,7 +69,7 @@ def test_tradeoff_refuses_a_build_and_a_folder_it_does_not_own(b, tmp_path):
     (mine / "images").mkdir()
     (mine / "images" / "reference.png").write_bytes(b"the user's picture")
     before = tree(mine)
-    refused(tradeoff(mine, glb), "--out", "folder with other files", str(mine))
+    one_error_line(tradeoff(mine, glb), "--out", "folder with other files", str(mine))
     assert tree(mine) == before
 
 
@@ -112,10 +91,10 @@ def test_tradeoff_zero_resolution_and_level_are_refused_and_choices_take_any_cas
     glb = tmp_path / "obj.glb"
     glb.write_bytes(b"glTF")
     out = tmp_path / "out"
-    refused(tradeoff(out, glb, "--resolution", "0"), "--resolution 0")
-    refused(tradeoff(out, glb, "--level", "0"), "--level")
+    one_error_line(tradeoff(out, glb, "--resolution", "0"), "--resolution 0")
+    one_error_line(tradeoff(out, glb, "--level", "0"), "--level")
     # --denoise OIDN is parsed as oidn (the refusal is the next option's).
-    refused(tradeoff(out, glb, "--denoise", "OIDN", "--level", "0"), "--level")
+    one_error_line(tradeoff(out, glb, "--denoise", "OIDN", "--level", "0"), "--level")
     assert not out.exists()
 
 
@@ -125,23 +104,27 @@ def test_tradeoff_zero_resolution_and_level_are_refused_and_choices_take_any_cas
 def test_check_poses_never_writes_into_what_it_checks(b, tmp_path):
     s = a_setting(b)
     before = tree(b)
-    refused(run_cli("check-poses", str(s), "--workdir", str(s), check=False), "--workdir")
-    refused(
+    one_error_line(run_cli("check-poses", str(s), "--workdir", str(s), check=False), "--workdir")
+    one_error_line(
         run_cli("check-poses", str(s), "--workdir", str(b / "colmap"), check=False),
         "--workdir",
         "lies inside the blurset build",
     )
-    refused(
+    one_error_line(
         run_cli("check-poses", str(s), "--json", str(s / "sharp" / "r.json"), check=False),
         "--json",
     )
-    refused(run_cli("check-poses", str(s), "--json", str(b / "r.json"), check=False), "--json")
+    one_error_line(
+        run_cli("check-poses", str(s), "--json", str(b / "r.json"), check=False), "--json"
+    )
     # An LLFF scene (outside any build): its images_<f>/ is no workdir.
     scene = tmp_path / "scene"
     shutil.copytree(s / "sharp", scene)
     sub = next(p for p in scene.iterdir() if p.is_dir())
-    refused(run_cli("check-poses", str(scene), "--workdir", str(sub), check=False), "--workdir")
-    refused(
+    one_error_line(
+        run_cli("check-poses", str(scene), "--workdir", str(sub), check=False), "--workdir"
+    )
+    one_error_line(
         run_cli("check-poses", str(scene), "--json", str(sub / "r.json"), check=False), "--json"
     )
     assert tree(b) == before
@@ -155,7 +138,7 @@ def test_check_poses_refuses_a_workdir_holding_colmap_files_at_its_top(b, tmp_pa
     (wd / "sparse" / "0").mkdir(parents=True)
     (wd / "database.db").write_bytes(b"the user's COLMAP database")
     before = tree(wd)
-    line = refused(
+    line = one_error_line(
         run_cli("check-poses", str(a_setting(b)), "--workdir", str(wd), check=False), "--workdir"
     )
     assert "database.db" in line and tree(wd) == before
@@ -168,7 +151,7 @@ def test_a_build_inside_another_build_is_refused(b, standin_blender):
     before = tree(b)
     for out in (a_setting(b) / "sub", b / "sub"):
         proc = standin_build(out, standin_blender, check=False)
-        refused(proc, "--out", "lies inside the blurset build", str(b))
+        one_error_line(proc, "--out", "lies inside the blurset build", str(b))
         assert not out.exists()
     assert tree(b) == before
 
@@ -177,14 +160,16 @@ def test_reports_of_one_build_are_never_written_into_another_output(b, b2, tmp_p
     noise = fake_noise_output(tmp_path / "n")
     for other in (b2, noise):
         before = tree(other)
-        refused(run_cli("stats", str(b), "--out", str(other / "x"), check=False), "--out")
-        refused(
+        one_error_line(run_cli("stats", str(b), "--out", str(other / "x"), check=False), "--out")
+        one_error_line(
             run_cli("card", str(b), "--out", str(other / "README.md"), check=False),
             "--out",
             "lies inside the blurset",
         )
-        refused(run_cli("preview", str(b), "--out", str(other / "sheet.png"), check=False), "--out")
-        refused(
+        one_error_line(
+            run_cli("preview", str(b), "--out", str(other / "sheet.png"), check=False), "--out"
+        )
+        one_error_line(
             run_cli("preview", str(a_setting(b)), "--out", str(other / "p.png"), check=False),
             "--out",
         )
@@ -222,7 +207,7 @@ def test_an_empty_path_is_refused_by_name_not_taken_for_the_cwd(argv, tmp_path):
         text=True,
     )
     option = argv[-2] if argv[-1] == "" else argv[-1].rstrip("=")
-    line = refused(proc, option, "empty")
+    line = one_error_line(proc, option, "empty")
     assert line.startswith(f"blurset {argv[0]}: error:")
     assert list(tmp_path.iterdir()) == []
 
@@ -237,7 +222,7 @@ def test_reexport_names_a_note_inside_a_scene_it_would_replace(b, tmp_path):
     blur = next(p for p in sorted(scenes.iterdir()) if "__blur_" in p.name)
     (blur / "notes.txt").write_text("my notes")
     before = tree(data)
-    line = refused(
+    line = one_error_line(
         run_cli("export", str(b), "--out", str(data), "--levels", "sharp", check=False),
         "--out",
         "notes.txt",
@@ -304,7 +289,7 @@ def test_a_rerun_removes_the_old_setting_a_killed_publish_left_aside(b, standin_
 def test_build_out_a_dangling_link_is_refused_and_its_target_not_made(tmp_path, standin_blender):
     link = tmp_path / "link"
     link.symlink_to(tmp_path / "elsewhere" / "deep")
-    refused(standin_build(link, standin_blender, check=False), "--out", "link to nothing")
+    one_error_line(standin_build(link, standin_blender, check=False), "--out", "link to nothing")
     assert not (tmp_path / "elsewhere").exists()
 
 
@@ -331,12 +316,14 @@ def test_a_stopped_stats_run_is_taken_back_by_its_rerun(b, tmp_path, monkeypatch
     mine.mkdir()
     (mine / "notes.txt").write_text("mine")
     (mine / stats.UNFINISHED).touch()
-    refused(run_cli("stats", str(b), "--out", str(mine), check=False), "--out", "other files")
+    one_error_line(
+        run_cli("stats", str(b), "--out", str(mine), check=False), "--out", "other files"
+    )
 
 
 def test_stats_of_a_noise_output_says_it_is_not_a_build(tmp_path):
     noise = fake_noise_output(tmp_path / "n")
-    line = refused(run_cli("stats", str(noise), check=False), "noise output", "not a build")
+    line = one_error_line(run_cli("stats", str(noise), check=False), "noise output", "not a build")
     assert str(noise) in line and not (noise / "stats").exists()
 
 
@@ -345,7 +332,7 @@ def test_preview_gain_errors_name_gain(b, tmp_path):
     s = a_setting(b)
     out = str(tmp_path / "p.png")
     for gain in ("nan", "1e308"):
-        line = refused(run_cli("preview", str(s), "--noise", str(noise), "--gain", gain,
+        line = one_error_line(run_cli("preview", str(s), "--noise", str(noise), "--gain", gain,
                                "--out", out, check=False), "--gain ", gain)  # fmt: skip
         assert "--gains" not in line and "Errno" not in line, line
 
@@ -370,7 +357,9 @@ def test_export_copy_on_a_full_disk_is_one_line(b, tmp_path, monkeypatch, capsys
 def test_check_poses_of_a_setting_without_its_images_names_the_damage(b, tmp_path):
     s = a_setting(b)
     shutil.rmtree(s / "sharp" / "images")
-    line = refused(run_cli("check-poses", str(s), check=False), "no images/", str(s / "sharp"))
+    line = one_error_line(
+        run_cli("check-poses", str(s), check=False), "no images/", str(s / "sharp")
+    )
     assert "texture" not in line
 
 
@@ -418,7 +407,7 @@ def test_noise_of_another_build_of_the_same_name_is_refused(b, tmp_path, standin
         ["preview", str(s), "--noise", str(theirs), "--gain", "1", "--out",
          str(tmp_path / "p.png")],
     ):  # fmt: skip
-        refused(run_cli(*argv, check=False), "--noise", "not a noise output of this build")
+        one_error_line(run_cli(*argv, check=False), "--noise", "not a noise output of this build")
     assert not (tmp_path / "data").exists() and not (tmp_path / "p.png").exists()
     # The build's own noise passes.
     run_cli("export", str(b), "--out", str(tmp_path / "data"), "--noise", str(ours))
@@ -447,7 +436,7 @@ def test_open_scene_names_an_image_of_the_wrong_size(b):
 
 def test_noise_frames_past_the_limit_is_refused_before_anything(b, tmp_path):
     out = tmp_path / "n"
-    line = refused(
+    line = one_error_line(
         run_cli("noise", str(b), "--out", str(out), "--frames", "100000000", check=False),
         "--frames 100000000",
     )
@@ -466,7 +455,7 @@ def test_card_noise_and_stats_do_not_call_a_damaged_build_whole(b, tmp_path):
         ["card", str(b), "--out", str(tmp_path / "card.md")],
         ["noise", str(b), "--out", str(tmp_path / "n"), "--gains", "1"],
     ):
-        line = refused(run_cli(*argv, check=False), "damaged setting", s.name)
+        line = one_error_line(run_cli(*argv, check=False), "damaged setting", s.name)
         assert "4000" in line, line
     assert not (tmp_path / "card.md").exists() and not (tmp_path / "n").exists()
     p = run_cli("stats", str(b), "--out", str(tmp_path / "st"))
@@ -482,7 +471,7 @@ def test_a_valid_png_of_the_wrong_size_is_damage_the_rerun_redoes(b, tmp_path, s
     Image.new("RGB", (7, 5)).save(png)
     problem = f"sharp/images/{png.name} is 7x5 px, not 32x32"
     assert layout.setting_problem(s) == problem
-    refused(run_cli("export", str(b), "--out", str(tmp_path / "data"), check=False), s.name)
+    one_error_line(run_cli("export", str(b), "--out", str(tmp_path / "data"), check=False), s.name)
     assert not (tmp_path / "data").exists()
     proc = standin_build(b, standin_blender)
     assert f"redoing {s.name}: {problem}" in proc.stderr
