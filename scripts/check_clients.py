@@ -36,6 +36,7 @@ import os
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -418,6 +419,16 @@ def _seed(i: int) -> None:
     torch.manual_seed(i)
 
 
+def _items(ds: Any, n: int, reads: _Reads) -> Iterator[tuple[int, Any, list[str]]]:
+    """Items 0 to n - 1 of `ds`, each drawn with every RNG seeded by its index, with the
+    files that drawing it opened."""
+    for i in range(n):
+        _seed(i)
+        reads.take()
+        item = ds[i]
+        yield i, item, reads.take()
+
+
 def _ibrnet_like(p: dict, pkg: str, config: str) -> dict:
     """IBRNet and GNT: config.config_parser on the documented command line, then
     <pkg>.data_loaders.llff_test.LLFFTestDataset in train's 'train' and 'validation'
@@ -462,11 +473,7 @@ def _ibrnet_like(p: dict, pkg: str, config: str) -> dict:
     ):
         ds = llff_test.LLFFTestDataset(args, mode, scenes=scene_list)
         draws = []
-        for i in range(len(ds.render_rgb_files)):
-            _seed(i)
-            reads.take()
-            item = ds[i]
-            opened = reads.take()
+        for i, item, opened in _items(ds, len(ds.render_rgb_files), reads):
             target, sources = opened[0], opened[1:]
             files = ds.render_rgb_files[i]
             draws.append({
@@ -548,11 +555,7 @@ def _nan(p: dict) -> dict:
         a.include_target = include
         ds = llff_data.LLFFTestDataset(a, mode, scenes=scene_list)
         draws = []
-        for i in range(len(ds.render_rgb_files)):
-            _seed(i)
-            reads.take()
-            item = ds[i]
-            opened = reads.take()
+        for i, item, opened in _items(ds, len(ds.render_rgb_files), reads):
             f = Path(ds.render_rgb_files[i])
             draws.append({
                 "dir": str(f.parent.parent), "target": opened[0], "sources": opened[1:],
@@ -720,11 +723,9 @@ def _geonerf(p: dict) -> dict:
         ),
     ):
         draws = []
-        for i in range(len(ds.meta)):  # every target (validation's __len__ stops at 2)
-            _seed(i)
-            reads.take()
-            item = ds[i]
-            opened = reads.take()  # the sources in their order, then the target
+        # Every target (validation's __len__ stops at 2); `opened`: the sources in their
+        # order, then the target.
+        for i, item, opened in _items(ds, len(ds.meta), reads):
             scan, t = ds.meta[i]["scan"], ds.meta[i]["target_idx"]
             draws.append({
                 "dir": str(Path(ds.root_dir) / scan), "target": opened[-1],
