@@ -749,8 +749,15 @@ mod tests {
     use super::*;
     use crate::plan::sampling::plan_setting;
 
-    #[test]
-    fn meta_is_the_plan_without_cameras_and_stats_can_read_it() -> Result<()> {
+    const QA: FrameQa = FrameQa {
+        coverage: 0.5,
+        luminance: 0.2,
+        saturated: 0.0,
+        border_coverage: 0.0,
+    };
+
+    /// A config of 3 views and levels 1 and 3, its plan of one setting and its meta.json.
+    fn planned() -> Result<(BuildConfig, SettingPlan, Meta)> {
         let cfg = BuildConfig {
             views: 3,
             levels: vec![1, 3],
@@ -758,20 +765,24 @@ mod tests {
             ..Default::default()
         };
         let plan = plan_setting(&cfg.sampling(), "u", 90.0, 5, [1.0, 0.5, 0.5], &[])?;
-        let qa = FrameQa {
-            coverage: 0.5,
-            luminance: 0.2,
-            saturated: 0.0,
-            border_coverage: 0.0,
-        };
         let meta = Meta::new(
             &plan,
             &cfg,
             ObjectRecord::default(),
             Timings::default(),
-            &[qa; 3],
+            &[QA; 3],
         )?;
-        let v = serde_json::to_value(&meta).map_err(|e| Error::Value(e.to_string()))?;
+        Ok((cfg, plan, meta))
+    }
+
+    fn value(meta: &Meta) -> Result<serde_json::Value> {
+        serde_json::to_value(meta).map_err(|e| Error::Value(e.to_string()))
+    }
+
+    #[test]
+    fn meta_is_the_plan_without_cameras_and_stats_can_read_it() -> Result<()> {
+        let (cfg, plan, meta) = planned()?;
+        let v = value(&meta)?;
         let frame = &v["views"][1]["levels"]["3"]["latent_frames"][0];
         assert!(frame.get("c2w").is_none() && frame.get("seed").is_some());
         assert_eq!(v["views"][1]["c2w"], serde_json::json!(plan.views[1].c2w));
@@ -779,6 +790,26 @@ mod tests {
             v["levels"],
             serde_json::json!(["sharp", "blur_1", "blur_3"])
         );
+        assert!(v.get("pose_check").is_none());
+        let back: ReadMeta =
+            serde_json::from_value(v.clone()).map_err(|e| Error::Value(e.to_string()))?;
+        assert_eq!((back.views.len(), back.views[2].levels.len()), (3, 2));
+        // One QA record a view.
+        let one_qa = Meta::new(
+            &plan,
+            &cfg,
+            ObjectRecord::default(),
+            Timings::default(),
+            &[QA],
+        );
+        assert!(one_qa.is_err());
+        Ok(())
+    }
+
+    #[test]
+    fn the_render_record_says_what_every_latent_frame_renders() -> Result<()> {
+        let (cfg, _, meta) = planned()?;
+        let v = value(&meta)?;
         // What every latent frame renders: 32 × 2^0.4 = 42.2 → 43 under parity.
         assert_eq!(v["render"]["samples_per_latent"], 43);
         assert_eq!(v["render"]["blur_budget"], "parity");
@@ -804,7 +835,12 @@ mod tests {
                 .map_err(|e| Error::Value(e.to_string()))?["linear"],
             true
         );
-        // The object names no builder path (issue 19): `source` is no field.
+        Ok(())
+    }
+
+    #[test]
+    fn the_object_names_no_builder_path() -> Result<()> {
+        // Issue 19: `source` is no field.
         let obj: ObjectRecord = serde_json::from_str(r#"{"path": "a.glb", "license": "CC0-1.0"}"#)
             .map_err(|e| Error::Value(e.to_string()))?;
         assert_eq!(
@@ -812,10 +848,13 @@ mod tests {
             ("a.glb", "CC0-1.0")
         );
         assert!(serde_json::from_str::<ObjectRecord>(r#"{"source": "/home/u/a.glb"}"#).is_err());
-        assert!(v.get("pose_check").is_none());
-        let back: ReadMeta =
-            serde_json::from_value(v.clone()).map_err(|e| Error::Value(e.to_string()))?;
-        assert_eq!((back.views.len(), back.views[2].levels.len()), (3, 2));
+        Ok(())
+    }
+
+    #[test]
+    fn check_poses_reads_the_mean_poses_and_exposure_ends_back() -> Result<()> {
+        let (_, plan, meta) = planned()?;
+        let v = value(&meta)?;
         // check-poses reads each view's mean latent pose of a level back whole.
         let dir = std::env::temp_dir().join(format!("blurset-meta-{}", std::process::id()));
         std::fs::create_dir_all(&dir).map_err(|e| Error::io("mkdir", &dir, e))?;
@@ -871,14 +910,6 @@ mod tests {
             Err(Error::Input { .. })
         ));
         std::fs::remove_dir_all(&dir).map_err(|e| Error::io("rm", &dir, e))?;
-        assert!(Meta::new(
-            &plan,
-            &cfg,
-            ObjectRecord::default(),
-            Timings::default(),
-            &[qa]
-        )
-        .is_err());
         Ok(())
     }
 }
