@@ -15,8 +15,7 @@ import pytest
 from blurset import layout
 from blurset.preflight import PreflightError, glb_inspect
 
-from tests.conftest import copy_build, run_cli, standin_build
-from tests.test_outputs_round3 import refused, tree
+from tests.conftest import copy_build, one_error_line, run_cli, standin_build, tree
 
 
 @pytest.fixture
@@ -38,7 +37,7 @@ def b(standin_build_dir, tmp_path) -> Path:
 def test_a_value_starting_with_a_dash_is_checked_by_its_option(argv, words, tmp_path):
     out = tmp_path / "o"
     proc = run_cli(*argv, "--demo", "--out", str(out), check=False)
-    line = refused(proc, *words)
+    line = one_error_line(proc, *words)
     assert "expected one argument" not in line
     # The same line as the value written with `=`, which argparse always took as a value.
     flag, value = argv[1], argv[2]
@@ -51,7 +50,7 @@ def test_a_dashed_value_in_a_list_option_is_checked_by_its_option(b, tmp_path):
     out = tmp_path / "n"
     for gains in (["-1"], ["1", "-1e-3"], ["-2", "4"]):
         proc = run_cli("noise", str(b), "--out", str(out), "--gains", *gains, check=False)
-        line = refused(proc, "--gains", gains[-1] if "-" in gains[-1] else gains[0])
+        line = one_error_line(proc, "--gains", gains[-1] if "-" in gains[-1] else gains[0])
         assert "expected at least one argument" not in line
         assert "unrecognized arguments" not in line
         assert not out.exists()
@@ -85,7 +84,9 @@ def test_a_superseded_setting_holding_a_users_file_is_refused_by_name(b, standin
     old = supersede(b)
     (old / "notes.txt").write_text("my notes")
     before = tree(b)
-    line = refused(standin_build(b, standin_blender, check=False), "old_box_000", "notes.txt")
+    line = one_error_line(
+        standin_build(b, standin_blender, check=False), "old_box_000", "notes.txt"
+    )
     assert "move it out" in line
     assert tree(b) == before  # nothing removed, nothing written
     (old / "notes.txt").unlink()
@@ -97,7 +98,7 @@ def test_a_superseded_setting_holding_a_users_file_is_refused_by_name(b, standin
 def test_a_users_file_in_a_level_of_a_superseded_setting_is_named_too(b, standin_blender):
     old = supersede(b)
     (old / "sharp" / "README").write_text("about this level")
-    refused(standin_build(b, standin_blender, check=False), "old_box_000", "sharp/README")
+    one_error_line(standin_build(b, standin_blender, check=False), "old_box_000", "sharp/README")
     assert (old / "sharp" / "README").read_text() == "about this level"
 
 
@@ -111,9 +112,9 @@ def test_toml_out_a_dangling_link_is_refused_like_the_flag(tmp_path, standin_ble
     config.write_text(f'out = "{link}"\n')
     proc = run_cli("build", "--demo", "--config", str(config), "--quiet",
                    "--blender", str(standin_blender), check=False)  # fmt: skip
-    line = refused(proc, "c.toml", "out", "link to nothing", str(link))
+    line = one_error_line(proc, "c.toml", "out", "link to nothing", str(link))
     assert not (tmp_path / "elsewhere").exists()
-    flag = refused(standin_build(link, standin_blender, check=False), "--out")
+    flag = one_error_line(standin_build(link, standin_blender, check=False), "--out")
     # One check: the same words after the option's name.
     assert line.split(" out ", 1)[1] == flag.split("--out ", 1)[1]
 
@@ -130,7 +131,7 @@ def test_noise_of_a_scene_with_unknown_bounds_names_the_view_and_writes_nothing(
     np.save(poses, rows)
     out = tmp_path / "n"
     proc = run_cli("noise", str(scene), "--gains", "1", "--out", str(out), check=False)
-    refused(proc, "row 2 (view 2)", "near -1", "poses_bounds.npy")
+    one_error_line(proc, "row 2 (view 2)", "near -1", "poses_bounds.npy")
     assert not out.exists()
 
 
