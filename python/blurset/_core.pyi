@@ -865,6 +865,18 @@ class NoisePlan:
     def levels(self) -> list[str]: ...
     @property
     def units(self) -> list[NoiseUnit]: ...
+    @property
+    def params(self) -> rec.NoiseParams:
+        """The options the run is made with (noise_dataset.json `params`): a rerun into
+        the same output must match them."""
+    def write_dataset_start(self, out: str | PathLike[str]) -> None:
+        """noise_dataset.json in `out` before any unit: the build and the options."""
+    def write_dataset(self, out: str | PathLike[str], created: str) -> rec.NoiseDatasetDoc:
+        """noise_dataset.json in `out` over its complete units (earlier runs' too),
+        stamped `created`; returned."""
+    def write_scene_record(self, out: str | PathLike[str]) -> rec.NoiseSceneRecord:
+        """noise_scene.json in `out`: the scene, its gain folders, seed and profile;
+        returned."""
 
 def plan_noise_scene(
     scene: str | PathLike[str],

@@ -620,6 +620,15 @@ class GainRecord(TypedDict):
     sigma_read: float
     sigma_shot: float
 
+class NoiseTableParams(TypedDict):
+    """The σ(gain) table a noise output is made with (noise.json's, without KPN's file name). Its fields are in name order: the order noise_dataset.json has held them in since it was a free map, so that a rerun writes the same bytes."""
+
+    log10_sigma_read_1: float
+    log10_sigma_shot_1: float
+    read_step_per_log2_gain: float
+    shot_step_per_log2_gain: float
+    source: str
+
 class NoiseParams(TypedDict):
     """The options a noise output is made with; a rerun into it must match them."""
 
@@ -627,7 +636,7 @@ class NoiseParams(TypedDict):
     downsample: list[int]
     frames: int
     gamma: str
-    levels_table: Any
+    levels_table: NoiseTableParams
     profile: str
     seed: int
     source: str

@@ -15,8 +15,10 @@ the failing call had started and leaves complete units alone.
 
 blurset-core plans every unit before anything is written (`plan_noise_build`,
 rust/core/src/dataset/noise_plan.rs: inputs checked, seeds, keys, sigmas, each gain's
-noise.json) and writes it; this module schedules: the lock and the options record,
-partial folders, the fault injection, progress, publishing, noise_dataset.json.
+noise.json, the options record) and writes it, and assembles and writes
+noise_dataset.json (rust/core/src/dataset/noise_output.rs); this module schedules: the
+lock, when each record is written, partial folders, the fault injection, progress,
+publishing.
 
 The seed of a (setting, level) is derived in blurset-core from the one `--seed`
 (`noise_scene_seed`) and plays the role of the single-scene `--seed`, so the PNG path
@@ -38,9 +40,9 @@ import sys
 import time
 from pathlib import Path
 
-from blurset import __version__, _core, layout, outputs, publish
+from blurset import _core, layout, outputs, publish
 from blurset.exceptions import ConfigError
-from blurset.noise.params import kpn_path, noise_table, planned, table_record
+from blurset.noise.params import kpn_path, noise_table, planned
 from blurset.stop import interruptible, remove_tree
 
 NOISE = outputs.OutputKind.NOISE
@@ -52,22 +54,7 @@ def is_build(path: Path) -> bool:
     return outputs.kind_of(path) is outputs.OutputKind.BUILD
 
 
-def _params(cfg: _core.NoiseConfig, plan: _core.NoisePlan, table) -> dict:
-    """The options a noise build is made with; a rerun into the same DIR must match them."""
-    return {
-        "seed": cfg.seed,
-        "source": plan.source,
-        "profile": cfg.profile,
-        "gamma": plan.gamma,
-        "white_level": cfg.white_level,
-        "frames": cfg.frames,
-        "levels_table": table_record(table, kpn_path(cfg)),
-        "downsample": plan.downsample,
-        "clean_views": "none" if cfg.noisy_test_views else "test_views",
-    }
-
-
-def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
+def _prepare_out(out: Path, build: Path, plan: _core.NoisePlan, overwrite: bool) -> None:
     """Claim OUT for this noise run (call under its lock): a new or empty folder, or a
     noise output made with the same options; `--overwrite` replaces a noise output's own
     units and records, nothing else in the folder, and never a build or a foreign folder."""
@@ -81,7 +68,7 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
         if overwrite:
             outputs.remove_owned(out, NOISE)
         else:
-            for k, v in params.items():
+            for k, v in plan.params.items():
                 if old["params"].get(k) != v:
                     raise ConfigError(
                         f"--out was written with {k} = {old['params'].get(k)!r}, not {v!r}: use "
@@ -91,7 +78,7 @@ def _prepare_out(out: Path, build: Path, params: dict, overwrite: bool) -> None:
     if not (out / DATASET_FILE).is_file():
         # Written first (options only) so that a run killed before its end resumes;
         # rewritten with the seeds and counts at the end.
-        outputs.write_record(out / DATASET_FILE, {"build": build.resolve().name, "params": params})
+        plan.write_dataset_start(out)
     for stale in out.glob("*/*/gain_*.partial"):
         shutil.rmtree(stale, ignore_errors=True)
     # The old unit a killed publish had moved aside (replace_dir), beside the new one.
@@ -137,48 +124,6 @@ def _write_unit(unit: _core.NoiseUnit, pending: list[int], die: bool = False) ->
         raise
 
 
-def _finalize(out: Path, build: Path, params: dict, dataset: dict) -> dict:
-    """noise_dataset.json over the complete units on disk."""
-    seeds: dict[str, dict[str, int]] = {}
-    gains_on_disk: dict[str, dict] = {}
-    n_units = n_images = 0
-    for unit in sorted(u for u in out.glob("*/*/gain_*") if layout.is_complete(u)):
-        meta = outputs.read_record(unit / layout.NOISE)
-        setting, level = unit.parent.parent.name, unit.parent.name
-        seeds.setdefault(setting, {})[level] = meta["seed"]
-        gains_on_disk[unit.name] = {
-            "gain": meta["gain"],
-            "sigma_read": meta["sigma_read"],
-            "sigma_shot": meta["sigma_shot"],
-        }
-        n_units += 1
-        n_images += len(meta["files"])
-    order = {lvl: i for i, lvl in enumerate(dataset.get("levels", []))}
-    seeds = {
-        s: dict(sorted(d.items(), key=lambda kv: order.get(kv[0], 99))) for s, d in seeds.items()
-    }
-    doc = {
-        "name": "blurset Objaverse-Blur + noise",
-        "blurset_version": __version__,
-        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "build": build.resolve().name,
-        "build_seed": dataset.get("seed"),
-        "params": params,
-        "seed_derivation": _core.NOISE_SEED_DERIVATION,
-        "gains": sorted(gains_on_disk.values(), key=lambda d: d["gain"]),
-        "levels": [
-            lvl for lvl in dataset.get("levels", []) if any(lvl in s for s in seeds.values())
-        ],
-        "seeds": seeds,
-        "layout": "<setting>/<level>/gain_<g>/ (images/, linear/, images_<f>/, linear_<f>/, "
-        "poses_bounds.npy, transforms.json, noise.json)",
-        "splits": "splits.json (copied from the build)",
-        "counts": {"settings": len(seeds), "units": n_units, "images": n_images},
-    }
-    outputs.write_record(out / DATASET_FILE, doc)
-    return doc
-
-
 def _refuse_scene_options(cfg: _core.NoiseConfig) -> None:
     """The options that pick a scene's images or held-out views mean nothing here."""
     if cfg.factor is not None:
@@ -212,23 +157,22 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
     _refuse_scene_options(cfg)
     # A build still being written (or stopped) would be noised half, with stale splits.
     complete = outputs.finished_build(build, "SCENE").complete
-    dataset = outputs.read_record(build / layout.DATASET)
     table = noise_table(kpn_path(cfg))
     # Every unit checked before writing anything: a bad build fails with nothing written.
     plan = planned(_core.plan_noise_build, build, out, list(complete), cfg, table)
-    params = _params(cfg, plan, table)
     outputs.refuse_overlap(out, [build])
     outputs.refuse_inside_settings(out)
     fault = _fault_unit()  # a bad spec is refused before anything is written
     outputs.claim(out, NOISE, "--out")  # refused before the lock creates anything
     with outputs.lock(out, NOISE):
-        _prepare_out(out, build, params, cfg.overwrite)
+        _prepare_out(out, build, plan, cfg.overwrite)
         layout.write_text_atomic(out / layout.SPLITS, (build / layout.SPLITS).read_text())
         n_gains = len(cfg.gain_values)
         # Pending under the lock: --overwrite may just have removed units.
         skipped = sum(n_gains - len(u.pending()) for u in plan.units)
         written = _write_pending(plan, cfg.quiet, fault)
-        doc = _finalize(out, build, params, dataset)
+        # Over every complete unit on disk, earlier runs' too.
+        doc = plan.write_dataset(out, time.strftime("%Y-%m-%dT%H:%M:%S"))
         publish.write_manifest(out)
     print(
         f"blurset noise: {written} scene(s) written, {skipped} complete skipped "

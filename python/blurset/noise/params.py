@@ -55,14 +55,3 @@ def read_kpn_levels(path: Path) -> NoiseTable:
 def noise_table(kpn_levels: Path | None) -> NoiseTable:
     """The σ(gain) table: NAN's from KPN's file when given, else blurset's default."""
     return read_kpn_levels(kpn_levels) if kpn_levels else _core.noise_default_levels()
-
-
-def table_record(table: NoiseTable, kpn_levels: Path | None) -> dict[str, Any]:
-    """The σ table as noise_dataset.json's params record it."""
-    return {
-        "source": "kpn" if kpn_levels else "blurset-default",
-        "log10_sigma_read_1": table[0],
-        "read_step_per_log2_gain": table[1],
-        "log10_sigma_shot_1": table[2],
-        "shot_step_per_log2_gain": table[3],
-    }

@@ -13,7 +13,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from blurset import __version__, _core, layout, outputs
+from blurset import _core, layout, outputs
 from blurset.exceptions import ConfigError
 from blurset.noise.params import kpn_path, noise_table, planned
 from blurset.stop import interruptible, remove_tree
@@ -52,17 +52,7 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
             outputs.remove_owned(out, NOISE_SCENE)
             for gdir in gain_dirs:
                 layout.replace_dir(gdir, out / gdir.name)
-            outputs.write_record(
-                out / NOISE_SCENE.record,
-                {
-                    "kind": "blurset noise scene",
-                    "blurset_version": __version__,
-                    "scene": scene.resolve().name,
-                    "gains": [gdir.name for gdir in gain_dirs],
-                    "seed": cfg.seed,
-                    "profile": cfg.profile,
-                },
-            )
+            plan.write_scene_record(out)
         finally:
             remove_tree(tmp)
     print(

@@ -51,74 +51,77 @@ impl NoiseGain {
     }
 }
 
-/// One scene to noise (a scene, or a level of a build's setting).
+/// One scene to noise (a scene, or a level of a build's setting): unit `i` of its plan,
+/// which it shares so that a unit's writer can run with the GIL released.
 #[pyclass(frozen, name = "NoiseUnit", module = "blurset._core")]
-pub struct NoiseUnit(Arc<core::NoiseUnit>);
+pub struct NoiseUnit {
+    plan: Arc<core::NoisePlan>,
+    i: usize,
+}
+
+impl NoiseUnit {
+    fn unit(&self) -> &core::NoiseUnit {
+        &self.plan.units[self.i]
+    }
+}
 
 #[pymethods]
 impl NoiseUnit {
     #[getter]
     fn setting(&self) -> Option<&str> {
-        self.0.setting.as_deref()
+        self.unit().setting.as_deref()
     }
     #[getter]
     fn level(&self) -> Option<&str> {
-        self.0.level.as_deref()
+        self.unit().level.as_deref()
     }
     #[getter]
     fn dst(&self) -> PathBuf {
-        self.0.dst.clone()
+        self.unit().dst.clone()
     }
     #[getter]
     fn seed(&self) -> u64 {
-        self.0.seed
+        self.unit().seed
     }
     #[getter]
     fn images(&self) -> usize {
-        self.0.names.len()
+        self.unit().names.len()
     }
     #[getter]
     fn clean_views(&self) -> Vec<usize> {
-        self.0.clean_views.clone()
+        self.unit().clean_views.clone()
     }
     #[getter]
     fn gains(&self) -> Vec<NoiseGain> {
-        self.0.gains.iter().cloned().map(NoiseGain).collect()
+        self.unit().gains.iter().cloned().map(NoiseGain).collect()
     }
 
     /// The gains not yet complete in `dst` (indices into `gains`).
     fn pending(&self) -> Vec<usize> {
-        self.0.pending()
+        self.unit().pending()
     }
 
     /// The noisy images of the gains `dirs` names, as (gain index, folder).
     fn write_images(&self, py: Python<'_>, dirs: Vec<(usize, PathBuf)>) -> PyResult<()> {
-        let unit = Arc::clone(&self.0);
-        run_detached(py, move || unit.write_images(&dirs))
+        let (plan, i) = (Arc::clone(&self.plan), self.i);
+        run_detached(py, move || plan.units[i].write_images(&dirs))
     }
 
     /// The clean views' files, the poses, a build's transforms.json and noise.json of
     /// gain `gain` in `dir`.
     fn write_gain_files(&self, py: Python<'_>, gain: usize, dir: PathBuf) -> PyResult<()> {
-        let unit = Arc::clone(&self.0);
-        run_detached(py, move || unit.write_gain_files(gain, &dir))
+        let (plan, i) = (Arc::clone(&self.plan), self.i);
+        run_detached(py, move || plan.units[i].write_gain_files(gain, &dir))
     }
 }
 
 /// The plan of one `blurset noise` run.
 #[pyclass(frozen, name = "NoisePlan", module = "blurset._core")]
-pub struct NoisePlan {
-    plan: core::NoisePlan,
-    units: Vec<Arc<core::NoiseUnit>>,
-}
+pub struct NoisePlan(Arc<core::NoisePlan>);
 
 impl From<core::NoisePlan> for NoisePlan {
-    fn from(mut plan: core::NoisePlan) -> Self {
-        let units = std::mem::take(&mut plan.units);
-        NoisePlan {
-            plan,
-            units: units.into_iter().map(Arc::new).collect(),
-        }
+    fn from(plan: core::NoisePlan) -> Self {
+        NoisePlan(Arc::new(plan))
     }
 }
 
@@ -126,23 +129,61 @@ impl From<core::NoisePlan> for NoisePlan {
 impl NoisePlan {
     #[getter]
     fn source(&self) -> &str {
-        &self.plan.source
+        &self.0.source
     }
     #[getter]
     fn gamma(&self) -> &str {
-        &self.plan.gamma
+        &self.0.gamma
     }
     #[getter]
     fn downsample(&self) -> Vec<u32> {
-        self.plan.downsample.clone()
+        self.0.downsample.clone()
     }
     #[getter]
     fn levels(&self) -> Vec<String> {
-        self.plan.levels.clone()
+        self.0.levels.clone()
     }
     #[getter]
     fn units(&self) -> Vec<NoiseUnit> {
-        self.units.iter().cloned().map(NoiseUnit).collect()
+        let unit = |i| NoiseUnit {
+            plan: Arc::clone(&self.0),
+            i,
+        };
+        (0..self.0.units.len()).map(unit).collect()
+    }
+    /// The options the run is made with (noise_dataset.json `params`).
+    #[getter]
+    fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::convert::to_py(py, &self.0.params)
+    }
+
+    /// noise_dataset.json in `out` before any unit: the build and the options.
+    fn write_dataset_start(&self, py: Python<'_>, out: PathBuf) -> PyResult<()> {
+        let plan = Arc::clone(&self.0);
+        run_detached(py, move || plan.write_dataset_start(&out))
+    }
+
+    /// noise_dataset.json in `out` over its complete units, stamped `created`; returned.
+    fn write_dataset<'py>(
+        &self,
+        py: Python<'py>,
+        out: PathBuf,
+        created: String,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let plan = Arc::clone(&self.0);
+        let doc = run_detached(py, move || plan.write_dataset(&out, &created))?;
+        crate::convert::to_py(py, &doc)
+    }
+
+    /// noise_scene.json in `out`: the scene, its gain folders, seed and profile; returned.
+    fn write_scene_record<'py>(
+        &self,
+        py: Python<'py>,
+        out: PathBuf,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let plan = Arc::clone(&self.0);
+        let doc = run_detached(py, move || plan.write_scene_record(&out))?;
+        crate::convert::to_py(py, &doc)
     }
 }
 

@@ -6,6 +6,7 @@ pub mod layout;
 pub mod llff;
 pub mod manifest;
 pub mod meta;
+pub mod noise_output;
 pub mod noise_plan;
 pub mod outputs;
 pub mod read;

@@ -12,6 +12,7 @@ use super::llff::{read_poses_bounds, write_poses_bounds, write_scene_transforms}
 use super::llff::{PoseRow, SceneFields};
 use super::read::{read_record, Record};
 use super::records::{write_noise, BuildNoiseRecord, NoiseDoc, NoiseFile, NoiseTableRecord};
+use super::records::{NoiseParams, NoiseTableParams};
 use super::records::{NoiseSource as SourceRecord, WhiteBalanceRecord};
 use crate::error::{Error, Result};
 use crate::ground::names::{files, gain_name, images_dir, test_views};
@@ -99,6 +100,43 @@ pub struct NoisePlan {
     /// The levels of a build noised (none for a scene).
     pub levels: Vec<String>,
     pub units: Vec<NoiseUnit>,
+    /// The scene or build noised, by its folder's name (no builder paths in outputs).
+    pub input: String,
+    /// The options the run is made with: noise_dataset.json's `params`, which a rerun
+    /// into the same output must match.
+    pub params: NoiseParams,
+    /// A build's levels and seed as its dataset.json has them (empty for a scene):
+    /// noise_dataset.json orders its levels by them and names the seed.
+    pub build_levels: Vec<String>,
+    pub build_seed: Option<u64>,
+}
+
+/// The options of a run as noise_dataset.json records them; `clean` when some views
+/// stay clean (a build's test views, a scene's `--clean-views`).
+fn params(
+    cfg: &NoiseConfig,
+    table: &NoiseLevels,
+    plan: (&str, NoiseGamma, &[u32], bool),
+) -> NoiseParams {
+    let (source, gamma, downsample, clean) = plan;
+    let kpn = cfg.kpn_levels.is_some();
+    NoiseParams {
+        seed: cfg.seed,
+        source: source.into(),
+        profile: cfg.profile.name().into(),
+        gamma: gamma.name().into(),
+        white_level: cfg.white_level,
+        frames: cfg.frames as usize,
+        levels_table: NoiseTableParams {
+            log10_sigma_read_1: table.log10_read,
+            log10_sigma_shot_1: table.log10_shot,
+            read_step_per_log2_gain: table.read_step,
+            shot_step_per_log2_gain: table.shot_step,
+            source: if kpn { "kpn" } else { "blurset-default" }.into(),
+        },
+        downsample: downsample.to_vec(),
+        clean_views: if clean { "test_views" } else { "none" }.into(),
+    }
 }
 
 /// What every unit of a run shares: the gains with their σ, and the record's common part.
@@ -415,12 +453,17 @@ pub fn plan_scene(
     let gamma = cfg.gamma.unwrap_or(NoiseGamma::Power22);
     let common = Common::of(cfg, table, gamma)?;
     let unit = scene_unit(scene, &image_dir, out, cfg, &common, (sources, rows, size))?;
+    let clean = cfg.clean_views.is_some();
     Ok(NoisePlan {
         source: "png".into(),
         gamma: gamma.name().into(),
+        params: params(cfg, table, ("png", gamma, &downsample, clean)),
         downsample,
         levels: Vec::new(),
         units: vec![unit],
+        input: resolved_name(scene)?,
+        build_levels: Vec::new(),
+        build_seed: None,
     })
 }
 
@@ -532,20 +575,27 @@ pub fn parse_levels(value: Option<&str>, available: &[String]) -> Result<Vec<Str
         .collect())
 }
 
-/// What a build's plan reads of its dataset.json: its levels and its `images_<f>/` factors.
-fn build_record(build: &Path) -> Result<(Vec<String>, Vec<u32>)> {
+/// What a build's plan reads of its dataset.json.
+struct BuildRecord {
+    /// Its levels as written (none in a build that did not record them).
+    levels: Vec<String>,
+    seed: Option<u64>,
+    /// Its `images_<f>/` factors.
+    factors: Vec<u32>,
+}
+
+fn build_record(build: &Path) -> Result<BuildRecord> {
     let doc = read_record(&build.join(files::DATASET), Record::Dataset)?;
-    let strings = |v: &serde_json::Value| -> Vec<String> {
-        let items = v.as_array().into_iter().flatten();
-        items.filter_map(|x| x.as_str().map(String::from)).collect()
-    };
-    let mut levels = strings(&doc["levels"]);
-    if levels.is_empty() {
-        levels = vec!["sharp".into()];
-    }
+    let levels = doc["levels"].as_array().into_iter().flatten();
     let factors = doc["config"]["downsample"].as_array().into_iter().flatten();
     let factors = factors.filter_map(|f| f.as_u64().and_then(|f| u32::try_from(f).ok()));
-    Ok((levels, factors.collect()))
+    Ok(BuildRecord {
+        levels: levels
+            .filter_map(|x| x.as_str().map(String::from))
+            .collect(),
+        seed: doc["seed"].as_u64(),
+        factors: factors.collect(),
+    })
 }
 
 /// Whether every image of a level has its linear EXR (`--keep-linear`).
@@ -574,8 +624,12 @@ pub fn plan_build(
     cfg: &NoiseConfig,
     table: &NoiseLevels,
 ) -> Result<NoisePlan> {
-    let (available, factors) = build_record(build)?;
-    let downsample = cfg.downsample.clone().unwrap_or(factors);
+    let record = build_record(build)?;
+    let available = match record.levels.is_empty() {
+        true => vec!["sharp".to_string()],
+        false => record.levels.clone(),
+    };
+    let downsample = cfg.downsample.clone().unwrap_or(record.factors);
     let levels = parse_levels(cfg.levels.as_deref(), &available)?;
     if settings.is_empty() {
         return Err(Error::Input {
@@ -609,12 +663,18 @@ pub fn plan_build(
             units.push(at.unit(s, l)?);
         }
     }
+    let source = if linear { "linear" } else { "png" };
+    let clean = !cfg.noisy_test_views;
     Ok(NoisePlan {
-        source: if linear { "linear" } else { "png" }.into(),
+        source: source.into(),
         gamma: gamma.name().into(),
+        params: params(cfg, table, (source, gamma, &downsample, clean)),
         downsample,
         levels,
         units,
+        input: at.name,
+        build_levels: record.levels,
+        build_seed: record.seed,
     })
 }
 
@@ -953,6 +1013,18 @@ mod tests {
         let t = NoiseLevels::DEFAULT;
         let plan = plan_scene(&dir, &dir.join("out"), &c, &t)?;
         assert_eq!((plan.gamma.as_str(), plan.units.len()), ("2.2", 1));
+        // The run's options as noise_dataset.json records them; the scene by its name.
+        let p = &plan.params;
+        assert_eq!((p.seed, p.frames, p.downsample.clone()), (7, 2, vec![2]));
+        assert_eq!(
+            (p.source.as_str(), p.clean_views.as_str()),
+            ("png", "test_views")
+        );
+        assert_eq!(p.levels_table.read_step_per_log2_gain, t.read_step);
+        assert_eq!(
+            Some(plan.input.as_str()),
+            dir.file_name().and_then(|n| n.to_str())
+        );
         let u = &plan.units[0];
         assert_eq!(u.clean_views, vec![0, 3]);
         assert_eq!(u.names[..3], ["000_f00", "000_f01", "001_f00"]);

@@ -206,10 +206,24 @@ pub struct NoiseParams {
     pub gamma: String,
     pub white_level: f64,
     pub frames: usize,
-    pub levels_table: serde_json::Value,
+    pub levels_table: NoiseTableParams,
     pub downsample: Vec<u32>,
     /// `test_views` (the build's test views stay clean) or `none`.
     pub clean_views: String,
+}
+
+/// The σ(gain) table a noise output is made with (noise.json's, without KPN's file name).
+/// Its fields are in name order: the order noise_dataset.json has held them in since it
+/// was a free map, so that a rerun writes the same bytes.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseTableParams {
+    pub log10_sigma_read_1: f64,
+    pub log10_sigma_shot_1: f64,
+    pub read_step_per_log2_gain: f64,
+    pub shot_step_per_log2_gain: f64,
+    /// `kpn` (NAN's, from KPN's file) or `blurset-default`.
+    pub source: String,
 }
 
 /// One gain of a noise output.
@@ -265,7 +279,7 @@ pub struct NoiseDatasetStart {
 #[serde(untagged)]
 pub enum NoiseDatasetRecord {
     Done(Box<NoiseDatasetDoc>),
-    Start(NoiseDatasetStart),
+    Start(Box<NoiseDatasetStart>),
 }
 
 /// `noise_scene.json` of `blurset noise SCENE`: what the folder is, written last.
