@@ -22,7 +22,7 @@ import time
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import IO, Any, NoReturn
+from typing import IO, Any, NoReturn, TypedDict, cast
 
 from blurset import _core
 from blurset.exceptions import BlursetError
@@ -140,6 +140,40 @@ def worker_command(
         "--",
         *ours,
     ]
+
+
+class LoadedObject(TypedDict, total=False):
+    """What `Worker.load` returns: the worker's reply (blender_scripts/worker.py: the
+    normalized object, its import warnings, light paths and device), the driver's QA
+    measures, and what the build adds before it writes meta.json's `object`."""
+
+    ok: bool
+    reason: str
+    bbox_dims: list[float]
+    n_vertices: int
+    n_triangles: int
+    scale: float
+    center: list[float]
+    warnings: list[str]
+    unlit_fixed: bool
+    light_paths: dict[str, Any]
+    device: dict[str, Any]
+    seconds: float
+    qa_coverage: list[float]
+    qa_luminance: list[float]
+    # Added by the build (builder/unit.py).
+    load_s: float
+    provenance: dict[str, Any]
+    blender_version: str | None
+
+
+class RenderDone(TypedDict, total=False):
+    """The worker's final reply to a render request: frames written, render calls."""
+
+    ok: bool
+    done: int
+    jobs: int
+    reason: str
 
 
 class Worker:
@@ -334,7 +368,7 @@ class Worker:
 
     def load(
         self, glb: Path, vertices_out: Path, *, unlit: str = "lit", light_paths: str = "auto"
-    ) -> dict[str, Any]:
+    ) -> LoadedObject:
         """Import and normalize one GLB (light-path bounces from its materials, or fixed),
         then render its QA views and judge them; the worker's reply (see
         blender_scripts/worker.py) plus `qa_coverage`, `qa_luminance`.
@@ -360,7 +394,7 @@ class Worker:
             raise WorkerError(f"{failure} ({glb})")
         reply["qa_coverage"] = [q.coverage for q in qa]
         reply["qa_luminance"] = [q.luminance for q in qa]
-        return reply
+        return cast(LoadedObject, reply)
 
     def _object_qa(self, bbox_dims: list[float]) -> list[Any]:
         """Render the core's QA views of the loaded object (tiny, few samples) and measure
@@ -396,7 +430,7 @@ class Worker:
         crop: bool = False,
         guides: bool = False,
         geometry: bool = False,
-    ) -> dict[str, Any]:
+    ) -> RenderDone:
         """Render frames ({"c2w": 4x4 row-major, "seed": int, "out": EXR path}) in order.
 
         `samples` is the count of every frame that carries none; without it, each frame
@@ -449,7 +483,7 @@ class Worker:
 
     def _await_render(
         self, n: int, on_frame: Callable[[int, str, tuple[int, int] | None], None] | None
-    ) -> dict[str, Any]:
+    ) -> RenderDone:
         """The replies of one render request: each frame on disk to `on_frame`, then the
         final reply, which must count all `n` frames."""
         while True:
@@ -468,7 +502,7 @@ class Worker:
                 raise WorkerError(f"render failed: {msg.get('reason', 'unknown')}")
             if msg.get("done") != n:
                 raise WorkerError(f"render: worker reported {msg.get('done')} of {n} frames")
-            return msg
+            return cast(RenderDone, msg)
 
     def close(self) -> None:
         """Ask the worker to quit; kill it if it does not within a few seconds."""

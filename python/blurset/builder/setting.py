@@ -26,6 +26,7 @@ from blurset.progress import Progress
 
 if TYPE_CHECKING:
     from blurset import _records
+    from blurset.worker_client import LoadedObject
 
 
 @dataclass
@@ -66,7 +67,7 @@ def _copy_sharp(setting: Path, views: list[int], n_views: int, cfg: BuildConfig)
                 shutil.copyfile(setting / layout.SHARP / d / f, setting / level / d / f)
 
 
-def _object_record(obj: ObjectSpec, info: dict) -> _records.ObjectRecord:
+def _object_record(obj: ObjectSpec, info: LoadedObject) -> _records.ObjectRecord:
     """meta.json's `object`: the file and what the worker reported about it (free JSON
     from the worker: the core checks every field when it takes the record)."""
     keys = ("bbox_dims", "scale", "center", "n_vertices", "n_triangles", "unlit_fixed")
@@ -85,7 +86,7 @@ def render_setting(
     job: SettingJob,
     cfg: BuildConfig,
     worker: Any,
-    info: dict,
+    info: LoadedObject,
     verts: np.ndarray,
     progress: Progress,
 ) -> Path:
@@ -137,7 +138,7 @@ def _warn_ghosts(plan: _core.Plan, cfg: BuildConfig, name: str, progress: Progre
 
 
 def _plan(
-    job: SettingJob, cfg: BuildConfig, info: dict, verts: np.ndarray, partial: Path
+    job: SettingJob, cfg: BuildConfig, info: LoadedObject, verts: np.ndarray, partial: Path
 ) -> tuple[_core.Plan, list[_records.Render], Path]:
     """The setting's plan and its renders, in a fresh partial folder with every level's
     image folders; returns (plan, renders, the folder the frames' EXRs land in)."""
@@ -207,7 +208,7 @@ class _Images:
         partial: Path,
         n_views: int,
         cfg: BuildConfig,
-        info: dict,
+        info: LoadedObject,
         frames: list[Any],
         progress: Progress,
     ) -> None:
@@ -301,7 +302,7 @@ def _write_records(
     cfg: BuildConfig,
     plan: Any,
     partial: Path,
-    info: dict,
+    info: LoadedObject,
     images: _Images,
     timings: _records.Timings,
     records: dict[tuple[int, str], _records.ImageRender],

@@ -30,7 +30,7 @@ from blurset.tradeoff.render import (
     sharp_frames,
 )
 from blurset.tradeoff.report import plot, write_csv, write_record
-from blurset.worker_client import Worker
+from blurset.worker_client import LoadedObject, Worker
 
 
 @dataclass
@@ -42,7 +42,7 @@ class _Session:
     w: Worker
     work: Path
     uid: str
-    info: dict
+    info: LoadedObject
     verts: Any
 
     def plan_of(self, cfg: BuildConfig):
