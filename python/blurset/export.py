@@ -22,11 +22,15 @@ import shutil
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from blurset import __version__, _core, layout, outputs
 from blurset.exceptions import ConfigError, InputError, reason_of
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 EXPORT = outputs.OutputKind.EXPORT
 EXPORT_FILE = EXPORT.record
@@ -237,14 +241,14 @@ def _scenes(inp: _Inputs, target: str) -> _Scenes:
     return out
 
 
-def plan(args) -> tuple[dict, dict[str, Path]]:
+def plan(args) -> tuple[_records.ExportDoc, dict[str, Path]]:
     """What the export holds (export.json: scene name → its source, relative to the
     build or the noise output, and the lists), and each scene's source folder."""
     inp = _inputs(args)
     sc = _scenes(inp, args.target)
     if not sc.rels:
         raise InputError(f"nothing to export (no complete setting with {inp.levels}): {args.build}")
-    doc = {
+    doc: _records.ExportDoc = {
         "kind": "blurset export",
         "blurset_version": __version__,
         "for": args.target,
@@ -319,11 +323,13 @@ def _link(s: Path, dst: Path, final: Path, copy: bool) -> None:
 
 
 def _write_geonerf_scene(
-    d: Path, final: Path, src: Path, doc: dict, scene: str, build: Path
+    d: Path, final: Path, src: Path, doc: _records.ExportDoc, scene: str, build: Path
 ) -> None:
     """A GeoNeRF scene: its views' images_4/ files (renamed 000.png … in its order) and
     their poses_bounds.npy rows; a test scene's target image is the sharp level's."""
-    vs = doc["views"][scene]
+    views = doc.get("views")
+    assert views is not None  # a GeoNeRF export's plan lists every scene's views
+    vs = views[scene]
     rows = np.asarray(_core.read_poses_bounds(src / layout.POSES_BOUNDS), dtype=np.float64)
     images = sorted(p for p in (src / GEONERF_DIR).iterdir() if p.suffix == ".png")
     if len(images) != len(rows):
@@ -339,7 +345,7 @@ def _write_geonerf_scene(
     _core.write_poses_bounds(d / layout.POSES_BOUNDS, rows[vs])
 
 
-def _write_scene(d: Path, final: Path, src: Path, doc: dict) -> None:
+def _write_scene(d: Path, final: Path, src: Path, doc: _records.ExportDoc) -> None:
     d.mkdir(parents=True)
     parts = [layout.IMAGES, *(layout.images_dir(f) for f in doc["factors"])]
     parts += [layout.POSES_BOUNDS]
@@ -354,7 +360,7 @@ def _write_scene(d: Path, final: Path, src: Path, doc: dict) -> None:
         _link(s, d / part, final / part, doc["copy"])
 
 
-def _write_passes(d: Path, final: Path, src: Path, sharp: Path, doc: dict) -> None:
+def _write_passes(d: Path, final: Path, src: Path, sharp: Path, doc: _records.ExportDoc) -> None:
     """The build's `--passes` beside a scene's images: the sharp level's folders (depth/,
     normals/, masks/ and their _<f> sizes; LLFF loaders ignore them), and for nerfstudio
     its own: depth as 16-bit millimetre PNGs in depths/ (its default unit) and a
@@ -387,13 +393,13 @@ def _write_passes(d: Path, final: Path, src: Path, sharp: Path, doc: dict) -> No
     layout.write_json(d / layout.TRANSFORMS, tf)
 
 
-def _own_transforms(doc: dict) -> bool:
+def _own_transforms(doc: _records.ExportDoc) -> bool:
     """Whether each scene's transforms.json is written by the export (nerfstudio, with
     depth or masks to name) instead of linked from the build."""
     return doc["for"] == "nerfstudio" and bool({"depth", "mask"} & set(doc.get("passes") or []))
 
 
-def _refuse_overlap(out: Path, doc: dict, inputs: list[Path]) -> None:
+def _refuse_overlap(out: Path, doc: _records.ExportDoc, inputs: list[Path]) -> None:
     """--out may hold the build (IBRNet's `data/` may keep it beside the export), but it
     may not be or lie in an input, and no entry the export writes may touch one."""
     o = out.resolve()
@@ -432,7 +438,7 @@ def _not_written_by_export(scene: Path) -> str | None:
     return None
 
 
-def _entry(doc: dict, scene: str) -> str:
+def _entry(doc: _records.ExportDoc, scene: str) -> str:
     return scene if doc["scenes_dir"] == "." else f"{doc['scenes_dir']}/{scene}"
 
 
@@ -465,7 +471,12 @@ def _other_noise(was: str | None, now: str | None, out: Path) -> str:
 
 
 def _replace(
-    out: Path, doc: dict, sources: dict[str, Path], how: str, build_root: Path, overwrite: bool
+    out: Path,
+    doc: _records.ExportDoc,
+    sources: dict[str, Path],
+    how: str,
+    build_root: Path,
+    overwrite: bool,
 ) -> int:
     """Put the export's entries in place, replacing only what the previous export here
     wrote; everything else in OUT stays as it is."""
@@ -484,7 +495,7 @@ def _replace(
     return 0
 
 
-def _sweep_stale(out: Path, doc: dict) -> None:
+def _sweep_stale(out: Path, doc: _records.ExportDoc) -> None:
     """A killed export's staged scenes and the old ones it moved aside (GBs with --copy)
     go first, also when the export is otherwise up to date; and an old scene a killed
     replace_dir had moved aside, beside the new one."""
@@ -493,7 +504,7 @@ def _sweep_stale(out: Path, doc: dict) -> None:
         layout.remove_stale_temps(parent, list(doc["scenes"]))
 
 
-def _refuse_other_export(old: dict, doc: dict, out: Path, overwrite: bool) -> None:
+def _refuse_other_export(old: dict, doc: _records.ExportDoc, out: Path, overwrite: bool) -> None:
     """An export of another build, or with another --noise, is not replaced by itself."""
     # (an export.json of an older blurset names the build by its absolute path)
     was_of = Path(str(old.get("build"))).name if old.get("build") else doc["build"]
@@ -506,7 +517,7 @@ def _refuse_other_export(old: dict, doc: dict, out: Path, overwrite: bool) -> No
         raise ConfigError(_other_noise(old.get("noise"), doc["noise"], out))
 
 
-def _refuse_foreign(out: Path, doc: dict, owned: set[str], new: list[str]) -> None:
+def _refuse_foreign(out: Path, doc: _records.ExportDoc, owned: set[str], new: list[str]) -> None:
     """Nothing an earlier export did not write is replaced, and a scene folder that makes
     way holds only what an export writes: a user's file there (a note) is named, never
     deleted with it."""
@@ -533,7 +544,7 @@ def _refuse_foreign(out: Path, doc: dict, owned: set[str], new: list[str]) -> No
 
 def _put_in_place(
     out: Path,
-    doc: dict,
+    doc: _records.ExportDoc,
     sources: dict[str, Path],
     build_root: Path,
     owned: set[str],
@@ -582,7 +593,7 @@ def _put_in_place(
             shutil.rmtree(t, ignore_errors=True)
 
 
-def _say(doc: dict, out: Path, what: str) -> None:
+def _say(doc: _records.ExportDoc, out: Path, what: str) -> None:
     root = out / doc["scenes_dir"] if doc["scenes_dir"] != "." else out
     factors = ", ".join(f"{layout.images_dir(f)}/" for f in doc["factors"]) or "images/ only"
     # nerfstudio reads the split from each scene's transforms.json; LLFF loaders need llffhold.

@@ -24,7 +24,7 @@ import fcntl
 import json
 import os
 import socket
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -139,7 +139,7 @@ def read_record(path: Path, record: str | None = None) -> Any:
     return _core.read_record(Path(path), record)
 
 
-def write_record(path: Path, value: dict, record: str | None = None) -> None:
+def write_record(path: Path, value: Mapping[str, Any], record: str | None = None) -> None:
     """Write a record assembled here (dataset.json's start, noise_dataset.json,
     noise_scene.json, export.json, noise.json) through the core's type and schema,
     atomically; `record` names it when the file is named otherwise."""
