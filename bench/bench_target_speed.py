@@ -125,7 +125,9 @@ def signal_detail_ratio(img: np.ndarray, r1: np.ndarray, r2: np.ndarray) -> floa
 
 def _against_continuous(setting: Path, cont: dict) -> dict:
     """A build's images against the continuous references, on object pixels: PSNR against
-    the mean of the two renders, the detail ratio against their noise-free part."""
+    the mean of the two renders, the detail ratio against their noise-free part (noise on
+    top of the image reads as detail: > 1), and the share of the texture kept (core
+    `detail_kept`: render noise on neither side counts; < 1 smoothed away)."""
     from blurset import image, layout
     from blurset.image import read_exr
 
@@ -136,6 +138,7 @@ def _against_continuous(setting: Path, cont: dict) -> dict:
         acc = per["sharp" if level == "sharp" else "blur"]
         acc.setdefault("psnr", []).append(image.object_error(img, (r1 + r2) / 2).psnr)
         acc.setdefault("detail", []).append(signal_detail_ratio(img, r1, r2))
+        acc.setdefault("kept", []).append(image.detail_kept(img, r1, r2))
     out: dict[str, Any] = {}
     for kind, xs in per.items():
         out[f"{kind}_vs_continuous_mean_db"] = round(statistics.fmean(xs["psnr"]), 2)
@@ -143,6 +146,8 @@ def _against_continuous(setting: Path, cont: dict) -> dict:
         out[f"detail_ratio_{kind}"] = round(statistics.fmean(xs["detail"]), 3)
         out[f"detail_ratio_{kind}_range"] = [round(min(xs["detail"]), 3),
                                              round(max(xs["detail"]), 3)]  # fmt: skip
+        out[f"detail_kept_{kind}"] = round(statistics.fmean(xs["kept"]), 3)
+        out[f"detail_kept_{kind}_range"] = [round(min(xs["kept"]), 3), round(max(xs["kept"]), 3)]
     return out
 
 

@@ -802,8 +802,6 @@ def noise_write_variants(
 
 # --- the noise plan (rust/py/src/noise_plan.rs) ----------------------------------------
 
-NOISE_SEED_DERIVATION: str
-
 @final
 class NoiseGain:
     """One gain of a unit: its folder, key, sigmas and noise.json."""
@@ -952,6 +950,17 @@ def image_error(
     """{psnr, psnr_linear, mse, mse_linear} of `image` against `reference`, both
     float32 (H, W, 4) premultiplied linear RGBA; `psnr` is of the sRGB image composited
     over `background` (peak 1), capped at 200 dB for identical images."""
+
+def detail_kept(
+    image: npt.NDArray[np.float32],
+    r1: npt.NDArray[np.float32],
+    r2: npt.NDArray[np.float32],
+    *,
+    background: tuple[float, float, float] = ...,
+) -> float:
+    """The share of the reference's texture `image` keeps (core `detail_kept`): `reference`
+    rendered twice on independent seeds, `r1` and `r2`; all float32 (H, W, 4)
+    premultiplied linear RGBA. Render noise on either side does not read as detail."""
 
 @final
 class ObjectError:

@@ -75,8 +75,7 @@ pub use crate::dataset::meta::{
     Meta, ObjectRecord, Pose, PoseCheck, Timings,
 };
 pub use crate::dataset::noise_plan::{
-    plan_build as plan_noise_build, plan_scene as plan_noise_scene, NoiseGain, NoisePlan,
-    NoiseUnit, SEED_DERIVATION as NOISE_SEED_DERIVATION,
+    plan_build as plan_noise_build, plan_scene as plan_noise_scene, NoiseGain, NoisePlan, NoiseUnit,
 };
 pub use crate::dataset::outputs::{
     build_state, claim, mark_text, output_kind, owned_entries, remove_owned, superseded_settings,
@@ -104,5 +103,6 @@ pub use crate::ground::names::{
 
 // Image error against a reference and the speed/quality front.
 pub use crate::metrics::{
-    detail_ratio, half_noise, image_error, object_error, pareto_front, spread, ObjectError, Spread,
+    detail_kept, detail_ratio, half_noise, image_error, object_error, pareto_front, spread,
+    ObjectError, Spread,
 };

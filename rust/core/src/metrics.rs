@@ -179,6 +179,46 @@ pub fn spread(values: &[f64]) -> Result<Spread> {
 /// interior pixels of a `width`-wide premultiplied linear RGBA image. Texture and edges
 /// carry it; render noise adds to it and a denoiser that smooths texture removes it.
 pub fn detail_energy(image: &[f32], width: usize, background: [f64; 3]) -> Result<f64> {
+    let lap = laplacian(image, width, background)?;
+    Ok(mean_product(&lap, &lap))
+}
+
+/// The share of a reference's texture and edges an image keeps, with render noise on
+/// neither side: the mean product of the image's luma Laplacian (as [`detail_energy`])
+/// with each of two renders of the reference on independent seeds, over the mean product
+/// of the two renders'. Noise independent of the other side averages out of every
+/// product, so noise on top of the image does not read as detail (as it does in
+/// [`detail_ratio`]) and the reference's own noise does not hide it: 1 kept, < 1
+/// smoothed away. A reference without texture (a product ≤ 0) gives NaN.
+pub fn detail_kept(
+    image: &[f32],
+    reference: [&[f32]; 2],
+    width: usize,
+    background: [f64; 3],
+) -> Result<f64> {
+    if reference.iter().any(|r| r.len() != image.len()) {
+        return Err(Error::Shape(format!(
+            "image has {} values and the references {} and {}",
+            image.len(),
+            reference[0].len(),
+            reference[1].len()
+        )));
+    }
+    let img = laplacian(image, width, background)?;
+    let r1 = laplacian(reference[0], width, background)?;
+    let r2 = laplacian(reference[1], width, background)?;
+    let shared = mean_product(&r1, &r2);
+    let kept = (mean_product(&img, &r1) + mean_product(&img, &r2)) / 2.0;
+    Ok(if shared > 0.0 {
+        kept / shared
+    } else {
+        f64::NAN
+    })
+}
+
+/// The 4-neighbour Laplacian of an image's sRGB luma over `background`, at its interior
+/// pixels (row-major).
+fn laplacian(image: &[f32], width: usize, background: [f64; 3]) -> Result<Vec<f64>> {
     if width == 0 || image.is_empty() || !image.len().is_multiple_of(CH * width) {
         return Err(Error::Shape(format!(
             "{} values are not rows of {width} RGBA pixels",
@@ -198,20 +238,22 @@ pub fn detail_energy(image: &[f32], width: usize, background: [f64; 3]) -> Resul
             (0..3).map(|k| LUMA[k] * srgb_encode_f64(c[k])).sum()
         })
         .collect();
-    let sum: f64 = (1..height - 1)
+    Ok((1..height - 1)
         .into_par_iter()
-        .map(|y| {
-            (1..width - 1)
-                .map(|x| {
-                    let i = y * width + x;
-                    let lap = luma[i - 1] + luma[i + 1] + luma[i - width] + luma[i + width]
-                        - 4.0 * luma[i];
-                    lap * lap
-                })
-                .sum::<f64>()
+        .flat_map_iter(|y| {
+            let luma = &luma;
+            (1..width - 1).map(move |x| {
+                let i = y * width + x;
+                luma[i - 1] + luma[i + 1] + luma[i - width] + luma[i + width] - 4.0 * luma[i]
+            })
         })
-        .sum();
-    Ok(sum / ((width - 2) * (height - 2)) as f64)
+        .collect())
+}
+
+/// The mean of the products of two equally long sequences.
+fn mean_product(a: &[f64], b: &[f64]) -> f64 {
+    let sum: f64 = a.par_iter().zip(b.par_iter()).map(|(x, y)| x * y).sum();
+    sum / a.len() as f64
 }
 
 /// Rec. 709 luma weights.
@@ -310,6 +352,58 @@ mod tests {
         assert!(detail_ratio(&noisy, &tex, w, [1.0; 3])? > 1.0);
         assert!(detail_energy(&tex, 5, [1.0; 3]).is_err());
         assert!(detail_energy(&tex[..4 * 2 * w], w, [1.0; 3]).is_err());
+        Ok(())
+    }
+
+    #[test]
+    fn detail_kept_sees_texture_through_noise_on_either_side() -> Result<()> {
+        // A textured truth, two references and an image each with its own render
+        // noise (a small LCG: no dependency for a test).
+        let (w, h) = (96usize, 96usize);
+        let mut state = 0x2545_F491_u64;
+        let mut noise = move |amp: f32| {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            amp * (((state >> 33) as f32 / (1u64 << 31) as f32) - 0.5)
+        };
+        let truth: Vec<f32> = (0..w * h)
+            .flat_map(|i| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                let v = 0.45 + 0.2 * (x * 0.9).sin() * (y * 0.7).cos();
+                [v, v, v, 1.0]
+            })
+            .collect();
+        let mut noisy = |amp: f32| -> Vec<f32> {
+            truth
+                .chunks(4)
+                .flat_map(|p| {
+                    let v = p[0] + noise(amp);
+                    [v, v, v, 1.0]
+                })
+                .collect()
+        };
+        let (r1, r2, image) = (noisy(0.1), noisy(0.1), noisy(0.1));
+        let kept = detail_kept(&image, [&r1, &r2], w, [1.0; 3])?;
+        assert!(
+            (kept - 1.0).abs() < 0.05,
+            "noisy image keeps its texture: {kept}"
+        );
+        // The energy ratio reads the image's noise as detail over the truth's.
+        assert!(detail_ratio(&image, &truth, w, [1.0; 3])? > 1.1);
+        // A 3-pixel box blur of the truth smooths texture away.
+        let blurred: Vec<f32> = (0..w * h)
+            .flat_map(|i| {
+                let (x, y) = (i % w, i / w);
+                let xs = [x.saturating_sub(1), x, (x + 1).min(w - 1)];
+                let v = xs.iter().map(|&x| truth[4 * (y * w + x)]).sum::<f32>() / 3.0;
+                [v, v, v, 1.0]
+            })
+            .collect();
+        assert!(detail_kept(&blurred, [&r1, &r2], w, [1.0; 3])? < 0.8);
+        let flat: Vec<f32> = (0..w * h).flat_map(|_| [0.5, 0.5, 0.5, 1.0]).collect();
+        assert!(detail_kept(&image, [&flat, &flat], w, [1.0; 3])?.is_nan());
+        assert!(detail_kept(&image, [&r1, &r1[..4 * w * 3]], w, [1.0; 3]).is_err());
         Ok(())
     }
 

@@ -80,6 +80,28 @@ fn image_error(
     })
 }
 
+/// The share of the reference's texture `image` keeps (core `detail_kept`): `reference`
+/// rendered twice on independent seeds, `r1` and `r2`; all float32 (H, W, 4)
+/// premultiplied linear RGBA. Render noise on either side does not read as detail.
+#[pyfunction]
+#[pyo3(signature = (image, r1, r2, *, background = (1.0, 1.0, 1.0)))]
+fn detail_kept(
+    py: Python<'_>,
+    image: PyReadonlyArray3<'_, f32>,
+    r1: PyReadonlyArray3<'_, f32>,
+    r2: PyReadonlyArray3<'_, f32>,
+    background: (f64, f64, f64),
+) -> PyResult<f64> {
+    same_shape(&image, &r1)?;
+    same_shape(&image, &r2)?;
+    let (a, b, c) = (rgba(&image, "image")?, rgba(&r1, "r1")?, rgba(&r2, "r2")?);
+    let bg = [background.0, background.1, background.2];
+    let width = image.shape()[1];
+    Ok(crate::run_detached(py, || {
+        core::detail_kept(a, [b, c], width, bg)
+    })?)
+}
+
 /// Error on the object's pixels (alpha > 0 in either image; DESIGN §8).
 #[pyclass(frozen, get_all, name = "ObjectError", module = "blurset._core")]
 pub struct ObjectError {
@@ -162,6 +184,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(half_noise, m)?)?;
     m.add_function(wrap_pyfunction!(spread, m)?)?;
     m.add_function(wrap_pyfunction!(image_error, m)?)?;
+    m.add_function(wrap_pyfunction!(detail_kept, m)?)?;
     m.add_function(wrap_pyfunction!(pareto_front, m)?)?;
     Ok(())
 }
