@@ -841,31 +841,33 @@ def speed_lines(rs: list[dict]) -> list[str]:
 
 
 def detail_lines(rs: list[dict]) -> list[str]:
-    """Does a target build keep the texture (bench/bench_target_detail.py): its detail
-    ratio over the noise-free part of a continuous reference rendered twice."""
+    """Does a target build keep the texture (bench/bench_target_detail.py): the share of
+    a continuous reference's texture its images keep, from two renders of the reference."""
     if not rs:
         return []
     out = [
-        "## Texture kept: the detail ratio against a noise-free reference",
+        "## Texture kept",
         "",
         "`bench/bench_target_detail.py` rebuilds the T = worst build above and renders the",
-        "continuous blur twice, on independent seeds. The reference's own render noise adds",
-        "to its high-frequency energy (its samples spread over hundreds of frames), so the",
-        "detail ratio divides the image's energy by the reference's noise-free part,",
-        "2 E(mean of the two) - (E(r1) + E(r2)) / 2; PSNR is against the mean of the two.",
-        "A ratio under 1 is texture smoothed away, over 1 render noise on top.",
+        "continuous blur twice, on independent seeds. *Kept* is the share of the reference's",
+        "texture an image keeps (core `detail_kept`: the image's luma Laplacian against each",
+        "render's, over the two renders' against each other; render noise on neither side",
+        "counts): 1 kept, under 1 smoothed away. *Energy* is the image's high-frequency energy",
+        "over the reference's noise-free part, 2 E(mean of the two) - (E(r1) + E(r2)) / 2:",
+        "over 1 where render noise sits on top of the image. PSNR is against the mean of the two.",
         "",
-        "| model | size | views | T dB | detail blurry: mean (lowest, highest) "
-        "| detail sharp | blurry vs continuous: mean / worst dB | largest gap px |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| model | size | views | T dB | kept blurry: mean (lowest, highest) | kept sharp "
+        "| energy blurry / sharp | blurry vs continuous: mean / worst dB | largest gap px |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in sorted(rs, key=lambda r: r["name"]):
-        lo, hi = r.get("detail_ratio_blur_range") or (None, None)
+        lo, hi = r.get("detail_kept_blur_range") or (None, None)
         out.append(
             f"| `{r.get('model')}` | {_fmt(r.get('resolution'))} px | "
             f"{_fmt(r.get('views_measured'))} | {_fmt(r.get('target_db'))} | "
-            f"{_fmt(r.get('detail_ratio_blur'))} ({_fmt(lo)}, {_fmt(hi)}) | "
-            f"{_fmt(r.get('detail_ratio_sharp'))} | "
+            f"{_fmt(r.get('detail_kept_blur'))} ({_fmt(lo)}, {_fmt(hi)}) | "
+            f"{_fmt(r.get('detail_kept_sharp'))} | "
+            f"{_fmt(r.get('detail_ratio_blur'))} / {_fmt(r.get('detail_ratio_sharp'))} | "
             f"{_fmt(r.get('blur_vs_continuous_mean_db'))} / "
             f"{_fmt(r.get('blur_vs_continuous_worst_db'))} | {_fmt(r.get('max_gap_px'))} |"
         )
