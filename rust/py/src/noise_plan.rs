@@ -223,7 +223,6 @@ fn plan_noise_build(
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add("NOISE_SEED_DERIVATION", core::NOISE_SEED_DERIVATION)?;
     m.add_class::<NoisePlan>()?;
     m.add_class::<NoiseUnit>()?;
     m.add_class::<NoiseGain>()?;

@@ -584,6 +584,16 @@ struct BuildRecord {
     factors: Vec<u32>,
 }
 
+impl BuildRecord {
+    /// The levels a plan may choose from: `sharp` alone in a build that did not record them.
+    fn available(&self) -> Vec<String> {
+        match self.levels.is_empty() {
+            true => vec!["sharp".into()],
+            false => self.levels.clone(),
+        }
+    }
+}
+
 fn build_record(build: &Path) -> Result<BuildRecord> {
     let doc = read_record(&build.join(files::DATASET), Record::Dataset)?;
     let levels = doc["levels"].as_array().into_iter().flatten();
@@ -625,12 +635,8 @@ pub fn plan_build(
     table: &NoiseLevels,
 ) -> Result<NoisePlan> {
     let record = build_record(build)?;
-    let available = match record.levels.is_empty() {
-        true => vec!["sharp".to_string()],
-        false => record.levels.clone(),
-    };
+    let levels = parse_levels(cfg.levels.as_deref(), &record.available())?;
     let downsample = cfg.downsample.clone().unwrap_or(record.factors);
-    let levels = parse_levels(cfg.levels.as_deref(), &available)?;
     if settings.is_empty() {
         return Err(Error::Input {
             reason: format!(
