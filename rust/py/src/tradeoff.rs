@@ -97,9 +97,7 @@ fn detail_kept(
     let (a, b, c) = (rgba(&image, "image")?, rgba(&r1, "r1")?, rgba(&r2, "r2")?);
     let bg = [background.0, background.1, background.2];
     let width = image.shape()[1];
-    Ok(crate::run_detached(py, || {
-        core::detail_kept(a, [b, c], width, bg)
-    })?)
+    crate::run_detached(py, || core::detail_kept(a, [b, c], width, bg))
 }
 
 /// Error on the object's pixels (alpha > 0 in either image; DESIGN §8).
