@@ -856,14 +856,14 @@ def detail_lines(rs: list[dict]) -> list[str]:
         "over the reference's noise-free part, 2 E(mean of the two) - (E(r1) + E(r2)) / 2:",
         "over 1 where render noise sits on top of the image. PSNR is against the mean of the two.",
         "",
-        "| model | size | views | T dB | kept blurry: mean (lowest, highest) | kept sharp "
+        "| result | size | views | T dB | kept blurry: mean (lowest, highest) | kept sharp "
         "| energy blurry / sharp | blurry vs continuous: mean / worst dB | largest gap px |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in sorted(rs, key=lambda r: r["name"]):
         lo, hi = r.get("detail_kept_blur_range") or (None, None)
         out.append(
-            f"| `{r.get('model')}` | {_fmt(r.get('resolution'))} px | "
+            f"| `{r['name']}` | {_fmt(r.get('resolution'))} px | "
             f"{_fmt(r.get('views_measured'))} | {_fmt(r.get('target_db'))} | "
             f"{_fmt(r.get('detail_kept_blur'))} ({_fmt(lo)}, {_fmt(hi)}) | "
             f"{_fmt(r.get('detail_kept_sharp'))} | "
