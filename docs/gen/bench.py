@@ -16,6 +16,7 @@ import re
 import shutil
 import sys
 from collections import defaultdict
+from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib
@@ -239,9 +240,8 @@ PRESET_QUALITY_COLUMNS = [
 ]
 
 
-def _presets_table(rows: dict, png: str, res: str, explain: bool = True) -> list[str]:
-    out: list[str] = []
-    names = sorted(rows, key=lambda p: (p != "paper", -rows[p].get("settings_per_hour", 0)))
+def _presets_figure(rows: dict, names: list[str], png: str) -> str:
+    """Settings per hour per preset, and each preset's accuracy against its speed."""
     sph = [rows[p].get("settings_per_hour", rows[p].get("ratio")) for p in names]
     fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.6))
     ax = axes[0]
@@ -284,7 +284,13 @@ def _presets_table(rows: dict, png: str, res: str, explain: bool = True) -> list
     ax.set_xlabel("settings per hour (log)")
     ax.set_ylabel("PSNR against the reference, dB")
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3)
-    out += [_save(fig, png), ""]
+    return _save(fig, png)
+
+
+def _presets_table(rows: dict, png: str, res: str, explain: bool = True) -> list[str]:
+    out: list[str] = []
+    names = sorted(rows, key=lambda p: (p != "paper", -rows[p].get("settings_per_hour", 0)))
+    out += [_presets_figure(rows, names, png), ""]
     cols = [c for c in PRESET_COLUMNS if any(c[0] in rows[p] for p in names)]
     sizes = sorted({rows[p]["resolution"] for p in names if "resolution" in rows[p]})
     paper = any(rows[p].get("ratio") for p in names)
@@ -450,102 +456,114 @@ def render_noise_page(parity: list[dict], noise: list[dict]) -> list[str]:
         "",
     ]
     if parity:
-        out += [
-            "## The parity budget",
-            "",
-            "Blurry over sharp render-noise MSE with the budget split flat at F times the",
-            "preset's samples (`--samples-total F·S --blur-budget flat`, lines), and with the",
-            "default parity budget (markers at the right).",
-            "",
-        ]
-        by_preset: dict[str, dict] = defaultdict(lambda: defaultdict(dict))
-        for r in parity:
-            m = _match(PARITY, r["name"])
-            by_preset[m["preset"]][int(m["level"])][m["budget"]] = r
-        presets = sorted(by_preset, key=lambda p: (p != "paper", p))
-        fig, axes = plt.subplots(1, len(presets), figsize=(4.6 * len(presets), 3.4), sharey=True)
-        axes = [axes] if len(presets) == 1 else list(axes)
-        for ax, preset in zip(axes, presets, strict=True):
-            levels = by_preset[preset]
-            xmax = max((_budget_factor(b) or 1 for lv in levels.values() for b in lv), default=1)
-            for level in sorted(levels):
-                flat = sorted(
-                    (_budget_factor(b), r["ratio"])
-                    for b, r in levels[level].items()
-                    if _budget_factor(b)
-                )
-                line = None
-                if flat:
-                    (line,) = ax.plot(
-                        [f for f, _ in flat], [v for _, v in flat], "o-", label=f"level {level}"
-                    )
-                other = [(b, r) for b, r in levels[level].items() if not _budget_factor(b)]
-                for b, r in other:
-                    ax.plot(
-                        [xmax * 1.6],
-                        [r["ratio"]],
-                        "D",
-                        color=line.get_color() if line else None,
-                        label=f"level {level}, {b}" if not line else None,
-                    )
-            ax.axhline(1.0, color="grey", lw=0.8)
-            ax.axhline(1.12, color="grey", lw=0.8, ls=":")
-            ax.set_xscale("log", base=2)
-            ax.set_yscale("log")
-            ticks = [2**k for k in range(int(xmax).bit_length())] + [xmax * 1.6]
-            ax.set_xticks(ticks, [f"{t:g}" for t in ticks[:-1]] + ["parity"])
-            ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
-            ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-            ax.set_yticks([0.25, 0.5, 1, 2, 4, 8])
-            ax.set_title(f"{preset} preset")
-            ax.set_xlabel("F: the budget split flat at F times the preset's")
-            ax.legend(fontsize=7)
-        axes[0].set_ylabel("blurry / sharp render-noise MSE")
-        out += [_save(fig, "parity.png"), ""]
-        table = ["| result | blurry / sharp MSE | motion, px | what was rendered |"]
-        table += ["| --- | --- | --- | --- |"]
-        for r in parity:
-            table.append(
-                f"| `{r['name']}` | {r['ratio']:.2f}× | {_fmt(r.get('motion_px'), 1)} | "
-                f"{_cell(r.get('contender', ''))} |"
-            )
-        out += _collapsed("Every result of the plot", table)
+        out += _parity_section(parity)
     if noise:
-        out += [
-            "## Sample subsets or a seed per frame",
-            "",
-            "The same ratio with the preset's budget split flat: the latent frames as sample",
-            "subsets of one sequence (`--latent-sampling subsets`, the default) or on a seed",
-            "each (`independent`); at zero motion and along a moving level-4 trajectory.",
-            "`adaptive` is Cycles' adaptive sampling (noise threshold 0.01), which blurset",
-            "leaves off: it stops the sharp image's pixels early and breaks the pair.",
-            "",
-        ]
-        groups: dict[tuple[str, str], dict[str, float]] = defaultdict(dict)
-        for r in noise:
-            m = _match(NOISE, r["name"])
-            groups[(m["preset"], m["motion"].replace("_trajectory", ""))][m["scheme"]] = r["ratio"]
-        schemes = sorted({s for g in groups.values() for s in g})
-        keys = sorted(groups, key=lambda k: (k[0] != "paper", k))
-        fig, ax = plt.subplots(figsize=(9, 3.4))
-        width = 0.8 / max(1, len(schemes))
-        for i, s in enumerate(schemes):
-            xs = [j + i * width for j in range(len(keys))]
-            ax.bar(xs, [groups[k].get(s, float("nan")) for k in keys], width, label=s)
-        ax.set_xticks([j + width * (len(schemes) - 1) / 2 for j in range(len(keys))])
-        ax.set_xticklabels([f"{p}\n{m}" for p, m in keys])
-        ax.axhline(1.0, color="grey", lw=0.8)
-        ax.set_yscale("log")
-        ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
-        ax.set_ylabel("blurry / sharp render-noise MSE")
-        ax.legend(fontsize=7)
-        out += [_save(fig, "render_noise.png"), ""]
-        table = ["| result | blurry / sharp MSE | what was rendered |", "| --- | --- | --- |"]
-        for r in noise:
-            table.append(f"| `{r['name']}` | {r['ratio']:.2f}× | {_cell(r.get('contender', ''))} |")
-        out += _collapsed("Every result of the plot", table)
+        out += _subsets_section(noise)
     if not parity and not noise:
         out.append("No `render_parity_*` or `render_noise_*` result in bench/results.json yet.")
+    return out
+
+
+def _parity_section(parity: list[dict]) -> list[str]:
+    out = [
+        "## The parity budget",
+        "",
+        "Blurry over sharp render-noise MSE with the budget split flat at F times the",
+        "preset's samples (`--samples-total F·S --blur-budget flat`, lines), and with the",
+        "default parity budget (markers at the right).",
+        "",
+    ]
+    by_preset: dict[str, dict] = defaultdict(lambda: defaultdict(dict))
+    for r in parity:
+        m = _match(PARITY, r["name"])
+        by_preset[m["preset"]][int(m["level"])][m["budget"]] = r
+    presets = sorted(by_preset, key=lambda p: (p != "paper", p))
+    fig, axes = plt.subplots(1, len(presets), figsize=(4.6 * len(presets), 3.4), sharey=True)
+    axes = [axes] if len(presets) == 1 else list(axes)
+    for ax, preset in zip(axes, presets, strict=True):
+        _parity_axes(ax, preset, by_preset[preset])
+    axes[0].set_ylabel("blurry / sharp render-noise MSE")
+    out += [_save(fig, "parity.png"), ""]
+    table = ["| result | blurry / sharp MSE | motion, px | what was rendered |"]
+    table += ["| --- | --- | --- | --- |"]
+    for r in parity:
+        table.append(
+            f"| `{r['name']}` | {r['ratio']:.2f}× | {_fmt(r.get('motion_px'), 1)} | "
+            f"{_cell(r.get('contender', ''))} |"
+        )
+    out += _collapsed("Every result of the plot", table)
+    return out
+
+
+def _parity_axes(ax, preset: str, levels: dict[int, dict[str, dict]]) -> None:
+    """One preset's panel: a line per level over the flat budgets, a marker for each other."""
+    xmax = max((_budget_factor(b) or 1 for lv in levels.values() for b in lv), default=1)
+    for level in sorted(levels):
+        flat = sorted(
+            (_budget_factor(b), r["ratio"]) for b, r in levels[level].items() if _budget_factor(b)
+        )
+        line = None
+        if flat:
+            (line,) = ax.plot(
+                [f for f, _ in flat], [v for _, v in flat], "o-", label=f"level {level}"
+            )
+        other = [(b, r) for b, r in levels[level].items() if not _budget_factor(b)]
+        for b, r in other:
+            ax.plot(
+                [xmax * 1.6],
+                [r["ratio"]],
+                "D",
+                color=line.get_color() if line else None,
+                label=f"level {level}, {b}" if not line else None,
+            )
+    ax.axhline(1.0, color="grey", lw=0.8)
+    ax.axhline(1.12, color="grey", lw=0.8, ls=":")
+    ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ticks = [2**k for k in range(int(xmax).bit_length())] + [xmax * 1.6]
+    ax.set_xticks(ticks, [f"{t:g}" for t in ticks[:-1]] + ["parity"])
+    ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_yticks([0.25, 0.5, 1, 2, 4, 8])
+    ax.set_title(f"{preset} preset")
+    ax.set_xlabel("F: the budget split flat at F times the preset's")
+    ax.legend(fontsize=7)
+
+
+def _subsets_section(noise: list[dict]) -> list[str]:
+    out = [
+        "## Sample subsets or a seed per frame",
+        "",
+        "The same ratio with the preset's budget split flat: the latent frames as sample",
+        "subsets of one sequence (`--latent-sampling subsets`, the default) or on a seed",
+        "each (`independent`); at zero motion and along a moving level-4 trajectory.",
+        "`adaptive` is Cycles' adaptive sampling (noise threshold 0.01), which blurset",
+        "leaves off: it stops the sharp image's pixels early and breaks the pair.",
+        "",
+    ]
+    groups: dict[tuple[str, str], dict[str, float]] = defaultdict(dict)
+    for r in noise:
+        m = _match(NOISE, r["name"])
+        groups[(m["preset"], m["motion"].replace("_trajectory", ""))][m["scheme"]] = r["ratio"]
+    schemes = sorted({s for g in groups.values() for s in g})
+    keys = sorted(groups, key=lambda k: (k[0] != "paper", k))
+    fig, ax = plt.subplots(figsize=(9, 3.4))
+    width = 0.8 / max(1, len(schemes))
+    for i, s in enumerate(schemes):
+        xs = [j + i * width for j in range(len(keys))]
+        ax.bar(xs, [groups[k].get(s, float("nan")) for k in keys], width, label=s)
+    ax.set_xticks([j + width * (len(schemes) - 1) / 2 for j in range(len(keys))])
+    ax.set_xticklabels([f"{p}\n{m}" for p, m in keys])
+    ax.axhline(1.0, color="grey", lw=0.8)
+    ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.set_ylabel("blurry / sharp render-noise MSE")
+    ax.legend(fontsize=7)
+    out += [_save(fig, "render_noise.png"), ""]
+    table = ["| result | blurry / sharp MSE | what was rendered |", "| --- | --- | --- |"]
+    for r in noise:
+        table.append(f"| `{r['name']}` | {r['ratio']:.2f}× | {_cell(r.get('contender', ''))} |")
+    out += _collapsed("Every result of the plot", table)
     return out
 
 
@@ -564,86 +582,101 @@ def render_cost_page(cost: list[dict], light: list[dict]) -> list[str]:
         "",
     ]
     if cost:
-        cost = sorted(cost, key=lambda r: (r["name"].endswith("_saving"), r["name"]))
-        kinds = [
-            (
-                [r for r in cost if not r["name"].endswith("_saving")],
-                "blurry / sharp cost (CPU time where measured)",
-                "#009688",
-            ),
-            (
-                [r for r in cost if r["name"].endswith("_saving")],
-                "saving: baseline / contender CPU time",
-                "#607d8b",
-            ),
-        ]
-        kinds = [k for k in kinds if k[0]]
-        n = sum(len(k[0]) for k in kinds)
-        fig, axes = plt.subplots(
-            len(kinds),
-            1,
-            figsize=(8, 0.42 * n + 1.2 * len(kinds)),
-            gridspec_kw={"height_ratios": [len(k[0]) for k in kinds]},
-        )
-        axes = [axes] if len(kinds) == 1 else list(axes)
-        for ax, (rs, label, color) in zip(axes, kinds, strict=True):
-            vals = [r.get("cpu_ratio", r["ratio"]) for r in rs]
-            ax.barh([r["name"] for r in rs][::-1], vals[::-1], color=color)
-            ax.axvline(1.0, color="grey", lw=0.8)
-            for y, v in enumerate(vals[::-1]):
-                ax.text(v, y, f" {v:.2f}×", va="center", fontsize=8)
-            ax.set_xlim(0, max(vals) * 1.2)
-            ax.set_xlabel(label)
-        out += ["## Blurry against sharp, regions, crops", "", _save(fig, "render_cost.png"), ""]
-        table = [
-            "| result | ratio | ratio is | contender | baseline |",
-            "| --- | --- | --- | --- | --- |",
-        ]
-        for r in cost:
-            ratio = f"{r['ratio']:.2f}×"
-            if "cpu_ratio" in r:
-                ratio += f" (CPU {r['cpu_ratio']:.2f}×)"
-            table.append(
-                f"| `{r['name']}` | {ratio} | {_cell(r.get('ratio_is', ''))} | "
-                f"{_cell(r.get('contender', ''))} | {_cell(r.get('baseline', ''))} |"
-            )
-        out += _collapsed("Every result of the plot", table)
-        extra = [
-            (r["name"], k, r[k])
-            for r in cost
-            for k in ("traced_px_ratio", "cpu_ratio_per_traced_px", "exr_mb_ratio")
-            if k in r
-        ]
-        if extra:
-            out += ["", "Where the time goes:", ""]
-            out += [f"- `{n}`: {k.replace('_', ' ')} {v:.2f}×" for n, k, v in extra]
-        out.append("")
+        out += _cost_section(cost)
     if light:
-        out += [
-            "## Light paths",
-            "",
-            "`--light-paths auto` takes Cycles' bounces from the object's materials;",
-            "`fixed` uses the same bounces for every object. Auto over fixed time per GLB, and",
-            "whether the pixels came out identical:",
-            "",
-        ]
-        names = [_match(LIGHT, r["name"])["glb"] for r in light]
-        fig, ax = plt.subplots(figsize=(8, 0.4 * len(light) + 1))
-        cpu = [r.get("cpu_ratio", r["ratio"]) for r in light]
-        ax.barh(names[::-1], cpu[::-1], color="#795548")
+        out += _light_section(light)
+    return out
+
+
+def _cost_section(cost: list[dict]) -> list[str]:
+    out: list[str] = []
+    cost = sorted(cost, key=lambda r: (r["name"].endswith("_saving"), r["name"]))
+    kinds = [
+        (
+            [r for r in cost if not r["name"].endswith("_saving")],
+            "blurry / sharp cost (CPU time where measured)",
+            "#009688",
+        ),
+        (
+            [r for r in cost if r["name"].endswith("_saving")],
+            "saving: baseline / contender CPU time",
+            "#607d8b",
+        ),
+    ]
+    kinds = [k for k in kinds if k[0]]
+    n = sum(len(k[0]) for k in kinds)
+    fig, axes = plt.subplots(
+        len(kinds),
+        1,
+        figsize=(8, 0.42 * n + 1.2 * len(kinds)),
+        gridspec_kw={"height_ratios": [len(k[0]) for k in kinds]},
+    )
+    axes = [axes] if len(kinds) == 1 else list(axes)
+    for ax, (rs, label, color) in zip(axes, kinds, strict=True):
+        vals = [r.get("cpu_ratio", r["ratio"]) for r in rs]
+        ax.barh([r["name"] for r in rs][::-1], vals[::-1], color=color)
         ax.axvline(1.0, color="grey", lw=0.8)
-        ax.set_xlabel("auto / fixed CPU time")
-        out += [_save(fig, "light_paths.png"), ""]
-        out += [
-            "| GLB | CPU ratio | identical pixels | bounces (auto) |",
-            "| --- | --- | --- | --- |",
-        ]
-        for glb, r in zip(names, light, strict=True):
-            out.append(
-                f"| {glb} | {r.get('cpu_ratio', r['ratio']):.2f}× | "
-                f"{'yes' if r.get('identical_pixels') else 'no'} | "
-                f"{_cell(r.get('contender', '').split(':')[0])} |"
-            )
+        for y, v in enumerate(vals[::-1]):
+            ax.text(v, y, f" {v:.2f}×", va="center", fontsize=8)
+        ax.set_xlim(0, max(vals) * 1.2)
+        ax.set_xlabel(label)
+    out += ["## Blurry against sharp, regions, crops", "", _save(fig, "render_cost.png"), ""]
+    out += _collapsed("Every result of the plot", _cost_table(cost))
+    extra = [
+        (r["name"], k, r[k])
+        for r in cost
+        for k in ("traced_px_ratio", "cpu_ratio_per_traced_px", "exr_mb_ratio")
+        if k in r
+    ]
+    if extra:
+        out += ["", "Where the time goes:", ""]
+        out += [f"- `{n}`: {k.replace('_', ' ')} {v:.2f}×" for n, k, v in extra]
+    out.append("")
+    return out
+
+
+def _cost_table(cost: list[dict]) -> list[str]:
+    table = [
+        "| result | ratio | ratio is | contender | baseline |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for r in cost:
+        ratio = f"{r['ratio']:.2f}×"
+        if "cpu_ratio" in r:
+            ratio += f" (CPU {r['cpu_ratio']:.2f}×)"
+        table.append(
+            f"| `{r['name']}` | {ratio} | {_cell(r.get('ratio_is', ''))} | "
+            f"{_cell(r.get('contender', ''))} | {_cell(r.get('baseline', ''))} |"
+        )
+    return table
+
+
+def _light_section(light: list[dict]) -> list[str]:
+    out = [
+        "## Light paths",
+        "",
+        "`--light-paths auto` takes Cycles' bounces from the object's materials;",
+        "`fixed` uses the same bounces for every object. Auto over fixed time per GLB, and",
+        "whether the pixels came out identical:",
+        "",
+    ]
+    names = [_match(LIGHT, r["name"])["glb"] for r in light]
+    fig, ax = plt.subplots(figsize=(8, 0.4 * len(light) + 1))
+    cpu = [r.get("cpu_ratio", r["ratio"]) for r in light]
+    ax.barh(names[::-1], cpu[::-1], color="#795548")
+    ax.axvline(1.0, color="grey", lw=0.8)
+    ax.set_xlabel("auto / fixed CPU time")
+    out += [_save(fig, "light_paths.png"), ""]
+    out += [
+        "| GLB | CPU ratio | identical pixels | bounces (auto) |",
+        "| --- | --- | --- | --- |",
+    ]
+    for glb, r in zip(names, light, strict=True):
+        out.append(
+            f"| {glb} | {r.get('cpu_ratio', r['ratio']):.2f}× | "
+            f"{'yes' if r.get('identical_pixels') else 'no'} | "
+            f"{_cell(r.get('contender', '').split(':')[0])} |"
+        )
     return out
 
 
@@ -694,51 +727,65 @@ def targets_page(rs: list[dict]) -> list[str]:
         m = _match(TARGET, r["name"])
         runs[(m["res"], m["db"])].append(r)
     for (res, db), group in sorted(runs.items(), key=lambda kv: (int(kv[0][0]), kv[0][1])):
-        first = group[0]
-        out += [
-            f"## {db} dB at {res} px",
-            "",
-            f"{_fmt(first.get('views_measured'))} views a model, references at "
-            f"{_fmt(first.get('reference_factor'))}× the samples.",
-            "",
-        ]
-        est = overall.get(f"target_{res}px_{db}db_estimate")
-        if est:
-            out += [
-                f"Over all {est.get('images')} images of the {len(group)} models: "
-                f"{est.get('at_target_share', 0):.0%} measure at least {float(db) - 0.5:g} dB, "
-                f"and {est.get('ratio', 0):.0%} of the estimates are within 1 dB of the "
-                f"measurement (`{est['name']}`).",
-                "",
-            ]
-        head = ["model", *[t for _, t, _ in TARGET_COLUMNS]]
-        out += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
-        for r in sorted(group, key=lambda r: r["name"]):
-            cells = [f"`{_match(TARGET, r['name'])['model']}`"]
-            for k, _, fmt in TARGET_COLUMNS:
-                v = r.get(k)
-                cells.append(format(v, fmt) if isinstance(v, (int, float)) else "")
-            out.append("| " + " | ".join(cells) + " |")
-        out.append("")
-        if est and isinstance(est.get("per_image"), dict):
-            out += _target_misses(est["per_image"])
-            out += _target_plot(est["per_image"], float(db), f"targets_{res}_{db}.png")
-        more = [
-            ("spent_over_least_median_image", "samples over the least, median image"),
-            ("spent_over_least_max_image", "samples over the least, worst image"),
-            ("estimate_error_db_max", "largest estimate error, dB"),
-            ("render_s_per_view", "render time per view, s (the machine may be busy)"),
-        ]
-        table = ["| model | " + " | ".join(t for _, t in more) + " |"]
-        table.append("|" + " --- |" * (len(more) + 1))
-        for r in sorted(group, key=lambda r: r["name"]):
-            table.append(
-                f"| `{_match(TARGET, r['name'])['model']}` | "
-                + " | ".join(_fmt(r.get(k)) for k, _ in more)
-                + " |"
-            )
-        out += _collapsed("More per model", table)
+        out += _target_run(res, db, group, overall.get(f"target_{res}px_{db}db_estimate"))
     return out
+
+
+def _target_run(res: str, db: str, group: list[dict], est: dict | None) -> list[str]:
+    """One target and size: the per-model table, the misses and plot, more per model."""
+    first = group[0]
+    out = [
+        f"## {db} dB at {res} px",
+        "",
+        f"{_fmt(first.get('views_measured'))} views a model, references at "
+        f"{_fmt(first.get('reference_factor'))}× the samples.",
+        "",
+    ]
+    if est:
+        out += [
+            f"Over all {est.get('images')} images of the {len(group)} models: "
+            f"{est.get('at_target_share', 0):.0%} measure at least {float(db) - 0.5:g} dB, "
+            f"and {est.get('ratio', 0):.0%} of the estimates are within 1 dB of the "
+            f"measurement (`{est['name']}`).",
+            "",
+        ]
+    head = ["model", *[t for _, t, _ in TARGET_COLUMNS]]
+    out += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    for r in sorted(group, key=lambda r: r["name"]):
+        cells = [f"`{_match(TARGET, r['name'])['model']}`"]
+        for k, _, fmt in TARGET_COLUMNS:
+            v = r.get(k)
+            cells.append(format(v, fmt) if isinstance(v, (int, float)) else "")
+        out.append("| " + " | ".join(cells) + " |")
+    out.append("")
+    if est and isinstance(est.get("per_image"), dict):
+        out += _target_misses(est["per_image"])
+        out += _target_plot(est["per_image"], float(db), f"targets_{res}_{db}.png")
+    more = [
+        ("spent_over_least_median_image", "samples over the least, median image"),
+        ("spent_over_least_max_image", "samples over the least, worst image"),
+        ("estimate_error_db_max", "largest estimate error, dB"),
+        ("render_s_per_view", "render time per view, s (the machine may be busy)"),
+    ]
+    table = ["| model | " + " | ".join(t for _, t in more) + " |"]
+    table.append("|" + " --- |" * (len(more) + 1))
+    for r in sorted(group, key=lambda r: r["name"]):
+        table.append(
+            f"| `{_match(TARGET, r['name'])['model']}` | "
+            + " | ".join(_fmt(r.get(k)) for k, _ in more)
+            + " |"
+        )
+    out += _collapsed("More per model", table)
+    return out
+
+
+# The builds a speed row holds, by key, and their label.
+SPEED_BUILDS = (
+    ("paper", "paper"),
+    ("at_paper_worst", "T = worst"),
+    ("at_paper_median", "T = median"),
+    ("at_floor", "floor"),
+)
 
 
 def _at(r: dict) -> str:
@@ -768,8 +815,6 @@ def speed_lines(rs: list[dict]) -> list[str]:
         "| T = worst: settings/h (×) | T = median: settings/h (×) | floor: settings/h (×) |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
-    builds = (("paper", "paper"), ("at_paper_worst", "T = worst"),
-              ("at_paper_median", "T = median"), ("at_floor", "floor"))  # fmt: skip
     for r in sorted(rs, key=lambda r: r["name"]):
         p = r.get("paper_measured") or {}
         cells = [
@@ -779,7 +824,7 @@ def speed_lines(rs: list[dict]) -> list[str]:
             f"{_fmt(p.get('worst_db'))} / {_fmt(p.get('median_db'))}",
             _fmt(r.get("paper_settings_per_hour")),
         ]
-        for key, _ in builds[1:]:
+        for key, _ in SPEED_BUILDS[1:]:
             b = r.get(key)
             cells.append(
                 f"{_fmt(b.get('settings_per_hour'))} ({_fmt(b.get('ratio'))}×)" if b else "not run"
@@ -789,7 +834,12 @@ def speed_lines(rs: list[dict]) -> list[str]:
     quality = [r for r in rs if isinstance(r.get("paper"), dict)]
     if not quality:
         return out
-    out += [
+    return out + _continuous_table(quality) + _time_split_table(quality)
+
+
+def _continuous_table(quality: list[dict]) -> list[str]:
+    """Each build against the continuous blur, and its work per view."""
+    out = [
         "Each build against the continuous blur (stratified frames at most 0.5 px apart on",
         "screen sharing 1,024 samples, in rows marked *; in the others, measured before, 64",
         "stratified frames × 16 samples; the sharp image at 1,024 samples), on object",
@@ -804,7 +854,7 @@ def speed_lines(rs: list[dict]) -> list[str]:
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in sorted(quality, key=lambda r: r["name"]):
-        for key, label in builds:
+        for key, label in SPEED_BUILDS:
             b = r.get(key)
             if not b:
                 continue  # (a run that left this build out: a 512 px run on 2 cores)
@@ -817,7 +867,12 @@ def speed_lines(rs: list[dict]) -> list[str]:
                 f"{_count(b.get('samples_per_view'))} | {_count(b.get('calls_per_view'))} | "
                 f"{_fmt(b.get('sample_ratio', 1.0 if key == 'paper' else None))} |"
             )
-    out += [
+    return out
+
+
+def _time_split_table(quality: list[dict]) -> list[str]:
+    """Seconds per render call and per sample, fitted per model."""
+    out = [
         "",
         "Where the time goes: seconds per view fitted, per model, as a × render calls +",
         "b × samples over its four builds (least squares), and the share of a view's",
@@ -978,6 +1033,25 @@ def index_page(
     return out
 
 
+def _by_page(results: list[dict]) -> dict[str, list[dict]]:
+    """Each result under the first kind whose name pattern it matches, else "other"."""
+    kinds: list[tuple[str, Callable[[str], object]]] = [
+        ("presets", lambda n: PRESETS.match(n) and n not in NOT_PRESETS),
+        ("parity", PARITY.match),
+        ("noise", NOISE.match),
+        ("cost", COST.match),
+        ("light", LIGHT.match),
+        ("gain", GAIN.match),
+        ("target", TARGET.match),
+        ("speed", SPEED.match),
+        ("detail", DETAIL.match),
+    ]
+    out: dict[str, list[dict]] = {k: [] for k, _ in [*kinds, ("other", None)]}
+    for r in results:
+        out[next((k for k, match in kinds if match(r["name"])), "other")].append(r)
+    return out
+
+
 def main(figures_too: bool = True) -> int:
     """The benchmark pages, then (`figures_too`) the figures quoted in README.md and the
     guides rewritten from the same results (docs/gen/figures.py)."""
@@ -985,55 +1059,38 @@ def main(figures_too: bool = True) -> int:
     if OUT.exists():
         shutil.rmtree(OUT)
     OUT.mkdir(parents=True)
-    presets, parity, noise, cost, light, gain, target, other = [], [], [], [], [], [], [], []
-    speed: list[dict] = []
-    detail: list[dict] = []
-    for r in results:
-        n = r["name"]
-        if PRESETS.match(n) and n not in NOT_PRESETS:
-            presets.append(r)
-        elif PARITY.match(n):
-            parity.append(r)
-        elif NOISE.match(n):
-            noise.append(r)
-        elif COST.match(n):
-            cost.append(r)
-        elif LIGHT.match(n):
-            light.append(r)
-        elif GAIN.match(n):
-            gain.append(r)
-        elif TARGET.match(n):
-            target.append(r)
-        elif SPEED.match(n):
-            speed.append(r)
-        elif DETAIL.match(n):
-            detail.append(r)
-        else:
-            other.append(r)
+    kind = _by_page(results)
     pages = [
         (
             "presets.md",
             "Presets",
-            presets_page(presets) + denoise_gain_lines(gain),
-            len(presets) + len(gain),
+            presets_page(kind["presets"]) + denoise_gain_lines(kind["gain"]),
+            len(kind["presets"]) + len(kind["gain"]),
         ),
         (
             "render-noise.md",
             "Render noise of a pair",
-            render_noise_page(parity, noise),
-            len(parity) + len(noise),
+            render_noise_page(kind["parity"], kind["noise"]),
+            len(kind["parity"]) + len(kind["noise"]),
         ),
-        ("render-cost.md", "Render cost", render_cost_page(cost, light), len(cost) + len(light)),
+        (
+            "render-cost.md",
+            "Render cost",
+            render_cost_page(kind["cost"], kind["light"]),
+            len(kind["cost"]) + len(kind["light"]),
+        ),
         (
             "targets.md",
             "Render targets",
-            targets_page(target) + speed_lines(speed) + detail_lines(detail),
-            len(target) + len(speed) + len(detail),
+            targets_page(kind["target"])
+            + speed_lines(kind["speed"])
+            + detail_lines(kind["detail"]),
+            len(kind["target"]) + len(kind["speed"]) + len(kind["detail"]),
         ),
     ]
     for name, _, lines, _ in pages:
         (OUT / name).write_text("\n".join(lines).rstrip() + "\n")
-    index = index_page(results, other, [(p, t, n) for p, t, _, n in pages])
+    index = index_page(results, kind["other"], [(p, t, n) for p, t, _, n in pages])
     (OUT / "index.md").write_text("\n".join(index).rstrip() + "\n")
     print(f"wrote {len(pages) + 1} benchmark pages in {OUT}", file=sys.stderr)
     if not figures_too:
