@@ -846,12 +846,15 @@ def _continuous_table(quality: list[dict]) -> list[str]:
         "pixels: the blurry images' mean and worst",
         "PSNR, the sharp images' mean, and the detail ratio (high-frequency energy over the",
         "reference's, blurry / sharp: under 1 is texture smoothed away, over 1 noise on top);",
+        "the texture kept (core `detail_kept`, blurry / sharp: the share of the reference's",
+        "Laplacian the image keeps, from two independent reference renders, so that noise",
+        "counts on neither side; rows measured before it have none);",
         "then the work per view: samples, render calls (a target image renders each frame",
         "once per half and round) and the paper preset's samples over the build's.",
         "",
         "| model | build | blurry mean / worst dB | sharp dB | detail blurry / sharp "
-        "| samples / view | calls / view | paper samples / these |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| texture kept blurry / sharp | samples / view | calls / view | paper samples / these |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in sorted(quality, key=lambda r: r["name"]):
         for key, label in SPEED_BUILDS:
@@ -864,10 +867,17 @@ def _continuous_table(quality: list[dict]) -> list[str]:
                 f"{_fmt(b.get('blur_vs_continuous_worst_db'))} | "
                 f"{_fmt(b.get('sharp_vs_continuous_mean_db'))} | "
                 f"{_fmt(b.get('detail_ratio_blur'))} / {_fmt(b.get('detail_ratio_sharp'))} | "
-                f"{_count(b.get('samples_per_view'))} | {_count(b.get('calls_per_view'))} | "
+                f"{_kept(b)} | {_count(b.get('samples_per_view'))} | {_count(b.get('calls_per_view'))} | "
                 f"{_fmt(b.get('sample_ratio', 1.0 if key == 'paper' else None))} |"
             )
     return out
+
+
+def _kept(b: dict) -> str:
+    """Texture kept, blurry / sharp, where the run measured it."""
+    if "detail_kept_blur" not in b:
+        return ""
+    return f"{_fmt(b.get('detail_kept_blur'), 3)} / {_fmt(b.get('detail_kept_sharp'), 3)}"
 
 
 def _time_split_table(quality: list[dict]) -> list[str]:
