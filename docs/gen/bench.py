@@ -839,11 +839,17 @@ def speed_lines(rs: list[dict]) -> list[str]:
 
 def _continuous_table(quality: list[dict]) -> list[str]:
     """Each build against the continuous blur, and its work per view."""
+    older = any(not r.get("continuous") for r in quality)
     out = [
         "Each build against the continuous blur (stratified frames at most 0.5 px apart on",
-        "screen sharing 1,024 samples, in rows marked *; in the others, measured before, 64",
-        "stratified frames × 16 samples; the sharp image at 1,024 samples), on object",
-        "pixels: the blurry images' mean and worst",
+        "screen sharing 1,024 samples"
+        + (
+            ", in rows marked *; in the others, measured before, 64 stratified frames × 16 samples"
+            if older
+            else ""
+        )
+        + "; the sharp image at 1,024 samples), on object pixels: the blurry images' mean",
+        "and worst",
         "PSNR, the sharp images' mean, and the detail ratio (high-frequency energy over the",
         "reference's, blurry / sharp: under 1 is texture smoothed away, over 1 noise on top);",
         "the texture kept (core `detail_kept`, blurry / sharp: the share of the reference's",
@@ -862,7 +868,8 @@ def _continuous_table(quality: list[dict]) -> list[str]:
             if not b:
                 continue  # (a run that left this build out: a 512 px run on 2 cores)
             out.append(
-                f"| `{r.get('model')}`{_at(r)}{'*' if r.get('continuous') else ''} | {label} | "
+                f"| `{r.get('model')}`{_at(r)}{'*' if older and r.get('continuous') else ''} | "
+                f"{label} | "
                 f"{_fmt(b.get('blur_vs_continuous_mean_db'))} / "
                 f"{_fmt(b.get('blur_vs_continuous_worst_db'))} | "
                 f"{_fmt(b.get('sharp_vs_continuous_mean_db'))} | "
