@@ -473,6 +473,45 @@ def use_device(backend: str, gpus: list[int] | None) -> dict:
     return {"backend": backend, "devices": [gpu[i].name for i in idx], "kernel": backend}
 
 
+def cuda_kernels() -> dict:
+    """What the first CUDA or OptiX render will need, as facts for the driver to judge
+    (blurset.kernels): {"archs": ["sm_90", ...] of the GPUs this process sees, "kernels":
+    ["sm_89", ...] that Cycles ships compiled, "driver": the CUDA driver's version}.
+    Cycles takes a shipped cubin for a GPU's arch; otherwise the driver compiles
+    Blender's PTX before the first frame. No archs where there is no CUDA driver."""
+    import ctypes
+
+    archs: list[str] = []
+    driver = ctypes.c_int(0)
+    try:
+        cuda = ctypes.CDLL("libcuda.so.1")
+    except OSError:
+        cuda = None
+    if cuda is not None and cuda.cuInit(0) == 0:
+        cuda.cuDriverGetVersion(ctypes.byref(driver))
+        n = ctypes.c_int(0)
+        cuda.cuDeviceGetCount(ctypes.byref(n))
+        for i in range(n.value):
+            dev, major, minor = ctypes.c_int(), ctypes.c_int(), ctypes.c_int()
+            if cuda.cuDeviceGet(ctypes.byref(dev), i) != 0:
+                continue
+            # CU_DEVICE_ATTRIBUTE_COMPUTE_CAPABILITY_MAJOR / _MINOR
+            cuda.cuDeviceGetAttribute(ctypes.byref(major), 75, dev)
+            cuda.cuDeviceGetAttribute(ctypes.byref(minor), 76, dev)
+            arch = f"sm_{major.value}{minor.value}"
+            if arch not in archs:
+                archs.append(arch)
+    lib = os.path.join(bpy.utils.system_resource("SCRIPTS"), "addons_core", "cycles", "lib")
+    try:
+        names = os.listdir(lib)
+    except OSError:
+        names = []
+    kernels = sorted(
+        {n.split(".")[0][len("kernel_") :] for n in names if n.startswith("kernel_sm_")}
+    )
+    return {"archs": archs, "kernels": kernels, "driver": driver.value}
+
+
 # ---------------------------------------------------------------------------- render
 
 

@@ -51,7 +51,10 @@ stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protoco
   {"cmd":"quit"} -> exit 0
 
 At start-up the worker announces itself with
-{"ok":true,"ready":true,"blender":version,"blender_version":version,"pid":pid}.
+{"ok":true,"ready":true,"blender":version,"blender_version":version,"pid":pid,
+ "device":{..}[,"cuda":{"archs":["sm_90",..],"kernels":["sm_89",..]}]}: "cuda" (CUDA and
+OptiX only) gives the compute capabilities of the GPUs it sees and the archs Cycles ships
+kernels for, so the driver can say when the first frame will wait for a compile.
 
 Fault injection, for the reliability tests only (a real hang or crash of this process,
 nothing simulated downstream): BLURSET_WORKER_FAULT="hang:S" makes the load of a GLB
@@ -276,16 +279,19 @@ def main() -> int:
         send({"ok": False, "reason": one_line(e)})
         worker.close()
         return 2
-    send(
-        {
-            "ok": True,
-            "ready": True,
-            "blender": version,
-            "blender_version": version,
-            "device": device,
-            "pid": os.getpid(),
-        }
-    )
+    ready = {
+        "ok": True,
+        "ready": True,
+        "blender": version,
+        "blender_version": version,
+        "device": device,
+        "pid": os.getpid(),
+    }
+    if device["backend"] in ("CUDA", "OPTIX"):
+        # Whether the first frame waits for the driver to compile kernels: the driver
+        # says so before it sends the first render (blurset.kernels).
+        ready["cuda"] = blender_scene.cuda_kernels()
+    send(ready)
     try:
         for line in sys.stdin:
             line = line.strip()

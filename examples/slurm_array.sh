@@ -24,6 +24,10 @@ DEVICE=${DEVICE:-auto}                             # auto | optix | cuda | hip |
 N=${SLURM_ARRAY_TASK_COUNT:?run as a job array}
 I=${SLURM_ARRAY_TASK_ID:?run as a job array}
 
+# Cycles kernels the driver compiles for a GPU that bpy ships none for (sm_90: H100/H200,
+# 8 minutes before the first frame): one cache every node finds (docs/guide/scale.md).
+export CUDA_CACHE_PATH=${CUDA_CACHE_PATH:-/shared/cache/blurset-cuda}
+
 # The objaverse cache must be shared too, or each node downloads its own copies.
 .venv/bin/blurset build --objects "$OBJECTS" --out "$OUT" \
   --objaverse-dir /shared/objaverse --objaverse-count 250 --seed 0 \

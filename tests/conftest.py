@@ -276,10 +276,12 @@ def standin_blender(tmp_path_factory) -> Path:
     return wrapper
 
 
-def standin_build(out: Path, blender: Path, *args: str, check: bool = True):
+def standin_build(
+    out: Path, blender: Path, *args: str, check: bool = True, env: dict | None = None
+):
     """`blurset build` of the demo objects (or `args`) with the stand-in worker."""
     return run_cli("build", *STANDIN_ARGS, *args, "--blender", str(blender), "--out", str(out),
-                   check=check)  # fmt: skip
+                   check=check, env=env)  # fmt: skip
 
 
 @pytest.fixture(scope="session")

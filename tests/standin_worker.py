@@ -17,6 +17,10 @@ BLURSET_STANDIN_FAULT="hang:S" or "crash:S" makes the load of a GLB whose path
 contains S hang or die (SIGKILL), as the real worker's fault injection does;
 "hang_render:S" loads it, renders its QA and sharp views, and hangs at its first render
 of a blur level (a setting half-written).
+
+BLURSET_STANDIN_CUDA="sm_90" makes it report a GPU of that arch whose kernels Blender does
+not ship ("cuda" in its ready reply, as the real worker on CUDA or OptiX), and at its
+first render it does what the driver's compile leaves: a file in $CUDA_CACHE_PATH.
 """
 
 from __future__ import annotations
@@ -97,6 +101,7 @@ class StandIn:
     def __init__(self) -> None:
         self.half: np.ndarray | None = None
         self.hang_blur = False
+        self.compiled = False
 
     def load(self, cmd: dict) -> dict:
         glb = str(cmd["glb"])
@@ -217,6 +222,14 @@ class StandIn:
         if self.hang_blur and any(str(f.get("level", "")).startswith("blur") for f in frames):
             while True:
                 time.sleep(3600)
+        arch = os.environ.get("BLURSET_STANDIN_CUDA")
+        if arch and not self.compiled:
+            # What the driver's JIT leaves in the cache the worker was given.
+            cache = os.environ["CUDA_CACHE_PATH"]
+            os.makedirs(cache, exist_ok=True)
+            with open(os.path.join(cache, f"standin-{arch}.jit"), "a") as f:
+                f.write(f"{os.getpid()}\n")
+            self.compiled = True
         calls: set = set()
         for i, fr in enumerate(frames):
             t_start = time.perf_counter()
@@ -260,16 +273,18 @@ def main() -> int:
     if "--probe" in argv:
         send({"ok": True, "devices": {"CPU": ["stand-in"]}, "blender": "stand-in"})
         return 0
-    send(
-        {
-            "ok": True,
-            "ready": True,
-            "blender": "stand-in",
-            "blender_version": "stand-in",
-            "device": {"backend": "CPU", "devices": ["stand-in"]},
-            "pid": os.getpid(),
-        }
-    )
+    ready = {
+        "ok": True,
+        "ready": True,
+        "blender": "stand-in",
+        "blender_version": "stand-in",
+        "device": {"backend": "CPU", "devices": ["stand-in"]},
+        "pid": os.getpid(),
+    }
+    arch = os.environ.get("BLURSET_STANDIN_CUDA")
+    if arch:
+        ready["cuda"] = {"archs": [arch], "kernels": ["sm_86", "sm_89"], "driver": 13000}
+    send(ready)
     worker = StandIn()
     for line in sys.stdin:
         line = line.strip()

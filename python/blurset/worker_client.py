@@ -24,7 +24,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any, NoReturn, TypedDict, cast
 
-from blurset import _core
+from blurset import _core, kernels
 from blurset.exceptions import BlursetError
 from blurset.scripts import blender_script
 
@@ -213,6 +213,9 @@ class Worker:
             log_path = Path(name)
         self.log_path = Path(log_path)
         self.info: dict[str, Any] = {}
+        # Archs whose kernels the driver compiles before this worker's first frame.
+        self._compiling: list[str] = []
+        self._env = kernels.environ()
         self._proc: subprocess.Popen[bytes] | None = None
         self._log: IO[bytes] | None = None
         self._lines: queue.Queue[bytes | None] = queue.Queue()
@@ -239,6 +242,7 @@ class Worker:
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=self._log,
+                env=self._env,
             )
         except OSError as e:
             self._log.close()
@@ -255,6 +259,9 @@ class Worker:
             reason = self.info.get("reason", "worker refused to start")
             self._discard()
             raise WorkerError(f"Blender worker: {reason}")
+        self._compiling = kernels.to_compile(self.info, self._env)
+        if self._compiling:
+            kernels.announce(self._compiling, self._env)
 
     @property
     def alive(self) -> bool:
@@ -315,8 +322,15 @@ class Worker:
         self._discard()
         raise WorkerCrash(f"Blender worker exited with code {code}; last stderr: {tail}")
 
+    @property
+    def reply_wait(self) -> float:
+        """Seconds a reply may take: `timeout`, and while the driver compiles this
+        worker's kernels (before its first frame) the time that takes too."""
+        return self.timeout + (kernels.COMPILE_ALLOWANCE_S if self._compiling else 0.0)
+
     def _receive(self, *, startup: bool = False) -> dict[str, Any]:
-        reply_by = time.monotonic() + self.timeout
+        wait = self.reply_wait
+        reply_by = time.monotonic() + wait
         deadline = min(reply_by, self.deadline) if self.deadline is not None else reply_by
         while True:
             left = deadline - time.monotonic()
@@ -332,7 +346,7 @@ class Worker:
                     ) from None
                 what = "start up" if startup else "reply"
                 raise WorkerTimeout(
-                    f"Blender worker did not {what} within {self.timeout:g} s; killed it"
+                    f"Blender worker did not {what} within {wait:g} s; killed it"
                 ) from None
             if raw is None:
                 from blurset.stop import STOP
@@ -489,6 +503,9 @@ class Worker:
         while True:
             msg = self._receive_in_sync()
             if "frame" in msg:
+                if self._compiling:  # a frame came back: the cache holds the kernels
+                    kernels.mark_compiled(self.info, self._compiling, self._env)
+                    self._compiling = []
                 if on_frame is not None:
                     try:
                         origin = msg.get("origin")
