@@ -42,6 +42,28 @@ def test_workers_are_pinned_one_gpu_each():
     assert devices.worker_slots("CPU", None, 0, 2) == [None, None]
 
 
+def test_workers_per_gpu_pins_that_many_workers_to_each_chosen_gpu():
+    assert devices.worker_slots("OPTIX", None, 2, 1, 3) == [[0], [1]] * 3
+    assert devices.worker_slots("CUDA", [1], 4, 1, 2) == [[1], [1]]
+
+
+def test_workers_per_gpu_options(tmp_path, standin_blender):
+    ray = {"executor": "ray", "workers_per_gpu": 4}
+    quarter = make_config(ray, {"demo": True, "out": tmp_path, "device": "cuda"})
+    assert devices.ray_gpus_per_task(quarter, 8) == 0.25
+    for bad in ({"device": "cpu"}, {"workers": 2}):
+        with pytest.raises(ConfigError, match="workers_per_gpu 2"):
+            make_config({"workers_per_gpu": 2, **bad}, {"demo": True, "out": tmp_path})
+    # On a machine without a GPU the build refuses before it writes anything.
+    out = tmp_path / "out"
+    proc = run_cli("build", "--demo", "--out", str(out), "--workers-per-gpu", "2",
+                   "--blender", str(standin_blender), "--quiet", check=False)  # fmt: skip
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode != 0 and len(lines) == 1, proc.stderr
+    assert "error: --workers-per-gpu 2: rendering on the CPU" in lines[0], lines
+    assert not out.exists()
+
+
 def test_device_options_and_ray_gpus(tmp_path):
     cfg = make_config({}, {"demo": True, "out": tmp_path, "device": "CUDA", "gpus": "0,2"})
     assert (cfg.device, cfg.gpus) == ("cuda", [0, 2])

@@ -21,9 +21,16 @@ GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "ONEAPI", "METAL")
 NAMES = {"OPTIX": "OptiX", "CUDA": "CUDA", "HIP": "HIP", "ONEAPI": "oneAPI", "METAL": "Metal"}
 
 
-def needs_probe(device: str, gpus: list[int] | None, workers: int) -> bool:
+def needs_probe(
+    device: str, gpus: list[int] | None, workers: int, per_gpu: int | None = None
+) -> bool:
     """Whether the choice can fail or needs the device count (to pin workers)."""
-    return device not in ("auto", "cpu") or gpus is not None or (device == "auto" and workers > 1)
+    return (
+        device not in ("auto", "cpu")
+        or gpus is not None
+        or (device == "auto" and workers > 1)
+        or per_gpu is not None
+    )
 
 
 def probe(blender: str | None, timeout: float = 300.0) -> dict[str, list[str]]:
@@ -91,12 +98,18 @@ def resolve(
     return backend, gpus
 
 
-def worker_slots(backend: str, gpus: list[int] | None, n_gpus: int, workers: int) -> list:
+def worker_slots(
+    backend: str, gpus: list[int] | None, n_gpus: int, workers: int, per_gpu: int | None = None
+) -> list:
     """The GPU indices of each local worker: one worker renders on all chosen GPUs;
-    with several workers, worker i is pinned to one device (round robin). CPU: None."""
-    if backend == "CPU" or workers <= 1:
-        return [gpus] * max(1, workers)
+    with several workers, worker i is pinned to one device (round robin). CPU: None.
+    `per_gpu` (--workers-per-gpu): that many workers pinned to each chosen GPU, which
+    overlap one another's fixed cost of a render call (scene sync, film readback)."""
     chosen = gpus if gpus is not None else list(range(n_gpus))
+    if per_gpu is not None and backend != "CPU":
+        workers = per_gpu * len(chosen)
+    elif backend == "CPU" or workers <= 1:
+        return [gpus] * max(1, workers)
     return [[chosen[i % len(chosen)]] for i in range(workers)]
 
 
@@ -106,13 +119,19 @@ Device = tuple[str, "list[int] | None"]  # (Cycles backend or AUTO, GPU indices 
 def plan_local(cfg) -> list[Device]:
     """The device of each local worker of a build (`cfg`: a BuildConfig), checked before
     the build writes anything: one (backend, GPU indices) per worker slot."""
-    if not needs_probe(cfg.device, cfg.gpus, cfg.workers):
+    per_gpu = cfg.workers_per_gpu
+    if not needs_probe(cfg.device, cfg.gpus, cfg.workers, per_gpu):
         backend = "CPU" if cfg.device == "cpu" else "AUTO"
         return [(backend, None)] * max(1, cfg.workers)
     available = probe(cfg.blender)
     backend, gpus = resolve(cfg.device, cfg.gpus, available)
+    if per_gpu is not None and backend == "CPU":
+        raise ConfigError(
+            f"--workers-per-gpu {per_gpu}: rendering on the CPU, there is no GPU to share "
+            f"(Cycles: {describe(available)}); the CPU takes --workers"
+        )
     n = len(available.get(backend, []))
-    return [(backend, g) for g in worker_slots(backend, gpus, n, cfg.workers)]
+    return [(backend, g) for g in worker_slots(backend, gpus, n, cfg.workers, per_gpu)]
 
 
 def for_ray(cfg) -> Device:
@@ -122,12 +141,14 @@ def for_ray(cfg) -> Device:
 
 
 def ray_gpus_per_task(cfg, cluster_gpus: float) -> float:
-    """GPUs a Ray task reserves: --gpus-per-task, else 1 when the build renders on GPUs
-    (a GPU backend, or auto on a cluster that has GPUs), else 0."""
+    """GPUs a Ray task reserves: --gpus-per-task, else 1 (1/N under --workers-per-gpu
+    N) when the build renders on GPUs (a GPU backend, or auto on a cluster that has
+    GPUs), else 0."""
     if cfg.gpus_per_task is not None:
         return float(cfg.gpus_per_task)
+    share = 1.0 / cfg.workers_per_gpu if cfg.workers_per_gpu else 1.0
     if cfg.device == "cpu":
         return 0.0
     if cfg.device == "auto":
-        return 1.0 if cluster_gpus > 0 else 0.0
-    return 1.0
+        return share if cluster_gpus > 0 else 0.0
+    return share

@@ -31,7 +31,7 @@ def run_local(
     """`slots`: the device of each worker (blurset.devices.plan_local); an object takes
     a free slot, so with GPUs worker i stays pinned to its device."""
     slots = slots or [("AUTO", None)] * cfg.workers
-    if cfg.workers == 1:
+    if len(slots) == 1:
         for o in objs:
             on_result(build_object(o, cfg, progress, slots[0]))
         return
@@ -46,7 +46,7 @@ def run_local(
         finally:
             free.put(slot)
 
-    pool = cf.ThreadPoolExecutor(cfg.workers)
+    pool = cf.ThreadPoolExecutor(len(slots))
     try:
         for fut in cf.as_completed([pool.submit(unit, o) for o in objs]):
             on_result(fut.result())
