@@ -19,7 +19,12 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-GPU_BENCHES = ("bench_blur_cost", "bench_denoise_gain", "bench_settings_per_hour")
+GPU_BENCHES = (
+    "bench_device_costs",
+    "bench_blur_cost",
+    "bench_denoise_gain",
+    "bench_settings_per_hour",
+)
 
 
 def pick_device(name: str) -> str:
