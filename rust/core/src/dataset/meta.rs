@@ -79,7 +79,9 @@ pub struct RenderRecord {
     pub blur_method: BlurMethod,
     /// A number, or "auto".
     pub latents: serde_json::Value,
-    pub sharp_samples: u64,
+    /// Cycles samples of every sharp image; null under a render target, where each
+    /// image renders its own (`views[].images`), never a count that was not rendered.
+    pub sharp_samples: Option<u64>,
     /// How a blurry image's latent frames share Cycles samples (issue 15): `subsets` or
     /// `independent`, in words in `latent_sampling_is`. Per level: `sample_sequence`;
     /// per latent frame: `seed` and `sample_offset`.
@@ -251,7 +253,7 @@ impl RenderRecord {
             } else {
                 cfg.latents.into()
             },
-            sharp_samples: cfg.effective_sharp_samples(),
+            sharp_samples: cfg.fixed_sharp_samples(),
             latent_sampling: cfg.latent_sampling,
             latent_sampling_is: latent_sampling_is(cfg.latent_sampling).into(),
             blur_budget: cfg.blur_budget,
@@ -312,9 +314,13 @@ fn pass_is(pass: &str) -> String {
     }
 }
 
-/// The count every latent frame renders, where one count holds for all of them.
+/// The count every latent frame renders, where one count holds for all of them (never
+/// under a render target: each image renders what its own noise needs).
 fn samples_per_latent(cfg: &BuildConfig) -> Option<u32> {
     let average = cfg.blur_method == BlurMethod::Average;
+    if cfg.target_psnr.is_some() {
+        return None;
+    }
     match cfg.samples_total {
         Some(_) => None,
         None if cfg.blur_budget == BlurBudget::Need && average => None,
@@ -824,6 +830,14 @@ mod tests {
             ..cfg.clone()
         };
         assert_eq!(RenderRecord::of(&auto).samples_per_latent, None);
+        assert_eq!(RenderRecord::of(&cfg).sharp_samples, Some(32 * 2));
+        // Under a render target every image renders its own count: none is stated.
+        let target = BuildConfig {
+            target_psnr: Some(30.0),
+            ..cfg.clone()
+        };
+        let r = RenderRecord::of(&target);
+        assert_eq!((r.sharp_samples, r.samples_per_latent), (None, None));
         // A default build's render record is unchanged; --keep-linear says so.
         assert!(v["render"].get("linear").is_none());
         let linear = BuildConfig {

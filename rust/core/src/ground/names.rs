@@ -77,6 +77,10 @@ pub fn images_dir(factor: u32) -> String {
 /// they are listed: depth along the viewing axis, world-space normals, object masks.
 pub const PASSES: [&str; 3] = ["depth", "normal", "mask"];
 
+/// The passes a geometry render gives (one per view and size); the mask comes from the
+/// sharp image's coverage.
+pub const RENDERED_PASSES: [&str; 2] = ["depth", "normal"];
+
 /// The folder of a pass in the sharp level at downsampling factor `factor` (`depth`,
 /// `normals`, `masks`; `depth_4`, …, as `images_4` beside `images`).
 pub fn pass_dir(pass: &str, factor: u32) -> String {

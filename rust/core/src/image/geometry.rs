@@ -270,6 +270,39 @@ mod tests {
     }
 
     #[test]
+    fn a_pixel_that_sees_no_surface_has_depth_and_normal_zero() -> Result<()> {
+        // A geometry render as Cycles writes it: the miss depth (1e10), an infinite or
+        // NaN depth, and a normal that is not zero on every pixel (Cycles leaves what it
+        // likes in a missed pixel's normal).
+        let depth = [2.5f32, 1e10, f32::INFINITY, f32::NAN, 0.0, 3.0];
+        let normal: Vec<f32> = (0..18).map(|i| 0.1 + i as f32 / 20.0).collect();
+        let interleaved: Vec<f32> = depth
+            .iter()
+            .zip(normal.chunks_exact(3))
+            .flat_map(|(z, n)| [*z, n[0], n[1], n[2]])
+            .collect();
+        let p = tmp("render.exr");
+        let names = [
+            "ViewLayer.Depth.Z",
+            "ViewLayer.Normal.X",
+            "ViewLayer.Normal.Y",
+            "ViewLayer.Normal.Z",
+        ];
+        float_exr(&p, 3, 2, &names, &interleaved)?;
+        let g = read_geometry(&p)?;
+        let _ = std::fs::remove_file(&p);
+        assert_eq!(g.depth, [2.5, 0.0, 0.0, 0.0, 0.0, 3.0]);
+        for (i, n) in g.normal.chunks_exact(3).enumerate() {
+            if g.depth[i] == NO_SURFACE {
+                assert_eq!(n, [NO_SURFACE; 3], "pixel {i}");
+            } else {
+                assert_eq!(n, &normal[i * 3..i * 3 + 3], "pixel {i}");
+            }
+        }
+        Ok(())
+    }
+
+    #[test]
     fn a_mask_is_half_coverage_or_more_at_every_size() -> Result<()> {
         // 4 x 2 pixels, alpha 0, 0.49, 0.5, 1 / 1, 1, 0, 0.
         let alpha = [0.0f32, 0.49, 0.5, 1.0, 1.0, 1.0, 0.0, 0.0];

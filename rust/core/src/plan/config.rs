@@ -12,7 +12,7 @@ use super::choices::{
 use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use super::presets::preset_values;
 use super::sampling::SamplingConfig;
-use super::spec::{check, specs, Kind, OptionValue, Raw, Spec};
+use super::spec::{check, specs, Kind, OptionValue, Raw, Spec, MIN_RENDER_PX};
 use super::spec::{config_error, convert};
 use super::target::TargetRule;
 use super::weights::Guards;
@@ -557,7 +557,44 @@ impl BuildConfig {
                 "and test_objects: give either N random test settings or test objects".into(),
             ));
         }
-        Ok(())
+        self.check_rendered_passes()
+    }
+
+    /// Depth and normals are rendered at every size the build writes (a depth cannot be
+    /// area-averaged across an edge), and Blender renders no image under
+    /// [`MIN_RENDER_PX`]: a smaller size would come back as a 4 x 4 file that `verify`
+    /// refuses. Masks come from coverage and take any size.
+    fn check_rendered_passes(&self) -> Result<()> {
+        let rendered: Vec<&str> = self
+            .passes
+            .iter()
+            .map(String::as_str)
+            .filter(|p| names::RENDERED_PASSES.contains(p))
+            .collect();
+        let Some(f) = self
+            .downsample
+            .iter()
+            .find(|&&f| self.resolution / f < MIN_RENDER_PX)
+        else {
+            return Ok(());
+        };
+        if rendered.is_empty() {
+            return Ok(());
+        }
+        Err(config_error(
+            "passes",
+            format!(
+                "{}: {} is rendered at every size, and {}_{f} of resolution {} would be \
+                 {} px, under the {MIN_RENDER_PX} px Blender renders: drop {f} from \
+                 downsample or raise resolution to at least {}",
+                rendered.join(","),
+                rendered.join(" and "),
+                names::pass_dir(rendered[0], 1),
+                self.resolution,
+                self.resolution / f,
+                MIN_RENDER_PX * f
+            ),
+        ))
     }
 
     /// A render target `t` (dB) needs the images' own samples, in subsets, pilot ≤ cap.
@@ -591,7 +628,31 @@ impl BuildConfig {
                 ),
             ));
         }
-        Ok(())
+        self.check_target_max_samples()
+    }
+
+    /// An image cannot stop below one sample per latent frame and half: a cap under
+    /// that is refused here, naming the least that works, rather than failing every
+    /// object at its first render.
+    fn check_target_max_samples(&self) -> Result<()> {
+        let m = self.max_latents();
+        let least = TargetRule::least_max_samples(m);
+        if u64::from(self.target_max_samples) >= least {
+            return Ok(());
+        }
+        let (frames, fewer) = if self.latents_auto && self.blur_method == BlurMethod::Average {
+            (format!("up to latents_max {m}"), "a lower latents_max")
+        } else {
+            (m.to_string(), "fewer latents")
+        };
+        Err(config_error(
+            "target_max_samples",
+            format!(
+                "{}: an image of {frames} latent frames renders at least one sample per \
+                 frame and half, {least} in all: give at least {least} (or {fewer})",
+                self.target_max_samples
+            ),
+        ))
     }
 
     /// This job's share of the objects, `(i, N)` of `shard` (None: every object).
@@ -732,6 +793,16 @@ impl BuildConfig {
             .map_or_else(|| self.blur_samples_total(), u64::from)
     }
 
+    /// The samples every sharp image renders, where one count holds for all of them:
+    /// None under a render target, where each image renders what its own noise needs
+    /// (its record in meta.json says how many), so no record states a count that was
+    /// not rendered.
+    pub fn fixed_sharp_samples(&self) -> Option<u64> {
+        self.target_psnr
+            .is_none()
+            .then(|| self.effective_sharp_samples())
+    }
+
     /// Renders of a setting (an upper bound with latents auto).
     pub fn frames_per_setting(&self) -> usize {
         self.views * (1 + self.levels.len() * self.max_latents() + self.defocus.len())
@@ -768,7 +839,8 @@ impl BuildConfig {
     }
 
     /// The `config` record of dataset.json: every option, `latents` = "auto" under
-    /// latents auto, and the effective sharp samples. It names no path of the build
+    /// latents auto, and the effective sharp samples (null under a render target:
+    /// [`Self::fixed_sharp_samples`]). It names no path of the build
     /// machine (issue 19: a build is published as is): OUT, the objaverse cache and a
     /// Blender binary by their last component, `--objects` entries by [`public_entry`].
     /// Those are run options, never compared between runs.
@@ -782,7 +854,7 @@ impl BuildConfig {
         if let Some(m) = v.as_object_mut() {
             m.insert(
                 "effective_sharp_samples".into(),
-                self.effective_sharp_samples().into(),
+                self.fixed_sharp_samples().into(),
             );
             if self.latents_auto {
                 m.insert("latents".into(), "auto".into());
@@ -1119,6 +1191,103 @@ mod tests {
             serde_json::Value::Null => Raw::Null,
             serde_json::Value::Object(_) => Raw::Table,
         }
+    }
+
+    #[test]
+    fn a_target_cap_under_one_sample_per_frame_and_half_is_refused_naming_the_least() -> Result<()>
+    {
+        let target = ("target_psnr", Raw::Float(40.0));
+        // 34 latent frames (the default) need 68: one sample per frame and half.
+        assert_eq!(
+            err(&[target.clone(), ("target_max_samples", Raw::Int(67))]),
+            "target_max_samples 67: an image of 34 latent frames renders at least one \
+             sample per frame and half, 68 in all: give at least 68 (or fewer latents)"
+        );
+        BuildConfig::from_values(&values(&[
+            target.clone(),
+            ("target_max_samples", Raw::Int(68)),
+            ("target_pilot_samples", Raw::Int(2)),
+        ]))?;
+        // Under latents auto an image may take up to latents_max frames.
+        let auto = [
+            target.clone(),
+            ("latents_auto", Raw::Bool(true)),
+            ("latents_max", Raw::Int(100)),
+            ("target_pilot_samples", Raw::Int(2)),
+        ];
+        let e = err(&[auto.as_slice(), &[("target_max_samples", Raw::Int(199))]].concat());
+        assert!(
+            e.starts_with("target_max_samples 199: an image of up to latents_max 100")
+                && e.contains("give at least 200 (or a lower latents_max)"),
+            "{e}"
+        );
+        BuildConfig::from_values(&values(
+            &[auto.as_slice(), &[("target_max_samples", Raw::Int(200))]].concat(),
+        ))?;
+        // The fast preset's frame cap with the default max.
+        BuildConfig::from_values(&values(&[("preset", Raw::Str("fast".into()))]))?;
+        Ok(())
+    }
+
+    #[test]
+    fn defocus_levels_stop_where_the_circle_is_as_wide_as_the_image() -> Result<()> {
+        let defocus = |l: &[i128]| {
+            (
+                "defocus",
+                Raw::List(l.iter().map(|&x| Raw::Int(x)).collect()),
+            )
+        };
+        BuildConfig::from_values(&values(&[defocus(&[1, 9])]))?;
+        for bad in [10, 31, 64] {
+            let e = err(&[defocus(&[1, bad])]);
+            assert!(
+                e.starts_with(&format!("defocus {bad}: defocus levels must be in 1..=9")),
+                "{e}"
+            );
+        }
+        assert!(err(&[defocus(&[65])]).starts_with("defocus [65]"));
+        Ok(())
+    }
+
+    #[test]
+    fn rendered_passes_need_every_size_blender_renders() -> Result<()> {
+        let passes = |p: &str| ("passes", Raw::Str(p.into()));
+        let res = |r: i128| ("resolution", Raw::Int(r));
+        for r in [8, 12] {
+            let e = err(&[res(r), passes("depth,mask")]);
+            assert!(
+                e.starts_with(
+                    "passes depth: depth is rendered at every size, and depth_4 of \
+                     resolution"
+                ) && e.contains("under the 4 px Blender renders")
+                    && e.contains("raise resolution to at least 16"),
+                "{e}"
+            );
+        }
+        assert!(err(&[res(8), passes("normal")]).starts_with("passes normal:"));
+        // Masks come from coverage; 16 px gives 4 px depth_4 files; no copies, no sizes.
+        BuildConfig::from_values(&values(&[res(8), passes("mask")]))?;
+        BuildConfig::from_values(&values(&[res(16), passes("depth,normal")]))?;
+        BuildConfig::from_values(&values(&[
+            res(8),
+            passes("depth"),
+            ("downsample", Raw::List(Vec::new())),
+        ]))?;
+        Ok(())
+    }
+
+    #[test]
+    fn a_target_build_states_no_fixed_sample_count() -> Result<()> {
+        let fast = BuildConfig::from_values(&values(&[("preset", Raw::Str("fast".into()))]))?;
+        assert_eq!(fast.fixed_sharp_samples(), None);
+        assert_eq!(
+            fast.record()["effective_sharp_samples"],
+            serde_json::Value::Null
+        );
+        let fixed = BuildConfig::default();
+        assert_eq!(fixed.fixed_sharp_samples(), Some(32 * 34));
+        assert_eq!(fixed.record()["effective_sharp_samples"], 32 * 34);
+        Ok(())
     }
 
     #[test]

@@ -25,10 +25,17 @@ pub const SENSOR_WIDTH_MM: f64 = 36.0;
 /// The resolution the circle-of-confusion sizes are stated at.
 const COC_REFERENCE_PX: f64 = 512.0;
 
+/// The highest defocus level: its largest circle of confusion, 2^9 = 512 px at 512 px,
+/// is as wide as the image. A higher level would spread a point of the object over
+/// more than the whole frame (level 31 asked for circles of 2^31 px), which no view
+/// shows and no aperture in meta.json should claim.
+pub const MAX_DEFOCUS_LEVEL: u32 = 9;
+
 /// The largest circle of confusion on the object (diameter, pixels) of defocus level
-/// `level` at `resolution` pixels wide: 2^level at 512 px, scaled with the resolution.
+/// `level` (1..=[`MAX_DEFOCUS_LEVEL`]) at `resolution` pixels wide: 2^level at 512 px,
+/// scaled with the resolution.
 pub fn coc_px(level: u32, resolution: u32) -> f64 {
-    2f64.powi(level.min(30) as i32) * f64::from(resolution) / COC_REFERENCE_PX
+    2f64.powi(level.min(MAX_DEFOCUS_LEVEL) as i32) * f64::from(resolution) / COC_REFERENCE_PX
 }
 
 /// The circle of confusion (diameter, pixels) of a point at depth `z` along the viewing
@@ -132,6 +139,28 @@ mod tests {
         assert!((plan["4"].aperture_radius / plan["1"].aperture_radius - 8.0).abs() < 1e-9);
         // Scaled with the resolution: 4 px at 256 px for level 3.
         assert!((coc_px(3, 256) - 4.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn each_view_focuses_somewhere_inside_the_object_not_at_an_end() {
+        // The focus is a uniform draw over (near, far): over many views it lies strictly
+        // inside, covers both halves of the range, so both ends of the object are blurred
+        // (a focus at near or far would leave that end sharp in every view).
+        let (near, far) = (1.5, 2.7);
+        let f = 512.0 / (2.0 * 20f64.to_radians().tan());
+        let focuses: Vec<f64> = (0..64)
+            .map(|view| {
+                let mut s = Stream::new(11, view);
+                let p = &plan_view(&[2], near, far, 512, 40.0, &mut s, |_| 0)["2"];
+                let at = |z| circle_of_confusion(z, p.focus_distance, p.aperture_radius, f);
+                assert!(at(near) > 1e-3 && at(far) > 1e-3, "view {view}: {p:?}");
+                p.focus_distance
+            })
+            .collect();
+        assert!(focuses.iter().all(|&s| near < s && s < far));
+        let mid = (near + far) / 2.0;
+        let below = focuses.iter().filter(|&&s| s < mid).count();
+        assert!((16..=48).contains(&below), "{below} of 64 below the middle");
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! what is drawn (view, purpose), so changing the number of latents does not move the
 //! viewpoints, and dropping a level does not change the others.
 use super::camera::{clamp_polar, depth_range, focal_px, orbit_c2w};
-use super::defocus::{plan_view, DefocusPlan};
+use super::defocus::{plan_view, DefocusPlan, MAX_DEFOCUS_LEVEL};
 use super::weights::{level_interval, scene_weight, Guards};
 use crate::error::{Error, Result};
 use crate::rng::{derive_seed, Stream};
@@ -183,6 +183,17 @@ impl SamplingConfig {
         check("delta0", &self.delta0, &specs::DELTA0)?;
         check("level_spread", &self.level_spread, &specs::LEVEL_SPREAD)?;
         check("levels", &self.levels, &Spec::Levels)?;
+        check("defocus", &self.defocus, &Spec::Levels)?;
+        if let Some(l) = self.defocus.iter().find(|&&l| l > MAX_DEFOCUS_LEVEL) {
+            return Err(Error::Config {
+                option: "defocus".into(),
+                detail: format!(
+                    "{l}: defocus levels must be in 1..={MAX_DEFOCUS_LEVEL} (level l blurs \
+                     the object by circles of up to 2^l px at 512 px; above \
+                     {MAX_DEFOCUS_LEVEL} they are wider than the image)"
+                ),
+            });
+        }
         check(
             "orientation_max",
             &self.guards.orientation_max,

@@ -11,6 +11,10 @@ use std::fmt;
 /// Largest number of views per setting and of latent frames per blurry image.
 pub const MAX_COUNT: usize = 4096;
 
+/// The smallest image Blender renders (its `resolution_x` / `resolution_y` start at 4):
+/// a render asked smaller comes back this size.
+pub const MIN_RENDER_PX: u32 = 4;
+
 /// Largest Cycles sample count of one render, and of a `samples_total` budget.
 pub const MAX_SAMPLES: u32 = 1 << 20;
 

@@ -78,6 +78,13 @@ impl TargetRule {
         (self.max_samples / 2).max(1)
     }
 
+    /// The fewest `max_samples` an image of `frames` latent frames can render under: one
+    /// sample per frame and half, its frames' blocks inside the [`Self::sequence`] of
+    /// half of it (fewer would put a frame's block past the end of the sequence).
+    pub fn least_max_samples(frames: usize) -> u64 {
+        2 * frames.max(1) as u64
+    }
+
     /// Samples per frame and half of the pilot round of an image of `frames` frames.
     pub fn pilot_per_frame(&self, frames: u32) -> u32 {
         let per_half = (self.pilot_samples / 2).max(1);
@@ -232,6 +239,31 @@ mod tests {
         assert_eq!(RULE.next_round(&state(4, 0, 0, None)), Some(4));
         // At least one sample per frame and half.
         assert_eq!(RULE.next_round(&state(40, 0, 0, None)), Some(1));
+    }
+
+    #[test]
+    fn the_pilot_fits_the_sequence_its_frames_split() {
+        // Every pilot the config accepts (pilot <= max) of every image the config accepts
+        // (frames <= the sequence, `BuildConfig::check_target`): its m frames' blocks lie
+        // inside the sequence. 32 of 32 over 3 frames: 16 a half, 6 a frame would end at
+        // 18, past the 16 samples of the sequence.
+        for max in 2..=40 {
+            for pilot in 1..=max {
+                let rule = TargetRule {
+                    pilot_samples: pilot,
+                    max_samples: max,
+                    ..RULE
+                };
+                for frames in 1..=rule.sequence() {
+                    let n = rule.pilot_per_frame(frames);
+                    assert!(n >= 1, "{pilot}/{max}, {frames} frames");
+                    assert!(
+                        frames * n <= rule.sequence(),
+                        "{pilot}/{max}, {frames} frames: {n} a frame"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
