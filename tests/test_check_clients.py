@@ -235,3 +235,92 @@ def test_the_ibrnet_noise_recipe_reads_noisy_scenes_from_a_second_root(
     assert cc.main(["ibrnet", str(beside), *args]) == 2
     err = capsys.readouterr().err
     assert "never read" in err and "ROOTN/data" in err and "--rootdir ROOTN" in err, err
+
+
+# -- the client pages' commands, in the environments docs/training/index.md builds -----
+
+TRAINING = ROOT / "docs" / "training"
+CLIENT_PACKAGE = {"nerfstudio": "nerfstudio"}  # a client checked as an installed package
+
+
+def _sh_lines(page: Path) -> list[str]:
+    """Every command of the page's ```sh blocks, continuation lines joined."""
+    import re
+
+    lines = []
+    for block in re.findall(r"```sh\n(.*?)```", page.read_text(), flags=re.S):
+        for line in block.replace("\\\n", " ").splitlines():
+            if line.strip() and not line.lstrip().startswith("#"):
+                lines.append(" ".join(line.split()))
+    return lines
+
+
+def _environments() -> dict[str, list[str]]:
+    """The client environments index.md's recipe makes: path → what pip installs in it."""
+    envs: dict[str, list[str]] = {}
+    for line in _sh_lines(TRAINING / "index.md"):
+        words = line.split()
+        if words[1:3] == ["-m", "venv"]:
+            envs[words[3]] = []
+        elif len(words) > 2 and words[0].endswith("/bin/pip") and words[1] == "install":
+            env = words[0].removesuffix("/bin/pip")
+            assert env in envs, f"pip of {env}, which the recipe does not make"
+            envs[env] += [w.strip('"') for w in words[2:]]
+    return envs
+
+
+def test_every_client_environment_pins_numpy_below_2():
+    """Each pip install resolves on its own: one without the pin takes numpy 2, which the
+    clients' binary dependencies (torch, OpenCV as Deblur-NeRF imports them) were not
+    built against, also in an environment stacked on another's site-packages."""
+    envs = _environments()
+    assert {"clients/venv", "clients/venv-ns"} <= set(envs), envs
+    for line in _sh_lines(TRAINING / "index.md"):
+        if "/bin/pip install" in line:
+            assert '"numpy<2"' in line, line
+
+
+def test_the_client_pages_check_commands_run_in_environments_the_recipe_makes():
+    """Every `check_clients.py` command of a client page names a --python the recipe
+    makes, and a --checkout inside an environment's site-packages only where that
+    environment installs the client (nerfstudio from PyPI)."""
+    envs = _environments()
+    commands = [
+        (page, line.split())
+        for page in sorted(TRAINING.glob("*.md"))
+        for line in _sh_lines(page)
+        if "scripts/check_clients.py" in line and page.name != "index.md"
+    ]
+    assert len(commands) >= 6, commands
+    for page, words in commands:
+        client = words[words.index("scripts/check_clients.py") + 1]
+        python = words[words.index("--python") + 1]
+        env = python.removesuffix("/bin/python")
+        assert env in envs, (page.name, python)
+        checkout = words[words.index("--checkout") + 1]
+        if "/site-packages" in checkout:
+            assert checkout == f"{env}/lib/python3.11/site-packages", (page.name, checkout)
+            pkg = CLIENT_PACKAGE[client]
+            assert any(w.split("=")[0].split("<")[0] == pkg for w in envs[env]), (
+                page.name,
+                f"{env} does not install {pkg}",
+            )
+
+
+def test_the_deblur_nerf_config_is_the_one_checked_and_runs_alone(cc):
+    """docs/training/deblur-nerf.md's config is what check_clients feeds Deblur-NeRF's
+    parser, and holds what run_nerf.py needs to train from it alone: its parser's
+    required options (basedir, datadir, tbdir) and a kernel_type train() builds."""
+    import re
+
+    text = (TRAINING / "deblur-nerf.md").read_text()
+    blocks = re.findall(r"```text\n(.*?)```", text, flags=re.S)
+    scene = "<setting>__blur_4"
+    want = cc.DEBLUR_NERF_CONFIG.format(
+        scene=scene, root="ROOT", datadir=f"ROOT/data/nerf_llff_data/{scene}", llffhold=16
+    )
+    assert want in blocks, blocks[:1]
+    keys = dict(line.split(" = ", 1) for line in want.splitlines())
+    assert {"basedir", "datadir", "tbdir", "expname"} <= set(keys)
+    assert keys["kernel_type"] in ("deformablesparsekernel", "none")
+    assert f"python run_nerf.py --config {scene}.txt" in text

@@ -511,6 +511,10 @@ def pass_dir(kind: str, factor: int) -> str:
 def pass_file(kind: str, image: str) -> str:
     """The file of an image's view in a pass's folder (`007.exr`; masks `007.png`)."""
 
+def pass_level(kind: str, level: str) -> str:
+    """The level folder that holds `level`'s files of pass `kind`: a blur level's own
+    masks (`blur_4`), everything else the sharp level's (`sharp`)."""
+
 def setting_name(uid: str, theta0_deg: float) -> str:
     """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
 
@@ -666,6 +670,19 @@ class Accumulator:
     def write_mask(self, path: str | PathLike[str], *, downsample: int = 1) -> None:
         """Write the object mask of the mean (8-bit PNG: 255 where coverage, area-averaged
         over `downsample` x `downsample` blocks, is at least one half; else 0)."""
+    def write_exposure_mask(
+        self,
+        path: str | PathLike[str],
+        *,
+        blur_method: Literal["average", "motion_blur"],
+        downsample: int = 1,
+        sharp: str | PathLike[str] | None = None,
+    ) -> None:
+        """Write a blurry image's mask (8-bit PNG): 255 where its exposure covered the
+        pixel, each frame one render of `blur_method` (`average`: some frame's alpha at
+        least one half; `motion_blur`: the render's alpha above 0), area-averaged over
+        `downsample` x `downsample` blocks to at least one half; every pixel of the mask
+        PNG `sharp` (the view's sharp mask at that size) added."""
     def write_exr(self, path: str | PathLike[str]) -> None:
         """Write the linear mean as a ZIP-compressed RGBA float32 EXR, atomically."""
 

@@ -75,7 +75,8 @@ class Scene:
     pose: str = "written"
     #: With `--passes` (else None), per view at this size, of the sharp image at the
     #: written pose p: depth (N, H, W) float32 along the viewing axis in world units (0:
-    #: no surface), normals (N, H, W, 3) float32 in the world frame, masks (N, H, W) bool.
+    #: no surface), normals (N, H, W, 3) float32 in the world frame, masks (N, H, W) bool
+    #: (a blur level's: the pixels its exposure covered, the sharp mask's included).
     depth: np.ndarray | None = None
     normals: np.ndarray | None = None
     masks: np.ndarray | None = None
@@ -198,18 +199,19 @@ def open_scene(
         test_views=test,
         noise=meta,
         pose=pose,
-        **_passes(sdir, n, downsample),
+        **_passes(sdir, level, n, downsample),
     )
 
 
-def _passes(sdir: Path, n: int, downsample: int) -> dict[str, np.ndarray]:
-    """The `--passes` files of a setting at one size, as Scene's fields (none without)."""
+def _passes(sdir: Path, level: str, n: int, downsample: int) -> dict[str, np.ndarray]:
+    """The `--passes` files of `level` at one size, as Scene's fields (none without): the
+    sharp level's, but a blur level's own masks (`layout.pass_level`)."""
     meta = layout.read_json(sdir / layout.META, layout.META)
     kinds = (meta.get("render") or {}).get("passes") or []
     names = [layout.image_name(i, n) for i in range(n)]
 
     def files(kind: str) -> list[Path]:
-        d = sdir / layout.SHARP / layout.pass_dir(kind, downsample)
+        d = sdir / layout.pass_level(kind, level) / layout.pass_dir(kind, downsample)
         out = [d / layout.pass_file(kind, name) for name in names]
         for p in out:
             if not p.is_file():

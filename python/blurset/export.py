@@ -360,19 +360,22 @@ def _write_scene(d: Path, final: Path, src: Path, doc: _records.ExportDoc) -> No
         _link(s, d / part, final / part, doc["copy"])
 
 
-def _write_passes(d: Path, final: Path, src: Path, sharp: Path, doc: _records.ExportDoc) -> None:
-    """The build's `--passes` beside a scene's images: the sharp level's folders (depth/,
-    normals/, masks/ and their _<f> sizes; LLFF loaders ignore them), and for nerfstudio
-    its own: depth as 16-bit millimetre PNGs in depths/ (its default unit) and a
+def _write_passes(
+    d: Path, final: Path, src: Path, setting: Path, level: str, doc: _records.ExportDoc
+) -> None:
+    """The build's `--passes` beside a scene's images: the folders (depth/, normals/,
+    masks/ and their _<f> sizes; LLFF loaders ignore them) of the sharp level, but a blur
+    level's own masks (`layout.pass_level`), and for nerfstudio its own: depth as 16-bit
+    millimetre PNGs in depths/ (its default unit) and a
     transforms.json whose frames name them (`depth_file_path`) and the masks
     (`mask_path`), which its parser looks up in depths_<f>/ and masks_<f>/ when it
     downscales."""
     for kind in doc.get("passes") or []:
         for f in [1, *doc["factors"]]:
-            sub = layout.pass_dir(kind, f)
-            if not (sharp / sub).is_dir():
-                raise InputError(f"missing {sub} in the build's sharp level: {sharp}")
-            _link(sharp / sub, d / sub, final / sub, doc["copy"])
+            sub, holder = layout.pass_dir(kind, f), setting / layout.pass_level(kind, level)
+            if not (holder / sub).is_dir():
+                raise InputError(f"missing {sub} in the build's {holder.name} level: {holder}")
+            _link(holder / sub, d / sub, final / sub, doc["copy"])
     if not _own_transforms(doc):
         return
     tf = layout.read_json(src / layout.TRANSFORMS, layout.TRANSFORMS)
@@ -388,7 +391,12 @@ def _write_passes(d: Path, final: Path, src: Path, sharp: Path, doc: _records.Ex
             (d / sub).mkdir()
             for frame in tf["frames"]:
                 name = Path(frame["file_path"]).name
-                exr = sharp / layout.pass_dir("depth", f) / layout.pass_file("depth", name)
+                exr = (
+                    setting
+                    / layout.pass_level("depth", level)
+                    / layout.pass_dir("depth", f)
+                    / layout.pass_file("depth", name)
+                )
                 _core.write_depth_millimetres(exr, d / sub / name)
     layout.write_json(d / layout.TRANSFORMS, tf)
 
@@ -561,9 +569,9 @@ def _put_in_place(
             if doc["for"] == "geonerf":
                 _write_geonerf_scene(stage / scene, final, src, doc, scene, build_root)
             else:
-                sharp = build_root / doc["scenes"][scene].split("/", 1)[0] / layout.SHARP
+                setting, level = doc["scenes"][scene].split("/")[:2]
                 _write_scene(stage / scene, final, src, doc)
-                _write_passes(stage / scene, final, src, sharp, doc)
+                _write_passes(stage / scene, final, src, build_root / setting, level, doc)
         # What this run may put in place is recorded first: an export stopped half-way
         # still owns every entry it wrote, and its rerun replaces them.
         outputs.write_record(

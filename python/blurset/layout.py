@@ -66,6 +66,17 @@ def pass_dir(p: str, factor: int) -> str:
     return _core.pass_dir(p, factor)
 
 
+def pass_level(p: str, level: str) -> str:
+    """The level folder holding `level`'s files of pass `p`: a blur level's own masks
+    (the coverage of its exposure), everything else the sharp level's."""
+    return _core.pass_level(p, level)
+
+
+def own_mask_levels(levels: list[str]) -> list[str]:
+    """The levels of `levels` that hold masks of their own (the blur levels)."""
+    return [lv for lv in levels if lv != SHARP and pass_level("mask", lv) == lv]
+
+
 def pass_file(p: str, image: str) -> str:
     """The file of an image's view in pass `p`'s folder (`007.exr`; masks `007.png`)."""
     return _core.pass_file(p, image)

@@ -160,12 +160,14 @@ def setting_problems(
         ]
         if render.get("linear"):
             subs.append((layout.LINEAR, exrs, w, h))
-        if level == layout.SHARP:
-            # --passes: depth/, normals/, masks/ and their _<f> sizes, named as the images.
-            for kind in render.get("passes") or []:
-                names = [layout.pass_file(kind, i) for i in images]
-                for f in [1, *factors]:
-                    subs.append((layout.pass_dir(kind, int(f)), names, w // int(f), h // int(f)))
+        # --passes: depth/, normals/, masks/ and their _<f> sizes, named as the images, in
+        # the sharp level; a blur level's own masks in it (layout.pass_level).
+        for kind in render.get("passes") or []:
+            if layout.pass_level(kind, level) != level:
+                continue
+            names = [layout.pass_file(kind, i) for i in images]
+            for f in [1, *factors]:
+                subs.append((layout.pass_dir(kind, int(f)), names, w // int(f), h // int(f)))
         to_decode += _level_problems(root, setting / level, subs, n, flagged, rep)
     if layout.TRANSFORMS in flagged:
         return _one_per_file(rep), to_decode

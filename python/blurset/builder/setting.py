@@ -54,17 +54,24 @@ def frames_per_setting(cfg: BuildConfig) -> int:
 
 
 def _copy_sharp(setting: Path, views: list[int], n_views: int, cfg: BuildConfig) -> None:
-    """The sharp files of `views` into every blur level (byte-identical copies)."""
+    """The sharp files of `views` into every blur level (byte-identical copies): a view
+    that holds the sharp image holds its mask too."""
     subdirs = [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]
+    masks = [layout.pass_dir("mask", f) for f in [1, *cfg.downsample]] if _masks(cfg) else []
     for view in views:
         name = layout.image_name(view, n_views)
         files = [(d, name) for d in subdirs]
         if cfg.write_linear:
             files.append((layout.LINEAR, layout.linear_name(name)))
         for level in cfg.level_dirs[1:]:
-            for d, f in files:
+            own = masks if level in layout.own_mask_levels([level]) else []
+            for d, f in [*files, *((m, layout.pass_file("mask", name)) for m in own)]:
                 (setting / level / d).mkdir(exist_ok=True)  # linear/: no view rendered
                 shutil.copyfile(setting / layout.SHARP / d / f, setting / level / d / f)
+
+
+def _masks(cfg: BuildConfig) -> bool:
+    return "mask" in cfg.passes
 
 
 def _object_record(obj: ObjectSpec, info: LoadedObject) -> _records.ObjectRecord:
@@ -160,9 +167,10 @@ def _plan(
     for d in cfg.level_dirs:
         for sub in [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]:
             (partial / d / sub).mkdir(parents=True)
-    if "mask" in cfg.passes:
-        for f in [1, *cfg.downsample]:
-            (partial / layout.SHARP / layout.pass_dir("mask", f)).mkdir()
+    if _masks(cfg):
+        for level in [layout.SHARP, *layout.own_mask_levels(cfg.level_dirs)]:
+            for f in [1, *cfg.downsample]:
+                (partial / level / layout.pass_dir("mask", f)).mkdir()
     return plan, frames, exr_dir
 
 
@@ -241,12 +249,26 @@ class _Images:
             a.write_png(level_dir / layout.images_dir(f) / name, background=bg, downsample=f)
         if self.cfg.write_linear:
             a.write_exr(level_dir / layout.LINEAR / layout.linear_name(name))
+        if _masks(self.cfg):
+            self._write_masks(level, name, a)
         if level == layout.SHARP:
-            if "mask" in self.cfg.passes:
-                for f in [1, *self.cfg.downsample]:
-                    mask = level_dir / layout.pass_dir("mask", f) / layout.pass_file("mask", name)
-                    a.write_mask(mask, downsample=f)
             self.qa[view] = _core.frame_qa(a.mean())
+
+    def _write_masks(self, level: str, name: str, a: Any) -> None:
+        """The image's masks at every size: the sharp image's coverage; a blurry image's
+        own, the pixels its exposure covered plus the sharp mask of its view (written
+        first: every sharp image is done before a blurry one starts)."""
+        for f in [1, *self.cfg.downsample]:
+            sub, file = layout.pass_dir("mask", f), layout.pass_file("mask", name)
+            if level == layout.SHARP:
+                a.write_mask(self.partial / level / sub / file, downsample=f)
+            elif level in layout.own_mask_levels([level]):
+                a.write_exposure_mask(
+                    self.partial / level / sub / file,
+                    blur_method=self.cfg.blur_method,
+                    downsample=f,
+                    sharp=self.partial / layout.SHARP / sub / file,
+                )
 
     def on_frame(self, i: int, path: str, origin: tuple[int, int] | None) -> None:
         key = self.keys[i]

@@ -20,7 +20,7 @@ pub use crate::error::{Error, Result};
 pub use crate::rng::seed_for;
 
 // What one setting renders: views, trajectories, levels, latent frames.
-pub use crate::plan::choices::{Choice, Preset};
+pub use crate::plan::choices::{BlurMethod, Choice, Preset};
 pub use crate::plan::config::BuildConfig;
 pub use crate::plan::defocus::{circle_of_confusion, DefocusPlan};
 pub use crate::plan::options::OptionInfo;
@@ -97,8 +97,8 @@ pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
     defocus_dir, files, gain_name, image_name, images_dir, is_level_dir, level_dir, level_dirs,
     linear_dir, linear_name, object_lock, parse_defocus_dir, parse_level_dir, pass_dir, pass_file,
-    setting_name, sort_level_dirs, theta0s, work_dir, OBJECT_LOCK_PREFIX, PASSES, SHARP,
-    WORK_PREFIX,
+    pass_level, setting_name, sort_level_dirs, theta0s, work_dir, OBJECT_LOCK_PREFIX, PASSES,
+    SHARP, WORK_PREFIX,
 };
 
 // Image error against a reference and the speed/quality front.

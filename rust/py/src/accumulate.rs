@@ -212,6 +212,26 @@ impl PyAccumulator {
         run_detached(py, move || inner.write_mask(&path, downsample))
     }
 
+    /// Write a blurry image's mask (core `Accumulator::write_exposure_mask`): the pixels
+    /// its frames covered, each frame one render of `blur_method`, area-averaged
+    /// `downsample` times, with every pixel of the mask PNG `sharp` added.
+    #[pyo3(signature = (path, *, blur_method, downsample = 1, sharp = None))]
+    fn write_exposure_mask(
+        &self,
+        py: Python<'_>,
+        path: PathBuf,
+        blur_method: &str,
+        downsample: u32,
+        sharp: Option<PathBuf>,
+    ) -> PyResult<()> {
+        let method = <core::BlurMethod as core::Choice>::from_name(blur_method)
+            .ok_or_else(|| PyValueError::new_err(format!("no blur method {blur_method:?}")))?;
+        let inner = &self.inner;
+        run_detached(py, move || {
+            inner.write_exposure_mask(&path, downsample, method, sharp.as_deref())
+        })
+    }
+
     /// Write the mean as a linear premultiplied RGBA float32 EXR.
     fn write_exr(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let inner = &self.inner;

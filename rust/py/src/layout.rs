@@ -107,6 +107,13 @@ fn pass_dir(kind: &str, factor: u32) -> String {
     core::pass_dir(kind, factor)
 }
 
+/// The level folder that holds `level`'s files of pass `kind` (a blur level's own
+/// masks; everything else the sharp level's).
+#[pyfunction]
+fn pass_level(kind: &str, level: &str) -> String {
+    core::pass_level(kind, level).to_string()
+}
+
 /// The file of an image's view in a pass's folder (`007.png` → `007.exr` or `007.png`).
 #[pyfunction]
 fn pass_file(kind: &str, image: &str) -> String {
@@ -252,6 +259,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(linear_dir, m)?)?;
     m.add_function(wrap_pyfunction!(pass_dir, m)?)?;
     m.add_function(wrap_pyfunction!(pass_file, m)?)?;
+    m.add_function(wrap_pyfunction!(pass_level, m)?)?;
     m.add_function(wrap_pyfunction!(setting_name, m)?)?;
     m.add_function(wrap_pyfunction!(theta0s, m)?)?;
     m.add_function(wrap_pyfunction!(image_name, m)?)?;

@@ -9,7 +9,7 @@
 //! - a build's setting directories are scanned once, here ([`scan`]).
 use crate::error::{Error, Result};
 use crate::ground::atomic::{replace_dir, write_atomic};
-use crate::ground::names::{files, images_dir, pass_dir};
+use crate::ground::names::{files, images_dir, pass_dir, pass_level};
 use crate::ground::names::{sort_level_dirs, SHARP, WORK_PREFIX};
 use std::path::{Path, PathBuf};
 
@@ -193,9 +193,7 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
             let rel = format!("{lvl}/{}", files::LINEAR);
             out.extend(exr_problems(&d.join(files::LINEAR), &rel, counts.views));
         }
-        if lvl == SHARP {
-            out.extend(pass_problems(&d, &counts));
-        }
+        out.extend(pass_problems(&d, lvl, &counts));
         let npy = format!("{lvl}/poses_bounds.npy");
         match std::fs::metadata(d.join(files::POSES_BOUNDS)) {
             Ok(m) if m.is_file() => {
@@ -209,21 +207,22 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
     out
 }
 
-/// The problems of the sharp level's `--passes` folders (`sharp`: its path): a count
-/// other than the views', an empty file, a damaged mask or one of another size.
-fn pass_problems(sharp: &Path, counts: &SettingCounts) -> Vec<SettingProblem> {
+/// The problems of the `--passes` folders level `lvl` holds (`level`: its path; the
+/// sharp level's passes, a blur level's own masks: `pass_level`): a count other than the
+/// views', an empty file, a damaged mask or one of another size.
+fn pass_problems(level: &Path, lvl: &str, counts: &SettingCounts) -> Vec<SettingProblem> {
     let mut out = Vec::new();
-    for pass in &counts.passes {
+    for pass in counts.passes.iter().filter(|p| pass_level(p, lvl) == lvl) {
         for factor in std::iter::once(1).chain(counts.downsample.iter().copied()) {
             let sub = pass_dir(pass, factor);
-            let rel = format!("{SHARP}/{sub}");
+            let rel = format!("{lvl}/{sub}");
             if pass == "mask" {
                 let want = counts.resolution.map(|[w, h]| (w / factor, h / factor));
-                let dir = sharp.join(&sub);
+                let dir = level.join(&sub);
                 out.extend(image_problems(&dir, &rel, counts.views, want, "masks"));
                 continue;
             }
-            out.extend(exr_problems(&sharp.join(&sub), &rel, counts.views));
+            out.extend(exr_problems(&level.join(&sub), &rel, counts.views));
         }
     }
     out

@@ -307,9 +307,14 @@ fn pass_is(pass: &str) -> String {
         ),
         _ => format!(
             "{}: 8-bit PNG, 255 where the sharp image covers at least half the pixel (its \
-             alpha, area-averaged to the size), else 0",
+             alpha, area-averaged to the size), else 0; each blur level holds its own in \
+             blur_<l>/{}/: 255 where the exposure covered the pixel (a latent frame's alpha \
+             at least one half, or with blur_method motion_blur the render's alpha above \
+             0, area-averaged to the size) or the sharp mask is 255; a held-out view's is \
+             the sharp mask",
             at.replace("{dir}", &dir(pass))
-                .replace(", rendered at that size", "")
+                .replace(", rendered at that size", ""),
+            dir(pass)
         ),
     }
 }

@@ -96,6 +96,18 @@ pub fn pass_dir(pass: &str, factor: u32) -> String {
     }
 }
 
+/// The level folder that holds `level`'s files of `pass`: a blur level (`blur_<l>`)
+/// holds its own masks, because its image is an average over the exposure whose
+/// coverage is larger than the sharp silhouette (issue 48); every other pass, and the
+/// masks of the sharp and defocus levels (one render at the written pose each), are the
+/// sharp level's.
+pub fn pass_level<'a>(pass: &str, level: &'a str) -> &'a str {
+    match parse_level_dir(level) {
+        Some(l) if l > 0 && pass == "mask" => level,
+        _ => SHARP,
+    }
+}
+
 /// The file of view `image` (`007.png`) in a pass's folder: `007.exr` (depth, normals:
 /// float), `007.png` (masks: 8-bit).
 pub fn pass_file(pass: &str, image: &str) -> String {
@@ -270,3 +282,17 @@ mod tests {
         assert_eq!(linear_name(&image_name(7, 1500)), "0007.exr");
     }
 }
+
+    #[test]
+    fn a_blur_level_holds_its_own_masks_and_nothing_else_of_the_passes() {
+        assert_eq!(pass_level("mask", "blur_4"), "blur_4");
+        for (pass, level) in [
+            ("mask", SHARP),
+            ("mask", "defocus_2"),
+            ("depth", "blur_4"),
+            ("normal", "blur_1"),
+            ("mask", "blur_04"),
+        ] {
+            assert_eq!(pass_level(pass, level), SHARP, "{pass} of {level}");
+        }
+    }

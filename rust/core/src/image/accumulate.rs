@@ -11,11 +11,12 @@ use super::denoise::Denoiser;
 use super::exr::passes::decode_passes;
 use super::exr::read::{decode_rgba, first_non_finite, read_into};
 use super::exr::write::write_exr;
-use super::geometry::{mask_from_coverage, write_gray8_png};
+use super::geometry::{add_mask_file, exposure_mask, mask_from_coverage, write_gray8_png};
 use super::io::write_png_rgb8;
 use super::resample::area_mean;
 use super::{check_rgba_len, CH};
 use crate::error::{Error, Result};
+use crate::plan::choices::BlurMethod;
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -50,6 +51,13 @@ fn add_scaled(sum: &mut [f64], frame: &[f32], weight: f64) {
     }
 }
 
+/// `covered[i] = max(covered[i], alpha of pixel i)` for the RGBA pixels of `rgba`.
+fn cover(covered: &mut [f32], rgba: &[f32]) {
+    for (c, p) in covered.iter_mut().zip(rgba.chunks_exact(CH)) {
+        *c = c.max(p[3]);
+    }
+}
+
 /// Running sum of linear RGBA frames of one size; the mean is the blurry image.
 #[derive(Clone, Debug)]
 pub struct Accumulator {
@@ -57,6 +65,9 @@ pub struct Accumulator {
     height: u32,
     // f64: the sum of hundreds of f32 frames keeps every f32 bit of their mean.
     sum: Vec<f64>,
+    /// Per pixel, the largest alpha of any frame added: what the mean alone cannot say,
+    /// whether some frame covered the pixel (a blurry image's mask, issue 48).
+    covered: Vec<f32>,
     count: u32,
     /// The frames' weights summed (each frame 1 unless added with a weight: its samples,
     /// when rounds of one image render different counts per frame, `plan/target.rs`).
@@ -81,6 +92,7 @@ impl Accumulator {
             width,
             height,
             sum: vec![0.0; width as usize * height as usize * CH],
+            covered: vec![0.0; width as usize * height as usize],
             count: 0,
             weight: 0.0,
             staging: Vec::new(),
@@ -415,6 +427,11 @@ impl Accumulator {
             .par_chunks_mut(row)
             .zip(rgba.par_chunks(tile_row))
             .for_each(|(s, f)| add_scaled(&mut s[x0 * CH..x0 * CH + tile_row], f, weight));
+        // Outside the tile the frame's alpha is 0, which changes no maximum.
+        self.covered[y0 * self.width as usize..]
+            .par_chunks_mut(self.width as usize)
+            .zip(rgba.par_chunks(tile_row))
+            .for_each(|(c, f)| cover(&mut c[x0..x0 + tile_width], f));
         self.count_frame(weight);
     }
 
@@ -429,6 +446,8 @@ impl Accumulator {
             .par_chunks_mut(row)
             .zip(rgba.par_chunks(row))
             .for_each(|(s, f)| add_scaled(s, f, weight));
+        let px = start / CH;
+        cover(&mut self.covered[px..px + rgba.len() / CH], rgba);
         self.count_frame(weight);
     }
 
@@ -457,6 +476,9 @@ impl Accumulator {
             .par_iter_mut()
             .zip(other.sum.par_iter())
             .for_each(|(s, o)| *s += o);
+        for (c, &o) in self.covered.iter_mut().zip(&other.covered) {
+            *c = c.max(o);
+        }
         self.count += other.count;
         self.weight += other.weight;
         Ok(())
@@ -543,6 +565,32 @@ impl Accumulator {
         write_gray8_png(path, self.width / factor, self.height / factor, &mask)
     }
 
+    /// Per pixel, the largest alpha any frame added had (row-major).
+    pub fn covered(&self) -> Result<&[f32]> {
+        self.require_frames()?;
+        Ok(&self.covered)
+    }
+
+    /// Write the mask of a blurry image (the pixels its exposure covered, area-averaged
+    /// `factor` times: [`crate::image::geometry::exposure_mask`], each frame being one
+    /// render of `method`) as an 8-bit PNG, with every pixel of the mask PNG `with`
+    /// added (the sharp image's mask of the view at that size: the object at the written
+    /// pose, an instant of the exposure).
+    pub fn write_exposure_mask(
+        &self,
+        path: &Path,
+        factor: u32,
+        method: BlurMethod,
+        with: Option<&Path>,
+    ) -> Result<()> {
+        let mut mask = exposure_mask(self.covered()?, self.width, self.height, factor, method)?;
+        let (w, h) = (self.width / factor, self.height / factor);
+        if let Some(other) = with {
+            add_mask_file(&mut mask, w, h, other)?;
+        }
+        write_gray8_png(path, w, h, &mask)
+    }
+
     /// Write the mean as a linear, premultiplied RGBA f32 EXR.
     pub fn write_exr(&self, path: &Path) -> Result<()> {
         let mean = self.mean()?;
@@ -556,6 +604,7 @@ mod tests {
     use super::*;
     use crate::ground::atomic::write_atomic;
     use crate::image::exr::read::read_exr;
+    use crate::image::io::{read_image, Samples};
     use image::ImageEncoder;
     use proptest::prelude::*;
     use std::io::Cursor;
@@ -857,6 +906,69 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("already denoised"), "{e}");
+        Ok(())
+    }
+
+    /// An RGBA frame whose alpha is `alpha` (colour = alpha, premultiplied white).
+    fn alpha_frame(alpha: &[f32]) -> Vec<f32> {
+        alpha.iter().flat_map(|&a| [a, a, a, a]).collect()
+    }
+
+    #[test]
+    fn a_blurry_mask_is_every_pixel_some_frame_covered_half() -> Result<()> {
+        // Three frames of an object moving right across 6 x 1 pixels: each covers two
+        // pixels fully and its edges by 0.6 and 0.3. The mean's alpha reaches 0.5 on
+        // two pixels only; the frames cover five of them at least half.
+        let frames = [
+            [1.0f32, 1.0, 0.6, 0.0, 0.0, 0.0],
+            [0.0, 0.3, 1.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 0.3, 1.0, 0.6],
+        ];
+        let (mut a, mut b) = (Accumulator::new(6, 1), Accumulator::new(6, 1));
+        a.add_frame(&alpha_frame(&frames[0]))?;
+        // A cropped render adds nothing outside its tile (its alpha there is 0).
+        let p = tmp("cover_tile.exr");
+        std::fs::create_dir_all(tmp("")).unwrap();
+        write_exr(&p, 3, 1, &alpha_frame(&frames[1][1..4]))?;
+        a.add_exr_at(&p, Some((1, 0)))?;
+        b.add_frame(&alpha_frame(&frames[2]))?;
+        a.merge(&b)?;
+        assert_eq!(a.covered()?, [1.0, 1.0, 1.0, 1.0, 1.0, 0.6]);
+        let of_mean = mask_from_coverage(&a.mean()?, 6, 1, 1)?;
+        assert_eq!(of_mean, [0, 0, 255, 0, 0, 0]);
+        let m = tmp("cover.png");
+        a.write_exposure_mask(&m, 1, BlurMethod::Average, None)?;
+        let img = read_image(&m)?;
+        assert_eq!(img.samples, Samples::U8(vec![255, 255, 255, 255, 255, 255]));
+        // One motion-blurred render: every pixel it saw the object in at all.
+        let mut mb = Accumulator::new(6, 1);
+        mb.add_frame(&alpha_frame(&[0.0, 0.01, 0.4, 0.9, 0.2, 0.0]))?;
+        mb.write_exposure_mask(&m, 1, BlurMethod::MotionBlur, None)?;
+        assert_eq!(
+            read_image(&m)?.samples,
+            Samples::U8(vec![0, 255, 255, 255, 255, 0])
+        );
+        mb.write_exposure_mask(&m, 1, BlurMethod::Average, None)?;
+        assert_eq!(
+            read_image(&m)?.samples,
+            Samples::U8(vec![0, 0, 0, 255, 0, 0])
+        );
+        // The sharp mask's pixels are added; a mask of another size is refused by name.
+        let sharp = tmp("sharp_mask.png");
+        crate::image::geometry::write_gray8_png(&sharp, 6, 1, &[255, 0, 0, 0, 0, 0])?;
+        mb.write_exposure_mask(&m, 1, BlurMethod::Average, Some(&sharp))?;
+        assert_eq!(
+            read_image(&m)?.samples,
+            Samples::U8(vec![255, 0, 0, 255, 0, 0])
+        );
+        let small = tmp("small_mask.png");
+        crate::image::geometry::write_gray8_png(&small, 3, 1, &[255, 0, 0])?;
+        let e = mb
+            .write_exposure_mask(&m, 1, BlurMethod::Average, Some(&small))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("small_mask.png") && e.contains("6x1"), "{e}");
+        assert!(Accumulator::new(6, 1).covered().is_err());
         Ok(())
     }
 

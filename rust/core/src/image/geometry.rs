@@ -6,10 +6,12 @@
 //! a blend of an edge's two sides); the mask from the sharp image itself.
 use super::exr::passes::{decode_named, PassSpec};
 use super::exr::write::write_encoded;
+use super::io::{read_image, Samples};
 use super::resample::check_factor;
 use super::CH;
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
+use crate::plan::choices::BlurMethod;
 use std::io::Cursor;
 use std::path::Path;
 
@@ -152,6 +154,53 @@ pub fn decode_depth_exr(bytes: &[u8], path: &Path) -> Result<(usize, usize, Vec<
 /// (nerfstudio reads any non-zero value as "use this pixel").
 pub fn mask_from_coverage(rgba: &[f32], width: u32, height: u32, factor: u32) -> Result<Vec<u8>> {
     super::check_rgba_len(width, height, rgba.len())?;
+    half_covered(width, height, factor, |i| f64::from(rgba[i * CH + 3]))
+}
+
+/// The mask of a blurry image from `covered`, per pixel the largest alpha any render of
+/// it had (`Accumulator` keeps it beside the mean), area-averaged over `factor` blocks
+/// as [`mask_from_coverage`] does. What one render is decides which pixels the exposure
+/// covered (issue 48):
+/// - `Average`: one latent frame, so a pixel is in when at least one frame covers at
+///   least half of it (the union of the frames' alpha ≥ 0.5, the sharp image's rule
+///   applied to each instant rendered);
+/// - `MotionBlur`: the whole exposure, averaged over time by Cycles: the union of its
+///   instants is not observable from that mean (a thin part crossing a pixel for a
+///   moment leaves a small alpha), so every pixel the render saw the object in at all
+///   (alpha > 0) is in, the smallest rule that never drops a pixel an instant covered.
+pub fn exposure_mask(
+    covered: &[f32],
+    width: u32,
+    height: u32,
+    factor: u32,
+    method: BlurMethod,
+) -> Result<Vec<u8>> {
+    if covered.len() != width as usize * height as usize {
+        return Err(Error::Shape(format!(
+            "{} coverage values for a {width}x{height} image",
+            covered.len()
+        )));
+    }
+    match method {
+        BlurMethod::Average => half_covered(width, height, factor, |i| f64::from(covered[i])),
+        BlurMethod::MotionBlur => half_covered(width, height, factor, |i| {
+            if covered[i] > 0.0 {
+                1.0
+            } else {
+                0.0
+            }
+        }),
+    }
+}
+
+/// 255 where the mean of `alpha(pixel index)` over a `factor` × `factor` block is at
+/// least one half, else 0: the one rule of every mask.
+fn half_covered(
+    width: u32,
+    height: u32,
+    factor: u32,
+    alpha: impl Fn(usize) -> f64,
+) -> Result<Vec<u8>> {
     check_factor(width, height, factor)?;
     let (w, f) = (width as usize, factor as usize);
     let (ow, oh) = (w / f, height as usize / f);
@@ -160,7 +209,7 @@ pub fn mask_from_coverage(rgba: &[f32], width: u32, height: u32, factor: u32) ->
         .map(|i| {
             let (oy, ox) = (i / ow, i % ow);
             let sum: f64 = (0..f * f)
-                .map(|k| f64::from(rgba[((oy * f + k / f) * w + ox * f + k % f) * CH + 3]))
+                .map(|k| alpha((oy * f + k / f) * w + ox * f + k % f))
                 .sum();
             if sum / area >= 0.5 {
                 255
@@ -169,6 +218,35 @@ pub fn mask_from_coverage(rgba: &[f32], width: u32, height: u32, factor: u32) ->
             }
         })
         .collect())
+}
+
+/// `mask` with every pixel of the mask PNG at `other` added (the sharp image's mask of
+/// the same view and size: the object at the written pose p, which is an instant of
+/// every exposure, `plan/sampling.rs`); the file must be a mask of the same size.
+pub fn add_mask_file(mask: &mut [u8], width: u32, height: u32, other: &Path) -> Result<()> {
+    let img = read_image(other)?;
+    let bad = |reason: String| Error::Image {
+        reason,
+        path: other.to_path_buf(),
+    };
+    if (img.width, img.height) != (width, height) || img.channels != 1 {
+        return Err(bad(format!(
+            "a {}x{} image of {} channels, not a {width}x{height} mask",
+            img.width, img.height, img.channels
+        )));
+    }
+    let Samples::U8(px) = &img.samples else {
+        return Err(bad("not an 8-bit mask".into()));
+    };
+    if px.len() != mask.len() {
+        return Err(bad(format!("{} pixels, {} expected", px.len(), mask.len())));
+    }
+    for (m, &o) in mask.iter_mut().zip(px) {
+        if o > 0 {
+            *m = 255;
+        }
+    }
+    Ok(())
 }
 
 /// An 8-bit single-channel ("L") PNG, written atomically.
