@@ -512,6 +512,10 @@ def pass_file(kind: str, image: str) -> str:
     """The file of an image's view in a pass's folder (`007.exr`; masks `007.png`)."""
 
 def pass_level(kind: str, level: str) -> str:
+def nerfstudio_depth_dir(factor: int) -> str:
+    """nerfstudio's depth folder in an exported scene at downsampling factor `factor`
+    (`depths`, `depths_4`)."""
+
     """The level folder that holds `level`'s files of pass `kind`: a blur level's own
     masks (`blur_4`), everything else the sharp level's (`sharp`)."""
 
@@ -1376,7 +1380,8 @@ def owned_entries(dir: str | PathLike[str], kind: OutputKind) -> list[str]:
     """The entries (relative paths) an output of `kind` in `dir` wrote."""
 
 def remove_owned(dir: str | PathLike[str], kind: OutputKind) -> list[str]:
-    """Remove what `owned_entries` lists; returns it."""
+    """Remove what `owned_entries` lists; returns it. An entry holding a file the command
+    did not write is refused by name (InputError) before anything is removed."""
 
 def build_state(out: str | PathLike[str]) -> BuildState:
     """Whether `out` is a finished build, and its complete settings."""
@@ -1392,6 +1397,10 @@ def mark_text(text: str, command: str) -> str:
 
 def text_owner(path: str | PathLike[str], command: str) -> str:
     """`absent`, `ours`, `edited` or `foreign`: who the text file at `path` belongs to."""
+def not_written(dir: str | PathLike[str], kind: OutputKind, rel: str) -> list[str]:
+    """The entries inside the owned entry `rel` of the output in `dir` that no command of
+    `kind` writes (paths relative to `dir`)."""
+
 
 def read_record(path: str | PathLike[str], record: str | None = None) -> Any:
     """A record blurset wrote, checked against its shape: the parsed JSON. InputError

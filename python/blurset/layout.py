@@ -66,6 +66,12 @@ def pass_dir(p: str, factor: int) -> str:
     return _core.pass_dir(p, factor)
 
 
+def nerfstudio_depth_dir(factor: int) -> str:
+    """nerfstudio's depth folder in an exported scene (`depths`, `depths_4`: its parser
+    reads `depths_<f>/` when it downscales)."""
+    return _core.nerfstudio_depth_dir(factor)
+
+
 def pass_level(p: str, level: str) -> str:
     """The level folder holding `level`'s files of pass `p`: a blur level's own masks
     (the coverage of its exposure), everything else the sharp level's."""

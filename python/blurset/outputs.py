@@ -24,7 +24,7 @@ import fcntl
 import json
 import os
 import socket
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -129,8 +129,26 @@ def owned_entries(path: Path, kind: _core.OutputKind) -> list[str]:
 
 
 def remove_owned(path: Path, kind: _core.OutputKind) -> list[str]:
-    """Remove only what the output of `kind` in `path` wrote (`--overwrite`)."""
+    """Remove only what the output of `kind` in `path` wrote (`--overwrite`); an entry
+    holding a file the command did not write is refused (InputError) before any goes."""
     return _core.remove_owned(Path(path), kind)
+
+
+def refuse_not_written(
+    path: Path, kind: _core.OutputKind, entries: Iterable[str], command: str, option: str = "--out"
+) -> None:
+    """ConfigError naming the first file inside `entries` (owned entries of the output
+    of `kind` in `path`, about to be replaced) that `blurset <command>` did not write: a
+    user's note in a gain or scene folder is named, never deleted with it."""
+    for rel in entries:
+        found = _core.not_written(Path(path), kind, rel)
+        if found:
+            more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
+            raise ConfigError(
+                f"{option} holds {found[0]}{more}, which blurset {command} did not write "
+                f"and would delete with {rel}: move it out, then rerun (nothing was changed): "
+                f"{path}"
+            )
 
 
 def read_record(path: Path, record: str | None = None) -> Any:

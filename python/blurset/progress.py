@@ -40,6 +40,7 @@ class Progress:
         self.settings_done = 0
         self.settings_skipped = 0
         self.failed = 0
+        self.skipped = 0  # objects --licenses leaves out: by request, not failures
         self.fps = frames_per_setting
         self.frames_total = settings * frames_per_setting
         self.frames_done = 0
@@ -65,10 +66,13 @@ class Progress:
 
     def _post(self) -> None:
         if self._bar is not None:
-            s = f"{self.settings_done}/{self.settings_total} settings"
-            if self.failed:
-                s += f", {self.failed} failed"
+            s = f"{self.settings_done}/{self.settings_total} settings{self._tally()}"
             self._bar.set_postfix_str(s, refresh=False)
+
+    def _tally(self) -> str:
+        """`, 1 failed, 2 skipped (licence)`: what did not render, and why."""
+        s = f", {self.failed} failed" if self.failed else ""
+        return s + (f", {self.skipped} skipped (licence)" if self.skipped else "")
 
     def timing(self) -> str:
         """`1m05s elapsed, ETA 3m10s` (ETA `-` before the first frame of this run)."""
@@ -93,9 +97,8 @@ class Progress:
             self.settings_done += 1
             self._post()
             if self._lines:
-                failed = f", {self.failed} failed" if self.failed else ""
                 print(
-                    f"{self.settings_done}/{self.settings_total} settings done{failed} "
+                    f"{self.settings_done}/{self.settings_total} settings done{self._tally()} "
                     f"({self.timing()})",
                     file=sys.stderr,
                     flush=True,
@@ -116,8 +119,18 @@ class Progress:
             self._post()
 
     def object_failed(self, settings_left: int) -> None:
+        self._drop(settings_left, skipped=False)
+
+    def object_skipped(self, settings_left: int) -> None:
+        """An object `--licenses` leaves out: its settings leave the work, not failed."""
+        self._drop(settings_left, skipped=True)
+
+    def _drop(self, settings_left: int, skipped: bool) -> None:
         with self._lock:
-            self.failed += 1
+            if skipped:
+                self.skipped += 1
+            else:
+                self.failed += 1
             if settings_left > 0:
                 self.frames_total = max(
                     self.frames_done, self.frames_total - settings_left * self.fps

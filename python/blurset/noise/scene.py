@@ -38,8 +38,12 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
         )
     with outputs.lock(out, NOISE_SCENE):
         # Claimed again under the lock: another run may have written it meanwhile.
-        if outputs.claim(out, NOISE_SCENE, "--out") == "same" and not cfg.overwrite:
-            raise ConfigError(f"--out is a noise output already (pass --overwrite): {out}")
+        if outputs.claim(out, NOISE_SCENE, "--out") == "same":
+            if not cfg.overwrite:
+                raise ConfigError(f"--out is a noise output already (pass --overwrite): {out}")
+            # Refused before the gains are written: their old folders go whole.
+            owned = outputs.owned_entries(out, NOISE_SCENE)
+            outputs.refuse_not_written(out, NOISE_SCENE, owned, "noise")
         # A killed run's staging tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
         # (and an old gain a killed replace_dir had moved aside)
         layout.remove_stale_temps(out, [STAGE, *(g.name for g in out.glob("gain_*"))])

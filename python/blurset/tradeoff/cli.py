@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from blurset import layout, outputs
+from blurset.config import BUILD
 from blurset.exceptions import ConfigError
 from blurset.tradeoff.grid import preset_from_args
 from blurset.tradeoff.measure import measure
@@ -33,7 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-ghost-px", type=float, default=1.0, help="for the auto rows")
     p.add_argument(
         "--latent-sampling",
-        choices=["subsets", "independent"],
+        type=str.lower,  # choices in any case, as build takes them (its declaration's)
+        choices=BUILD.by_name["latent_sampling"].choices,
         default="subsets",
         help="how the candidates' latent frames share samples",
     )

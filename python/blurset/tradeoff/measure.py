@@ -18,6 +18,7 @@ import numpy as np
 from blurset import _core, layout, outputs
 from blurset.config import BuildConfig
 from blurset.denoise import denoiser
+from blurset.exceptions import ConfigError
 from blurset.tradeoff.grid import Candidate, Preset, candidate_config, candidates
 from blurset.tradeoff.recommend import recommend
 from blurset.tradeoff.render import (
@@ -116,9 +117,26 @@ class _References:
         }
 
 
-def measure(args: argparse.Namespace, pre: Preset, glb: Path, out: Path) -> dict:
-    work = out / ".work"
+# The worker's folder in OUT is `.work.tmp<pid>` (layout.temp_path): this run's alone.
+WORK = "work"
+
+
+def scratch(out: Path) -> Path:
+    """The worker's log and scratch for this run: `.work.tmp<pid>` in OUT, made new (a
+    `.work` of the user's, or a link by that name, is never used or removed); a killed
+    run's is removed by the next run."""
+    layout.remove_stale_temps(out, [WORK])
+    work = layout.temp_path(out / WORK)
+    if work.is_symlink() or work.is_file():
+        raise ConfigError(f"--out holds {work.name}, which tradeoff did not write: {work}")
+    # (A folder by this name is a dead run's of this very pid: this run's scratch.)
     shutil.rmtree(work, ignore_errors=True)
+    work.mkdir()
+    return work
+
+
+def measure(args: argparse.Namespace, pre: Preset, glb: Path, out: Path) -> dict:
+    work = scratch(out)
     (out / layout.IMAGES).mkdir(exist_ok=True)
     say: Callable[[str], None] = (
         (lambda *_: None) if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
@@ -143,7 +161,9 @@ def measure(args: argparse.Namespace, pre: Preset, glb: Path, out: Path) -> dict
             if refs.den is not None:
                 rows.append(_denoised_row(s, refs, row, c, frames, lp))
                 say(f"      +oidn {rows[-1]['psnr']:6.2f} dB, render {rows[-1]['render_psnr']}")
-    return _finish(args, pre, glb, out, s.uid, rows, ref_lp, refs.r_samples, t_start)
+    res = _finish(args, pre, glb, out, s.uid, rows, ref_lp, refs.r_samples, t_start)
+    shutil.rmtree(work, ignore_errors=True)
+    return res
 
 
 def _references(
@@ -344,5 +364,4 @@ def _finish(
     write_csv(out / "tradeoff.csv", rows)
     write_record(out / outputs.TRADEOFF_RECORD, setup, rows, rec)
     plot(out / "tradeoff.png", rows, setup)
-    shutil.rmtree(out / ".work", ignore_errors=True)
     return {"setup": setup, "rows": rows, "recommendation": rec}

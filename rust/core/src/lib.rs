@@ -78,8 +78,8 @@ pub use crate::dataset::noise_plan::{
     plan_build as plan_noise_build, plan_scene as plan_noise_scene, NoiseGain, NoisePlan, NoiseUnit,
 };
 pub use crate::dataset::outputs::{
-    build_state, claim, mark_text, output_kind, owned_entries, remove_owned, superseded_settings,
-    text_owner, BuildState, Claim, OutputKind, TextOwner,
+    build_state, claim, mark_text, not_written, output_kind, owned_entries, remove_owned,
+    superseded_settings, text_owner, BuildState, Claim, OutputKind, TextOwner,
 };
 pub use crate::dataset::read::{check_shape, parse_record, read_record, Record};
 pub use crate::dataset::records::{write_dataset, DatasetDoc};
@@ -96,9 +96,9 @@ pub use crate::ground::license::{
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
     defocus_dir, files, gain_name, image_name, images_dir, is_level_dir, level_dir, level_dirs,
-    linear_dir, linear_name, object_lock, parse_defocus_dir, parse_level_dir, pass_dir, pass_file,
-    pass_level, setting_name, sort_level_dirs, theta0s, work_dir, OBJECT_LOCK_PREFIX, PASSES,
-    SHARP, WORK_PREFIX,
+    linear_dir, linear_name, nerfstudio_depth_dir, object_lock, parse_defocus_dir, parse_level_dir,
+    pass_dir, pass_file, pass_level, setting_name, sort_level_dirs, theta0s, work_dir,
+    OBJECT_LOCK_PREFIX, PASSES, SHARP, WORK_PREFIX,
 };
 
 // Image error against a reference and the speed/quality front.

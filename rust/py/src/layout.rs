@@ -107,6 +107,13 @@ fn pass_dir(kind: &str, factor: u32) -> String {
     core::pass_dir(kind, factor)
 }
 
+/// nerfstudio's depth folder in an exported scene at downsampling factor `factor`
+/// (`depths`, `depths_4`).
+#[pyfunction]
+fn nerfstudio_depth_dir(factor: u32) -> String {
+    core::nerfstudio_depth_dir(factor)
+}
+
 /// The level folder that holds `level`'s files of pass `kind` (a blur level's own
 /// masks; everything else the sharp level's).
 #[pyfunction]
@@ -258,6 +265,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(linear_name, m)?)?;
     m.add_function(wrap_pyfunction!(linear_dir, m)?)?;
     m.add_function(wrap_pyfunction!(pass_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(nerfstudio_depth_dir, m)?)?;
     m.add_function(wrap_pyfunction!(pass_file, m)?)?;
     m.add_function(wrap_pyfunction!(pass_level, m)?)?;
     m.add_function(wrap_pyfunction!(setting_name, m)?)?;

@@ -105,7 +105,20 @@ fn owned_entries(py: Python<'_>, dir: PathBuf, kind: PyOutputKind) -> PyResult<V
     crate::run_detached(py, || core::owned_entries(&dir, kind.into()))
 }
 
-/// Remove what `owned_entries` lists; returns it.
+/// The entries inside the owned entry `rel` of the output in `dir` that no command of
+/// `kind` writes (paths relative to `dir`).
+#[pyfunction]
+fn not_written(
+    py: Python<'_>,
+    dir: PathBuf,
+    kind: PyOutputKind,
+    rel: String,
+) -> PyResult<Vec<String>> {
+    crate::run_detached(py, || core::not_written(&dir, kind.into(), &rel))
+}
+
+/// Remove what `owned_entries` lists; returns it. An entry holding a file the command
+/// did not write is refused by name (InputError) before anything is removed.
 #[pyfunction]
 fn remove_owned(py: Python<'_>, dir: PathBuf, kind: PyOutputKind) -> PyResult<Vec<String>> {
     crate::run_detached(py, || core::remove_owned(&dir, kind.into()))
@@ -237,6 +250,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(output_kind, m)?)?;
     m.add_function(wrap_pyfunction!(claim, m)?)?;
     m.add_function(wrap_pyfunction!(owned_entries, m)?)?;
+    m.add_function(wrap_pyfunction!(not_written, m)?)?;
     m.add_function(wrap_pyfunction!(remove_owned, m)?)?;
     m.add_function(wrap_pyfunction!(build_state, m)?)?;
     m.add_function(wrap_pyfunction!(superseded_settings, m)?)?;

@@ -13,6 +13,15 @@ use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
+/// The stage of the record of an object `--licenses` leaves out: skipped by request,
+/// not a failure (progress lines, the build's summary and `stats` say so).
+pub const LICENSE_STAGE: &str = "license";
+
+/// Whether a record is such a skip.
+pub fn is_license_skip(stage: Option<&str>) -> bool {
+    stage == Some(LICENSE_STAGE)
+}
+
 /// The records of a failures.jsonl (none when the file is absent) and the number of
 /// lines skipped because they are not a JSON object with a string `uid`.
 pub fn read_records(path: &Path) -> Result<(Vec<Value>, usize)> {

@@ -16,10 +16,10 @@
 //! - A file blurset writes among a user's files (a dataset card) carries a mark of its
 //!   own content ([`mark_text`]); [`text_owner`] tells an unedited one from one a person
 //!   edited or wrote, which is replaced only when asked.
-use super::layout::{scan, PARTIAL_SUFFIX};
+use super::layout::{parse_temp_name, scan, PARTIAL_SUFFIX};
 use super::read::{check_shape, read_record, Record};
 use crate::error::{Error, Result};
-use crate::ground::names::{files, OBJECT_LOCK_PREFIX};
+use crate::ground::names::{files, nerfstudio_depth_dir, pass_dir, OBJECT_LOCK_PREFIX, PASSES};
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
@@ -382,10 +382,151 @@ fn safe_rel(rel: &str) -> bool {
     !rel.is_empty() && rel.split('/').all(safe_name)
 }
 
+// -- what an owned entry holds that its command did not write --------------------------
+
+/// What a folder an output of a kind owns may hold: the files at its top, the folders
+/// `<base>` / `<base>_<f>` of image files (one per downsampling factor), and whether
+/// links are the command's own (an export links its scenes into the build).
+struct EntryRule {
+    files: Vec<String>,
+    folders: Vec<String>,
+    links: bool,
+}
+
+impl EntryRule {
+    /// The rule of a folder entry `name` of `kind`: a noise unit (`gain_<g>`) or an
+    /// exported scene; None for an entry that is no such folder (a record, a list).
+    fn of(kind: OutputKind, name: &str) -> Option<EntryRule> {
+        let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+        match kind {
+            OutputKind::Noise | OutputKind::NoiseScene if name.starts_with("gain_") => {
+                Some(EntryRule {
+                    files: s(&[
+                        files::POSES_BOUNDS,
+                        files::TRANSFORMS,
+                        files::NOISE,
+                        super::layout::MARKER,
+                    ]),
+                    folders: s(&[files::IMAGES, files::LINEAR]),
+                    links: false,
+                })
+            }
+            OutputKind::Export => {
+                let mut folders = s(&[files::IMAGES]);
+                folders.extend(PASSES.iter().map(|p| pass_dir(p, 1)));
+                folders.push(nerfstudio_depth_dir(1));
+                Some(EntryRule {
+                    files: s(&[files::POSES_BOUNDS, files::TRANSFORMS]),
+                    folders,
+                    links: true,
+                })
+            }
+            _ => None,
+        }
+    }
+
+    /// `base` or `base_<f>` of one of the rule's folders.
+    fn is_folder(&self, name: &str) -> bool {
+        self.folders.iter().any(|base| {
+            name == base
+                || name
+                    .strip_prefix(base.as_str())
+                    .and_then(|r| r.strip_prefix('_'))
+                    .is_some_and(|f| !f.is_empty() && f.bytes().all(|b| b.is_ascii_digit()))
+        })
+    }
+}
+
+enum Shape {
+    Link,
+    Folder,
+    File,
+}
+
+/// An image file's name (what the folders of an entry hold).
+fn is_image_name(name: &str) -> bool {
+    let lower = name.to_ascii_lowercase();
+    [".png", ".exr", ".jpg", ".jpeg"]
+        .iter()
+        .any(|e| lower.ends_with(e))
+}
+
+/// The entries (paths relative to `dir`) inside the owned entry `rel` of the output of
+/// `kind` in `dir` that no command of that kind writes: what removing `rel` would take
+/// with it that is not blurset's (a user's notes in a gain or scene folder). A killed
+/// writer's temp names (`.<name>.tmp<pid>`) are the command's own. Empty for a file
+/// entry, and for a link where the kind writes links.
+pub fn not_written(dir: &Path, kind: OutputKind, rel: &str) -> Result<Vec<String>> {
+    let top = dir.join(rel);
+    let Ok(meta) = std::fs::symlink_metadata(&top) else {
+        return Ok(Vec::new());
+    };
+    let name = rel.rsplit('/').next().unwrap_or(rel);
+    let base = name.strip_suffix(PARTIAL_SUFFIX).unwrap_or(name);
+    let rule = EntryRule::of(kind, base);
+    if !meta.is_dir() {
+        return Ok(match &rule {
+            Some(r) if meta.file_type().is_symlink() && !r.links => vec![rel.to_string()],
+            _ => Vec::new(),
+        });
+    }
+    let Some(rule) = rule else {
+        // A record's or a list's name that is a folder: not one blurset wrote.
+        return Ok(vec![rel.to_string()]);
+    };
+    // What an entry is, never following a link: a link, a real folder or a file.
+    let what = |p: &Path| match p.symlink_metadata() {
+        Ok(m) if m.file_type().is_symlink() => Shape::Link,
+        Ok(m) if m.is_dir() => Shape::Folder,
+        _ => Shape::File,
+    };
+    let mut found = Vec::new();
+    for (n, p) in list(&top)? {
+        let here = format!("{rel}/{n}");
+        let ours = match what(&p) {
+            _ if parse_temp_name(&n).is_some() => true,
+            Shape::Link => rule.links && (rule.files.contains(&n) || rule.is_folder(&n)),
+            Shape::File => rule.files.contains(&n),
+            Shape::Folder if rule.is_folder(&n) => {
+                for (m, q) in list(&p)? {
+                    let image = match what(&q) {
+                        Shape::Folder => false,
+                        Shape::Link => rule.links && is_image_name(&m),
+                        Shape::File => is_image_name(&m),
+                    };
+                    if !image && parse_temp_name(&m).is_none() {
+                        found.push(format!("{here}/{m}"));
+                    }
+                }
+                true
+            }
+            Shape::Folder => false,
+        };
+        if !ours {
+            found.push(here);
+        }
+    }
+    Ok(found)
+}
+
 /// Remove the entries `owned_entries` lists (then the folders a noise output's units
 /// leave empty): what `--overwrite` does, and nothing else. Returns what was removed.
+/// An entry holding a file the command did not write ([`not_written`]) is refused by
+/// name before anything is removed.
 pub fn remove_owned(dir: &Path, kind: OutputKind) -> Result<Vec<String>> {
     let entries = owned_entries(dir, kind)?;
+    for rel in &entries {
+        if let Some(first) = not_written(dir, kind, rel)?.first() {
+            return Err(Error::Input {
+                reason: format!(
+                    "holds {first}, which blurset {} did not write and would delete with \
+                     {rel}: move it out, then rerun (nothing was removed)",
+                    kind.name()
+                ),
+                path: dir.into(),
+            });
+        }
+    }
     for rel in &entries {
         let p = dir.join(rel);
         crate::ground::atomic::remove_entry(&p)?;
@@ -748,7 +889,7 @@ mod tests {
             r#"{"build": "b", "params": {}}"#,
         );
         write(&d.join("a_000/blur_3/gain_4/noise.json"), "{}");
-        write(&d.join("a_000/blur_3/gain_8.partial/x.png"), "x");
+        write(&d.join("a_000/blur_3/gain_8.partial/images/000.png"), "x");
         write(&d.join("a_000/blur_3/my_notes/n.txt"), "mine");
         write(&d.join("a_000/blur_3/gain_notes.txt"), "mine");
         let owned = owned_entries(&d, OutputKind::Noise)?;
@@ -781,6 +922,93 @@ mod tests {
         );
         let _ = std::fs::remove_dir_all(&d);
         let _ = std::fs::remove_dir_all(&s);
+        Ok(())
+    }
+
+    #[test]
+    fn overwrite_refuses_a_unit_holding_a_file_noise_did_not_write() -> Result<()> {
+        let d = tmp("noise-foreign");
+        write(
+            &d.join("noise_dataset.json"),
+            r#"{"build": "b", "params": {}}"#,
+        );
+        let unit = d.join("a_000/blur_4/gain_1");
+        for f in [
+            "noise.json",
+            ".complete",
+            "poses_bounds.npy",
+            "images/000.png",
+        ] {
+            write(&unit.join(f), "x");
+        }
+        write(&unit.join("linear_2/000.exr"), "x");
+        write(&unit.join("images/.001.png.tmp99"), "a killed writer's");
+        assert_eq!(
+            not_written(&d, OutputKind::Noise, "a_000/blur_4/gain_1")?,
+            Vec::<String>::new()
+        );
+        write(&unit.join("mynote.txt"), "mine");
+        write(&unit.join("images/mine.txt"), "mine");
+        write(&unit.join("depth/000.exr"), "not noise's");
+        assert_eq!(
+            not_written(&d, OutputKind::Noise, "a_000/blur_4/gain_1")?,
+            [
+                "a_000/blur_4/gain_1/depth",
+                "a_000/blur_4/gain_1/images/mine.txt",
+                "a_000/blur_4/gain_1/mynote.txt"
+            ]
+        );
+        let e = remove_owned(&d, OutputKind::Noise).unwrap_err().to_string();
+        assert!(
+            e.contains("holds a_000/blur_4/gain_1/depth, which blurset noise output did not"),
+            "{e}"
+        );
+        // Nothing removed, the records neither.
+        assert!(unit.join("mynote.txt").is_file() && d.join("noise_dataset.json").is_file());
+        // One scene's gains, likewise.
+        let s = tmp("noise-scene-foreign");
+        write(&s.join("noise_scene.json"), "{}");
+        write(&s.join("gain_2/noise.json"), "{}");
+        write(&s.join("gain_2/README"), "mine");
+        assert_eq!(
+            not_written(&s, OutputKind::NoiseScene, "gain_2")?,
+            ["gain_2/README"]
+        );
+        assert!(remove_owned(&s, OutputKind::NoiseScene).is_err());
+        assert!(s.join("gain_2/README").is_file());
+        let _ = std::fs::remove_dir_all(&d);
+        let _ = std::fs::remove_dir_all(&s);
+        Ok(())
+    }
+
+    #[test]
+    fn an_exported_scene_owns_its_pass_folders_and_links() -> Result<()> {
+        let d = tmp("export-foreign");
+        let scene = d.join("a_000__sharp");
+        write(&scene.join("poses_bounds.npy"), "x");
+        write(&scene.join("depths_4/000.png"), "x");
+        write(&scene.join("masks/000.png"), "x");
+        write(&d.join("build/depth/000.exr"), "x");
+        #[cfg(unix)]
+        {
+            let link = |to: &str, at: &str| {
+                std::os::unix::fs::symlink(d.join(to), scene.join(at)).expect("link")
+            };
+            link("build/depth", "depth");
+            link("build/depth", "normals_4");
+            link("build/depth/000.exr", "images");
+        }
+        assert_eq!(
+            not_written(&d, OutputKind::Export, "a_000__sharp")?,
+            Vec::<String>::new()
+        );
+        write(&scene.join("notes.txt"), "mine");
+        write(&scene.join("depths/notes.txt"), "mine");
+        assert_eq!(
+            not_written(&d, OutputKind::Export, "a_000__sharp")?,
+            ["a_000__sharp/depths/notes.txt", "a_000__sharp/notes.txt"]
+        );
+        let _ = std::fs::remove_dir_all(&d);
         Ok(())
     }
 

@@ -330,7 +330,8 @@ pub struct ExportDoc {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_images: Option<String>,
     /// The build's `--passes` every scene carries beside its images (issue 35): the
-    /// sharp level's files at the written pose, which every level and gain shares.
+    /// sharp level's files at the written pose, which every level and gain shares
+    /// (without `mask` under `export --no-masks`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub passes: Vec<String>,
 }

@@ -190,6 +190,10 @@ pub struct Counts {
     pub settings_failed: usize,
     /// failures.jsonl lines that do not parse (torn by a kill), skipped.
     pub failure_lines_skipped: usize,
+    /// Objects `--licenses` leaves out now (records of stage `license`): skipped by
+    /// request, not counted in `failures`.
+    #[serde(default)]
+    pub licence_skipped: usize,
     /// Setting directories skipped as incomplete (`*.partial`, or no `.complete`).
     pub incomplete_settings: usize,
 }
@@ -223,6 +227,9 @@ pub struct BuildStats {
     pub settings: Vec<SettingInfo>,
     pub incomplete: Vec<String>,
     pub failures: Vec<Failure>,
+    /// Objects `--licenses` leaves out (their failures.jsonl records): not failures.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub licence_skipped: Vec<Failure>,
     pub view_setting: Vec<usize>,
     pub view_index: Vec<u64>,
     pub scene_range: Vec<f64>,
@@ -546,17 +553,20 @@ pub fn build_stats(out: &Path) -> Result<BuildStats> {
     let complete: BTreeSet<String> = scan.complete.iter().cloned().collect();
     let text =
         |r: &serde_json::Value, k: &str| r.get(k).and_then(|v| v.as_str()).map(str::to_owned);
-    let failing = failures::current(&lines, &complete, theta0s.as_deref())
-        .iter()
-        .map(|r| Failure {
-            uid: text(r, "uid").unwrap_or_default(),
-            setting: text(r, "setting"),
-            stage: text(r, "stage"),
-            reason: text(r, "reason"),
-        })
-        .collect();
+    let (licence, failing): (Vec<Failure>, Vec<Failure>) =
+        failures::current(&lines, &complete, theta0s.as_deref())
+            .iter()
+            .map(|r| Failure {
+                uid: text(r, "uid").unwrap_or_default(),
+                setting: text(r, "setting"),
+                stage: text(r, "stage"),
+                reason: text(r, "reason"),
+            })
+            .partition(|f| failures::is_license_skip(f.stage.as_deref()));
     let mut st = assemble(out, scan, records, splits, failing);
     st.counts.failure_lines_skipped = skipped;
+    st.counts.licence_skipped = licence.len();
+    st.licence_skipped = licence;
     Ok(st)
 }
 
@@ -614,6 +624,7 @@ fn no_views(
         settings: Vec::with_capacity(settings),
         incomplete,
         failures: Vec::new(),
+        licence_skipped: Vec::new(),
         view_setting: Vec::with_capacity(n_views),
         view_index: Vec::with_capacity(n_views),
         scene_range: col(),
@@ -966,6 +977,26 @@ mod tests {
         // the document is valid JSON without NaN
         let text = serde_json::to_string(&s).map_err(|e| Error::Value(e.to_string()))?;
         assert!(text.contains("\"blur_weight\":{\"1\":[0.5,1.5,0.5,null]"));
+        Ok(())
+    }
+
+    #[test]
+    fn an_object_left_out_by_licenses_is_skipped_not_failed() -> Result<()> {
+        let t = TempDir::new("licence")?;
+        let out = &t.0;
+        setting(out, "a_0", &meta("a", 0.0, [1.0; 3], &[2.0], &[1]), true)?;
+        write(
+            &out.join("failures.jsonl"),
+            "{\"uid\":\"nc\",\"stage\":\"license\",\"reason\":\"licence CC-BY-NC-4.0\"}\n\
+             {\"uid\":\"d\",\"stage\":\"load\",\"reason\":\"bad glb\"}\n",
+        )?;
+        let s = build_stats(out)?;
+        assert_eq!((s.counts.failures, s.counts.licence_skipped), (1, 1));
+        let uids = |v: &[Failure]| v.iter().map(|f| f.uid.clone()).collect::<Vec<_>>();
+        assert_eq!(
+            (uids(&s.failures), uids(&s.licence_skipped)),
+            (vec!["d".to_string()], vec!["nc".to_string()])
+        );
         Ok(())
     }
 

@@ -118,6 +118,17 @@ pub fn pass_file(pass: &str, image: &str) -> String {
     }
 }
 
+/// nerfstudio's depth folder in an exported scene at downsampling factor `factor`:
+/// `depths`, `depths_4` (its parser reads `depths_<f>/` when it downscales), holding the
+/// depth pass as 16-bit millimetre PNGs.
+pub fn nerfstudio_depth_dir(factor: u32) -> String {
+    if factor <= 1 {
+        "depths".to_string()
+    } else {
+        format!("depths_{factor}")
+    }
+}
+
 /// The linear EXR folder at downsampling factor `factor`: `linear` or `linear_<f>`.
 pub fn linear_dir(factor: u32) -> String {
     if factor <= 1 {
