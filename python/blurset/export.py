@@ -37,11 +37,11 @@ EXPORT_FILE = EXPORT.record
 NOISE_DATASET = outputs.OutputKind.NOISE.record
 # Temp names (`.<name>.tmp<pid>`) of the staged scenes and of what makes way.
 STAGE, TRASH = "export", "export.old"
+# The files an export writes at the top of --out besides its scenes.
+LISTS = ("train.txt", "test.txt", EXPORT_FILE)
 # What each target reads: IBRNet's `<rootdir>/data/nerf_llff_data/<scene>` and NAN's
 # `DATA_DIR/nerf_llff_data/<scene>` list every entry of that folder as a scene, so
 # nothing else may lie there; nerfstudio takes any scene folder (`--data`).
-# nerfstudio's depth folder (its parser reads `depths_<f>/` when it downscales).
-NERFSTUDIO_DEPTHS = "depths"
 SCENES_DIR = {"llff": "nerf_llff_data", "nerfstudio": ".", "geonerf": "geonerf"}
 # GeoNeRF (data/llff.py) holds out every 8th image of a scene (hard-coded) and draws a
 # target's sources from all the others: a test scene is its target and the 7 nearest
@@ -73,6 +73,13 @@ def add_arguments(p) -> None:
     )
     p.add_argument("--gains", nargs="+", help="gains of --noise to export (default: all)")
     p.add_argument("--copy", action="store_true", help="copy the files instead of symlinking")
+    p.add_argument(
+        "--no-masks",
+        action="store_true",
+        help="leave the build's masks (--passes mask) out: no masks/ folders, and no "
+        "mask_path in a nerfstudio scene's transforms.json, so a loader trains on every "
+        "pixel (export.json lists the passes exported)",
+    )
     p.add_argument(
         "--overwrite",
         action="store_true",
@@ -178,6 +185,9 @@ def _inputs(args) -> _Inputs:
             "--downsample 4"
         )
     passes = [] if args.target == "geonerf" else list(dataset["config"].get("passes") or [])
+    if args.no_masks:
+        # Recorded by their absence from export.json's passes: a rerun with masks differs.
+        passes = [p for p in passes if p != "mask"]
     return _Inputs(build, noise, state.complete, splits, levels, gains, factors, held, passes)
 
 
@@ -382,12 +392,12 @@ def _write_passes(
     for frame in tf["frames"]:
         name = Path(frame["file_path"]).name
         if "depth" in doc["passes"]:
-            frame["depth_file_path"] = f"{NERFSTUDIO_DEPTHS}/{name}"
+            frame["depth_file_path"] = f"{layout.nerfstudio_depth_dir(1)}/{name}"
         if "mask" in doc["passes"]:
             frame["mask_path"] = f"{layout.pass_dir('mask', 1)}/{name}"
     if "depth" in doc["passes"]:
         for f in [1, *doc["factors"]]:
-            sub = NERFSTUDIO_DEPTHS if f == 1 else f"{NERFSTUDIO_DEPTHS}_{f}"
+            sub = layout.nerfstudio_depth_dir(f)
             (d / sub).mkdir()
             for frame in tf["frames"]:
                 name = Path(frame["file_path"]).name
@@ -418,32 +428,9 @@ def _refuse_overlap(out: Path, doc: _records.ExportDoc, inputs: list[Path]) -> N
         if r.is_relative_to(o):
             top = doc["scenes_dir"] if doc["scenes_dir"] != "." else None
             mine = [top] if top else list(doc["scenes"])
-            for e in [*mine, "train.txt", "test.txt", EXPORT_FILE]:
+            for e in [*mine, *LISTS]:
                 if r == o / e or r.is_relative_to(o / e):
                     raise ConfigError(f"--out/{e} would hold the input {str(i)!r}: {out}")
-
-
-def _not_written_by_export(scene: Path) -> str | None:
-    """The first entry of an exported scene folder (or of its copied image folders) that
-    no export writes, relative to the scene; None when it holds only an export's files:
-    images/, images_<f>/, poses_bounds.npy, transforms.json, and image files in the
-    folders."""
-    if scene.is_symlink() or not scene.is_dir():
-        return None
-    for p in sorted(scene.iterdir()):
-        name = p.name
-        is_images = name == layout.IMAGES or (
-            name.startswith(layout.IMAGES + "_") and name[len(layout.IMAGES) + 1 :].isdigit()
-        )
-        if name in (layout.POSES_BOUNDS, layout.TRANSFORMS) and not p.is_dir():
-            continue
-        if not is_images:
-            return name
-        if p.is_dir() and not p.is_symlink():
-            for q in sorted(p.iterdir()):
-                if q.suffix.lower() not in (".png", ".jpg", ".jpeg", ".exr") or q.is_dir():
-                    return f"{name}/{q.name}"
-    return None
 
 
 def _entry(doc: _records.ExportDoc, scene: str) -> str:
@@ -496,7 +483,7 @@ def _replace(
     if old is not None:
         _refuse_other_export(old, doc, out, overwrite)
     owned = set(outputs.owned_entries(out, EXPORT)) if old is not None else set()
-    new = [_entry(doc, s) for s in doc["scenes"]] + ["train.txt", "test.txt", EXPORT_FILE]
+    new = [_entry(doc, s) for s in doc["scenes"]] + list(LISTS)
     _refuse_foreign(out, doc, owned, new)
     _put_in_place(out, doc, sources, build_root, owned, new)
     _say(doc, out, "written")
@@ -507,7 +494,7 @@ def _sweep_stale(out: Path, doc: _records.ExportDoc) -> None:
     """A killed export's staged scenes and the old ones it moved aside (GBs with --copy)
     go first, also when the export is otherwise up to date; and an old scene a killed
     replace_dir had moved aside, beside the new one."""
-    layout.remove_stale_temps(out, [STAGE, TRASH])
+    layout.remove_stale_temps(out, [STAGE, TRASH, *LISTS])
     for parent in {(out / _entry(doc, s)).parent for s in doc["scenes"]}:
         layout.remove_stale_temps(parent, list(doc["scenes"]))
 
@@ -538,16 +525,10 @@ def _refuse_foreign(out: Path, doc: _records.ExportDoc, owned: set[str], new: li
             )
     if doc["scenes_dir"] != "." and (out / doc["scenes_dir"]).is_file():
         raise ConfigError(f"--out holds a file {doc['scenes_dir']}: {out}")
-    for rel in sorted(owned):
-        if rel in ("train.txt", "test.txt", EXPORT_FILE):
-            continue
-        foreign = _not_written_by_export(out / rel)
-        if foreign:
-            raise ConfigError(
-                f"--out/{rel} holds {foreign}, which export did not write and would delete "
-                f"with the scene: move it out of the scene folder, then rerun (nothing was "
-                f"changed): {out}"
-            )
+    # (The core's rule of what an exported scene holds: images/, images_<f>/, the passes'
+    # folders and links, nerfstudio's depths/, poses_bounds.npy, transforms.json.)
+    scenes = [rel for rel in sorted(owned) if rel not in LISTS]
+    outputs.refuse_not_written(out, EXPORT, scenes, "export")
 
 
 def _put_in_place(

@@ -105,6 +105,11 @@ COUNTS = [
     ),
     ("settings_failed", "settings failing render QA now (records that name a setting)"),
     ("failure_lines_skipped", "failures.jsonl lines that do not parse (torn by a kill)"),
+    (
+        "licence_skipped",
+        "objects `--licenses` leaves out (failures.jsonl stage `license`): skipped by "
+        "request, not counted in failures",
+    ),
     ("incomplete_settings", "setting directories skipped: `*.partial` or no `.complete` marker"),
 ]
 
@@ -448,7 +453,8 @@ def report_markdown(stats: dict, figures: list[Path]) -> str:
     lines += ["", "## Figures", ""]
     for f in figures:
         lines += [f"![{f.stem}]({f.name})", ""]
-    if stats["incomplete"] or stats["failures"]:
+    skips = stats.get("licence_skipped") or []
+    if stats["incomplete"] or stats["failures"] or skips:
         lines += ["## Skipped", ""]
         shown = stats["incomplete"][:50]
         if shown:
@@ -462,6 +468,11 @@ def report_markdown(stats: dict, figures: list[Path]) -> str:
             lines += [f"- failed {what} ({f.get('stage') or '?'}): {f.get('reason') or ''}"]
         if len(stats["failures"]) > 50:
             lines += [f"- and {len(stats['failures']) - 50} more failed objects (failures.jsonl)"]
+        lines += [
+            f"- skipped object `{f['uid']}` ({f.get('reason') or 'licence'})" for f in skips[:50]
+        ]
+        if len(skips) > 50:
+            lines += [f"- and {len(skips) - 50} more objects skipped by --licenses"]
         lines += [""]
     return "\n".join(lines)
 
@@ -483,7 +494,8 @@ def terminal_summary(stats: dict, report: Path) -> str:
         f"  {c['settings']} settings, {c['objects']} objects, {c['views']} views, "
         f"{c['images']} images; {test}",
         f"  skipped: {c['incomplete_settings']} incomplete settings; "
-        f"{c['failures']} failed objects",
+        f"{c['failures']} failed objects"
+        + (f"; {c['licence_skipped']} skipped by --licenses" if c.get("licence_skipped") else ""),
     ]
     for s in stats["summary"]:
         q = s["quantity"]

@@ -154,7 +154,10 @@ class ObjectUnit:
             else:
                 reason = f"{type(e).__name__}: {' '.join(str(e).split())[:300]}"
             self.result.failures.append(failure_record(obj, self.stage, reason, t0, 1))
-            self.progress.object_failed(n_pending)
+            if isinstance(e, LicenseRefused):
+                self.progress.object_skipped(n_pending)  # by request: not a failure
+            else:
+                self.progress.object_failed(n_pending)
             return False
         return True
 

@@ -66,6 +66,7 @@ def _prepare_out(out: Path, build: Path, plan: _core.NoisePlan, overwrite: bool)
                 f"--overwrite to replace it: {out}"
             )
         if overwrite:
+            outputs.refuse_not_written(out, NOISE, outputs.owned_entries(out, NOISE), "noise")
             outputs.remove_owned(out, NOISE)
         else:
             for k, v in plan.params.items():
@@ -74,6 +75,9 @@ def _prepare_out(out: Path, build: Path, plan: _core.NoisePlan, overwrite: bool)
                         f"--out was written with {k} = {old['params'].get(k)!r}, not {v!r}: use "
                         f"another --out, or --overwrite to replace it: {out / DATASET_FILE}"
                     )
+    # A killed run's partial units go (below): none may hold a file of the user's.
+    partials = [r for r in outputs.owned_entries(out, NOISE) if r.endswith(layout.PARTIAL_SUFFIX)]
+    outputs.refuse_not_written(out, NOISE, partials, "noise")
     out.mkdir(parents=True, exist_ok=True)
     if not (out / DATASET_FILE).is_file():
         # Written first (options only) so that a run killed before its end resumes;
@@ -96,7 +100,8 @@ FAULT = "BLURSET_NOISE_FAULT"
 def _fault_unit() -> int | None:
     spec = os.environ.get(FAULT, "")
     kind, _, k = spec.partition(":")
-    if kind != "kill_in" or not k.isdigit():
+    # (ASCII digits only: str.isdigit() takes "²", which int() refuses.)
+    if kind != "kill_in" or not (k.isascii() and k.isdigit()):
         if spec:
             raise ConfigError(f"{FAULT}={spec!r}: expected kill_in:K")
         return None
@@ -108,6 +113,8 @@ def _write_unit(unit: _core.NoiseUnit, pending: list[int], die: bool = False) ->
     once whole; an error removes the partial folders this call started."""
     finals = {i: unit.dst / unit.gains[i].dir for i in pending}
     partials = {i: layout.partial_dir(d) for i, d in finals.items()}
+    # A gain folder this replaces (not complete, or redone) may not hold a user's file.
+    outputs.refuse_not_written(unit.dst, NOISE, [d.name for d in finals.values()], "noise")
     unit.dst.mkdir(parents=True, exist_ok=True)
     for p in partials.values():
         shutil.rmtree(p, ignore_errors=True)
