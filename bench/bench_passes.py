@@ -52,9 +52,13 @@ def measure(name: str, args: tuple[str, ...]) -> dict:
         plain = layout.complete_settings(off)
         for s in settings:
             geometry_s.append(json.loads((s / layout.META).read_text())["timings"]["geometry_s"])
+        # Every level's own files of a pass (a blur level holds its own masks).
         kinds = {
             k: sum(
-                _bytes(s / layout.SHARP / layout.pass_dir(k, f)) for s in settings for f in (1, 4)
+                _bytes(s / lv / layout.pass_dir(k, f))
+                for s in settings
+                for lv in {layout.pass_level(k, lv) for lv in layout.setting_levels(s)}
+                for f in (1, 4)
             )
             for k in layout.PASSES
         }
