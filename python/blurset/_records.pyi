@@ -368,6 +368,7 @@ class Counts(TypedDict):
     failures: int
     images: int
     incomplete_settings: int
+    licence_skipped: NotRequired[int]
     objects: int
     settings: int
     settings_failed: int
@@ -426,6 +427,7 @@ class BuildStats(TypedDict):
     image_samples: NotRequired[dict[str, list[int | None]]]
     incomplete: list[str]
     latent_frames: dict[str, list[int | None]]
+    licence_skipped: NotRequired[list[Failure]]
     motion_px: dict[str, list[float | None]]
     orientation: list[float]
     quantities: list[Quantity]
@@ -728,6 +730,7 @@ class StatsRecord(TypedDict):
     image_samples: NotRequired[dict[str, list[int | None]]]
     incomplete: list[str]
     latent_frames: dict[str, list[int | None]]
+    licence_skipped: NotRequired[list[Failure]]
     motion_px: dict[str, list[float | None]]
     orientation: list[float]
     quantities: list[Quantity]
