@@ -16,6 +16,13 @@ pub const MAX_IMAGE_SIDE: u32 = 1 << 16;
 /// 16-bit RGBA (8 bytes per pixel), 2 GiB.
 pub const MAX_IMAGE_ALLOC: u64 = MAX_IMAGE_PIXELS * 8;
 
+/// The most bytes one byte of a zlib (deflate) stream inflates to: a 258-byte match
+/// coded in two bits (zlib's documented bound, 1032:1). EXR's ZIP and PXR24 blocks are
+/// zlib streams, and no EXR codec read expands more: an EXR header may not promise more
+/// samples than its file's bytes could hold at its codec's bound (issue 48), so a file
+/// refused later has cost memory in proportion to its own size, not its header's claim.
+pub const ZLIB_MAX_RATIO: u64 = 1032;
+
 /// The most rows of a `poses_bounds.npy`: a million views, 136 MB of float64, where a
 /// build has at most 4096 views a setting (`--views`).
 pub const MAX_POSE_ROWS: usize = 1 << 20;

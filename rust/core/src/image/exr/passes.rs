@@ -89,7 +89,7 @@ fn read_layers(bytes: &[u8]) -> std::result::Result<Layers, String> {
     // The crate allocates every channel from the header's size: check it first.
     let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
         .map_err(|e| format!("EXR: {e}"))?;
-    super::read::check_sizes(&meta)?;
+    super::read::check_sizes(&meta, bytes.len())?;
     exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()

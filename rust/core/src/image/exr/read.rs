@@ -63,9 +63,11 @@ pub fn decode_exr(bytes: &[u8]) -> Result<Frame> {
 }
 
 /// Refuse a file whose headers promise a layer past [`MAX_IMAGE_SIDE`] or
-/// [`MAX_IMAGE_PIXELS`], before anything of that size is allocated: the reason, for
-/// the caller to pair with its file.
-pub(crate) fn check_sizes(meta: &MetaData) -> std::result::Result<(), String> {
+/// [`MAX_IMAGE_PIXELS`], or more samples than the file's `file_len` bytes can hold under
+/// its codecs ([`max_expansion`]), before anything of that size is allocated: the
+/// reason, for the caller to pair with its file. What a decode then allocates is
+/// bounded by the file's own size, whether its blocks turn out whole or not.
+pub(crate) fn check_sizes(meta: &MetaData, file_len: usize) -> std::result::Result<(), String> {
     for h in &meta.headers {
         let (w, ht) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
         let side = u64::from(MAX_IMAGE_SIDE);
@@ -77,6 +79,64 @@ pub(crate) fn check_sizes(meta: &MetaData) -> std::result::Result<(), String> {
             MAX_IMAGE_PIXELS,
             "MAX_IMAGE_PIXELS",
         )?;
+    }
+    check_fits_file(meta, file_len as u64)
+}
+
+/// The bytes of samples of a layer's full-resolution level (subsampled channels count
+/// their own samples): what a decode of it holds before conversion.
+fn level0_bytes(h: &Header) -> u64 {
+    let (w, ht) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
+    h.channels
+        .list
+        .iter()
+        .map(|c| {
+            let (sx, sy) = (c.sampling.x().max(1) as u64, c.sampling.y().max(1) as u64);
+            w.div_ceil(sx) * ht.div_ceil(sy) * c.sample_type.bytes_per_sample() as u64
+        })
+        .sum()
+}
+
+/// The most bytes of samples one byte of a block can become under `c`, or `None` for
+/// the codecs not read: DWAA/DWAB (lossy DCT; a block of a few bytes can claim a whole
+/// layer) and HTJ2K (the crate does not decode it).
+fn max_expansion(c: Compression) -> Option<u64> {
+    Some(match c {
+        Compression::Uncompressed => 1,
+        // A count byte and a value byte make at most 128 equal bytes.
+        Compression::RLE => 64,
+        Compression::ZIP1 | Compression::ZIP16 => limits::ZLIB_MAX_RATIO,
+        // Huffman codes of at least one bit, and a run code with an 8-bit count repeats
+        // at most 255 values of 2 bytes: under 512 bytes per byte.
+        Compression::PIZ => 512,
+        // 4-byte samples are deflated as 3 bytes.
+        Compression::PXR24 => limits::ZLIB_MAX_RATIO * 4 / 3,
+        // A 4x4 block of halves (32 bytes) in at least 3 bytes; other samples raw.
+        Compression::B44 | Compression::B44A => 11,
+        _ => return None,
+    })
+}
+
+/// The samples every (flat) header promises must fit the file: at least
+/// `bytes / max_expansion` bytes of blocks each, together no more than `file_len`.
+/// Checked before the output (or the crate's channels) are allocated, so a header at
+/// the pixel limit over a file of tiny blocks is refused at the cost of its own bytes.
+fn check_fits_file(meta: &MetaData, file_len: u64) -> std::result::Result<(), String> {
+    let mut least = 0u64;
+    for h in meta.headers.iter().filter(|h| !h.deep) {
+        let ratio = max_expansion(h.compression)
+            .ok_or_else(|| format!("EXR {} is not read", h.compression))?;
+        let bytes = level0_bytes(h);
+        least = least.saturating_add(bytes.div_ceil(ratio));
+        if least > file_len {
+            let (w, ht) = (h.layer_size.width(), h.layer_size.height());
+            return Err(format!(
+                "EXR header promises a {w}x{ht} layer of {bytes} bytes of samples, more than \
+                 a file of {file_len} bytes can hold under {} (at most {ratio}:1); \
+                 refused before reading it",
+                h.compression
+            ));
+        }
     }
     Ok(())
 }
@@ -142,7 +202,7 @@ pub(crate) fn decode_rgba(bytes: &[u8], path: &Path, rgba: &mut Vec<f32>) -> Res
     let reader = exr::block::read(Cursor::new(bytes), false).map_err(|e| bad(exr_reason(e)))?;
     let meta = reader.meta_data().clone();
     // Every header is checked before anything of its size is allocated.
-    check_sizes(&meta).map_err(bad)?;
+    check_sizes(&meta, bytes.len()).map_err(bad)?;
     let layer = rgb_layer(&meta).map_err(bad)?;
     let header = &meta.headers[layer];
     check_uncropped(header).map_err(bad)?;
@@ -259,11 +319,16 @@ fn decode_layer(
         if chunks.len() < need {
             return Err(too_few(chunks.len(), "blocks"));
         }
+        // Every block is decompressed before the frame is allocated: a file whose
+        // blocks do not decode costs what they held, not what its header promised.
+        let blocks = decompress_chunks(chunks, meta)?;
         // The crate's blocks write the channels the file has: a missing alpha reads 1.
         let has_alpha = slots.contains(&Some(3));
         rgba.clear();
         rgba.resize(width * height * CH, if has_alpha { 0.0 } else { 1.0 });
-        decode_generic(chunks, meta, header, slots, width, rgba)?;
+        for b in &blocks {
+            place_block(b, &header.channels, slots, rgba, width)?;
+        }
         return Ok(first_non_finite(width, rgba));
     }
     // Single-part files: the chunks are sliced out of `bytes` in place; a
@@ -693,24 +758,17 @@ fn interleave(lo: &[u8], hi: &[u8], out: &mut [u8]) {
     }
 }
 
-/// Any other layout: the `exr` crate decompresses each block, then its lines are placed.
-fn decode_generic(
+/// Any other layout: the `exr` crate decompresses each block (in parallel); the
+/// caller then places their lines.
+fn decompress_chunks(
     chunks: Vec<Chunk>,
     meta: &MetaData,
-    header: &Header,
-    slots: &[Option<usize>],
-    width: usize,
-    rgba: &mut [f32],
-) -> std::result::Result<(), String> {
-    let blocks = chunks
+) -> std::result::Result<Vec<UncompressedBlock>, String> {
+    chunks
         .into_par_iter()
         .map(|chunk| UncompressedBlock::decompress_chunk(chunk, meta, false))
         .collect::<std::result::Result<Vec<_>, _>>()
-        .map_err(|e| format!("EXR: {e}"))?;
-    for b in &blocks {
-        place_block(b, &header.channels, slots, rgba, width)?;
-    }
-    Ok(())
+        .map_err(|e| format!("EXR: {e}"))
 }
 
 /// Convert the lines of one decompressed block (native-endian samples) into
@@ -946,6 +1004,84 @@ mod tests {
         Ok(())
     }
 
+    /// A scan-line EXR written by hand, as issue 48's was: half channels `names`,
+    /// OpenEXR compression number `code` (`lines` a block), a `w` x `h` data and display
+    /// window and a whole offset table of blocks of `block` bytes each (zeros): a valid
+    /// frame of the file, far fewer bytes than its header's size needs.
+    fn tiny_blocks(names: &[&str], code: u8, lines: i32, w: i32, h: i32, block: i32) -> Vec<u8> {
+        fn attr(out: &mut Vec<u8>, name: &str, ty: &str, value: &[u8]) {
+            for s in [name, ty] {
+                out.extend_from_slice(s.as_bytes());
+                out.push(0);
+            }
+            out.extend_from_slice(&(value.len() as i32).to_le_bytes());
+            out.extend_from_slice(value);
+        }
+        let ints = |v: &[i32]| -> Vec<u8> { v.iter().flat_map(|x| x.to_le_bytes()).collect() };
+        let mut out = ints(&[20_000_630, 2]);
+        let mut chlist = Vec::new();
+        for n in names {
+            chlist.extend_from_slice(n.as_bytes());
+            chlist.push(0);
+            chlist.extend(ints(&[1, 0, 1, 1])); // half, pLinear + reserved, sampling 1x1
+        }
+        chlist.push(0);
+        attr(&mut out, "channels", "chlist", &chlist);
+        attr(&mut out, "compression", "compression", &[code]);
+        let window = ints(&[0, 0, w - 1, h - 1]);
+        attr(&mut out, "dataWindow", "box2i", &window);
+        attr(&mut out, "displayWindow", "box2i", &window);
+        attr(&mut out, "lineOrder", "lineOrder", &[0]);
+        attr(&mut out, "pixelAspectRatio", "float", &1f32.to_le_bytes());
+        attr(&mut out, "screenWindowCenter", "v2f", &[0; 8]);
+        attr(&mut out, "screenWindowWidth", "float", &1f32.to_le_bytes());
+        out.push(0);
+        let n = (h + lines - 1) / lines;
+        let first = out.len() as u64 + 8 * n as u64;
+        let chunk = 8 + block as u64;
+        for i in 0..n as u64 {
+            out.extend_from_slice(&(first + i * chunk).to_le_bytes());
+        }
+        for i in 0..n {
+            out.extend(ints(&[i * lines, block]));
+            out.resize(out.len() + block as usize, 0);
+        }
+        out
+    }
+
+    #[test]
+    fn a_header_at_the_limit_over_tiny_blocks_is_refused_before_allocating() -> Result<()> {
+        let path = Path::new("tiny.exr");
+        let words = |r: Result<()>| r.err().map(|e| e.to_string()).unwrap_or_default();
+        // 4096^2 first: without the check it costs 256 MiB and fails later, on a block.
+        for (w, h) in [(4096, 4096), (16384, 16384)] {
+            // ZIP, uncompressed, PIZ (the crate's decompressor).
+            for (code, lines) in [(3, 16), (0, 1), (4, 32)] {
+                let rgb = tiny_blocks(&["B", "G", "R"], code, lines, w, h, 8);
+                let mut out = Vec::new();
+                let e = words(decode_rgba(&rgb, path, &mut out).map(|_| ()));
+                assert!(
+                    e.contains(&format!("EXR header promises a {w}x{h} layer"))
+                        && e.contains(&format!("more than a file of {} bytes", rgb.len()))
+                        && e.contains("tiny.exr"),
+                    "{e}"
+                );
+                assert!(out.capacity() < 1 << 20, "allocated before refusing");
+                // The depth and guide readers (verify tries depth after colour) too.
+                let z = tiny_blocks(&["Z"], code, lines, w, h, 8);
+                let e = words(crate::image::geometry::decode_depth_exr(&z, path).map(|_| ()));
+                assert!(e.contains("more than a file of") && e.contains("tiny.exr"), "{e}");
+                let e = words(super::super::passes::decode_passes(&rgb, path).map(|_| ()));
+                assert!(e.contains("more than a file of") && e.contains("tiny.exr"), "{e}");
+            }
+        }
+        // Lossy DCT blocks may claim any size from a few bytes: not read.
+        let dwa = tiny_blocks(&["B", "G", "R"], 8, 32, 64, 64, 8);
+        let e = words(decode_exr(&dwa).map(|_| ()));
+        assert!(e.contains("EXR dwaa compression is not read"), "{e}");
+        Ok(())
+    }
+
     /// A multi-layer render as Blender writes one: the combined pass and the guides in
     /// one part (`ViewLayer.<pass>.<channel>`), or, with `parts`, one part a pass whose
     /// last (the normal) is `odd` pixels wider than the others.
@@ -1145,7 +1281,7 @@ mod tests {
     fn decoding_is_pinned() -> Result<()> {
         let (digest, outcomes) = decoding_digest()?;
         assert_eq!(outcomes, [98, 477, 189, 1536]);
-        assert_eq!(digest, 0x1d38_9bb5_1445_546d, "{digest:#018x}");
+        assert_eq!(digest, 0x4f71_bff0_8eb5_4429, "{digest:#018x}");
         Ok(())
     }
 
