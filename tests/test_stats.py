@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from blurset import layout
 from blurset.stats import BAR, load_stats
 from PIL import Image
 
@@ -117,6 +118,8 @@ def recompute(build: Path) -> dict:
         "failures": len({r["uid"] for r in failing}),
         "settings_failed": sum(1 for r in failing if r.get("setting")),
         "failure_lines_skipped": 0,
+        # What a rerun would redo (a synthetic build's settings hold no images at all).
+        "damaged_settings": sum(layout.setting_problem(d) is not None for d in dirs),
         "incomplete_settings": sum(
             d.is_dir()
             and not d.name.startswith(".")

@@ -64,6 +64,7 @@ SettingFault: TypeAlias = Literal[
     "png_truncated",
     "empty",
     "truncated",
+    "undecodable",
 ]
 ManifestFault: TypeAlias = Literal["missing", "mismatch", "unlisted"]
 
@@ -1318,6 +1319,19 @@ def check_manifest(root: str | PathLike[str]) -> list[tuple[str, ManifestFault, 
     root/MANIFEST.sha256: `missing`, `mismatch` (checksum mismatch) or `unlisted` (not in
     MANIFEST.sha256), sorted by path.
     Raises FileNotFoundError without a manifest, InputError naming a bad line."""
+
+def rewrite_manifest(root: str | PathLike[str], written: list[str]) -> int:
+    """Write root/MANIFEST.sha256 after a rerun that wrote `written` (relative files or
+    folders): those hashed, every other file the existing manifest lists kept at its
+    line, files it does not list hashed; without a manifest, every file hashed. The
+    number of files listed."""
+
+def manifest_mismatches(
+    root: str | PathLike[str], dir: str
+) -> list[tuple[str, ManifestFault, str]]:
+    """(relative path, kind, what is wrong) of each file root/MANIFEST.sha256 lists under
+    the folder `dir` that is gone (`missing`) or holds other bytes (`mismatch`), sorted
+    by path; empty without a manifest. InputError naming a bad line."""
 
 def check_images(items: list[tuple[str | PathLike[str], int, int]]) -> list[str | None]:
     """For each (path, width, height): None when the image (PNG/JPEG, or a linear EXR

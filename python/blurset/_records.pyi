@@ -364,6 +364,7 @@ class Splits(TypedDict):
     view_stride: int
 
 class Counts(TypedDict):
+    damaged_settings: NotRequired[int]
     failure_lines_skipped: int
     failures: int
     images: int
@@ -378,6 +379,12 @@ class Counts(TypedDict):
     test_views: NotRequired[int | None]
     unsplit_settings: NotRequired[int | None]
     views: int
+
+class Damaged(TypedDict):
+    """A complete setting the cheap check of a rerun finds damaged: what a rerun redoes it for (the first problem)."""
+
+    problem: str
+    setting: str
 
 class Failure(TypedDict):
     reason: NotRequired[str | None]
@@ -420,6 +427,7 @@ class BuildStats(TypedDict):
     blur_weight: dict[str, list[float | None]]
     build: str
     counts: Counts
+    damaged: NotRequired[list[Damaged]]
     defocus_coc_px: NotRequired[dict[str, list[float | None]]]
     depth_range: list[float]
     failures: list[Failure]
@@ -722,6 +730,7 @@ class StatsRecord(TypedDict):
     blurset_version: str
     build: str
     counts: Counts
+    damaged: NotRequired[list[Damaged]]
     defocus_coc_px: NotRequired[dict[str, list[float | None]]]
     depth_range: list[float]
     failures: list[Failure]

@@ -88,6 +88,28 @@ def write_manifest(root: Path) -> int:
     return _core.write_manifest(Path(root))
 
 
+def rewrite_manifest(root: Path, written: list[str]) -> int:
+    """root/MANIFEST.sha256 at the end of a rerun that wrote `written` (files or folders
+    relative to `root`): those are hashed; every other file the existing manifest lists
+    keeps its line (damage since stays a mismatch for `verify`), a file it does not list
+    is hashed; without a manifest every file is. The count listed."""
+    return _core.rewrite_manifest(Path(root), list(written))
+
+
+def manifest_problem(root: Path, folder: str) -> str | None:
+    """Why the folder `folder` of `root` (a setting, a noise unit's gain) is not what
+    root/MANIFEST.sha256 certifies: its first file that is gone or holds other bytes, in
+    words; None when it matches (or there is no manifest). A rerun redoes such a folder
+    rather than certify what it did not write."""
+    found = _core.manifest_mismatches(Path(root), folder)
+    if not found:
+        return None
+    rel, _, what = found[0]
+    more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
+    inside = rel[len(folder) + 1 :] if rel.startswith(folder + "/") else rel
+    return f"{inside}: {what} against {MANIFEST}{more}"
+
+
 def _manifest_root(path: Path) -> Path | None:
     """The build or noise output holding `path` that has a manifest, or None."""
     from blurset import outputs

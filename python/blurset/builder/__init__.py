@@ -124,7 +124,7 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     prog = Progress(n_settings, frames_per_setting=frames_per_setting(cfg), enabled=progress)
     with build_lock(out):
         check_same_options(out, cfg)
-        sweep(out, every, cfg, prog)
+        removed = sweep(out, every, cfg, prog)
     if found := resumed_settings(out, objs, cfg):
         prog.write(
             f"resuming: {found} of {n_settings} settings are complete from an earlier run "
@@ -132,10 +132,10 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
         )
     _report_missing(objs, cfg, prog)
     t0 = time.time()
-    new_settings = _run_objects(objs, cfg, prog, slots, out)
+    written = _run_objects(objs, cfg, prog, slots, out)
     with build_lock(out):
-        summary = finalize(out, cfg, time.time() - t0)
-    return _summary(summary, objs, new_settings)
+        summary = finalize(out, cfg, time.time() - t0, [*removed, *written])
+    return _summary(summary, objs, len(written))
 
 
 def _check(cfg: BuildConfig, out: Path) -> tuple[list[ObjectSpec] | None, list]:
@@ -161,16 +161,16 @@ def _check(cfg: BuildConfig, out: Path) -> tuple[list[ObjectSpec] | None, list]:
 
 def _run_objects(
     objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress, slots: list, out: Path
-) -> int:
+) -> list[str]:
     """Every object rendered by the configured executor; each result's failures and
-    local record appended under the build lock as it arrives. Returns the settings new."""
-    new_settings = 0
+    local record appended under the build lock as it arrives. Returns the settings this
+    run published."""
+    written: list[str] = []
     lock = threading.Lock()
 
     def on_result(res: ObjectResult) -> None:
-        nonlocal new_settings
         with lock:
-            new_settings += res.new_settings
+            written.extend(res.written)
             if res.failures or res.local:
                 with build_lock(out):
                     if res.failures:
@@ -188,7 +188,7 @@ def _run_objects(
             run_ray(objs, cfg, prog, on_result)
         else:
             run_local(objs, cfg, prog, on_result, slots)
-    return new_settings
+    return written
 
 
 def _summary(summary: dict, objs: list[ObjectSpec], new_settings: int) -> dict:

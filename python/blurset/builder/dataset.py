@@ -39,12 +39,13 @@ def build_lock(out: Path):
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
-def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig, prog=None) -> None:
+def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig, prog=None) -> list[str]:
     """What a killed run left behind that no object owns: temp files of the shared
     writes (a partial setting and an object's scratch folder are its object's, cleaned
     under that object's lock: another process may be writing them now). And settings
     whose source file now has another id (`objs` is every object of the build, all
-    shards): one source file, one set of settings. Call under build_lock."""
+    shards): one source file, one set of settings. Call under build_lock. Returns the
+    settings removed (the manifest drops their lines)."""
     current = [(o.uid, o.rel or o.path.name) for o in objs]
     superseded = _core.superseded_settings(out, current)
     # A superseded setting holds only what a build writes: a user's file there (a note)
@@ -67,6 +68,7 @@ def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig, prog=None) -> Non
         say = prog.write if prog is not None else print
         say(f"removed {setting}: its source file {source} now has the id {now} (a name it shares)")
     publish.move_local_paths(out)
+    return [setting for setting, _, _ in superseded]
 
 
 # Options that decide where and how a build runs, not what it writes: a rerun may change
@@ -142,10 +144,12 @@ def _complete_settings(out: Path) -> list[tuple[str, dict]]:
     return found
 
 
-def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
-    """splits.json, dataset.json and failures.jsonl over what is on disk (call under
-    build_lock). failures.jsonl keeps the latest record per object (or per setting, for
-    QA failures) whose work is still not complete."""
+def finalize(out: Path, cfg: BuildConfig, seconds: float, written: list[str]) -> dict:
+    """splits.json, dataset.json and failures.jsonl over what is on disk, and the
+    manifest (call under build_lock). failures.jsonl keeps the latest record per object
+    (or per setting, for QA failures) whose work is still not complete. `written`: the
+    settings this run published or removed; the manifest hashes only those and the
+    files written here, and keeps its lines of the rest (checked when reused)."""
     complete = _complete_settings(out)
     fpath = out / layout.FAILURES
     kept, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
@@ -198,6 +202,8 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float) -> dict:
     if checks:
         dataset["pose_checks"] = checks
     _core.write_dataset_json(out / layout.DATASET, dataset)
-    # Last: the checksums of everything above (another shard's finalize rewrites it).
-    publish.write_manifest(out)
+    # Last: the checksums of what this run wrote (another shard's finalize rewrites it
+    # with its own); a file it did not write keeps the line it had.
+    shared = [f for f in SHARED_FILES if f != layout.MANIFEST]
+    publish.rewrite_manifest(out, [*written, *shared])
     return {"settings_complete": len(complete), "failures": kept, "test_settings": len(splits.test)}

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from blurset import _core, attribution, layout, objaverse_cache, outputs, preflight
+from blurset import _core, attribution, layout, objaverse_cache, outputs, preflight, publish
 from blurset.builder.setting import SettingFailed, SettingJob, render_setting
 from blurset.config import BuildConfig, out_dir
 from blurset.devices import Device
@@ -37,6 +37,8 @@ class ObjectResult:
     # Failure records (failures.jsonl): the object's, or one per setting that failed QA.
     failures: list[dict[str, Any]] = field(default_factory=list)
     new_settings: int = 0
+    # The settings this run published (the manifest hashes only what a run wrote).
+    written: list[str] = field(default_factory=list)
     # For the local paths file (publish.local_paths_file, never under OUT): where this
     # object came from.
     local: dict[str, Any] = field(default_factory=dict)
@@ -214,15 +216,18 @@ class ObjectUnit:
         return {"path": obj.rel, "sha256": self.sha256(), **attribution.attribution(*sources)}
 
     def _reusable(self, setting: Path) -> bool:
-        """A complete setting made from this very file (the same bytes), and whole
-        (another file may have had this id in an earlier run, a file may have been damaged
-        or deleted since): anything else is redone, never passed off as this object's."""
+        """A complete setting made from this very file (the same bytes), whole, and the
+        bytes OUT's manifest certifies (another file may have had this id in an earlier
+        run, a file may have been damaged, deleted or copied over since): anything else
+        is redone, never passed off as this object's nor certified anew."""
         if not layout.is_complete(setting):
             return False
         problem = layout.setting_problem(setting)
         if problem is None:
             made_from = json.loads((setting / layout.META).read_text()).get("object") or {}
             problem = self._other_file(made_from)
+        if problem is None:
+            problem = publish.manifest_problem(self.out, setting.name)
             if problem is None:
                 return True
         self.progress.write(f"redoing {setting.name}: {problem}")
@@ -292,6 +297,7 @@ class ObjectUnit:
                     progress.object_failed(1)
                 else:
                     result.settings.append(j.name)
+                    result.written.append(j.name)
                     result.new_settings += 1
                     progress.setting_done()
                 pending.pop(0)

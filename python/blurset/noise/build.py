@@ -142,15 +142,30 @@ def _refuse_scene_options(cfg: _core.NoiseConfig) -> None:
         )
 
 
-def _write_pending(plan: _core.NoisePlan, quiet: bool, fault: int | None) -> int:
+def _pending(out: Path, unit: _core.NoiseUnit) -> list[int]:
+    """The gains of `unit` to write: those not complete, and a complete one whose files
+    are not the bytes OUT's manifest certifies (damaged or copied over since), named on
+    stderr: redone, never certified anew."""
+    pending = set(unit.pending())
+    for i, g in enumerate(unit.gains):
+        if i in pending:
+            continue
+        rel = (unit.dst / g.dir).relative_to(out).as_posix()
+        if problem := publish.manifest_problem(out, rel):
+            print(f"redoing {rel}: {problem}", file=sys.stderr)
+            pending.add(i)
+    return sorted(pending)
+
+
+def _write_pending(out: Path, plan: _core.NoisePlan, quiet: bool, fault: int | None) -> list[str]:
     """Every unit's pending gains, a unit at a time (a count on a terminal); returns the
-    gain scenes written."""
-    written = 0
-    todo = [(u, p) for u in plan.units if (p := u.pending())]
+    gain folders written (relative to OUT)."""
+    written: list[str] = []
+    todo = [(u, p) for u in plan.units if (p := _pending(out, u))]
     show = not quiet and sys.stderr.isatty()
     for n, (u, pending) in enumerate(todo, 1):
         _write_unit(u, pending, die=n == fault)
-        written += len(pending)
+        written += [(u.dst / u.gains[i].dir).relative_to(out).as_posix() for i in pending]
         if show:
             print(f"\r{n}/{len(todo)} levels noised", end="", file=sys.stderr, flush=True)
     if show and todo:
@@ -176,13 +191,17 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
         layout.write_text_atomic(out / layout.SPLITS, (build / layout.SPLITS).read_text())
         n_gains = len(cfg.gain_values)
         # Pending under the lock: --overwrite may just have removed units.
-        skipped = sum(n_gains - len(u.pending()) for u in plan.units)
-        written = _write_pending(plan, cfg.quiet, fault)
+        written = _write_pending(out, plan, cfg.quiet, fault)
+        skipped = len(plan.units) * n_gains - len(written)
         # Over every complete unit on disk, earlier runs' too.
         doc = plan.write_dataset(out, time.strftime("%Y-%m-%dT%H:%M:%S"))
-        publish.write_manifest(out)
+        if cfg.overwrite:
+            publish.write_manifest(out)  # every unit of the old output was replaced
+        else:
+            # Hashed: what this run wrote; the rest keeps the line it had (checked above).
+            publish.rewrite_manifest(out, [*written, DATASET_FILE, layout.SPLITS])
     print(
-        f"blurset noise: {written} scene(s) written, {skipped} complete skipped "
+        f"blurset noise: {len(written)} scene(s) written, {skipped} complete skipped "
         f"({len(complete)} settings x {len(plan.levels)} levels x {n_gains} gains, "
         f"source {plan.source}) -> {out} [{doc['counts']['units']} scenes in total]"
     )

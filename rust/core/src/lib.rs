@@ -67,8 +67,8 @@ pub use crate::dataset::llff::{
     write_setting_poses, PoseRow, SceneFields,
 };
 pub use crate::dataset::manifest::{
-    check_manifest, list_files as manifest_files, sha256_file, update_manifest, write_manifest,
-    ManifestProblem, MANIFEST,
+    check_manifest, list_files as manifest_files, manifest_mismatches, rewrite_manifest,
+    sha256_file, update_manifest, write_manifest, ManifestProblem, MANIFEST,
 };
 pub use crate::dataset::meta::{
     read_exposure_ends, read_mean_poses, write_json, DeviceRecord, ImageRender, LightPathsRecord,

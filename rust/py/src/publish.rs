@@ -28,6 +28,28 @@ fn update_manifest(py: Python<'_>, root: PathBuf, rels: Vec<String>) -> PyResult
     crate::run_detached(py, || core::update_manifest(&root, &rels))
 }
 
+/// Write root/MANIFEST.sha256 after a rerun that wrote `written` (files or folders,
+/// relative): those hashed, every other listed file keeps its line; the count.
+#[pyfunction]
+fn rewrite_manifest(py: Python<'_>, root: PathBuf, written: Vec<String>) -> PyResult<usize> {
+    crate::run_detached(py, || core::rewrite_manifest(&root, &written))
+}
+
+/// [(relative path, kind, what is wrong)] of the files root/MANIFEST.sha256 lists under
+/// the folder `dir` that are gone or hold other bytes (none without a manifest).
+#[pyfunction]
+fn manifest_mismatches(
+    py: Python<'_>,
+    root: PathBuf,
+    dir: String,
+) -> PyResult<Vec<(String, &'static str, &'static str)>> {
+    let problems = crate::run_detached(py, || core::manifest_mismatches(&root, &dir))?;
+    Ok(problems
+        .into_iter()
+        .map(|(p, what)| (p, what.kind(), what.as_str()))
+        .collect())
+}
+
 /// [(relative path, kind, what is wrong)] of the files that do not match
 /// root/MANIFEST.sha256 (kinds: missing, mismatch, unlisted).
 #[pyfunction]
@@ -84,6 +106,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(write_manifest, m)?)?;
     m.add_function(wrap_pyfunction!(update_manifest, m)?)?;
     m.add_function(wrap_pyfunction!(check_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(rewrite_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(manifest_mismatches, m)?)?;
     m.add_function(wrap_pyfunction!(check_images, m)?)?;
     m.add_function(wrap_pyfunction!(spdx_of, m)?)?;
     m.add_function(wrap_pyfunction!(canonical_license, m)?)?;

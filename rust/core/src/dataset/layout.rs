@@ -9,7 +9,7 @@
 //! - a build's setting directories are scanned once, here ([`scan`]).
 use crate::error::{Error, Result};
 use crate::ground::atomic::{replace_dir, write_atomic};
-use crate::ground::names::{files, images_dir, pass_dir, pass_level};
+use crate::ground::names::{files, images_dir, is_level_dir, pass_dir, pass_level};
 use crate::ground::names::{sort_level_dirs, SHARP, WORK_PREFIX};
 use std::path::{Path, PathBuf};
 
@@ -54,6 +54,41 @@ pub fn publish(partial: &Path, final_dir: &Path, stamp: &str) -> Result<()> {
     replace_dir(partial, final_dir)
 }
 
+/// A setting's preview image (`--previews`, `blurset preview`).
+const PREVIEW: &str = "preview.png";
+
+/// Whether `rel` (relative to a setting folder, '/'-separated) names a file a build
+/// writes there: meta.json, transforms.json, preview.png; a level's poses_bounds.npy
+/// and transforms.json; the PNGs and EXRs of its images/, linear/, depth/, normals/,
+/// masks/ and their `_<f>` sizes. Anything else in a setting is a user's (a note a
+/// redone setting keeps): a manifest never certifies it as the build's.
+pub fn is_build_file(rel: &str) -> bool {
+    let parts: Vec<&str> = rel.split('/').collect();
+    match parts.as_slice() {
+        [f] => [files::META, files::TRANSFORMS, PREVIEW].contains(f),
+        [level, f] => is_level_dir(level) && [files::POSES_BOUNDS, files::TRANSFORMS].contains(f),
+        [level, folder, f] => {
+            is_level_dir(level)
+                && is_image_folder(folder)
+                && (f.ends_with(".png") || f.ends_with(".exr"))
+                && !f.starts_with('.')
+        }
+        _ => false,
+    }
+}
+
+/// `images`, `linear` or a pass folder (`depth`, `normals`, `masks`), or one of them at
+/// a downsampling factor (`images_4`).
+fn is_image_folder(name: &str) -> bool {
+    let base = match name.split_once('_') {
+        Some((base, f)) if !f.is_empty() && f.bytes().all(|b| b.is_ascii_digit()) => base,
+        Some(_) => return false,
+        None => name,
+    };
+    let passes = crate::ground::names::PASSES.map(|p| pass_dir(p, 1));
+    base == files::IMAGES || base == files::LINEAR || passes.iter().any(|p| p == base)
+}
+
 const PNG_MAGIC: &[u8; 8] = b"\x89PNG\r\n\x1a\n";
 /// Bytes of one `poses_bounds.npy` row (17 float64).
 const POSE_ROW_BYTES: u64 = 17 * 8;
@@ -84,6 +119,9 @@ pub enum Fault {
     Empty,
     /// A file shorter than what it must hold.
     Truncated,
+    /// An EXR that does not decode (cut short, a block that no longer inflates): the
+    /// reason.
+    Undecodable(String),
 }
 
 impl Fault {
@@ -99,6 +137,7 @@ impl Fault {
             Fault::PngTruncated => "png_truncated",
             Fault::Empty => "empty",
             Fault::Truncated => "truncated",
+            Fault::Undecodable(_) => "undecodable",
         }
     }
 
@@ -116,6 +155,7 @@ impl Fault {
             Fault::PngTruncated => "truncated (no PNG end chunk)".into(),
             Fault::Empty => "empty".into(),
             Fault::Truncated => "truncated".into(),
+            Fault::Undecodable(why) => format!("does not decode ({why})"),
         }
     }
 }
@@ -141,7 +181,7 @@ impl SettingProblem {
         let path = &self.path;
         match &self.fault {
             Fault::LevelMissing => format!("level folder {path}/ is missing"),
-            Fault::Count { .. } => format!("{path} {}", self.fault.what()),
+            Fault::Count { .. } | Fault::Undecodable(_) => format!("{path} {}", self.fault.what()),
             Fault::PngTruncated => format!("{path} is truncated"),
             f => format!("{path} is {}", f.what()),
         }
@@ -149,7 +189,8 @@ impl SettingProblem {
 }
 
 /// What is missing or damaged in a complete setting, checked cheaply (names, sizes, PNG
-/// signatures and IEND chunks, the pose file's size; `blurset verify` decodes
+/// signatures and IEND chunks, the pose file's size; EXRs decoded, as nothing short of
+/// inflating their blocks finds a cut or flipped one; `blurset verify` decodes
 /// everything): None when it looks whole. A rerun redoes a setting with a problem
 /// instead of counting it.
 pub fn setting_problem(setting: &Path) -> Option<String> {
@@ -160,8 +201,8 @@ pub fn setting_problem(setting: &Path) -> Option<String> {
 }
 
 /// Every problem [`setting_problem`] checks for (it reports the first): `blurset verify`
-/// lists them all, then decodes what is there. Linear EXRs are checked (count, not
-/// empty) when meta.json's `render.linear` says they were kept.
+/// lists them all, then decodes what is there. Linear EXRs are checked (count, each
+/// decodes) when meta.json's `render.linear` says they were kept.
 pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
     let counts = match SettingCounts::read(setting) {
         Ok(c) => c,
@@ -324,17 +365,54 @@ fn count_problem(
 }
 
 /// The problems of a folder of EXRs (`rel`, relative to the setting: a level's linear/,
-/// the sharp level's depth/ and normals/): a count other than `views`, an empty file.
+/// the sharp level's depth/ and normals/): a count other than `views`, an empty file,
+/// one that does not decode. A rerun would otherwise keep (and its manifest certify) a
+/// cut or bit-flipped EXR: no header read or size finds a block that no longer
+/// inflates, so each is decoded (in parallel), as `blurset verify` does.
 fn exr_problems(dir: &Path, rel: &str, views: usize) -> Vec<SettingProblem> {
+    use rayon::prelude::*;
     let mut out = Vec::new();
     let exrs = files_with(dir, "exr");
     out.extend(count_problem(rel.into(), exrs.len(), views, "EXRs"));
-    for (name, p) in &exrs {
-        if std::fs::metadata(p).map_or(true, |m| m.len() == 0) {
-            out.push(SettingProblem::new(format!("{rel}/{name}"), Fault::Empty));
+    let faults: Vec<Option<Fault>> = exrs.par_iter().map(|(_, p)| exr_fault(p)).collect();
+    for ((name, _), fault) in exrs.iter().zip(faults) {
+        if let Some(fault) = fault {
+            out.push(SettingProblem::new(format!("{rel}/{name}"), fault));
         }
     }
     out
+}
+
+/// What is wrong with an EXR of a setting (empty, or does not decode), or None.
+fn exr_fault(path: &Path) -> Option<Fault> {
+    match std::fs::read(path) {
+        Ok(bytes) if bytes.is_empty() => Some(Fault::Empty),
+        Ok(bytes) => decode_exr_size(&bytes, path)
+            .err()
+            .map(|e| Fault::Undecodable(error_reason(&e.to_string()))),
+        Err(e) => Some(Fault::Unreadable(e.kind().to_string())),
+    }
+}
+
+/// The width and height of a build's EXR, decoded whole: a colour EXR (linear/,
+/// normals/), else a one-channel depth EXR (depth/). The one rule of the cheap check
+/// and of `blurset verify`'s decode.
+pub(crate) fn decode_exr_size(bytes: &[u8], path: &Path) -> Result<(u32, u32)> {
+    crate::image::exr::read::decode_exr(bytes)
+        .map(|f| (f.width, f.height))
+        .or_else(|e| {
+            crate::image::geometry::decode_depth_exr(bytes, path)
+                .map(|(w, h, _)| (w as u32, h as u32))
+                .map_err(|_| e)
+        })
+}
+
+/// An error's words without the path the caller names anyway (`…: "<path>"`).
+pub(crate) fn error_reason(msg: &str) -> String {
+    match msg.rfind(": \"") {
+        Some(i) if msg.ends_with('"') => msg[..i].to_string(),
+        _ => msg.to_string(),
+    }
 }
 
 /// (name, path) of a folder's files with this extension, sorted by name (none when the
@@ -634,6 +712,109 @@ mod tests {
         );
         let _ = std::fs::remove_dir_all(&dir);
         Ok(())
+    }
+
+    #[test]
+    fn exrs_of_a_complete_setting_are_decoded() -> Result<()> {
+        use crate::image::exr::write::write_exr;
+        use crate::image::geometry::{write_depth_exr, Geometry};
+        let dir = std::env::temp_dir().join(format!("blurset-exrs-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let put = |rel: &str, bytes: &[u8]| write_atomic(&dir.join(rel), bytes);
+        put(
+            "meta.json",
+            br#"{"views": [{}, {}], "levels": ["sharp"], "render": {"linear": true, "passes": ["depth"]}}"#,
+        )?;
+        put("transforms.json", b"{}")?;
+        put("sharp/poses_bounds.npy", &[0u8; 400])?;
+        let mut png = PNG_MAGIC.to_vec();
+        png.extend([0u8; 60]);
+        png.extend(b"\0\0\0\0IEND\xaeB`\x82");
+        let (w, h) = (48usize, 40usize);
+        // Varied pixels, so each block is compressed data a flipped byte breaks.
+        let px: Vec<f32> = (0..w * h * 4)
+            .map(|i| ((i * 7919) % 1013) as f32 / 97.0)
+            .collect();
+        let g = Geometry {
+            width: w,
+            height: h,
+            depth: px[..w * h].to_vec(),
+            normal: Vec::new(),
+        };
+        for v in ["000", "001"] {
+            put(&format!("sharp/images/{v}.png"), &png)?;
+            write_exr(
+                &dir.join(format!("sharp/linear/{v}.exr")),
+                w as u32,
+                h as u32,
+                &px,
+            )?;
+            write_depth_exr(&dir.join(format!("sharp/depth/{v}.exr")), &g)?;
+        }
+        assert_eq!(setting_problems(&dir), vec![]);
+        let read = |rel: &str| std::fs::read(dir.join(rel)).unwrap_or_default();
+        let whole_linear = read("sharp/linear/001.exr");
+        let whole_depth = read("sharp/depth/000.exr");
+        // Cut short (a header and part of its blocks: the file still has a size), and a
+        // flipped byte inside a compressed block.
+        put(
+            "sharp/linear/001.exr",
+            &whole_linear[..whole_linear.len() * 2 / 3],
+        )?;
+        let mut flipped = whole_depth.clone();
+        let at = flipped.len() - 40;
+        flipped[at] ^= 0x5a;
+        put("sharp/depth/000.exr", &flipped)?;
+        let found: Vec<(String, &str)> = setting_problems(&dir)
+            .into_iter()
+            .map(|p| (p.path, p.fault.kind()))
+            .collect();
+        assert_eq!(
+            found,
+            vec![
+                ("sharp/linear/001.exr".to_string(), "undecodable"),
+                ("sharp/depth/000.exr".to_string(), "undecodable"),
+            ]
+        );
+        let said = setting_problem(&dir).unwrap_or_default();
+        assert!(
+            said.starts_with("sharp/linear/001.exr does not decode ("),
+            "{said}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn the_files_a_build_writes_in_a_setting() {
+        for rel in [
+            "meta.json",
+            "transforms.json",
+            "preview.png",
+            "sharp/poses_bounds.npy",
+            "blur_4/transforms.json",
+            "sharp/images/000.png",
+            "blur_1/images_4/007.png",
+            "defocus_2/linear/000.exr",
+            "sharp/depth_4/000.exr",
+            "sharp/normals/000.exr",
+            "sharp/masks/000.png",
+            "blur_4/masks_4/000.png",
+        ] {
+            assert!(is_build_file(rel), "{rel}");
+        }
+        for rel in [
+            "mynote.txt",
+            "sharp/README",
+            "notes/a.txt",
+            "blur_0/images/000.png",
+            "sharp/images/notes.txt",
+            "sharp/images_x/000.png",
+            "sharp/images/sub/000.png",
+            "sharp/other/000.png",
+        ] {
+            assert!(!is_build_file(rel), "{rel}");
+        }
     }
 
     #[test]

@@ -6,14 +6,25 @@
 //! under the root, except the manifest itself, anything whose path has a component
 //! starting with `.` (the `.lock`, the `.complete` markers, temp files of atomic writes,
 //! `.work-*` scratch, `.local/` with the builder's own paths) and `*.partial` staging
-//! directories (another shard may be writing one right now).
+//! directories (another shard may be writing one right now); inside a build's setting,
+//! only the files a build writes there (`layout::is_build_file`: a user's note kept in a
+//! redone setting is not the build's to certify).
+//!
+//! A rerun certifies only what it wrote or checked (`rewrite_manifest`): a file the
+//! existing manifest lists keeps its line unless the run wrote it, so damage since (bit
+//! rot, a file copied over another) stays a mismatch for `blurset verify` instead of
+//! being hashed anew; what a rerun reuses is checked against those lines first
+//! (`manifest_mismatches`), and redone when it differs.
+use super::layout::is_build_file;
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
+use crate::ground::names::files;
 use rayon::prelude::*;
 use sha2::{Digest, Sha256};
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 
 /// The manifest's file name, at the root of what it lists.
 pub const MANIFEST: &str = "MANIFEST.sha256";
@@ -37,8 +48,31 @@ pub fn is_listed(rel: &str) -> bool {
 pub fn list_files(root: &Path) -> Result<Vec<String>> {
     let mut out = Vec::new();
     walk(root, "", &mut out)?;
+    let settings = setting_dirs(root);
+    out.retain(|rel| in_setting_rule(rel, &settings));
     out.sort_unstable_by(|a, b| a.as_bytes().cmp(b.as_bytes()));
     Ok(out)
+}
+
+/// The settings of a build at `root`: its top folders holding a meta.json (a noise
+/// output's folders hold none).
+fn setting_dirs(root: &Path) -> BTreeSet<String> {
+    let Ok(rd) = std::fs::read_dir(root) else {
+        return BTreeSet::new();
+    };
+    rd.filter_map(|e| e.ok())
+        .filter(|e| e.path().join(files::META).is_file())
+        .filter_map(|e| e.file_name().to_str().map(str::to_owned))
+        .collect()
+}
+
+/// Whether `rel` passes the setting rule: outside a setting anything listable, inside
+/// one only what a build writes.
+fn in_setting_rule(rel: &str, settings: &BTreeSet<String>) -> bool {
+    match rel.split_once('/') {
+        Some((top, rest)) if settings.contains(top) => is_build_file(rest),
+        _ => true,
+    }
 }
 
 fn walk(dir: &Path, prefix: &str, out: &mut Vec<String>) -> Result<()> {
@@ -284,6 +318,138 @@ pub fn update_manifest(root: &Path, rels: &[String]) -> Result<usize> {
     Ok(entries.len())
 }
 
+/// A manifest's lines grouped by their first path component (a setting, or a noise
+/// output's setting), parsed once per process and version of the file: a rerun checks
+/// each setting it reuses against it.
+type Grouped = Arc<HashMap<String, Vec<(String, String)>>>;
+
+struct Cached {
+    path: PathBuf,
+    stamp: (u64, u64, std::time::SystemTime),
+    lines: Grouped,
+}
+
+static PARSED: Mutex<Option<Cached>> = Mutex::new(None);
+
+/// The lines of `root`'s manifest by first component, or None when it has none.
+fn grouped_lines(root: &Path) -> Result<Option<Grouped>> {
+    use std::os::unix::fs::MetadataExt;
+    let path = root.join(MANIFEST);
+    let meta = match std::fs::metadata(&path) {
+        Ok(m) if m.is_file() => m,
+        Ok(_) => return Ok(None),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(Error::io("cannot stat", &path, e)),
+    };
+    let modified = meta
+        .modified()
+        .map_err(|e| Error::io("cannot stat", &path, e))?;
+    let stamp = (meta.ino(), meta.len(), modified);
+    let mut cache = PARSED.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some(c) = cache
+        .as_ref()
+        .filter(|c| c.path == path && c.stamp == stamp)
+    {
+        return Ok(Some(c.lines.clone()));
+    }
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::io("cannot read", &path, e))?;
+    let mut by_top: HashMap<String, Vec<(String, String)>> = HashMap::new();
+    for (rel, digest) in parse_manifest(&text, &path)? {
+        let top = rel.split('/').next().unwrap_or_default().to_string();
+        by_top.entry(top).or_default().push((rel, digest));
+    }
+    let lines = Arc::new(by_top);
+    *cache = Some(Cached {
+        path,
+        stamp,
+        lines: lines.clone(),
+    });
+    Ok(Some(lines))
+}
+
+/// The files `root`'s manifest lists under the folder `dir` (relative, '/'-separated)
+/// that are gone or hold other bytes than it lists, hashed in parallel, sorted by path;
+/// none without a manifest. A rerun redoes such a setting or noise unit rather than
+/// certify what it did not write.
+pub fn manifest_mismatches(root: &Path, dir: &str) -> Result<Vec<(String, ManifestProblem)>> {
+    let Some(lines) = grouped_lines(root)? else {
+        return Ok(Vec::new());
+    };
+    let top = dir.split('/').next().unwrap_or_default();
+    let under = format!("{}/", dir.trim_end_matches('/'));
+    let listed: Vec<&(String, String)> = lines
+        .get(top)
+        .map(|v| v.iter().filter(|(r, _)| r.starts_with(&under)).collect())
+        .unwrap_or_default();
+    let found: Vec<Option<(String, ManifestProblem)>> = listed
+        .par_iter()
+        .map(|(rel, digest)| {
+            let file = root.join(rel);
+            let problem = if !file.is_file() {
+                Some(ManifestProblem::Missing)
+            } else {
+                match sha256_file(&file) {
+                    Ok(d) if &d == digest => None,
+                    _ => Some(ManifestProblem::Mismatch),
+                }
+            };
+            problem.map(|p| (rel.clone(), p))
+        })
+        .collect();
+    let mut out: Vec<(String, ManifestProblem)> = found.into_iter().flatten().collect();
+    out.sort_by(|a, b| a.0.as_bytes().cmp(b.0.as_bytes()));
+    Ok(out)
+}
+
+/// Write `root`'s manifest at the end of a rerun that wrote `written` (relative files
+/// or folders; a folder stands for everything under it, removed ones included): what
+/// the run wrote is hashed; a file the existing manifest lists keeps its line, never
+/// hashed anew (damage since stays a mismatch; the run checked what it reused with
+/// [`manifest_mismatches`]), and a listed file that is gone keeps its line too (still
+/// missing); a file it does not list (published after it: by a killed run, by another
+/// shard) is hashed. Without a manifest, every file is hashed ([`write_manifest`]).
+/// Returns the number of files listed.
+pub fn rewrite_manifest(root: &Path, written: &[String]) -> Result<usize> {
+    let path = root.join(MANIFEST);
+    if !path.is_file() {
+        return write_manifest(root);
+    }
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::io("cannot read", &path, e))?;
+    let old: BTreeMap<String, String> = parse_manifest(&text, &path)?.into_iter().collect();
+    let written: BTreeSet<&str> = written.iter().map(|w| w.trim_end_matches('/')).collect();
+    let wrote = |rel: &str| {
+        written.contains(rel)
+            || rel
+                .match_indices('/')
+                .any(|(i, _)| written.contains(&rel[..i]))
+    };
+    let on_disk = list_files(root)?;
+    let (to_hash, kept): (Vec<String>, Vec<String>) = on_disk
+        .iter()
+        .cloned()
+        .partition(|r| wrote(r) || !old.contains_key(r));
+    let mut entries: BTreeMap<Vec<u8>, (String, String)> = BTreeMap::new();
+    for r in kept {
+        let d = old[&r].clone();
+        entries.insert(r.as_bytes().to_vec(), (r, d));
+    }
+    // Gone since the manifest, and not by this run: still listed, so still missing.
+    let present: BTreeSet<&str> = on_disk.iter().map(String::as_str).collect();
+    let settings = setting_dirs(root);
+    for (r, d) in &old {
+        let listable = is_listed(r) && in_setting_rule(r, &settings);
+        if !present.contains(r.as_str()) && !wrote(r) && listable && !root.join(r).exists() {
+            entries.insert(r.as_bytes().to_vec(), (r.clone(), d.clone()));
+        }
+    }
+    let digests = hash_files(root, &to_hash)?;
+    for (r, d) in to_hash.into_iter().zip(digests) {
+        entries.insert(r.as_bytes().to_vec(), (r, d));
+    }
+    write_atomic(&path, render(&entries).as_bytes())?;
+    Ok(entries.len())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -372,6 +538,77 @@ mod tests {
             ],
         )?;
         assert_eq!(check_manifest(&d)?, vec![]);
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn a_rerun_certifies_only_what_it_wrote() -> Result<()> {
+        let d = tmp("rerun");
+        put(&d, "dataset.json", b"{}")?;
+        put(&d, "a_000/meta.json", b"{}")?;
+        put(&d, "a_000/sharp/images/000.png", b"one")?;
+        put(&d, "a_000/sharp/images/001.png", b"two")?;
+        put(&d, "b_000/meta.json", b"{}")?;
+        put(&d, "b_000/sharp/images/000.png", b"three")?;
+        put(&d, "README.md", b"card")?;
+        assert_eq!(write_manifest(&d)?, 7);
+        let listed = |d: &Path| -> Result<BTreeMap<String, String>> {
+            let text = std::fs::read_to_string(d.join(MANIFEST)).unwrap_or_default();
+            Ok(parse_manifest(&text, d)?.into_iter().collect())
+        };
+        let before = listed(&d)?;
+        // Damage since: one image copied over the other, the card edited, one gone.
+        put(&d, "a_000/sharp/images/001.png", b"one")?;
+        put(&d, "README.md", b"edited")?;
+        std::fs::remove_file(d.join("b_000/sharp/images/000.png"))
+            .map_err(|e| Error::io("rm", &d, e))?;
+        assert_eq!(
+            manifest_mismatches(&d, "a_000")?,
+            vec![(
+                "a_000/sharp/images/001.png".to_string(),
+                ManifestProblem::Mismatch
+            )]
+        );
+        assert_eq!(
+            manifest_mismatches(&d, "b_000")?,
+            vec![(
+                "b_000/sharp/images/000.png".to_string(),
+                ManifestProblem::Missing
+            )]
+        );
+        assert_eq!(manifest_mismatches(&d, "a_00")?, vec![]); // a folder, not a prefix
+        let problems = check_manifest(&d)?;
+        // A rerun that wrote only dataset.json and a new file: nothing it did not write
+        // is certified anew, and a user's file in a setting is never listed.
+        put(&d, "dataset.json", b"{\"new\": 1}")?;
+        put(&d, "c_000/meta.json", b"{}")?;
+        put(&d, "a_000/mynote.txt", b"mine")?;
+        rewrite_manifest(&d, &["dataset.json".to_string()])?;
+        let after = listed(&d)?;
+        assert_eq!(check_manifest(&d)?, problems);
+        assert_ne!(after["dataset.json"], before["dataset.json"]);
+        assert!(after.contains_key("c_000/meta.json"));
+        assert!(!after.contains_key("a_000/mynote.txt"));
+        for kept in [
+            "README.md",
+            "a_000/sharp/images/001.png",
+            "b_000/sharp/images/000.png",
+        ] {
+            assert_eq!(after[kept], before[kept], "{kept}");
+        }
+        // A redone setting (written) is hashed anew, a removed one drops its lines.
+        std::fs::remove_dir_all(d.join("b_000")).map_err(|e| Error::io("rm", &d, e))?;
+        rewrite_manifest(&d, &["a_000".to_string(), "b_000".to_string()])?;
+        let problems = check_manifest(&d)?;
+        assert_eq!(
+            problems,
+            vec![("README.md".to_string(), ManifestProblem::Mismatch)]
+        );
+        // Without a manifest every file is hashed.
+        std::fs::remove_file(d.join(MANIFEST)).map_err(|e| Error::io("rm", &d, e))?;
+        assert_eq!(rewrite_manifest(&d, &[])?, 6);
+        assert_eq!(manifest_mismatches(&d, "a_000")?, vec![]);
         let _ = std::fs::remove_dir_all(&d);
         Ok(())
     }

@@ -21,7 +21,9 @@
 //! What counts (see [`Counts`]): a setting is complete when its directory has the
 //! `.complete` marker and is not a `*.partial` directory; any other directory that looks
 //! like a setting (`*.partial`, or holding `meta.json` or `sharp/`) is skipped and
-//! counted as incomplete, so a build still running can be read. Hidden directories
+//! counted as incomplete, so a build still running can be read. A complete setting the
+//! cheap check of a rerun finds damaged (a file missing or cut short: a rerun redoes it)
+//! is counted from its meta.json all the same, and named in `damaged`. Hidden directories
 //! (`.work-*`, `.demo_objects`) and anything else are ignored.
 use super::failures;
 #[cfg(test)]
@@ -196,6 +198,18 @@ pub struct Counts {
     pub licence_skipped: usize,
     /// Setting directories skipped as incomplete (`*.partial`, or no `.complete`).
     pub incomplete_settings: usize,
+    /// Complete settings the cheap check of a rerun finds damaged (counted all the
+    /// same, named in `damaged`).
+    #[serde(default)]
+    pub damaged_settings: usize,
+}
+
+/// A complete setting the cheap check of a rerun finds damaged: what a rerun redoes it
+/// for (the first problem).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct Damaged {
+    pub setting: String,
+    pub problem: String,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -226,6 +240,9 @@ pub struct BuildStats {
     pub summary: Vec<Summary>,
     pub settings: Vec<SettingInfo>,
     pub incomplete: Vec<String>,
+    /// Complete settings a rerun would redo (a file missing or damaged), by name.
+    #[serde(default)]
+    pub damaged: Vec<Damaged>,
     pub failures: Vec<Failure>,
     /// Objects `--licenses` leaves out (their failures.jsonl records): not failures.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -567,7 +584,23 @@ pub fn build_stats(out: &Path) -> Result<BuildStats> {
     st.counts.failure_lines_skipped = skipped;
     st.counts.licence_skipped = licence.len();
     st.licence_skipped = licence;
+    st.damaged = damaged(out, &st.settings);
+    st.counts.damaged_settings = st.damaged.len();
     Ok(st)
+}
+
+/// The complete settings the cheap check of a rerun finds damaged (checked in
+/// parallel), with their first problem: statistics of a damaged build say so.
+fn damaged(out: &Path, settings: &[SettingInfo]) -> Vec<Damaged> {
+    settings
+        .par_iter()
+        .filter_map(|s| {
+            layout::setting_problem(&out.join(&s.name)).map(|problem| Damaged {
+                setting: s.name.clone(),
+                problem,
+            })
+        })
+        .collect()
 }
 
 fn assemble(
@@ -623,6 +656,7 @@ fn no_views(
         summary: Vec::new(),
         settings: Vec::with_capacity(settings),
         incomplete,
+        damaged: Vec::new(),
         failures: Vec::new(),
         licence_skipped: Vec::new(),
         view_setting: Vec::with_capacity(n_views),

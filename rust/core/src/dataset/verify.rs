@@ -1,9 +1,8 @@
 //! The expensive half of `blurset verify`: decode every image of a build in parallel
 //! and compare its size with the one its meta.json promises. (Which files must exist
 //! is decided by the caller from meta.json; this only reads pixels.)
+use super::layout::{decode_exr_size, error_reason as reason};
 use crate::error::Error;
-use crate::image::exr::read::decode_exr;
-use crate::image::geometry::decode_depth_exr;
 use crate::image::io::read_image;
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -31,19 +30,10 @@ fn check_one(item: &ImageCheck) -> Option<String> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     let size = if is_exr {
-        // A colour EXR (linear/, normals/), else a one-channel depth EXR (depth/): the
-        // file is read once for both.
+        // The file is read once, decoded as the cheap check of a rerun decodes it.
         std::fs::read(&item.path)
             .map_err(|e| Error::io("cannot open EXR", &item.path, e))
-            .and_then(|bytes| {
-                decode_exr(&bytes)
-                    .map(|f| (f.width, f.height))
-                    .or_else(|e| {
-                        decode_depth_exr(&bytes, &item.path)
-                            .map(|(w, h, _)| (w as u32, h as u32))
-                            .map_err(|_| e)
-                    })
-            })
+            .and_then(|bytes| decode_exr_size(&bytes, &item.path))
     } else {
         read_image(&item.path).map(|i| (i.width, i.height))
     };
@@ -54,14 +44,6 @@ fn check_one(item: &ImageCheck) -> Option<String> {
             item.width, item.height
         )),
         Ok(_) => None,
-    }
-}
-
-/// The error text without the path the caller names anyway.
-fn reason(msg: &str) -> String {
-    match msg.rfind(": \"") {
-        Some(i) if msg.ends_with('"') => msg[..i].to_string(),
-        _ => msg.to_string(),
     }
 }
 
