@@ -397,6 +397,32 @@ mod tests {
     }
 
     #[test]
+    fn an_exposure_mask_at_a_size_averages_the_largest_alpha_or_any_cover() -> Result<()> {
+        // 4 x 2 pixels' largest alpha over the frames: 2 x 2 blocks average 0.6 and 0.25;
+        // with motion blur every pixel but two is touched at all (4 and 2 of 4 a block).
+        let covered = [0.6f32, 0.8, 0.0, 0.6, 0.2, 0.8, 0.0, 0.4];
+        assert_eq!(
+            exposure_mask(&covered, 4, 2, 2, BlurMethod::Average)?,
+            [255, 0]
+        );
+        assert_eq!(
+            exposure_mask(&covered, 4, 2, 2, BlurMethod::MotionBlur)?,
+            [255, 255]
+        );
+        assert_eq!(
+            exposure_mask(&covered, 4, 2, 1, BlurMethod::MotionBlur)?,
+            [255, 255, 0, 255, 255, 255, 0, 255]
+        );
+        assert_eq!(
+            exposure_mask(&covered, 4, 2, 1, BlurMethod::Average)?,
+            [255, 255, 0, 255, 0, 255, 0, 0]
+        );
+        assert!(exposure_mask(&covered[..7], 4, 2, 1, BlurMethod::Average).is_err());
+        assert!(exposure_mask(&covered, 4, 2, 3, BlurMethod::Average).is_err());
+        Ok(())
+    }
+
+    #[test]
     fn millimetres_keep_zero_for_no_surface_and_refuse_what_does_not_fit() -> Result<()> {
         assert_eq!(
             depth_millimetres(&[0.0, 2.0, 1.23456, 1e-4, 65.535])?,
