@@ -1,9 +1,12 @@
 //! The expensive half of `blurset verify`: decode every image of a build in parallel
 //! and compare its size with the one its meta.json promises. (Which files must exist
-//! is decided by the caller from meta.json; this only reads pixels.)
+//! is decided by the caller from meta.json; this only reads pixels.) The decodes in
+//! flight together hold at most [`MAX_PARALLEL_DECODE_BYTES`] (or one image alone).
 use super::layout::{decode_exr_size, error_reason as reason};
 use crate::error::Error;
-use crate::image::io::read_image;
+use crate::ground::limits::MAX_PARALLEL_DECODE_BYTES;
+use crate::image::exr::read::decode_cost as exr_decode_cost;
+use crate::image::io::{image_info, read_image};
 use rayon::prelude::*;
 use std::path::PathBuf;
 
@@ -18,18 +21,56 @@ pub struct ImageCheck {
 /// What is wrong with each image (None when it decodes whole at its size), in order.
 /// `.exr` files are read as linear EXRs (or depth EXRs), anything else as PNG/JPEG.
 pub fn check_images(items: &[ImageCheck]) -> Vec<Option<String>> {
-    items.par_iter().map(check_one).collect()
+    let costs: Vec<u64> = items.par_iter().map(decode_cost).collect();
+    let mut found = Vec::with_capacity(items.len());
+    for batch in batches(&costs, MAX_PARALLEL_DECODE_BYTES) {
+        found.par_extend(items[batch].par_iter().map(check_one));
+    }
+    found
+}
+
+fn is_exr(item: &ImageCheck) -> bool {
+    item.path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+}
+
+/// The most bytes checking `item` may hold: an EXR's as its reader counts it, a PNG's
+/// or JPEG's file and samples (what its header promises; its length when that does
+/// not parse, as the decode then refuses it).
+fn decode_cost(item: &ImageCheck) -> u64 {
+    if is_exr(item) {
+        return exr_decode_cost(&item.path);
+    }
+    let len = std::fs::metadata(&item.path).map_or(0, |m| m.len());
+    image_info(&item.path).map_or(len, |(w, h, channels, bits)| {
+        len + u64::from(w) * u64::from(h) * channels as u64 * u64::from(bits.div_ceil(8))
+    })
+}
+
+/// `costs` cut into consecutive ranges whose sums stay within `budget` (a cost over it
+/// is a range alone): the decodes of one range run in parallel, the ranges in turn.
+fn batches(costs: &[u64], budget: u64) -> Vec<std::ops::Range<usize>> {
+    let mut out = Vec::new();
+    let (mut start, mut sum) = (0, 0u64);
+    for (i, &c) in costs.iter().enumerate() {
+        if i > start && sum.saturating_add(c) > budget {
+            out.push(start..i);
+            (start, sum) = (i, 0);
+        }
+        sum = sum.saturating_add(c);
+    }
+    if start < costs.len() {
+        out.push(start..costs.len());
+    }
+    out
 }
 
 fn check_one(item: &ImageCheck) -> Option<String> {
     if !item.path.is_file() {
         return Some("missing".into());
     }
-    let is_exr = item
-        .path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-    let size = if is_exr {
+    let size = if is_exr(item) {
         // The file is read once, decoded as the cheap check of a rerun decodes it.
         std::fs::read(&item.path)
             .map_err(|e| Error::io("cannot open EXR", &item.path, e))
@@ -51,6 +92,58 @@ fn check_one(item: &ImageCheck) -> Option<String> {
 mod tests {
     use super::*;
     use crate::image::io::write_png_rgb8;
+
+    #[test]
+    fn parallel_decodes_hold_at_most_the_budget_together() {
+        let costs = [5u64, 3, 2, 9, 1, 1, 12, 0, 4];
+        for budget in [1u64, 4, 8, 10, 12, 100] {
+            let got = batches(&costs, budget);
+            // Every image once, in order; a batch over the budget is one image alone.
+            let flat: Vec<usize> = got.iter().flat_map(|r| r.clone()).collect();
+            assert_eq!(flat, (0..costs.len()).collect::<Vec<_>>(), "{budget}");
+            for r in &got {
+                let sum: u64 = costs[r.clone()].iter().sum();
+                assert!(sum <= budget || r.len() == 1, "{budget}: {r:?} holds {sum}");
+            }
+        }
+        assert_eq!(batches(&costs, 100), vec![0..costs.len()]);
+        assert_eq!(batches(&[], 1), Vec::<std::ops::Range<usize>>::new());
+    }
+
+    #[test]
+    fn an_images_cost_is_what_its_decode_holds() -> crate::Result<()> {
+        let d = std::env::temp_dir().join(format!("blurset-cost-{}", std::process::id()));
+        std::fs::create_dir_all(&d).ok();
+        let item = |p: &std::path::Path| ImageCheck {
+            path: p.to_path_buf(),
+            width: 0,
+            height: 0,
+        };
+        let png = d.join("a.png");
+        write_png_rgb8(&png, 40, 30, &[7u8; 40 * 30 * 3])?;
+        let len = std::fs::metadata(&png).map_or(0, |m| m.len());
+        assert_eq!(decode_cost(&item(&png)), len + 40 * 30 * 3);
+        let exr = d.join("a.exr");
+        crate::image::exr::write::write_exr(&exr, 40, 30, &[0.5; 40 * 30 * 4])?;
+        let len = std::fs::metadata(&exr).map_or(0, |m| m.len());
+        // The file, its samples (4 channels of at least 2 bytes) and the f32 frame.
+        let cost = decode_cost(&item(&exr));
+        assert!(
+            cost >= len + 40 * 30 * (8 + 16) && cost <= len + 40 * 30 * 32,
+            "{cost}"
+        );
+        // A header that promises more than its file can hold costs the file alone.
+        let mut huge = std::fs::read(&exr).unwrap_or_default();
+        let name = b"dataWindow\0box2i\0";
+        if let Some(i) = huge.windows(name.len()).position(|x| x == name) {
+            let at = i + name.len() + 4;
+            huge[at + 8..at + 16].copy_from_slice(&[0xFF, 0x3F, 0, 0, 0xFF, 0x3F, 0, 0]);
+        }
+        std::fs::write(&exr, &huge).ok();
+        assert_eq!(decode_cost(&item(&exr)), huge.len() as u64);
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
 
     #[test]
     fn good_truncated_wrong_size_and_missing() -> crate::Result<()> {

@@ -23,6 +23,12 @@ pub const MAX_IMAGE_ALLOC: u64 = MAX_IMAGE_PIXELS * 8;
 /// refused later has cost memory in proportion to its own size, not its header's claim.
 pub const ZLIB_MAX_RATIO: u64 = 1032;
 
+/// The most bytes the images a command decodes in parallel (`blurset verify`) may hold
+/// together, each counted at the most its decode may hold (its file, its samples and its
+/// frame): 1 GiB, or one image alone when it is larger. Decoding a file per thread
+/// multiplies the largest image's memory by the threads (issue 48).
+pub const MAX_PARALLEL_DECODE_BYTES: u64 = 1 << 30;
+
 /// The most rows of a `poses_bounds.npy`: a million views, 136 MB of float64, where a
 /// build has at most 4096 views a setting (`--views`).
 pub const MAX_POSE_ROWS: usize = 1 << 20;

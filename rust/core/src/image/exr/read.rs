@@ -83,6 +83,28 @@ pub(crate) fn check_sizes(meta: &MetaData, file_len: usize) -> std::result::Resu
     check_fits_file(meta, file_len as u64)
 }
 
+/// The most bytes a decode of the EXR file at `path` may hold at once: the file, the
+/// samples its headers promise and their RGBA f32 frame; a file whose header does not
+/// parse or is refused costs its length. For callers that decode many files at once
+/// and bound their sum.
+pub(crate) fn decode_cost(path: &Path) -> u64 {
+    let len = std::fs::metadata(path).map_or(0, |m| m.len());
+    let Ok(meta) = MetaData::read_from_file(path, false) else {
+        return len;
+    };
+    if check_sizes(&meta, len as usize).is_err() {
+        return len;
+    }
+    let frame = |h: &Header| (h.layer_size.area() * CH * 4) as u64;
+    let held: u64 = meta
+        .headers
+        .iter()
+        .filter(|h| !h.deep)
+        .map(|h| level0_bytes(h) + frame(h))
+        .sum();
+    len + held
+}
+
 /// The bytes of samples of a layer's full-resolution level (subsampled channels count
 /// their own samples): what a decode of it holds before conversion.
 fn level0_bytes(h: &Header) -> u64 {
@@ -1070,9 +1092,15 @@ mod tests {
                 // The depth and guide readers (verify tries depth after colour) too.
                 let z = tiny_blocks(&["Z"], code, lines, w, h, 8);
                 let e = words(crate::image::geometry::decode_depth_exr(&z, path).map(|_| ()));
-                assert!(e.contains("more than a file of") && e.contains("tiny.exr"), "{e}");
+                assert!(
+                    e.contains("more than a file of") && e.contains("tiny.exr"),
+                    "{e}"
+                );
                 let e = words(super::super::passes::decode_passes(&rgb, path).map(|_| ()));
-                assert!(e.contains("more than a file of") && e.contains("tiny.exr"), "{e}");
+                assert!(
+                    e.contains("more than a file of") && e.contains("tiny.exr"),
+                    "{e}"
+                );
             }
         }
         // Lossy DCT blocks may claim any size from a few bytes: not read.
