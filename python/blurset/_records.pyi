@@ -508,7 +508,7 @@ class RenderRecord(TypedDict):
     preset: NotRequired[Preset | None]
     samples_per_latent: NotRequired[int | None]
     samples_total: NotRequired[int | None]
-    sharp_samples: int
+    sharp_samples: NotRequired[int | None]
     target_is: NotRequired[str]
     target_psnr_db: NotRequired[float | None]
 

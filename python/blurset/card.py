@@ -369,6 +369,27 @@ def _contents(
     return out
 
 
+def _image_records(metas: list[dict], level: str) -> list[dict]:
+    """Under --target-psnr: what each image of `level` rendered (meta.json
+    `views[].images`)."""
+    return [
+        im
+        for meta in metas
+        for v in meta.get("views", [])
+        if isinstance(im := (v.get("images") or {}).get(level), dict)
+    ]
+
+
+def _rendered_samples(metas: list[dict], level: str) -> str | None:
+    """The samples the images of `level` rendered under a target, as the records state
+    them (fewest–most, median): each image renders its own, so no one count is true."""
+    n = [int(r["samples"]) for r in _image_records(metas, level)]
+    if not n:
+        return None
+    spread = f"{min(n)}" if min(n) == max(n) else f"{min(n)}–{max(n)}"
+    return f"{spread} (median {statistics.median(n):g}), each image to the target"
+
+
 def _render_table(metas: list[dict], levels: list[str], target: Any) -> list[str]:
     """Under --target-psnr: per level, what the images cost and reached (the worst
     image and the 5th percentile beside the median: a mean would hide the worst)."""
@@ -383,12 +404,7 @@ def _render_table(metas: list[dict], levels: list[str], target: Any) -> list[str
         "|---|---|---|---|---|",
     ]
     for lvl in levels:
-        recs = [
-            im
-            for meta in metas
-            for v in meta.get("views", [])
-            if isinstance(im := (v.get("images") or {}).get(lvl), dict)
-        ]
+        recs = _image_records(metas, lvl)
         if not recs:
             continue
         n = [r["samples"] for r in recs]
@@ -425,13 +441,19 @@ def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> 
     table = ["| parameter | paper | this build |", "|---|---|---|"]
     for label, key in rows:
         table.append(f"| {label} | {_fmt(PAPER_VALUES.get(key))} | {_fmt(used(key))} |")
+    # Under a render target no count is fixed: the sharp images' row states what they
+    # rendered, and the fixed-count rows (a budget, per-frame samples) do not apply.
+    targeted = render.get("target_psnr_db") is not None
     extra = [
         ("resolution (px)", cfg.get("resolution")),
         ("field of view (°)", cfg.get("fov_deg", sampling.get("fov_deg"))),
         ("blur method", render.get("blur_method", cfg.get("blur_method"))),
-        ("Cycles samples per latent frame", render.get("samples_per_latent")),
-        ("blurry sample budget", render.get("blur_budget")),
-        ("Cycles samples of a sharp image", render.get("sharp_samples")),
+        ("Cycles samples per latent frame", None if targeted else render.get("samples_per_latent")),
+        ("blurry sample budget", None if targeted else render.get("blur_budget")),
+        (
+            "Cycles samples of a sharp image",
+            _rendered_samples(metas, "sharp") if targeted else render.get("sharp_samples"),
+        ),
         ("preset", render.get("preset", cfg.get("preset"))),
         ("render PSNR target per image (dB, object pixels)", render.get("target_psnr_db")),
         ("denoiser", _denoiser(render, cfg)),

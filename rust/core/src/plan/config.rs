@@ -141,8 +141,9 @@ macro_rules! build_options {
     };
     /// Most samples of one image under a target, both halves together.
     target_max_samples: u32 = 16384, specs::TARGET_MAX_SAMPLES, shapes {
-        help: "--target-psnr: most samples of one image (an image that would need more \
-            stops there, and meta.json says it did not reach the target)",
+        help: "--target-psnr: most samples of one image, at least 2 per latent frame (an \
+            image that would need more stops there, and meta.json says it did not reach \
+            the target)",
     };
     /// `auto`: light-path bounces from the object's materials; `fixed`: the same for all.
     light_paths: LightPaths = LightPaths::Auto, choice::<LightPaths>(), shapes {
@@ -268,9 +269,10 @@ macro_rules! build_options {
     /// Defocus levels (issue 35): `defocus_<l>/` beside the blur levels, depth of field
     /// rendered by Cycles ([`super::defocus`]).
     defocus: Vec<u32> = Vec::new(), Spec::Levels, shapes {
-        help: "defocus levels, e.g. 1,2,3,4: defocus_<l>/ beside the blur levels, each view \
-            focused inside the object's depth range and the largest circle of confusion on \
-            the object 2^l px at 512 px (scaled with --resolution); none by default",
+        help: "defocus levels 1 to 9, e.g. 1,2,3,4: defocus_<l>/ beside the blur levels, \
+            each view focused inside the object's depth range and the largest circle of \
+            confusion on the object 2^l px at 512 px (scaled with --resolution); none by \
+            default",
         before: Some(Vec::new()),
     };
     /// Depth, normals and masks of every view, in the sharp level (issue 35): depth and
