@@ -286,6 +286,13 @@ macro_rules! build_options {
     workers: usize = 1, specs::WORKERS, run {
         help: "objects rendered in parallel",
     };
+    /// Workers rendering on each GPU at once; None = one worker per GPU (or --workers).
+    workers_per_gpu: Option<usize> = None, specs::WORKERS_PER_GPU, run {
+        help: "workers rendering on each GPU at once, to overlap the fixed cost of a \
+            render call (a GPU device; local: every chosen GPU gets N pinned workers, \
+            Ray: each task reserves 1/N of a GPU)",
+        unset: Some("one per GPU, or --workers"),
+    };
     /// Cycles threads per worker (0 = all cores).
     threads: usize = 0, specs::THREADS, run {
         help: "Cycles threads per worker (0: all cores)",
@@ -519,6 +526,26 @@ impl BuildConfig {
                          cluster holds)",
                         self.workers
                     ),
+                ));
+            }
+        }
+        if let Some(k) = self.workers_per_gpu {
+            if self.device == Device::Cpu {
+                return Err(config_error(
+                    "workers_per_gpu",
+                    format!("{k}: only with a GPU device (the CPU takes --workers)"),
+                ));
+            }
+            if self.workers != 1 {
+                return Err(config_error(
+                    "workers_per_gpu",
+                    format!("{k}: with workers {}: give one of them", self.workers),
+                ));
+            }
+            if self.gpus_per_task.is_some() {
+                return Err(config_error(
+                    "workers_per_gpu",
+                    format!("{k}: with gpus_per_task: give one of them (it is 1/{k})"),
                 ));
             }
         }
@@ -985,6 +1012,11 @@ mod tests {
         assert!(err(&[("object_timeout", Raw::Float(1e308))]).starts_with("object_timeout"));
         assert!(err(&[("gpus_per_task", Raw::Float(1.0))])
             .starts_with("gpus_per_task 1.0: only with executor ray"));
+        let k = ("workers_per_gpu", Raw::Int(2));
+        assert!(err(&[k.clone(), ("device", Raw::Str("cpu".into()))])
+            .starts_with("workers_per_gpu 2: only with a GPU device"));
+        assert!(err(&[k.clone(), ("workers", Raw::Int(4))]).contains("give one of them"));
+        assert!(err(&[("workers_per_gpu", Raw::Int(0))]).starts_with("workers_per_gpu 0"));
         let ray = ("executor", Raw::Str("ray".into()));
         assert!(err(&[ray.clone(), ("gpus", Raw::List(vec![Raw::Int(0)]))])
             .starts_with("gpus [0]: only with executor local"));

@@ -516,6 +516,7 @@ pub mod specs {
     pub const BUDGET_SECONDS: Spec = Spec::num(0.0, false, MAX_SECONDS, false);
     pub const THREADS: Spec = Spec::int(0, 4096);
     pub const WORKERS: Spec = Spec::int(1, 1024);
+    pub const WORKERS_PER_GPU: Spec = Spec::int(1, 64);
 }
 
 /// The longest timeout or time budget, s (a year; a wait of 1e308 s cannot be made).
