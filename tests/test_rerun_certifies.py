@@ -193,3 +193,21 @@ def test_a_noise_rerun_redoes_a_gain_file_copied_over_another(b, tmp_path):
     for p, data in whole.items():
         assert p.read_bytes() == data, p
     assert verify_lines(out) == {}
+
+
+def test_a_superseded_setting_of_a_passes_build_is_removed_not_refused(b, standin_blender):
+    # Its depth/, normals/ and masks/ are the build's own (the one rule of what a build
+    # writes in a setting), not a user's files that would make the rerun refuse.
+    src = layout.complete_settings(b)[0]
+    old = b / "old_box_000"
+    shutil.copytree(src, old)
+    meta = json.loads((old / layout.META).read_text())
+    meta["uid"] = "old_box"
+    (old / layout.META).write_text(json.dumps(meta))
+    assert layout.not_written_by_build(old) == []
+    (old / "sharp" / "depth" / "notes.txt").write_text("mine")
+    assert layout.not_written_by_build(old) == ["sharp/depth/notes.txt"]
+    (old / "sharp" / "depth" / "notes.txt").unlink()
+    proc = standin_build(b, standin_blender, *PASSES)
+    assert "removed old_box_000" in proc.stderr
+    assert not old.exists()

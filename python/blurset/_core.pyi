@@ -573,6 +573,10 @@ def partial_dir(final_dir: str | PathLike[str]) -> Path:
 def is_complete(dir: str | PathLike[str]) -> bool:
     """A final (not `*.partial`) directory holding its marker."""
 
+def is_image_folder(name: str) -> bool:
+    """Whether a level's folder `name` holds per-view files: images, linear, depth,
+    normals, masks, each also at a factor (`images_4`)."""
+
 def setting_problem(setting: str | PathLike[str]) -> str | None:
     """What is missing or damaged in a complete setting (checked cheaply), or None."""
 

@@ -72,15 +72,23 @@ def nerfstudio_depth_dir(factor: int) -> str:
     return _core.nerfstudio_depth_dir(factor)
 
 
-def pass_level(p: str, level: str) -> str:
+def pass_level(p: str, level: str, level_masks: bool) -> str:
     """The level folder holding `level`'s files of pass `p`: a blur level's own masks
-    (the coverage of its exposure), everything else the sharp level's."""
-    return _core.pass_level(p, level)
+    (the coverage of its exposure) in a setting that records them (`level_masks`, meta.json
+    `render.level_masks`), everything else the sharp level's."""
+    return _core.pass_level(p, level, level_masks)
+
+
+def level_masks(meta: dict) -> bool:
+    """Whether a setting's blur levels hold masks of their own (its meta.json): false in
+    a setting built before they had them, whose levels all take the sharp masks."""
+    return bool((meta.get("render") or {}).get("level_masks", False))
 
 
 def own_mask_levels(levels: list[str]) -> list[str]:
-    """The levels of `levels` that hold masks of their own (the blur levels)."""
-    return [lv for lv in levels if lv != SHARP and pass_level("mask", lv) == lv]
+    """The levels of `levels` that hold masks of their own in a build made now (the blur
+    levels)."""
+    return [lv for lv in levels if lv != SHARP and pass_level("mask", lv, True) == lv]
 
 
 def pass_file(p: str, image: str) -> str:
@@ -196,16 +204,12 @@ def replace_dir(new: Path, dst: Path) -> None:
     _core.replace_dir(new, dst)
 
 
-def _is_folder_of(name: str, base: str) -> bool:
-    """`base` or `base_<f>` (images, images_8, linear_4)."""
-    return name == base or (name.startswith(base + "_") and name[len(base) + 1 :].isdigit())
-
-
 def not_written_by_build(setting: Path) -> list[str]:
     """The entries (relative paths) of a setting folder that no build writes: anything
     but meta.json, transforms.json, the marker, preview.png, the level folders with
-    their images/, images_<f>/, linear/, linear_<f>/ of image files, poses_bounds.npy
-    and transforms.json, and a killed writer's temp names."""
+    their images/, linear/ and pass folders (depth/, normals/, masks/), each also at a
+    factor (images_<f>/), of image files, poses_bounds.npy and transforms.json, and a
+    killed writer's temp names (the core's rule of what a manifest lists in a setting)."""
     setting = Path(setting)
     if setting.is_symlink() or not setting.is_dir():
         return []
@@ -224,11 +228,7 @@ def not_written_by_build(setting: Path) -> list[str]:
                 continue
             if _core.parse_temp_name(q.name) is not None:
                 continue
-            if not (
-                (_is_folder_of(q.name, IMAGES) or _is_folder_of(q.name, LINEAR))
-                and q.is_dir()
-                and not q.is_symlink()
-            ):
+            if not (_core.is_image_folder(q.name) and q.is_dir() and not q.is_symlink()):
                 found.append(rel)
                 continue
             for r in sorted(q.iterdir()):

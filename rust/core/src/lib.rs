@@ -58,7 +58,8 @@ pub use crate::dataset::failures::{
     current as current_failures, read_records as read_failure_records,
 };
 pub use crate::dataset::layout::{
-    complete_settings, is_complete, parse_temp_name, partial_dir, png_fault, publish,
+    complete_settings, is_complete, is_image_folder, parse_temp_name, partial_dir, png_fault,
+    publish,
     setting_levels, setting_problem, setting_problems, temp_path, Fault, SettingProblem, MARKER,
     PARTIAL_SUFFIX,
 };

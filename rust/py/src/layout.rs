@@ -115,10 +115,10 @@ fn nerfstudio_depth_dir(factor: u32) -> String {
 }
 
 /// The level folder that holds `level`'s files of pass `kind` (a blur level's own
-/// masks; everything else the sharp level's).
+/// masks where the setting records them; everything else the sharp level's).
 #[pyfunction]
-fn pass_level(kind: &str, level: &str) -> String {
-    core::pass_level(kind, level).to_string()
+fn pass_level(kind: &str, level: &str, level_masks: bool) -> String {
+    core::pass_level(kind, level, level_masks).to_string()
 }
 
 /// The file of an image's view in a pass's folder (`007.png` → `007.exr` or `007.png`).
@@ -149,6 +149,12 @@ fn partial_dir(final_dir: PathBuf) -> PathBuf {
 #[pyfunction]
 fn is_complete(dir: PathBuf) -> bool {
     core::is_complete(&dir)
+}
+
+/// Whether a level's folder `name` holds per-view files (images, linear, passes).
+#[pyfunction]
+fn is_image_folder(name: &str) -> bool {
+    core::is_image_folder(name)
 }
 
 /// The private folder an object's worker writes its scratch in (`.work-<uid>`).
@@ -284,6 +290,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(gain_name, m)?)?;
     m.add_function(wrap_pyfunction!(partial_dir, m)?)?;
     m.add_function(wrap_pyfunction!(is_complete, m)?)?;
+    m.add_function(wrap_pyfunction!(is_image_folder, m)?)?;
     m.add_function(wrap_pyfunction!(complete_settings, m)?)?;
     m.add_function(wrap_pyfunction!(setting_problem, m)?)?;
     m.add_function(wrap_pyfunction!(setting_problems, m)?)?;
