@@ -57,7 +57,7 @@ def measure(name: str, args: tuple[str, ...]) -> dict:
             k: sum(
                 _bytes(s / lv / layout.pass_dir(k, f))
                 for s in settings
-                for lv in {layout.pass_level(k, lv) for lv in layout.setting_levels(s)}
+                for lv in {layout.pass_level(k, lv, True) for lv in layout.setting_levels(s)}
                 for f in (1, 4)
             )
             for k in layout.PASSES

@@ -193,3 +193,35 @@ def test_real_blurry_masks_cover_the_exposure(tmp_path):
     for sharp, own, alpha in views:
         assert not (sharp & ~own).any() and not ((alpha >= 0.5) & ~own).any()
     assert any((own & ~sharp).any() for sharp, own, _ in views)
+
+
+def test_a_build_made_before_blur_masks_is_still_whole_and_read_as_made(
+    masks_build, tmp_path
+):
+    """A setting whose meta.json does not record `level_masks` (every --passes mask build
+    before issue 48) holds masks in sharp/ only: verify finds it whole, open_scene and the
+    nerfstudio export give every level the sharp masks, and a rerun keeps it."""
+    from blurset import publish
+
+    old = copy_build(masks_build, tmp_path / "old")
+    for setting in layout.complete_settings(old):
+        meta = json.loads((setting / layout.META).read_text())
+        assert meta["render"].pop("level_masks") is True
+        (setting / layout.META).write_text(json.dumps(meta, indent=2))
+        for level in BLUR:
+            for f in (1, 4):
+                d = setting / level / layout.pass_dir("mask", f)
+                for p in d.iterdir():
+                    p.unlink()
+                d.rmdir()
+    publish.write_manifest(old)  # its manifest, as that build wrote it
+    run_cli("verify", str(old))
+    setting = layout.complete_settings(old)[0]
+    sharp = open_scene(old, setting.name, layout.SHARP)
+    assert np.array_equal(open_scene(old, setting.name, "blur_2").masks, sharp.masks)
+    run_cli("export", str(old), "--for", "nerfstudio", "--out", str(tmp_path / "ns"))
+    scene = tmp_path / "ns" / f"{setting.name}__blur_2" / layout.TRANSFORMS
+    tf = json.loads(scene.read_text())
+    first = scene.parent / tf["frames"][0]["mask_path"]
+    name = Path(tf["frames"][0]["file_path"]).name
+    assert first.read_bytes() == (setting / layout.SHARP / "masks" / name).read_bytes()

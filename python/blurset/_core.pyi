@@ -194,6 +194,7 @@ class BuildConfigRecord(TypedDict):
     defocus: list[int]
     passes: list[str]
     workers: int
+    workers_per_gpu: int | None
     threads: int
     executor: Literal["local", "ray"]
     ray_address: str | None
@@ -377,6 +378,8 @@ class BuildConfig:
     @property
     def workers(self) -> int: ...
     @property
+    def workers_per_gpu(self) -> int | None: ...
+    @property
     def threads(self) -> int: ...
     @property
     def executor(self) -> Literal["local", "ray"]: ...
@@ -509,16 +512,17 @@ def pass_dir(kind: str, factor: int) -> str:
     """The sharp level's folder of a pass at downsampling factor `factor` (`depth`,
     `normals_4`, `masks`)."""
 
-def pass_file(kind: str, image: str) -> str:
-    """The file of an image's view in a pass's folder (`007.exr`; masks `007.png`)."""
-
-def pass_level(kind: str, level: str) -> str:
 def nerfstudio_depth_dir(factor: int) -> str:
     """nerfstudio's depth folder in an exported scene at downsampling factor `factor`
     (`depths`, `depths_4`)."""
 
+def pass_file(kind: str, image: str) -> str:
+    """The file of an image's view in a pass's folder (`007.exr`; masks `007.png`)."""
+
+def pass_level(kind: str, level: str, level_masks: bool) -> str:
     """The level folder that holds `level`'s files of pass `kind`: a blur level's own
-    masks (`blur_4`), everything else the sharp level's (`sharp`)."""
+    masks (`blur_4`) where the setting records them (meta.json `render.level_masks`),
+    everything else the sharp level's (`sharp`)."""
 
 def setting_name(uid: str, theta0_deg: float) -> str:
     """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""
@@ -1397,6 +1401,10 @@ def claim(dir: str | PathLike[str], kind: OutputKind, option: str) -> str:
 def owned_entries(dir: str | PathLike[str], kind: OutputKind) -> list[str]:
     """The entries (relative paths) an output of `kind` in `dir` wrote."""
 
+def not_written(dir: str | PathLike[str], kind: OutputKind, rel: str) -> list[str]:
+    """The entries inside the owned entry `rel` of the output in `dir` that no command of
+    `kind` writes (paths relative to `dir`)."""
+
 def remove_owned(dir: str | PathLike[str], kind: OutputKind) -> list[str]:
     """Remove what `owned_entries` lists; returns it. An entry holding a file the command
     did not write is refused by name (InputError) before anything is removed."""
@@ -1415,10 +1423,6 @@ def mark_text(text: str, command: str) -> str:
 
 def text_owner(path: str | PathLike[str], command: str) -> str:
     """`absent`, `ours`, `edited` or `foreign`: who the text file at `path` belongs to."""
-def not_written(dir: str | PathLike[str], kind: OutputKind, rel: str) -> list[str]:
-    """The entries inside the owned entry `rel` of the output in `dir` that no command of
-    `kind` writes (paths relative to `dir`)."""
-
 
 def read_record(path: str | PathLike[str], record: str | None = None) -> Any:
     """A record blurset wrote, checked against its shape: the parsed JSON. InputError

@@ -501,6 +501,7 @@ class RenderRecord(TypedDict):
     latent_sampling: LatentSampling
     latent_sampling_is: str
     latents: Any
+    level_masks: NotRequired[bool]
     light_paths: NotRequired[LightPathsRecord | None]
     linear: NotRequired[bool]
     passes: NotRequired[list[str]]

@@ -211,7 +211,8 @@ def _passes(sdir: Path, level: str, n: int, downsample: int) -> dict[str, np.nda
     names = [layout.image_name(i, n) for i in range(n)]
 
     def files(kind: str) -> list[Path]:
-        d = sdir / layout.pass_level(kind, level) / layout.pass_dir(kind, downsample)
+        holder = layout.pass_level(kind, level, layout.level_masks(meta))
+        d = sdir / holder / layout.pass_dir(kind, downsample)
         out = [d / layout.pass_file(kind, name) for name in names]
         for p in out:
             if not p.is_file():

@@ -380,9 +380,10 @@ def _write_passes(
     transforms.json whose frames name them (`depth_file_path`) and the masks
     (`mask_path`), which its parser looks up in depths_<f>/ and masks_<f>/ when it
     downscales."""
+    own = layout.level_masks(layout.read_json(setting / layout.META, layout.META))
     for kind in doc.get("passes") or []:
         for f in [1, *doc["factors"]]:
-            sub, holder = layout.pass_dir(kind, f), setting / layout.pass_level(kind, level)
+            sub, holder = layout.pass_dir(kind, f), setting / layout.pass_level(kind, level, own)
             if not (holder / sub).is_dir():
                 raise InputError(f"missing {sub} in the build's {holder.name} level: {holder}")
             _link(holder / sub, d / sub, final / sub, doc["copy"])
@@ -403,7 +404,7 @@ def _write_passes(
                 name = Path(frame["file_path"]).name
                 exr = (
                     setting
-                    / layout.pass_level("depth", level)
+                    / layout.pass_level("depth", level, own)
                     / layout.pass_dir("depth", f)
                     / layout.pass_file("depth", name)
                 )

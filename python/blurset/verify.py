@@ -163,7 +163,7 @@ def setting_problems(
         # --passes: depth/, normals/, masks/ and their _<f> sizes, named as the images, in
         # the sharp level; a blur level's own masks in it (layout.pass_level).
         for kind in render.get("passes") or []:
-            if layout.pass_level(kind, level) != level:
+            if layout.pass_level(kind, level, layout.level_masks(meta)) != level:
                 continue
             names = [layout.pass_file(kind, i) for i in images]
             for f in [1, *factors]:

@@ -115,10 +115,10 @@ fn nerfstudio_depth_dir(factor: u32) -> String {
 }
 
 /// The level folder that holds `level`'s files of pass `kind` (a blur level's own
-/// masks; everything else the sharp level's).
+/// masks where the setting records them; everything else the sharp level's).
 #[pyfunction]
-fn pass_level(kind: &str, level: &str) -> String {
-    core::pass_level(kind, level).to_string()
+fn pass_level(kind: &str, level: &str, level_masks: bool) -> String {
+    core::pass_level(kind, level, level_masks).to_string()
 }
 
 /// The file of an image's view in a pass's folder (`007.png` → `007.exr` or `007.png`).

@@ -253,7 +253,8 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
 /// views', an empty file, a damaged mask or one of another size.
 fn pass_problems(level: &Path, lvl: &str, counts: &SettingCounts) -> Vec<SettingProblem> {
     let mut out = Vec::new();
-    for pass in counts.passes.iter().filter(|p| pass_level(p, lvl) == lvl) {
+    let own = |p: &&String| pass_level(p, lvl, counts.level_masks) == lvl;
+    for pass in counts.passes.iter().filter(own) {
         for factor in std::iter::once(1).chain(counts.downsample.iter().copied()) {
             let sub = pass_dir(pass, factor);
             let rel = format!("{lvl}/{sub}");
@@ -278,6 +279,8 @@ struct SettingCounts {
     linear: bool,
     /// The sharp level's per-view outputs besides colour (`render.passes`).
     passes: Vec<String>,
+    /// Blur levels hold masks of their own (`render.level_masks`).
+    level_masks: bool,
     resolution: Option<[u32; 2]>,
 }
 
@@ -290,6 +293,8 @@ impl SettingCounts {
             linear: bool,
             #[serde(default)]
             passes: Vec<String>,
+            #[serde(default)]
+            level_masks: bool,
         }
         #[derive(serde::Deserialize)]
         struct Counts {
@@ -320,6 +325,7 @@ impl SettingCounts {
             levels: c.levels,
             downsample: c.downsample,
             linear: c.render.as_ref().is_some_and(|r| r.linear),
+            level_masks: c.render.as_ref().is_some_and(|r| r.level_masks),
             passes: c.render.map(|r| r.passes).unwrap_or_default(),
             resolution: c.resolution,
         })

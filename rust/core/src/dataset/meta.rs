@@ -127,6 +127,11 @@ pub struct RenderRecord {
     pub passes: Vec<String>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub passes_are: BTreeMap<String, String>,
+    /// Each blur level holds masks of its own coverage (`blur_<l>/masks/`): true in a
+    /// setting with the mask pass made since issue 48; absent before, where every level
+    /// takes the sharp level's masks.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub level_masks: bool,
     /// The `--preset` the build was asked for (the options it set are recorded as options).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preset: Option<Preset>,
@@ -283,6 +288,7 @@ impl RenderRecord {
             linear: cfg.write_linear,
             passes: cfg.passes.clone(),
             passes_are: cfg.passes.iter().map(|p| (p.clone(), pass_is(p))).collect(),
+            level_masks: cfg.passes.iter().any(|p| p == "mask"),
         }
     }
 }

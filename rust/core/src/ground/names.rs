@@ -96,14 +96,15 @@ pub fn pass_dir(pass: &str, factor: u32) -> String {
     }
 }
 
-/// The level folder that holds `level`'s files of `pass`: a blur level (`blur_<l>`)
-/// holds its own masks, because its image is an average over the exposure whose
-/// coverage is larger than the sharp silhouette (issue 48); every other pass, and the
-/// masks of the sharp and defocus levels (one render at the written pose each), are the
-/// sharp level's.
-pub fn pass_level<'a>(pass: &str, level: &'a str) -> &'a str {
+/// The level folder that holds `level`'s files of `pass`: in a setting whose blur levels
+/// hold masks of their own (`level_masks`, meta.json `render.level_masks`), a blur level
+/// (`blur_<l>`) holds its masks, because its image is an average over the exposure whose
+/// coverage is larger than the sharp silhouette (issue 48); every other pass, the masks
+/// of the sharp and defocus levels (one render at the written pose each) and every mask
+/// of a setting built before blur levels had their own, are the sharp level's.
+pub fn pass_level<'a>(pass: &str, level: &'a str, level_masks: bool) -> &'a str {
     match parse_level_dir(level) {
-        Some(l) if l > 0 && pass == "mask" => level,
+        Some(l) if l > 0 && pass == "mask" && level_masks => level,
         _ => SHARP,
     }
 }
@@ -292,11 +293,12 @@ mod tests {
         assert_eq!(linear_name("007.png"), "007.exr");
         assert_eq!(linear_name(&image_name(7, 1500)), "0007.exr");
     }
-}
 
     #[test]
     fn a_blur_level_holds_its_own_masks_and_nothing_else_of_the_passes() {
-        assert_eq!(pass_level("mask", "blur_4"), "blur_4");
+        assert_eq!(pass_level("mask", "blur_4", true), "blur_4");
+        // A setting built before blur levels had masks of their own: the sharp one.
+        assert_eq!(pass_level("mask", "blur_4", false), SHARP);
         for (pass, level) in [
             ("mask", SHARP),
             ("mask", "defocus_2"),
@@ -304,6 +306,7 @@ mod tests {
             ("normal", "blur_1"),
             ("mask", "blur_04"),
         ] {
-            assert_eq!(pass_level(pass, level), SHARP, "{pass} of {level}");
+            assert_eq!(pass_level(pass, level, true), SHARP, "{pass} of {level}");
         }
     }
+}
