@@ -53,7 +53,7 @@ test-py: venv
 # poses_bounds.npy; rust/fuzz), each for FUZZ_SECONDS: CI runs it after `make test`.
 # libFuzzer needs nightly flags: RUSTC_BOOTSTRAP lets the stable toolchain take them.
 FUZZ_SECONDS ?= 20
-FUZZ_TARGETS := exr records poses_bounds
+FUZZ_TARGETS := exr exr_memory records poses_bounds
 fuzz:
 	command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked
 	RUSTC_BOOTSTRAP=1 cargo fuzz build --fuzz-dir rust/fuzz

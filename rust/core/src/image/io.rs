@@ -123,6 +123,56 @@ fn check_size(w: u32, h: u32) -> std::result::Result<(), String> {
     )
 }
 
+/// A PNG's header may promise no more pixel data than its file's bytes can inflate to
+/// (zlib's bound, [`limits::ZLIB_MAX_RATIO`]): the decoder allocates the whole image
+/// before it inflates anything, so a 1 KB file promising 16384² would cost 1 GiB before
+/// being refused (issue 48). The data's size is read from IHDR (width, height, bit depth,
+/// colour type: a palette or 1-bit image holds fewer bytes than it decodes to); a file
+/// that is not a PNG passes.
+fn check_png_fits_file(path: &Path) -> std::result::Result<(), String> {
+    use std::io::Read;
+    let mut head = [0u8; 26];
+    let len = std::fs::File::open(path)
+        .and_then(|mut f| {
+            f.read_exact(&mut head)?;
+            f.metadata()
+        })
+        .map(|m| m.len());
+    let Ok(len) = len else {
+        return Ok(()); // too short for a PNG header: the decoder says what is wrong
+    };
+    if &head[..8] != b"\x89PNG\r\n\x1a\n" || &head[12..16] != b"IHDR" {
+        return Ok(());
+    }
+    let be = |at: usize| {
+        u64::from(u32::from_be_bytes([
+            head[at],
+            head[at + 1],
+            head[at + 2],
+            head[at + 3],
+        ]))
+    };
+    let (w, h, depth) = (be(16), be(20), u64::from(head[24]));
+    // Samples a pixel by colour type: gray, -, RGB, palette index, gray + alpha, -, RGBA.
+    let samples = match head[25] {
+        0 | 3 => 1,
+        2 => 3,
+        4 => 2,
+        6 => 4,
+        _ => return Ok(()),
+    };
+    let data = (w * samples * depth).div_ceil(8).saturating_mul(h);
+    let most = len.saturating_mul(limits::ZLIB_MAX_RATIO);
+    if data > most {
+        return Err(format!(
+            "PNG header promises a {w}x{h} image of {data} bytes of pixel data, more than a \
+             file of {len} bytes can hold (at most {}:1); refused before reading it",
+            limits::ZLIB_MAX_RATIO
+        ));
+    }
+    Ok(())
+}
+
 /// Decode an image file (format guessed from its bytes) into 8- or 16-bit samples,
 /// within the limits of `ground::limits` (the decoder allocates at most
 /// [`MAX_IMAGE_ALLOC`]).
@@ -138,6 +188,7 @@ pub fn read_image(path: &Path) -> Result<Image> {
     let decoder = reader.into_decoder().map_err(|e| bad(e.to_string()))?;
     let (w, h) = decoder.dimensions();
     check_size(w, h).map_err(bad)?;
+    check_png_fits_file(path).map_err(bad)?;
     let img = DynamicImage::from_decoder(decoder).map_err(|e| bad(e.to_string()))?;
     let (channels, samples) = match img {
         DynamicImage::ImageLuma8(b) => (1, Samples::U8(b.into_raw())),
@@ -216,6 +267,54 @@ mod tests {
 
     fn tmp(name: &str) -> std::path::PathBuf {
         std::env::temp_dir().join(format!("blurset-imageio-{}-{name}", std::process::id()))
+    }
+
+    #[test]
+    fn a_png_header_promising_more_than_its_file_holds_is_refused_before_decoding() -> Result<()> {
+        // IHDR of a 16384^2 RGBA8 image (1 GiB decoded) over one tiny IDAT: the decoder
+        // used to allocate the whole image before finding the data short.
+        let chunk = |ty: &[u8], data: &[u8]| -> Vec<u8> {
+            let mut c = (data.len() as u32).to_be_bytes().to_vec();
+            c.extend_from_slice(ty);
+            c.extend_from_slice(data);
+            // CRC-32 of type and data (bitwise, reflected 0xEDB88320).
+            let mut crc = !0u32;
+            for &b in &c[4..] {
+                crc ^= u32::from(b);
+                for _ in 0..8 {
+                    crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
+                }
+            }
+            c.extend_from_slice(&(!crc).to_be_bytes());
+            c
+        };
+        let mut ihdr = 16384u32.to_be_bytes().repeat(2);
+        ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
+        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+        for (ty, data) in [
+            (&b"IHDR"[..], &ihdr[..]),
+            (b"IDAT", &[0x78, 1, 3, 0][..]),
+            (b"IEND", &[]),
+        ] {
+            png.extend(chunk(ty, data));
+        }
+        let p = tmp("huge.png");
+        std::fs::write(&p, &png).map_err(|e| Error::io("write", &p, e))?;
+        let e = read_image(&p)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            e.contains("PNG header promises a 16384x16384 image of 1073741824 bytes")
+                && e.contains("more than a file of")
+                && e.contains("huge.png"),
+            "{e}"
+        );
+        // A flat image compresses far, but never past zlib's bound: read whole.
+        write_png_rgb8(&p, 2000, 1500, &vec![0u8; 2000 * 1500 * 3])?;
+        assert_eq!(read_image(&p)?.width, 2000);
+        let _ = std::fs::remove_file(&p);
+        Ok(())
     }
 
     #[test]
