@@ -62,7 +62,6 @@ def run_capped(*args: str) -> subprocess.CompletedProcess:
 def crafted(standin_blender, tmp_path) -> tuple[Path, list[Path]]:
     """A `--keep-linear` stand-in build whose first setting's first three sharp linear
     EXRs are issue 48's file."""
-
     out = tmp_path / "b"
     standin_build(out, standin_blender, "--keep-linear")
     setting = layout.complete_settings(out)[0]
