@@ -211,3 +211,22 @@ def test_a_superseded_setting_of_a_passes_build_is_removed_not_refused(b, standi
     proc = standin_build(b, standin_blender, *PASSES)
     assert "removed old_box_000" in proc.stderr
     assert not old.exists()
+
+
+def test_the_cheap_check_of_a_hostile_exr_stays_bounded(b, tmp_path, standin_blender):
+    # The rerun's and stats' cheap check decodes EXRs: issue 48's 525 KB file with a
+    # 16384² header is refused there too, under the address-space cap, by name.
+    from tests.test_bounded_memory import run_capped, tiny_blocks
+
+    setting = layout.complete_settings(b)[0]
+    exr = sorted((setting / "sharp" / "linear").glob("*.exr"))[0]
+    exr.write_bytes(tiny_blocks())
+    proc = run_capped("stats", str(b), "--out", str(tmp_path / "st"))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    doc = json.loads((tmp_path / "st" / layout.STATS).read_text())
+    (damaged,) = doc["damaged"]
+    assert damaged["setting"] == setting.name
+    assert damaged["problem"].startswith(f"sharp/linear/{exr.name} does not decode")
+    proc = standin_build(b, standin_blender, *PASSES)
+    assert f"redoing {setting.name}: sharp/linear/{exr.name} does not decode" in proc.stderr
+    assert verify_lines(b) == {}
