@@ -196,7 +196,7 @@ def test_real_blurry_masks_cover_the_exposure(tmp_path):
 
 
 def test_a_build_made_before_blur_masks_is_still_whole_and_read_as_made(
-    masks_build, tmp_path
+    masks_build, tmp_path, standin_blender
 ):
     """A setting whose meta.json does not record `level_masks` (every --passes mask build
     before issue 48) holds masks in sharp/ only: verify finds it whole, open_scene and the
@@ -215,6 +215,10 @@ def test_a_build_made_before_blur_masks_is_still_whole_and_read_as_made(
                     p.unlink()
                 d.rmdir()
     publish.write_manifest(old)  # its manifest, as that build wrote it
+    run_cli("verify", str(old))
+    rerun = standin_build(old, standin_blender, *MASKS, "--settings-per-object", "1")
+    assert "redoing" not in rerun.stderr, rerun.stderr
+    assert not (layout.complete_settings(old)[0] / "blur_1" / "masks").exists()
     run_cli("verify", str(old))
     setting = layout.complete_settings(old)[0]
     sharp = open_scene(old, setting.name, layout.SHARP)
