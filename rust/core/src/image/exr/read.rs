@@ -51,7 +51,8 @@ pub fn read_exr(path: &Path) -> Result<Frame> {
 
 /// Decode an EXR file held in memory (as [`read_exr`]; errors name it `<bytes>`).
 /// Arbitrary bytes give a frame or an error, never a panic nor an allocation past
-/// [`MAX_IMAGE_PIXELS`] (fuzzed).
+/// [`MAX_IMAGE_PIXELS`], nor more than a few times the frame given or, for an error, a
+/// bound proportional to `bytes.len()` (fuzzed: exr, exr_memory).
 pub fn decode_exr(bytes: &[u8]) -> Result<Frame> {
     let mut rgba = Vec::new();
     let d = decode_rgba(bytes, Path::new("<bytes>"), &mut rgba)?;
