@@ -54,7 +54,6 @@ ALLOWED: list[tuple[str, str]] = [
     (r"A 4× downsample|about\s+4×", "a 4× area average cuts σ 4×: arithmetic"),
     (r"within 10 % of", "a tested bound of the denoiser"),
     (r"459 s in\s+tools/DEVICE\.md", "the kernel compile on an H200, measured by tools/DEVICE.md"),
-    (r"about 8 min before the first frame", "the kernel notice's words (kernels.COMPILE_MINUTES)"),
 ]
 
 
