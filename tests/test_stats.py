@@ -97,7 +97,9 @@ def recompute(build: Path) -> dict:
     if (build / "failures.jsonl").exists():
         records = [json.loads(line) for line in (build / "failures.jsonl").read_text().splitlines()]
     done = {d.name for d in dirs}
-    failing = [r for r in records if not (r.get("setting") and r["setting"] in done)]
+    current = [r for r in records if not (r.get("setting") and r["setting"] in done)]
+    # An object --licenses left out is a skip, counted apart from the failures.
+    failing = [r for r in current if r.get("stage") != "license"]
     uids = {m["uid"] for m in metas}
     exp["counts"] = {
         "objects": len(uids),
@@ -118,6 +120,7 @@ def recompute(build: Path) -> dict:
         "failures": len({r["uid"] for r in failing}),
         "settings_failed": sum(1 for r in failing if r.get("setting")),
         "failure_lines_skipped": 0,
+        "licence_skipped": sum(r.get("stage") == "license" for r in current),
         # What a rerun would redo (a synthetic build's settings hold no images at all).
         "damaged_settings": sum(layout.setting_problem(d) is not None for d in dirs),
         "incomplete_settings": sum(
