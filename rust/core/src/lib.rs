@@ -61,9 +61,8 @@ pub use crate::dataset::failures::{
 };
 pub use crate::dataset::layout::{
     complete_settings, is_complete, is_image_folder, parse_temp_name, partial_dir, png_fault,
-    publish,
-    setting_levels, setting_problem, setting_problems, temp_path, Fault, SettingProblem, MARKER,
-    PARTIAL_SUFFIX,
+    publish, setting_levels, setting_problem, setting_problems, temp_path, Fault, SettingProblem,
+    MARKER, PARTIAL_SUFFIX,
 };
 pub use crate::dataset::llff::{
     parse_poses_bounds, read_poses_bounds, write_poses_bounds, write_scene_transforms,
