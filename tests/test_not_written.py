@@ -253,3 +253,23 @@ def test_a_bad_noise_fault_spec_is_one_line_naming_the_variable(b, tmp_path, spe
                    env={"BLURSET_NOISE_FAULT": spec})  # fmt: skip
     one_error_line(proc, "BLURSET_NOISE_FAULT", "kill_in:K")
     assert "int()" not in proc.stderr and not out.exists()
+
+
+def test_a_lock_file_a_user_wrote_is_refused_by_name_and_kept(tmp_path):
+    """A lock file says which run holds it; a file of that name that says anything else
+    (a user's `.tradeoff.lock`) is named and left as it is, never truncated or removed.
+    One a killed run left (its holder line, or nothing) is taken over and removed."""
+    from blurset import outputs
+    from blurset.exceptions import InputError
+
+    mine = tmp_path / outputs.TRADEOFF_LOCK
+    mine.write_text("my notes\n")
+    with pytest.raises(InputError, match=r"\.tradeoff\.lock is a file blurset did not write"):
+        with outputs.flock_file(mine):
+            pass
+    assert mine.read_text() == "my notes\n"
+    for stale in ("pid 4242 on host node-7\n", ""):
+        mine.write_text(stale)
+        with outputs.flock_file(mine):
+            assert mine.read_text().startswith("pid ")
+        assert not mine.exists()

@@ -23,6 +23,7 @@ import contextlib
 import fcntl
 import json
 import os
+import re
 import socket
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
@@ -279,6 +280,10 @@ def noise_of_build(noise: Path, build: Path, option: str = "--noise") -> dict:
     return doc
 
 
+# What a lock file holds: the run that holds it (or nothing, a run killed before it wrote).
+_HOLDER = re.compile(r"pid \d+ on host \S*\n?")
+
+
 @contextlib.contextmanager
 def flock_file(lock_path: Path, on_busy: Callable[[str], None] | None = None) -> Iterator[None]:
     """Hold an exclusive flock on `lock_path`, writing who holds it into the file. When
@@ -306,6 +311,15 @@ def flock_file(lock_path: Path, on_busy: Callable[[str], None] | None = None) ->
         if same:
             break
         f.close()
+    f.seek(0)
+    held = f.read()
+    if held and not _HOLDER.fullmatch(held):
+        # Not a lock any blurset run left (one says who held it): a user's file.
+        f.close()
+        raise InputError(
+            f"{lock_path} is a file blurset did not write (its lock file holds who holds "
+            "it); move it away"
+        )
     try:
         f.seek(0)
         f.truncate()
