@@ -195,6 +195,26 @@ def test_a_noise_rerun_redoes_a_gain_file_copied_over_another(b, tmp_path):
     assert verify_lines(out) == {}
 
 
+def test_a_users_file_in_a_noise_gain_is_not_listed(b, tmp_path):
+    """A note kept in a noise unit's gain folder is the user's: neither the run that
+    finds it nor verify certifies it as the noise output's."""
+    out = tmp_path / "n"
+    noise = ("noise", str(b), "--gains", "1", "--out", str(out))
+    run_cli(*noise)
+    gain = sorted(out.glob("*/blur_1/gain_1"))[0]
+    (gain / "mynote.txt").write_text("mine")
+    (gain / "images" / "notes.md").write_text("mine")
+    run_cli(*noise)  # up to date: nothing written
+    names = listed(out)
+    rel = gain.relative_to(out).as_posix()
+    assert f"{rel}/mynote.txt" not in names and f"{rel}/images/notes.md" not in names
+    assert f"{rel}/noise.json" in names
+    # A stray file among the images is named (a loader that lists images/ would read
+    # it); the note beside them is the user's business.
+    assert verify_lines(out) == {f"{rel}/images/notes.md": ["not a file of this images folder"]}
+    assert (gain / "mynote.txt").read_text() == "mine"
+
+
 def test_a_superseded_setting_of_a_passes_build_is_removed_not_refused(b, standin_blender):
     # Its depth/, normals/ and masks/ are the build's own (the one rule of what a build
     # writes in a setting), not a user's files that would make the rerun refuse.

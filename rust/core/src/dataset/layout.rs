@@ -77,6 +77,35 @@ pub fn is_build_file(rel: &str) -> bool {
     }
 }
 
+/// Whether `rel`, a path relative to a noise unit's gain folder (`gain_4/…`), is a file
+/// `blurset noise` writes there: poses_bounds.npy, transforms.json, noise.json, and the
+/// PNGs of images/ and EXRs of linear/ at any size. Anything else is a user's: a
+/// manifest never certifies it as the noise output's.
+pub fn is_noise_gain_file(rel: &str) -> bool {
+    let parts: Vec<&str> = rel.split('/').collect();
+    match parts.as_slice() {
+        [f] => [files::POSES_BOUNDS, files::TRANSFORMS, files::NOISE].contains(f),
+        [folder, f] => {
+            let base = match folder.split_once('_') {
+                Some((b, n)) if !n.is_empty() && n.bytes().all(|c| c.is_ascii_digit()) => b,
+                Some(_) => return false,
+                None => folder,
+            };
+            !f.starts_with('.')
+                && ((base == files::IMAGES && f.ends_with(".png"))
+                    || (base == files::LINEAR && f.ends_with(".exr")))
+        }
+        _ => false,
+    }
+}
+
+/// A noise gain's folder name: `gain_4`, `gain_2.5`.
+pub fn is_gain_dir(name: &str) -> bool {
+    name.strip_prefix("gain_")
+        .and_then(|g| g.parse::<f64>().ok())
+        .is_some_and(|g| g.is_finite() && g > 0.0)
+}
+
 /// `images`, `linear` or a pass folder (`depth`, `normals`, `masks`), or one of them at
 /// a downsampling factor (`images_4`): a folder of a level's per-view files.
 pub fn is_image_folder(name: &str) -> bool {

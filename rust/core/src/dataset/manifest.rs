@@ -15,7 +15,7 @@
 //! rot, a file copied over another) stays a mismatch for `blurset verify` instead of
 //! being hashed anew; what a rerun reuses is checked against those lines first
 //! (`manifest_mismatches`), and redone when it differs.
-use super::layout::is_build_file;
+use super::layout::{is_build_file, is_gain_dir, is_noise_gain_file};
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
 use crate::ground::names::files;
@@ -66,13 +66,25 @@ fn setting_dirs(root: &Path) -> BTreeSet<String> {
         .collect()
 }
 
-/// Whether `rel` passes the setting rule: outside a setting anything listable, inside
-/// one only what a build writes.
+/// Whether `rel` passes the setting rule: inside a setting only what a build writes,
+/// inside a noise unit's gain folder only what noise writes, elsewhere anything listable.
 fn in_setting_rule(rel: &str, settings: &BTreeSet<String>) -> bool {
     match rel.split_once('/') {
         Some((top, rest)) if settings.contains(top) => is_build_file(rest),
-        _ => true,
+        _ => in_gain_rule(rel),
     }
+}
+
+/// Below a `gain_<g>` folder (a noise output's unit), only the files noise writes there.
+fn in_gain_rule(rel: &str) -> bool {
+    let mut at = 0;
+    for part in rel.split('/') {
+        at += part.len() + 1;
+        if is_gain_dir(part) && at < rel.len() {
+            return is_noise_gain_file(&rel[at..]);
+        }
+    }
+    true
 }
 
 fn walk(dir: &Path, prefix: &str, out: &mut Vec<String>) -> Result<()> {
@@ -495,6 +507,31 @@ mod tests {
         assert!(!is_listed("x/.dataset.json.tmp12"));
         // A nested manifest is an ordinary file of the tree.
         assert!(is_listed("sub/MANIFEST.sha256"));
+    }
+
+    #[test]
+    fn a_users_file_in_a_noise_gain_is_not_listed() -> Result<()> {
+        let d = tmp("gain");
+        put(&d, "noise_dataset.json", b"{}")?;
+        for rel in [
+            "a_000/blur_4/gain_2.5/noise.json",
+            "a_000/blur_4/gain_2.5/poses_bounds.npy",
+            "a_000/blur_4/gain_2.5/images_4/000.png",
+            "a_000/blur_4/gain_2.5/linear_4/000.exr",
+        ] {
+            put(&d, rel, b"x")?;
+        }
+        put(&d, "a_000/blur_4/gain_2.5/mynote.txt", b"mine")?;
+        put(&d, "a_000/blur_4/gain_2.5/images_4/notes.md", b"mine")?;
+        put(&d, "a_000/blur_4/about.txt", b"outside a gain: listed")?;
+        let listed = list_files(&d)?;
+        assert_eq!(listed.len(), 6, "{listed:?}");
+        assert!(!listed
+            .iter()
+            .any(|r| r.contains("mynote") || r.contains("notes.md")));
+        assert!(listed.contains(&"a_000/blur_4/about.txt".to_string()));
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
     }
 
     #[test]
