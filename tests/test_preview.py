@@ -82,6 +82,8 @@ def test_rerun_with_previews_draws_the_missing_ones_only(linear_build, tmp_path)
     check_setting_figure(out / names[0] / "preview.png", out / names[0],
                          [(lvl, out / names[0] / lvl / "images") for lvl in LEVELS])  # fmt: skip
     assert (out / names[1] / "preview.png").stat().st_mtime_ns == kept
+    # The preview drawn again is what the manifest now certifies.
+    run_cli("verify", "--no-decode", str(out))
 
 
 def test_preview_with_a_noise_gain(linear_build, tmp_path):

@@ -326,14 +326,16 @@ def test_verify_finds_damage_without_a_manifest(published, tmp_path):
     exr = f"{build}/khronos_BoxTextured_000/sharp/linear/003.exr"
     assert found[exr].startswith("does not decode"), found
     assert "5 problem(s)" in proc.stderr  # the four, and the missing manifest
-    # The cheap check (headers, PNG end chunks, files, pose rows) catches the cut PNG
-    # too; only the full decode sees inside the EXR.
+    # The cheap check (headers, PNG end chunks, files, pose rows, and the EXRs decoded,
+    # the rerun's rule since issue 48) catches the cut PNG and the cut EXR too; it
+    # decodes no PNG.
     cheap = run_cli("verify", "--no-decode", str(build), check=False)
     assert cheap.returncode == 1
     found = dict(line.split(": ", 1) for line in cheap.stdout.splitlines())
     assert found.pop(f"{build}/MANIFEST.sha256").startswith("missing"), cheap.stdout
     assert found[png] == "truncated (no PNG end chunk)", cheap.stdout
-    assert len(found) == 3 and f"{build}/khronos_BoxTextured_000/blur_1" in found
+    assert found[exr].startswith("does not decode"), cheap.stdout
+    assert len(found) == 4 and f"{build}/khronos_BoxTextured_000/blur_1" in found
 
 
 @pytest.mark.blender

@@ -37,6 +37,8 @@ STATS: str = _core.STATS
 IMAGES: str = _core.IMAGES
 LINEAR: str = _core.LINEAR
 MANIFEST: str = _core.MANIFEST
+# A setting's `--previews` figure (drawn from its images: a rerun draws a missing one).
+PREVIEW = "preview.png"
 # A build's private names: its demo objects, its lock, and per object a lock and a
 # scratch folder (the core's; no other module spells them).
 DEMO_OBJECTS: str = _core.DEMO_OBJECTS
@@ -215,7 +217,7 @@ def not_written_by_build(setting: Path) -> list[str]:
         return []
     found: list[str] = []
     for p in sorted(setting.iterdir()):
-        if p.name in (META, TRANSFORMS, MARKER, "preview.png") and not p.is_dir():
+        if p.name in (META, TRANSFORMS, MARKER, PREVIEW) and not p.is_dir():
             continue
         if _core.parse_temp_name(p.name) is not None:
             continue

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
@@ -96,12 +97,14 @@ def rewrite_manifest(root: Path, written: list[str]) -> int:
     return _core.rewrite_manifest(Path(root), list(written))
 
 
-def manifest_problem(root: Path, folder: str) -> str | None:
+def manifest_problem(root: Path, folder: str, skip: Collection[str] = ()) -> str | None:
     """Why the folder `folder` of `root` (a setting, a noise unit's gain) is not what
     root/MANIFEST.sha256 certifies: its first file that is gone or holds other bytes, in
     words; None when it matches (or there is no manifest). A rerun redoes such a folder
-    rather than certify what it did not write."""
-    found = _core.manifest_mismatches(Path(root), folder)
+    rather than certify what it did not write. `skip`: files of the folder (relative to
+    it) the rerun remakes from the rest, whose state is no reason to redo it."""
+    left = {f"{folder}/{s}" for s in skip}
+    found = [f for f in _core.manifest_mismatches(Path(root), folder) if f[0] not in left]
     if not found:
         return None
     rel, _, what = found[0]

@@ -132,10 +132,10 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
         )
     _report_missing(objs, cfg, prog)
     t0 = time.time()
-    written = _run_objects(objs, cfg, prog, slots, out)
+    written, new = _run_objects(objs, cfg, prog, slots, out)
     with build_lock(out):
         summary = finalize(out, cfg, time.time() - t0, [*removed, *written])
-    return _summary(summary, objs, len(written))
+    return _summary(summary, objs, new)
 
 
 def _check(cfg: BuildConfig, out: Path) -> tuple[list[ObjectSpec] | None, list]:
@@ -161,16 +161,20 @@ def _check(cfg: BuildConfig, out: Path) -> tuple[list[ObjectSpec] | None, list]:
 
 def _run_objects(
     objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress, slots: list, out: Path
-) -> list[str]:
+) -> tuple[list[str], int]:
     """Every object rendered by the configured executor; each result's failures and
-    local record appended under the build lock as it arrives. Returns the settings this
-    run published."""
+    local record appended under the build lock as it arrives. Returns what this run
+    wrote (the settings it published, the previews it drew) and how many settings it
+    published."""
     written: list[str] = []
+    new = 0
     lock = threading.Lock()
 
     def on_result(res: ObjectResult) -> None:
+        nonlocal new
         with lock:
             written.extend(res.written)
+            new += res.new_settings
             if res.failures or res.local:
                 with build_lock(out):
                     if res.failures:
@@ -188,7 +192,7 @@ def _run_objects(
             run_ray(objs, cfg, prog, on_result)
         else:
             run_local(objs, cfg, prog, on_result, slots)
-    return written
+    return written, new
 
 
 def _summary(summary: dict, objs: list[ObjectSpec], new_settings: int) -> dict:

@@ -37,7 +37,8 @@ class ObjectResult:
     # Failure records (failures.jsonl): the object's, or one per setting that failed QA.
     failures: list[dict[str, Any]] = field(default_factory=list)
     new_settings: int = 0
-    # The settings this run published (the manifest hashes only what a run wrote).
+    # What this run wrote: the settings it published, the previews it drew (the manifest
+    # hashes only what a run wrote).
     written: list[str] = field(default_factory=list)
     # For the local paths file (publish.local_paths_file, never under OUT): where this
     # object came from.
@@ -121,8 +122,9 @@ class ObjectUnit:
             from blurset.preview import write_build_preview
 
             for name in result.settings:
-                if not (self.out / name / "preview.png").exists():
+                if not (self.out / name / layout.PREVIEW).exists():
                     write_build_preview(self.out / name, warn=progress.write)
+                    result.written.append(f"{name}/{layout.PREVIEW}")  # the manifest hashes it
         shutil.rmtree(self.work, ignore_errors=True)
         for j in jobs:
             shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
@@ -227,7 +229,9 @@ class ObjectUnit:
             made_from = json.loads((setting / layout.META).read_text()).get("object") or {}
             problem = self._other_file(made_from)
         if problem is None:
-            problem = publish.manifest_problem(self.out, setting.name)
+            # A preview is drawn from the images, not data: a missing one is drawn again
+            # (--previews), not a reason to render the setting again.
+            problem = publish.manifest_problem(self.out, setting.name, skip=(layout.PREVIEW,))
             if problem is None:
                 return True
         self.progress.write(f"redoing {setting.name}: {problem}")
