@@ -280,8 +280,9 @@ def noise_of_build(noise: Path, build: Path, option: str = "--noise") -> dict:
     return doc
 
 
-# What a lock file holds: the run that holds it (or nothing, a run killed before it wrote).
-_HOLDER = re.compile(r"pid \d+ on host \S*\n?")
+# What a lock file holds: the run that holds it, `pid N on host H` (`pid N` before the
+# host was written), or nothing (a run killed before it wrote).
+_HOLDER = re.compile(r"pid \d+(?: on host \S*)?\s*")
 
 
 @contextlib.contextmanager
