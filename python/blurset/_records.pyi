@@ -688,6 +688,16 @@ class NoiseSceneRecord(TypedDict):
     scene: str
     seed: int
 
+class HubShard(TypedDict):
+    """One Parquet shard of `export --for hub`: the rows of whole settings of one config."""
+
+    bytes: int
+    config: str
+    rows: int
+    settings: list[str]
+    sha256: str
+    split: str
+
 ExportDoc = TypedDict(
     "ExportDoc",
     {
@@ -704,6 +714,8 @@ ExportDoc = TypedDict(
         "passes": NotRequired[list[str]],
         "scenes": dict[str, str],
         "scenes_dir": str,
+        "shard_bytes": NotRequired[int | None],
+        "shards": NotRequired[dict[str, HubShard] | None],
         "target_images": NotRequired[str | None],
         "test": list[str],
         "test_view_images": str,

@@ -334,6 +334,29 @@ pub struct ExportDoc {
     /// (without `mask` under `export --no-masks`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub passes: Vec<String>,
+    /// `--for hub` (issue 50): the size a Parquet shard is cut at, in bytes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard_bytes: Option<u64>,
+    /// `--for hub`: every shard (a path relative to scenes_dir, also a key of `scenes`)
+    /// and what it holds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shards: Option<BTreeMap<String, HubShard>>,
+}
+
+/// One Parquet shard of `export --for hub`: the rows of whole settings of one config.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct HubShard {
+    /// The config (`sharp`, `blur_4`, `blur_4_gain_4` …): one level, or one gain of it.
+    pub config: String,
+    /// `train` or `test`: the split of the settings it holds.
+    pub split: String,
+    /// The settings whose rows it holds, in order (a setting's rows are never split).
+    pub settings: Vec<String>,
+    /// Rows (one per image) and the file's size and sha256.
+    pub rows: usize,
+    pub bytes: u64,
+    pub sha256: String,
 }
 
 /// The export.json an export writes before it moves its scenes into place: everything
