@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from blurset import __version__, _core, layout, outputs
+from blurset import __version__, _core, export_hub, layout, outputs
 from blurset.exceptions import ConfigError, InputError, reason_of
 
 if TYPE_CHECKING:
@@ -59,12 +59,15 @@ def add_arguments(p) -> None:
         "--for",
         dest="target",
         type=str.lower,  # choices in any case, as build and noise take them
-        choices=sorted(SCENES_DIR),
+        choices=sorted([*SCENES_DIR, export_hub.TARGET]),
         default="llff",
         help="llff: OUT/nerf_llff_data/<scene>/ (IBRNet, NAN, GNT); nerfstudio: OUT/<scene>/ "
         "with transforms.json; geonerf: OUT/geonerf/train/<scene>/ (train views only) and "
-        "OUT/geonerf/test/<scene>__v<view>/ (one sharp target, 7 nearest degraded sources)",
+        "OUT/geonerf/test/<scene>__v<view>/ (one sharp target, 7 nearest degraded sources); "
+        "hub: Parquet shards OUT/data/<config>/<split>-*.parquet that `datasets` loads and "
+        "the Hugging Face Hub shows (one config per level and gain)",
     )
+    export_hub.add_arguments(p)
     p.add_argument("--levels", help="levels to export, e.g. blur_4,sharp (default: all)")
     p.add_argument(
         "--noise",
@@ -439,6 +442,10 @@ def _entry(doc: _records.ExportDoc, scene: str) -> str:
 
 
 def run(args) -> int:
+    if args.target == export_hub.TARGET:
+        return export_hub.run(args)
+    if args.shard_size is not None:
+        raise ConfigError(f"--shard-size: only --for hub writes shards (not --for {args.target})")
     out: Path = args.out
     doc, sources = plan(args)
     inputs = [args.build] + ([args.noise] if args.noise else [])

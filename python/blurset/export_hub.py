@@ -1,0 +1,751 @@
+"""`blurset export BUILD --for hub --out DIR` (issue 50): a build as Parquet shards that
+`datasets.load_dataset` and the Hugging Face Hub's viewer read.
+
+    DIR/export.json                                   what was exported (shards, rows, sha256)
+    DIR/data/<config>/<split>-00000-of-00003.parquet  the shards
+
+One config per level (`sharp`, `blur_1` …, `defocus_1` …) and, with `--noise`, per
+noisy level and gain (`blur_4_gain_4`); splits `train` and `test` are the build's
+settings splits (splits.json). One row per image: its PNG's bytes unchanged in the
+`image` column (the `datasets` Image layout, struct {bytes, path}; `image_<f>` for each
+`images_<f>/` size), the setting, the view, whether it is a held-out view, its camera
+(the poses_bounds.npy row as written, the OpenGL camera-to-world, focal, near, far,
+the mean latent pose where meta.json records one), meta.json's per-image record
+(`meta`, as JSON, and its numbers as columns), and the build's passes (`depth`,
+`normal` as EXR bytes, `mask` as an image).
+
+A shard holds whole settings (one Parquet row group each), cut at `--shard-size` MB, so
+a scene streams whole. Shards are planned from the files' sizes before any is written,
+written one at a time through a temp name and a rename, with fixed compression and no
+timestamps: the same build gives the same bytes. A shard's schema metadata carries the
+key of what it was made from (the build's MANIFEST.sha256 lines of its files, the
+options): a rerun after a kill keeps every shard whose key is its plan's and writes the
+rest, so its shards are those of an uninterrupted export. `blurset verify DIR` checks
+each shard against export.json (size, sha256, rows, settings) and decodes every image.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import shutil
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from blurset import __version__, _core, layout, outputs, publish
+from blurset.exceptions import ConfigError, InputError
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+    from blurset import _records
+
+TARGET = "hub"
+DATA_DIR = "data"
+DEFAULT_SHARD_MB = 500.0
+# The shard's schema metadata: `huggingface` (the `datasets` features: the image
+# columns are Images) and ours, the key of what the shard was made from.
+KEY = b"blurset"
+# The row layout's version: a change of columns changes every key.
+LAYOUT = 1
+# Fixed write options: same rows, same bytes (PNG bytes do not compress: none there).
+COMPRESSION = "zstd"
+COMPRESSION_LEVEL = 3
+
+
+def add_arguments(p) -> None:
+    """`--shard-size`: only `--for hub` reads it."""
+    p.add_argument(
+        "--shard-size",
+        type=float,
+        metavar="MB",
+        help=f"--for hub: the size a Parquet shard is cut at, in MB (default: "
+        f"{DEFAULT_SHARD_MB:g}; a shard holds whole settings: one setting larger than this is "
+        "a shard of its own)",
+    )
+
+
+def _pyarrow():
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise ConfigError(
+            "--for hub needs pyarrow: pip install 'blurset[hub]' (or pip install pyarrow)"
+        ) from None
+    return pa, pq
+
+
+def config_name(level: str, gain: str | None = None) -> str:
+    """A config's name: the level, or `<level>_<gain>` (`blur_4_gain_4`)."""
+    return level if gain is None else f"{level}_{gain}"
+
+
+# -- what is exported -------------------------------------------------------------------
+
+
+@dataclass
+class _Config:
+    """One config: a level of the build, or a gain of a level of the noise output."""
+
+    name: str
+    level: str
+    gain: str | None  # the gain folder (`gain_4`), or None
+    root: Path  # the build or the noise output
+
+
+@dataclass
+class _Shard:
+    """One planned shard: its name under data/, its config and split, its settings and
+    the input files' sizes (the plan's estimate of its bytes)."""
+
+    name: str
+    config: _Config
+    split: str
+    settings: list[str]
+    size: int = 0
+
+
+@dataclass
+class HubPlan:
+    build: Path
+    noise: Path | None
+    dataset: dict
+    splits: dict
+    configs: list[_Config]
+    factors: list[int]
+    passes: list[str]
+    held: str
+    shards: list[_Shard] = field(default_factory=list)
+    doc: dict = field(default_factory=dict)
+
+
+def _shard_bytes(args) -> int:
+    mb = DEFAULT_SHARD_MB if args.shard_size is None else args.shard_size
+    if not (mb > 0) or mb != mb or mb == float("inf"):
+        raise ConfigError(f"--shard-size {mb:g}: a shard's size must be a number of MB above 0")
+    return max(1, int(mb * 1e6))
+
+
+def _inputs(args) -> HubPlan:
+    from blurset import export
+
+    if args.copy:
+        raise ConfigError("--copy: --for hub writes the images' bytes into its shards")
+    build: Path = args.build.resolve()
+    state = outputs.finished_build(build)
+    dataset = outputs.read_record(build / layout.DATASET)
+    splits = outputs.read_record(build / layout.SPLITS)
+    if args.gains and args.noise is None:
+        raise ConfigError("--gains needs --noise (a `blurset noise BUILD` output)")
+    available = dataset.get("levels") or [layout.SHARP]
+    levels = export._levels(args.levels, available)
+    configs = [_Config(config_name(lvl), lvl, None, build) for lvl in levels]
+    noise = args.noise.resolve() if args.noise else None
+    if noise is not None:
+        doc = outputs.noise_of_build(noise, build)
+        if int((doc.get("params") or {}).get("frames", 1)) != 1:
+            raise ConfigError(
+                "--for hub: one row per view image; --noise holds several noisy frames per "
+                "view (blurset noise --frames)"
+            )
+        gains = export._gains(noise, doc, args.gains)
+        for lvl in [lvl for lvl in levels if lvl in doc["levels"]]:
+            configs += [_Config(config_name(lvl, g), lvl, g, noise) for g in gains]
+    passes = list(dataset["config"].get("passes") or [])
+    if args.no_masks:
+        passes = [p for p in passes if p != "mask"]
+    hp = HubPlan(
+        build=build,
+        noise=noise,
+        dataset=dataset,
+        splits=splits,
+        configs=configs,
+        factors=[int(f) for f in dataset["config"].get("downsample") or []],
+        passes=passes,
+        held=splits.get("test_view_images") or "blurry",
+    )
+    hp.doc = {"complete": state.complete}
+    return hp
+
+
+def _setting_files(hp: HubPlan, cfg: _Config, setting: str) -> list[Path]:
+    """Every file a setting's rows of `cfg` are made from (its images at each size and
+    its passes), for the plan's sizes and the shard's key."""
+    return [p for row in _row_sources(hp, cfg, setting) for p in row.files()]
+
+
+@dataclass
+class _RowSource:
+    """The files one row is made from."""
+
+    view: int
+    image: Path
+    sized: dict[int, Path]
+    passes: dict[str, Path]
+
+    def files(self) -> list[Path]:
+        return [self.image, *self.sized.values(), *self.passes.values()]
+
+
+def _row_sources(hp: HubPlan, cfg: _Config, setting: str) -> list[_RowSource]:
+    sdir = hp.build / setting
+    n = len(_core.read_poses_bounds(sdir / cfg.level / layout.POSES_BOUNDS))
+    names = [layout.image_name(i, n) for i in range(n)]
+    src = sdir / cfg.level if cfg.gain is None else hp.noise / setting / cfg.level / cfg.gain  # type: ignore[operator]
+    if cfg.gain is not None:
+        if not layout.is_complete(src):
+            raise InputError(f"--noise has no complete {cfg.gain} here: {src}")
+        noise = layout.read_json(src / layout.NOISE, layout.NOISE)
+        by_view = {f["view"]: Path(f["image"]).name for f in noise["files"] if f["frame"] == 0}
+        try:
+            names = [by_view[i] for i in range(n)]
+        except KeyError:
+            raise InputError(f"{len(by_view)} noisy images for {n} views: {src}") from None
+    meta = layout.read_json(sdir / layout.META, layout.META)
+    own = layout.level_masks(meta)
+    rows = []
+    for i, name in enumerate(names):
+        passes = {}
+        for kind in hp.passes:
+            holder = sdir / layout.pass_level(kind, cfg.level, own)
+            base = layout.image_name(i, n)
+            passes[kind] = holder / layout.pass_dir(kind, 1) / layout.pass_file(kind, base)
+        rows.append(
+            _RowSource(
+                view=i,
+                image=src / layout.IMAGES / name,
+                sized={f: src / layout.images_dir(f) / name for f in hp.factors},
+                passes=passes,
+            )
+        )
+    for r in rows:
+        for p in r.files():
+            if not p.is_file():
+                raise InputError(f"missing file of the scene to export: {p}")
+    return rows
+
+
+def plan(args) -> HubPlan:
+    """The shards of the export, each with its settings, and export.json without the
+    shards' sizes and hashes (known once written)."""
+    target = _shard_bytes(args)
+    hp = _inputs(args)
+    complete: list[str] = hp.doc.pop("complete")
+    test = set(hp.splits["test"])
+    for name in complete:
+        if problem := layout.setting_problem(hp.build / name):
+            raise InputError(
+                f"the build's setting {name} is damaged ({problem}): `blurset verify` lists "
+                f"what is wrong, a rerun of the build redoes it: {hp.build / name}"
+            )
+    by_split = {
+        "train": [s for s in complete if s not in test],
+        "test": [s for s in complete if s in test],
+    }
+    for cfg in hp.configs:
+        for split, settings in by_split.items():
+            cut: list[list[str]] = []
+            sizes: list[int] = []
+            for s in settings:
+                size = sum(p.stat().st_size for p in _setting_files(hp, cfg, s))
+                if cut and sizes[-1] + size <= target:
+                    cut[-1].append(s)
+                    sizes[-1] += size
+                else:
+                    cut.append([s])
+                    sizes.append(size)
+            for k, (ss, size) in enumerate(zip(cut, sizes, strict=True)):
+                name = f"{cfg.name}/{split}-{k:05d}-of-{len(cut):05d}.parquet"
+                hp.shards.append(_Shard(name, cfg, split, ss, size))
+    if not hp.shards:
+        raise InputError(f"nothing to export (no complete setting): {args.build}")
+    hp.doc = {
+        "kind": "blurset export",
+        "blurset_version": __version__,
+        "for": TARGET,
+        "build": hp.build.name,
+        "noise": hp.noise.name if hp.noise else None,
+        "levels": sorted({c.level for c in hp.configs}, key=[c.level for c in hp.configs].index),
+        "gains": sorted({c.gain for c in hp.configs if c.gain}),
+        "copy": False,
+        "llffhold": hp.splits["view_stride"],
+        "factors": hp.factors,
+        "test_view_images": hp.held,
+        "scenes_dir": DATA_DIR,
+        # Every shard the export writes, by its config: the entries it owns.
+        "scenes": {s.name: s.config.name for s in hp.shards},
+        "train": [s.name for s in hp.shards if s.split == "train"],
+        "test": [s.name for s in hp.shards if s.split == "test"],
+        "shard_bytes": target,
+    }
+    if hp.passes:
+        hp.doc["passes"] = hp.passes
+    return hp
+
+
+# -- rows --------------------------------------------------------------------------------
+
+
+def _float_or_none(x: Any) -> float | None:
+    return float(x) if isinstance(x, int | float) and not isinstance(x, bool) else None
+
+
+def _int_or_none(x: Any) -> int | None:
+    return int(x) if isinstance(x, int | float) and not isinstance(x, bool) else None
+
+
+def _columns(factors: list[int], passes: list[str], noise: bool) -> list[tuple[str, Any]]:
+    """(name, `datasets` feature) of every column, in order."""
+    f64 = {"dtype": "float64", "_type": "Value"}
+    i32 = {"dtype": "int32", "_type": "Value"}
+    s = {"dtype": "string", "_type": "Value"}
+    mat = {"feature": {"feature": f64, "_type": "List"}, "_type": "List"}
+    cols: list[tuple[str, Any]] = [("image", {"_type": "Image"})]
+    cols += [(f"image_{f}", {"_type": "Image"}) for f in factors]
+    cols += [
+        ("setting", s),
+        ("uid", s),
+        ("theta0_deg", f64),
+        ("level", s),
+        ("gain", f64),
+        ("view", i32),
+        ("split", s),
+        ("held_out", {"dtype": "bool", "_type": "Value"}),
+        ("width", i32),
+        ("height", i32),
+        ("focal", f64),
+        ("near", f64),
+        ("far", f64),
+        ("poses_bounds", {"feature": f64, "_type": "List"}),
+        ("c2w", mat),
+        ("mean_c2w", mat),
+        ("w_l", f64),
+        ("motion_px", f64),
+        ("latents", i32),
+        ("samples", i32),
+        ("render_psnr_db", f64),
+        ("coc_px", {"feature": f64, "_type": "List"}),
+        ("meta", s),
+    ]
+    if noise:
+        cols += [("sigma_read", f64), ("sigma_shot", f64), ("noise", s)]
+    for kind in passes:
+        cols.append(
+            (kind, {"_type": "Image"} if kind == "mask" else {"dtype": "binary", "_type": "Value"})
+        )
+    return cols
+
+
+def _arrow_type(pa, feature: dict):
+    t = feature["_type"]
+    if t == "Image":
+        return pa.struct([("bytes", pa.binary()), ("path", pa.string())])
+    if t == "List":
+        return pa.list_(_arrow_type(pa, feature["feature"]))
+    return {
+        "float64": pa.float64(),
+        "int32": pa.int32(),
+        "string": pa.string(),
+        "bool": pa.bool_(),
+        "binary": pa.binary(),
+    }[feature["dtype"]]
+
+
+def features(hp_factors: list[int], passes: list[str], noise: bool) -> dict[str, Any]:
+    """The `datasets` features of a config's rows (what `huggingface` metadata holds)."""
+    return dict(_columns(hp_factors, passes, noise))
+
+
+def schema(factors: list[int], passes: list[str], noise: bool, key: str) -> pa.Schema:
+    pa, _ = _pyarrow()
+    cols = _columns(factors, passes, noise)
+    hf = {"info": {"features": dict(cols)}}
+    meta = {b"huggingface": json.dumps(hf).encode(), KEY: key.encode()}
+    return pa.schema([(n, _arrow_type(pa, f)) for n, f in cols], metadata=meta)
+
+
+def _c2w_opengl(row: np.ndarray) -> list[list[float]]:
+    """An LLFF pose row's camera-to-world in OpenGL axes (blurset.data._cameras)."""
+    m = row[:15].reshape(3, 5)
+    down, right, back, t = m[:, 0], m[:, 1], m[:, 2], m[:, 3]
+    gl = np.eye(4)
+    gl[:3, 0], gl[:3, 1], gl[:3, 2], gl[:3, 3] = right, -down, back, t
+    return gl.tolist()
+
+
+def _view_record(meta: dict, view: int, level: str) -> dict:
+    """meta.json's records of one view at one level: the level's (`views[].levels[l]`),
+    its rendered image's (`views[].images[level]`) and a defocus level's lens."""
+    v = meta["views"][view]
+    rec: dict[str, Any] = {}
+    if level.startswith("blur_"):
+        rec["level"] = (v.get("levels") or {}).get(level.partition("_")[2])
+    if layout.is_defocus_dir(level):
+        rec["defocus"] = (v.get("defocus") or {}).get(level.partition("_")[2])
+    if isinstance(im := (v.get("images") or {}).get(level), dict):
+        rec["image"] = im
+    return {k: x for k, x in rec.items() if x is not None}
+
+
+def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[str, list]:
+    """The columns of one setting's rows of one config."""
+    sdir = hp.build / setting
+    meta = layout.read_json(sdir / layout.META, layout.META)
+    src = sdir / cfg.level if cfg.gain is None else hp.noise / setting / cfg.level / cfg.gain  # type: ignore[operator]
+    rows = np.asarray(_core.read_poses_bounds(src / layout.POSES_BOUNDS), np.float64)
+    sources = _row_sources(hp, cfg, setting)
+    if len(rows) != len(sources):
+        raise InputError(f"{len(rows)} pose rows for {len(sources)} views: {src}")
+    noise = layout.read_json(src / layout.NOISE, layout.NOISE) if cfg.gain else None
+    held = {int(v) for v in (hp.splits.get("test_views") or {}).get(setting, [])}
+    render = meta.get("render") or {}
+    w, h = (int(x) for x in meta["resolution"])
+    degraded = cfg.level != layout.SHARP
+    # Held-out views of a degraded level hold the sharp image (unless the build rendered
+    # them blurry): their records are the sharp image's.
+    clean_held = degraded and hp.held in ("sharp", "clean")
+    cols: dict[str, list] = {n: [] for n, _ in _columns(hp.factors, hp.passes, bool(cfg.gain))}
+
+    def image(p: Path) -> dict:
+        return {"bytes": p.read_bytes(), "path": p.relative_to(cfg.root).as_posix()}
+
+    for r in sources:
+        v = r.view
+        is_held = v in held
+        own = not (clean_held and is_held)
+        rec = _view_record(meta, v, cfg.level if own else layout.SHARP)
+        lv = rec.get("level") or {}
+        im = rec.get("image") or {}
+        mean = (lv.get("mean_pose") or {}).get("c2w") if own and degraded else None
+        samples = im.get("samples")
+        if samples is None:
+            if lv:
+                samples = _int_or_none(lv.get("samples_per_frame"))
+                samples = samples * int(lv.get("latents", 1)) if samples is not None else None
+            elif not degraded or not own:
+                samples = _int_or_none(render.get("sharp_samples"))
+        cols["image"].append(image(r.image))
+        for f, p in r.sized.items():
+            cols[f"image_{f}"].append(image(p))
+        cols["setting"].append(setting)
+        cols["uid"].append(str(meta.get("uid", setting)))
+        cols["theta0_deg"].append(_float_or_none(meta.get("theta0_deg")))
+        cols["level"].append(cfg.level)
+        cols["gain"].append(float(noise["gain"]) if noise else None)
+        cols["view"].append(v)
+        cols["split"].append(split)
+        cols["held_out"].append(is_held)
+        cols["width"].append(w)
+        cols["height"].append(h)
+        cols["focal"].append(float(rows[v, 14]))
+        cols["near"].append(float(rows[v, 15]))
+        cols["far"].append(float(rows[v, 16]))
+        cols["poses_bounds"].append(rows[v].tolist())
+        cols["c2w"].append(_c2w_opengl(rows[v]))
+        cols["mean_c2w"].append(mean)
+        cols["w_l"].append(_float_or_none(lv.get("w_l")))
+        cols["motion_px"].append(_float_or_none(lv.get("motion_px")))
+        cols["latents"].append(_int_or_none(lv.get("latents")))
+        cols["samples"].append(samples)
+        cols["render_psnr_db"].append(_float_or_none(im.get("render_psnr_db")))
+        coc = (rec.get("defocus") or {}).get("coc_px")
+        cols["coc_px"].append([float(c) for c in coc] if isinstance(coc, list) else None)
+        cols["meta"].append(json.dumps(rec, sort_keys=True))
+        if noise is not None:
+            cols["sigma_read"].append(_float_or_none(noise.get("sigma_read")))
+            cols["sigma_shot"].append(_float_or_none(noise.get("sigma_shot")))
+            cols["noise"].append(json.dumps(noise, sort_keys=True))
+        for kind, p in r.passes.items():
+            cols[kind].append(image(p) if kind == "mask" else p.read_bytes())
+    return cols
+
+
+# -- the shard's key and its writing ------------------------------------------------------
+
+
+def _manifest_lines(build: Path) -> dict[str, str]:
+    """The build's MANIFEST.sha256: relative path → sha256."""
+    p = build / publish.MANIFEST
+    out: dict[str, str] = {}
+    if p.is_file():
+        for line in p.read_text().splitlines():
+            digest, _, rel = line.partition("  ")
+            if rel:
+                out[rel] = digest
+    return out
+
+
+def shard_key(hp: HubPlan, shard: _Shard, manifest: dict[str, str]) -> str:
+    """What a shard is made from: its name, the options that shape its rows, and each
+    input file by its manifest hash (size and mtime for a file the manifest lacks)."""
+    h = hashlib.sha256()
+    head = {
+        "layout": LAYOUT,
+        "blurset": __version__,
+        "shard": shard.name,
+        "split": shard.split,
+        "settings": shard.settings,
+        "factors": hp.factors,
+        "passes": hp.passes,
+        "held": hp.held,
+    }
+    h.update(json.dumps(head, sort_keys=True).encode())
+    for s in shard.settings:
+        for p in [
+            hp.build / s / layout.META,
+            *_setting_files(hp, shard.config, s),
+            _src(hp, shard.config, s) / layout.POSES_BOUNDS,
+        ]:
+            root = shard.config.root if p.is_relative_to(shard.config.root) else hp.build
+            rel = p.relative_to(root).as_posix()
+            digest = manifest.get(rel) if root == hp.build else None
+            if digest is None:
+                st = p.stat()
+                digest = f"{st.st_size}:{st.st_mtime_ns}"
+            h.update(f"{rel}\0{digest}\n".encode())
+    return h.hexdigest()
+
+
+def _src(hp: HubPlan, cfg: _Config, setting: str) -> Path:
+    if cfg.gain is None:
+        return hp.build / setting / cfg.level
+    return cfg.root / setting / cfg.level / cfg.gain
+
+
+class _HashingFile(io.RawIOBase):
+    """A file that hashes what is written to it (the shard's sha256 without reading it
+    back)."""
+
+    def __init__(self, path: Path) -> None:
+        self._f = open(path, "wb")  # noqa: SIM115 - closed in close()
+        self.sha = hashlib.sha256()
+        self.size = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, b) -> int:  # type: ignore[override]
+        mv = memoryview(b)
+        self.sha.update(mv)
+        self._f.write(mv)
+        self.size += len(mv)
+        return len(mv)
+
+    def tell(self) -> int:
+        return self.size
+
+    def close(self) -> None:
+        if not self._f.closed:
+            self._f.flush()
+            os.fsync(self._f.fileno())
+            self._f.close()
+        super().close()
+
+
+def write_shard(hp: HubPlan, shard: _Shard, path: Path, key: str) -> tuple[int, str, int]:
+    """Write one shard to `path` (a temp name): one row group per setting, built and
+    written one setting at a time. Returns (rows, sha256, bytes)."""
+    pa, pq = _pyarrow()
+    sch = schema(hp.factors, hp.passes, shard.config.gain is not None, key)
+    sink = _HashingFile(path)
+    strings = [
+        f.name for f in sch if pa.types.is_string(f.type) and f.name not in ("meta", "noise")
+    ]
+    n = 0
+    with pq.ParquetWriter(
+        sink,
+        sch,
+        compression=COMPRESSION,
+        compression_level=COMPRESSION_LEVEL,
+        use_dictionary=strings,
+        write_statistics=False,
+        store_schema=True,
+    ) as w:
+        for s in shard.settings:
+            cols = _setting_rows(hp, shard.config, s, shard.split)
+            table = pa.table(
+                {name: pa.array(cols[name], type=sch.field(name).type) for name in sch.names},
+                schema=sch,
+            )
+            w.write_table(table, row_group_size=max(1, table.num_rows))
+            n += table.num_rows
+            del table, cols
+    sink.close()
+    return n, sink.sha.hexdigest(), sink.size
+
+
+def read_key(path: Path) -> str | None:
+    """The key a finished shard was made from, or None (no shard, or not ours)."""
+    _, pq = _pyarrow()
+    try:
+        meta = pq.read_schema(path).metadata or {}
+    except (OSError, ValueError):
+        return None
+    key = meta.get(KEY)
+    return key.decode() if key else None
+
+
+def _sha256(path: Path) -> str:
+    return _core.sha256_file(path)
+
+
+# -- the run -----------------------------------------------------------------------------
+
+
+def run(args) -> int:
+    from blurset import export
+
+    out: Path = args.out
+    hp = plan(args)
+    doc = hp.doc
+    inputs = [args.build] + ([args.noise] if args.noise else [])
+    export._refuse_overlap(out, doc, inputs)  # type: ignore[arg-type]
+    outputs.refuse_inside_settings(out)
+    outputs.claim(out, export.EXPORT, "--out")
+    with outputs.lock(out, export.EXPORT):
+        how = outputs.claim(out, export.EXPORT, "--out")
+        return _write(out, hp, how, overwrite=args.overwrite)
+
+
+def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
+    from blurset import export
+
+    doc = hp.doc
+    top = [export.EXPORT_FILE]
+    layout.remove_stale_temps(out, [export.STAGE, export.TRASH, *top])
+    for d in {(out / DATA_DIR / s.name).parent for s in hp.shards}:
+        layout.remove_stale_temps(d, [Path(s.name).name for s in hp.shards])
+    old = outputs.read_record(out / export.EXPORT_FILE) if how == "same" else None
+    if old is not None:
+        export._refuse_other_export(old, doc, out, overwrite)  # type: ignore[arg-type]
+    owned = set(outputs.owned_entries(out, export.EXPORT)) if old is not None else set()
+    new = [f"{DATA_DIR}/{s.name}" for s in hp.shards] + top
+    export._refuse_foreign(out, doc, owned, new)  # type: ignore[arg-type]
+    manifest = _manifest_lines(hp.build)
+    keys = {s.name: shard_key(hp, s, manifest) for s in hp.shards}
+    done_doc = old if isinstance(old, dict) and old.get("state") != "replacing" else None
+    recorded = (done_doc or {}).get("shards") or {}
+    final = {s.name: out / DATA_DIR / s.name for s in hp.shards}
+    todo = [s for s in hp.shards if read_key(final[s.name]) != keys[s.name]]
+    stale = sorted(owned - set(new))
+    if not todo and not stale and done_doc is not None:
+        want = dict(doc)
+        want["shards"] = recorded
+        if want == done_doc:
+            _say(want, out, hp, "up to date", 0)
+            return 0
+    # What this run may put in place is recorded first: an export stopped half-way owns
+    # every shard it wrote, and its rerun keeps the finished ones.
+    outputs.write_record(
+        out / export.EXPORT_FILE,
+        {
+            "kind": "blurset export",
+            "state": "replacing",
+            "build": doc["build"],
+            "scenes_dir": doc["scenes_dir"],
+            "scenes": {},
+            "owns": sorted(owned | set(new)),
+        },
+    )
+    for rel in stale:
+        p = out / rel
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink(missing_ok=True)
+    shards: dict[str, Any] = {}
+    written = 0
+    for s in hp.shards:
+        dst = final[s.name]
+        if s in todo:
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            tmp = layout.temp_path(dst)
+            try:
+                rows, sha, size = write_shard(hp, s, tmp, keys[s.name])
+                os.replace(tmp, dst)
+            finally:
+                tmp.unlink(missing_ok=True)
+            written += 1
+        else:
+            # A finished shard of this plan (kept from a stopped run): its record, or
+            # its bytes read once more.
+            rec = recorded.get(s.name)
+            size = dst.stat().st_size
+            if rec and rec.get("bytes") == size:
+                rows, sha = rec["rows"], rec["sha256"]
+            else:
+                _, pq = _pyarrow()
+                rows, sha = pq.ParquetFile(dst).metadata.num_rows, _sha256(dst)
+        shards[s.name] = {
+            "config": s.config.name,
+            "split": s.split,
+            "settings": s.settings,
+            "rows": int(rows),
+            "bytes": int(size),
+            "sha256": sha,
+        }
+    _remove_empty_dirs(out / DATA_DIR)
+    doc["shards"] = shards
+    outputs.write_record(out / export.EXPORT_FILE, doc)
+    _say(doc, out, hp, "written", written)
+    return 0
+
+
+def _remove_empty_dirs(root: Path) -> None:
+    if not root.is_dir():
+        return
+    for d in sorted((p for p in root.iterdir() if p.is_dir()), reverse=True):
+        if not any(d.iterdir()):
+            d.rmdir()
+
+
+def _say(doc: dict, out: Path, hp: HubPlan, what: str, written: int) -> None:
+    shards = doc.get("shards") or {}
+    rows = sum(int(s["rows"]) for s in shards.values())
+    configs = sorted({c.name for c in hp.configs}, key=[c.name for c in hp.configs].index)
+    print(
+        f"blurset export: {len(shards)} shards ({written} written), {rows} rows in "
+        f"{len(configs)} configs ({', '.join(configs)}) {what} -> {out / DATA_DIR}; "
+        f"`blurset card {hp.build.name} --hub {out}` writes its card",
+        file=sys.stdout,
+    )
+
+
+# -- reading shards back -----------------------------------------------------------------
+
+
+def hub_doc(path: Path) -> dict | None:
+    """export.json of a `--for hub` export in `path`, or None when it is not one."""
+    rec = Path(path) / outputs.OutputKind.EXPORT.record
+    if not rec.is_file():
+        return None
+    doc = outputs.read_record(rec)
+    return doc if isinstance(doc, dict) and doc.get("for") == TARGET else None
+
+
+def iter_rows(path: Path, config: str, setting: str | None = None) -> Iterator[dict]:
+    """The rows of `config` in a hub export (of one setting: only its shard is read,
+    only its row group)."""
+    _, pq = _pyarrow()
+    doc = hub_doc(path)
+    if doc is None:
+        raise InputError(f"not a `blurset export --for hub` output (export.json): {path}")
+    if doc.get("state") == "replacing" or doc.get("shards") is None:
+        raise InputError(f"the export is not finished (a run was stopped): {path}")
+    for name, rec in sorted(doc["shards"].items()):
+        if rec["config"] != config or (setting is not None and setting not in rec["settings"]):
+            continue
+        f = pq.ParquetFile(Path(path) / DATA_DIR / name)
+        groups = range(f.num_row_groups)
+        if setting is not None:
+            groups = [rec["settings"].index(setting)]
+        for g in groups:
+            yield from f.read_row_group(g).to_pylist()
