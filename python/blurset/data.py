@@ -29,8 +29,12 @@ Which pose a blurry image gets (`pose=`):
 
 from __future__ import annotations
 
+import io
+import json
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -141,10 +145,18 @@ def open_scene(
     noise: str | Path | None = None,
     downsample: int = 1,
     pose: str = "written",
+    sharp_rows: Iterable[Mapping[str, Any]] | None = None,
 ) -> Scene:
     """Read one scene of a build: `level` (`sharp`, `blur_<l>`) of `setting`, or with
     `gain` the noisy copy of it in `noise` (a `blurset noise BUILD` output), at full
     size or from `images_<downsample>/`.
+
+    `build` may also be a `blurset export --for hub` folder (the same scene from its
+    Parquet shards: `noise` is not needed, the gain's config is in it), or the rows of
+    the level's config (a `datasets` split, streaming or not: `load_dataset(...,
+    "blur_4", split="train", streaming=True)`), read until the setting's rows end; the
+    clean images then come from `sharp_rows` (the `sharp` config's rows), needed unless
+    `level` is `sharp`. Either gives the arrays the build's folders give.
 
     `pose` picks the cameras of a blur level: `"written"` (default) the pose p in
     `poses_bounds.npy`, as the LLFF loaders read it; `"mean"` each blurry image's mean
@@ -153,7 +165,18 @@ def open_scene(
     Raises InputError naming a missing file, or a meta.json from before mean poses."""
     if pose not in POSES:
         raise ValueError(f"pose must be one of {', '.join(map(repr, POSES))}, got {pose!r}")
+    if not isinstance(build, str | Path):
+        # Rows: a `datasets` split (streaming or not) of the level's config.
+        return _scene_from_rows(build, setting, level, gain, sharp_rows, downsample, pose)
     build = Path(build)
+    from blurset import export_hub
+
+    if export_hub.hub_doc(build) is not None:
+        # A `blurset export --for hub` folder: only the setting's row group of its shard.
+        config = export_hub.config_name(level, None if gain is None else layout.gain_name(gain))
+        rows = export_hub.iter_rows(build, config, setting)
+        sharp = export_hub.iter_rows(build, layout.SHARP, setting)
+        return _scene_from_rows(rows, setting, level, gain, sharp, downsample, pose)
     sdir = build / setting
     if not layout.is_complete(sdir):
         raise InputError(f"no complete setting {setting!r} in the build: {sdir}")
@@ -266,3 +289,139 @@ def list_scenes(build: str | Path) -> list[tuple[str, str]]:
         for s in layout.complete_settings(Path(build))
         for lvl in layout.setting_levels(s)
     ]
+
+
+# -- a scene from Parquet shards (`blurset export --for hub`) ------------------------------
+
+
+def _setting_rows(rows: Iterable[Mapping[str, Any]], setting: str) -> list[Mapping[str, Any]]:
+    """The rows of one setting, in view order: a shard holds a setting's rows together, so
+    reading stops where they end (a stream is not read to its end)."""
+    out: list[Mapping[str, Any]] = []
+    for r in rows:
+        if r["setting"] == setting:
+            out.append(r)
+        elif out:
+            break
+    return sorted(out, key=lambda r: int(r["view"]))
+
+
+def _decode_png(value: Any, what: str) -> np.ndarray:
+    """An image cell: {bytes, path} (pyarrow, or `datasets` with decode=False) or a PIL
+    image (`datasets` decoding), as the uint8 array the build's file decodes to."""
+    if isinstance(value, Mapping):
+        data = value.get("bytes")
+        if not data:
+            raise InputError(f"a row's {what} has no bytes")
+        from PIL import Image
+
+        with Image.open(io.BytesIO(data)) as im:
+            a = np.asarray(im)
+    else:
+        a = np.asarray(value)
+    return a[..., None] if a.ndim == 2 else a
+
+
+def _decode_with(reader: Any, data: bytes, suffix: str) -> np.ndarray:
+    """A pass file's bytes decoded by the core's reader of that file (through a temp
+    file: the readers take paths)."""
+    import tempfile
+
+    with tempfile.NamedTemporaryFile(suffix=suffix) as f:
+        f.write(data)
+        f.flush()
+        return np.asarray(reader(f.name))
+
+
+def _column(rows: list[Mapping[str, Any]], name: str, setting: str) -> list[Any]:
+    if name not in rows[0]:
+        raise InputError(f"the shards of {setting} have no column {name!r}")
+    return [r[name] for r in rows]
+
+
+def _scene_from_rows(
+    rows: Iterable[Mapping[str, Any]],
+    setting: str,
+    level: str,
+    gain: float | None,
+    sharp_rows: Iterable[Mapping[str, Any]] | None,
+    downsample: int,
+    pose: str,
+) -> Scene:
+    from blurset import export_hub
+
+    mine = _setting_rows(rows, setting)
+    if not mine:
+        raise InputError(f"no rows of the setting {setting!r} (level {level})")
+    for r in mine:
+        if r["level"] != level or (gain is not None and r.get("gain") != float(gain)):
+            raise InputError(
+                f"the rows of {setting} are of level {r['level']} gain {r.get('gain')}, "
+                f"not {level} gain {gain}"
+            )
+    if sharp_rows is None:
+        if level != layout.SHARP:
+            raise InputError("sharp_rows is needed for a degraded level (the `sharp` config)")
+        clean_rows = mine
+    else:
+        clean_rows = _setting_rows(sharp_rows, setting)
+    n = len(mine)
+    if [int(r["view"]) for r in mine] != list(range(n)) or len(clean_rows) != n:
+        raise InputError(f"the rows of {setting} are not one per view ({n} rows)")
+    col = "image" if downsample == 1 else f"image_{downsample}"
+    images = np.stack([_decode_png(v, col)[..., :3] for v in _column(mine, col, setting)])
+    clean = np.stack([_decode_png(v, col)[..., :3] for v in _column(clean_rows, col, setting)])
+    if images.shape != clean.shape:
+        raise InputError(f"the images of {setting} are {images.shape}, its sharp {clean.shape}")
+    images = images.astype(np.float32) / 255.0
+    clean = clean.astype(np.float32) / 255.0
+    pb = np.asarray([r["poses_bounds"] for r in mine], dtype=np.float64)
+    cv, gl = _cameras(pb)
+    if pose == "mean" and level != layout.SHARP and not layout.is_defocus_dir(level):
+        means = [r.get("mean_c2w") for r in mine]
+        if any(m is None for m in means):
+            raise InputError(
+                f"the rows of {setting} record no mean latent poses (a build from before "
+                "them): use pose='written'"
+            )
+        gl = np.asarray(means, dtype=np.float64)
+        cv = gl * np.array([1.0, -1.0, -1.0, 1.0])
+    h, w = images.shape[1:3]
+    focal = pb[0, 14] * w / pb[0, 9]
+    k = np.array([[focal, 0, w / 2], [0, focal, h / 2], [0, 0, 1]], dtype=np.float64)
+    held = [int(r["view"]) for r in mine if r["held_out"]]
+    noise = json.loads(mine[0]["noise"]) if mine[0].get("noise") else None
+    passes: dict[str, np.ndarray] = {}
+    readers = {
+        "depth": ("depth", lambda b: _decode_with(_core.read_depth, b, ".exr")),
+        "normal": ("normals", lambda b: _decode_with(_core.read_exr, b, ".exr")[..., :3]),
+        "mask": ("masks", lambda b: _decode_png(b, "mask")[..., 0] > 0),
+    }
+    for kind, (field_name, read) in readers.items():
+        name = export_hub.pass_column(kind, downsample)
+        if name in mine[0] and mine[0][name] is not None:
+            passes[field_name] = np.stack([read(r[name]) for r in mine])
+
+    def files(rs: list[Mapping[str, Any]]) -> list[Path]:
+        return [Path(v["path"]) if isinstance(v, Mapping) else Path() for v in (r[col] for r in rs)]
+
+    return Scene(
+        setting=setting,
+        level=level,
+        gain=gain,
+        downsample=downsample,
+        images=images,
+        clean=clean,
+        image_files=files(mine),
+        clean_files=files(clean_rows),
+        c2w_opencv=cv,
+        c2w_opengl=gl,
+        intrinsics=k,
+        near=pb[:, 15].copy(),
+        far=pb[:, 16].copy(),
+        train_views=np.array([i for i in range(n) if i not in set(held)], dtype=np.int64),
+        test_views=np.array(sorted(held), dtype=np.int64),
+        noise=noise,
+        pose=pose,
+        **passes,
+    )

@@ -45,8 +45,6 @@ from blurset.exceptions import ConfigError, InputError
 if TYPE_CHECKING:
     import pyarrow as pa
 
-    from blurset import _records
-
 TARGET = "hub"
 DATA_DIR = "data"
 DEFAULT_SHARD_MB = 500.0
@@ -189,7 +187,7 @@ class _RowSource:
     view: int
     image: Path
     sized: dict[int, Path]
-    passes: dict[str, Path]
+    passes: dict[str, Path]  # by column (pass_column)
 
     def files(self) -> list[Path]:
         return [self.image, *self.sized.values(), *self.passes.values()]
@@ -216,8 +214,9 @@ def _row_sources(hp: HubPlan, cfg: _Config, setting: str) -> list[_RowSource]:
         passes = {}
         for kind in hp.passes:
             holder = sdir / layout.pass_level(kind, cfg.level, own)
-            base = layout.image_name(i, n)
-            passes[kind] = holder / layout.pass_dir(kind, 1) / layout.pass_file(kind, base)
+            base = layout.pass_file(kind, layout.image_name(i, n))
+            for f in [1, *hp.factors]:
+                passes[pass_column(kind, f)] = holder / layout.pass_dir(kind, f) / base
         rows.append(
             _RowSource(
                 view=i,
@@ -338,10 +337,14 @@ def _columns(factors: list[int], passes: list[str], noise: bool) -> list[tuple[s
     if noise:
         cols += [("sigma_read", f64), ("sigma_shot", f64), ("noise", s)]
     for kind in passes:
-        cols.append(
-            (kind, {"_type": "Image"} if kind == "mask" else {"dtype": "binary", "_type": "Value"})
-        )
+        feature = {"_type": "Image"} if kind == "mask" else {"dtype": "binary", "_type": "Value"}
+        cols += [(pass_column(kind, f), feature) for f in [1, *factors]]
     return cols
+
+
+def pass_column(kind: str, factor: int) -> str:
+    """The column of pass `kind` (`depth`, `normal`, `mask`) at 1/`factor` of the size."""
+    return kind if factor == 1 else f"{kind}_{factor}"
 
 
 def _arrow_type(pa, feature: dict):
@@ -408,6 +411,9 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
     held = {int(v) for v in (hp.splits.get("test_views") or {}).get(setting, [])}
     render = meta.get("render") or {}
     w, h = (int(x) for x in meta["resolution"])
+    # The mean latent poses as open_scene(pose="mean") reads them (held-out views that
+    # hold the sharp copy keep its pose); None before meta.json recorded them.
+    means = layout.mean_poses(sdir, cfg.level) if cfg.level.startswith("blur_") else None
     degraded = cfg.level != layout.SHARP
     # Held-out views of a degraded level hold the sharp image (unless the build rendered
     # them blurry): their records are the sharp image's.
@@ -424,7 +430,7 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
         rec = _view_record(meta, v, cfg.level if own else layout.SHARP)
         lv = rec.get("level") or {}
         im = rec.get("image") or {}
-        mean = (lv.get("mean_pose") or {}).get("c2w") if own and degraded else None
+        mean = means[v] if means is not None else None
         samples = im.get("samples")
         if samples is None:
             if lv:
@@ -463,8 +469,8 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
             cols["sigma_read"].append(_float_or_none(noise.get("sigma_read")))
             cols["sigma_shot"].append(_float_or_none(noise.get("sigma_shot")))
             cols["noise"].append(json.dumps(noise, sort_keys=True))
-        for kind, p in r.passes.items():
-            cols[kind].append(image(p) if kind == "mask" else p.read_bytes())
+        for col, p in r.passes.items():
+            cols[col].append(image(p) if col.startswith("mask") else p.read_bytes())
     return cols
 
 
