@@ -75,6 +75,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--pretty-name", help="the card's title (default: from the build's name)")
     p.add_argument(
+        "--hub",
+        type=Path,
+        help="a `blurset export BUILD --for hub` output: the card gets its `configs:` and "
+        "`dataset_info` (what `datasets.load_dataset` and the Hub's viewer read) and is "
+        "written to HUB/README.md unless --out says otherwise",
+    )
+    p.add_argument(
         "--force",
         action="store_true",
         help="replace a card that was edited, or a README blurset did not write (the old "
@@ -138,16 +145,114 @@ def _q(s: Any) -> str:
     return json.dumps(str(s), ensure_ascii=False)
 
 
+def _yaml(value: Any, indent: int = 0) -> list[str]:
+    """Block YAML of nested dicts and lists (scalars quoted as JSON, numbers and booleans
+    as they are)."""
+    pad = " " * indent
+    out: list[str] = []
+
+    def scalar(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, int | float):
+            return json.dumps(v)
+        return _q(v)
+
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if isinstance(v, dict | list) and v:
+                out.append(f"{pad}{k}:")
+                out += _yaml(v, indent + 2)
+            else:
+                out.append(f"{pad}{k}: {scalar(v) if not isinstance(v, dict | list) else '[]'}")
+    else:
+        for v in value:
+            if isinstance(v, dict | list) and v:
+                inner = _yaml(v, indent + 2)
+                out.append(f"{pad}- {inner[0].lstrip()}")
+                out += inner[1:]
+            else:
+                out.append(f"{pad}- {scalar(v)}")
+    return out
+
+
 def yaml_header(meta: dict[str, Any]) -> str:
     lines = ["---"]
     for key, value in meta.items():
-        if isinstance(value, list):
+        if isinstance(value, list) and value and isinstance(value[0], dict):
+            lines.append(f"{key}:")
+            lines += _yaml(value)
+        elif isinstance(value, list):
             lines.append(f"{key}:")
             lines.extend(f"- {_q(v)}" for v in value)
         else:
             lines.append(f"{key}: {_q(value)}")
     lines.append("---")
     return "\n".join(lines) + "\n"
+
+
+def _feature_yaml(name: str, feature: dict) -> dict[str, Any]:
+    """A `datasets` feature as the card's `dataset_info.features` writes it."""
+
+    def inner(f: dict) -> Any:
+        if f["_type"] == "Image":
+            return "image"
+        if f["_type"] == "List":
+            return {"list": inner(f["feature"])}
+        return f["dtype"]
+
+    v = inner(feature)
+    return {"name": name, **(v if isinstance(v, dict) else {"dtype": v})}
+
+
+def _hub_configs(doc: dict) -> list[str]:
+    """A hub export's configs in its order (levels, then gains)."""
+    return list(dict.fromkeys(doc["scenes"][s] for s in [*doc["train"], *doc["test"]]))
+
+
+def hub_header(hub: Path, doc: dict) -> dict[str, Any]:
+    """`configs:` and `dataset_info` of a `blurset export --for hub` output: one config
+    per level and gain, its splits' shards, features and counts."""
+    from blurset import export_hub
+
+    by_config: dict[str, dict[str, list[dict]]] = {}
+    for _, rec in sorted((doc.get("shards") or {}).items()):
+        by_config.setdefault(rec["config"], {}).setdefault(rec["split"], []).append(rec)
+    order = _hub_configs(doc)
+    default = next((c for c in order if c != layout.SHARP), order[0])
+    configs, infos = [], []
+    for c in order:
+        splits = by_config.get(c, {})
+        entry: dict[str, Any] = {
+            "config_name": c,
+            "data_files": [
+                {"split": sp, "path": f"{export_hub.DATA_DIR}/{c}/{sp}-*.parquet"}
+                for sp in ("train", "test")
+                if sp in splits
+            ],
+        }
+        if c == default:
+            entry["default"] = True
+        configs.append(entry)
+        feats = export_hub.features(
+            list(doc.get("factors") or []), list(doc.get("passes") or []), c not in doc["levels"]
+        )
+        infos.append(
+            {
+                "config_name": c,
+                "features": [_feature_yaml(n, f) for n, f in feats.items()],
+                "splits": [
+                    {
+                        "name": sp,
+                        "num_bytes": sum(int(r["bytes"]) for r in recs),
+                        "num_examples": sum(int(r["rows"]) for r in recs),
+                    }
+                    for sp, recs in splits.items()
+                ],
+                "download_size": sum(int(r["bytes"]) for recs in splits.values() for r in recs),
+            }
+        )
+    return {"configs": configs, "dataset_info": infos}
 
 
 def _cell(s: Any) -> str:
@@ -260,9 +365,11 @@ def make_card(
     previews: bool = False,
     pretty_name: str | None = None,
     card_dir: Path | None = None,
+    hub: Path | None = None,
 ) -> str:
     """The card's text. `card_dir` is where it will be written (picture links are
-    relative to it)."""
+    relative to it); `hub`, a `blurset export --for hub` output of the build, adds its
+    configs, features and counts and how to load them."""
     build = Path(build)
     # A card describes a finished build: a provisional one would publish wrong counts.
     state = outputs.finished_build(build)
@@ -286,6 +393,9 @@ def make_card(
         "size_categories": [size_category(n_images)],
         "tags": list(TAGS) + (["denoising"] if noise_docs else []),
     }
+    hub_doc = _hub_doc(hub, build) if hub is not None else None
+    if hub_doc is not None:
+        header.update(hub_header(hub, hub_doc))  # type: ignore[arg-type]
     m0 = metas[0]
     res = m0.get("resolution") or [cfg.get("resolution")] * 2
     out: list[str] = [yaml_header(header), f"# {name}", ""]
@@ -305,6 +415,8 @@ def make_card(
     out += _defocus_table(metas, levels)
     for path, doc in noise_docs:
         out += _noise_section(path, doc)
+    if hub_doc is not None:
+        out += _hub_loading(hub_doc)
     out += _loading(levels, splits.get("view_stride") or cfg.get("view_stride") or 16)
     if previews:
         out += _previews(build, settings, card_dir or build)
@@ -557,6 +669,55 @@ def _loading(levels: list[str], llffhold: int) -> list[str]:
     ]
 
 
+def _hub_doc(hub: Path, build: Path) -> dict:
+    """export.json of a finished `blurset export --for hub` output of `build`."""
+    from blurset import export_hub
+
+    doc = export_hub.hub_doc(hub)
+    if doc is None:
+        raise InputError(f"--hub is not a `blurset export --for hub` output (export.json): {hub}")
+    if doc.get("shards") is None:
+        raise InputError(f"--hub is an export that has not finished (rerun it): {hub}")
+    if doc.get("build") != build.resolve().name:
+        raise InputError(f"--hub is an export of the build {doc.get('build')!r}, not of {build}")
+    return doc
+
+
+def _hub_loading(doc: dict) -> list[str]:
+    """How to load the Parquet shards: `datasets`, a stream, the rows' columns."""
+    configs = _hub_configs(doc)
+    blur = next((c for c in configs if c != layout.SHARP), configs[0])
+    return [
+        "## Loading with `datasets`",
+        "",
+        f"The images are Parquet shards under `data/<config>/`: one config per level "
+        f"({', '.join(f'`{c}`' for c in configs)}), splits `train` and `test` (the settings "
+        "of the held-out objects). One row per image: `image` holds the build's PNG bytes "
+        "unchanged"
+        + ("" if not doc.get("factors") else ", `image_<f>` its `images_<f>/` copy")
+        + "; `setting`, `view`, `held_out` (a held-out view of a degraded level holds the "
+        f"{doc.get('test_view_images')} image), the camera (`poses_bounds`: the LLFF row; "
+        "`c2w`: OpenGL camera-to-world; `focal`, `near`, `far`; `mean_c2w`: the mean latent "
+        "pose of a blurry image) and meta.json's record of the image (`meta`, `w_l`, "
+        "`motion_px`, `samples`, …). A shard holds whole settings, so a scene streams whole.",
+        "",
+        "```python",
+        "from datasets import load_dataset",
+        "",
+        f'ds = load_dataset("REPO_ID", "{blur}", split="train")  # or a local folder',
+        'row = ds[0]  # row["image"] is a PIL image; row["c2w"] a 4 x 4 list',
+        "",
+        "# A scene as NumPy arrays, streamed (pip install blurset):",
+        "from blurset.data import open_scene",
+        "",
+        f'rows = load_dataset("REPO_ID", "{blur}", split="train", streaming=True)',
+        'sharp = load_dataset("REPO_ID", "sharp", split="train", streaming=True)',
+        'scene = open_scene(rows, ds[0]["setting"], "' + blur + '", sharp_rows=sharp)',
+        "```",
+        "",
+    ]
+
+
 def _previews(build: Path, settings: list[Path], card_dir: Path) -> list[str]:
     pics = []
     sheet = build / "contact_sheet.png"
@@ -608,12 +769,17 @@ def run(args: argparse.Namespace) -> int:
     build: Path = args.build
     if outputs.kind_of(build) is not outputs.OutputKind.BUILD:
         raise InputError(f"not a blurset build (no dataset.json): {build}")
-    out: Path = args.out or build / "README.md"
+    hub: Path | None = getattr(args, "hub", None)
+    if hub is not None:
+        _hub_doc(hub, build)  # refused before anything is written
+    out: Path = args.out or (hub or build) / "README.md"
     if out.suffix.lower() != ".md":
         raise ConfigError(f"--out {out}: a dataset card is a Markdown file (.md)")
     outputs.refuse_inside_settings(out)
-    # The card of A never lands in B (B's manifest would list it, its README describe A).
-    outputs.refuse_inside_output(out, "--out", within=build)
+    # The card of A never lands in B (B's manifest would list it, its README describe A);
+    # a hub export of the build takes its card at its top.
+    within = hub if hub is not None and out.resolve().parent == hub.resolve() else build
+    outputs.refuse_inside_output(out, "--out", within=within)
     if out.is_dir():
         raise ConfigError(f"--out is a folder, not a card file: {out}")
     text = make_card(
@@ -622,6 +788,7 @@ def run(args: argparse.Namespace) -> int:
         previews=args.previews,
         pretty_name=args.pretty_name,
         card_dir=out.resolve().parent,
+        hub=hub,
     )
     out.parent.mkdir(parents=True, exist_ok=True)
     # A README that blurset did not write, or that someone edited, is theirs.

@@ -35,7 +35,12 @@ NOISE_DATASET = layout.NOISE_DATASET
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("path", type=Path, help="a build directory, or a `blurset noise BUILD` output")
+    p.add_argument(
+        "path",
+        type=Path,
+        help="a build directory, a `blurset noise BUILD` output, or a `blurset export --for "
+        "hub` output",
+    )
     p.add_argument(
         "--no-decode",
         action="store_true",
@@ -425,8 +430,129 @@ def _check_manifest(root: Path, rep: Report, *, finished: bool) -> None:
             rep.bad(rel, f"{what} (MANIFEST.sha256)")
 
 
+# -- a hub export (`blurset export --for hub`) ----------------------------------------------
+
+
+def _image_problem(cell: Any, w: int, h: int, decode: bool) -> str | None:
+    """What is wrong with an image cell ({bytes, path}) of a shard: no bytes, not a PNG,
+    a size other than the row's, or (with `decode`) pixels that do not decode."""
+    import io
+
+    from PIL import Image, UnidentifiedImageError
+
+    data = (cell or {}).get("bytes") if isinstance(cell, dict) else None
+    if not data:
+        return "no image bytes"
+    try:
+        with Image.open(io.BytesIO(data)) as im:
+            if im.size != (w, h):
+                return f"is {im.size[0]}x{im.size[1]}, expected {w}x{h}"
+            if decode:
+                im.load()
+    except (OSError, UnidentifiedImageError, ValueError, SyntaxError) as e:
+        return f"does not decode ({reason_of(e)})"
+    return None
+
+
+def verify_hub(root: Path, *, decode: bool = True) -> Report:
+    """A `blurset export --for hub` output: every shard export.json lists is there with
+    its size and sha256, holds its rows and settings (a setting's rows one row group, one
+    per view), every image of every row decodes at the row's size (`image_<f>` at 1/f),
+    no other file lies under data/, every config holds the same settings and views, and
+    the counts match the build's dataset.json when the build lies beside the export."""
+    from blurset import export_hub
+
+    rep = Report(root, unit="shards")
+    doc = export_hub.hub_doc(root) or {}
+    record = outputs.OutputKind.EXPORT.record
+    if doc.get("shards") is None:
+        rep.bad(record, "the export has not finished (a run was stopped): rerun it")
+        return rep
+    _, pq = export_hub._pyarrow()
+    listed = {f"{export_hub.DATA_DIR}/{n}" for n in doc["shards"]}
+    data = root / export_hub.DATA_DIR
+    for p in sorted(data.rglob("*")) if data.is_dir() else []:
+        rel = p.relative_to(root).as_posix()
+        if p.is_file() and rel not in listed and not p.name.startswith("."):
+            rep.stray(rel, f"not a shard {record} lists")
+    # Per config: setting -> views.
+    views: dict[str, dict[str, int]] = {}
+    for name, rec in sorted(doc["shards"].items()):
+        rel = f"{export_hub.DATA_DIR}/{name}"
+        p = root / rel
+        if not p.is_file():
+            rep.bad(rel, "missing")
+            continue
+        if p.stat().st_size != rec["bytes"]:
+            rep.bad(rel, f"{p.stat().st_size} bytes, {record} says {rec['bytes']}")
+            continue
+        if _core.sha256_file(p) != rec["sha256"]:
+            rep.bad(rel, f"sha256 differs from {record}'s")
+            continue
+        try:
+            pf = pq.ParquetFile(p)
+        except (OSError, ValueError) as e:
+            rep.bad(rel, f"does not read as Parquet ({reason_of(e)})")
+            continue
+        rep.settings += 1
+        if pf.metadata.num_rows != rec["rows"]:
+            rep.bad(rel, f"{pf.metadata.num_rows} rows, {record} says {rec['rows']}")
+        images = [c for c in pf.schema_arrow.names if c == "image" or c.startswith("image_")]
+        settings = []
+        for g in range(pf.num_row_groups):
+            t = pf.read_row_group(g, columns=["setting", "view", "width", "height", *images])
+            cells = t.to_pylist()
+            names = sorted({str(r["setting"]) for r in cells})
+            settings += names
+            if len(names) != 1 or [r["view"] for r in cells] != list(range(len(cells))):
+                rep.bad(rel, f"row group {g} is not one setting's views in order")
+                continue
+            views.setdefault(rec["config"], {})[names[0]] = len(cells)
+            for r in cells:
+                for c in images:
+                    f = int(c.partition("_")[2] or 1)
+                    problem = _image_problem(r[c], r["width"] // f, r["height"] // f, decode)
+                    rep.images += 1
+                    if problem:
+                        rep.bad(f"{rel}: {r['setting']} view {r['view']} {c}", problem)
+        if settings != rec["settings"]:
+            rep.bad(rel, f"holds the settings {', '.join(settings[:3])}…, {record} lists others")
+    _hub_counts(root, doc, views, rep)
+    return rep
+
+
+def _hub_counts(root: Path, doc: dict, views: dict[str, dict[str, int]], rep: Report) -> None:
+    """Every config holds the same settings and views; with the build beside the export,
+    its dataset.json counts (settings, and images per level) are what the shards hold."""
+    record = outputs.OutputKind.EXPORT.record
+    configs = sorted(views)
+    for c in configs[1:]:
+        if views[c] != views[configs[0]]:
+            rep.bad(record, f"the configs {configs[0]} and {c} hold other settings or views")
+    build = root.parent / str(doc.get("build"))
+    if not configs or outputs.kind_of(build) is not outputs.OutputKind.BUILD:
+        rep.note(record, "the build is not beside the export: counts not compared")
+        return
+    counts = (outputs.read_record(build / layout.DATASET).get("counts")) or {}
+    dataset = outputs.read_record(build / layout.DATASET)
+    levels = dataset.get("levels") or [layout.SHARP]
+    per_level = views[configs[0]]
+    if counts.get("settings") != len(per_level):
+        rep.bad(
+            record,
+            f"{len(per_level)} settings, the build's dataset.json counts {counts.get('settings')}",
+        )
+    rows = sum(per_level.values())
+    if counts.get("images") != rows * len(levels):
+        rep.bad(
+            record,
+            f"{rows} images per level, the build's dataset.json counts {counts.get('images')} "
+            f"in {len(levels)} levels",
+        )
+
+
 def verify(path: Path, *, decode: bool = True) -> Report:
-    """Verify a build or a noise output (by what it holds)."""
+    """Verify a build, a noise output or a hub export (by what it holds)."""
     root = Path(path)
     if not root.is_dir():
         raise InputError(f"no such build or noise output: {path}")
@@ -435,8 +561,14 @@ def verify(path: Path, *, decode: bool = True) -> Report:
         return verify_noise(root, decode=decode)
     if kind is outputs.OutputKind.BUILD:
         return verify_build(root, decode=decode)
+    if kind is outputs.OutputKind.EXPORT:
+        from blurset import export_hub
+
+        if export_hub.hub_doc(root) is not None:
+            return verify_hub(root, decode=decode)
     raise InputError(
-        f"not a blurset build (dataset.json) or noise output ({NOISE_DATASET}): {path}"
+        f"not a blurset build (dataset.json), noise output ({NOISE_DATASET}) or "
+        f"`export --for hub` output: {path}"
     )
 
 
