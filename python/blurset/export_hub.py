@@ -421,7 +421,10 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
     cols: dict[str, list] = {n: [] for n, _ in _columns(hp.factors, hp.passes, bool(cfg.gain))}
 
     def image(p: Path) -> dict:
-        return {"bytes": p.read_bytes(), "path": p.relative_to(cfg.root).as_posix()}
+        # The path relative to the output holding the file (a noisy image's to the noise
+        # output, a pass's to the build).
+        root = cfg.root if p.is_relative_to(cfg.root) else hp.build
+        return {"bytes": p.read_bytes(), "path": p.relative_to(root).as_posix()}
 
     for r in sources:
         v = r.view
