@@ -250,3 +250,49 @@ def test_the_cheap_check_of_a_hostile_exr_stays_bounded(b, tmp_path, standin_ble
     proc = standin_build(b, standin_blender, *PASSES)
     assert f"redoing {setting.name}: sharp/linear/{exr.name} does not decode" in proc.stderr
     assert verify_lines(b) == {}
+
+
+def test_a_users_file_at_the_top_of_a_build_is_never_listed_by_a_rerun(b, standin_blender):
+    (b / "notes.txt").write_text("mine")
+    (b / "extra").mkdir()
+    (b / "extra" / "plot.png").write_bytes(b"not the build's")
+    standin_build(b, standin_blender, *PASSES)  # up to date: nothing rendered
+    names = listed(b)
+    assert "notes.txt" not in names and "extra/plot.png" not in names
+    assert layout.DATASET in names
+    assert (b / "notes.txt").read_text() == "mine"  # kept, never deleted
+
+
+def test_a_rerun_without_a_manifest_lists_what_it_checked_and_nothing_else(b, standin_blender):
+    # As after a run killed before its last step: the rerun checks every complete
+    # setting before reusing it, so those are listed; the user's file beside them is not.
+    before = listed(b)
+    (b / publish.MANIFEST).unlink()
+    (b / "notes.txt").write_text("mine")
+    setting = layout.complete_settings(b)[0]
+    cut(sorted((setting / "sharp" / "depth").iterdir())[0])
+    proc = standin_build(b, standin_blender, *PASSES)
+    # No manifest to differ from, but the check decodes: the cut EXR's setting is
+    # redone, and listed as written; the others as checked.
+    assert f"redoing {setting.name}" in proc.stderr, proc.stderr
+    names = listed(b)
+    assert "notes.txt" not in names
+    assert names == before
+    assert publish.check_manifest(b) == [("notes.txt", "unlisted", "not in MANIFEST.sha256")]
+
+
+def test_a_users_file_at_the_top_of_a_noise_output_is_never_listed(b, tmp_path):
+    out = tmp_path / "n"
+    noise = ("noise", str(b), "--gains", "1", "--out", str(out))
+    run_cli(*noise)
+    (out / "notes.txt").write_text("mine")
+    run_cli(*noise)  # up to date
+    assert "notes.txt" not in listed(out)
+    run_cli(*noise, "--seed", "5", "--overwrite")  # every unit replaced
+    names = listed(out)
+    assert "notes.txt" not in names and "noise_dataset.json" in names
+    assert (out / "notes.txt").read_text() == "mine"
+    # Without a manifest (a killed run), a rerun lists the units it found complete.
+    (out / publish.MANIFEST).unlink()
+    run_cli(*noise, "--seed", "5")
+    assert listed(out) == names

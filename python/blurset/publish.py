@@ -89,12 +89,13 @@ def write_manifest(root: Path) -> int:
     return _core.write_manifest(Path(root))
 
 
-def rewrite_manifest(root: Path, written: list[str]) -> int:
-    """root/MANIFEST.sha256 at the end of a rerun that wrote `written` (files or folders
-    relative to `root`): those are hashed; every other file the existing manifest lists
-    keeps its line (damage since stays a mismatch for `verify`), a file it does not list
-    is hashed; without a manifest every file is. The count listed."""
-    return _core.rewrite_manifest(Path(root), list(written))
+def rewrite_manifest(root: Path, vouched: list[str], *, keep_old: bool = True) -> int:
+    """root/MANIFEST.sha256 at the end of a run: the files and folders (relative to
+    `root`) it vouches for, because it wrote them or checked them before reusing them,
+    are hashed; with `keep_old`, every other file the existing manifest lists keeps its
+    line (damage since stays a mismatch for `verify`). Nothing else is listed: a file
+    nobody wrote or checked (a user's note in OUT) is never certified. The count listed."""
+    return _core.rewrite_manifest(Path(root), list(vouched), keep_old)
 
 
 def manifest_problem(root: Path, folder: str, skip: Collection[str] = ()) -> str | None:

@@ -164,8 +164,8 @@ def _run_objects(
 ) -> tuple[list[str], int]:
     """Every object rendered by the configured executor; each result's failures and
     local record appended under the build lock as it arrives. Returns what this run
-    wrote (the settings it published, the previews it drew) and how many settings it
-    published."""
+    vouches for (the settings it published or checked and reused, the previews it drew)
+    and how many settings it published."""
     written: list[str] = []
     new = 0
     lock = threading.Lock()
@@ -174,6 +174,7 @@ def _run_objects(
         nonlocal new
         with lock:
             written.extend(res.written)
+            written.extend(res.checked)
             new += res.new_settings
             if res.failures or res.local:
                 with build_lock(out):

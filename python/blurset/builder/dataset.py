@@ -144,12 +144,13 @@ def _complete_settings(out: Path) -> list[tuple[str, dict]]:
     return found
 
 
-def finalize(out: Path, cfg: BuildConfig, seconds: float, written: list[str]) -> dict:
+def finalize(out: Path, cfg: BuildConfig, seconds: float, vouched: list[str]) -> dict:
     """splits.json, dataset.json and failures.jsonl over what is on disk, and the
     manifest (call under build_lock). failures.jsonl keeps the latest record per object
-    (or per setting, for QA failures) whose work is still not complete. `written`: the
-    settings this run published or removed; the manifest hashes only those and the
-    files written here, and keeps its lines of the rest (checked when reused)."""
+    (or per setting, for QA failures) whose work is still not complete. `vouched`: the
+    settings this run published, removed or checked and reused; the manifest hashes
+    only those and the files written here, keeps its lines of the rest, and lists
+    nothing else (another shard's settings are listed by that shard's run)."""
     complete = _complete_settings(out)
     fpath = out / layout.FAILURES
     kept, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
@@ -202,8 +203,8 @@ def finalize(out: Path, cfg: BuildConfig, seconds: float, written: list[str]) ->
     if checks:
         dataset["pose_checks"] = checks
     _core.write_dataset_json(out / layout.DATASET, dataset)
-    # Last: the checksums of what this run wrote (another shard's finalize rewrites it
-    # with its own); a file it did not write keeps the line it had.
+    # Last: the checksums of what this run wrote or checked (another shard's finalize
+    # rewrites it with its own); a file it did not write keeps the line it had.
     shared = [f for f in SHARED_FILES if f != layout.MANIFEST]
-    publish.rewrite_manifest(out, [*written, *shared])
+    publish.rewrite_manifest(out, [*vouched, *shared])
     return {"settings_complete": len(complete), "failures": kept, "test_settings": len(splits.test)}

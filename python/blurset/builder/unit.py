@@ -38,8 +38,11 @@ class ObjectResult:
     failures: list[dict[str, Any]] = field(default_factory=list)
     new_settings: int = 0
     # What this run wrote: the settings it published, the previews it drew (the manifest
-    # hashes only what a run wrote).
+    # hashes only what a run wrote or checked).
     written: list[str] = field(default_factory=list)
+    # The complete settings it reused after checking them (`_reusable`): the manifest
+    # lists them too, even where no manifest was written yet (a killed shard's rerun).
+    checked: list[str] = field(default_factory=list)
     # For the local paths file (publish.local_paths_file, never under OUT): where this
     # object came from.
     local: dict[str, Any] = field(default_factory=dict)
@@ -117,6 +120,7 @@ class ObjectUnit:
         jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
         pending = [j for j in jobs if not self._reusable(self.out / j.name)]
         result.settings = [j.name for j in jobs if j not in pending]
+        result.checked = list(result.settings)
         progress.skip(len(jobs) - len(pending))
         if cfg.previews:
             from blurset.preview import write_build_preview

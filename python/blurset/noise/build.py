@@ -157,11 +157,21 @@ def _pending(out: Path, unit: _core.NoiseUnit) -> list[int]:
     return sorted(pending)
 
 
-def _write_pending(out: Path, plan: _core.NoisePlan, quiet: bool, fault: int | None) -> list[str]:
+def _write_pending(
+    out: Path, plan: _core.NoisePlan, quiet: bool, fault: int | None
+) -> tuple[list[str], list[str]]:
     """Every unit's pending gains, a unit at a time (a count on a terminal); returns the
-    gain folders written (relative to OUT)."""
+    gain folders written and those reused, complete and matching the manifest (relative
+    to OUT)."""
     written: list[str] = []
-    todo = [(u, p) for u in plan.units if (p := _pending(out, u))]
+    checked: list[str] = []
+    todo = []
+    for u in plan.units:
+        p = _pending(out, u)
+        if p:
+            todo.append((u, p))
+        rel = u.dst.relative_to(out).as_posix()
+        checked += [f"{rel}/{g.dir}" for i, g in enumerate(u.gains) if i not in p]
     show = not quiet and sys.stderr.isatty()
     for n, (u, pending) in enumerate(todo, 1):
         _write_unit(u, pending, die=n == fault)
@@ -170,7 +180,7 @@ def _write_pending(out: Path, plan: _core.NoisePlan, quiet: bool, fault: int | N
             print(f"\r{n}/{len(todo)} levels noised", end="", file=sys.stderr, flush=True)
     if show and todo:
         print(file=sys.stderr)
-    return written
+    return written, checked
 
 
 def run(build: Path, cfg: _core.NoiseConfig) -> int:
@@ -191,15 +201,15 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
         layout.write_text_atomic(out / layout.SPLITS, (build / layout.SPLITS).read_text())
         n_gains = len(cfg.gain_values)
         # Pending under the lock: --overwrite may just have removed units.
-        written = _write_pending(out, plan, cfg.quiet, fault)
+        written, checked = _write_pending(out, plan, cfg.quiet, fault)
         skipped = len(plan.units) * n_gains - len(written)
         # Over every complete unit on disk, earlier runs' too.
         doc = plan.write_dataset(out, time.strftime("%Y-%m-%dT%H:%M:%S"))
-        if cfg.overwrite:
-            publish.write_manifest(out)  # every unit of the old output was replaced
-        else:
-            # Hashed: what this run wrote; the rest keeps the line it had (checked above).
-            publish.rewrite_manifest(out, [*written, DATASET_FILE, layout.SPLITS])
+        # Hashed: what this run wrote or checked; the rest keeps the line it had, except
+        # under --overwrite, which replaced every unit of the old output.
+        publish.rewrite_manifest(
+            out, [*written, *checked, DATASET_FILE, layout.SPLITS], keep_old=not cfg.overwrite
+        )
     print(
         f"blurset noise: {len(written)} scene(s) written, {skipped} complete skipped "
         f"({len(complete)} settings x {len(plan.levels)} levels x {n_gains} gains, "

@@ -28,11 +28,18 @@ fn update_manifest(py: Python<'_>, root: PathBuf, rels: Vec<String>) -> PyResult
     crate::run_detached(py, || core::update_manifest(&root, &rels))
 }
 
-/// Write root/MANIFEST.sha256 after a rerun that wrote `written` (files or folders,
-/// relative): those hashed, every other listed file keeps its line; the count.
+/// Write root/MANIFEST.sha256 at the end of a run that vouches for `vouched` (files or
+/// folders it wrote or checked, relative): those hashed; with `keep_old` every other
+/// file the old manifest lists keeps its line; nothing else is listed. The count.
 #[pyfunction]
-fn rewrite_manifest(py: Python<'_>, root: PathBuf, written: Vec<String>) -> PyResult<usize> {
-    crate::run_detached(py, || core::rewrite_manifest(&root, &written))
+#[pyo3(signature = (root, vouched, keep_old=true))]
+fn rewrite_manifest(
+    py: Python<'_>,
+    root: PathBuf,
+    vouched: Vec<String>,
+    keep_old: bool,
+) -> PyResult<usize> {
+    crate::run_detached(py, || core::rewrite_manifest(&root, &vouched, keep_old))
 }
 
 /// [(relative path, kind, what is wrong)] of the files root/MANIFEST.sha256 lists under

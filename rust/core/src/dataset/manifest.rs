@@ -413,44 +413,42 @@ pub fn manifest_mismatches(root: &Path, dir: &str) -> Result<Vec<(String, Manife
     Ok(out)
 }
 
-/// Write `root`'s manifest at the end of a rerun that wrote `written` (relative files
-/// or folders; a folder stands for everything under it, removed ones included): what
-/// the run wrote is hashed; a file the existing manifest lists keeps its line, never
-/// hashed anew (damage since stays a mismatch; the run checked what it reused with
-/// [`manifest_mismatches`]), and a listed file that is gone keeps its line too (still
-/// missing); a file it does not list (published after it: by a killed run, by another
-/// shard) is hashed. Without a manifest, every file is hashed ([`write_manifest`]).
-/// Returns the number of files listed.
-pub fn rewrite_manifest(root: &Path, written: &[String]) -> Result<usize> {
+/// Write `root`'s manifest at the end of a run that vouches for `vouched` (relative
+/// files or folders; a folder stands for everything under it, removed ones included):
+/// what the run wrote, and what it reused after checking it (a complete setting decoded
+/// and matched against the old lines). Those are hashed. With `keep_old`, a file the
+/// existing manifest lists keeps its line, never hashed anew (damage since stays a
+/// mismatch; the run checked what it reused with [`manifest_mismatches`]), and a listed
+/// file that is gone keeps its line too (still missing). Nothing else is listed: a file
+/// neither vouched for nor listed before (a user's note at the top of OUT, a setting a
+/// killed run left and nobody checked) stays unlisted, which `verify` reports as added
+/// after the manifest, never as certified. Returns the number of files listed.
+pub fn rewrite_manifest(root: &Path, vouched: &[String], keep_old: bool) -> Result<usize> {
     let path = root.join(MANIFEST);
-    if !path.is_file() {
-        return write_manifest(root);
-    }
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io("cannot read", &path, e))?;
-    let old: BTreeMap<String, String> = parse_manifest(&text, &path)?.into_iter().collect();
-    let written: BTreeSet<&str> = written.iter().map(|w| w.trim_end_matches('/')).collect();
-    let wrote = |rel: &str| {
-        written.contains(rel)
+    let old: BTreeMap<String, String> = if keep_old && path.is_file() {
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| Error::io("cannot read", &path, e))?;
+        parse_manifest(&text, &path)?.into_iter().collect()
+    } else {
+        BTreeMap::new()
+    };
+    let vouched: BTreeSet<&str> = vouched.iter().map(|w| w.trim_end_matches('/')).collect();
+    let vouches = |rel: &str| {
+        vouched.contains(rel)
             || rel
                 .match_indices('/')
-                .any(|(i, _)| written.contains(&rel[..i]))
+                .any(|(i, _)| vouched.contains(&rel[..i]))
     };
     let on_disk = list_files(root)?;
-    let (to_hash, kept): (Vec<String>, Vec<String>) = on_disk
-        .iter()
-        .cloned()
-        .partition(|r| wrote(r) || !old.contains_key(r));
+    let to_hash: Vec<String> = on_disk.iter().filter(|r| vouches(r)).cloned().collect();
     let mut entries: BTreeMap<Vec<u8>, (String, String)> = BTreeMap::new();
-    for r in kept {
-        let d = old[&r].clone();
-        entries.insert(r.as_bytes().to_vec(), (r, d));
-    }
-    // Gone since the manifest, and not by this run: still listed, so still missing.
-    let present: BTreeSet<&str> = on_disk.iter().map(String::as_str).collect();
+    // Kept: listed before and not vouched for now, present (damage stays a mismatch) or
+    // gone and not by this run (still missing).
     let settings = setting_dirs(root);
+    let present: BTreeSet<&str> = on_disk.iter().map(String::as_str).collect();
     for (r, d) in &old {
         let listable = is_listed(r) && in_setting_rule(r, &settings);
-        if !present.contains(r.as_str()) && !wrote(r) && listable && !root.join(r).exists() {
+        if !vouches(r) && listable && (present.contains(r.as_str()) || !root.join(r).exists()) {
             entries.insert(r.as_bytes().to_vec(), (r.clone(), d.clone()));
         }
     }
@@ -621,11 +619,19 @@ mod tests {
         put(&d, "dataset.json", b"{\"new\": 1}")?;
         put(&d, "c_000/meta.json", b"{}")?;
         put(&d, "a_000/mynote.txt", b"mine")?;
-        rewrite_manifest(&d, &["dataset.json".to_string()])?;
+        put(&d, "notes.txt", b"mine")?;
+        rewrite_manifest(&d, &["dataset.json".to_string()], true)?;
         let after = listed(&d)?;
-        assert_eq!(check_manifest(&d)?, problems);
+        let unlisted = |rel: &str| (rel.to_string(), ManifestProblem::Unlisted);
+        let mut now = problems.clone();
+        now.extend([unlisted("c_000/meta.json"), unlisted("notes.txt")]);
+        now.sort_by(|a, b| a.0.as_bytes().cmp(b.0.as_bytes()));
+        assert_eq!(check_manifest(&d)?, now);
         assert_ne!(after["dataset.json"], before["dataset.json"]);
-        assert!(after.contains_key("c_000/meta.json"));
+        // Neither written nor checked by the run: not certified (a user's top-level
+        // note, a setting nobody checked).
+        assert!(!after.contains_key("c_000/meta.json"));
+        assert!(!after.contains_key("notes.txt"));
         assert!(!after.contains_key("a_000/mynote.txt"));
         for kept in [
             "README.md",
@@ -636,16 +642,26 @@ mod tests {
         }
         // A redone setting (written) is hashed anew, a removed one drops its lines.
         std::fs::remove_dir_all(d.join("b_000")).map_err(|e| Error::io("rm", &d, e))?;
-        rewrite_manifest(&d, &["a_000".to_string(), "b_000".to_string()])?;
+        let c = "c_000".to_string();
+        rewrite_manifest(
+            &d,
+            &["a_000".to_string(), "b_000".to_string(), c.clone()],
+            true,
+        )?;
         let problems = check_manifest(&d)?;
         assert_eq!(
             problems,
-            vec![("README.md".to_string(), ManifestProblem::Mismatch)]
+            vec![
+                ("README.md".to_string(), ManifestProblem::Mismatch),
+                ("notes.txt".to_string(), ManifestProblem::Unlisted)
+            ]
         );
-        // Without a manifest every file is hashed.
+        // Without a manifest (or without keeping it) only what is vouched for is listed.
         std::fs::remove_file(d.join(MANIFEST)).map_err(|e| Error::io("rm", &d, e))?;
-        assert_eq!(rewrite_manifest(&d, &[])?, 6);
+        assert_eq!(rewrite_manifest(&d, &[], true)?, 0);
+        assert_eq!(rewrite_manifest(&d, &["a_000".to_string(), c], false)?, 4);
         assert_eq!(manifest_mismatches(&d, "a_000")?, vec![]);
+        assert!(!listed(&d)?.contains_key("notes.txt"));
         let _ = std::fs::remove_dir_all(&d);
         Ok(())
     }
