@@ -1328,11 +1328,11 @@ def check_manifest(root: str | PathLike[str]) -> list[tuple[str, ManifestFault, 
     MANIFEST.sha256), sorted by path.
     Raises FileNotFoundError without a manifest, InputError naming a bad line."""
 
-def rewrite_manifest(root: str | PathLike[str], written: list[str]) -> int:
-    """Write root/MANIFEST.sha256 after a rerun that wrote `written` (relative files or
-    folders): those hashed, every other file the existing manifest lists kept at its
-    line, files it does not list hashed; without a manifest, every file hashed. The
-    number of files listed."""
+def rewrite_manifest(root: str | PathLike[str], vouched: list[str], keep_old: bool = True) -> int:
+    """Write root/MANIFEST.sha256 at the end of a run that vouches for `vouched`
+    (relative files or folders it wrote, or checked before reusing them): those hashed;
+    with `keep_old`, every other file the existing manifest lists kept at its line;
+    nothing else listed. The number of files listed."""
 
 def manifest_mismatches(
     root: str | PathLike[str], dir: str
