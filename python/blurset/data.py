@@ -174,9 +174,9 @@ def open_scene(
     if export_hub.hub_doc(build) is not None:
         # A `blurset export --for hub` folder: only the setting's row group of its shard.
         config = export_hub.config_name(level, None if gain is None else layout.gain_name(gain))
-        rows = export_hub.iter_rows(build, config, setting)
+        found = export_hub.iter_rows(build, config, setting)
         sharp = export_hub.iter_rows(build, layout.SHARP, setting)
-        return _scene_from_rows(rows, setting, level, gain, sharp, downsample, pose)
+        return _scene_from_rows(found, setting, level, gain, sharp, downsample, pose)
     sdir = build / setting
     if not layout.is_complete(sdir):
         raise InputError(f"no complete setting {setting!r} in the build: {sdir}")

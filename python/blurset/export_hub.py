@@ -480,21 +480,40 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
 # -- the shard's key and its writing ------------------------------------------------------
 
 
-def _manifest_lines(build: Path) -> dict[str, str]:
-    """The build's MANIFEST.sha256: relative path → sha256."""
-    p = build / publish.MANIFEST
-    out: dict[str, str] = {}
+@dataclass
+class _Manifest:
+    """An output's MANIFEST.sha256 (relative path → sha256) and when it was written: a
+    file changed since then is keyed by its size and time instead."""
+
+    root: Path
+    lines: dict[str, str]
+    written_ns: int
+
+    def digest(self, p: Path) -> str:
+        st = p.stat()
+        rel = p.relative_to(self.root).as_posix()
+        line = self.lines.get(rel)
+        if line is None or st.st_mtime_ns > self.written_ns:
+            return f"{st.st_size}:{st.st_mtime_ns}"
+        return line
+
+
+def _manifest(root: Path) -> _Manifest:
+    p = root / publish.MANIFEST
+    lines: dict[str, str] = {}
     if p.is_file():
         for line in p.read_text().splitlines():
             digest, _, rel = line.partition("  ")
             if rel:
-                out[rel] = digest
-    return out
+                lines[rel] = digest
+    return _Manifest(root, lines, p.stat().st_mtime_ns if p.is_file() else 0)
 
 
-def shard_key(hp: HubPlan, shard: _Shard, manifest: dict[str, str]) -> str:
+def shard_key(hp: HubPlan, shard: _Shard, manifests: dict[Path, _Manifest]) -> str:
     """What a shard is made from: its name, the options that shape its rows, and each
-    input file by its manifest hash (size and mtime for a file the manifest lacks)."""
+    input file by its line in its output's MANIFEST.sha256 (the same build gives the same
+    key, wherever it lies), or by its size and time when the manifest lacks it or is
+    older than the file."""
     h = hashlib.sha256()
     head = {
         "layout": LAYOUT,
@@ -505,6 +524,7 @@ def shard_key(hp: HubPlan, shard: _Shard, manifest: dict[str, str]) -> str:
         "factors": hp.factors,
         "passes": hp.passes,
         "held": hp.held,
+        "test_views": {s: (hp.splits.get("test_views") or {}).get(s) for s in shard.settings},
     }
     h.update(json.dumps(head, sort_keys=True).encode())
     for s in shard.settings:
@@ -514,11 +534,10 @@ def shard_key(hp: HubPlan, shard: _Shard, manifest: dict[str, str]) -> str:
             _src(hp, shard.config, s) / layout.POSES_BOUNDS,
         ]:
             root = shard.config.root if p.is_relative_to(shard.config.root) else hp.build
+            if root not in manifests:
+                manifests[root] = _manifest(root)
             rel = p.relative_to(root).as_posix()
-            digest = manifest.get(rel) if root == hp.build else None
-            if digest is None:
-                st = p.stat()
-                digest = f"{st.st_size}:{st.st_mtime_ns}"
+            digest = manifests[root].digest(p)
             h.update(f"{rel}\0{digest}\n".encode())
     return h.hexdigest()
 
@@ -541,7 +560,7 @@ class _HashingFile(io.RawIOBase):
     def writable(self) -> bool:
         return True
 
-    def write(self, b) -> int:  # type: ignore[override]
+    def write(self, b) -> int:
         mv = memoryview(b)
         self.sha.update(mv)
         self._f.write(mv)
@@ -638,8 +657,8 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
     owned = set(outputs.owned_entries(out, export.EXPORT)) if old is not None else set()
     new = [f"{DATA_DIR}/{s.name}" for s in hp.shards] + top
     export._refuse_foreign(out, doc, owned, new)  # type: ignore[arg-type]
-    manifest = _manifest_lines(hp.build)
-    keys = {s.name: shard_key(hp, s, manifest) for s in hp.shards}
+    manifests: dict[Path, _Manifest] = {}
+    keys = {s.name: shard_key(hp, s, manifests) for s in hp.shards}
     done_doc = old if isinstance(old, dict) and old.get("state") != "replacing" else None
     recorded = (done_doc or {}).get("shards") or {}
     final = {s.name: out / DATA_DIR / s.name for s in hp.shards}
@@ -753,7 +772,7 @@ def iter_rows(path: Path, config: str, setting: str | None = None) -> Iterator[d
         if rec["config"] != config or (setting is not None and setting not in rec["settings"]):
             continue
         f = pq.ParquetFile(Path(path) / DATA_DIR / name)
-        groups = range(f.num_row_groups)
+        groups = list(range(f.num_row_groups))
         if setting is not None:
             groups = [rec["settings"].index(setting)]
         for g in groups:
