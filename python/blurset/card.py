@@ -79,7 +79,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=Path,
         help="a `blurset export BUILD --for hub` output: the card gets its `configs:` and "
         "`dataset_info` (what `datasets.load_dataset` and the Hub's viewer read) and is "
-        "written to HUB/README.md unless --out says otherwise",
+        "written to HUB/README.md unless --out says otherwise (default: none, a card of "
+        "the build's folders)",
     )
     p.add_argument(
         "--force",
