@@ -155,7 +155,7 @@ class BuildConfigRecord(TypedDict):
     latents_auto: bool
     latents_max: int
     max_ghost_px: float
-    blur_method: Literal["average", "motion_blur"]
+    blur_method: Literal["average", "motion_blur", "auto"]
     samples: int
     samples_total: int | None
     sharp_samples: int | None
@@ -300,7 +300,7 @@ class BuildConfig:
     @property
     def max_ghost_px(self) -> float: ...
     @property
-    def blur_method(self) -> Literal["average", "motion_blur"]: ...
+    def blur_method(self) -> Literal["average", "motion_blur", "auto"]: ...
     @property
     def samples(self) -> int: ...
     @property
@@ -1149,8 +1149,11 @@ def plan_setting(
     seed: int,
     bbox_dims: list[float] | tuple[float, float, float],
     vertices: npt.NDArray[np.float32],
+    backend: str | None = None,
 ) -> Plan:
-    """Plan one setting (views, near/far from the vertices, weights, latent frames, seeds)."""
+    """Plan one setting (views, near/far from the vertices, weights, latent frames, seeds).
+    `backend`: the Cycles backend the worker reported, on which `blur_method auto` (a
+    BuildConfig's) prices each blurry image's method; auto without it is refused."""
 
 def write_scene_transforms(
     path: str | PathLike[str],

@@ -63,7 +63,7 @@ class Render(TypedDict):
 
 BlurBudget = Literal["parity", "flat", "need"]
 
-BlurMethod = Literal["average", "motion_blur"]
+BlurMethod = Literal["average", "motion_blur", "auto"]
 
 class Guards(TypedDict):
     near_floor: float
@@ -449,6 +449,34 @@ class BuildStats(TypedDict):
     view_setting: list[int]
     w_u: list[float]
 
+class CostSeconds(TypedDict):
+    """The priced seconds of a setting's blurry images (one pilot round each)."""
+
+    average: float
+    chosen: float
+    motion_blur: float
+
+DeviceKind = Literal["cpu", "gpu"]
+
+class CostModel(TypedDict):
+    """What a render costs on one kind of device."""
+
+    call_s: float
+    kind: DeviceKind
+    motion_blur_factor: float
+    sample_s_512px: float
+
+class BlurChoice(TypedDict):
+    """How `blur_method auto` chose each blurry image's method in a setting (meta.json `render.blur_choice`; each level's own `method` says which it got)."""
+
+    cost_s: CostSeconds
+    device: str
+    images: dict[str, int]
+    model: CostModel
+    priced: str
+    reason: str
+    rule: str
+
 Denoise = Literal["none", "oidn"]
 
 class DenoiserRecord(TypedDict):
@@ -489,6 +517,7 @@ class RenderRecord(TypedDict):
     background: list[float]
     blur_budget: NotRequired[BlurBudget]
     blur_budget_is: NotRequired[str]
+    blur_choice: NotRequired[BlurChoice | None]
     blur_method: BlurMethod
     cycles_samples: NotRequired[int | None]
     denoise: NotRequired[Denoise]

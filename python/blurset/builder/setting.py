@@ -74,6 +74,21 @@ def _masks(cfg: BuildConfig) -> bool:
     return "mask" in cfg.passes
 
 
+# Test-only: the Cycles backend `--blur-method auto` prices a setting's images for,
+# whatever the worker renders on (a CPU render of what a GPU would choose, in CI, which
+# has no GPU). Never set it for a real build: the choice is then not the device's.
+PRICE_BACKEND_ENV = "BLURSET_PRICE_BACKEND"
+
+
+def pricing_backend(info: LoadedObject, cfg: BuildConfig) -> str:
+    """The backend the core prices `blur_method auto` on: the one the worker reported
+    rendering on (its ready reply's `device.backend`), else the configured device."""
+    forced = os.environ.get(PRICE_BACKEND_ENV)
+    if forced:
+        return forced
+    return str((info.get("device") or {}).get("backend") or cfg.device)
+
+
 def _object_record(obj: ObjectSpec, info: LoadedObject) -> _records.ObjectRecord:
     """meta.json's `object`: the file and what the worker reported about it (free JSON
     from the worker: the core checks every field when it takes the record)."""
@@ -159,6 +174,7 @@ def _plan(
         seed=_core.seed_for(cfg.seed, job.obj.uid, job.index),
         bbox_dims=info["bbox_dims"],
         vertices=verts,
+        backend=pricing_backend(info, cfg),
     )
     # Under sample subsets every render of the build takes a block of one Cycles sequence
     # length, so no pixel depends on what the worker rendered before (a resume equals an
@@ -222,6 +238,9 @@ class _Images:
     ) -> None:
         self.partial, self.n_views, self.cfg, self.progress = partial, n_views, cfg, progress
         self.keys: list[tuple[int, str]] = [(f["view"], f["level"]) for f in frames]
+        # Each image's method (under blur_method auto, the plan's per image): a motion
+        # blur render carries its camera's motion.
+        self.motion_blur = {(f["view"], f["level"]) for f in frames if f.get("motion")}
         self.need: dict[tuple[int, str], int] = {}
         for k in self.keys:
             self.need[k] = self.need.get(k, 0) + 1
@@ -250,14 +269,15 @@ class _Images:
         if self.cfg.write_linear:
             a.write_exr(level_dir / layout.LINEAR / layout.linear_name(name))
         if _masks(self.cfg):
-            self._write_masks(level, name, a)
+            self._write_masks(key, name, a)
         if level == layout.SHARP:
             self.qa[view] = _core.frame_qa(a.mean())
 
-    def _write_masks(self, level: str, name: str, a: Any) -> None:
+    def _write_masks(self, key: tuple[int, str], name: str, a: Any) -> None:
         """The image's masks at every size: the sharp image's coverage; a blurry image's
         own, the pixels its exposure covered plus the sharp mask of its view (written
         first: every sharp image is done before a blurry one starts)."""
+        level = key[1]
         for f in [1, *self.cfg.downsample]:
             sub, file = layout.pass_dir("mask", f), layout.pass_file("mask", name)
             if level == layout.SHARP:
@@ -265,7 +285,7 @@ class _Images:
             elif level in layout.own_mask_levels([level]):
                 a.write_exposure_mask(
                     self.partial / level / sub / file,
-                    blur_method=self.cfg.blur_method,
+                    blur_method="motion_blur" if key in self.motion_blur else "average",
                     downsample=f,
                     sharp=self.partial / layout.SHARP / sub / file,
                 )

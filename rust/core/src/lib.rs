@@ -22,11 +22,14 @@ pub use crate::rng::seed_for;
 // What one setting renders: views, trajectories, levels, latent frames.
 pub use crate::plan::choices::{BlurMethod, Choice, Preset};
 pub use crate::plan::config::BuildConfig;
+pub use crate::plan::cost::{BlurChoice, CostModel, Pricing};
 pub use crate::plan::defocus::{circle_of_confusion, DefocusPlan};
 pub use crate::plan::options::OptionInfo;
 pub use crate::plan::presets::{preset_values, FLOOR_PSNR_DB};
 pub use crate::plan::renders::{level_renders, Motion, Render};
-pub use crate::plan::sampling::{plan_setting, LevelPlan, SamplingConfig, SettingPlan};
+pub use crate::plan::sampling::{
+    plan_setting, plan_setting_priced, LevelPlan, SamplingConfig, SettingPlan,
+};
 pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
 pub use crate::plan::target::{round_renders, ImageRound, ImageState, TargetRule};
 

@@ -189,9 +189,12 @@ impl Plan {
 }
 
 /// Plan one setting (views, near/far from the vertices, weights, latent frames, seeds).
-/// `config` is a SamplingConfig or a BuildConfig (its sampling).
+/// `config` is a SamplingConfig or a BuildConfig (its sampling). `backend`: the Cycles
+/// backend the worker reported, which `blur_method auto` (a BuildConfig's) prices each
+/// blurry image's method on.
 #[pyfunction]
-#[pyo3(signature = (config, *, uid, theta0_deg, seed, bbox_dims, vertices))]
+#[pyo3(signature = (config, *, uid, theta0_deg, seed, bbox_dims, vertices, backend = None))]
+#[allow(clippy::too_many_arguments)] // keyword arguments of one Python call
 fn plan_setting(
     py: Python<'_>,
     config: &Bound<'_, PyAny>,
@@ -200,11 +203,17 @@ fn plan_setting(
     seed: u64,
     bbox_dims: [f64; 3],
     vertices: PyReadonlyArray2<'_, f32>,
+    backend: Option<&str>,
 ) -> PyResult<Plan> {
-    let cfg = if let Ok(b) = config.cast::<BuildConfig>() {
-        b.get().0.sampling()
+    let (cfg, pricing) = if let Ok(b) = config.cast::<BuildConfig>() {
+        let b = &b.get().0;
+        let pricing = match backend {
+            Some(name) => b.pricing(name).map_err(crate::error::to_pyerr)?,
+            None => None,
+        };
+        (b.sampling(), pricing)
     } else {
-        config.cast::<SamplingConfig>()?.get().0.clone()
+        (config.cast::<SamplingConfig>()?.get().0.clone(), None)
     };
     let v = vertices.as_array();
     if v.ncols() != 3 {
@@ -215,7 +224,15 @@ fn plan_setting(
     }
     let pts: Vec<[f32; 3]> = v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
     let plan = crate::run_detached(py, || {
-        core::plan_setting(&cfg, uid, theta0_deg, seed, bbox_dims, &pts)
+        core::plan_setting_priced(
+            &cfg,
+            pricing.as_ref(),
+            uid,
+            theta0_deg,
+            seed,
+            bbox_dims,
+            &pts,
+        )
     })?;
     Ok(Plan(plan))
 }

@@ -10,6 +10,7 @@ use crate::image::qa::FrameQa;
 use crate::plan::camera::orbit_c2w;
 use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, LightPaths, Preset};
 use crate::plan::config::BuildConfig;
+use crate::plan::cost::BlurChoice;
 use crate::plan::sampling::{
     rows, LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
 };
@@ -143,6 +144,11 @@ pub struct RenderRecord {
     pub target_psnr_db: Option<f64>,
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub target_is: String,
+    /// `blur_method auto` (the accuracy presets): how each blurry image's method was
+    /// chosen from the device's costs (`plan/cost.rs`), each level's `method` being the
+    /// result; absent under a method given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blur_choice: Option<BlurChoice>,
 }
 
 /// How one image of a target-driven build was rendered (`views[].images[<level dir>]`).
@@ -278,6 +284,7 @@ impl RenderRecord {
             preset: cfg.preset,
             target_psnr_db: cfg.target_psnr,
             target_is: cfg.target().map(|t| target_is(&t)).unwrap_or_default(),
+            blur_choice: None,
             adaptive_sampling: false,
             light_paths: None,
             device: None,
@@ -528,7 +535,10 @@ impl Meta {
             levels: cfg.level_dirs(),
             downsample: cfg.downsample.clone(),
             sampling: plan.config.clone(),
-            render: RenderRecord::of(cfg),
+            render: RenderRecord {
+                blur_choice: plan.blur_choice.clone(),
+                ..RenderRecord::of(cfg)
+            },
             object,
             timings,
             blurset_version: env!("CARGO_PKG_VERSION").into(),

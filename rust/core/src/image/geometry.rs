@@ -190,6 +190,11 @@ pub fn exposure_mask(
                 0.0
             }
         }),
+        BlurMethod::Auto => Err(Error::Value(
+            "an exposure mask is made by the method its image was rendered by (its level's \
+             `method`), not auto"
+                .into(),
+        )),
     }
 }
 

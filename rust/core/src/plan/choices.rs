@@ -118,6 +118,19 @@ choice_enum! {
         /// shutter: every path sample gets its own time, so the image integrates the
         /// whole segment.
         MotionBlur = "motion_blur",
+        /// Per blurry image, whichever of the two the rendering device makes for less
+        /// (`plan/cost.rs`): motion blur where a render call is dear (a GPU), averaged
+        /// frames where samples are (the CPU). Needs a render target, which fixes the
+        /// accuracy both methods reach.
+        Auto = "auto",
+    }
+}
+
+impl BlurMethod {
+    /// Whether images may be averaged latent frames (`average`, or `auto`, which plans
+    /// them before it prices them).
+    pub fn averages(self) -> bool {
+        self != BlurMethod::MotionBlur
     }
 }
 

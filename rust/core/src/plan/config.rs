@@ -9,6 +9,7 @@ use super::choices::{
     choice, BlurBudget, BlurMethod, Denoise, Device, Executor, LatentPositions, LatentSampling,
     LightPaths, Preset, TrajectoryAnchor,
 };
+use super::cost::Pricing;
 use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use super::presets::preset_values;
 use super::sampling::SamplingConfig;
@@ -74,8 +75,13 @@ macro_rules! build_options {
     max_ghost_px: f64 = SAMPLING().max_ghost_px, specs::MAX_GHOST_PX, shapes {
         help: "--latents auto: largest screen gap between latent frames, px",
     };
+    /// `auto`: per blurry image the method the rendering device makes for less
+    /// (`plan/cost.rs`), under a render target.
     blur_method: BlurMethod = BlurMethod::Average, choice::<BlurMethod>(), shapes {
-        help: "average of latent renders (the paper) or one Cycles motion blur render",
+        help: "average of latent renders (the paper), one Cycles motion blur render, or \
+            auto: per blurry image whichever costs the rendering device less (motion blur \
+            where render calls are dear, a GPU; averaged frames on a CPU), under \
+            --target-psnr; meta.json's render.blur_choice says why",
     };
     /// Cycles samples per rendered latent frame.
     samples: u32 = SAMPLING().samples, specs::SAMPLES, shapes {
@@ -484,7 +490,28 @@ impl BuildConfig {
                     .into(),
             ));
         }
+        if self.blur_method == BlurMethod::Auto && self.target_psnr.is_none() {
+            // Priced at equal samples, the methods are compared at equal accuracy only
+            // where a target renders each image until its own noise reaches it.
+            return Err(config_error(
+                "blur_method",
+                "auto: the methods are priced at the accuracy a render target sets; give \
+                 target_psnr (a preset sets one) or blur_method average or motion_blur"
+                    .into(),
+            ));
+        }
         Ok(())
+    }
+
+    /// The prices `blur_method auto` chooses by on the Cycles `backend` the worker reported
+    /// (`plan/cost.rs`); None under a method given.
+    pub fn pricing(&self, backend: &str) -> Result<Option<Pricing>> {
+        match (self.blur_method, self.target()) {
+            (BlurMethod::Auto, Some(rule)) => {
+                Pricing::new(backend, rule, self.resolution).map(Some)
+            }
+            _ => Ok(None),
+        }
     }
 
     /// Where the build runs: the options of one executor are refused under the other.
@@ -669,7 +696,7 @@ impl BuildConfig {
         if u64::from(self.target_max_samples) >= least {
             return Ok(());
         }
-        let (frames, fewer) = if self.latents_auto && self.blur_method == BlurMethod::Average {
+        let (frames, fewer) = if self.latents_auto && self.blur_method.averages() {
             (format!("up to latents_max {m}"), "a lower latents_max")
         } else {
             (m.to_string(), "fewer latents")
@@ -945,6 +972,35 @@ mod tests {
     }
 
     #[test]
+    fn blur_method_auto_is_the_accuracy_presets_and_needs_a_target() -> Result<()> {
+        for p in ["balanced", "floor", "fast"] {
+            let cfg = BuildConfig::from_values(&values(&[("preset", Raw::Str(p.into()))]))?;
+            assert_eq!(cfg.blur_method, BlurMethod::Auto, "{p}");
+            assert!(cfg.pricing("CPU")?.is_some() && cfg.pricing("OPTIX")?.is_some());
+            assert!(cfg.pricing("tpu").is_err());
+        }
+        let paper = BuildConfig::from_values(&values(&[("preset", Raw::Str("paper".into()))]))?;
+        assert_eq!(paper.blur_method, BlurMethod::Average);
+        assert!(paper.pricing("CUDA")?.is_none());
+        // A method given beside a preset is kept.
+        let given = BuildConfig::from_values(&values(&[
+            ("preset", Raw::Str("balanced".into())),
+            ("blur_method", Raw::Str("average".into())),
+        ]))?;
+        assert_eq!(given.blur_method, BlurMethod::Average);
+        assert!(given.pricing("CUDA")?.is_none());
+        assert!(err(&[("blur_method", Raw::Str("auto".into()))]).contains("target_psnr"));
+        // The options of averaged frames stand under auto, which plans them first.
+        BuildConfig::from_values(&values(&[
+            ("blur_method", Raw::Str("auto".into())),
+            ("target_psnr", Raw::Float(45.0)),
+            ("latent_positions", Raw::Str("stratified".into())),
+            ("latents_auto", Raw::Bool(true)),
+        ]))?;
+        Ok(())
+    }
+
+    #[test]
     fn defaults_are_valid_and_the_papers() -> Result<()> {
         let c = BuildConfig::default();
         c.validate()?;
@@ -1208,7 +1264,7 @@ mod tests {
         let bm = d("blur_method").ok_or(Error::Value("blur_method".into()))?;
         assert_eq!(
             (bm.kind, bm.choices.clone()),
-            (Kind::Choice, vec!["average", "motion_blur"])
+            (Kind::Choice, vec!["average", "motion_blur", "auto"])
         );
         Ok(())
     }

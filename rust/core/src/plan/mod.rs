@@ -3,6 +3,7 @@
 pub mod camera;
 pub mod choices;
 pub mod config;
+pub mod cost;
 pub mod defocus;
 pub mod options;
 pub mod presets;

@@ -19,6 +19,9 @@ pub fn preset_values(preset: Preset) -> Vec<(&'static str, Raw)> {
             ("latent_positions", Raw::Str("stratified".into())),
             ("max_ghost_px", Raw::Float(ghost_px)),
             ("latents_max", Raw::Int(MAX_COUNT as i128)),
+            // Each image by the method its device renders for less (`plan/cost.rs`): the
+            // frames the ghost bound plans on a CPU, one motion-blur render on a GPU.
+            ("blur_method", Raw::Str("auto".into())),
         ]
     };
     let target = |db: f64| ("target_psnr", Raw::Float(db));

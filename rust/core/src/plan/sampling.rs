@@ -5,12 +5,14 @@
 //! what is drawn (view, purpose), so changing the number of latents does not move the
 //! viewpoints, and dropping a level does not change the others.
 use super::camera::{clamp_polar, depth_range, focal_px, orbit_c2w};
+use super::cost::{BlurChoice, ImagePrice, Pricing};
 use super::defocus::{plan_view, DefocusPlan, MAX_DEFOCUS_LEVEL};
 use super::weights::{level_interval, scene_weight, Guards};
 use crate::error::{Error, Result};
 use crate::rng::{derive_seed, Stream};
 use glam::{DMat4, DVec3};
 use serde::{Deserialize, Serialize};
+use std::cell::RefCell;
 use std::collections::BTreeMap;
 
 pub use super::choices::{
@@ -150,9 +152,7 @@ impl SamplingConfig {
         check("radius_margin", &self.radius_margin, &specs::RADIUS_MARGIN)?;
         check("phi0_deg", &self.phi0_deg, &specs::PHI0_DEG)?;
         check("window_deg", &self.window_deg, &specs::WINDOW_DEG)?;
-        if self.latent_sampling == LatentSampling::Subsets
-            && self.blur_method == BlurMethod::Average
-        {
+        if self.latent_sampling == LatentSampling::Subsets && self.blur_method.averages() {
             let m = self.max_latents();
             let seq = m as u64 * self.samples_per_frame(m) as u64;
             if seq > MAX_SEQUENCE {
@@ -206,8 +206,8 @@ impl SamplingConfig {
     pub fn max_latents(&self) -> usize {
         match (self.blur_method, self.latents_auto) {
             (BlurMethod::MotionBlur, _) => 1,
-            (BlurMethod::Average, true) => self.latents_max,
-            (BlurMethod::Average, false) => self.latents,
+            (_, true) => self.latents_max,
+            (_, false) => self.latents,
         }
     }
 
@@ -229,12 +229,13 @@ impl SamplingConfig {
         let m = m.max(1);
         let budget = match (self.blur_method, self.samples_total) {
             (_, Some(total)) => total as f64 / m as f64,
-            (BlurMethod::Average, None) => self.samples as f64,
             (BlurMethod::MotionBlur, None) => self.samples as f64 * self.latents as f64,
+            (_, None) => self.samples as f64,
         };
         let factor = match (self.blur_method, self.blur_budget) {
-            (BlurMethod::Average, BlurBudget::Parity) => parity_factor(m),
-            (BlurMethod::Average, BlurBudget::Need) => need_factor(m, motion_px),
+            (BlurMethod::MotionBlur, _) => 1.0,
+            (_, BlurBudget::Parity) => parity_factor(m),
+            (_, BlurBudget::Need) => need_factor(m, motion_px),
             _ => 1.0,
         };
         (budget * factor).ceil().min(MAX_SAMPLES as f64) as u32
@@ -275,8 +276,8 @@ impl SamplingConfig {
     pub fn max_sequence(&self) -> u32 {
         let ms = match (self.blur_method, self.latents_auto) {
             (BlurMethod::MotionBlur, _) => 1..=1,
-            (BlurMethod::Average, true) => 1..=self.latents_max,
-            (BlurMethod::Average, false) => self.latents..=self.latents,
+            (_, true) => 1..=self.latents_max,
+            (_, false) => self.latents..=self.latents,
         };
         ms.map(|m| self.sample_blocks(m).0).max().unwrap_or(1)
     }
@@ -504,6 +505,10 @@ pub struct SettingPlan {
     /// render can see ([`super::region`]); None (a plan read back): render whole images.
     #[serde(skip)]
     pub object_box: Option<[[f64; 3]; 2]>,
+    /// Under `blur_method auto`: how each blurry image's method was chosen (meta.json's
+    /// `render.blur_choice`); None otherwise.
+    #[serde(skip)]
+    pub blur_choice: Option<BlurChoice>,
 }
 
 impl SettingPlan {
@@ -816,7 +821,35 @@ pub fn plan_setting(
     bbox_dims: [f64; 3],
     vertices: &[[f32; 3]],
 ) -> Result<SettingPlan> {
+    plan_setting_priced(cfg, None, uid, theta0_deg, seed, bbox_dims, vertices)
+}
+
+/// [`plan_setting`] with the device's prices: under `blur_method auto` each blurry image
+/// is planned as averaged frames, priced both ways ([`Pricing::choose`]) and kept, or
+/// planned again as one motion-blur render, whichever costs less (auto without a pricing
+/// is refused: the choice is the device's).
+pub fn plan_setting_priced(
+    cfg: &SamplingConfig,
+    pricing: Option<&Pricing>,
+    uid: &str,
+    theta0_deg: f64,
+    seed: u64,
+    bbox_dims: [f64; 3],
+    vertices: &[[f32; 3]],
+) -> Result<SettingPlan> {
     cfg.validate()?;
+    let pricing = match (cfg.blur_method, pricing) {
+        (BlurMethod::Auto, None) => {
+            return Err(Error::Config {
+                option: "blur_method".into(),
+                detail: "auto: each blurry image's method is priced on the device that \
+                         renders it; plan with the worker's backend"
+                    .into(),
+            })
+        }
+        (BlurMethod::Auto, p) => p,
+        _ => None,
+    };
     super::spec::check_theta0(theta0_deg)?;
     if bbox_dims.iter().any(|d| !d.is_finite() || *d < 0.0) || bbox_dims.iter().all(|d| *d <= 0.0) {
         return Err(Error::Value(format!(
@@ -842,6 +875,10 @@ pub fn plan_setting(
         focal,
         size: cfg.resolution as f64,
     };
+    let resolved = |m| SamplingConfig {
+        blur_method: m,
+        ..cfg.clone()
+    };
     let ctx = Setting {
         cfg,
         seed,
@@ -849,10 +886,15 @@ pub fn plan_setting(
         radius,
         r_min,
         screen: &screen,
+        pricing,
+        as_average: resolved(BlurMethod::Average),
+        as_motion_blur: resolved(BlurMethod::MotionBlur),
+        prices: RefCell::new(Vec::new()),
     };
     let views = (0..cfg.views)
         .map(|index| ctx.view(index, vertices, bbox_dims))
         .collect();
+    let blur_choice = pricing.map(|p| p.record(&ctx.prices.borrow()));
     Ok(SettingPlan {
         uid: uid.to_string(),
         theta0_deg,
@@ -866,6 +908,7 @@ pub fn plan_setting(
         sample_sequence_max: cfg.max_sequence(),
         views,
         object_box: Some(vertex_box(vertices)),
+        blur_choice,
     })
 }
 
@@ -877,6 +920,12 @@ struct Setting<'a> {
     radius: f64,
     r_min: f64,
     screen: &'a Screen,
+    /// Under `blur_method auto`: the device's prices, and the config as each method.
+    pricing: Option<&'a Pricing>,
+    as_average: SamplingConfig,
+    as_motion_blur: SamplingConfig,
+    /// The price of every blurry image planned so far (auto), for the setting's record.
+    prices: RefCell<Vec<ImagePrice>>,
 }
 
 impl Setting<'_> {
@@ -955,9 +1004,23 @@ impl Setting<'_> {
             sharp_seed,
             motion_px,
         };
-        match cfg.blur_method {
-            BlurMethod::Average => self.average(&seg, &at),
-            BlurMethod::MotionBlur => self.motion_blur(&seg, &at),
+        match (cfg.blur_method, self.pricing) {
+            (BlurMethod::Average, _) => self.average(cfg, &seg, &at),
+            (BlurMethod::MotionBlur, _) => self.motion_blur(cfg, &seg, &at),
+            // The frames the ghost bound plans are what averaging would cost: priced, and
+            // kept or replaced by one motion-blur render (the draws are per view and
+            // level, so the plan of any other image does not move).
+            (BlurMethod::Auto, Some(pricing)) => {
+                let averaged = self.average(&self.as_average, &seg, &at);
+                let price = pricing.price(averaged.latents);
+                self.prices.borrow_mut().push(price);
+                match price.cheaper() {
+                    BlurMethod::MotionBlur => self.motion_blur(&self.as_motion_blur, &seg, &at),
+                    _ => averaged,
+                }
+            }
+            // plan_setting_priced refuses auto without a pricing.
+            (BlurMethod::Auto, None) => self.average(&self.as_average, &seg, &at),
         }
     }
 
@@ -971,8 +1034,7 @@ impl Setting<'_> {
     }
 
     /// A level as the mean of latent frames along its segment.
-    fn average(&self, seg: &Segment, at: &LevelAt) -> LevelPlan {
-        let cfg = self.cfg;
+    fn average(&self, cfg: &SamplingConfig, seg: &Segment, at: &LevelAt) -> LevelPlan {
         let draw = |m| sample_level_m(cfg, self.seed, at.index, at.level, at.w_u, m).1;
         let (ts, max_gap_px) = latent_positions(cfg, draw, seg, self.screen, at.motion_px);
         let (sample_sequence, offsets) = cfg.sample_blocks_at(ts.len(), at.motion_px);
@@ -1009,8 +1071,7 @@ impl Setting<'_> {
     }
 
     /// A level as one Cycles motion-blur render along the segment's keys.
-    fn motion_blur(&self, seg: &Segment, at: &LevelAt) -> LevelPlan {
-        let cfg = self.cfg;
+    fn motion_blur(&self, cfg: &SamplingConfig, seg: &Segment, at: &LevelAt) -> LevelPlan {
         let (motion_steps, interpolation_error_px, keys) = motion_keys(seg, self.screen);
         LevelPlan {
             w_l: seg.w_l,
@@ -1983,6 +2044,110 @@ mod tests {
                     prop_assert!(lp.mean_pose.c2w.iter().flatten().all(|x| x.is_finite()));
                 }
             }
+        }
+    }
+
+    /// `blur_method auto` as the accuracy presets set it, priced on `backend`.
+    fn auto_plan(backend: &str, res: u32) -> (SettingPlan, SettingPlan) {
+        use crate::plan::cost::Pricing;
+        use crate::plan::target::TargetRule;
+        let cfg = SamplingConfig {
+            views: 6,
+            resolution: res,
+            latents_auto: true,
+            latents_max: MAX_COUNT,
+            latent_positions: LatentPositions::Stratified,
+            blur_method: BlurMethod::Auto,
+            ..SamplingConfig::default()
+        };
+        let rule = TargetRule {
+            target_psnr_db: 50.0,
+            pilot_samples: 32,
+            max_samples: 16384,
+        };
+        let pricing = Pricing::new(backend, rule, res).expect("known backend");
+        let d = [1.0, 0.6, 0.3];
+        let verts = cube_vertices(d);
+        let auto = plan_setting_priced(&cfg, Some(&pricing), "obj", 90.0, 7, d, &verts)
+            .expect("valid plan");
+        let average = SamplingConfig {
+            blur_method: BlurMethod::Average,
+            ..cfg
+        };
+        (auto, plan(&average, 7, d))
+    }
+
+    fn levels(p: &SettingPlan) -> Vec<&LevelPlan> {
+        p.views.iter().flat_map(|v| v.levels.values()).collect()
+    }
+
+    #[test]
+    fn auto_on_a_cpu_is_the_average_plan() {
+        for res in [16, 512] {
+            let (auto, average) = auto_plan("CPU", res);
+            assert_eq!(auto.views, average.views, "{res} px");
+            let choice = auto.blur_choice.clone().expect("a record under auto");
+            assert_eq!(choice.images.get("average"), Some(&levels(&auto).len()));
+            assert!(choice.reason.contains("cpu"), "{}", choice.reason);
+        }
+    }
+
+    #[test]
+    fn auto_on_a_gpu_renders_motion_blur_where_frames_are_many() {
+        for backend in ["OPTIX", "CUDA"] {
+            let (auto, average) = auto_plan(backend, 512);
+            for (a, b) in levels(&auto).iter().zip(levels(&average)) {
+                let want = if b.latents > 1 {
+                    BlurMethod::MotionBlur
+                } else {
+                    BlurMethod::Average
+                };
+                assert_eq!(a.method, want, "m = {}", b.latents);
+                assert_eq!(a.w_l, b.w_l);
+                assert_eq!(a.motion_px, b.motion_px);
+                if want == BlurMethod::MotionBlur {
+                    assert_eq!(a.latents, 1);
+                    assert!(a.motion_blur.is_some());
+                }
+            }
+            let choice = auto.blur_choice.clone().expect("a record under auto");
+            assert!(choice.images.get("motion_blur").copied().unwrap_or(0) > 0);
+            assert!(choice.cost_s.chosen < choice.cost_s.average);
+            // The sharp renders and every camera but the blurry images' are the same.
+            for (a, b) in auto.views.iter().zip(&average.views) {
+                assert_eq!((a.c2w, a.sharp_seed), (b.c2w, b.sharp_seed));
+            }
+        }
+    }
+
+    #[test]
+    fn auto_is_planned_only_with_prices_and_a_given_method_is_kept() {
+        let d = [1.0, 0.6, 0.3];
+        let cfg = SamplingConfig {
+            views: 3,
+            blur_method: BlurMethod::Auto,
+            ..SamplingConfig::default()
+        };
+        assert!(plan_setting(&cfg, "obj", 90.0, 7, d, &cube_vertices(d)).is_err());
+        use crate::plan::cost::Pricing;
+        use crate::plan::target::TargetRule;
+        let rule = TargetRule {
+            target_psnr_db: 50.0,
+            pilot_samples: 32,
+            max_samples: 16384,
+        };
+        let gpu = Pricing::new("cuda", rule, 512).expect("known backend");
+        for method in [BlurMethod::Average, BlurMethod::MotionBlur] {
+            let given = SamplingConfig {
+                blur_method: method,
+                ..cfg.clone()
+            };
+            let priced =
+                plan_setting_priced(&given, Some(&gpu), "obj", 90.0, 7, d, &cube_vertices(d))
+                    .expect("valid plan");
+            assert!(priced.blur_choice.is_none());
+            assert_eq!(priced.views, plan(&given, 7, d).views);
+            assert!(levels(&priced).iter().all(|l| l.method == method));
         }
     }
 }
