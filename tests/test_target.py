@@ -52,7 +52,8 @@ def test_an_accuracy_preset_keeps_its_ghost_bound_at_512_px():
                 lv
                 for v in plan.plan_setting(c, uid="box", theta0_deg=90.0, seed=5,
                                            bbox_dims=[1.0, 0.7, 0.5],
-                                           vertices=np.zeros((0, 3), np.float32)).to_dict()["views"]
+                                           vertices=np.zeros((0, 3), np.float32),
+                                           backend="CPU").to_dict()["views"]
                 for lv in v["levels"].values()
             ]  # fmt: skip
             gaps.append(max(lv["max_gap_px"] for lv in levels))
