@@ -123,6 +123,8 @@ class HubPlan:
     held: str
     shards: list[_Shard] = field(default_factory=list)
     doc: dict = field(default_factory=dict)
+    # (config, setting) -> the digest of the files its rows are made from.
+    digests: dict[tuple[str, str], str] = field(default_factory=dict)
 
 
 def _shard_bytes(args) -> int:
@@ -174,30 +176,28 @@ def _inputs(args) -> HubPlan:
     return hp
 
 
-def _setting_files(hp: HubPlan, cfg: _Config, setting: str) -> list[Path]:
-    """Every file a setting's rows of `cfg` are made from (its images at each size and
-    its passes), for the plan's sizes and the shard's key."""
-    return [p for row in _row_sources(hp, cfg, setting) for p in row.files()]
-
-
 @dataclass
 class _RowSource:
-    """The files one row is made from."""
+    """The files one row is made from (paths as strings: a build has ~10^5 of them)."""
 
     view: int
-    image: Path
-    sized: dict[int, Path]
-    passes: dict[str, Path]  # by column (pass_column)
+    image: str
+    sized: dict[int, str]
+    passes: dict[str, str]  # by column (pass_column)
 
-    def files(self) -> list[Path]:
+    def files(self) -> list[str]:
         return [self.image, *self.sized.values(), *self.passes.values()]
 
 
-def _row_sources(hp: HubPlan, cfg: _Config, setting: str) -> list[_RowSource]:
+def _row_sources(
+    hp: HubPlan, cfg: _Config, setting: str, meta: dict | None = None
+) -> list[_RowSource]:
+    """The files of each row of a setting in `cfg` (`meta`: its meta.json, read here when
+    the passes need it and it is not given)."""
     sdir = hp.build / setting
     n = len(_core.read_poses_bounds(sdir / cfg.level / layout.POSES_BOUNDS))
     names = [layout.image_name(i, n) for i in range(n)]
-    src = sdir / cfg.level if cfg.gain is None else hp.noise / setting / cfg.level / cfg.gain  # type: ignore[operator]
+    src = _src(hp, cfg, setting)
     if cfg.gain is not None:
         if not layout.is_complete(src):
             raise InputError(f"--noise has no complete {cfg.gain} here: {src}")
@@ -207,29 +207,70 @@ def _row_sources(hp: HubPlan, cfg: _Config, setting: str) -> list[_RowSource]:
             names = [by_view[i] for i in range(n)]
         except KeyError:
             raise InputError(f"{len(by_view)} noisy images for {n} views: {src}") from None
-    meta = layout.read_json(sdir / layout.META, layout.META)
-    own = layout.level_masks(meta)
+    holders: dict[tuple[str, int], str] = {}
+    if hp.passes:
+        meta = meta if meta is not None else layout.read_json(sdir / layout.META, layout.META)
+        own = layout.level_masks(meta)
+        for kind in hp.passes:
+            for f in [1, *hp.factors]:
+                holder = sdir / layout.pass_level(kind, cfg.level, own) / layout.pass_dir(kind, f)
+                holders[kind, f] = str(holder)
+    dirs = {
+        f: str(src / (layout.IMAGES if f == 1 else layout.images_dir(f))) for f in [1, *hp.factors]
+    }
     rows = []
     for i, name in enumerate(names):
         passes = {}
         for kind in hp.passes:
-            holder = sdir / layout.pass_level(kind, cfg.level, own)
             base = layout.pass_file(kind, layout.image_name(i, n))
             for f in [1, *hp.factors]:
-                passes[pass_column(kind, f)] = holder / layout.pass_dir(kind, f) / base
+                passes[pass_column(kind, f)] = os.path.join(holders[kind, f], base)
         rows.append(
             _RowSource(
                 view=i,
-                image=src / layout.IMAGES / name,
-                sized={f: src / layout.images_dir(f) / name for f in hp.factors},
+                image=os.path.join(dirs[1], name),
+                sized={f: os.path.join(dirs[f], name) for f in hp.factors},
                 passes=passes,
             )
         )
-    for r in rows:
-        for p in r.files():
-            if not p.is_file():
-                raise InputError(f"missing file of the scene to export: {p}")
     return rows
+
+
+def _setting_digest(
+    hp: HubPlan, cfg: _Config, setting: str, manifests: dict[Path, _Manifest]
+) -> tuple[int, str]:
+    """The bytes of a setting's files in `cfg` (the plan's estimate of its rows) and the
+    digest of what its rows are made from: the manifest's digest of each folder they lie
+    in (the same build gives the same digest, wherever it lies), and each file's size
+    and time where the manifest does not cover it or is older than it. Stats each file
+    once; a missing one is named."""
+    h = hashlib.sha256()
+    size = 0
+    src = _src(hp, cfg, setting)
+    extra = [str(hp.build / setting / layout.META), str(src / layout.POSES_BOUNDS)]
+    files = [p for r in _row_sources(hp, cfg, setting) for p in r.files()]
+    folders: set[tuple[Path, str]] = set()
+    for k, p in enumerate([*extra, *files]):
+        root = cfg.root if p.startswith(str(cfg.root) + os.sep) else hp.build
+        depth = 3 if root != hp.build else 2
+        if root not in manifests:
+            manifests[root] = _manifest(root, depth)
+        try:
+            st = os.stat(p)
+        except FileNotFoundError:
+            raise InputError(f"missing file of the scene to export: {p}") from None
+        if k >= len(extra):
+            size += st.st_size
+        rel = p[len(str(root)) + 1 :].replace(os.sep, "/")
+        m = manifests[root]
+        bucket = m.bucket(rel, depth)
+        if bucket is None or st.st_mtime_ns > m.written_ns:
+            h.update(f"{rel}\0{st.st_size}:{st.st_mtime_ns}\n".encode())
+        if bucket is not None:
+            folders.add((root, "/".join(rel.split("/")[:depth])))
+    for root, folder in sorted(folders):
+        h.update(f"{folder}\0{manifests[root].buckets[folder]}\n".encode())
+    return size, h.hexdigest()
 
 
 def plan(args) -> HubPlan:
@@ -239,12 +280,8 @@ def plan(args) -> HubPlan:
     hp = _inputs(args)
     complete: list[str] = hp.doc.pop("complete")
     test = set(hp.splits["test"])
-    for name in complete:
-        if problem := layout.setting_problem(hp.build / name):
-            raise InputError(
-                f"the build's setting {name} is damaged ({problem}): `blurset verify` lists "
-                f"what is wrong, a rerun of the build redoes it: {hp.build / name}"
-            )
+    # (finished_build refused a damaged setting: the rerun's own cheap check.)
+    manifests: dict[Path, _Manifest] = {}
     by_split = {
         "train": [s for s in complete if s not in test],
         "test": [s for s in complete if s in test],
@@ -254,7 +291,7 @@ def plan(args) -> HubPlan:
             cut: list[list[str]] = []
             sizes: list[int] = []
             for s in settings:
-                size = sum(p.stat().st_size for p in _setting_files(hp, cfg, s))
+                size, hp.digests[cfg.name, s] = _setting_digest(hp, cfg, s, manifests)
                 if cut and sizes[-1] + size <= target:
                     cut[-1].append(s)
                     sizes[-1] += size
@@ -402,9 +439,9 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
     """The columns of one setting's rows of one config."""
     sdir = hp.build / setting
     meta = layout.read_json(sdir / layout.META, layout.META)
-    src = sdir / cfg.level if cfg.gain is None else hp.noise / setting / cfg.level / cfg.gain  # type: ignore[operator]
+    src = _src(hp, cfg, setting)
     rows = np.asarray(_core.read_poses_bounds(src / layout.POSES_BOUNDS), np.float64)
-    sources = _row_sources(hp, cfg, setting)
+    sources = _row_sources(hp, cfg, setting, meta)
     if len(rows) != len(sources):
         raise InputError(f"{len(rows)} pose rows for {len(sources)} views: {src}")
     noise = layout.read_json(src / layout.NOISE, layout.NOISE) if cfg.gain else None
@@ -420,11 +457,15 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
     clean_held = degraded and hp.held in ("sharp", "clean")
     cols: dict[str, list] = {n: [] for n, _ in _columns(hp.factors, hp.passes, bool(cfg.gain))}
 
-    def image(p: Path) -> dict:
+    roots = [str(cfg.root) + os.sep, str(hp.build) + os.sep]
+
+    def image(p: str) -> dict:
         # The path relative to the output holding the file (a noisy image's to the noise
         # output, a pass's to the build).
-        root = cfg.root if p.is_relative_to(cfg.root) else hp.build
-        return {"bytes": p.read_bytes(), "path": p.relative_to(root).as_posix()}
+        root = roots[0] if p.startswith(roots[0]) else roots[1]
+        with open(p, "rb") as f:
+            data = f.read()
+        return {"bytes": data, "path": p[len(root) :].replace(os.sep, "/")}
 
     for r in sources:
         v = r.view
@@ -473,7 +514,7 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
             cols["sigma_shot"].append(_float_or_none(noise.get("sigma_shot")))
             cols["noise"].append(json.dumps(noise, sort_keys=True))
         for col, p in r.passes.items():
-            cols[col].append(image(p) if col.startswith("mask") else p.read_bytes())
+            cols[col].append(image(p) if col.startswith("mask") else Path(p).read_bytes())
     return cols
 
 
@@ -482,39 +523,39 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
 
 @dataclass
 class _Manifest:
-    """An output's MANIFEST.sha256 (relative path → sha256) and when it was written: a
-    file changed since then is keyed by its size and time instead."""
+    """An output's MANIFEST.sha256, folded into one digest per folder of `depth` path
+    components (`<setting>/<level>` of a build, `<setting>/<level>/<gain>` of a noise
+    output; a file at that depth, meta.json, is its own): the key of a setting's rows
+    without holding a line per file (a build lists ~10^5), and when it was written: a
+    file changed since then is keyed by its size and time as well."""
 
-    root: Path
-    lines: dict[str, str]
+    buckets: dict[str, str]
     written_ns: int
 
-    def digest(self, p: Path) -> str:
-        st = p.stat()
-        rel = p.relative_to(self.root).as_posix()
-        line = self.lines.get(rel)
-        if line is None or st.st_mtime_ns > self.written_ns:
-            return f"{st.st_size}:{st.st_mtime_ns}"
-        return line
+    def bucket(self, rel: str, depth: int) -> str | None:
+        return self.buckets.get("/".join(rel.split("/")[:depth]))
 
 
-def _manifest(root: Path) -> _Manifest:
+def _manifest(root: Path, depth: int) -> _Manifest:
     p = root / publish.MANIFEST
-    lines: dict[str, str] = {}
+    hashes: dict[str, Any] = {}
     if p.is_file():
-        for line in p.read_text().splitlines():
-            digest, _, rel = line.partition("  ")
-            if rel:
-                lines[rel] = digest
-    return _Manifest(root, lines, p.stat().st_mtime_ns if p.is_file() else 0)
+        with open(p, encoding="utf-8") as f:
+            for line in f:
+                digest, _, rel = line.rstrip("\n").partition("  ")
+                if rel:
+                    key = "/".join(rel.split("/")[:depth])
+                    if key not in hashes:
+                        hashes[key] = hashlib.sha256()
+                    hashes[key].update(f"{rel}\0{digest}\n".encode())
+    return _Manifest(
+        {k: h.hexdigest() for k, h in hashes.items()}, p.stat().st_mtime_ns if p.is_file() else 0
+    )
 
 
-def shard_key(hp: HubPlan, shard: _Shard, manifests: dict[Path, _Manifest]) -> str:
-    """What a shard is made from: its name, the options that shape its rows, and each
-    input file by its line in its output's MANIFEST.sha256 (the same build gives the same
-    key, wherever it lies), or by its size and time when the manifest lacks it or is
-    older than the file."""
-    h = hashlib.sha256()
+def shard_key(hp: HubPlan, shard: _Shard) -> str:
+    """What a shard is made from: its name, the options that shape its rows, and the
+    digest of each setting's files (_setting_digest)."""
     head = {
         "layout": LAYOUT,
         "blurset": __version__,
@@ -525,21 +566,9 @@ def shard_key(hp: HubPlan, shard: _Shard, manifests: dict[Path, _Manifest]) -> s
         "passes": hp.passes,
         "held": hp.held,
         "test_views": {s: (hp.splits.get("test_views") or {}).get(s) for s in shard.settings},
+        "files": [hp.digests[shard.config.name, s] for s in shard.settings],
     }
-    h.update(json.dumps(head, sort_keys=True).encode())
-    for s in shard.settings:
-        for p in [
-            hp.build / s / layout.META,
-            *_setting_files(hp, shard.config, s),
-            _src(hp, shard.config, s) / layout.POSES_BOUNDS,
-        ]:
-            root = shard.config.root if p.is_relative_to(shard.config.root) else hp.build
-            if root not in manifests:
-                manifests[root] = _manifest(root)
-            rel = p.relative_to(root).as_posix()
-            digest = manifests[root].digest(p)
-            h.update(f"{rel}\0{digest}\n".encode())
-    return h.hexdigest()
+    return hashlib.sha256(json.dumps(head, sort_keys=True).encode()).hexdigest()
 
 
 def _src(hp: HubPlan, cfg: _Config, setting: str) -> Path:
@@ -587,12 +616,15 @@ def write_shard(hp: HubPlan, shard: _Shard, path: Path, key: str) -> tuple[int, 
     strings = [
         f.name for f in sch if pa.types.is_string(f.type) and f.name not in ("meta", "noise")
     ]
+    # PNG and EXR bytes do not compress: stored as they are; the rest zstd.
+    raw = {f.name for f in sch if pa.types.is_struct(f.type) or pa.types.is_binary(f.type)}
+    codecs = {c: ("NONE" if c.split(".")[0] in raw else COMPRESSION) for c in _leaf_columns(sch)}
     n = 0
     with pq.ParquetWriter(
         sink,
         sch,
-        compression=COMPRESSION,
-        compression_level=COMPRESSION_LEVEL,
+        compression=codecs,
+        compression_level={c: COMPRESSION_LEVEL for c, k in codecs.items() if k != "NONE"},
         use_dictionary=strings,
         write_statistics=False,
         store_schema=True,
@@ -608,6 +640,16 @@ def write_shard(hp: HubPlan, shard: _Shard, path: Path, key: str) -> tuple[int, 
             del table, cols
     sink.close()
     return n, sink.sha.hexdigest(), sink.size
+
+
+def _leaf_columns(sch) -> list[str]:
+    """The Parquet column paths of a schema (`image.bytes`, `c2w.list.element.list.element`)."""
+    import pyarrow.parquet as pq
+
+    buf = io.BytesIO()
+    pq.write_table(sch.empty_table(), buf)
+    meta = pq.ParquetFile(io.BytesIO(buf.getvalue())).metadata.schema
+    return [meta.column(i).path for i in range(len(meta))]
 
 
 def read_key(path: Path) -> str | None:
@@ -657,8 +699,7 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
     owned = set(outputs.owned_entries(out, export.EXPORT)) if old is not None else set()
     new = [f"{DATA_DIR}/{s.name}" for s in hp.shards] + top
     export._refuse_foreign(out, doc, owned, new)  # type: ignore[arg-type]
-    manifests: dict[Path, _Manifest] = {}
-    keys = {s.name: shard_key(hp, s, manifests) for s in hp.shards}
+    keys = {s.name: shard_key(hp, s) for s in hp.shards}
     done_doc = old if isinstance(old, dict) and old.get("state") != "replacing" else None
     recorded = (done_doc or {}).get("shards") or {}
     final = {s.name: out / DATA_DIR / s.name for s in hp.shards}
