@@ -46,6 +46,11 @@ SEED = 5
 SALTS = (0x5BD1E995, 0x2545F491)
 PROBE_SALTS = (0x27D4EB2F, 0x165667B1)
 HELD_OUT = ("textured_panel_blender_reexport", "khronos_2CylinderEngine", "khronos_BoxTextured")
+# Views of each specular model of our own (bench/specular_models.py; 0: none).
+SPECULAR_VIEWS = int(os.environ.get("BLURSET_BENCH_TARGET_SPECULAR_VIEWS", "3"))
+# A bound "holds" on an image measuring at most this far under it: the rule accepts an
+# image this far under the target, and the reference's own noise is taken out to ~0.1 dB.
+BOUND_SLACK_DB = 0.25
 
 
 def held_out_glbs(work: Path | None) -> list[Path]:
@@ -161,12 +166,12 @@ def _db(mse: float) -> float:
     return 200.0 if mse <= 0 else min(200.0, -10.0 * math.log10(mse))
 
 
-def measure_model(glb: Path, work: Path) -> dict:
+def measure_model(glb: Path, work: Path, views: int = VIEWS) -> dict:
     from blurset import image, layout
     from blurset.image import read_exr
 
     out = work / f"build_{glb.stem}"
-    cfg = config(out, glb, RES, VIEWS, preset="balanced", target_psnr=TARGET)
+    cfg = config(out, glb, RES, views, preset="balanced", target_psnr=TARGET)
     wall, setting, meta = timed_build(cfg)
     refs = _references(cfg, glb, setting, meta, work)
     target_mse = 10 ** (-TARGET / 10)
@@ -190,6 +195,8 @@ def measure_model(glb: Path, work: Path) -> dict:
                     "level": level,
                     "samples": rec["samples"],
                     "estimate_db": rec["render_psnr_db"],
+                    # What the rounds stop on (builds since the bound; the estimate before).
+                    "bound_db": rec.get("render_psnr_bound_db", rec["render_psnr_db"]),
                     "measured_db": round(_db(mse), 3),
                     "reference_noise_db": round(_db(ref_noise), 2),
                     "coverage": rec["coverage"],
@@ -238,6 +245,18 @@ def summarize(models: list[dict]) -> list[dict]:
                 "estimate_error_db_max": round(
                     max(abs(r["estimate_db"] - r["measured_db"]) for r in rows), 3
                 ),
+                # Signed: above 0 the estimate promised more than the image has.
+                "estimate_over_measured_db_range": [
+                    round(min(r["estimate_db"] - r["measured_db"] for r in rows), 3),
+                    round(max(r["estimate_db"] - r["measured_db"] for r in rows), 3),
+                ],
+                "bound_holds_share": sum(
+                    r["measured_db"] >= r["bound_db"] - BOUND_SLACK_DB for r in rows
+                )
+                / len(rows),
+                "bound_over_measured_db_max": round(
+                    max(r["bound_db"] - r["measured_db"] for r in rows), 3
+                ),
                 "measured_worst_db": s["worst"],
                 "measured_p5_db": s["p5"],
                 "measured_mean_db": round(s["mean"], 3),
@@ -257,9 +276,15 @@ def summarize(models: list[dict]) -> list[dict]:
 
 
 def measure() -> dict:
+    from specular_models import make_specular_models
+
     with tempfile.TemporaryDirectory(prefix="blurset-bench-target-") as d:
         work = Path(d)
         models = [measure_model(g, work) for g in held_out_glbs(work)]
+        specular = []
+        if SPECULAR_VIEWS > 0:
+            glbs = make_specular_models(work / "specular")
+            specular = [measure_model(g, work, SPECULAR_VIEWS) for g in glbs]
     return {
         "resolution": RES,
         "views": VIEWS,
@@ -267,6 +292,8 @@ def measure() -> dict:
         "reference_factor": REF,
         "models": models,
         "summary": summarize(models),
+        "specular": specular,
+        "specular_summary": summarize(specular) if specular else [],
         "load_average": os.getloadavg()[0],
     }
 
@@ -310,8 +337,56 @@ def run() -> list[dict]:
             "target_db": TARGET,
             "reference_factor": REF,
             "load_average": m["load_average"],
+            "bound_holds_share": sum(
+                r["measured_db"] >= r["bound_db"] - BOUND_SLACK_DB for r in every
+            )
+            / n,
         }
     )
+    spec = [r for mm in m["specular"] for r in mm["images"]]
+    for row in m["specular_summary"]:
+        res.append(
+            {
+                "name": f"target_{RES}px_{TARGET:g}db_{row['model']}",
+                "ratio": row["bound_holds_share"],
+                "ratio_is": "share of images measuring at or above their render-noise bound "
+                "(within 0.25 dB), this specular model",
+                "contender": f"bound of {row['images']} images",
+                "baseline": f"converged references at {REF}x the samples",
+                **row,
+                "resolution": RES,
+                "views_measured": SPECULAR_VIEWS,
+                "target_db": TARGET,
+                "reference_factor": REF,
+            }
+        )
+    if spec:
+        res.append(
+            {
+                "name": f"target_{RES}px_{TARGET:g}db_specular_bound",
+                "ratio": sum(r["measured_db"] >= r["bound_db"] - BOUND_SLACK_DB for r in spec)
+                / len(spec),
+                "ratio_is": "share of images measuring at or above their render-noise bound "
+                "(within 0.25 dB), specular PBR models of our own",
+                "contender": f"{len(spec)} images, {len(m['specular'])} models",
+                "baseline": f"converged references at {REF}x the samples",
+                "images": len(spec),
+                "at_target_share": sum(r["measured_db"] >= TARGET - 0.5 for r in spec) / len(spec),
+                "estimate_within_1db_share": sum(
+                    abs(r["estimate_db"] - r["measured_db"]) <= 1.0 for r in spec
+                )
+                / len(spec),
+                "estimate_over_measured_db_range": [
+                    round(min(r["estimate_db"] - r["measured_db"] for r in spec), 3),
+                    round(max(r["estimate_db"] - r["measured_db"] for r in spec), 3),
+                ],
+                "per_image": {mm["model"]: mm["images"] for mm in m["specular"]},
+                "resolution": RES,
+                "views_measured": SPECULAR_VIEWS,
+                "target_db": TARGET,
+                "reference_factor": REF,
+            }
+        )
     return res
 
 

@@ -1025,6 +1025,16 @@ def half_noise(
     """The render noise of the mean of two independent halves of an image, estimated from
     them: MSE(half_a, half_b) / 4 on object pixels."""
 
+def half_noise_bound(
+    half_a: npt.NDArray[np.float32],
+    half_b: npt.NDArray[np.float32],
+    *,
+    background: tuple[float, float, float] = ...,
+) -> dict[str, Any]:
+    """half_noise with its upper bound where the noise is heavy-tailed: `estimate` (psnr,
+    mse, coverage, object_px), `mse_bound`, `psnr_bound` (the PSNR reached at least) and
+    `n_eff` (how many pixels the estimate effectively rests on)."""
+
 def spread(values: list[float]) -> rec.Spread:
     """The worst value, the 5th percentile (nearest rank) and the mean of per-image
     figures."""

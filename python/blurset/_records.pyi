@@ -20,6 +20,7 @@ class ImageRender(TypedDict):
     coverage: float
     pilot_psnr_db: float
     reached: bool
+    render_psnr_bound_db: NotRequired[float | None]
     render_psnr_db: float
     rounds: int
     samples: int

@@ -32,8 +32,10 @@ class _Image:
     halves: tuple[Any, Any]
     spent: int = 0
     rounds: int = 0
-    estimate: Any = None  # _core.ObjectError of the last round
-    previous: tuple[int, float] | None = None  # (spent, mse) of the round before
+    # _core.half_noise_bound of the last round: the estimate and the bound the rounds
+    # stop on (a few fireflies on a specular surface make one round's estimate scatter).
+    estimate: dict[str, Any] | None = None
+    previous: tuple[int, float] | None = None  # (spent, mse bound) of the round before
     pilot_db: float = 0.0
 
     @classmethod
@@ -49,30 +51,32 @@ class _Image:
             frames=self.frames,
             spent_per_frame=self.spent,
             rounds=self.rounds,
-            mse=None if self.estimate is None else self.estimate.mse,
+            mse=None if self.estimate is None else self.estimate["mse_bound"],
             previous=self.previous,
         )
 
     def rendered(self, add: int, background: tuple[float, float, float]) -> None:
         """A round of `add` samples per frame and half is in both halves: estimate anew."""
         if self.estimate is not None:
-            self.previous = (self.spent, float(self.estimate.mse))
+            self.previous = (self.spent, float(self.estimate["mse_bound"]))
         self.spent += add
         self.rounds += 1
         a, b = self.halves
-        self.estimate = _core.half_noise(a.mean(), b.mean(), background=background)
+        self.estimate = _core.half_noise_bound(a.mean(), b.mean(), background=background)
         if self.rounds == 1:
-            self.pilot_db = float(self.estimate.psnr)
+            self.pilot_db = float(self.estimate["psnr_bound"])  # what the rest follows from
 
     def record(self, cfg: BuildConfig) -> ImageRender:
-        e = self.estimate
+        assert self.estimate is not None  # a record is made after a round
+        e = self.estimate["estimate"]
         return {
             "samples": 2 * self.frames * self.spent,
             "rounds": self.rounds,
-            "render_psnr_db": round(float(e.psnr), 3),
+            "render_psnr_db": round(float(e["psnr"]), 3),
+            "render_psnr_bound_db": round(float(self.estimate["psnr_bound"]), 3),
             "pilot_psnr_db": round(self.pilot_db, 3),
-            "coverage": round(float(e.coverage), 6),
-            "reached": _core.target_reached(cfg, float(e.mse)),
+            "coverage": round(float(e["coverage"]), 6),
+            "reached": _core.target_reached(cfg, float(self.estimate["mse_bound"])),
         }
 
 

@@ -108,6 +108,6 @@ pub use crate::ground::names::{
 
 // Image error against a reference and the speed/quality front.
 pub use crate::metrics::{
-    detail_kept, detail_ratio, half_noise, image_error, object_error, pareto_front, spread,
-    ObjectError, Spread,
+    detail_kept, detail_ratio, half_noise, half_noise_bound, image_error, object_error,
+    pareto_front, spread, ObjectError, Spread,
 };

@@ -161,6 +161,24 @@ fn half_noise(
     object_figure(py, pair, background, core::half_noise)
 }
 
+/// [`half_noise`] with its bound where the noise is heavy-tailed (core
+/// `half_noise_bound`): a dict with `estimate` (psnr, mse, coverage, object_px),
+/// `mse_bound`, `psnr_bound` and `n_eff`.
+#[pyfunction]
+#[pyo3(signature = (half_a, half_b, *, background = (1.0, 1.0, 1.0)))]
+fn half_noise_bound<'py>(
+    py: Python<'py>,
+    half_a: PyReadonlyArray3<'py, f32>,
+    half_b: PyReadonlyArray3<'py, f32>,
+    background: (f64, f64, f64),
+) -> PyResult<Bound<'py, PyAny>> {
+    same_shape(&half_a, &half_b)?;
+    let (a, b) = (rgba(&half_a, "half_a")?, rgba(&half_b, "half_b")?);
+    let bg = [background.0, background.1, background.2];
+    let h = crate::run_detached(py, || core::half_noise_bound(a, b, bg))?;
+    crate::convert::to_py(py, &h)
+}
+
 /// The worst value, the 5th percentile and the mean of per-image figures (core `spread`):
 /// a dict with worst, p5, mean, n.
 #[pyfunction]
@@ -180,6 +198,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<ObjectError>()?;
     m.add_function(wrap_pyfunction!(object_error, m)?)?;
     m.add_function(wrap_pyfunction!(half_noise, m)?)?;
+    m.add_function(wrap_pyfunction!(half_noise_bound, m)?)?;
     m.add_function(wrap_pyfunction!(spread, m)?)?;
     m.add_function(wrap_pyfunction!(image_error, m)?)?;
     m.add_function(wrap_pyfunction!(detail_kept, m)?)?;

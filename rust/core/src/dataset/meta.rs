@@ -162,12 +162,17 @@ pub struct ImageRender {
     /// Its render PSNR (dB, peak 1, sRGB over the background, on its object's pixels),
     /// estimated from its two halves after the last round.
     pub render_psnr_db: f64,
+    /// The PSNR it reaches at least (`metrics::half_noise_bound`: the estimate less its
+    /// own scatter, wide where a few fireflies carry the noise): what the rounds stop on
+    /// and `reached` judges. Absent in builds before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub render_psnr_bound_db: Option<f64>,
     /// The estimate after the pilot round, from which the samples it needed were
-    /// extrapolated.
+    /// extrapolated (its bound, in builds that record `render_psnr_bound_db`).
     pub pilot_psnr_db: f64,
     /// Fraction of the frame that is object pixels (alpha > 0 in either half).
     pub coverage: f64,
-    /// The estimate is at the target (within 0.25 dB); false: the sample cap or the round
+    /// The bound is at the target (within 0.25 dB); false: the sample cap or the round
     /// limit stopped it first.
     pub reached: bool,
 }
