@@ -46,6 +46,10 @@ def test_the_presets_price_the_method_and_paper_and_a_given_method_stay():
     assert _cfg(preset="paper").blur_method == "average"
     given = _cfg(preset="fast", blur_method="average", **cam)
     assert all(lv["method"] == "average" for lv in _levels(given, "CUDA"))
+    # motion_blur beside a preset: kept, the preset's frames by motion dropped, its target kept.
+    mb = _cfg(preset="fast", blur_method="motion_blur", **cam)
+    assert not mb.latents_auto and mb.target_psnr == 40.0
+    assert all(lv["method"] == "motion_blur" for lv in _levels(mb, "CPU"))
     with pytest.raises(ConfigError, match="target_psnr"):
         _cfg(blur_method="auto")
 

@@ -397,6 +397,16 @@ impl BuildConfig {
         for (k, v) in values {
             cfg.set(k, v)?;
         }
+        // A method given beside an accuracy preset is kept: the preset's frames by motion
+        // mean nothing to one motion-blur render, so they go unless given too.
+        let given = |k: &str| values.get(k).is_some_and(|v| *v != Raw::Null);
+        if cfg.preset.is_some()
+            && cfg.blur_method == BlurMethod::MotionBlur
+            && !given("latents")
+            && !given("latents_auto")
+        {
+            cfg.latents_auto = false;
+        }
         cfg.validate()?;
         cfg.check_given(values)?;
         Ok(cfg)
@@ -989,6 +999,12 @@ mod tests {
         ]))?;
         assert_eq!(given.blur_method, BlurMethod::Average);
         assert!(given.pricing("CUDA")?.is_none());
+        let mb = BuildConfig::from_values(&values(&[
+            ("preset", Raw::Str("fast".into())),
+            ("blur_method", Raw::Str("motion_blur".into())),
+        ]))?;
+        assert_eq!(mb.blur_method, BlurMethod::MotionBlur);
+        assert!(!mb.latents_auto && mb.target_psnr == Some(40.0));
         assert!(err(&[("blur_method", Raw::Str("auto".into()))]).contains("target_psnr"));
         // The options of averaged frames stand under auto, which plans them first.
         BuildConfig::from_values(&values(&[
