@@ -46,12 +46,15 @@ def proc_cpu(pid: int) -> float:
 def plan_object(cfg, glb: Path, w, work: Path):
     """The plan of `glb`'s first setting under `cfg`, as a build makes it (its vertices
     loaded by the worker `w`)."""
+    from blurset.builder.setting import pricing_backend
     from blurset.plan import plan_setting, seed_for
 
     info = w.load(glb, work / "v.npy")
     verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
+    # blur_method auto is priced on the device the worker renders on, as a build's is.
+    backend = pricing_backend({"device": w.info.get("device")}, cfg)
     return plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
-                        bbox_dims=info["bbox_dims"], vertices=verts)  # fmt: skip
+                        bbox_dims=info["bbox_dims"], vertices=verts, backend=backend)  # fmt: skip
 
 
 def render_mean(w, frames: list, samples: int, res: int, fov_deg: float) -> np.ndarray:
