@@ -134,3 +134,13 @@ def test_on_the_cpu_the_preset_averages_frames(tmp_path, box, monkeypatch):
     choice = meta["render"]["blur_choice"]
     assert choice["device"] == "cpu" and set(choice["images"]) == {"average"}
     assert all(lv["method"] == "average" for lv, _ in _blurry(meta))
+    # The bytes of the preset before the choice existed (its frames averaged, as given).
+    given = _build(tmp_path / "g", box, "--blur-method", "average")
+    assert "blur_choice" not in given["render"]
+    assert [v["levels"] for v in meta["views"]] == [v["levels"] for v in given["views"]]
+
+    def data(out: Path) -> list[str]:
+        lines = (out / "MANIFEST.sha256").read_text().splitlines()
+        return [x for x in lines if x.endswith((".png", ".npy"))]
+
+    assert len(data(tmp_path / "c")) > 10 and data(tmp_path / "c") == data(tmp_path / "g")
