@@ -227,6 +227,25 @@ def test_an_export_stopped_half_way_resumes_to_the_same_bytes(hub_build, tmp_pat
     assert {p: p.stat().st_mtime_ns for p in cut.rglob("*")} == before
 
 
+def test_an_export_killed_inside_a_shard_resumes_to_the_same_bytes(hub_build, tmp_path):
+    """SIGKILL inside a shard (after its first setting is in its temp file): the shards
+    before it are whole and in place, the torn one only under its temp name, and the
+    rerun leaves exactly the uninterrupted export."""
+    b, n = hub_build
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    args = ["--for", "hub", "--noise", str(n), "--shard-size", SHARD_MB]
+    run_cli("export", str(b), "--out", str(whole), *args)
+    proc = run_cli("export", str(b), "--out", str(cut), *args, check=False,
+                   env={export_hub.FAULT: "kill_in:4"})  # fmt: skip
+    assert proc.returncode == -9, proc.stderr
+    done = sorted((cut / "data").rglob("*.parquet"))
+    torn = [p for p in (cut / "data").rglob(".*.tmp*")]
+    assert len(done) == 4 and len(torn) == 1
+    assert all(p.read_bytes() == (whole / p.relative_to(cut)).read_bytes() for p in done)
+    run_cli("export", str(b), "--out", str(cut), *args)
+    assert tree(cut) == tree(whole)
+
+
 def test_a_rerun_after_the_build_changed_rewrites_only_what_changed(hub_build, tmp_path):
     b0, _ = hub_build
     b = tmp_path / "b"

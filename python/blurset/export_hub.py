@@ -31,6 +31,7 @@ import io
 import json
 import os
 import shutil
+import signal
 import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -599,6 +600,10 @@ class _HashingFile(io.RawIOBase):
     def tell(self) -> int:
         return self.size
 
+    def flush(self) -> None:
+        if not self._f.closed:
+            self._f.flush()
+
     def close(self) -> None:
         if not self._f.closed:
             self._f.flush()
@@ -607,9 +612,28 @@ class _HashingFile(io.RawIOBase):
         super().close()
 
 
-def write_shard(hp: HubPlan, shard: _Shard, path: Path, key: str) -> tuple[int, str, int]:
+# Fault injection for the tests: `kill_in:K` kills this process (SIGKILL) inside the K-th
+# shard it writes (from 0), once its first setting is in the temp file, so a test of the
+# resume kills at a known point instead of racing the run.
+FAULT = "BLURSET_HUB_FAULT"
+
+
+def _fault_shard() -> int | None:
+    spec = os.environ.get(FAULT, "")
+    kind, _, k = spec.partition(":")
+    if kind != "kill_in" or not (k.isascii() and k.isdigit()):
+        if spec:
+            raise ConfigError(f"{FAULT}={spec!r}: expected kill_in:K")
+        return None
+    return int(k)
+
+
+def write_shard(
+    hp: HubPlan, shard: _Shard, path: Path, key: str, kill: bool = False
+) -> tuple[int, str, int]:
     """Write one shard to `path` (a temp name): one row group per setting, built and
-    written one setting at a time. Returns (rows, sha256, bytes)."""
+    written one setting at a time. Returns (rows, sha256, bytes). `kill`: the fault
+    injection's (FAULT) SIGKILL after the first setting."""
     pa, pq = _pyarrow()
     sch = schema(hp.factors, hp.passes, shard.config.gain is not None, key)
     sink = _HashingFile(path)
@@ -636,6 +660,9 @@ def write_shard(hp: HubPlan, shard: _Shard, path: Path, key: str) -> tuple[int, 
                 schema=sch,
             )
             w.write_table(table, row_group_size=max(1, table.num_rows))
+            if kill:
+                sink.flush()
+                os.kill(os.getpid(), signal.SIGKILL)
             n += table.num_rows
             del table, cols
     sink.close()
@@ -732,13 +759,14 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
             p.unlink(missing_ok=True)
     shards: dict[str, Any] = {}
     written = 0
+    fault = _fault_shard()
     for s in hp.shards:
         dst = final[s.name]
         if s in todo:
             dst.parent.mkdir(parents=True, exist_ok=True)
             tmp = layout.temp_path(dst)
             try:
-                rows, sha, size = write_shard(hp, s, tmp, keys[s.name])
+                rows, sha, size = write_shard(hp, s, tmp, keys[s.name], written == fault)
                 os.replace(tmp, dst)
             finally:
                 tmp.unlink(missing_ok=True)
