@@ -115,6 +115,9 @@ def test_priced_as_a_gpu_motion_blur_renders_each_image_in_two_calls_a_round(
         return [x for x in lines if x.endswith((".png", ".npy"))]
 
     assert any("/blur_4/masks/" in x for x in data(tmp_path / "a"))
+    run_cli("card", str(tmp_path / "a"), "--out", str(tmp_path / "card.md"))
+    chose = ", ".join(f"{n} {k}" for k, n in sorted(choice["images"].items()))
+    assert f"auto, priced on cuda: {chose} blurry images" in (tmp_path / "card.md").read_text()
     assert data(tmp_path / "a") == data(tmp_path / "b")
     # An image that needs more samples gets more: the same images to a 6 dB higher target.
     hi = _build(tmp_path / "hi", box, "--target-psnr", "46")

@@ -503,6 +503,21 @@ def _rendered_samples(metas: list[dict], level: str) -> str | None:
     return f"{spread} (median {statistics.median(n):g}), each image to the target"
 
 
+def _blur_method(metas: list[dict], method: Any) -> Any:
+    """`auto` (issue 47) with what it chose, over every setting: how many blurry images
+    took each method, on which devices (meta.json's `render.blur_choice`)."""
+    choices = [c for m in metas if (c := (m.get("render") or {}).get("blur_choice"))]
+    if method != "auto" or not choices:
+        return method
+    images: dict[str, int] = {}
+    for c in choices:
+        for k, n in (c.get("images") or {}).items():
+            images[k] = images.get(k, 0) + int(n)
+    devices = ", ".join(sorted({str(c.get("device")) for c in choices}))
+    chose = ", ".join(f"{n} {k}" for k, n in sorted(images.items()))
+    return f"auto, priced on {devices}: {chose} blurry images"
+
+
 def _render_table(metas: list[dict], levels: list[str], target: Any) -> list[str]:
     """Under --target-psnr: per level, what the images cost and reached (the worst
     image and the 5th percentile beside the median: a mean would hide the worst)."""
@@ -564,7 +579,7 @@ def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> 
     extra = [
         ("resolution (px)", cfg.get("resolution")),
         ("field of view (°)", cfg.get("fov_deg", sampling.get("fov_deg"))),
-        ("blur method", render.get("blur_method", cfg.get("blur_method"))),
+        ("blur method", _blur_method(metas, render.get("blur_method", cfg.get("blur_method")))),
         ("Cycles samples per latent frame", None if targeted else render.get("samples_per_latent")),
         ("blurry sample budget", None if targeted else render.get("blur_budget")),
         (
