@@ -364,3 +364,22 @@ def test_the_card_names_every_config_and_its_counts(hub):
 
     assert sum(int(x) for x in re.findall(r"num_examples: (\d+)", text)) == total
     assert "load_dataset(" in text and "## Licensing and attribution" in text
+
+
+def test_an_llff_export_and_a_hub_export_replace_each_other_whole(hub_build, tmp_path):
+    """The same --out from one target to the other (--overwrite): the old entries go,
+    and the folders they leave empty with them."""
+    b, _ = hub_build
+    out = tmp_path / "x"
+    (tmp_path / "x").mkdir()
+    (out / "notes.txt").write_text("mine")
+    run_cli("export", str(b), "--for", "hub", "--out", str(out), "--levels", "sharp")
+    run_cli("export", str(b), "--out", str(out), "--levels", "sharp", "--overwrite")
+    assert sorted(p.name for p in out.iterdir()) == [
+        "export.json", "nerf_llff_data", "notes.txt", "test.txt", "train.txt"
+    ]  # fmt: skip
+    run_cli("export", str(b), "--for", "hub", "--out", str(out), "--levels", "sharp",
+            "--overwrite")  # fmt: skip
+    assert sorted(p.name for p in out.iterdir()) == ["data", "export.json", "notes.txt"]
+    assert (out / "notes.txt").read_text() == "mine"
+    assert run_cli("verify", str(out)).returncode == 0

@@ -578,6 +578,8 @@ def _put_in_place(
         # Old scenes (and a scene folder of another target) make way, one rename each.
         for k, rel in enumerate(sorted(owned - set(new))):
             os.replace(out / rel, trash / str(k))
+            # (A hub export's shards leave their empty data/<config>/ folders.)
+            export_hub.prune_empty_parents(out, rel)
         for scene in doc["scenes"]:
             dst = out / _entry(doc, scene)
             dst.parent.mkdir(parents=True, exist_ok=True)

@@ -757,6 +757,7 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
             shutil.rmtree(p)
         else:
             p.unlink(missing_ok=True)
+        prune_empty_parents(out, rel)
     shards: dict[str, Any] = {}
     written = 0
     fault = _fault_shard()
@@ -794,6 +795,18 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
     outputs.write_record(out / export.EXPORT_FILE, doc)
     _say(doc, out, hp, "written", written)
     return 0
+
+
+def prune_empty_parents(out: Path, rel: str) -> None:
+    """The folders above an entry that made way (`data/blur_4`, `nerf_llff_data`), once
+    empty, go too; never `out` itself."""
+    d = (out / rel).parent
+    while d != out and d.is_relative_to(out):
+        try:
+            d.rmdir()
+        except OSError:
+            return  # not empty (or not ours to remove)
+        d = d.parent
 
 
 def _remove_empty_dirs(root: Path) -> None:
