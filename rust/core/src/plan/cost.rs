@@ -255,7 +255,8 @@ pub struct BlurChoice {
     pub model: CostModel,
     /// What was priced, in words.
     pub priced: String,
-    /// Blurry images by chosen method.
+    /// Blurry images by chosen method: every view's levels as planned, the held-out
+    /// views' included (whose levels then hold a copy of the sharp image instead).
     pub images: BTreeMap<String, usize>,
     pub cost_s: CostSeconds,
     pub reason: String,
