@@ -18,9 +18,11 @@ A shard holds whole settings (one Parquet row group each), cut at `--shard-size`
 a scene streams whole. Shards are planned from the files' sizes before any is written,
 written one at a time through a temp name and a rename, with fixed compression and no
 timestamps: the same build gives the same bytes. A shard's schema metadata carries the
-key of what it was made from (the build's MANIFEST.sha256 lines of its files, the
-options): a rerun after a kill keeps every shard whose key is its plan's and writes the
-rest, so its shards are those of an uninterrupted export. `blurset verify DIR` checks
+key of what it was made from (the MANIFEST.sha256 lines of the folders its files lie in,
+each file's size and time where the manifest is older, the options): a rerun after a
+kill keeps every shard whose key is its plan's and writes the rest, so its shards are
+those of an uninterrupted export. The plan stats every file once and holds no line per
+file; writing holds one setting's rows at a time, never a whole shard. `blurset verify DIR` checks
 each shard against export.json (size, sha256, rows, settings) and decodes every image.
 """
 
