@@ -28,17 +28,24 @@ import numpy as np
 
 from blurset import __version__, _core, export_hub, layout, outputs
 from blurset.exceptions import ConfigError, InputError, reason_of
+from blurset.export_rules import (
+    EXPORT,
+    EXPORT_FILE,
+    LISTS,
+    STAGE,
+    TRASH,
+    prune_empty_parents,
+)
+from blurset.export_rules import gains as _gains
+from blurset.export_rules import levels as _levels
+from blurset.export_rules import refuse_foreign as _refuse_foreign
+from blurset.export_rules import refuse_other_export as _refuse_other_export
+from blurset.export_rules import refuse_overlap as _refuse_overlap
 
 if TYPE_CHECKING:
     from blurset import _records
 
-EXPORT = outputs.OutputKind.EXPORT
-EXPORT_FILE = EXPORT.record
 NOISE_DATASET = outputs.OutputKind.NOISE.record
-# Temp names (`.<name>.tmp<pid>`) of the staged scenes and of what makes way.
-STAGE, TRASH = "export", "export.old"
-# The files an export writes at the top of --out besides its scenes.
-LISTS = ("train.txt", "test.txt", EXPORT_FILE)
 # What each target reads: IBRNet's `<rootdir>/data/nerf_llff_data/<scene>` and NAN's
 # `DATA_DIR/nerf_llff_data/<scene>` list every entry of that folder as a scene, so
 # nothing else may lie there; nerfstudio takes any scene folder (`--data`).
@@ -89,32 +96,6 @@ def add_arguments(p) -> None:
         help="replace an export of another build, or of another --noise (or none), in --out "
         "(a re-export of the same build and --noise replaces its own scenes without it)",
     )
-
-
-def _levels(value: str | None, available: list[str]) -> list[str]:
-    if value is None:
-        return available
-    names = [s.strip() for s in value.split(",") if s.strip()]
-    for n in names:
-        if n not in available:
-            raise ConfigError(f"--levels: the build has no level {n!r} ({', '.join(available)})")
-    return [lvl for lvl in available if lvl in names]
-
-
-def _gains(noise: Path, doc: dict, value: list[str] | None) -> list[str]:
-    have = [layout.gain_name(g["gain"]) for g in doc["gains"]]
-    if value is None:
-        return have
-    names = []
-    for v in value:
-        try:
-            name = layout.gain_name(float(v))
-        except ValueError:
-            raise ConfigError(f"--gains {v!r}: not a number") from None
-        if name not in have:
-            raise ConfigError(f"--gains {v}: {noise} has no {name} ({', '.join(have)})")
-        names.append(name)
-    return names
 
 
 def _noise_output(noise: Path, build: Path) -> dict:
@@ -421,22 +402,6 @@ def _own_transforms(doc: _records.ExportDoc) -> bool:
     return doc["for"] == "nerfstudio" and bool({"depth", "mask"} & set(doc.get("passes") or []))
 
 
-def _refuse_overlap(out: Path, doc: _records.ExportDoc, inputs: list[Path]) -> None:
-    """--out may hold the build (IBRNet's `data/` may keep it beside the export), but it
-    may not be or lie in an input, and no entry the export writes may touch one."""
-    o = out.resolve()
-    for i in inputs:
-        r = Path(i).resolve()
-        if o == r or o.is_relative_to(r):
-            outputs.refuse_overlap(out, [i])
-        if r.is_relative_to(o):
-            top = doc["scenes_dir"] if doc["scenes_dir"] != "." else None
-            mine = [top] if top else list(doc["scenes"])
-            for e in [*mine, *LISTS]:
-                if r == o / e or r.is_relative_to(o / e):
-                    raise ConfigError(f"--out/{e} would hold the input {str(i)!r}: {out}")
-
-
 def _entry(doc: _records.ExportDoc, scene: str) -> str:
     return scene if doc["scenes_dir"] == "." else f"{doc['scenes_dir']}/{scene}"
 
@@ -456,21 +421,6 @@ def run(args) -> int:
         # Claimed again under the lock: another export may have finished meanwhile.
         how = outputs.claim(out, EXPORT, "--out")
         return _replace(out, doc, sources, how, args.build.resolve(), overwrite=args.overwrite)
-
-
-def _other_noise(was: str | None, now: str | None, out: Path) -> str:
-    """Why an export of the build with another --noise (or none) does not replace the one
-    in OUT by itself: a loader reads one root, so clean and noisy scenes need two."""
-
-    def of(noise: str | None) -> str:
-        return f"the noise output {noise!r}" if noise else "the build without --noise"
-
-    return (
-        f"--out holds the export of {of(was)}; this export of {of(now)} would replace it. "
-        "To keep both, give this one its own root (IBRNet and GNT read only "
-        "<rootdir>/data/nerf_llff_data/: --out ROOTN/data, then --rootdir ROOTN), or "
-        f"--overwrite to replace it: {out}"
-    )
 
 
 def _replace(
@@ -505,38 +455,6 @@ def _sweep_stale(out: Path, doc: _records.ExportDoc) -> None:
     layout.remove_stale_temps(out, [STAGE, TRASH, *LISTS])
     for parent in {(out / _entry(doc, s)).parent for s in doc["scenes"]}:
         layout.remove_stale_temps(parent, list(doc["scenes"]))
-
-
-def _refuse_other_export(old: dict, doc: _records.ExportDoc, out: Path, overwrite: bool) -> None:
-    """An export of another build, or with another --noise, is not replaced by itself."""
-    # (an export.json of an older blurset names the build by its absolute path)
-    was_of = Path(str(old.get("build"))).name if old.get("build") else doc["build"]
-    if was_of != doc["build"] and not overwrite:
-        raise ConfigError(
-            f"--out holds an export of the build {was_of!r}: give another --out, "
-            f"or --overwrite to replace that export: {out}"
-        )
-    if old.get("state") != "replacing" and old.get("noise") != doc["noise"] and not overwrite:
-        raise ConfigError(_other_noise(old.get("noise"), doc["noise"], out))
-
-
-def _refuse_foreign(out: Path, doc: _records.ExportDoc, owned: set[str], new: list[str]) -> None:
-    """Nothing an earlier export did not write is replaced, and a scene folder that makes
-    way holds only what an export writes: a user's file there (a note) is named, never
-    deleted with it."""
-    for rel in new:
-        p = out / rel
-        if (p.exists() or p.is_symlink()) and rel not in owned:
-            raise ConfigError(
-                f"--out already holds {rel}, which no earlier export here wrote: move it, or "
-                f"give another --out: {out}"
-            )
-    if doc["scenes_dir"] != "." and (out / doc["scenes_dir"]).is_file():
-        raise ConfigError(f"--out holds a file {doc['scenes_dir']}: {out}")
-    # (The core's rule of what an exported scene holds: images/, images_<f>/, the passes'
-    # folders and links, nerfstudio's depths/, poses_bounds.npy, transforms.json.)
-    scenes = [rel for rel in sorted(owned) if rel not in LISTS]
-    outputs.refuse_not_written(out, EXPORT, scenes, "export")
 
 
 def _put_in_place(
@@ -579,7 +497,7 @@ def _put_in_place(
         for k, rel in enumerate(sorted(owned - set(new))):
             os.replace(out / rel, trash / str(k))
             # (A hub export's shards leave their empty data/<config>/ folders.)
-            export_hub.prune_empty_parents(out, rel)
+            prune_empty_parents(out, rel)
         for scene in doc["scenes"]:
             dst = out / _entry(doc, scene)
             dst.parent.mkdir(parents=True, exist_ok=True)

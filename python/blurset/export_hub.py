@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from blurset import __version__, _core, layout, outputs, publish
+from blurset import __version__, _core, export_rules, layout, outputs, publish
 from blurset.exceptions import ConfigError, InputError
 
 if TYPE_CHECKING:
@@ -138,8 +138,6 @@ def _shard_bytes(args) -> int:
 
 
 def _inputs(args) -> HubPlan:
-    from blurset import export
-
     if args.copy:
         raise ConfigError("--copy: --for hub writes the images' bytes into its shards")
     build: Path = args.build.resolve()
@@ -149,7 +147,7 @@ def _inputs(args) -> HubPlan:
     if args.gains and args.noise is None:
         raise ConfigError("--gains needs --noise (a `blurset noise BUILD` output)")
     available = dataset.get("levels") or [layout.SHARP]
-    levels = export._levels(args.levels, available)
+    levels = export_rules.levels(args.levels, available)
     configs = [_Config(config_name(lvl), lvl, None, build) for lvl in levels]
     noise = args.noise.resolve() if args.noise else None
     if noise is not None:
@@ -159,7 +157,7 @@ def _inputs(args) -> HubPlan:
                 "--for hub: one row per view image; --noise holds several noisy frames per "
                 "view (blurset noise --frames)"
             )
-        gains = export._gains(noise, doc, args.gains)
+        gains = export_rules.gains(noise, doc, args.gains)
         for lvl in [lvl for lvl in levels if lvl in doc["levels"]]:
             configs += [_Config(config_name(lvl, g), lvl, g, noise) for g in gains]
     passes = list(dataset["config"].get("passes") or [])
@@ -700,34 +698,30 @@ def _sha256(path: Path) -> str:
 
 
 def run(args) -> int:
-    from blurset import export
-
     out: Path = args.out
     hp = plan(args)
     doc = hp.doc
     inputs = [args.build] + ([args.noise] if args.noise else [])
-    export._refuse_overlap(out, doc, inputs)  # type: ignore[arg-type]
+    export_rules.refuse_overlap(out, doc, inputs)  # type: ignore[arg-type]
     outputs.refuse_inside_settings(out)
-    outputs.claim(out, export.EXPORT, "--out")
-    with outputs.lock(out, export.EXPORT):
-        how = outputs.claim(out, export.EXPORT, "--out")
+    outputs.claim(out, export_rules.EXPORT, "--out")
+    with outputs.lock(out, export_rules.EXPORT):
+        how = outputs.claim(out, export_rules.EXPORT, "--out")
         return _write(out, hp, how, overwrite=args.overwrite)
 
 
 def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
-    from blurset import export
-
     doc = hp.doc
-    top = [export.EXPORT_FILE]
-    layout.remove_stale_temps(out, [export.STAGE, export.TRASH, *top])
+    top = [export_rules.EXPORT_FILE]
+    layout.remove_stale_temps(out, [export_rules.STAGE, export_rules.TRASH, *top])
     for d in {(out / DATA_DIR / s.name).parent for s in hp.shards}:
         layout.remove_stale_temps(d, [Path(s.name).name for s in hp.shards])
-    old = outputs.read_record(out / export.EXPORT_FILE) if how == "same" else None
+    old = outputs.read_record(out / export_rules.EXPORT_FILE) if how == "same" else None
     if old is not None:
-        export._refuse_other_export(old, doc, out, overwrite)  # type: ignore[arg-type]
-    owned = set(outputs.owned_entries(out, export.EXPORT)) if old is not None else set()
+        export_rules.refuse_other_export(old, doc, out, overwrite)  # type: ignore[arg-type]
+    owned = set(outputs.owned_entries(out, export_rules.EXPORT)) if old is not None else set()
     new = [f"{DATA_DIR}/{s.name}" for s in hp.shards] + top
-    export._refuse_foreign(out, doc, owned, new)  # type: ignore[arg-type]
+    export_rules.refuse_foreign(out, doc, owned, new)  # type: ignore[arg-type]
     keys = {s.name: shard_key(hp, s) for s in hp.shards}
     done_doc = old if isinstance(old, dict) and old.get("state") != "replacing" else None
     recorded = (done_doc or {}).get("shards") or {}
@@ -743,7 +737,7 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
     # What this run may put in place is recorded first: an export stopped half-way owns
     # every shard it wrote, and its rerun keeps the finished ones.
     outputs.write_record(
-        out / export.EXPORT_FILE,
+        out / export_rules.EXPORT_FILE,
         {
             "kind": "blurset export",
             "state": "replacing",
@@ -759,7 +753,7 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
             shutil.rmtree(p)
         else:
             p.unlink(missing_ok=True)
-        prune_empty_parents(out, rel)
+        export_rules.prune_empty_parents(out, rel)
     shards: dict[str, Any] = {}
     written = 0
     fault = _fault_shard()
@@ -794,21 +788,9 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
         }
     _remove_empty_dirs(out / DATA_DIR)
     doc["shards"] = shards
-    outputs.write_record(out / export.EXPORT_FILE, doc)
+    outputs.write_record(out / export_rules.EXPORT_FILE, doc)
     _say(doc, out, hp, "written", written)
     return 0
-
-
-def prune_empty_parents(out: Path, rel: str) -> None:
-    """The folders above an entry that made way (`data/blur_4`, `nerf_llff_data`), once
-    empty, go too; never `out` itself."""
-    d = (out / rel).parent
-    while d != out and d.is_relative_to(out):
-        try:
-            d.rmdir()
-        except OSError:
-            return  # not empty (or not ours to remove)
-        d = d.parent
 
 
 def _remove_empty_dirs(root: Path) -> None:
