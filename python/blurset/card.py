@@ -401,6 +401,22 @@ def make_card(
     res = m0.get("resolution") or [cfg.get("resolution")] * 2
     out: list[str] = [yaml_header(header), f"# {name}", ""]
     out += _contents(name, dataset, splits, m0, levels, res)
+    if hub_doc is not None:
+        # The card of a hub export describes its shards; the folders are the build's.
+        out += [
+            "This repository holds the build as Parquet shards (`blurset export --for hub`):",
+            "",
+            "```",
+            "export.json                                  every shard: its config, split, "
+            "settings, rows and sha256",
+            "data/<config>/<split>-00000-of-00004.parquet  one config per level (and gain), "
+            "whole settings per shard",
+            "```",
+            "",
+            "The layout above is the build's, which the shards were made from; "
+            "`blurset verify .` checks every shard and decodes every image.",
+            "",
+        ]
     if any((s / layout.SHARP / layout.LINEAR).is_dir() for s in settings[:1]):
         out += [
             "Each level also holds `linear/<view>.exr`: the linear premultiplied RGBA "
