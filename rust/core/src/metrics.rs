@@ -517,7 +517,7 @@ mod tests {
     /// (0.4 + the fireflies' expected value), as RGBA.
     fn fireflies(seed: u64, n: usize, p: f64, f: f64) -> [Vec<f32>; 4] {
         let mut s = crate::rng::Stream::new(seed, 0);
-        let mut draw = |s: &mut crate::rng::Stream| {
+        let draw = |s: &mut crate::rng::Stream| {
             let (u, v) = (s.uniform().max(1e-12), s.uniform());
             let g = (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos();
             0.002 * g + if s.uniform() < p { f } else { 0.0 }
