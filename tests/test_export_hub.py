@@ -410,3 +410,25 @@ def test_a_real_demo_build_exports_whole(demo_build, tmp_path):
     for level in layout.setting_levels(demo_build / s):
         _same(open_scene(demo_build, s, level), open_scene(out, s, level))
     assert run_cli("verify", str(out)).returncode == 0
+
+
+def test_a_targeted_builds_rows_carry_each_images_samples_and_psnr(standin_blender, tmp_path):
+    """Under --target-psnr every image renders its own samples to its own estimate: each
+    row carries its image's record (meta.json `views[].images[level]`)."""
+    b, out = tmp_path / "b", tmp_path / "hub"
+    run_cli("build", "--demo", "--views", "4", "--levels", "1", "--latents", "2",
+            "--resolution", "32", "--settings-per-object", "1", "--target-psnr", "30",
+            "--quiet", "--blender", str(standin_blender), "--out", str(b))  # fmt: skip
+    run_cli("export", str(b), "--for", "hub", "--out", str(out))
+    splits = layout.read_json(b / layout.SPLITS, layout.SPLITS)
+    n = 0
+    for p in sorted((out / "data").rglob("*.parquet")):
+        for row in pq.read_table(p, columns=["setting", "level", "view", "held_out",
+                                             "samples", "render_psnr_db"]).to_pylist():  # fmt: skip
+            meta = layout.read_json(b / row["setting"] / layout.META, layout.META)
+            # A held-out view of a blur level holds the sharp image: its record.
+            level = "sharp" if row["held_out"] and splits["test_view_images"] == "sharp" else None
+            im = meta["views"][row["view"]]["images"][level or row["level"]]
+            assert (row["samples"], row["render_psnr_db"]) == (im["samples"], im["render_psnr_db"])
+            n += 1
+    assert n > 0
