@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from blurset import export_hub, layout
+from blurset import data, export_hub, layout
 from blurset.data import open_scene
 
 from tests.conftest import one_error_line, run_cli, standin_build, tree
@@ -170,6 +170,11 @@ def _same(a, b, files: bool = True) -> None:
             assert x.dtype == y.dtype and np.array_equal(x, y), f.name
         else:
             assert x == y, f.name
+
+
+def test_list_scenes_of_shards_is_the_builds(hub, hub_build):
+    b, _ = hub_build
+    assert data.list_scenes(hub) == data.list_scenes(b)
 
 
 @pytest.mark.parametrize("level", ["sharp", "blur_1", "blur_2", "defocus_1"])

@@ -251,6 +251,7 @@ def hub_header(hub: Path, doc: dict) -> dict[str, Any]:
                     for sp, recs in splits.items()
                 ],
                 "download_size": sum(int(r["bytes"]) for recs in splits.values() for r in recs),
+                "dataset_size": sum(int(r["bytes"]) for recs in splits.values() for r in recs),
             }
         )
     return {"configs": configs, "dataset_info": infos}

@@ -8,6 +8,10 @@
     s.c2w_opencv, s.intrinsics, s.near, s.far
     s.depth, s.normals, s.masks  # with `build --passes`, else None
 
+The same scene comes from a `blurset export --for hub` folder (`open_scene("HUB", …)`),
+or from the rows of a `datasets` split, streaming or not (`open_scene(rows, setting,
+level, sharp_rows=sharp)`): the same arrays as from the build's folders.
+
 With `gain=` and `noise=` (a `blurset noise BUILD` output) the degraded images are that
 gain's noisy copies of the level (drawn at the size read). `clean` is always the sharp
 level at the same size: the undegraded truth of every degradation.
@@ -283,7 +287,15 @@ def _held_out(build: Path, setting: str) -> list[int]:
 
 
 def list_scenes(build: str | Path) -> list[tuple[str, str]]:
-    """(setting, level) of every complete setting of a build, in order."""
+    """(setting, level) of every complete setting of a build, in order; of a `blurset
+    export --for hub` folder, every setting and level its shards hold."""
+    from blurset import export_hub
+
+    doc = export_hub.hub_doc(Path(build))
+    if doc is not None:
+        held = {(s, r["config"]) for r in (doc.get("shards") or {}).values() for s in r["settings"]}
+        return [(s, lvl) for s in sorted({s for s, _ in held}) for lvl in doc["levels"]
+                if (s, lvl) in held]  # fmt: skip
     return [
         (s.name, lvl)
         for s in layout.complete_settings(Path(build))
