@@ -518,7 +518,7 @@ impl BuildConfig {
     pub fn pricing(&self, backend: &str) -> Result<Option<Pricing>> {
         match (self.blur_method, self.target()) {
             (BlurMethod::Auto, Some(rule)) => {
-                Pricing::new(backend, rule, self.resolution).map(Some)
+                Pricing::new(backend, rule.pilot_samples, self.resolution).map(Some)
             }
             _ => Ok(None),
         }

@@ -12,7 +12,6 @@
 //! The one rule is [`Pricing::choose`]; its record is [`BlurChoice`] (meta.json's
 //! `render.blur_choice`).
 use super::choices::{BlurMethod, Choice};
-use super::target::TargetRule;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -132,22 +131,24 @@ impl ImagePrice {
 }
 
 /// How the images of a setting are priced: the device's model, the backend it was taken
-/// from, the target's rule (its pilot round is what is priced) and the resolution.
+/// from, the target's pilot samples (its pilot round is what is priced: both halves,
+/// `TargetRule::pilot_samples`) and the resolution.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Pricing {
     pub backend: String,
     pub model: CostModel,
-    pub rule: TargetRule,
+    pub pilot_samples: u32,
     pub resolution: u32,
 }
 
 impl Pricing {
-    /// The pricing of `backend` (the worker's `device.backend`) under `rule` at `res` px.
-    pub fn new(backend: &str, rule: TargetRule, resolution: u32) -> Result<Pricing> {
+    /// The pricing of `backend` (the worker's `device.backend`) for a target whose pilot
+    /// round renders `pilot_samples` at `res` px.
+    pub fn new(backend: &str, pilot_samples: u32, resolution: u32) -> Result<Pricing> {
         Ok(Pricing {
             backend: backend.trim().to_ascii_lowercase(),
             model: CostModel::of_backend(backend)?,
-            rule,
+            pilot_samples,
             resolution,
         })
     }
@@ -157,7 +158,7 @@ impl Pricing {
     /// make 2 × frames calls (each frame once per half), motion blur 2. The samples are
     /// the same because the target, not the method, decides them.
     pub fn price(&self, frames: usize) -> ImagePrice {
-        let samples = u64::from(self.rule.pilot_samples.max(2));
+        let samples = u64::from(self.pilot_samples.max(2));
         let res = self.resolution;
         let m = self.model;
         ImagePrice {
@@ -205,7 +206,7 @@ impl Pricing {
             priced: format!(
                 "one round of {} samples (target_pilot_samples, both halves) per blurry \
                  image at {} px, the same for both methods",
-                self.rule.pilot_samples.max(2),
+                self.pilot_samples.max(2),
                 self.resolution
             ),
             images,
@@ -266,16 +267,8 @@ pub struct BlurChoice {
 mod tests {
     use super::*;
 
-    fn rule(pilot: u32) -> TargetRule {
-        TargetRule {
-            target_psnr_db: 50.0,
-            pilot_samples: pilot,
-            max_samples: 16384,
-        }
-    }
-
     fn pricing(backend: &str, res: u32) -> Pricing {
-        Pricing::new(backend, rule(32), res).expect("known backend")
+        Pricing::new(backend, 32, res).expect("known backend")
     }
 
     #[test]

@@ -2065,7 +2065,7 @@ mod tests {
             pilot_samples: 32,
             max_samples: 16384,
         };
-        let pricing = Pricing::new(backend, rule, res).expect("known backend");
+        let pricing = Pricing::new(backend, rule.pilot_samples, res).expect("known backend");
         let d = [1.0, 0.6, 0.3];
         let verts = cube_vertices(d);
         let auto = plan_setting_priced(&cfg, Some(&pricing), "obj", 90.0, 7, d, &verts)
@@ -2136,7 +2136,7 @@ mod tests {
             pilot_samples: 32,
             max_samples: 16384,
         };
-        let gpu = Pricing::new("cuda", rule, 512).expect("known backend");
+        let gpu = Pricing::new("cuda", rule.pilot_samples, 512).expect("known backend");
         for method in [BlurMethod::Average, BlurMethod::MotionBlur] {
             let given = SamplingConfig {
                 blur_method: method,
