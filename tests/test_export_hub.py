@@ -386,6 +386,15 @@ def test_the_card_names_every_config_and_its_counts(hub):
     assert "load_dataset(" in text and "## Licensing and attribution" in text
 
 
+def test_a_card_written_into_a_hub_export_is_its_card(hub, hub_build, tmp_path):
+    b, _ = hub_build
+    other = tmp_path / "hub"
+    shutil.copytree(hub, other)
+    (other / "README.md").unlink()
+    run_cli("card", str(b), "--out", str(other / "README.md"))
+    assert (other / "README.md").read_text() == (hub / "README.md").read_text()
+
+
 def test_an_llff_export_and_a_hub_export_replace_each_other_whole(hub_build, tmp_path):
     """The same --out from one target to the other (--overwrite): the old entries go,
     and the folders they leave empty with them."""

@@ -810,6 +810,13 @@ def run(args: argparse.Namespace) -> int:
     if hub is not None:
         _hub_doc(hub, build)  # refused before anything is written
     out: Path = args.out or (hub or build) / "README.md"
+    if hub is None and args.out is not None:
+        from blurset import export_hub
+
+        if export_hub.hub_doc(out.parent) is not None:
+            # A card written into a hub export is that export's: its configs and counts.
+            hub = out.parent
+            _hub_doc(hub, build)
     if out.suffix.lower() != ".md":
         raise ConfigError(f"--out {out}: a dataset card is a Markdown file (.md)")
     outputs.refuse_inside_settings(out)
