@@ -292,7 +292,13 @@ def test_a_users_file_at_the_top_of_a_noise_output_is_never_listed(b, tmp_path):
     names = listed(out)
     assert "notes.txt" not in names and "noise_dataset.json" in names
     assert (out / "notes.txt").read_text() == "mine"
-    # Without a manifest (a killed run), a rerun lists the units it found complete.
+    # Without a manifest (a killed run), a rerun lists the units it found complete and
+    # whole; one with a PNG cut short is redone, not certified.
     (out / publish.MANIFEST).unlink()
-    run_cli(*noise, "--seed", "5")
+    png = sorted(out.glob("*/blur_1/gain_1/images/*.png"))[0]
+    whole = png.read_bytes()
+    cut(png)
+    proc = run_cli(*noise, "--seed", "5")
+    assert f"redoing {png.parent.parent.relative_to(out).as_posix()}: images/" in proc.stderr
+    assert png.read_bytes() == whole
     assert listed(out) == names

@@ -144,17 +144,32 @@ def _refuse_scene_options(cfg: _core.NoiseConfig) -> None:
 
 def _pending(out: Path, unit: _core.NoiseUnit) -> list[int]:
     """The gains of `unit` to write: those not complete, and a complete one whose files
-    are not the bytes OUT's manifest certifies (damaged or copied over since), named on
-    stderr: redone, never certified anew."""
+    are not the bytes OUT's manifest certifies (damaged or copied over since), or, with
+    no manifest to compare with (a run killed before it), whose PNGs are cut short:
+    named on stderr and redone, never certified anew."""
     pending = set(unit.pending())
+    has_manifest = (out / publish.MANIFEST).is_file()
     for i, g in enumerate(unit.gains):
         if i in pending:
             continue
         rel = (unit.dst / g.dir).relative_to(out).as_posix()
-        if problem := publish.manifest_problem(out, rel):
+        if has_manifest:
+            problem = publish.manifest_problem(out, rel)
+        else:
+            problem = _png_problem(unit.dst / g.dir)
+        if problem:
             print(f"redoing {rel}: {problem}", file=sys.stderr)
             pending.add(i)
     return sorted(pending)
+
+
+def _png_problem(gain: Path) -> str | None:
+    """The first PNG of a gain folder that is not whole (signature, end chunk), in
+    words: the check of a setting's images, for a gain no manifest vouches for."""
+    for png in sorted(gain.glob("images*/*.png")):
+        if problem := layout.png_problem(png):
+            return f"{png.relative_to(gain).as_posix()}: {problem}"
+    return None
 
 
 def _write_pending(
