@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from blurset import __version__, _core, export_rules, layout, outputs, publish
+from blurset import __version__, _core, export_rules, layout, outputs, publish, stop
 from blurset.exceptions import ConfigError, InputError
 
 if TYPE_CHECKING:
@@ -618,16 +618,6 @@ class _HashingFile(io.RawIOBase):
 FAULT = "BLURSET_HUB_FAULT"
 
 
-def _fault_shard() -> int | None:
-    spec = os.environ.get(FAULT, "")
-    kind, _, k = spec.partition(":")
-    if kind != "kill_in" or not (k.isascii() and k.isdigit()):
-        if spec:
-            raise ConfigError(f"{FAULT}={spec!r}: expected kill_in:K")
-        return None
-    return int(k)
-
-
 def write_shard(
     hp: HubPlan, shard: _Shard, path: Path, key: str, kill: bool = False
 ) -> tuple[int, str, int]:
@@ -756,7 +746,7 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
         export_rules.prune_empty_parents(out, rel)
     shards: dict[str, Any] = {}
     written = 0
-    fault = _fault_shard()
+    fault = stop.fault_index(FAULT)
     for s in hp.shards:
         dst = final[s.name]
         if s in todo:

@@ -79,3 +79,21 @@ def remove_tree(path) -> None:
         if not path.exists():
             return
         time.sleep(0.05)
+
+
+def fault_index(var: str) -> int | None:
+    """The K of a test's fault injection `VAR=kill_in:K` (SIGKILL inside the K-th unit of
+    work, so a test of resume kills at a known point instead of racing the run); None
+    when unset. Anything else is refused by name (ASCII digits only: str.isdigit() takes
+    "²", which int() refuses)."""
+    import os
+
+    from blurset.exceptions import ConfigError
+
+    spec = os.environ.get(var, "")
+    kind, _, k = spec.partition(":")
+    if kind != "kill_in" or not (k.isascii() and k.isdigit()):
+        if spec:
+            raise ConfigError(f"{var}={spec!r}: expected kill_in:K")
+        return None
+    return int(k)

@@ -43,7 +43,7 @@ from pathlib import Path
 from blurset import _core, layout, outputs, publish
 from blurset.exceptions import ConfigError
 from blurset.noise.params import kpn_path, noise_table, planned
-from blurset.stop import interruptible, remove_tree
+from blurset.stop import fault_index, interruptible, remove_tree
 
 NOISE = outputs.OutputKind.NOISE
 DATASET_FILE = NOISE.record
@@ -95,17 +95,6 @@ def _prepare_out(out: Path, build: Path, plan: _core.NoisePlan, overwrite: bool)
 # before any of its gains is complete, so a test of the resume kills at a known point
 # instead of racing the run.
 FAULT = "BLURSET_NOISE_FAULT"
-
-
-def _fault_unit() -> int | None:
-    spec = os.environ.get(FAULT, "")
-    kind, _, k = spec.partition(":")
-    # (ASCII digits only: str.isdigit() takes "²", which int() refuses.)
-    if kind != "kill_in" or not (k.isascii() and k.isdigit()):
-        if spec:
-            raise ConfigError(f"{FAULT}={spec!r}: expected kill_in:K")
-        return None
-    return int(k)
 
 
 def _write_unit(unit: _core.NoiseUnit, pending: list[int], die: bool = False) -> None:
@@ -209,7 +198,7 @@ def run(build: Path, cfg: _core.NoiseConfig) -> int:
     plan = planned(_core.plan_noise_build, build, out, list(complete), cfg, table)
     outputs.refuse_overlap(out, [build])
     outputs.refuse_inside_settings(out)
-    fault = _fault_unit()  # a bad spec is refused before anything is written
+    fault = fault_index(FAULT)  # a bad spec is refused before anything is written
     outputs.claim(out, NOISE, "--out")  # refused before the lock creates anything
     with outputs.lock(out, NOISE):
         _prepare_out(out, build, plan, cfg.overwrite)
