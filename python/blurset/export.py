@@ -35,6 +35,7 @@ from blurset.export_rules import (
     STAGE,
     TRASH,
     prune_empty_parents,
+    record_replacing,
 )
 from blurset.export_rules import gains as _gains
 from blurset.export_rules import levels as _levels
@@ -479,19 +480,7 @@ def _put_in_place(
                 setting, level = doc["scenes"][scene].split("/")[:2]
                 _write_scene(stage / scene, final, src, doc)
                 _write_passes(stage / scene, final, src, build_root / setting, level, doc)
-        # What this run may put in place is recorded first: an export stopped half-way
-        # still owns every entry it wrote, and its rerun replaces them.
-        outputs.write_record(
-            out / EXPORT_FILE,
-            {
-                "kind": "blurset export",
-                "state": "replacing",
-                "build": doc["build"],
-                "scenes_dir": doc["scenes_dir"],
-                "scenes": {},
-                "owns": sorted(owned | set(new)),
-            },
-        )
+        record_replacing(out, doc, owned | set(new))
         trash.mkdir()
         # Old scenes (and a scene folder of another target) make way, one rename each.
         for k, rel in enumerate(sorted(owned - set(new))):

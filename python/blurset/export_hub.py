@@ -724,19 +724,7 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
         if want == done_doc:
             _say(want, out, hp, "up to date", 0)
             return 0
-    # What this run may put in place is recorded first: an export stopped half-way owns
-    # every shard it wrote, and its rerun keeps the finished ones.
-    outputs.write_record(
-        out / export_rules.EXPORT_FILE,
-        {
-            "kind": "blurset export",
-            "state": "replacing",
-            "build": doc["build"],
-            "scenes_dir": doc["scenes_dir"],
-            "scenes": {},
-            "owns": sorted(owned | set(new)),
-        },
-    )
+    export_rules.record_replacing(out, doc, owned | set(new))  # type: ignore[arg-type]
     for rel in stale:
         p = out / rel
         if p.is_dir() and not p.is_symlink():

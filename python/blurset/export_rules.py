@@ -115,6 +115,22 @@ def refuse_foreign(out: Path, doc: _records.ExportDoc, owned: set[str], new: lis
     outputs.refuse_not_written(out, EXPORT, scenes, "export")
 
 
+def record_replacing(out: Path, doc: _records.ExportDoc, owns: set[str]) -> None:
+    """What a run may put in place, recorded before it writes: an export stopped half-way
+    still owns every entry it wrote, and its rerun replaces (or keeps) them."""
+    outputs.write_record(
+        out / EXPORT_FILE,
+        {
+            "kind": "blurset export",
+            "state": "replacing",
+            "build": doc["build"],
+            "scenes_dir": doc["scenes_dir"],
+            "scenes": {},
+            "owns": sorted(owns),
+        },
+    )
+
+
 def prune_empty_parents(out: Path, rel: str) -> None:
     """The folders above an entry that made way (`data/blur_4`, `nerf_llff_data`), once
     empty, go too; never `out` itself."""
