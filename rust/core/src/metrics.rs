@@ -488,25 +488,7 @@ mod tests {
     fn half_noise_estimates_the_error_of_the_mean() {
         // Two halves = truth ± independent Gaussian noise: MSE(h1, h2)/4 matches the error
         // of their mean against the truth (in expectation; 64k samples here).
-        let n = 65_536;
-        let mut s = crate::rng::Stream::new(7, 0);
-        let mut gauss = || {
-            let (u, v) = (s.uniform().max(1e-12), s.uniform());
-            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-        };
-        let (mut a, mut b, mut mean, mut truth) = (vec![], vec![], vec![], vec![]);
-        for _ in 0..n {
-            let t = 0.4f64;
-            let (x, y) = (t + 0.002 * gauss(), t + 0.002 * gauss());
-            for (img, v) in [
-                (&mut a, x),
-                (&mut b, y),
-                (&mut mean, 0.5 * (x + y)),
-                (&mut truth, t),
-            ] {
-                img.extend([v as f32, v as f32, v as f32, 1.0]);
-            }
-        }
+        let [a, b, mean, truth] = fireflies(7, 65_536, 0.0, 0.0);
         let est = half_noise(&a, &b, [1.0; 3]).unwrap();
         let real = object_error(&mean, &truth, [1.0; 3]).unwrap();
         assert!((est.psnr - real.psnr).abs() < 0.1, "{est:?} {real:?}");
