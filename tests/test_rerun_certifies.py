@@ -263,6 +263,18 @@ def test_a_users_file_at_the_top_of_a_build_is_never_listed_by_a_rerun(b, standi
     assert (b / "notes.txt").read_text() == "mine"  # kept, never deleted
 
 
+def test_a_kept_preview_is_never_rehashed_by_a_rerun(b, standin_blender):
+    # The check of a reused setting skips its preview (drawn from the images): a preview
+    # altered since keeps the manifest's line, so verify still says so after the rerun.
+    standin_build(b, standin_blender, *PASSES, "--previews")  # draws them, and lists them
+    preview = layout.complete_settings(b)[0] / layout.PREVIEW
+    preview.write_bytes(preview.read_bytes() + b"tampered")
+    before = verify_lines(b)
+    standin_build(b, standin_blender, *PASSES, "--previews")
+    assert verify_lines(b) == before
+    assert before[preview.relative_to(b).as_posix()] == [MISMATCH]
+
+
 def test_a_rerun_without_a_manifest_lists_what_it_checked_and_nothing_else(b, standin_blender):
     # As after a run killed before its last step: the rerun checks every complete
     # setting before reusing it, so those are listed; the user's file beside them is not.

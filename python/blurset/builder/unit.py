@@ -40,8 +40,9 @@ class ObjectResult:
     # What this run wrote: the settings it published, the previews it drew (the manifest
     # hashes only what a run wrote or checked).
     written: list[str] = field(default_factory=list)
-    # The complete settings it reused after checking them (`_reusable`): the manifest
-    # lists them too, even where no manifest was written yet (a killed shard's rerun).
+    # The files of the complete settings it reused after checking them (`_reusable`):
+    # the manifest lists them too, even where no manifest was written yet (a killed
+    # shard's rerun).
     checked: list[str] = field(default_factory=list)
     # For the local paths file (publish.local_paths_file, never under OUT): where this
     # object came from.
@@ -120,7 +121,14 @@ class ObjectUnit:
         jobs = [SettingJob(obj, k, t) for k, t in enumerate(cfg.theta0s)]
         pending = [j for j in jobs if not self._reusable(self.out / j.name)]
         result.settings = [j.name for j in jobs if j not in pending]
-        result.checked = list(result.settings)
+        # Vouched for file by file: the check skips the preview (drawn from the images),
+        # so a kept preview keeps its manifest line (or stays unlisted), never rehashed.
+        result.checked = [
+            p.relative_to(self.out).as_posix()
+            for name in result.settings
+            for p in sorted((self.out / name).rglob("*"))
+            if p.is_file() and p.name != layout.PREVIEW
+        ]
         progress.skip(len(jobs) - len(pending))
         if cfg.previews:
             from blurset.preview import write_build_preview
