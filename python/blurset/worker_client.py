@@ -167,6 +167,15 @@ class LoadedObject(TypedDict, total=False):
     blender_version: str | None
 
 
+class RenderOptions(TypedDict):
+    """What every render of one setting shares (`Worker.render`'s keywords)."""
+
+    resolution: int
+    fov_deg: float
+    crop: bool
+    guides: bool
+
+
 class RenderDone(TypedDict, total=False):
     """The worker's final reply to a render request: frames written, render calls."""
 
@@ -428,7 +437,7 @@ class Worker:
                 fov_deg=_core.OBJECT_QA_FOV_DEG,
                 samples=_core.OBJECT_QA_SAMPLES,
             )
-            return [_core.frame_qa(_core.read_exr(out)) for out in outs]
+            return [_core.frame_qa_exr(out) for out in outs]
 
     def render(
         self,

@@ -1,4 +1,5 @@
 //! Bindings of the core's accumulator and EXR reader: numpy/path conversion and one core call each.
+use crate::qa::{FrameQa, QaThresholds};
 use crate::run_detached;
 use blurset_core as core;
 use numpy::{
@@ -64,6 +65,12 @@ fn rgba_to_py(py: Python<'_>, f: core::Frame) -> PyResult<Bound<'_, numpy::PyArr
 #[pyclass(name = "Accumulator", module = "blurset._core")]
 pub struct PyAccumulator {
     inner: core::Accumulator,
+}
+
+impl From<core::Accumulator> for PyAccumulator {
+    fn from(inner: core::Accumulator) -> Self {
+        PyAccumulator { inner }
+    }
 }
 
 #[pymethods]
@@ -180,6 +187,15 @@ impl PyAccumulator {
                 rgba,
             },
         )
+    }
+
+    /// Render QA of the mean, judged under `thresholds` (default: the core's); its
+    /// pixels stay in the core.
+    #[pyo3(signature = (*, thresholds = None))]
+    fn qa(&self, py: Python<'_>, thresholds: Option<QaThresholds>) -> PyResult<FrameQa> {
+        let inner = &self.inner;
+        let r = run_detached(py, move || inner.qa())?;
+        Ok(FrameQa::judged(r, thresholds))
     }
 
     /// Write the mean as an 8-bit sRGB PNG composited over `background` (linear RGB),

@@ -18,6 +18,7 @@ mod publish;
 mod qa;
 mod sampling;
 mod stats;
+mod target;
 mod tradeoff;
 
 /// Run long core work without the GIL, so Python threads (progress bars, Ray) go on.
@@ -48,5 +49,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     qa::register(m)?;
     tradeoff::register(m)?;
     stats::register(m)?;
+    target::register(m)?;
     Ok(())
 }

@@ -60,6 +60,14 @@ impl QaThresholds {
 #[derive(Clone)]
 pub struct FrameQa(pub core::FrameQa, pub Option<String>);
 
+impl FrameQa {
+    /// The numbers with their verdict under `thresholds` (default: the core's).
+    pub(crate) fn judged(r: core::FrameQa, thresholds: Option<QaThresholds>) -> Self {
+        let t: core::QaThresholds = thresholds.map(Into::into).unwrap_or_default();
+        FrameQa(r, t.verdict(&r))
+    }
+}
+
 #[pymethods]
 impl FrameQa {
     /// Mean alpha: the fraction of the image the object covers.
@@ -107,10 +115,21 @@ fn frame_qa(
     thresholds: Option<QaThresholds>,
 ) -> PyResult<FrameQa> {
     let shape = rgba_.shape();
-    let t: core::QaThresholds = thresholds.map(Into::into).unwrap_or_default();
     let r = core::frame_qa(shape[1] as u32, shape[0] as u32, rgba(&rgba_)?)
         .map_err(crate::error::to_pyerr)?;
-    Ok(FrameQa(r, t.verdict(&r)))
+    Ok(FrameQa::judged(r, thresholds))
+}
+
+/// QA of an EXR (premultiplied linear RGBA), read and judged in the core.
+#[pyfunction]
+#[pyo3(signature = (path, *, thresholds = None))]
+fn frame_qa_exr(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+    thresholds: Option<QaThresholds>,
+) -> PyResult<FrameQa> {
+    let r = crate::run_detached(py, move || core::exr_qa(&path))?;
+    Ok(FrameQa::judged(r, thresholds))
 }
 
 /// The default QA thresholds (one place for the numbers).
@@ -141,6 +160,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<QaThresholds>()?;
     m.add_class::<FrameQa>()?;
     m.add_function(wrap_pyfunction!(frame_qa, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_qa_exr, m)?)?;
     m.add_function(wrap_pyfunction!(default_qa_thresholds, m)?)?;
     m.add_function(wrap_pyfunction!(object_qa_cameras, m)?)?;
     m.add_function(wrap_pyfunction!(object_qa_verdict, m)?)?;

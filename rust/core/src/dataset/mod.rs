@@ -14,4 +14,5 @@ pub mod records;
 pub mod schema;
 pub mod splits;
 pub mod stats;
+pub mod target_loop;
 pub mod verify;

@@ -13,6 +13,7 @@ use super::exr::read::{decode_rgba, first_non_finite, read_into};
 use super::exr::write::write_exr;
 use super::geometry::{add_mask_file, exposure_mask, mask_from_coverage, write_gray8_png};
 use super::io::write_png_rgb8;
+use super::qa::{frame_qa, FrameQa};
 use super::resample::area_mean;
 use super::{check_rgba_len, CH};
 use crate::error::{Error, Result};
@@ -498,6 +499,11 @@ impl Accumulator {
         self.require_frames()?;
         let inv = 1.0 / self.weight;
         Ok(self.sum.par_iter().map(|&s| (s * inv) as f32).collect())
+    }
+
+    /// Render QA of the mean ([`frame_qa`]): the pixels it judges never leave the core.
+    pub fn qa(&self) -> Result<FrameQa> {
+        frame_qa(self.width, self.height, &self.mean()?)
     }
 
     /// The mean composited over `background` (linear RGB), sRGB-encoded, as RGB8.

@@ -6,6 +6,7 @@
 //! A contact sheet's thumbnails (8-bit RGB over the background) get the same kind of
 //! numbers from their codes ([`thumbnail_qa`]).
 use super::color::{luma, srgb_encode_u8};
+use super::exr::read::read_exr;
 use super::CH;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -69,6 +70,12 @@ impl QaThresholds {
         }
         None
     }
+}
+
+/// [`frame_qa`] of an EXR (a load-time QA view): read and judged in the core.
+pub fn exr_qa(path: &std::path::Path) -> Result<FrameQa> {
+    let f = read_exr(path)?;
+    frame_qa(f.width, f.height, &f.rgba)
 }
 
 /// QA numbers of a premultiplied linear RGBA image (row-major, 4 f32 per pixel).

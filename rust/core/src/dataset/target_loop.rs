@@ -1,0 +1,299 @@
+//! The target loop of a `--target-psnr` build (DESIGN §8): the images of one render phase,
+//! each held as its two halves, rendered in rounds until [`TargetRule::next_round`] says
+//! it is done. The rules are `plan/target.rs`'s and the estimate `metrics`'s; this is
+//! where they meet the pixels, so no image leaves the core between rounds: the builder
+//! asks for the next renders, hands back the EXRs the worker wrote, and takes each
+//! finished image (its halves merged) with its record.
+//!
+//! A few images are in flight at once ([`GROUP`]) so memory stays bounded at any
+//! resolution; the next group starts when every image of the last one is done, so the
+//! rounds, their render calls and their EXR names follow from rendered pixels alone.
+use super::meta::ImageRender;
+use crate::error::{Error, Result};
+use crate::image::accumulate::Accumulator;
+use crate::metrics::{half_noise_bound, HalfNoise};
+use crate::plan::renders::Render;
+use crate::plan::target::{round_renders, ImageRound, ImageState, TargetRule};
+use std::collections::VecDeque;
+use std::path::Path;
+
+/// Images whose halves are in flight at once (two accumulators each): 8 MB a half at
+/// 512 px.
+pub const GROUP: usize = 8;
+
+/// One image of a target-driven build: (view, level).
+pub type ImageKey = (usize, String);
+
+/// One image in flight: both halves, where its rounds stand, and its last estimate.
+struct Image {
+    key: ImageKey,
+    frames: u32,
+    halves: [Accumulator; 2],
+    spent: u32,
+    rounds: u32,
+    /// [`half_noise_bound`] of the last round: the estimate and the bound the rounds
+    /// stop on (a few fireflies on a specular surface make one round's estimate scatter).
+    estimate: Option<HalfNoise>,
+    /// (samples per frame and half, MSE bound) of the round before the last.
+    previous: Option<(u32, f64)>,
+    /// The bound after the pilot round: what the rest was extrapolated from.
+    pilot_db: f64,
+    /// EXRs each half received in the round in flight (each frame once per half).
+    got: [u32; 2],
+}
+
+impl Image {
+    fn state(&self) -> ImageState {
+        ImageState {
+            frames: self.frames,
+            spent_per_frame: self.spent,
+            rounds: self.rounds,
+            mse: self.estimate.map(|e| e.mse_bound),
+            previous: self.previous,
+        }
+    }
+
+    /// A round of `add` samples per frame and half is in both halves: estimate anew.
+    fn rendered(&mut self, add: u32, background: [f64; 3]) -> Result<()> {
+        if self.got != [self.frames; 2] {
+            return Err(Error::Value(format!(
+                "view {} {}: a round needs {} EXRs per half, the worker delivered {:?}",
+                self.key.0, self.key.1, self.frames, self.got
+            )));
+        }
+        self.got = [0; 2];
+        if let Some(e) = self.estimate {
+            self.previous = Some((self.spent, e.mse_bound));
+        }
+        self.spent += add;
+        self.rounds += 1;
+        let [a, b] = &self.halves;
+        let e = half_noise_bound(&a.mean()?, &b.mean()?, background)?;
+        if self.rounds == 1 {
+            self.pilot_db = e.psnr_bound;
+        }
+        self.estimate = Some(e);
+        Ok(())
+    }
+
+    fn record(&self, rule: &TargetRule) -> Result<ImageRender> {
+        let h = self.estimate.ok_or_else(|| {
+            Error::Value(format!("view {} {}: no round rendered", self.key.0, self.key.1))
+        })?;
+        Ok(ImageRender {
+            samples: 2 * u64::from(self.frames) * u64::from(self.spent),
+            rounds: self.rounds,
+            render_psnr_db: round_to(h.estimate.psnr, 3),
+            render_psnr_bound_db: Some(round_to(h.psnr_bound, 3)),
+            pilot_psnr_db: round_to(self.pilot_db, 3),
+            coverage: round_to(h.estimate.coverage, 6),
+            reached: rule.reached(h.mse_bound),
+        })
+    }
+}
+
+/// `x` rounded to `digits` decimals, correctly (the nearest decimal, ties to even): the
+/// figures meta.json records.
+fn round_to(x: f64, digits: usize) -> f64 {
+    format!("{x:.digits$}").parse().unwrap_or(x)
+}
+
+/// A finished image: the mean of both halves (every frame weighted by its samples) and
+/// its record in meta.json.
+pub struct Finished {
+    pub key: ImageKey,
+    pub image: Accumulator,
+    pub record: ImageRender,
+}
+
+/// The images of one render phase rendered to the target (see the module).
+pub struct TargetImages {
+    rule: TargetRule,
+    background: [f64; 3],
+    size: (u32, u32),
+    /// The Cycles sequence every block is taken of.
+    sequence: u32,
+    /// The plan's renders of these images (cameras, motion, regions, seeds).
+    base: Vec<Render>,
+    waiting: VecDeque<ImageKey>,
+    group: Vec<Image>,
+    /// The renders asked for last: (image in `group`, half), in their order.
+    asked: Vec<(usize, usize)>,
+    /// Samples per frame and half of the round in flight, per image in `group`.
+    adds: Vec<Option<u32>>,
+    finished: Vec<Finished>,
+    records: Vec<(ImageKey, ImageRender)>,
+}
+
+impl TargetImages {
+    /// The images `keys` of the plan's renders `base` (`renders_except` at the rule's
+    /// sequence), rendered to `rule` at `size`, noise judged over `background`.
+    pub fn new(
+        rule: TargetRule,
+        base: Vec<Render>,
+        keys: &[ImageKey],
+        size: (u32, u32),
+        background: [f64; 3],
+        sequence: u32,
+    ) -> Result<Self> {
+        let mut waiting = VecDeque::new();
+        for k in keys {
+            if !base.iter().any(|r| r.view == k.0 && r.level == k.1) {
+                return Err(Error::Value(format!(
+                    "the plan has no render of view {} at {}",
+                    k.0, k.1
+                )));
+            }
+            if !waiting.contains(k) {
+                waiting.push_back(k.clone());
+            }
+        }
+        Ok(TargetImages {
+            rule,
+            background,
+            size,
+            sequence,
+            base,
+            waiting,
+            group: Vec::new(),
+            asked: Vec::new(),
+            adds: Vec::new(),
+            finished: Vec::new(),
+            records: Vec::new(),
+        })
+    }
+
+    /// The renders of the next round of every image in flight that needs one, after the
+    /// round the worker just delivered is estimated; an image that is done leaves (for
+    /// [`Self::take_finished`]). The next group starts when one is all done. Empty: every
+    /// image is done.
+    pub fn next_renders(&mut self) -> Result<Vec<Render>> {
+        for (im, add) in self.group.iter_mut().zip(&self.adds) {
+            if let Some(add) = add {
+                im.rendered(*add, self.background)?;
+            }
+        }
+        self.adds.clear();
+        self.asked.clear();
+        loop {
+            let rounds = self.rounds()?;
+            if !rounds.is_empty() {
+                return Ok(self.ask(&rounds));
+            }
+            if self.waiting.is_empty() {
+                return Ok(Vec::new());
+            }
+            let n = GROUP.min(self.waiting.len());
+            let keys: Vec<ImageKey> = self.waiting.drain(..n).collect();
+            for key in keys {
+                let frames = self.base.iter().filter(|r| r.view == key.0 && r.level == key.1);
+                let (w, h) = self.size;
+                self.group.push(Image {
+                    frames: frames.count() as u32,
+                    key,
+                    halves: [Accumulator::new(w, h), Accumulator::new(w, h)],
+                    spent: 0,
+                    rounds: 0,
+                    estimate: None,
+                    previous: None,
+                    pilot_db: 0.0,
+                    got: [0; 2],
+                });
+            }
+        }
+    }
+
+    /// The next round of every image of the group that needs one; an image that is done
+    /// leaves the group, its halves merged.
+    fn rounds(&mut self) -> Result<Vec<ImageRound>> {
+        let mut rounds = Vec::new();
+        let mut kept = Vec::new();
+        for mut im in std::mem::take(&mut self.group) {
+            match self.rule.next_round(&im.state()) {
+                None => {
+                    let record = im.record(&self.rule)?;
+                    let [mut a, b] = im.halves;
+                    a.merge(&b)?;
+                    self.records.push((im.key.clone(), record));
+                    self.finished.push(Finished {
+                        key: im.key,
+                        image: a,
+                        record,
+                    });
+                }
+                Some(add) => {
+                    rounds.push(ImageRound {
+                        view: im.key.0,
+                        level: im.key.1.clone(),
+                        spent_per_frame: im.spent,
+                        add_per_frame: add,
+                        round: im.rounds + 1,
+                    });
+                    im.got = [0; 2];
+                    kept.push(im);
+                }
+            }
+        }
+        self.group = kept;
+        Ok(rounds)
+    }
+
+    /// The renders of `rounds` (one per image of the group, in its order), remembered so
+    /// each EXR the worker delivers finds its image and half.
+    fn ask(&mut self, rounds: &[ImageRound]) -> Vec<Render> {
+        let renders = round_renders(&self.base, rounds, self.sequence);
+        self.adds = rounds.iter().map(|r| Some(r.add_per_frame)).collect();
+        self.asked = renders
+            .iter()
+            .map(|r| {
+                let i = rounds
+                    .iter()
+                    .position(|x| x.view == r.view && x.level == r.level)
+                    .unwrap_or_default();
+                (i, r.half.unwrap_or_default() as usize)
+            })
+            .collect();
+        renders
+    }
+
+    /// The EXR of render `i` of the last [`Self::next_renders`] (`origin`: where a
+    /// cropped render lies) into its image's half, weighted by the samples each frame
+    /// rendered this round; the file is deleted once read.
+    pub fn add_exr(&mut self, i: usize, path: &Path, origin: Option<(u32, u32)>) -> Result<()> {
+        let &(im, half) = self.asked.get(i).ok_or_else(|| {
+            Error::Value(format!(
+                "render {i} was not asked for (the last round has {})",
+                self.asked.len()
+            ))
+        })?;
+        let add = self.adds[im].unwrap_or_default();
+        let image = &mut self.group[im];
+        image.halves[half].add_exr_weighted(path, origin, f64::from(add))?;
+        image.got[half] += 1;
+        std::fs::remove_file(path).map_err(|e| Error::io("cannot remove", path, e))
+    }
+
+    /// The images done since the last call, in the order they finished.
+    pub fn take_finished(&mut self) -> Vec<Finished> {
+        std::mem::take(&mut self.finished)
+    }
+
+    /// The record of every image done so far, in the order they finished.
+    pub fn records(&self) -> &[(ImageKey, ImageRender)] {
+        &self.records
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rounding_is_to_the_nearest_decimal_ties_to_even() {
+        assert_eq!(round_to(0.007_812_5, 6), 0.007_812);
+        assert_eq!(round_to(3.5, 0), 4.0);
+        assert_eq!(round_to(35.123_456, 3), 35.123);
+        assert_eq!(round_to(2.5, 0), 2.0);
+    }
+}
