@@ -78,7 +78,10 @@ impl Image {
 
     fn record(&self, rule: &TargetRule) -> Result<ImageRender> {
         let h = self.estimate.ok_or_else(|| {
-            Error::Value(format!("view {} {}: no round rendered", self.key.0, self.key.1))
+            Error::Value(format!(
+                "view {} {}: no round rendered",
+                self.key.0, self.key.1
+            ))
         })?;
         Ok(ImageRender {
             samples: 2 * u64::from(self.frames) * u64::from(self.spent),
@@ -186,7 +189,10 @@ impl TargetImages {
             let n = GROUP.min(self.waiting.len());
             let keys: Vec<ImageKey> = self.waiting.drain(..n).collect();
             for key in keys {
-                let frames = self.base.iter().filter(|r| r.view == key.0 && r.level == key.1);
+                let frames = self
+                    .base
+                    .iter()
+                    .filter(|r| r.view == key.0 && r.level == key.1);
                 let (w, h) = self.size;
                 self.group.push(Image {
                     frames: frames.count() as u32,
