@@ -1102,11 +1102,14 @@ class Plan:
         pin: int | None = None,
         *,
         sharp_views: list[int] = ...,
+        sharp_samples: int | None = None,
     ) -> list[rec.Render]:
         """Every render of the setting in stream order (per view: sharp, then each level),
-        as the worker takes them: {view, level, c2w, seed, samples?, sample_offset?,
-        sample_sequence?, out, motion?}; `pin`: BuildConfig.cycles_samples; the blur
-        renders of `sharp_views` are left out (their levels get the sharp image)."""
+        as the worker takes them: {view, level, kind, phase, c2w, seed, samples?,
+        sample_offset?, sample_sequence?, out, motion?}; `pin`: BuildConfig.cycles_samples.
+        The blur renders of `sharp_views` are left out (their levels get the sharp image).
+        With `sharp_samples` (BuildConfig.effective_sharp_samples) every render carries its
+        samples."""
     def round_renders(
         self,
         exr_dir: str | PathLike[str],

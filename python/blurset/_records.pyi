@@ -39,6 +39,23 @@ class Dof(TypedDict):
     aperture_radius: float
     focus_distance: float
 
+class ImageKindOf0(TypedDict):
+    type: Literal["sharp"]
+
+class ImageKindOf1(TypedDict):
+    """Motion blur of the camera's trajectory during the exposure (`blur_<l>`)."""
+
+    level: int
+    type: Literal["blur"]
+
+class ImageKindOf2(TypedDict):
+    """Depth of field of a thin lens (`defocus_<l>`, issue 35)."""
+
+    level: int
+    type: Literal["defocus"]
+
+ImageKind = ImageKindOf0 | ImageKindOf1 | ImageKindOf2
+
 class Motion(TypedDict):
     """The camera path of one Cycles motion blur render."""
 
@@ -46,15 +63,17 @@ class Motion(TypedDict):
     steps: int
 
 class Render(TypedDict):
-    """One render: the camera, its Cycles seed and samples, the EXR it writes, and the view and level directory it is accumulated into."""
+    """One render: the camera, its Cycles seed and samples, the EXR it writes, and the view and image it is accumulated into."""
 
     c2w: list[list[float]]
     call: NotRequired[int | None]
     dof: NotRequired[Dof | None]
     half: NotRequired[int | None]
+    kind: ImageKind
     level: str
     motion: NotRequired[Motion | None]
     out: str
+    phase: int
     region: NotRequired[list[int] | None]
     sample_offset: NotRequired[int | None]
     sample_sequence: NotRequired[int | None]

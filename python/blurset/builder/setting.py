@@ -179,7 +179,12 @@ def _plan(
     # Under sample subsets every render of the build takes a block of one Cycles sequence
     # length, so no pixel depends on what the worker rendered before (a resume equals an
     # uninterrupted build).
-    frames = plan.renders(exr_dir, cfg.cycles_samples, sharp_views=cfg.sharp_views(plan.n_views))
+    frames = plan.renders(
+        exr_dir,
+        cfg.cycles_samples,
+        sharp_views=cfg.sharp_views(plan.n_views),
+        sharp_samples=cfg.effective_sharp_samples,
+    )
     for d in cfg.level_dirs:
         for sub in [layout.IMAGES, *(layout.images_dir(f) for f in cfg.downsample)]:
             (partial / d / sub).mkdir(parents=True)
@@ -307,36 +312,22 @@ class _Images:
 def _render_fixed(
     cfg: BuildConfig, worker: Any, frames: list[Any], images: _Images, common: dict[str, Any]
 ) -> tuple[float, float]:
-    """The plan's frames at their sample counts: the sharp renders first (their own,
-    larger count), QA, then the blur renders. The seconds of each phase."""
-    sharp_idx = [i for i, k in enumerate(images.keys) if k[1] == layout.SHARP]
-    # Defocus images render once each at the sharp image's count (issue 35).
-    defocus_idx = [i for i, k in enumerate(images.keys) if layout.is_defocus_dir(k[1])]
-    rest = set(sharp_idx) | set(defocus_idx)
-    blur_idx = [i for i in range(len(images.keys)) if i not in rest]
+    """The plan's frames at their sample counts, phase by phase as the plan orders them:
+    the first phase (the sharp images) then its QA, then the others. The seconds of the
+    first phase and of the rest."""
     t1 = time.time()
-    worker.render(
-        [frames[i] for i in sharp_idx],
-        samples=cfg.effective_sharp_samples,
-        on_frame=lambda j, p, o: images.on_frame(sharp_idx[j], p, o),
-        **common,
-    )
-    _raise_on_qa(images.qa)
-    t_sharp = time.time() - t1
-    if blur_idx:
+    t_first = 0.0
+    for n, phase in enumerate(sorted({f["phase"] for f in frames})):
+        idx = [i for i, f in enumerate(frames) if f["phase"] == phase]
         worker.render(
-            [frames[i] for i in blur_idx],
-            on_frame=lambda j, p, o: images.on_frame(blur_idx[j], p, o),
+            [frames[i] for i in idx],
+            on_frame=lambda j, p, o, idx=idx: images.on_frame(idx[j], p, o),
             **common,
         )
-    if defocus_idx:
-        worker.render(
-            [frames[i] for i in defocus_idx],
-            samples=cfg.effective_sharp_samples,
-            on_frame=lambda j, p, o: images.on_frame(defocus_idx[j], p, o),
-            **common,
-        )
-    return t_sharp, time.time() - t1 - t_sharp
+        if n == 0:
+            _raise_on_qa(images.qa)
+            t_first = time.time() - t1
+    return t_first, time.time() - t1 - t_first
 
 
 def _write_records(

@@ -26,7 +26,7 @@ pub use crate::plan::cost::{BlurChoice, CostModel, Pricing};
 pub use crate::plan::defocus::{circle_of_confusion, DefocusPlan};
 pub use crate::plan::options::OptionInfo;
 pub use crate::plan::presets::{preset_values, FLOOR_PSNR_DB};
-pub use crate::plan::renders::{level_renders, Motion, Render};
+pub use crate::plan::renders::{level_renders, with_samples, Motion, Render};
 pub use crate::plan::sampling::{
     plan_setting, plan_setting_priced, LevelPlan, SamplingConfig, SettingPlan,
 };
@@ -98,6 +98,7 @@ pub use crate::ground::atomic::{replace_dir, write_atomic};
 pub use crate::ground::license::{
     allowed as license_allowed, canonical as canonical_license, spdx_ids, spdx_of,
 };
+pub use crate::ground::kind::ImageKind;
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
     defocus_dir, files, gain_name, image_name, images_dir, is_level_dir, level_dir, level_dirs,

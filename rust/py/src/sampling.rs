@@ -55,18 +55,25 @@ impl Plan {
     }
 
     /// Every render of the setting in stream order (per view: sharp, then each level),
-    /// as the worker takes them: {view, level, c2w, seed, samples?, sample_offset?,
-    /// sample_sequence?, out, motion?}; `pin`: BuildConfig.cycles_samples. The blur
-    /// renders of `sharp_views` are left out (their levels get the sharp image).
-    #[pyo3(signature = (exr_dir, pin = None, *, sharp_views = Vec::new()))]
+    /// as the worker takes them: {view, level, kind, phase, c2w, seed, samples?,
+    /// sample_offset?, sample_sequence?, out, motion?}; `pin`: BuildConfig.cycles_samples.
+    /// The blur renders of `sharp_views` are left out (their levels get the sharp image).
+    /// With `sharp_samples` (BuildConfig.effective_sharp_samples) every render carries its
+    /// samples.
+    #[pyo3(signature = (exr_dir, pin = None, *, sharp_views = Vec::new(), sharp_samples = None))]
     fn renders<'py>(
         &self,
         py: Python<'py>,
         exr_dir: PathBuf,
         pin: Option<u32>,
         sharp_views: Vec<usize>,
+        sharp_samples: Option<u32>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        to_py(py, &self.0.renders_except(&exr_dir, &sharp_views, pin))
+        let renders = self.0.renders_except(&exr_dir, &sharp_views, pin);
+        match sharp_samples {
+            Some(s) => to_py(py, &core::with_samples(renders, s)),
+            None => to_py(py, &renders),
+        }
     }
 
     /// The renders of `rounds` of a target-driven build (core `round_renders`): each

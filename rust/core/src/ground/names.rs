@@ -3,10 +3,7 @@
 //! writes or plans (`plan`, `image`, `noise`, `dataset`). What is on disk and what
 //! "complete" means stays in `dataset::layout`.
 
-/// The level directory of the sharp image (level 0).
-pub const SHARP: &str = "sharp";
-/// Largest blur level a build can write.
-pub const MAX_LEVEL: u32 = 64;
+pub use super::kind::{ImageKind, MAX_LEVEL, SHARP};
 
 /// The files and folders of the layout, named here only: every reader and writer (the
 /// core's and Python's, through `blurset.layout`) spells them with these.
@@ -160,9 +157,9 @@ pub fn image_name(index: usize, n: usize) -> String {
 /// Directory of a blur level (`blur_<l>`); level 0 is the sharp image.
 pub fn level_dir(level: u32) -> String {
     if level == 0 {
-        SHARP.to_string()
+        ImageKind::Sharp.dir()
     } else {
-        format!("blur_{level}")
+        ImageKind::Blur(level).dir()
     }
 }
 
@@ -177,59 +174,41 @@ pub fn level_dirs(levels: &[u32]) -> Vec<String> {
 /// The level of a level directory name: `sharp` → 0, `blur_<l>` → l for l in
 /// 1..=MAX_LEVEL written without leading zeros; anything else → None.
 pub fn parse_level_dir(name: &str) -> Option<u32> {
-    if name == SHARP {
-        return Some(0);
+    match ImageKind::parse(name)? {
+        ImageKind::Sharp => Some(0),
+        ImageKind::Blur(l) => Some(l),
+        _ => None,
     }
-    let num = name.strip_prefix("blur_")?;
-    if num.is_empty() || num.starts_with('0') || !num.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    num.parse::<u32>()
-        .ok()
-        .filter(|l| (1..=MAX_LEVEL).contains(l))
 }
-
-/// What a defocus level's directory starts with (`defocus_<l>`, issue 35).
-pub const DEFOCUS_PREFIX: &str = "defocus_";
 
 /// Directory of defocus level `level` (1..=MAX_LEVEL): `defocus_<l>`.
 pub fn defocus_dir(level: u32) -> String {
-    format!("{DEFOCUS_PREFIX}{level}")
+    ImageKind::Defocus(level).dir()
 }
 
 /// The level of a defocus level's directory (`defocus_<l>`, l in 1..=MAX_LEVEL without
 /// leading zeros); anything else → None.
 pub fn parse_defocus_dir(name: &str) -> Option<u32> {
-    let num = name.strip_prefix(DEFOCUS_PREFIX)?;
-    if num.is_empty() || num.starts_with('0') || !num.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
+    match ImageKind::parse(name)? {
+        ImageKind::Defocus(l) => Some(l),
+        _ => None,
     }
-    num.parse::<u32>()
-        .ok()
-        .filter(|l| (1..=MAX_LEVEL).contains(l))
 }
 
-/// Whether `name` is a level directory a build writes: `sharp`, `blur_<l>`, `defocus_<l>`.
+/// Whether `name` is a level directory a build writes: `sharp` or a level of any kind.
 pub fn is_level_dir(name: &str) -> bool {
-    parse_level_dir(name).is_some() || parse_defocus_dir(name).is_some()
-}
-
-/// A level directory's place in level order: sharp, the blur levels by number, then the
-/// defocus levels by number.
-fn level_order(name: &str) -> Option<(u32, u32)> {
-    match parse_level_dir(name) {
-        Some(0) => Some((0, 0)),
-        Some(l) => Some((1, l)),
-        None => parse_defocus_dir(name).map(|l| (2, l)),
-    }
+    ImageKind::parse(name).is_some()
 }
 
 /// Level directories sorted in level order (sharp first, then the blur levels by number,
 /// then the defocus levels); names that are not level directories are dropped.
 pub fn sort_level_dirs<S: AsRef<str>>(names: &[S]) -> Vec<String> {
-    let mut v: Vec<((u32, u32), String)> = names
+    let mut v: Vec<((usize, u32), String)> = names
         .iter()
-        .filter_map(|n| level_order(n.as_ref()).map(|l| (l, n.as_ref().to_string())))
+        .filter_map(|n| {
+            let kind = ImageKind::parse(n.as_ref())?;
+            Some((kind.order(), n.as_ref().to_string()))
+        })
         .collect();
     v.sort();
     v.into_iter().map(|(_, n)| n).collect()

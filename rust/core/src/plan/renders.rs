@@ -2,7 +2,7 @@
 //! the driver streams the frames into accumulators (per view: sharp, then each level).
 use super::region::{call_cost_px, object_region, render_calls, Region};
 use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
-use crate::ground::names::{defocus_dir, level_dir, SHARP};
+use crate::ground::kind::ImageKind;
 use glam::{DMat4, DVec3};
 use serde::Serialize;
 use std::path::Path;
@@ -25,11 +25,16 @@ pub struct Dof {
 }
 
 /// One render: the camera, its Cycles seed and samples, the EXR it writes, and the
-/// view and level directory it is accumulated into.
+/// view and image it is accumulated into.
 #[derive(Clone, Debug, Serialize, PartialEq, schemars::JsonSchema)]
 pub struct Render {
     pub view: usize,
+    /// The image's level directory: its `kind`'s ([`ImageKind::dir`]).
     pub level: String,
+    pub kind: ImageKind,
+    /// The render phase the builder renders it in, phases in ascending order (the
+    /// sharp images first, whose QA gates the rest): its kind's ([`ImageKind::phase`]).
+    pub phase: u32,
     /// OpenGL camera-to-world, row-major.
     pub c2w: [[f64; 4]; 4],
     pub seed: u32,
@@ -65,10 +70,12 @@ pub struct Render {
 impl Render {
     /// A pinhole render of one still image at `c2w` with the caller's samples: whole
     /// image, a call of its own, no halves, no lens, until the plan says otherwise.
-    fn still(view: usize, level: String, c2w: [[f64; 4]; 4], seed: u32, out: String) -> Render {
+    fn still(view: usize, kind: ImageKind, c2w: [[f64; 4]; 4], seed: u32, out: String) -> Render {
         Render {
             view,
-            level,
+            level: kind.dir(),
+            kind,
+            phase: kind.phase(),
             c2w,
             seed,
             samples: None,
@@ -102,7 +109,7 @@ pub fn level_renders(
     prefix: &str,
     pin: Option<u32>,
 ) -> Vec<Render> {
-    let dir = level_dir(level);
+    let kind = ImageKind::Blur(level);
     let subsets = lp.latent_sampling == LatentSampling::Subsets;
     let block = |offset: u32| {
         if subsets {
@@ -114,7 +121,7 @@ pub fn level_renders(
     if let Some(mb) = &lp.motion_blur {
         let keys: Vec<_> = mb.keys.iter().map(|k| k.c2w).collect();
         let (sample_offset, sample_sequence) = block(0);
-        let first = Render::still(view, dir, keys[0], mb.seed, format!("{prefix}_mb.exr"));
+        let first = Render::still(view, kind, keys[0], mb.seed, format!("{prefix}_mb.exr"));
         return vec![Render {
             samples: Some(lp.samples_per_frame),
             sample_offset,
@@ -138,10 +145,19 @@ pub fn level_renders(
                 samples: Some(lp.samples_per_frame),
                 sample_offset,
                 sample_sequence,
-                ..Render::still(view, dir.clone(), f.c2w, f.seed, out)
+                ..Render::still(view, kind, f.c2w, f.seed, out)
             }
         })
         .collect()
+}
+
+/// `renders` each carrying its samples: those that carry none (the sharp image's, and a
+/// defocus image's, one render at the sharp image's count) take `sharp_samples`.
+pub fn with_samples(mut renders: Vec<Render>, sharp_samples: u32) -> Vec<Render> {
+    for r in &mut renders {
+        r.samples = r.samples.or(Some(sharp_samples));
+    }
+    renders
 }
 
 impl SettingPlan {
@@ -168,7 +184,7 @@ impl SettingPlan {
             out.push(Render {
                 sample_offset: pin.map(|_| 0),
                 sample_sequence: pin,
-                ..Render::still(i, SHARP.into(), v.c2w, v.sharp_seed, out_sharp)
+                ..Render::still(i, ImageKind::Sharp, v.c2w, v.sharp_seed, out_sharp)
             });
             if sharp_views.contains(&i) {
                 continue;
@@ -192,7 +208,7 @@ impl SettingPlan {
                     }),
                     ..Render::still(
                         i,
-                        defocus_dir(level),
+                        ImageKind::Defocus(level),
                         v.c2w,
                         d.seed,
                         exr.display().to_string(),

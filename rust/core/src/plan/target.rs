@@ -359,9 +359,12 @@ mod tests {
     }
 
     fn frame(view: usize, level: &str, k: usize, call: Option<usize>) -> Render {
+        let kind = crate::ground::kind::ImageKind::parse(level).expect("level");
         Render {
             view,
             level: level.into(),
+            kind,
+            phase: kind.phase(),
             c2w: [[k as f64; 4]; 4],
             seed: 5,
             samples: Some(3),
