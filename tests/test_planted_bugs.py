@@ -11,7 +11,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from blurset import check_poses, export, llff, outputs, preflight
+from blurset import check_poses, llff, outputs, preflight
+from blurset.export_rules import SceneFolders, SceneSource
+from blurset.exports import geonerf
 from blurset.plan import BuildConfig
 
 from tests.conftest import ROOT
@@ -41,14 +43,15 @@ def test_geonerf_test_scene_sources_are_its_7_nearest_train_views(tmp_path):
     nearest first (not the 2nd to 8th, not a held-out view)."""
     level = _ring_scene(tmp_path, 34)
     held = [0, 16, 32]
-    scenes = export._geonerf_scenes("a_000_blur_3", level, held, True, True)
+    assert isinstance(geonerf.TARGET.output, SceneFolders)
+    scenes = geonerf.TARGET.output.split(SceneSource("a_000_blur_3", level, held, True, True))
     rows = np.asarray(llff.read_poses_bounds(level / "poses_bounds.npy"))
     centres = rows[:, [3, 8, 13]]
     train = [v for v in range(34) if v not in held]
     assert [name for name, _ in scenes] == [f"test/a_000_blur_3__v{v:03d}" for v in held]
     for (_, views), v in zip(scenes, held, strict=True):
         d = {t: float(np.linalg.norm(centres[t] - centres[v])) for t in train}
-        want = sorted(train, key=lambda t: d[t])[: export.GEONERF_IMAGES - 1]
+        want = sorted(train, key=lambda t: d[t])[: geonerf.IMAGES - 1]
         assert views[0] == v
         assert views[1:] == want
         assert views[1] == min(train, key=lambda t: d[t])  # the nearest is a source

@@ -737,6 +737,8 @@ class NoiseSceneRecord(TypedDict):
     scene: str
     seed: int
 
+ExportTarget = Literal["llff", "nerfstudio", "geonerf", "hub"]
+
 class HubShard(TypedDict):
     """One Parquet shard of `export --for hub`: the rows of whole settings of one config."""
 
@@ -754,7 +756,7 @@ ExportDoc = TypedDict(
         "build": str,
         "copy": bool,
         "factors": list[int],
-        "for": str,
+        "for": ExportTarget,
         "gains": list[str],
         "kind": str,
         "levels": list[str],

@@ -1,12 +1,17 @@
-"""What every `blurset export` target shares (`--for llff`, `nerfstudio`, `geonerf` in
-blurset.export, `hub` in blurset.export_hub): the output kind and its record, the temp
-names, the options read against the build (--levels, --gains), and the rules of what an
-export may write over (DESIGN §10): never an input, never an entry an earlier export
-here did not write, never an export of another build or --noise by itself.
+"""What every `blurset export` target shares: the interface a target declares itself
+with (`Target`: one module of blurset.exports each), the output kind and its record, the
+temp names, the options read against the build (--levels, --gains), and the rules of
+what an export may write over (DESIGN §10): never an input, never an entry an earlier
+export here did not write, never an export of another build or --noise by itself.
 """
 
 from __future__ import annotations
 
+import argparse
+import os
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -22,6 +27,99 @@ EXPORT_FILE = EXPORT.record
 STAGE, TRASH = "export", "export.old"
 # The files an export writes at the top of --out besides its scenes.
 LISTS = ("train.txt", "test.txt", EXPORT_FILE)
+
+
+@dataclass(frozen=True)
+class SceneSource:
+    """One (setting, level[, gain]) folder to export, as a target's `split` sees it."""
+
+    scene: str  # `<setting>__<level>[__gain_<g>]`
+    src: Path  # the level (or gain) folder
+    held_out: list[int]  # the setting's held-out views
+    clean_held: bool  # whether those views hold clean copies in this degraded level
+    is_test: bool  # whether the setting is a test setting
+
+
+def one_scene(s: SceneSource) -> list[tuple[str, list[int] | None]]:
+    """The test-scene rule of a loader that holds views out itself (llffhold, the split
+    in transforms.json): the folder is one scene, with every view."""
+    return [(s.scene, None)]
+
+
+@dataclass(frozen=True)
+class StagedScene:
+    """A scene being written: staged at `path`, moved to `final` once every scene is,
+    made from the folder `src` of the build `build` (or of its noise output); `name` is
+    its key in the record's `scenes`."""
+
+    path: Path
+    final: Path
+    src: Path
+    name: str
+    build: Path
+    doc: _records.ExportDoc
+
+    def put(self, source: Path, rel: str) -> None:
+        """`rel` of the scene links to (or, with --copy, is a copy of) `source`."""
+        link(source, self.path / rel, self.final / rel, self.doc["copy"])
+
+
+@dataclass(frozen=True)
+class SceneFolders:
+    """A target that is a folder of scene folders, which blurset.export plans, stages and
+    puts in place: what sets its scenes apart."""
+
+    folder: str  # where its scenes lie under --out (`.`: at the top)
+    write: Callable[[StagedScene], None]  # one staged scene's files
+    hint: Callable[[_records.ExportDoc, Path], str]  # how its loader is pointed at the root
+    split: Callable[[SceneSource], list[tuple[str, list[int] | None]]] = one_scene
+    passes: bool = True  # whether its scenes carry the build's --passes
+    one_frame: bool = False  # whether its loader reads one image per view (no --frames)
+    factor: int | None = None  # the images_<f>/ its loader reads, which the build must have
+    reader: str = ""  # its loader, as a refusal names it
+
+
+@dataclass(frozen=True)
+class OwnOutput:
+    """A target that writes an output of its own kind (hub: Parquet shards) by its own
+    `run`, with options only it reads."""
+
+    run: Callable[[argparse.Namespace], int]
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    options: tuple[str, ...]  # the options' dests: refused with another target
+    does: str  # what they are for, as that refusal says (`writes shards`)
+
+
+@dataclass(frozen=True)
+class Target:
+    """An export target, `blurset export --for NAME`: the `TARGET` of its module in
+    blurset.exports, the only place that names it."""
+
+    name: str  # `--for NAME`, the record's `for` (an ExportTarget of dataset/records.rs)
+    help: str  # its part of `--for`'s help
+    docs: str  # its page, relative to docs/
+    output: SceneFolders | OwnOutput
+
+
+def link(s: Path, dst: Path, final: Path, copy: bool) -> None:
+    """`dst` (staged) links to or copies `s`; `final` is where `dst` will end up."""
+    if copy:
+        try:
+            (shutil.copytree if s.is_dir() else shutil.copyfile)(s, dst)
+        except shutil.Error as e:
+            # copytree gathers every file's error into one list of (src, dst, why)
+            # tuples: say the first reason, how many, and where, in one line.
+            errors = e.args[0] if e.args and isinstance(e.args[0], list) else []
+            why = str(errors[0][2]) if errors else str(e)
+            why = why.split("] ", 1)[-1].split(":", 1)[0] if why.startswith("[Errno") else why
+            raise OSError(
+                f"--copy: {why} ({len(errors) or 'some'} files not copied; nothing of the "
+                f"new export was put in place): {final}"
+            ) from None
+    else:
+        # Relative to where the link will live: the export and the build may move
+        # together.
+        os.symlink(os.path.relpath(s, final.parent), dst)
 
 
 def levels(value: str | None, available: list[str]) -> list[str]:

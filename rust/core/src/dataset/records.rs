@@ -297,6 +297,24 @@ pub struct NoiseSceneDoc {
     pub profile: String,
 }
 
+/// The loader layout an export is made for, `blurset export --for`: one module of
+/// python/blurset/exports/ each, which declares it (that module's name is this name).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
+pub enum ExportTarget {
+    /// `nerf_llff_data/<scene>/`: IBRNet, NAN, GNT, Deblur-NeRF.
+    #[serde(rename = "llff")]
+    Llff,
+    /// `<scene>/` with transforms.json: nerfstudio.
+    #[serde(rename = "nerfstudio")]
+    Nerfstudio,
+    /// `geonerf/train/<scene>/` and `geonerf/test/<scene>__v<view>/`: GeoNeRF.
+    #[serde(rename = "geonerf")]
+    Geonerf,
+    /// Parquet shards `data/<config>/<split>-*.parquet`: `datasets`, the Hugging Face Hub.
+    #[serde(rename = "hub")]
+    Hub,
+}
+
 /// `export.json` of `blurset export`: what was exported and how to read it.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -304,9 +322,8 @@ pub struct ExportDoc {
     /// Always `blurset export`.
     pub kind: String,
     pub blurset_version: String,
-    /// `llff`, `nerfstudio` or `geonerf`.
     #[serde(rename = "for")]
-    pub target: String,
+    pub target: ExportTarget,
     /// The build, and the noise output, by their folders' names.
     pub build: String,
     pub noise: Option<String>,
@@ -427,6 +444,31 @@ mod tests {
         let mut bad = doc.clone();
         bad.sigma_read = f64::NAN;
         assert!(bad.validate().is_err());
+        Ok(())
+    }
+
+    #[test]
+    fn an_export_names_its_target_as_it_always_did_and_no_other() -> Result<()> {
+        let e = |e: serde_json::Error| Error::Value(e.to_string());
+        let export = |target: &str| {
+            json!({"kind": "blurset export", "blurset_version": "0", "for": target,
+                   "build": "b", "noise": null, "levels": ["sharp"], "gains": [],
+                   "copy": false, "llffhold": 16, "factors": [4], "test_view_images": "sharp",
+                   "scenes_dir": "geonerf", "scenes": {}, "train": [], "test": []})
+        };
+        for (name, target) in [
+            ("llff", ExportTarget::Llff),
+            ("nerfstudio", ExportTarget::Nerfstudio),
+            ("geonerf", ExportTarget::Geonerf),
+            ("hub", ExportTarget::Hub),
+        ] {
+            let doc: ExportDoc = serde_json::from_value(export(name)).map_err(e)?;
+            assert_eq!(doc.target, target);
+            assert_eq!(serde_json::to_value(&doc).map_err(e)?, export(name));
+        }
+        for bad in ["zarr", "LLFF", ""] {
+            assert!(serde_json::from_value::<ExportDoc>(export(bad)).is_err(), "{bad}");
+        }
         Ok(())
     }
 }

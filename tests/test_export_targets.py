@@ -1,0 +1,199 @@
+"""The export targets are a registry (issue 49): each `--for` target is one module of
+blurset.exports, and everything else follows from it. The `--for` choices and help come
+from the registry, every target is a name of the core's `ExportTarget` (which
+export.json's `for` is read as) and has its docs page, export.py names no target, and a
+target module export.py has never seen is exported with it unchanged."""
+
+from __future__ import annotations
+
+import ast
+import json
+import re
+import sys
+
+import pytest
+from blurset import cli, exports, outputs
+from blurset.export_rules import OwnOutput, SceneFolders
+
+from tests.conftest import ROOT
+
+EXPORT_PY = ROOT / "python" / "blurset" / "export.py"
+DOCS = ROOT / "docs"
+# The page that explains exports: every target has its row there.
+OVERVIEW = DOCS / "training" / "index.md"
+
+
+def _export_parser():
+    parser = cli.make_parser()
+    sub = next(a for a in parser._actions if a.choices and "export" in a.choices)
+    return sub.choices["export"]
+
+
+def _for_action(parser):
+    return next(a for a in parser._actions if "--for" in a.option_strings)
+
+
+def test_every_target_is_found_and_is_its_modules_name() -> None:
+    files = sorted(p.stem for p in (ROOT / "python" / "blurset" / "exports").glob("*.py"))
+    assert set(exports.targets()) == {f for f in files if f != "__init__"}
+    assert exports.DEFAULT in exports.targets()
+    for name, t in exports.targets().items():
+        assert t.name == name
+        assert isinstance(t.output, (SceneFolders, OwnOutput))
+
+
+def test_the_for_choices_and_help_are_the_registrys() -> None:
+    action = _for_action(_export_parser())
+    assert sorted(action.choices) == sorted(exports.targets())
+    assert action.default == exports.DEFAULT
+    for t in exports.targets().values():
+        assert f"{t.name}: {t.help}" in action.help
+    # A target's own options are declared by it, and only it reads them.
+    dests = {a.dest for a in _export_parser()._actions}
+    for t in exports.targets().values():
+        if isinstance(t.output, OwnOutput):
+            assert set(t.output.options) <= dests
+
+
+def test_every_target_is_a_name_of_the_records_enum() -> None:
+    """export.json's `for` is the core's ExportTarget: the registry and the enum hold
+    the same names (an unregistered name is a record no target writes; a target
+    missing there, one whose export.json the core refuses)."""
+    defs = outputs.record_schemas()["export.schema.json"]["$defs"]
+    assert defs["ExportDoc"]["properties"]["for"] == {"$ref": "#/$defs/ExportTarget"}
+    names = [alt["const"] for alt in defs["ExportTarget"]["oneOf"]]
+    assert sorted(names) == sorted(exports.targets())
+
+
+def test_every_target_has_its_docs_page_and_its_row() -> None:
+    nav = (ROOT / "mkdocs.yml").read_text()
+    overview = OVERVIEW.read_text()
+    for t in exports.targets().values():
+        page = DOCS / t.docs
+        assert page.is_file(), (t.name, t.docs)
+        assert re.search(rf"\b{re.escape(t.docs)}\b", nav), f"{t.docs} is not in mkdocs.yml"
+        assert f"--for {t.name}" in page.read_text(), (t.name, t.docs)
+        assert f"`--for {t.name}`" in overview, f"{t.name} has no row on {OVERVIEW.name}"
+
+
+def _targets_named(source: str) -> list[str]:
+    """Where a source names an export target: a string (other than a docstring) holding
+    a target's name as a word, or a name made of it (`_geonerf_scenes`, `SCENES_DIR`
+    keyed by them is caught by its strings)."""
+    names = list(exports.targets())
+    tree = ast.parse(source)
+    docstrings = {
+        id(n.body[0].value)
+        for n in ast.walk(tree)
+        if isinstance(n, (ast.Module, ast.FunctionDef, ast.ClassDef))
+        and n.body
+        and isinstance(n.body[0], ast.Expr)
+        and isinstance(n.body[0].value, ast.Constant)
+    }
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            if id(node) in docstrings:
+                continue
+            found += [
+                f"{n!r} in {node.value!r}" for n in names if re.search(rf"\b{n}\b", node.value)
+            ]
+        ident = (
+            node.id if isinstance(node, ast.Name)
+            else node.attr if isinstance(node, ast.Attribute)
+            else node.name if isinstance(node, (ast.FunctionDef, ast.ClassDef))
+            else None
+        )  # fmt: skip
+        if ident:
+            found += [
+                f"{n!r} in {ident}" for n in names if re.search(rf"(^|_){n}(_|$)", ident.lower())
+            ]
+    return found
+
+
+def test_export_py_names_no_target() -> None:
+    source = EXPORT_PY.read_text()
+    assert _targets_named(source) == []
+    # The check sees a branch on a target, a table keyed by one and a helper named for one.
+    branch = source.replace(
+        "def run(args) -> int:\n",
+        'def run(args) -> int:\n    if args.target == "geonerf":\n        pass\n',
+    )
+    assert _targets_named(branch) == ["'geonerf' in 'geonerf'"]
+    assert _targets_named('DIRS = {"llff": "nerf_llff_data"}\n') == ["'llff' in 'llff'"]
+    assert _targets_named("def _hub_run(): pass\n") == ["'hub' in _hub_run"]
+
+
+# A target export.py has never seen: scenes under flat/, the held-out views of a
+# setting each a scene of their own, and only the level's poses and a note written.
+THROWAWAY = """
+from blurset.export_rules import SceneFolders, Target
+
+
+def split(s):
+    return [(f"{s.scene}__v{v}", [v]) for v in s.held_out] if s.is_test else [(s.scene, None)]
+
+
+def write(s):
+    s.path.mkdir(parents=True)
+    s.put(s.src / "poses_bounds.npy", "poses_bounds.npy")
+    (s.path / "note.txt").write_text(s.name)
+
+
+TARGET = Target(
+    name="llff",
+    help="a throwaway layout",
+    docs="training/index.md",
+    output=SceneFolders(folder="flat", write=write, hint=lambda doc, root: "throwaway hint",
+                        split=split, passes=False),
+)
+"""
+
+
+@pytest.fixture
+def throwaway_registry(tmp_path, monkeypatch):
+    """The registry with one module, the throwaway target, in place of the package's own.
+    (It is named llff: export.json's `for` is read as ExportTarget, which a real new
+    target joins by its name.)"""
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "llff.py").write_text(THROWAWAY)
+    monkeypatch.setattr(exports, "__path__", [str(pkg)])
+    monkeypatch.delitem(sys.modules, "blurset.exports.llff", raising=False)
+    exports.targets.cache_clear()
+    yield
+    exports.targets.cache_clear()
+    sys.modules.pop("blurset.exports.llff", None)
+
+
+def test_a_new_target_module_is_exported_with_by_export_py_unchanged(
+    standin_build_dir, throwaway_registry, tmp_path, capsys
+) -> None:
+    before = EXPORT_PY.read_bytes()
+    assert list(exports.targets()) == ["llff"]
+    assert _for_action(_export_parser()).choices == ["llff"]
+    out = tmp_path / "out"
+    assert cli.main(["export", str(standin_build_dir), "--out", str(out)]) == 0
+    assert EXPORT_PY.read_bytes() == before
+    doc = json.loads((out / "export.json").read_text())
+    splits = json.loads((standin_build_dir / "splits.json").read_text())
+    assert doc["for"] == "llff" and doc["scenes_dir"] == "flat" and "passes" not in doc
+    # The throwaway split rule made the scenes: held-out views of test settings apart.
+    want_test = [
+        f"{s}__{lvl}__v{v}"
+        for s in splits["test"]
+        for lvl in doc["levels"]
+        for v in splits["test_views"][s]
+    ]
+    assert sorted(doc["test"]) == sorted(want_test) and want_test
+    assert sorted(doc["train"]) == sorted(
+        f"{s}__{lvl}" for s in splits["train"] for lvl in doc["levels"]
+    )
+    assert doc["views"] == {s: [int(s.rsplit("__v", 1)[1])] for s in want_test}
+    # Its writer wrote each scene, and nothing else was.
+    for scene in doc["scenes"]:
+        d = out / "flat" / scene
+        assert sorted(p.name for p in d.iterdir()) == ["note.txt", "poses_bounds.npy"]
+        assert (d / "note.txt").read_text() == scene
+    assert sorted(p.name for p in out.iterdir()) == ["export.json", "flat", "test.txt", "train.txt"]
+    assert "throwaway hint" in capsys.readouterr().out
