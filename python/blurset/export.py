@@ -10,7 +10,7 @@ settings, `export.json` says what was exported and the `llffhold` to use.
 Each target (`--for`) is a module of blurset.exports, whose `Target` declares what sets
 it apart: where its scenes lie, what its loader needs of the build, how a folder splits
 into scenes, how a scene is written. This module is the flow every scene-folder target
-shares, and names none; a target of its own kind (`hub`) runs its own.
+shares, and names none; a target of its own kind (Parquet shards) runs its own.
 
 The export lives beside whatever else `--out` holds (IBRNet's and NAN's `data/` keep
 other datasets next to `nerf_llff_data/`): it writes and replaces only its own entries,

@@ -467,7 +467,10 @@ mod tests {
             assert_eq!(serde_json::to_value(&doc).map_err(e)?, export(name));
         }
         for bad in ["zarr", "LLFF", ""] {
-            assert!(serde_json::from_value::<ExportDoc>(export(bad)).is_err(), "{bad}");
+            assert!(
+                serde_json::from_value::<ExportDoc>(export(bad)).is_err(),
+                "{bad}"
+            );
         }
         Ok(())
     }
