@@ -10,7 +10,9 @@ medians gives the two costs. `ratio` is the share of fixed cost in a paper laten
 86 % (tools/DEVICE.md), which is why a plan is priced by calls as well as samples.
 
 `--device` (bench/run.py) or BLURSET_BENCH_DEVICE picks the Cycles device (default CPU);
-BLURSET_BENCH_COST_RES the sizes (default 128,512).
+BLURSET_BENCH_COST_RES the sizes (default 128,512). On a GPU the same node's CPU is measured
+beside it (`device_costs_cpu_<res>px`, at BLURSET_BENCH_COST_CPU_RES, default 512; empty:
+none): the two rows price the same plan on both devices of one machine.
 """
 
 from __future__ import annotations
@@ -28,6 +30,9 @@ SAMPLES = (1, 8, 32, 128)
 FRAMES = int(os.environ.get("BLURSET_BENCH_COST_FRAMES", "6"))
 REPEATS = int(os.environ.get("BLURSET_BENCH_REPEATS", "3"))
 DEVICE = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")
+CPU_RESOLUTIONS = [
+    int(r) for r in os.environ.get("BLURSET_BENCH_COST_CPU_RES", "512").split(",") if r
+]
 PAPER_FRAME_SAMPLES = 32
 
 
@@ -52,7 +57,7 @@ def _frame_seconds(w, sharp: dict, work: Path, res: int, samples: int, tag: int)
     return (time.perf_counter() - t0) / FRAMES
 
 
-def _costs_at(res: int) -> dict:
+def _costs_at(res: int, device: str, name: str) -> dict:
     from blurset.demo import make_demo_objects
     from blurset.plan import BuildConfig
     from blurset.worker_client import Worker
@@ -62,19 +67,19 @@ def _costs_at(res: int) -> dict:
         work = Path(d)
         glb = make_demo_objects(work / "objs")[0]
         cfg = BuildConfig(views=1, levels=[1], resolution=res, fov_deg=40.0)
-        with Worker(threads=0, timeout=3600, workdir=work / "scratch", device=DEVICE) as w:
+        with Worker(threads=0, timeout=3600, workdir=work / "scratch", device=device) as w:
             sharp = plan_object(cfg, glb, w, work).renders(str(work / "r"), None)[0]
             _frame_seconds(w, sharp, work, res, 1, 0)  # warm: kernels, BVH, first session
             per: dict[int, list[float]] = {s: [] for s in SAMPLES}
             for r in range(REPEATS):
                 for s in SAMPLES:  # interleaved: load on the machine hits every count alike
                     per[s].append(_frame_seconds(w, sharp, work, res, s, 1 + r * 1000 + s))
-            device = w.info.get("device", {})
+            reported = w.info.get("device", {})
     medians = [statistics.median(per[s]) for s in SAMPLES]
     call_s, sample_s = fit_costs(list(SAMPLES), medians)
     frame_s = call_s + sample_s * PAPER_FRAME_SAMPLES
     return {
-        "name": f"device_costs_{res}px",
+        "name": name,
         "ratio": call_s / frame_s,
         "contender": f"the fixed cost of a render call ({res} px)",
         "baseline": f"a {PAPER_FRAME_SAMPLES}-sample frame's time",
@@ -84,9 +89,12 @@ def _costs_at(res: int) -> dict:
         "frame_s": medians,
         "frames_per_call": FRAMES,
         "repeats": REPEATS,
-        "device": device,
+        "device": reported,
     }
 
 
 def run() -> list[dict]:
-    return [_costs_at(res) for res in RESOLUTIONS]
+    out = [_costs_at(res, DEVICE, f"device_costs_{res}px") for res in RESOLUTIONS]
+    if DEVICE != "CPU":
+        out += [_costs_at(res, "CPU", f"device_costs_cpu_{res}px") for res in CPU_RESOLUTIONS]
+    return out

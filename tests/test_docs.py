@@ -146,6 +146,26 @@ def test_benchmark_pages_plot_every_result(tmp_path, monkeypatch) -> None:
     assert list((tmp_path / "bench").glob("*.png"))
 
 
+def test_gpu_page_shows_every_gpu_result_or_says_there_is_none(tmp_path, monkeypatch) -> None:
+    """docs/benchmarks/gpu.md comes from bench/results_gpu.json: each of its results on the
+    page; without the file, a page that says nothing was measured on a GPU."""
+    pytest.importorskip("matplotlib")
+    bench = _gen("bench")
+    monkeypatch.setattr(bench, "OUT", tmp_path / "bench")
+    monkeypatch.setattr(bench, "RESULTS_GPU", tmp_path / "absent.json")
+    assert bench.main(figures_too=False) == 0
+    assert "No GPU results yet" in (tmp_path / "bench" / "gpu.md").read_text()
+    # The CPU's results stand in for a GPU run's: the page is generated the same way.
+    results = json.loads((ROOT / "bench" / "results.json").read_text())
+    page = "\n".join(bench.device_page(results))
+    assert "No GPU results yet" not in page
+    shown = [r["name"] for r in results if f"`{r['name']}`" in page]
+    speed = [r["name"] for r in results if bench.SPEED.match(r["name"])]
+    assert speed and set(speed) <= set(shown)
+    others = [r["name"] for r in results if not bench.SPEED.match(r["name"])]
+    assert set(others) <= set(shown)
+
+
 def test_every_quoted_benchmark_figure_is_a_marker_filled_from_results() -> None:
     """README.md and docs/guide/*.md: each marker shows what bench/results.json gives, and
     no benchmark-looking number stands outside a marker but the allowed definitions."""

@@ -31,6 +31,8 @@ from common import sanitize  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results.json"
+# `make bench-gpu` (bench/run.py --device gpu): the same benchmarks on a GPU node.
+RESULTS_GPU = ROOT / "bench" / "results_gpu.json"
 OUT = ROOT / "docs" / "benchmarks"
 PNG_FLOOR_DB = 58.9  # PSNR of 8-bit quantization alone: 1 / (255² · 12) in MSE
 
@@ -49,6 +51,8 @@ GAIN = re.compile(r"^denoise_gain_(?P<glb>.+)_(?P<res>\d+)px$")
 TARGET = re.compile(r"^target_(?P<res>\d+)px_(?P<db>[\d.]+)db_(?P<model>.+)$")
 SPEED = re.compile(r"^target_speed_(?P<res>\d+)px_(?P<model>.+)$")
 DETAIL = re.compile(r"^target_detail_(?P<res>\d+)px_(?P<model>.+)$")
+DEVICE_COSTS = re.compile(r"^device_costs_(?:(?P<cpu>cpu)_)?(?P<res>\d+)px$")
+ONE_SETTING = re.compile(r"^one_setting_(?P<res>\d+)px_(?P<preset>\w+)$")
 NOT_PRESETS = {"settings_per_hour_2_vs_1_workers"}
 
 plt.rcParams.update({"figure.dpi": 110, "font.size": 9, "axes.grid": True, "grid.alpha": 0.3})
@@ -826,6 +830,7 @@ SPEED_BUILDS = (
     ("at_paper_worst", "T = worst"),
     ("at_paper_median", "T = median"),
     ("at_floor", "floor"),
+    ("at_paper_continuous", "continuous, per kind"),
 )
 
 
@@ -849,12 +854,16 @@ def speed_lines(rs: list[dict]) -> list[str]:
         "render on other seeds), then builds it with `--preset balanced --target-psnr T` at T",
         "= the paper images' worst (every image at least as accurate as the paper's worst)",
         "and at their median, and with `--preset floor` (every image to the 8-bit floor),",
-        "side by side in one run. Settings per hour are extrapolated to a setting's 34 views",
-        "from the views built (worker start and object load included).",
+        "side by side in one run; and, per image kind (sharp, each blur level), one target",
+        "build of that kind alone at the paper images' worst PSNR against the continuous",
+        "blur (its blurry kinds by motion blur, which has no ghosts), timed as their sum:",
+        "equal accuracy against the continuous blur. Settings per hour are extrapolated to a",
+        "setting's 34 views from the views built (worker start and object load included).",
         "",
-        "| result | model | views | paper: worst / median dB | paper settings/h "
-        "| T = worst: settings/h (×) | T = median: settings/h (×) | floor: settings/h (×) |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| result | model | views | paper: worst / median dB | paper settings/h | "
+        + " | ".join(f"{label}: settings/h (×)" for _, label in SPEED_BUILDS[1:])
+        + " |",
+        "| --- " * (5 + len(SPEED_BUILDS) - 1) + "|",
     ]
     for r in sorted(rs, key=lambda r: r["name"]):
         p = r.get("paper_measured") or {}
@@ -875,7 +884,35 @@ def speed_lines(rs: list[dict]) -> list[str]:
     quality = [r for r in rs if isinstance(r.get("paper"), dict)]
     if not quality:
         return out
-    return out + _continuous_table(quality) + _time_split_table(quality)
+    return out + _continuous_table(quality) + _per_kind_table(quality) + _time_split_table(quality)
+
+
+def _per_kind_table(quality: list[dict]) -> list[str]:
+    """The continuous rule's builds, one per image kind: what the paper preset's worst image
+    of the kind measured against the continuous blur, what the kind's own build reached."""
+    rows = [r for r in quality if isinstance(r.get("at_paper_continuous"), dict)]
+    if not rows:
+        return []
+    out = [
+        "",
+        "Equal accuracy against the continuous blur, per image kind: the paper preset's worst",
+        "image of the kind against the continuous blur (the kind's target), the worst its own",
+        "build reached (object pixels), that build's work per view and wall time, and how its",
+        "blurry images were rendered.",
+        "",
+        "| model | kind | paper worst dB | reached worst dB | samples / view | calls / view "
+        "| build s | method |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in sorted(rows, key=lambda r: r["name"]):
+        for kind, k in sorted(r["at_paper_continuous"].get("kinds", {}).items()):
+            method = ", ".join(k.get("methods") or [])
+            out.append(
+                f"| `{r.get('model')}`{_at(r)} | {kind} | {_fmt(k.get('paper_worst_db'))} | "
+                f"{_fmt(k.get('worst_db'))} | {_count(k.get('samples_per_view'))} | "
+                f"{_count(k.get('calls_per_view'))} | {_fmt(k.get('build_s'))} | {method} |"
+            )
+    return out
 
 
 def _continuous_table(quality: list[dict]) -> list[str]:
@@ -906,8 +943,10 @@ def _continuous_table(quality: list[dict]) -> list[str]:
     for r in sorted(quality, key=lambda r: r["name"]):
         for key, label in SPEED_BUILDS:
             b = r.get(key)
-            if not b:
-                continue  # (a run that left this build out: a 512 px run on 2 cores)
+            if not b or "kinds" in b:
+                # (a run that left this build out: a 512 px run on 2 cores; the per-kind
+                # builds have their own table)
+                continue
             out.append(
                 f"| `{r.get('model')}`{_at(r)}{'*' if older and r.get('continuous') else ''} | "
                 f"{label} | "
@@ -1044,6 +1083,97 @@ def _target_plot(per_image: dict, target: float, png: str) -> list[str]:
     ]
 
 
+# ---------------------------------------------------------------------------------- device
+
+
+def device_costs_lines(rs: list[dict]) -> list[str]:
+    """The unit costs that price a plan on a device (bench/bench_device_costs.py)."""
+    if not rs:
+        return []
+    out = [
+        "## What a render call and a sample cost",
+        "",
+        "`bench/bench_device_costs.py` renders jobs of frames at 1 to 128 samples through the",
+        "build's path (worker, EXR, accumulator) and fits seconds per frame = a + b × samples",
+        "(medians of interleaved repeats): a is the fixed cost of a render call, b the cost of",
+        "a sample; the share is a's part of a 32-sample latent frame (the paper preset's).",
+        "",
+        "| result | device | s per call | ms per sample | fixed share of a 32-sample frame |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for r in sorted(rs, key=lambda r: r["name"]):
+        call_s, sample_s, share = r.get("call_s"), r.get("sample_s"), r.get("ratio")
+        out.append(
+            f"| `{r['name']}` | {_cell(_machine([r]))} | {_fmt(call_s, 4)} | "
+            f"{_fmt(None if sample_s is None else sample_s * 1000, 3)} | "
+            f"{'' if share is None else format(share, '.0%')} |"
+        )
+    return [*out, ""]
+
+
+def one_setting_lines(rs: list[dict]) -> list[str]:
+    """Whole settings as a user builds them (bench/bench_one_setting.py)."""
+    if not rs:
+        return []
+    out = [
+        "## One whole setting",
+        "",
+        "`bench/bench_one_setting.py` builds one setting of a held-out model end to end (worker",
+        "start, object load and the device's first render included).",
+        "",
+        "| result | model | views | s | budget s | worst render PSNR dB | blurry images by |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in sorted(rs, key=lambda r: r["name"]):
+        method = ", ".join(f"{m} {n}" for m, n in sorted((r.get("blur_choice") or {}).items()))
+        budget = r.get("baseline", "").removesuffix(" s")
+        out.append(
+            f"| `{r['name']}` | `{r.get('model')}` | {_fmt(r.get('views'))} | "
+            f"{_fmt(r.get('build_s'), 1)} | {_cell(budget)} | "
+            f"{_fmt(r.get('worst_render_psnr_db'))} | {method} |"
+        )
+    return [*out, ""]
+
+
+def device_page(results: list[dict] | None) -> list[str]:
+    """The GPU node's page, from bench/results_gpu.json where `make bench-gpu` wrote one."""
+    out = [
+        "# On a GPU",
+        "",
+        "`make bench-gpu` (`bench/run.py --device gpu`) runs on the best GPU backend Cycles",
+        "reports: the unit costs of a render call and of a sample (and of the same node's",
+        "CPU beside them), speed at equal accuracy on two held-out models at 512 px, and one",
+        "whole 34-view setting of the balanced preset; it writes `bench/results_gpu.json`, from",
+        "which `make docs` generates this page.",
+        "",
+    ]
+    if not results:
+        return out + [
+            "No GPU results yet: the development machines have no GPU, and no",
+            "`bench/results_gpu.json` has been measured. Every figure in the other pages was",
+            "measured on a CPU.",
+        ]
+    kinds = defaultdict(list)
+    for r in results:
+        kind = next(
+            (k for k, rx in (("costs", DEVICE_COSTS), ("speed", SPEED), ("one", ONE_SETTING))
+             if rx.match(r["name"])),
+            "other",
+        )  # fmt: skip
+        kinds[kind].append(r)
+    out += [f"Measured on: {_machine(results)}.", ""]
+    out += device_costs_lines(kinds["costs"])
+    out += speed_lines(kinds["speed"])
+    out += one_setting_lines(kinds["one"])
+    if kinds["other"]:
+        out += ["## Other measurements", "", "| result | ratio | ratio is |", "| --- | --- | --- |"]
+        out += [
+            f"| `{r['name']}` | {_fmt(r.get('ratio'), 3)} | {_cell(r.get('ratio_is', ''))} |"
+            for r in sorted(kinds["other"], key=lambda r: r["name"])
+        ]
+    return out
+
+
 # ---------------------------------------------------------------------------------- index
 
 
@@ -1146,6 +1276,8 @@ def main(figures_too: bool = True) -> int:
             len(kind["target"]) + len(kind["speed"]) + len(kind["detail"]),
         ),
     ]
+    gpu = json.loads(RESULTS_GPU.read_text()) if RESULTS_GPU.exists() else None
+    pages.append(("gpu.md", "On a GPU", device_page(gpu), len(gpu or [])))
     for name, _, lines, _ in pages:
         (OUT / name).write_text("\n".join(lines).rstrip() + "\n")
     index = index_page(results, kind["other"], [(p, t, n) for p, t, _, n in pages])
