@@ -78,6 +78,10 @@ class SceneFolders:
     factor: int | None = None  # the images_<f>/ its loader reads, which the build must have
     reader: str = ""  # its loader, as a refusal names it
 
+    def __post_init__(self) -> None:
+        if (self.one_frame or self.factor is not None) and not self.reader:
+            raise TypeError("a target that refuses builds names its loader (reader)")
+
 
 @dataclass(frozen=True)
 class OwnOutput:
