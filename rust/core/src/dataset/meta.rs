@@ -11,6 +11,8 @@ use crate::plan::camera::orbit_c2w;
 use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, LightPaths, Preset};
 use crate::plan::config::BuildConfig;
 use crate::plan::cost::BlurChoice;
+use crate::plan::defocus::Defocus;
+use crate::plan::degradation::Degradation;
 use crate::plan::sampling::{
     rows, LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
 };
@@ -615,16 +617,9 @@ pub struct ReadView {
     /// `--target-psnr` builds: per level directory.
     #[serde(default)]
     pub images: BTreeMap<String, ReadImage>,
-    /// `--defocus` builds: per defocus level.
+    /// `--defocus` builds: per defocus level, what its statistic reads.
     #[serde(default)]
-    pub defocus: BTreeMap<String, ReadDefocus>,
-}
-
-/// A view's defocus level, as the statistics read it.
-#[derive(Debug, Deserialize)]
-pub struct ReadDefocus {
-    /// [smallest, largest] circle of confusion on the object, px.
-    pub coc_px: [f64; 2],
+    pub defocus: BTreeMap<String, <Defocus as Degradation>::Read>,
 }
 
 /// The fields of [`Meta`] the statistics use (older metas may lack `levels`).

@@ -32,6 +32,8 @@ use super::layout::{self, Scan};
 use super::meta::{ReadLevel as MetaLevel, ReadMeta as Meta, ReadView as MetaView};
 use crate::error::{Error, Result};
 use crate::ground::names::parse_level_dir;
+use crate::plan::defocus::Defocus;
+use crate::plan::degradation::Degradation;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
@@ -88,12 +90,7 @@ pub const QUANTITIES: &[(&str, &str, &str)] = &[
         "px",
         "largest screen motion of a bounding-box corner over the trajectory at level l (one per blurry view)",
     ),
-    (
-        "defocus_coc_px",
-        "px",
-        "largest circle of confusion (diameter) on the object at defocus level l: 2^l px at \
-         512 px, scaled with the resolution (--defocus builds; one per defocused view)",
-    ),
+    Defocus::STAT,
     (
         "render_psnr",
         "dB",
@@ -475,8 +472,8 @@ fn read_view(
     }
     let mut defocus = BTreeMap::new();
     for (key, d) in v.defocus.iter().filter(|_| !sharp_copy) {
-        let l = level_key(key, i, "defocus", path)?;
-        defocus.insert(l, d.coc_px[1]);
+        let l = level_key(key, i, Defocus::NAME, path)?;
+        defocus.insert(l, Defocus::stat(d));
     }
     Ok(ViewRecord {
         index: i,

@@ -14,9 +14,77 @@
 //! largest circle on the object, at near or far, is [`coc_px`]`(l)`: 2^l px at 512 px,
 //! scaled with the resolution (2, 4, 8, 16 px for levels 1–4), as the motion levels double
 //! their blur level to level.
+use super::degradation::{Degradation, RenderCx, ViewCx};
+use super::render::{Dof, Render};
+use crate::ground::kind::ImageKind;
 use crate::rng::Stream;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+
+/// Defocus as a [`Degradation`]: one render per level at the view's pose and the sharp
+/// image's samples, through the thin lens of its [`DefocusPlan`].
+pub struct Defocus;
+
+/// A view's defocus level, as the statistics read it from meta.json.
+#[derive(Debug, Deserialize)]
+pub struct DefocusStat {
+    /// [smallest, largest] circle of confusion on the object, px.
+    pub coc_px: [f64; 2],
+}
+
+impl Degradation for Defocus {
+    type Level = DefocusPlan;
+    type Read = DefocusStat;
+    const NAME: &'static str = "defocus";
+    /// Its blur levels use purposes 1..=MAX_LEVEL; its renders' seeds are those of
+    /// levels 1000 + l.
+    const PURPOSE: u64 = 1000;
+    const STAT: (&'static str, &'static str, &'static str) = (
+        "defocus_coc_px",
+        "px",
+        "largest circle of confusion (diameter) on the object at defocus level l: 2^l px at \
+         512 px, scaled with the resolution (--defocus builds; one per defocused view)",
+    );
+
+    fn kind(level: u32) -> ImageKind {
+        ImageKind::Defocus(level)
+    }
+
+    fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, DefocusPlan> {
+        plan_view(
+            levels,
+            cx.near,
+            cx.far,
+            cx.resolution,
+            cx.fov_deg,
+            &mut (cx.stream)(Self::PURPOSE),
+            |level| (cx.seed)(Self::PURPOSE + u64::from(level)),
+        )
+    }
+
+    fn renders(cx: &RenderCx, level: u32, d: &DefocusPlan) -> Vec<Render> {
+        let exr = cx.exr_dir.join(format!("{:04}_d{level}.exr", cx.view));
+        vec![Render {
+            sample_offset: cx.pin.map(|_| 0),
+            sample_sequence: cx.pin,
+            dof: Some(Dof {
+                focus_distance: d.focus_distance,
+                aperture_radius: d.aperture_radius,
+            }),
+            ..Render::still(
+                cx.view,
+                Self::kind(level),
+                cx.c2w,
+                d.seed,
+                exr.display().to_string(),
+            )
+        }]
+    }
+
+    fn stat(d: &DefocusStat) -> f64 {
+        d.coc_px[1]
+    }
+}
 
 /// The width of the sensor the f-number refers to (Blender's default, 36 mm, fitted
 /// horizontally): only the recorded f-number depends on it, never an image.
@@ -161,6 +229,37 @@ mod tests {
         let mid = (near + far) / 2.0;
         let below = focuses.iter().filter(|&&s| s < mid).count();
         assert!((16..=48).contains(&below), "{below} of 64 below the middle");
+    }
+
+    #[test]
+    fn a_level_renders_once_at_the_views_pose_through_its_lens() {
+        let mut s = Stream::new(3, 4);
+        let plan = plan_view(&[2], 1.5, 2.7, 64, 40.0, &mut s, |l| 10 + l);
+        let c2w = [[0.5; 4]; 4];
+        let cx = RenderCx {
+            view: 7,
+            c2w,
+            exr_dir: std::path::Path::new("/x"),
+            pin: Some(99),
+        };
+        let r = crate::plan::degradation::kind_renders::<Defocus>(&cx, &plan);
+        assert_eq!(r.len(), 1);
+        let (r, p) = (&r[0], &plan["2"]);
+        assert_eq!(
+            (r.level.as_str(), r.kind),
+            ("defocus_2", ImageKind::Defocus(2))
+        );
+        assert_eq!(
+            (r.view, r.c2w, r.seed, r.out.as_str()),
+            (7, c2w, 12, "/x/0007_d2.exr")
+        );
+        assert_eq!((r.sample_offset, r.sample_sequence), (Some(0), Some(99)));
+        let dof = r.dof.expect("a lens");
+        assert_eq!(dof.aperture_radius, p.aperture_radius);
+        assert_eq!(dof.focus_distance, p.focus_distance);
+        // The sharp image's count (None: the caller's) and a phase after the blur levels.
+        assert_eq!(r.samples, None);
+        assert!(r.phase > ImageKind::Blur(2).phase());
     }
 
     #[test]

@@ -1,101 +1,13 @@
 //! The render list of a planned setting: what the Blender worker renders, in the order
 //! the driver streams the frames into accumulators (per view: sharp, then each level).
+use super::defocus::Defocus;
+use super::degradation::{kind_renders, RenderCx};
 use super::region::{call_cost_px, object_region, render_calls, Region};
+pub use super::render::{Motion, Render};
 use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
 use crate::ground::kind::ImageKind;
 use glam::{DMat4, DVec3};
-use serde::Serialize;
 use std::path::Path;
-
-/// The camera path of one Cycles motion blur render.
-#[derive(Clone, Debug, Serialize, PartialEq, schemars::JsonSchema)]
-pub struct Motion {
-    pub steps: u32,
-    /// OpenGL camera-to-world matrices (row-major) at t_k = k / 2^steps.
-    pub keys: Vec<[[f64; 4]; 4]>,
-}
-
-/// The thin lens of a defocus render ([`super::defocus`]).
-#[derive(Clone, Copy, Debug, Serialize, PartialEq, schemars::JsonSchema)]
-pub struct Dof {
-    /// Distance of the plane in focus along the viewing axis (world units).
-    pub focus_distance: f64,
-    /// Radius of the lens aperture (world units).
-    pub aperture_radius: f64,
-}
-
-/// One render: the camera, its Cycles seed and samples, the EXR it writes, and the
-/// view and image it is accumulated into.
-#[derive(Clone, Debug, Serialize, PartialEq, schemars::JsonSchema)]
-pub struct Render {
-    pub view: usize,
-    /// The image's level directory: its `kind`'s ([`ImageKind::dir`]).
-    pub level: String,
-    pub kind: ImageKind,
-    /// The render phase the builder renders it in, phases in ascending order (the
-    /// sharp images first, whose QA gates the rest): its kind's ([`ImageKind::phase`]).
-    pub phase: u32,
-    /// OpenGL camera-to-world, row-major.
-    pub c2w: [[f64; 4]; 4],
-    pub seed: u32,
-    /// Cycles samples of this render; None: the caller's (the sharp render's own count).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub samples: Option<u32>,
-    /// Under sample subsets (issue 15): this render takes the samples [sample_offset,
-    /// sample_offset + samples) of a Cycles sequence of `sample_sequence` samples.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub sample_offset: Option<u32>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub sample_sequence: Option<u32>,
-    pub out: String,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub motion: Option<Motion>,
-    /// The pixels this render traces: those of its render call, which contain every
-    /// pixel that can see the object ([`super::region`]); None: the whole image.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub region: Option<Region>,
-    /// Which Blender render call renders it: consecutive renders with one `call` are one
-    /// animation job ([`super::region::render_calls`]); None: a call of its own.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub call: Option<usize>,
-    /// Under a render target ([`super::target`]): which of the image's two independent
-    /// halves this render adds to (0 or 1); None: the image has one.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub half: Option<u32>,
-    /// A defocus render's lens (issue 35); None: a pinhole camera.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub dof: Option<Dof>,
-}
-
-impl Render {
-    /// A pinhole render of one still image at `c2w` with the caller's samples: whole
-    /// image, a call of its own, no halves, no lens, until the plan says otherwise.
-    fn still(view: usize, kind: ImageKind, c2w: [[f64; 4]; 4], seed: u32, out: String) -> Render {
-        Render {
-            view,
-            level: kind.dir(),
-            kind,
-            phase: kind.phase(),
-            c2w,
-            seed,
-            samples: None,
-            sample_offset: None,
-            sample_sequence: None,
-            out,
-            motion: None,
-            region: None,
-            call: None,
-            half: None,
-            dof: None,
-        }
-    }
-
-    /// A render that is a whole-image call of its own: a motion blur render, or a
-    /// defocus render, whose blur spills past the object's pinhole footprint.
-    fn whole(&self) -> bool {
-        self.motion.is_some() || self.dof.is_some()
-    }
-}
 
 /// The renders of one blurry image: its latent frames (average method) or its single
 /// motion blur render, writing `<prefix>_<k>.exr` / `<prefix>_mb.exr`. Under sample
@@ -195,26 +107,13 @@ impl SettingPlan {
                 let prefix = prefix.display().to_string();
                 out.extend(level_renders(i, level, lp, &prefix, pin));
             }
-            // Defocus levels: one render each at the sharp image's pose and samples.
-            for (key, d) in &v.defocus {
-                let level: u32 = key.parse().unwrap_or(0);
-                let exr = exr_dir.join(format!("{i:04}_d{key}.exr"));
-                out.push(Render {
-                    sample_offset: pin.map(|_| 0),
-                    sample_sequence: pin,
-                    dof: Some(Dof {
-                        focus_distance: d.focus_distance,
-                        aperture_radius: d.aperture_radius,
-                    }),
-                    ..Render::still(
-                        i,
-                        ImageKind::Defocus(level),
-                        v.c2w,
-                        d.seed,
-                        exr.display().to_string(),
-                    )
-                });
-            }
+            let cx = RenderCx {
+                view: i,
+                c2w: v.c2w,
+                exr_dir,
+                pin,
+            };
+            out.extend(kind_renders::<Defocus>(&cx, &v.defocus));
         }
         self.with_regions(out)
     }

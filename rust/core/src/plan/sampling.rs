@@ -6,7 +6,8 @@
 //! viewpoints, and dropping a level does not change the others.
 use super::camera::{clamp_polar, depth_range, focal_px, orbit_c2w};
 use super::cost::{BlurChoice, ImagePrice, Pricing};
-use super::defocus::{plan_view, DefocusPlan, MAX_DEFOCUS_LEVEL};
+use super::defocus::{Defocus, DefocusPlan, MAX_DEFOCUS_LEVEL};
+use super::degradation::{Degradation, ViewCx};
 use super::weights::{level_interval, scene_weight, Guards};
 use crate::error::{Error, Result};
 use crate::rng::{derive_seed, Stream};
@@ -539,10 +540,9 @@ pub struct ViewSample {
     pub trajectory: Trajectory,
 }
 
+/// A view's own draw; its blur levels use purposes 1..=MAX_LEVEL, and every other
+/// degradation its own ([`Degradation::PURPOSE`]).
 const PURPOSE_VIEW: u64 = 0;
-/// The defocus stream of a view (its blur levels use purposes 1..=MAX_LEVEL); its renders'
-/// seeds are those of levels 1000 + l.
-const PURPOSE_DEFOCUS: u64 = 1000;
 
 fn stream_id(view: usize, purpose: u64) -> u64 {
     ((view as u64) << 32) | purpose
@@ -937,15 +937,17 @@ impl Setting<'_> {
         let (near, far) = depth_range(&c2w, vertices);
         let w = scene_weight(near, far, bbox_dims, &cfg.guards);
         let sharp_seed = frame_seed(self.seed, index, 0, 0);
-        let defocus = plan_view(
-            &cfg.defocus,
-            near.max(cfg.guards.near_floor),
-            far.max(cfg.guards.near_floor),
-            cfg.resolution,
-            cfg.fov_deg,
-            &mut Stream::new(self.seed, stream_id(index, PURPOSE_DEFOCUS)),
-            |level| frame_seed(self.seed, index, PURPOSE_DEFOCUS as u32 + level, 0),
-        );
+        let stream = |purpose| Stream::new(self.seed, stream_id(index, purpose));
+        let seed = |purpose| frame_seed(self.seed, index, purpose as u32, 0);
+        let cx = ViewCx {
+            near: near.max(cfg.guards.near_floor),
+            far: far.max(cfg.guards.near_floor),
+            resolution: cfg.resolution,
+            fov_deg: cfg.fov_deg,
+            stream: &stream,
+            seed: &seed,
+        };
+        let defocus = Defocus::plan_view(&cx, &cfg.defocus);
         let levels = cfg
             .levels
             .iter()

@@ -1,0 +1,71 @@
+//! What a degradation is (issue 49): one file per kind beside the motion blur of
+//! Algorithm 1 (`defocus.rs`), each a [`Degradation`] holding its per-view draw, the
+//! renders of a level with the fields it adds to them, its record in meta.json
+//! (`views[i].<NAME>["<l>"]`, its `Level`) and its statistic. The plan, the render list
+//! and the statistics call each kind through this interface only.
+use super::render::Render;
+use crate::ground::kind::ImageKind;
+use crate::rng::Stream;
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// What a kind's per-view draw knows of its view.
+pub struct ViewCx<'a> {
+    /// The object's depth range along the viewing axis (its vertices, floored by the
+    /// near guard), not the LLFF bounds.
+    pub near: f64,
+    pub far: f64,
+    pub resolution: u32,
+    pub fov_deg: f64,
+    /// The view's random stream of one purpose (a kind draws from its own, so adding
+    /// or dropping a kind moves no other number of the plan).
+    pub stream: &'a dyn Fn(u64) -> Stream,
+    /// The Cycles seed of a render of one purpose (a kind's purpose plus its level).
+    pub seed: &'a dyn Fn(u64) -> u32,
+}
+
+/// Where a view's renders of a kind go.
+pub struct RenderCx<'a> {
+    pub view: usize,
+    /// OpenGL camera-to-world at p, the view's written pose, row-major.
+    pub c2w: [[f64; 4]; 4],
+    pub exr_dir: &'a Path,
+    /// [`crate::BuildConfig::cycles_samples`]: the sequence every render is pinned to.
+    pub pin: Option<u32>,
+}
+
+/// One degradation kind: `Level` is what meta.json records of one level of one view.
+pub trait Degradation {
+    type Level: Clone + Serialize;
+    /// What the statistics read of a level's record in a meta.json (the fields its
+    /// statistic needs, so an older record with fewer fields is still read).
+    type Read: DeserializeOwned;
+    /// Its key in a view of meta.json (and of the plan): `views[i].<NAME>`.
+    const NAME: &'static str;
+    /// The purpose of its random stream and render seeds (distinct per kind).
+    const PURPOSE: u64;
+    /// Its statistic, one value per view and level: (name, unit, help).
+    const STAT: (&'static str, &'static str, &'static str);
+
+    /// The image of level `level` of this kind.
+    fn kind(level: u32) -> ImageKind;
+    /// The levels `levels` of one view, keyed by level number.
+    fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, Self::Level>;
+    /// The renders of one level of one view.
+    fn renders(cx: &RenderCx, level: u32, rec: &Self::Level) -> Vec<Render>;
+    /// The level's statistic ([`Self::STAT`]) from its record in meta.json.
+    fn stat(rec: &Self::Read) -> f64;
+}
+
+/// The renders of every level of kind `D` of one view, in level order.
+pub fn kind_renders<D: Degradation>(
+    cx: &RenderCx,
+    levels: &BTreeMap<String, D::Level>,
+) -> Vec<Render> {
+    levels
+        .iter()
+        .flat_map(|(key, rec)| D::renders(cx, key.parse().unwrap_or(0), rec))
+        .collect()
+}
