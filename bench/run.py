@@ -20,16 +20,18 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 # `make bench-gpu` (issue 47): what one GPU node pays, in one command: the unit costs of a
-# render call and a sample (and its CPU's beside them), speed at equal accuracy of the
+# render call and a sample (and its CPU's beside them), where a call's fixed cost goes, speed at equal accuracy of the
 # accuracy presets against the paper preset on two held-out models, and one whole setting.
 GPU_BENCHES = (
     "bench_device_costs",
+    "bench_call_cost",
     "bench_target_speed",
     "bench_one_setting",
 )
 # Their sizes under --device, unless set: 512 px, one view a model, the runs the issue's
 # figures need ((a) at the paper's worst image, (b) its accuracy against the continuous blur).
 DEVICE_SIZES = {
+    "BLURSET_BENCH_CALL_RES": "512",
     "BLURSET_BENCH_SPEED_RES": "512",
     "BLURSET_BENCH_SPEED_VIEWS": "1",
     "BLURSET_BENCH_SPEED_RUNS": "worst,continuous",
