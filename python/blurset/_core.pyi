@@ -609,6 +609,21 @@ def parse_temp_name(name: str) -> tuple[str, int] | None:
 def write_atomic(path: str | PathLike[str], data: bytes) -> None:
     """Write `data` through a synced temp file and a rename (parents created)."""
 
+def write_build_tail(
+    out: str | PathLike[str],
+    config: BuildConfig,
+    *,
+    name: str,
+    blurset_version: str,
+    python_version: str,
+    created: str,
+    seconds: float,
+) -> tuple[int, list[dict[str, Any]], int, list[tuple[str, str]]]:
+    """Write failures.jsonl (the failures now), splits.json and dataset.json of the build
+    at `out` made with `config`, from its complete settings' meta.json (call under the
+    build's lock). Returns (settings complete, the failures now, test settings, the
+    settings left out because their meta.json does not read: (name, why))."""
+
 def write_dataset_json(path: str | PathLike[str], doc: rec.DatasetDoc) -> None:
     """Write a build's dataset.json; `doc` must match the core's DatasetDoc (unknown or
     missing fields are errors)."""
@@ -671,6 +686,9 @@ class Accumulator:
         """Add a float32 (H, W, 4) C-contiguous premultiplied linear RGBA frame."""
     def mean(self) -> npt.NDArray[np.float32]:
         """The mean so far, float32 (H, W, 4); ValueError when no frame was added."""
+    def qa(self, *, thresholds: QaThresholds | None = None) -> FrameQa:
+        """Render QA of the mean under `thresholds` (default: the core's); its pixels
+        stay in the core."""
     def write_png(
         self,
         path: str | PathLike[str],
@@ -1269,6 +1287,11 @@ class FrameQa:
 def frame_qa(rgba_: npt.NDArray[np.float32], *, thresholds: QaThresholds | None = None) -> FrameQa:
     """QA of a premultiplied linear RGBA image (H, W, 4) under `thresholds`."""
 
+def frame_qa_exr(
+    path: str | PathLike[str], *, thresholds: QaThresholds | None = None
+) -> FrameQa:
+    """QA of an EXR (premultiplied linear RGBA), read and judged in the core."""
+
 def default_qa_thresholds() -> QaThresholds:
     """The default QA thresholds (one place for the numbers)."""
 
@@ -1285,6 +1308,37 @@ def object_qa_verdict(
     views: list[FrameQa], *, thresholds: QaThresholds | None = None
 ) -> str | None:
     """The reason an object fails its load-time QA (invisible or black in every view), or None."""
+
+# --- the target loop (rust/py/src/target.rs) ------------------------------------------
+
+class TargetImages:
+    """The images of one render phase of a setting rendered to the config's target: each
+    image's two halves and its rounds stay in the core (`dataset/target_loop.rs`)."""
+
+    def __new__(
+        cls,
+        plan: Plan,
+        config: BuildConfig,
+        keys: list[tuple[int, str]],
+        *,
+        exr_dir: str | PathLike[str],
+        sharp_views: list[int],
+    ) -> TargetImages:
+        """The images `keys` ((view, level), in render order) of `plan`, their EXRs in
+        `exr_dir`; `sharp_views` as for `Plan.renders`. ValueError without a target."""
+    def next_renders(self) -> list[rec.Render]:
+        """The renders of the next round of every image in flight, after estimating the
+        round just rendered; an empty list: every image is done. ValueError when an image
+        did not get each of its EXRs."""
+    def add_exr(
+        self, i: int, path: str | PathLike[str], origin: tuple[int, int] | None = None
+    ) -> None:
+        """The EXR of render `i` of the last `next_renders` into its image's half; the
+        file is deleted once read. `origin`: where a cropped render lies."""
+    def take_finished(self) -> list[tuple[int, str, Accumulator]]:
+        """The images done since the last call: (view, level, the mean of both halves)."""
+    def records(self) -> list[tuple[int, str, rec.ImageRender]]:
+        """The record (meta.json `views[].images`) of every image done so far."""
 
 # --- stats (rust/py/src/stats.rs) ---------------------------------------------------
 

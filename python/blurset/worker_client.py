@@ -22,11 +22,14 @@ import time
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import IO, Any, NoReturn, TypedDict, cast
+from typing import IO, TYPE_CHECKING, Any, NoReturn, TypedDict, cast
 
 from blurset import _core, kernels
 from blurset.exceptions import BlursetError
 from blurset.scripts import blender_script
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 WORKER_SCRIPT = blender_script("worker.py")
 STDERR_TAIL_LINES = 6
@@ -156,8 +159,8 @@ class LoadedObject(TypedDict, total=False):
     center: list[float]
     warnings: list[str]
     unlit_fixed: bool
-    light_paths: dict[str, Any]
-    device: dict[str, Any]
+    light_paths: _records.LightPathsRecord
+    device: _records.DeviceRecord
     seconds: float
     qa_coverage: list[float]
     qa_luminance: list[float]

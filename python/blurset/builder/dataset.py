@@ -13,15 +13,11 @@ import shutil
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from blurset import __version__, _core, layout, outputs, publish
 from blurset.config import BUILD, BuildConfig, flag
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec
-
-if TYPE_CHECKING:
-    from blurset import _records
 
 DATASET_NAME = "blurset Objaverse-Blur"
 # The files every process building into OUT shares (written under build_lock).
@@ -125,86 +121,29 @@ def append_failures(out: Path, records: list[dict]) -> None:
         os.fsync(f.fileno())
 
 
-def _complete_settings(out: Path) -> list[tuple[str, dict]]:
-    """(name, meta.json) of the complete settings; one whose meta.json does not read is
-    left out of splits.json and dataset.json, named on stderr (its object's next run
-    redoes it)."""
-    found = []
-    for d in layout.complete_settings(out):
-        try:
-            meta = json.loads((d / layout.META).read_text())
-            if not isinstance(meta, dict) or not isinstance(meta.get("views"), list):
-                raise ValueError("not a setting's meta.json")
-        except (OSError, ValueError) as e:
-            print(
-                f"skipped {d.name}: unreadable meta.json ({e}): {d / layout.META}", file=sys.stderr
-            )
-            continue
-        found.append((d.name, meta))
-    return found
-
-
 def finalize(out: Path, cfg: BuildConfig, seconds: float, vouched: list[str]) -> dict:
-    """splits.json, dataset.json and failures.jsonl over what is on disk, and the
-    manifest (call under build_lock). failures.jsonl keeps the latest record per object
-    (or per setting, for QA failures) whose work is still not complete. `vouched`: the
-    settings this run published, removed or checked and reused; the manifest hashes
-    only those and the files written here, keeps its lines of the rest, and lists
-    nothing else (another shard's settings are listed by that shard's run)."""
-    complete = _complete_settings(out)
-    fpath = out / layout.FAILURES
-    kept, _ = _core.current_failures(fpath, complete=[n for n, _ in complete], theta0s=cfg.theta0s)
-    layout.write_text_atomic(fpath, "".join(json.dumps(r) + "\n" for r in kept))
-    entries = [(n, m["uid"], len(m["views"])) for n, m in complete]
-    splits = _core.make_splits(
-        entries,
-        view_stride=cfg.view_stride,
-        test_fraction=cfg.test_fraction,
-        test_objects=cfg.test_objects,
-        seed=cfg.seed,
-        test_settings=cfg.test_settings,
-        sharp_test_views=not cfg.blurry_test_views,
+    """splits.json, dataset.json and failures.jsonl over what is on disk, written by the
+    core from the settings' meta.json (`dataset/build_tail.rs`), and the manifest (call
+    under build_lock). failures.jsonl keeps the latest record per object (or per
+    setting, for QA failures) whose work is still not complete. A complete setting whose
+    meta.json does not read is left out, named on stderr (its object's next run redoes
+    it). `vouched`: the settings this run published, removed or checked and reused; the
+    manifest hashes only those and the files written here, keeps its lines of the rest,
+    and lists nothing else (another shard's settings are listed by that shard's run)."""
+    complete, failures, test_settings, skipped = _core.write_build_tail(
+        out,
+        cfg,
+        name=DATASET_NAME,
+        blurset_version=__version__,
+        python_version=platform.python_version(),
+        created=time.strftime("%Y-%m-%dT%H:%M:%S"),
+        seconds=seconds,
     )
-    splits.write(out / layout.SPLITS)
-    checks = {n: m["pose_check"] for n, m in complete if "pose_check" in m}
-    # What the workers rendered on (backend, device names, Cycles kernel), once each.
-    used: list[_records.DeviceRecord] = []
-    for _, m in complete:
-        d = (m.get("render") or {}).get("device")
-        if d and d not in used:
-            used.append(d)
-    dataset: _records.DatasetDoc = {
-        "name": DATASET_NAME,
-        "blurset_version": __version__,
-        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "config": cfg.record(),
-        "seed": cfg.seed,
-        "levels": cfg.level_dirs,
-        "versions": {
-            "blurset": __version__,
-            "python": platform.python_version(),
-            "blender": next(
-                (m["object"].get("blender_version") for _, m in complete if m.get("object")), None
-            ),
-        },
-        "counts": {
-            "objects": len({m["uid"] for _, m in complete}),
-            # An object --licenses leaves out is skipped by request, not a failure (its
-            # record in failures.jsonl says stage "license").
-            "objects_failed": len({r["uid"] for r in kept if r.get("stage") != "license"}),
-            "settings": len(complete),
-            "settings_failed": sum(1 for r in kept if r.get("setting")),
-            "images": sum(len(m["views"]) * len(m["levels"]) for _, m in complete),
-        },
-        "settings": [n for n, _ in complete],
-        "render_devices": used,
-        "seconds": round(seconds, 1),
-    }
-    if checks:
-        dataset["pose_checks"] = checks
-    _core.write_dataset_json(out / layout.DATASET, dataset)
+    for name, why in skipped:
+        print(f"skipped {name}: unreadable meta.json ({why}): {out / name / layout.META}",
+              file=sys.stderr)  # fmt: skip
     # Last: the checksums of what this run wrote or checked (another shard's finalize
     # rewrites it with its own); a file it did not write keeps the line it had.
     shared = [f for f in SHARED_FILES if f != layout.MANIFEST]
     publish.rewrite_manifest(out, [*vouched, *shared])
-    return {"settings_complete": len(complete), "failures": kept, "test_settings": len(splits.test)}
+    return {"settings_complete": complete, "failures": failures, "test_settings": test_settings}

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -26,7 +27,7 @@ from blurset.progress import Progress
 
 if TYPE_CHECKING:
     from blurset import _records
-    from blurset.worker_client import LoadedObject
+    from blurset.worker_client import LoadedObject, RenderOptions, Worker
 
 
 @dataclass
@@ -86,7 +87,13 @@ def pricing_backend(info: LoadedObject, cfg: BuildConfig) -> str:
     forced = os.environ.get(PRICE_BACKEND_ENV)
     if forced:
         return forced
-    return str((info.get("device") or {}).get("backend") or cfg.device)
+    return reported_backend(info, cfg)
+
+
+def reported_backend(info: LoadedObject, cfg: BuildConfig) -> str:
+    """The Cycles backend the worker reported rendering on, else the configured device."""
+    device = info.get("device")
+    return device["backend"] if device else cfg.device
 
 
 def _object_record(obj: ObjectSpec, info: LoadedObject) -> _records.ObjectRecord:
@@ -107,7 +114,7 @@ def _object_record(obj: ObjectSpec, info: LoadedObject) -> _records.ObjectRecord
 def render_setting(
     job: SettingJob,
     cfg: BuildConfig,
-    worker: Any,
+    worker: Worker,
     info: LoadedObject,
     verts: np.ndarray,
     progress: Progress,
@@ -198,7 +205,7 @@ def _plan(
 def _render(
     plan: _core.Plan,
     cfg: BuildConfig,
-    worker: Any,
+    worker: Worker,
     exr_dir: Path,
     sharp: list[int],
     frames: list[_records.Render],
@@ -208,7 +215,7 @@ def _render(
     """Every image of the setting rendered into `images`, to a target or at the fixed
     counts: (the images' target records, renders made, sharp seconds, blurry seconds)."""
     # Cropped EXRs: only the pixels the region traced cross the disk.
-    common = {
+    common: RenderOptions = {
         "resolution": cfg.resolution,
         "fov_deg": cfg.fov_deg,
         "crop": True,
@@ -238,7 +245,7 @@ class _Images:
         n_views: int,
         cfg: BuildConfig,
         info: LoadedObject,
-        frames: list[Any],
+        frames: list[_records.Render],
         progress: Progress,
     ) -> None:
         self.partial, self.n_views, self.cfg, self.progress = partial, n_views, cfg, progress
@@ -249,8 +256,8 @@ class _Images:
         self.need: dict[tuple[int, str], int] = {}
         for k in self.keys:
             self.need[k] = self.need.get(k, 0) + 1
-        self.open: dict[tuple[int, str], Any] = {}
-        self.qa: dict[int, Any] = {}
+        self.open: dict[tuple[int, str], _core.Accumulator] = {}
+        self.qa: dict[int, _core.FrameQa] = {}
         # --denoise oidn: the frames carry their guide passes, every finished image (a
         # blurry mean or the sharp render) is denoised once by the driver (issue 28).
         self.guides = cfg.denoise == "oidn"
@@ -258,10 +265,9 @@ class _Images:
         if self.guides:
             from blurset.denoise import denoiser, device_for
 
-            backend = (info.get("device") or {}).get("backend") or cfg.device
-            self.den = denoiser(device_for(str(backend)))
+            self.den = denoiser(device_for(reported_backend(info, cfg)))
 
-    def finish(self, key: tuple[int, str], a: Any) -> None:
+    def finish(self, key: tuple[int, str], a: _core.Accumulator) -> None:
         """Write a finished image (the mean of its frames) and its copies; QA a sharp one."""
         if self.den is not None:
             a.denoise(self.den)
@@ -276,9 +282,9 @@ class _Images:
         if _masks(self.cfg):
             self._write_masks(key, name, a)
         if level == layout.SHARP:
-            self.qa[view] = _core.frame_qa(a.mean())
+            self.qa[view] = a.qa()
 
-    def _write_masks(self, key: tuple[int, str], name: str, a: Any) -> None:
+    def _write_masks(self, key: tuple[int, str], name: str, a: _core.Accumulator) -> None:
         """The image's masks at every size: the sharp image's coverage; a blurry image's
         own, the pixels its exposure covered plus the sharp mask of its view (written
         first: every sharp image is done before a blurry one starts)."""
@@ -310,7 +316,11 @@ class _Images:
 
 
 def _render_fixed(
-    cfg: BuildConfig, worker: Any, frames: list[Any], images: _Images, common: dict[str, Any]
+    cfg: BuildConfig,
+    worker: Worker,
+    frames: list[_records.Render],
+    images: _Images,
+    common: RenderOptions,
 ) -> tuple[float, float]:
     """The plan's frames at their sample counts, phase by phase as the plan orders them:
     the first phase (the sharp images) then its QA, then the others. The seconds of the
@@ -319,11 +329,11 @@ def _render_fixed(
     t_first = 0.0
     for n, phase in enumerate(sorted({f["phase"] for f in frames})):
         idx = [i for i, f in enumerate(frames) if f["phase"] == phase]
-        worker.render(
-            [frames[i] for i in idx],
-            on_frame=lambda j, p, o, idx=idx: images.on_frame(idx[j], p, o),
-            **common,
-        )
+
+        def on_frame(j: int, p: str, o: tuple[int, int] | None, idx: list[int] = idx) -> None:
+            images.on_frame(idx[j], p, o)
+
+        worker.render([frames[i] for i in idx], on_frame=on_frame, **common)
         if n == 0:
             _raise_on_qa(images.qa)
             t_first = time.time() - t1
@@ -333,7 +343,7 @@ def _render_fixed(
 def _write_records(
     job: SettingJob,
     cfg: BuildConfig,
-    plan: Any,
+    plan: _core.Plan,
     partial: Path,
     info: LoadedObject,
     images: _Images,
@@ -366,7 +376,7 @@ def _write_records(
         write_build_preview(partial, warn=progress.write)
 
 
-def _raise_on_qa(qa: dict[int, Any]) -> None:
+def _raise_on_qa(qa: dict[int, _core.FrameQa]) -> None:
     """QA before the costly blur renders: a bad sharp view fails this setting only."""
     for view in sorted(qa):
         if qa[view].failure:
@@ -374,24 +384,23 @@ def _raise_on_qa(qa: dict[int, Any]) -> None:
 
 
 def _render_targeted(
-    plan: Any,
+    plan: _core.Plan,
     cfg: BuildConfig,
-    worker: Any,
+    worker: Worker,
     exr_dir: Path,
     sharp: list[int],
     keys: list[tuple[int, str]],
-    finish: Any,
-    qa: dict[int, Any],
+    finish: Callable[[tuple[int, str], _core.Accumulator], None],
+    qa: dict[int, _core.FrameQa],
     progress: Progress,
-    common: dict[str, Any],
+    common: RenderOptions,
     bound: int,
 ) -> tuple[dict[tuple[int, str], _records.ImageRender], int, float, float]:
     """Every image to the config's target (builder/target.py): the sharp images first, QA,
     then the blurry ones. The progress bar counts renders up to the setting's share.
     Returns each image's record, the renders, and the seconds of each phase."""
-    from blurset.builder.target import frame_counts, render_to_target
+    from blurset.builder.target import render_to_target
 
-    counts = frame_counts({"view": v, "level": lv} for v, lv in keys)
     order = list(dict.fromkeys(keys))
     done = [0]
 
@@ -403,11 +412,11 @@ def _render_targeted(
     t1 = time.time()
     args = (plan, cfg, worker, exr_dir, sharp)
     sharp_keys = [k for k in order if k[1] == layout.SHARP]
-    images, n = render_to_target(*args, sharp_keys, counts, finish, on_render, common)
+    images, n = render_to_target(*args, sharp_keys, finish, on_render, common)
     _raise_on_qa(qa)
     t_sharp = time.time() - t1
     blur_keys = [k for k in order if k[1] != layout.SHARP]
-    blur, n_blur = render_to_target(*args, blur_keys, counts, finish, on_render, common)
+    blur, n_blur = render_to_target(*args, blur_keys, finish, on_render, common)
     images.update(blur)
     return images, n + n_blur, t_sharp, time.time() - t1 - t_sharp
 

@@ -46,7 +46,9 @@ pub use crate::image::geometry::{
     Geometry,
 };
 pub use crate::image::io::{image_info, read_image, Image, Samples};
-pub use crate::image::qa::{frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds};
+pub use crate::image::qa::{
+    exr_qa, frame_qa, object as object_qa, thumbnail_qa, FrameQa, QaThresholds,
+};
 
 // Sensor noise, from 8/16-bit images or from a build's linear EXRs.
 pub use crate::noise::config::NoiseConfig;
@@ -59,6 +61,7 @@ pub use crate::noise::model::{
 pub use crate::noise::variants::{write_variants, write_variants_linear, Variant, VariantOptions};
 
 // The files of a build.
+pub use crate::dataset::build_tail::{write_build_tail, BuildTail, RunFacts};
 pub use crate::dataset::failures::{
     current as current_failures, read_records as read_failure_records,
 };
@@ -93,12 +96,13 @@ pub use crate::dataset::schema::{
 };
 pub use crate::dataset::splits::{make_splits, seeded_subset, Holdout, SettingEntry, Splits};
 pub use crate::dataset::stats::{build_stats, BuildStats};
+pub use crate::dataset::target_loop::{Finished, ImageKey, TargetImages};
 pub use crate::dataset::verify::{check_images, ImageCheck};
 pub use crate::ground::atomic::{replace_dir, write_atomic};
+pub use crate::ground::kind::ImageKind;
 pub use crate::ground::license::{
     allowed as license_allowed, canonical as canonical_license, spdx_ids, spdx_of,
 };
-pub use crate::ground::kind::ImageKind;
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
     defocus_dir, files, gain_name, image_name, images_dir, is_level_dir, level_dir, level_dirs,

@@ -3,6 +3,7 @@
 use pyo3::prelude::*;
 
 mod accumulate;
+mod build_tail;
 mod config;
 mod convert;
 mod error;
@@ -40,6 +41,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     llff::register(m)?;
     sampling::register(m)?;
     accumulate::register(m)?;
+    build_tail::register(m)?;
     geometry::register(m)?;
     noise::register(m)?;
     noise_linear::register(m)?;

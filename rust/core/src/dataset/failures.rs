@@ -71,6 +71,120 @@ pub fn current(
         .collect()
 }
 
+/// Rewrite failures.jsonl as `records`, one a line, atomically. A line is spelled as
+/// the builder appends one (Python's `json.dumps`: `", "` and `": "`, non-ASCII escaped),
+/// so the file reads the same whichever wrote a line.
+pub fn write_records(path: &Path, records: &[Value]) -> Result<()> {
+    let mut text = String::new();
+    for r in records {
+        python_json(r, &mut text);
+        text.push('\n');
+    }
+    crate::ground::atomic::write_atomic(path, text.as_bytes())
+}
+
+/// `value` as Python's `json.dumps(value)` writes it.
+fn python_json(value: &Value, out: &mut String) {
+    match value {
+        Value::Null => out.push_str("null"),
+        Value::Bool(b) => out.push_str(if *b { "true" } else { "false" }),
+        Value::Number(n) => match n.as_f64() {
+            Some(x) if n.is_f64() => out.push_str(&python_float(x)),
+            _ => out.push_str(&n.to_string()),
+        },
+        Value::String(s) => python_string(s, out),
+        Value::Array(items) => {
+            out.push('[');
+            for (i, v) in items.iter().enumerate() {
+                if i > 0 {
+                    out.push_str(", ");
+                }
+                python_json(v, out);
+            }
+            out.push(']');
+        }
+        Value::Object(map) => {
+            out.push('{');
+            for (i, (k, v)) in map.iter().enumerate() {
+                if i > 0 {
+                    out.push_str(", ");
+                }
+                python_string(k, out);
+                out.push_str(": ");
+                python_json(v, out);
+            }
+            out.push('}');
+        }
+    }
+}
+
+/// Python's `repr` of a float: the shortest digits that read back, positional from
+/// 1e-4 up to 1e16, else `d.ddde±XX`.
+fn python_float(x: f64) -> String {
+    if !x.is_finite() {
+        return (if x.is_nan() {
+            "NaN"
+        } else if x > 0.0 {
+            "Infinity"
+        } else {
+            "-Infinity"
+        })
+        .into();
+    }
+    let sci = format!("{x:e}"); // shortest digits: `-1.2345e-5`
+    let (mantissa, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    let (sign, mantissa) = mantissa
+        .strip_prefix('-')
+        .map_or(("", mantissa), |m| ("-", m));
+    let digits: String = mantissa.chars().filter(char::is_ascii_digit).collect();
+    if (-4..16).contains(&exp) {
+        let point = exp + 1; // digits before the decimal point
+        let body = if point <= 0 {
+            format!("0.{}{digits}", "0".repeat((-point) as usize))
+        } else if (point as usize) >= digits.len() {
+            format!("{digits}{}.0", "0".repeat(point as usize - digits.len()))
+        } else {
+            let (int, frac) = digits.split_at(point as usize);
+            format!("{int}.{frac}")
+        };
+        format!("{sign}{body}")
+    } else {
+        let (first, rest) = digits.split_at(1);
+        let frac = if rest.is_empty() {
+            String::new()
+        } else {
+            format!(".{rest}")
+        };
+        let esign = if exp < 0 { '-' } else { '+' };
+        format!("{sign}{first}{frac}e{esign}{:02}", exp.abs())
+    }
+}
+
+/// A JSON string as Python's `json.dumps` (ensure_ascii) writes it.
+fn python_string(s: &str, out: &mut String) {
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\r' => out.push_str("\\r"),
+            '\t' => out.push_str("\\t"),
+            '\u{8}' => out.push_str("\\b"),
+            '\u{c}' => out.push_str("\\f"),
+            ' '..='~' => out.push(c),
+            _ => {
+                let mut units = [0u16; 2];
+                for u in c.encode_utf16(&mut units) {
+                    out.push_str(&format!("\\u{u:04x}"));
+                }
+            }
+        }
+    }
+    out.push('"');
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -96,6 +210,34 @@ mod tests {
         assert_eq!(reasons, ["bad glb", "crash after p_000", "black"]);
         // Not knowing the object's settings, object records stay.
         assert_eq!(current(&recs, &complete, None).len(), 4);
+    }
+
+    #[test]
+    fn a_record_is_spelled_as_python_json_dumps_spells_it() {
+        // Each right-hand side is what Python 3.11's json.dumps writes for the left.
+        let cases = [
+            (
+                json!({"uid": "a", "seconds": 0.5, "attempts": 2}),
+                r#"{"attempts": 2, "seconds": 0.5, "uid": "a"}"#,
+            ),
+            (
+                json!({"r": "θ \"x\"\n\u{7f}\u{1f600}"}),
+                r#"{"r": "\u03b8 \"x\"\n\u007f\ud83d\ude00"}"#,
+            ),
+            (
+                json!([1.0, 1e-5, 0.0001, 1e16, 123.456, -2.5e-7, null, true, []]),
+                "[1.0, 1e-05, 0.0001, 1e+16, 123.456, -2.5e-07, null, true, []]",
+            ),
+            (
+                json!({"s": 12.345, "n": -3, "o": {}}),
+                r#"{"n": -3, "o": {}, "s": 12.345}"#,
+            ),
+        ];
+        for (value, python) in cases {
+            let mut out = String::new();
+            python_json(&value, &mut out);
+            assert_eq!(out, python);
+        }
     }
 
     #[test]

@@ -573,6 +573,12 @@ impl Meta {
     }
 }
 
+/// `x` rounded to `digits` decimals, correctly (the nearest decimal, ties to even, as
+/// Python's `round`): the figures the records keep.
+pub fn round_to(x: f64, digits: usize) -> f64 {
+    format!("{x:.digits$}").parse().unwrap_or(x)
+}
+
 /// Serialize `value` as JSON (indent 1, newline at the end) and write it atomically.
 pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
     let mut buf = Vec::new();
@@ -775,6 +781,15 @@ pub type Pose = [[f64; 4]; 4];
 mod tests {
     use super::*;
     use crate::plan::sampling::plan_setting;
+
+    #[test]
+    fn rounding_is_to_the_nearest_decimal_ties_to_even() {
+        assert_eq!(round_to(0.007_812_5, 6), 0.007_812);
+        assert_eq!(round_to(3.5, 0), 4.0);
+        assert_eq!(round_to(35.123_456, 3), 35.123);
+        assert_eq!(round_to(2.5, 0), 2.0);
+        assert_eq!(round_to(0.25, 1), 0.2);
+    }
 
     const QA: FrameQa = FrameQa {
         coverage: 0.5,

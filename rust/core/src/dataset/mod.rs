@@ -1,6 +1,7 @@
 //! The files of a build: layout, LLFF poses, splits, failures, statistics, the
 //! checksum manifest and the image check of `blurset verify` (names, atomic writes and
 //! licence ids are `ground`'s).
+pub mod build_tail;
 pub mod failures;
 pub mod layout;
 pub mod llff;

@@ -8,7 +8,7 @@
 //! A few images are in flight at once ([`GROUP`]) so memory stays bounded at any
 //! resolution; the next group starts when every image of the last one is done, so the
 //! rounds, their render calls and their EXR names follow from rendered pixels alone.
-use super::meta::ImageRender;
+use super::meta::{round_to, ImageRender};
 use crate::error::{Error, Result};
 use crate::image::accumulate::Accumulator;
 use crate::metrics::{half_noise_bound, HalfNoise};
@@ -93,12 +93,6 @@ impl Image {
             reached: rule.reached(h.mse_bound),
         })
     }
-}
-
-/// `x` rounded to `digits` decimals, correctly (the nearest decimal, ties to even): the
-/// figures meta.json records.
-fn round_to(x: f64, digits: usize) -> f64 {
-    format!("{x:.digits$}").parse().unwrap_or(x)
 }
 
 /// A finished image: the mean of both halves (every frame weighted by its samples) and
@@ -287,19 +281,5 @@ impl TargetImages {
     /// The record of every image done so far, in the order they finished.
     pub fn records(&self) -> &[(ImageKey, ImageRender)] {
         &self.records
-    }
-}
-
-#[cfg(test)]
-#[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
-mod tests {
-    use super::*;
-
-    #[test]
-    fn rounding_is_to_the_nearest_decimal_ties_to_even() {
-        assert_eq!(round_to(0.007_812_5, 6), 0.007_812);
-        assert_eq!(round_to(3.5, 0), 4.0);
-        assert_eq!(round_to(35.123_456, 3), 35.123);
-        assert_eq!(round_to(2.5, 0), 2.0);
     }
 }
