@@ -34,8 +34,11 @@ pub struct BuildTail {
     pub settings_complete: usize,
     pub failures: Vec<Value>,
     pub test_settings: usize,
-    pub skipped: Vec<(String, String)>,
+    pub skipped: Vec<Unreadable>,
 }
+
+/// A complete setting left out of the tail: its name, and why its meta.json does not read.
+pub type Unreadable = (String, String);
 
 /// A complete setting's meta.json, as the tail reads it.
 struct Setting {
@@ -63,7 +66,7 @@ impl Setting {
 
 /// The complete settings whose meta.json reads (an object with `uid` and a `views`
 /// list); the others are named with why (their object's next run redoes them).
-fn read_settings(out: &Path) -> Result<(Vec<Setting>, Vec<(String, String)>)> {
+fn read_settings(out: &Path) -> Result<(Vec<Setting>, Vec<Unreadable>)> {
     let (mut found, mut skipped) = (Vec::new(), Vec::new());
     for name in complete_settings(out)? {
         let path = out.join(&name).join(files::META);
