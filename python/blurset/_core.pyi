@@ -1311,6 +1311,7 @@ def object_qa_verdict(
 
 # --- the target loop (rust/py/src/target.rs) ------------------------------------------
 
+@final
 class TargetImages:
     """The images of one render phase of a setting rendered to the config's target: each
     image's two halves and its rounds stay in the core (`dataset/target_loop.rs`)."""
