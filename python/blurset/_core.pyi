@@ -36,10 +36,6 @@ def check_downsample(factors: list[int]) -> None:
 def preset_values(name: str) -> dict[str, bool | int | float | str]:
     """What preset `name` sets, option name -> value (ValueError: no such preset)."""
 
-def target_reached(config: BuildConfig, mse: float) -> bool:
-    """Whether an image whose render noise (MSE on its object pixels) is `mse` is at the
-    config's target: within 0.25 dB under it, where its rounds stop."""
-
 def target_next_round(
     config: BuildConfig,
     *,
@@ -1128,16 +1124,6 @@ class Plan:
         The blur renders of `sharp_views` are left out (their levels get the sharp image).
         With `sharp_samples` (BuildConfig.effective_sharp_samples) every render carries its
         samples."""
-    def round_renders(
-        self,
-        exr_dir: str | PathLike[str],
-        pin: int,
-        sharp_views: list[int],
-        rounds: list[rec.ImageRound],
-    ) -> list[rec.Render]:
-        """The renders of `rounds` of a target-driven build: each round of one image, its
-        frames per half as consecutive blocks of a `pin`-sample sequence on the half's
-        seed (`half`: 0 or 1), one render call per image, round and plan call."""
     def level_renders(
         self, view: int, level: int, prefix: str, pin: int | None = None
     ) -> list[rec.Render]:

@@ -5,15 +5,6 @@ blurset.stubgen from blurset-core's JSON Schemas (`make schemas`); do not edit."
 
 from typing import Any, Literal, NotRequired, TypedDict
 
-class ImageRound(TypedDict):
-    """One round of one image: its view and level, how many samples per frame and half it adds and how many each frame rendered before, and which round it is (EXR names)."""
-
-    add_per_frame: int
-    level: str
-    round: int
-    spent_per_frame: int
-    view: int
-
 class ImageRender(TypedDict):
     """How one image of a target-driven build was rendered (`views[].images[<level dir>]`)."""
 

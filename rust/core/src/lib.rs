@@ -31,7 +31,7 @@ pub use crate::plan::sampling::{
     plan_setting, plan_setting_priced, LevelPlan, SamplingConfig, SettingPlan,
 };
 pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
-pub use crate::plan::target::{round_renders, ImageRound, ImageState, TargetRule};
+pub use crate::plan::target::{ImageState, TargetRule};
 
 // Linear frames in, encoded images out; image files; render QA.
 pub use crate::image::accumulate::Accumulator;

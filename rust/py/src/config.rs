@@ -419,20 +419,9 @@ fn target_next_round(
     }))
 }
 
-/// Whether an image whose render noise is `mse` is at the config's target.
-#[pyfunction]
-fn target_reached(config: PyRef<'_, BuildConfig>, mse: f64) -> PyResult<bool> {
-    let rule = config
-        .0
-        .target()
-        .ok_or_else(|| PyValueError::new_err("the config has no target_psnr"))?;
-    Ok(rule.reached(mse))
-}
-
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(preset_values, m)?)?;
     m.add_function(wrap_pyfunction!(target_next_round, m)?)?;
-    m.add_function(wrap_pyfunction!(target_reached, m)?)?;
     m.add_class::<BuildConfig>()?;
     m.add_class::<SamplingConfig>()?;
     m.add_function(wrap_pyfunction!(default_sampling_config, m)?)?;

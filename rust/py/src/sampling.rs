@@ -76,22 +76,6 @@ impl Plan {
         }
     }
 
-    /// The renders of `rounds` of a target-driven build (core `round_renders`): each
-    /// round (dict: view, level, spent_per_frame, add_per_frame, round) of one image,
-    /// from that image's renders in `renders(exr_dir, pin, sharp_views)`.
-    fn round_renders<'py>(
-        &self,
-        py: Python<'py>,
-        exr_dir: PathBuf,
-        pin: u32,
-        sharp_views: Vec<usize>,
-        rounds: &Bound<'py, PyAny>,
-    ) -> PyResult<Bound<'py, PyAny>> {
-        let rounds: Vec<core::ImageRound> = from_py("rounds", rounds)?;
-        let base = self.0.renders_except(&exr_dir, &sharp_views, Some(pin));
-        to_py(py, &core::round_renders(&base, &rounds, pin))
-    }
-
     /// The renders of one blurry image (view, level), EXRs named `<prefix>_…`.
     #[pyo3(signature = (view, level, prefix, pin = None))]
     fn level_renders<'py>(

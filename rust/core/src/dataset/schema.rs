@@ -74,10 +74,8 @@ pub fn value_schemas() -> Vec<(&'static str, serde_json::Value)> {
     use super::stats::BuildStats;
     use crate::plan::renders::Render;
     use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan};
-    use crate::plan::target::ImageRound;
     use schemars::schema_for;
     vec![
-        ("ImageRound", schema_for!(ImageRound).to_value()),
         ("ImageRender", schema_for!(ImageRender).to_value()),
         ("Spread", schema_for!(crate::metrics::Spread).to_value()),
         ("Render", schema_for!(Render).to_value()),

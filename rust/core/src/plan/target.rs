@@ -156,7 +156,7 @@ pub fn half_seed(seed: u32, half: u32) -> u32 {
 
 /// One round of one image: its view and level, how many samples per frame and half
 /// it adds and how many each frame rendered before, and which round it is (EXR names).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ImageRound {
     pub view: usize,
     pub level: String,
