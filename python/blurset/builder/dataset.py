@@ -12,12 +12,14 @@ import platform
 import shutil
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from blurset import __version__, _core, layout, outputs, publish
 from blurset.config import BUILD, BuildConfig, flag
 from blurset.exceptions import ConfigError
 from blurset.objects import ObjectSpec
+from blurset.progress import Progress
 
 DATASET_NAME = "blurset Objaverse-Blur"
 # The files every process building into OUT shares (written under build_lock).
@@ -25,7 +27,7 @@ SHARED_FILES = (layout.FAILURES, layout.SPLITS, layout.DATASET, layout.MANIFEST)
 
 
 @contextlib.contextmanager
-def build_lock(out: Path):
+def build_lock(out: Path) -> Iterator[None]:
     """Serialize the writes shared by every process building into OUT."""
     with open(out / layout.BUILD_LOCK, "a") as f:
         fcntl.flock(f, fcntl.LOCK_EX)
@@ -35,7 +37,9 @@ def build_lock(out: Path):
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
-def sweep(out: Path, objs: list[ObjectSpec], cfg: BuildConfig, prog=None) -> list[str]:
+def sweep(
+    out: Path, objs: list[ObjectSpec], cfg: BuildConfig, prog: Progress | None = None
+) -> list[str]:
     """What a killed run left behind that no object owns: temp files of the shared
     writes (a partial setting and an object's scratch folder are its object's, cleaned
     under that object's lock: another process may be writing them now). And settings
@@ -106,7 +110,7 @@ def check_same_options(out: Path, cfg: BuildConfig) -> None:
         )
 
 
-def append_failures(out: Path, records: list[dict]) -> None:
+def append_failures(out: Path, records: list[dict[str, object]]) -> None:
     """Append failure records to failures.jsonl (call under build_lock)."""
     with open(out / layout.FAILURES, "a+b") as f:
         # A record torn by a kill mid-append gets its line ended first, so the next
@@ -121,7 +125,7 @@ def append_failures(out: Path, records: list[dict]) -> None:
         os.fsync(f.fileno())
 
 
-def finalize(out: Path, cfg: BuildConfig, seconds: float, vouched: list[str]) -> dict:
+def finalize(out: Path, cfg: BuildConfig, seconds: float, vouched: list[str]) -> dict[str, object]:
     """splits.json, dataset.json and failures.jsonl over what is on disk, written by the
     core from the settings' meta.json (`dataset/build_tail.rs`), and the manifest (call
     under build_lock). failures.jsonl keeps the latest record per object (or per

@@ -9,17 +9,26 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from blurset import _core, layout
 from blurset.config import BuildConfig
+
+if TYPE_CHECKING:
+    from blurset._records import Render
+    from blurset.worker_client import Worker
 
 # The passes a geometry render gives (the mask comes from the sharp image).
 RENDERED = ("depth", "normal")
 
 
 def render_geometry(
-    cfg: BuildConfig, worker: Any, frames: list[Any], exr_dir: Path, sharp: Path, n_views: int
+    cfg: BuildConfig,
+    worker: Worker,
+    frames: list[Render],
+    exr_dir: Path,
+    sharp: Path,
+    n_views: int,
 ) -> float:
     """The depth and/or normal files of every view at every size the build writes
     (`images/` and each `images_<f>/`): the seconds it took (0 when none is asked for).
@@ -29,28 +38,33 @@ def render_geometry(
     if not wanted:
         return 0.0
     t0 = time.time()
-    poses: dict[int, Any] = {}
+    poses: dict[int, Render] = {}
     for f in frames:
         if f["level"] == layout.SHARP:
             poses.setdefault(int(f["view"]), f)
+    views = sorted(poses)
     for factor in [1, *cfg.downsample]:
         for p in wanted:
             (sharp / layout.pass_dir(p, factor)).mkdir(parents=True, exist_ok=True)
         batch = [
             {
-                "c2w": f["c2w"],
-                "seed": f["seed"],
+                "c2w": poses[v]["c2w"],
+                "seed": poses[v]["seed"],
                 "out": str(exr_dir / f"geometry_{factor}_{v}.exr"),
                 "view": v,
                 "level": "geometry",
             }
-            for v, f in sorted(poses.items())
+            for v in views
         ]
 
         def write(
-            j: int, path: str, _origin: Any, factor: int = factor, batch: list = batch
+            j: int,
+            path: str,
+            _origin: tuple[int, int] | None,
+            factor: int = factor,
+            views: list[int] = views,
         ) -> None:
-            name = layout.image_name(batch[j]["view"], n_views)
+            name = layout.image_name(views[j], n_views)
             out = {
                 p: sharp / layout.pass_dir(p, factor) / layout.pass_file(p, name) for p in wanted
             }
