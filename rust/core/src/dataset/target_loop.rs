@@ -283,3 +283,133 @@ impl TargetImages {
         &self.records
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failing unwrap is a failing test
+mod tests {
+    use super::*;
+    use crate::image::exr::write::write_exr;
+    use crate::plan::config::BuildConfig;
+    use crate::plan::sampling::plan_setting;
+    use crate::rng::derive_seed;
+
+    const SIZE: u32 = 16;
+    const RULE: TargetRule = TargetRule {
+        target_psnr_db: 30.0,
+        pilot_samples: 8,
+        max_samples: 4096,
+    };
+
+    /// A stand-in render: grey 0.5 everywhere plus noise that falls as 1 / √samples,
+    /// drawn from its seed and sample block (independent halves, reproducible).
+    fn render(r: &Render) -> Result<()> {
+        let n = f64::from(r.samples.unwrap());
+        let key = u64::from(r.seed) << 32 | u64::from(r.sample_offset.unwrap());
+        let px = (SIZE * SIZE) as u64;
+        let rgba: Vec<f32> = (0..px)
+            .flat_map(|i| {
+                let u = (derive_seed(key, &[i]) >> 11) as f64 / (1u64 << 53) as f64;
+                let v = (0.5 + (u - 0.5) / n.sqrt()) as f32;
+                [v, v, v, 1.0]
+            })
+            .collect();
+        write_exr(Path::new(&r.out), SIZE, SIZE, &rgba)
+    }
+
+    fn images(dir: &Path) -> Result<(Vec<Render>, Vec<ImageKey>)> {
+        let cfg = BuildConfig {
+            views: 2,
+            levels: vec![1],
+            latents: 2,
+            resolution: SIZE,
+            ..Default::default()
+        };
+        let plan = plan_setting(&cfg.sampling(), "u", 90.0, 5, [1.0, 0.5, 0.5], &[])?;
+        let base = plan.renders_except(dir, &[], Some(RULE.sequence()));
+        let mut keys: Vec<ImageKey> = Vec::new();
+        for r in &base {
+            let k = (r.view, r.level.clone());
+            if !keys.contains(&k) {
+                keys.push(k);
+            }
+        }
+        Ok((base, keys))
+    }
+
+    fn scratch(name: &str) -> Result<std::path::PathBuf> {
+        let dir = std::env::temp_dir().join(format!("blurset-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io("mkdir", &dir, e))?;
+        Ok(dir)
+    }
+
+    #[test]
+    fn every_image_renders_to_the_target_and_leaves_once() -> Result<()> {
+        let dir = scratch("target-loop")?;
+        let (base, keys) = images(&dir)?;
+        let frames = |k: &ImageKey| {
+            base.iter()
+                .filter(|r| (r.view, &r.level) == (k.0, &k.1))
+                .count()
+        };
+        let frames: Vec<(ImageKey, u32)> =
+            keys.iter().map(|k| (k.clone(), frames(k) as u32)).collect();
+        let mut t = TargetImages::new(RULE, base, &keys, (SIZE, SIZE), [1.0; 3], RULE.sequence())?;
+        let mut done = Vec::new();
+        let mut rounds = 0;
+        loop {
+            let renders = t.next_renders()?;
+            for f in t.take_finished() {
+                // Both halves merged: every frame of every round, once per half.
+                let m = frames.iter().find(|(k, _)| *k == f.key).unwrap().1;
+                assert_eq!(f.image.count(), 2 * m * f.record.rounds, "{:?}", f.key);
+                done.push(f.key);
+            }
+            if renders.is_empty() {
+                break;
+            }
+            rounds += 1;
+            for (i, r) in renders.iter().enumerate() {
+                render(r)?;
+                t.add_exr(i, Path::new(&r.out), None)?;
+                assert!(!Path::new(&r.out).exists(), "an EXR is deleted once read");
+            }
+        }
+        // Every image once, in the order their rounds stopped; each reached the target,
+        // which its pilot (4 samples a frame and half) was far from.
+        let (mut a, mut b) = (done.clone(), keys.clone());
+        a.sort();
+        b.sort();
+        assert_eq!(a, b);
+        assert!(rounds >= 2);
+        for (key, r) in t.records() {
+            assert!(r.reached, "{key:?}: {r:?}");
+            assert!(
+                r.rounds >= 2 && r.pilot_psnr_db < RULE.target_psnr_db,
+                "{key:?}: {r:?}"
+            );
+            assert!(
+                r.render_psnr_db >= RULE.target_psnr_db - 1.0,
+                "{key:?}: {r:?}"
+            );
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn a_round_the_worker_did_not_deliver_whole_is_an_error() -> Result<()> {
+        let dir = scratch("target-short")?;
+        let (base, keys) = images(&dir)?;
+        let mut t = TargetImages::new(RULE, base, &keys, (SIZE, SIZE), [1.0; 3], RULE.sequence())?;
+        let renders = t.next_renders()?;
+        for (i, r) in renders.iter().enumerate().skip(1) {
+            render(r)?;
+            t.add_exr(i, Path::new(&r.out), None)?;
+        }
+        let err = t.next_renders().unwrap_err().to_string();
+        assert!(err.contains("the worker delivered"), "{err}");
+        assert!(t.add_exr(renders.len(), &dir.join("x.exr"), None).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+}
