@@ -278,7 +278,7 @@ def main() -> int:
         "ready": True,
         "blender": "stand-in",
         "blender_version": "stand-in",
-        "device": {"backend": "CPU", "devices": ["stand-in"]},
+        "device": {"backend": "CPU", "devices": ["stand-in"], "kernel": "analytic"},
         "pid": os.getpid(),
     }
     arch = os.environ.get("BLURSET_STANDIN_CUDA")

@@ -3,6 +3,7 @@
 One section per binding file; keep each section next to its Rust counterpart's name.
 """
 
+from collections.abc import Mapping
 from os import PathLike
 from pathlib import Path
 from typing import Any, Literal, TypeAlias, TypedDict, final
@@ -1495,3 +1496,10 @@ def record_schemas() -> list[tuple[str, Any]]:
 def value_schemas() -> list[tuple[str, Any]]:
     """(type name, JSON Schema) of every value the bindings hand across as a dict (what
     blurset/_records.pyi is generated from)."""
+
+def wire_frame(render: Mapping[str, Any]) -> dict[str, Any]:
+    """A render (a plan's, or a caller's dict) as one frame of a worker's render request:
+    its wire fields, typed and checked; ValueError naming what is wrong."""
+
+def worker_schemas() -> list[tuple[str, Any]]:
+    """(file stem, JSON Schema) of the worker's requests and replies."""

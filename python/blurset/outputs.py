@@ -171,13 +171,24 @@ def record_schemas() -> dict[str, Any]:
     return dict(_core.record_schemas())
 
 
+def worker_schemas() -> dict[str, Any]:
+    """The worker contract's JSON Schemas (dataset/wire.rs), by path under schemas/:
+    `worker/request.schema.json` (what the builder sends a Blender worker) and
+    `worker/reply.schema.json` (what it answers)."""
+    return {
+        f"worker/{stem.removeprefix('worker_')}.schema.json": schema
+        for stem, schema in _core.worker_schemas()
+    }
+
+
 def write_schemas(folder: Path) -> list[Path]:
-    """Write every record's JSON Schema into `folder` (`make schemas`: the repository's
-    schemas/ folder); returns the files."""
+    """Write every record's JSON Schema, and the worker contract's, into `folder` (`make
+    schemas`: the repository's schemas/ folder); returns the files."""
     import json
 
     out = []
-    for name, schema in record_schemas().items():
+    for name, schema in {**record_schemas(), **worker_schemas()}.items():
+        (Path(folder) / name).parent.mkdir(parents=True, exist_ok=True)
         layout.write_text_atomic(Path(folder) / name, json.dumps(schema, indent=2) + "\n")
         out.append(Path(folder) / name)
     return out

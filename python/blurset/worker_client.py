@@ -50,32 +50,11 @@ def kill_all() -> None:
 
 
 def _frame_item(f: Mapping[str, Any]) -> dict[str, Any]:
-    """One frame of a render request as the worker protocol spells it."""
-    item: dict[str, Any] = {
-        "c2w": _matrix(f["c2w"]),
-        "seed": int(f["seed"]),
-        "out": str(Path(f["out"]).resolve()),
-    }
-    if f.get("samples") is not None:
-        item["samples"] = int(f["samples"])
-    if f.get("sample_offset") is not None:
-        item["sample_offset"] = int(f["sample_offset"])
-        item["sample_sequence"] = int(f["sample_sequence"])
-    if f.get("motion"):
-        m = f["motion"]
-        item["motion"] = {"steps": int(m["steps"]), "keys": [_matrix(k) for k in m["keys"]]}
-    if f.get("region") is not None:
-        item["region"] = [int(x) for x in f["region"]]
-    if f.get("dof"):
-        d = f["dof"]
-        item["dof"] = {
-            "focus_distance": float(d["focus_distance"]),
-            "aperture_radius": float(d["aperture_radius"]),
-        }
-    for key in ("call", "view", "level"):  # which render call renders it
-        if f.get(key) is not None:
-            item[key] = f[key]
-    return item
+    """One frame of a render request: the core's spelling of it (dataset/wire.rs, the
+    contract in schemas/worker/), its numbers made plain and its EXR path absolute."""
+    plain = {**f, "c2w": _matrix(f["c2w"]), "seed": int(f["seed"]),
+             "out": str(Path(f["out"]).resolve())}  # fmt: skip
+    return dict(_core.wire_frame(plain))
 
 
 class WorkerError(BlursetError):

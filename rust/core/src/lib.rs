@@ -98,6 +98,8 @@ pub use crate::dataset::splits::{make_splits, seeded_subset, Holdout, SettingEnt
 pub use crate::dataset::stats::{build_stats, BuildStats};
 pub use crate::dataset::target_loop::{Finished, ImageKey, TargetImages};
 pub use crate::dataset::verify::{check_images, ImageCheck};
+/// The worker contract: the JSON lines to and from a Blender worker, typed.
+pub use crate::dataset::wire;
 pub use crate::ground::atomic::{replace_dir, write_atomic};
 pub use crate::ground::kind::ImageKind;
 pub use crate::ground::license::{

@@ -21,6 +21,7 @@ mod sampling;
 mod stats;
 mod target;
 mod tradeoff;
+mod wire;
 
 /// Run long core work without the GIL, so Python threads (progress bars, Ray) go on.
 pub(crate) fn run_detached<T, F>(py: Python<'_>, f: F) -> PyResult<T>
@@ -52,5 +53,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     tradeoff::register(m)?;
     stats::register(m)?;
     target::register(m)?;
+    wire::register(m)?;
     Ok(())
 }

@@ -17,3 +17,4 @@ pub mod splits;
 pub mod stats;
 pub mod target_loop;
 pub mod verify;
+pub mod wire;

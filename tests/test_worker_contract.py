@@ -1,0 +1,157 @@
+"""The worker contract (issue 49): every line the builder sends a Blender worker and every
+line a worker sends back fits schemas/worker/ (the core's dataset/wire.rs types), for the
+real worker and for the stand-in the fast layer runs on; the shipped schemas are the
+core's; a render's frame is spelled by the core alone."""
+
+from __future__ import annotations
+
+import copy
+import json
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import pytest
+from blurset import outputs
+from blurset import worker_client as wc
+from blurset.demo import make_demo_objects
+
+ROOT = Path(__file__).resolve().parents[1]
+EYE = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 3.0], [0.0, 0.0, 0.0, 1.0]]
+
+
+def _validators() -> tuple[jsonschema.Draft202012Validator, jsonschema.Draft202012Validator]:
+    s = outputs.worker_schemas()
+    return (
+        jsonschema.Draft202012Validator(s["worker/request.schema.json"]),
+        jsonschema.Draft202012Validator(s["worker/reply.schema.json"]),
+    )
+
+
+def _traced(monkeypatch) -> tuple[list[dict], list[dict]]:
+    """Every message a Worker sends and receives from now on, as it crossed the pipe (a
+    copy: the client adds its own fields to a load reply afterwards)."""
+    sent: list[dict] = []
+    got: list[dict] = []
+    send, receive = wc.Worker._send, wc.Worker._receive
+
+    def _send(self: wc.Worker, msg: dict[str, Any]) -> None:
+        sent.append(json.loads(json.dumps(msg)))
+        send(self, msg)
+
+    def _receive(self: wc.Worker, **kw: Any) -> dict[str, Any]:
+        msg = receive(self, **kw)
+        got.append(copy.deepcopy(msg))
+        return msg
+
+    monkeypatch.setattr(wc.Worker, "_send", _send)
+    monkeypatch.setattr(wc.Worker, "_receive", _receive)
+    return sent, got
+
+
+def _exercise(w: wc.Worker, work: Path) -> None:
+    """Every kind of request and reply: ready, a refused load, a load, renders with every
+    frame field and every request option."""
+    bad = work / "not_a.glb"
+    bad.write_bytes(b"not a GLB")
+    with pytest.raises(wc.WorkerError):
+        w.load(bad, work / "v.npy")
+    w.load(make_demo_objects(work / "objs")[0], work / "v.npy")
+    frames = [
+        {"c2w": EYE, "seed": 1, "out": work / "a.exr", "region": [0, 0, 16, 16], "call": 0,
+         "view": 0, "level": "sharp", "kind": "Sharp", "phase": 0},
+        {"c2w": EYE, "seed": 2, "out": work / "b.exr", "samples": 2, "sample_offset": 2,
+         "sample_sequence": 4, "view": 0, "level": "blur_1", "half": 1},
+        {"c2w": EYE, "seed": 3, "out": work / "c.exr", "motion": {"steps": 1, "keys": [EYE] * 3}},
+        {"c2w": EYE, "seed": 4, "out": work / "d.exr",
+         "dof": {"focus_distance": 3.0, "aperture_radius": 0.01}},
+    ]  # fmt: skip
+    w.render(frames, resolution=32, fov_deg=40.0, samples=1, crop=True)
+    one = [{"c2w": EYE, "seed": 5, "out": work / "e.exr"}]
+    w.render(one, resolution=32, fov_deg=40.0, samples=2, batch=False, exr_codec="ZIP",
+             noise_threshold=0.1)  # fmt: skip
+    w.render(one, resolution=32, fov_deg=40.0, samples=1, guides=True)
+    w.render(one, resolution=32, fov_deg=40.0, samples=1, geometry=True)
+
+
+def _check(sent: list[dict], got: list[dict], blender: str | None) -> None:
+    request, reply = _validators()
+    # close() writes its quit line directly: the contract has it too.
+    for msg in [*sent, {"cmd": "quit"}]:
+        errors = [e.message for e in request.iter_errors(msg)]
+        assert not errors, (msg.get("cmd"), errors[:1])
+    for msg in got:
+        errors = [e.message for e in reply.iter_errors(msg)]
+        assert not errors, (sorted(msg), errors[:1])
+    cmds = [m["cmd"] for m in sent]
+    assert cmds.count("load") == 2 and cmds.count("render") >= 5, cmds
+    kinds = {
+        next(k for k in ("ready", "frame", "done", "reason", "bbox_dims") if k in m) for m in got
+    }
+    assert kinds == {"ready", "frame", "done", "reason", "bbox_dims"}, kinds
+    assert blender is None or "cuda" in got[0], "the stand-in's GPU ready line went untested"
+    # The --probe line of the same worker.
+    out = subprocess.run(wc.worker_command(blender, 1, probe=True), capture_output=True,
+                         timeout=300, check=True).stdout.decode()  # fmt: skip
+    probe = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    assert probe and not list(reply.iter_errors(probe[-1])), probe
+
+
+@pytest.mark.blender
+def test_the_real_worker_speaks_the_contract(tmp_path, monkeypatch) -> None:
+    sent, got = _traced(monkeypatch)
+    with wc.Worker(threads=1, timeout=300, workdir=tmp_path / "scratch") as w:
+        _exercise(w, tmp_path)
+    _check(sent, got, None)
+
+
+def test_the_standin_worker_speaks_the_contract(tmp_path, monkeypatch, standin_blender) -> None:
+    # As a GPU worker whose arch Blender ships no kernel for: "cuda" in its ready line.
+    monkeypatch.setenv("BLURSET_STANDIN_CUDA", "sm_90")
+    monkeypatch.setenv("CUDA_CACHE_PATH", str(tmp_path / "cuda-cache"))
+    sent, got = _traced(monkeypatch)
+    with wc.Worker(blender=str(standin_blender), threads=1, timeout=120,
+                   workdir=tmp_path / "scratch") as w:  # fmt: skip
+        _exercise(w, tmp_path)
+    _check(sent, got, str(standin_blender))
+
+
+def test_the_shipped_worker_schemas_are_the_cores() -> None:
+    shipped = {
+        f"worker/{p.name}": json.loads(p.read_text())
+        for p in (ROOT / "schemas" / "worker").glob("*.schema.json")
+    }
+    assert shipped == outputs.worker_schemas(), "schemas/worker/ differs: run `make schemas`"
+
+
+def test_a_message_outside_the_contract_is_refused() -> None:
+    """The schemas bite: a misspelled field, a missing one, a 3×4 camera, an unknown command."""
+    request, reply = _validators()
+    frame = {"c2w": EYE, "seed": 1, "out": "/a.exr"}
+    render = {"cmd": "render", "resolution": 8, "fov_deg": 40.0, "samples": 1, "frames": [frame]}
+    assert not list(request.iter_errors(render))
+    for bad in (
+        {**render, "frames": [{**frame, "sampels": 2}]},
+        {**render, "frames": [{"c2w": EYE, "out": "/a.exr"}]},
+        {**render, "frames": [{**frame, "c2w": EYE[:3]}]},
+        {**render, "cmd": "paint"},
+    ):
+        assert list(request.iter_errors(bad)), bad
+    assert list(reply.iter_errors({"frame": 0, "out": "a", "seconds": 0.1}))  # no origin
+
+
+def test_the_core_spells_a_frame_and_refuses_a_broken_one() -> None:
+    """worker_client sends what _core.wire_frame makes of a render: its wire fields only
+    (a plan render's kind, phase and half stay home), checked."""
+    plan_render = {"view": 2, "level": "blur_1", "kind": {"Blur": 1}, "phase": 1, "half": 0,
+                   "c2w": EYE, "seed": 9, "out": "/x/a.exr", "samples": 4, "call": 7}  # fmt: skip
+    item = wc._frame_item(plan_render)
+    assert set(item) == {"view", "level", "c2w", "seed", "out", "samples", "call"}
+    request, _ = _validators()
+    msg = {"cmd": "render", "resolution": 8, "fov_deg": 40.0, "samples": 1, "frames": [item]}
+    assert not list(request.iter_errors(json.loads(json.dumps(msg))))
+    with pytest.raises(ValueError, match="sample_sequence"):
+        wc._frame_item({**plan_render, "sample_offset": 4})
+    with pytest.raises(ValueError, match="keys"):
+        wc._frame_item({**plan_render, "motion": {"steps": 2, "keys": [EYE] * 3}})
