@@ -15,6 +15,10 @@ killed build leaves them where the next run cleans up, not in /tmp.
 stdin: one JSON command per line. Replies: one JSON object per line on the process's
 original stdout, which this script takes over privately at start-up; fd 1 then points at
 stderr so Blender's C-level prints ("Fra:", "Saved:") cannot corrupt the protocol.
+The contract is typed once, in the core (rust/core/src/dataset/wire.rs): its schemas are
+schemas/worker/request.schema.json and reply.schema.json, and tests/test_worker_contract.py
+checks every line this worker and the tests' stand-in exchange against them. Below, the
+same in short.
 
   {"cmd":"load","glb":P,"vertices_out":NPY[,"unlit":"lit"|"emission"]
    [,"light_paths":"auto"|"fixed"]}
