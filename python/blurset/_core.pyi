@@ -189,6 +189,7 @@ class BuildConfigRecord(TypedDict):
     blurry_test_views: bool
     downsample: list[int]
     defocus: list[int]
+    shake: list[int]
     passes: list[str]
     workers: int
     workers_per_gpu: int | None
@@ -371,6 +372,8 @@ class BuildConfig:
     @property
     def defocus(self) -> list[int]: ...
     @property
+    def shake(self) -> list[int]: ...
+    @property
     def passes(self) -> list[str]: ...
     @property
     def workers(self) -> int: ...
@@ -547,6 +550,16 @@ def parse_defocus_dir(name: str) -> int | None:
 
 def is_level_dir(name: str) -> bool:
     """Whether a name is a level directory a build writes (sharp, blur_<l>, defocus_<l>)."""
+
+def level_record(name: str) -> tuple[str, str] | None:
+    """Where meta.json records a level directory's image in each view: (the key of its
+    kind's map, its level's key), `("levels", "2")` for `blur_2`; None for `sharp` and
+    for a name that is no level directory."""
+
+def written_pose(name: str) -> bool:
+    """Whether a level directory's images are seen from the written poses (sharp, defocus)
+    rather than being means whose mean latent poses meta.json records; False for a name
+    that is no level directory."""
 
 def sort_level_dirs(names: list[str]) -> list[str]:
     """Level directory names in level order; other names are dropped."""

@@ -45,7 +45,13 @@ class ImageKindOf2(TypedDict):
     level: int
     type: Literal["defocus"]
 
-ImageKind = ImageKindOf0 | ImageKindOf1 | ImageKindOf2
+class ImageKindOf3(TypedDict):
+    """A hand-held camera turning about its centre during the exposure (`shake_<l>`)."""
+
+    level: int
+    type: Literal["shake"]
+
+ImageKind = ImageKindOf0 | ImageKindOf1 | ImageKindOf2 | ImageKindOf3
 
 class Motion(TypedDict):
     """The camera path of one Cycles motion blur render."""
@@ -108,6 +114,7 @@ class SamplingConfig(TypedDict):
     resolution: NotRequired[int]
     samples: NotRequired[int]
     samples_total: NotRequired[int | None]
+    shake: NotRequired[list[int]]
     trajectory: NotRequired[TrajectoryAnchor]
     views: NotRequired[int]
     window_deg: NotRequired[float]
@@ -171,6 +178,26 @@ class LevelPlan(TypedDict):
     samples_per_frame: int
     w_l: float
 
+class ShakePose(TypedDict):
+    """The camera's turn at one instant of the exposure."""
+
+    pitch_deg: float
+    t: float
+    yaw_deg: float
+
+class ShakePlan(TypedDict):
+    """One shake level of one view, as meta.json records it (`views[i].shake[l]`)."""
+
+    amplitude_px: float
+    method: BlurMethod
+    motion_steps: NotRequired[int | None]
+    path_px: float
+    poses: list[ShakePose]
+    sample_offsets: NotRequired[list[int]]
+    sample_sequence: NotRequired[int | None]
+    samples_per_frame: int
+    seeds: list[int]
+
 class Trajectory(TypedDict):
     dphi_deg: float
     dr: float
@@ -190,6 +217,7 @@ class ViewPlan(TypedDict):
     orientation: float
     phi_deg: float
     r: float
+    shake: NotRequired[dict[str, ShakePlan]]
     sharp_seed: int
     theta_deg: float
     trajectory: Trajectory
@@ -439,7 +467,6 @@ class BuildStats(TypedDict):
     build: str
     counts: Counts
     damaged: NotRequired[list[Damaged]]
-    defocus_coc_px: NotRequired[dict[str, list[float | None]]]
     depth_range: list[float]
     failures: list[Failure]
     flatness: list[float]
@@ -616,6 +643,7 @@ class MetaView(TypedDict):
     phi_deg: float
     qa: FrameQa
     r: float
+    shake: NotRequired[dict[str, ShakePlan]]
     sharp_seed: int
     theta_deg: float
     trajectory: Trajectory
@@ -786,7 +814,6 @@ class StatsRecord(TypedDict):
     build: str
     counts: Counts
     damaged: NotRequired[list[Damaged]]
-    defocus_coc_px: NotRequired[dict[str, list[float | None]]]
     depth_range: list[float]
     failures: list[Failure]
     flatness: list[float]

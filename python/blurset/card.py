@@ -313,9 +313,9 @@ def _level_table(metas: list[dict], levels: list[str]) -> list[str]:
         if lvl == layout.SHARP:
             rows.append("| sharp | 0 | 0 | 1 (ground truth) |")
             continue
-        if layout.is_defocus_dir(lvl):
-            continue  # a lens, not a motion: _defocus_table
-        key = lvl.partition("_")[2]
+        kind, key = layout.level_record(lvl) or ("", "")
+        if kind != "levels":
+            continue  # not a motion (a lens: _defocus_table)
         w, px, m = [], [], []
         for meta in metas:
             for v in meta.get("views", []):

@@ -197,7 +197,7 @@ def open_scene(
     rows = np.asarray(_core.read_poses_bounds(scene_dir / layout.POSES_BOUNDS), np.float64)
     rows = rows[:: len(rows) // n] if len(rows) != n else rows
     cv, gl = _cameras(rows)
-    if pose == "mean" and level != layout.SHARP and not layout.is_defocus_dir(level):
+    if pose == "mean" and not layout.written_pose(level):
         cv, gl = _mean_cameras(sdir, level, n)
     images = _read(image_files)
     clean = _read(clean_files, images.shape[1:3])
@@ -389,7 +389,7 @@ def _scene_from_rows(
     clean = clean.astype(np.float32) / 255.0
     pb = np.asarray([r["poses_bounds"] for r in mine], dtype=np.float64)
     cv, gl = _cameras(pb)
-    if pose == "mean" and level != layout.SHARP and not layout.is_defocus_dir(level):
+    if pose == "mean" and not layout.written_pose(level):
         means = [r.get("mean_c2w") for r in mine]
         if any(m is None for m in means):
             raise InputError(

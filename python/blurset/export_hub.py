@@ -424,13 +424,13 @@ def _c2w_opengl(row: np.ndarray) -> list[list[float]]:
 
 def _view_record(meta: dict, view: int, level: str) -> dict:
     """meta.json's records of one view at one level: the level's (`views[].levels[l]`),
-    its rendered image's (`views[].images[level]`) and a defocus level's lens."""
+    its rendered image's (`views[].images[level]`) and another kind's (a defocus level's
+    lens: `views[].defocus[l]`), under the key of its kind (`level` for a blur level)."""
     v = meta["views"][view]
     rec: dict[str, Any] = {}
-    if level.startswith("blur_"):
-        rec["level"] = (v.get("levels") or {}).get(level.partition("_")[2])
-    if layout.is_defocus_dir(level):
-        rec["defocus"] = (v.get("defocus") or {}).get(level.partition("_")[2])
+    if (at := layout.level_record(level)) is not None:
+        kind, key = at
+        rec["level" if kind == "levels" else kind] = (v.get(kind) or {}).get(key)
     if isinstance(im := (v.get("images") or {}).get(level), dict):
         rec["image"] = im
     return {k: x for k, x in rec.items() if x is not None}

@@ -139,6 +139,19 @@ def is_defocus_dir(name: str) -> bool:
     return _core.parse_defocus_dir(name) is not None
 
 
+def level_record(name: str) -> tuple[str, str] | None:
+    """Where meta.json records a level's image in each view: (its kind's key, its level's
+    key), `("levels", "2")` for `blur_2`, `("defocus", "1")` for `defocus_1`; None for
+    `sharp` and for a name that is no level directory."""
+    return _core.level_record(name)
+
+
+def written_pose(name: str) -> bool:
+    """Whether a level's images are seen from the written poses (sharp, defocus) rather
+    than being means over a moving camera whose mean latent poses meta.json records."""
+    return _core.written_pose(name)
+
+
 def sort_level_dirs(names: list[str]) -> list[str]:
     """Level directory names in level order (sharp first, then by number)."""
     return _core.sort_level_dirs(names)

@@ -63,6 +63,11 @@ FIGURES = {
         "largest circle of confusion on the object  (px at build resolution)",
         "views",
     ),
+    "shake_path_px": (
+        "Camera shake per level",
+        "length of the image centre's path over the exposure  (px at build resolution)",
+        "views",
+    ),
     "render_psnr": (
         "Render PSNR per image (level 0: sharp)",
         "estimated render PSNR on the object's pixels  (dB)",
@@ -253,12 +258,14 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
     return written
 
 
+# Each degradation kind's statistic beside motion blur (the core's KIND_STATS), by the
+# prefix of its level folders: from builds with that kind only.
+KINDS = {"defocus_coc_px": "defocus", "shake_path_px": "shake"}
 # The per-level figures, in report order; latent_frames as bars of counts, the rest as
-# histograms. defocus_coc_px comes from --defocus builds only; render_psnr and
-# image_samples from --target-psnr builds only: what each image cost and reached (level
-# "0" is the sharp image).
+# histograms. render_psnr and image_samples from --target-psnr builds only: what each
+# image cost and reached (level "0" is the sharp image).
 PER_LEVEL = (
-    "blur_weight", "latent_frames", "motion_px", "defocus_coc_px", "render_psnr", "image_samples",
+    "blur_weight", "latent_frames", "motion_px", *KINDS, "render_psnr", "image_samples",
 )  # fmt: skip
 PER_IMAGE = ("render_psnr", "image_samples")
 
@@ -304,8 +311,8 @@ def _per_level_figure(stats: dict, name: str, blurry: str, out_dir: Path, max_bi
         per_image = name in PER_IMAGE
         what = f"{n} images" if per_image else f"{n} blurry views"
         label = "sharp" if per_image and lvl == "0" else f"level {lvl}"
-        if name == "defocus_coc_px":
-            what, label = f"{n} defocused views", f"defocus_{lvl}"
+        if name in KINDS:
+            what, label = f"{n} views", f"{KINDS[name]}_{lvl}"
         panel = f"{label} ({what})" if by_level else "no blur levels (sharp only)"
         ax.set(title=panel, xlabel=xlabel, ylabel=ylabel)
     fig.suptitle(f"{title} — {blurry}")

@@ -87,7 +87,7 @@ def mean_latent_poses(scene_dir: Path, n: int):
     recorded them."""
     level = scene_dir.name
     # Sharp and defocus images are rendered at the written pose: no mean to report.
-    if level == layout.SHARP or layout.is_defocus_dir(level) or not layout.is_level_dir(level):
+    if layout.written_pose(level) or not layout.is_level_dir(level):
         return None
     if not (scene_dir.parent / layout.META).is_file():
         return None

@@ -58,6 +58,22 @@ fn is_level_dir(name: &str) -> bool {
     core::is_level_dir(name)
 }
 
+/// Where meta.json records a level directory's image in each view: (the key of its
+/// kind's map, its level's key), `("levels", "2")` for `blur_2`; None for `sharp` and
+/// for a name that is no level directory.
+#[pyfunction]
+fn level_record(name: &str) -> Option<(&'static str, String)> {
+    core::ImageKind::parse(name).and_then(core::ImageKind::record)
+}
+
+/// Whether a level directory's images are seen from the written poses (sharp, defocus)
+/// rather than being means whose mean latent poses meta.json records; False for a name
+/// that is no level directory.
+#[pyfunction]
+fn written_pose(name: &str) -> bool {
+    core::ImageKind::parse(name).is_some_and(core::ImageKind::written_pose)
+}
+
 /// Level directory names in level order; other names are dropped.
 #[pyfunction]
 fn sort_level_dirs(names: Vec<String>) -> Vec<String> {
@@ -282,6 +298,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(parse_level_dir, m)?)?;
     m.add_function(wrap_pyfunction!(defocus_dir, m)?)?;
     m.add_function(wrap_pyfunction!(parse_defocus_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(level_record, m)?)?;
+    m.add_function(wrap_pyfunction!(written_pose, m)?)?;
     m.add_function(wrap_pyfunction!(is_level_dir, m)?)?;
     m.add_function(wrap_pyfunction!(sort_level_dirs, m)?)?;
     m.add_function(wrap_pyfunction!(setting_levels, m)?)?;

@@ -11,8 +11,6 @@ use crate::plan::camera::orbit_c2w;
 use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, LightPaths, Preset};
 use crate::plan::config::BuildConfig;
 use crate::plan::cost::BlurChoice;
-use crate::plan::defocus::Defocus;
-use crate::plan::degradation::Degradation;
 use crate::plan::sampling::{
     rows, LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
 };
@@ -623,9 +621,10 @@ pub struct ReadView {
     /// `--target-psnr` builds: per level directory.
     #[serde(default)]
     pub images: BTreeMap<String, ReadImage>,
-    /// `--defocus` builds: per defocus level, what its statistic reads.
-    #[serde(default)]
-    pub defocus: BTreeMap<String, <Defocus as Degradation>::Read>,
+    /// The view's other fields, among them each degradation kind's levels (`defocus`
+    /// …), which the statistics read through the kind ([`crate::plan::sampling::KIND_STATS`]).
+    #[serde(flatten)]
+    pub rest: BTreeMap<String, serde_json::Value>,
 }
 
 /// The fields of [`Meta`] the statistics use (older metas may lack `levels`).

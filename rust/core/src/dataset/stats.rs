@@ -32,8 +32,7 @@ use super::layout::{self, Scan};
 use super::meta::{ReadLevel as MetaLevel, ReadMeta as Meta, ReadView as MetaView};
 use crate::error::{Error, Result};
 use crate::ground::names::parse_level_dir;
-use crate::plan::defocus::Defocus;
-use crate::plan::degradation::Degradation;
+use crate::plan::sampling::KIND_STATS;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
@@ -90,7 +89,6 @@ pub const QUANTITIES: &[(&str, &str, &str)] = &[
         "px",
         "largest screen motion of a bounding-box corner over the trajectory at level l (one per blurry view)",
     ),
-    Defocus::STAT,
     (
         "render_psnr",
         "dB",
@@ -256,10 +254,11 @@ pub struct BuildStats {
     pub blur_weight: BTreeMap<u32, Vec<Option<f64>>>,
     pub latent_frames: BTreeMap<u32, Vec<Option<u64>>>,
     pub motion_px: BTreeMap<u32, Vec<Option<f64>>>,
-    /// `--defocus` builds (absent otherwise): per defocus level, the largest circle of
-    /// confusion on the object, null where the view holds the sharp image.
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub defocus_coc_px: BTreeMap<u32, Vec<Option<f64>>>,
+    /// Each degradation kind's statistic, by its name (`defocus_coc_px` of `--defocus`
+    /// builds: per defocus level, the largest circle of confusion on the object), per
+    /// level, null where the view holds the sharp image; absent without the kind.
+    #[serde(flatten)]
+    pub kinds: BTreeMap<String, BTreeMap<u32, Vec<Option<f64>>>>,
     /// `--target-psnr` builds (absent otherwise): per level, 0 the sharp image.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub render_psnr: BTreeMap<u32, Vec<Option<f64>>>,
@@ -345,9 +344,9 @@ struct ViewRecord {
     levels: BTreeMap<u32, MetaLevel>,
     /// Under a target: (samples, estimated render PSNR) per level, 0 the sharp image.
     images: BTreeMap<u32, (u64, f64)>,
-    /// Per defocus level, the largest circle of confusion on the object (px); none where
+    /// Each degradation kind's statistic per level, by the statistic's name; none where
     /// the view holds the sharp image.
-    defocus: BTreeMap<u32, f64>,
+    kinds: BTreeMap<&'static str, BTreeMap<u32, f64>>,
 }
 
 struct SettingRecord {
@@ -428,7 +427,7 @@ fn read_setting(dir: &Path, name: &str) -> Result<SettingRecord> {
 
 /// One view of a meta.json at `path`, checked: its numbers, then its blur levels
 /// (their keys added to `level_keys`; none kept for a `sharp_copy`), its scene range,
-/// its images, its defocus levels.
+/// its images, each degradation kind's levels.
 fn read_view(
     v: &MetaView,
     sharp_copy: bool,
@@ -470,10 +469,26 @@ fn read_view(
         })?;
         images.insert(l, (im.samples, im.render_psnr_db));
     }
-    let mut defocus = BTreeMap::new();
-    for (key, d) in v.defocus.iter().filter(|_| !sharp_copy) {
-        let l = level_key(key, i, Defocus::NAME, path)?;
-        defocus.insert(l, Defocus::stat(d));
+    let mut kinds = BTreeMap::new();
+    for kind in KIND_STATS.iter().filter(|_| !sharp_copy) {
+        let Some(levels) = v.rest.get(kind.name).and_then(|x| x.as_object()) else {
+            continue;
+        };
+        let mut stat = BTreeMap::new();
+        for (key, rec) in levels {
+            let l = level_key(key, i, kind.name, path)?;
+            let x = (kind.read)(rec).ok_or_else(|| {
+                input_error(
+                    format!(
+                        "bad meta.json (view {i}: {} level {key} unreadable)",
+                        kind.name
+                    ),
+                    path,
+                )
+            })?;
+            stat.insert(l, x);
+        }
+        kinds.insert(kind.stat.0, stat);
     }
     Ok(ViewRecord {
         index: i,
@@ -484,7 +499,7 @@ fn read_view(
         w_u: v.w_u,
         levels,
         images,
-        defocus,
+        kinds,
     })
 }
 
@@ -642,8 +657,7 @@ fn no_views(
         // The build by its folder's name: a published stats.json names no builder path.
         build: build_name(out),
         counts: Counts::default(),
-        quantities: QUANTITIES
-            .iter()
+        quantities: quantities()
             .map(|(n, u, d)| Quantity {
                 name: n.to_string(),
                 unit: u.to_string(),
@@ -667,7 +681,7 @@ fn no_views(
         blur_weight: per_level(levels, n_views),
         latent_frames: per_level(levels, n_views),
         motion_px: per_level(levels, n_views),
-        defocus_coc_px: BTreeMap::new(),
+        kinds: BTreeMap::new(),
         render_psnr: BTreeMap::new(),
         image_samples: BTreeMap::new(),
     }
@@ -684,9 +698,15 @@ fn per_level<T>(levels: &BTreeSet<u32>, n_views: usize) -> BTreeMap<u32, Vec<T>>
 /// Every view of every setting, a row of each column; a per-level column has a row of
 /// every view (null where the view has no such level).
 fn add_views(st: &mut BuildStats, records: Vec<SettingRecord>, levels: &BTreeSet<u32>) {
-    let defocus_levels: BTreeSet<u32> = records
+    // Each kind's levels over every view: (statistic, level).
+    let kind_levels: BTreeSet<(&str, u32)> = records
         .iter()
-        .flat_map(|r| r.views.iter().flat_map(|v| v.defocus.keys().copied()))
+        .flat_map(|r| r.views.iter())
+        .flat_map(|v| {
+            v.kinds
+                .iter()
+                .flat_map(|(name, m)| m.keys().map(move |&l| (*name, l)))
+        })
         .collect();
     let with_sharp: Vec<u32> = std::iter::once(0).chain(levels.iter().copied()).collect();
     for (k, r) in records.into_iter().enumerate() {
@@ -710,11 +730,13 @@ fn add_views(st: &mut BuildStats, records: Vec<SettingRecord>, levels: &BTreeSet
                     .or_default()
                     .push(lp.and_then(|x| x.motion_px));
             }
-            for &l in &defocus_levels {
-                st.defocus_coc_px
+            for &(name, l) in &kind_levels {
+                st.kinds
+                    .entry(name.to_string())
+                    .or_default()
                     .entry(l)
                     .or_default()
-                    .push(v.defocus.get(&l).copied());
+                    .push(v.kinds.get(name).and_then(|m| m.get(&l)).copied());
             }
             for &l in &with_sharp {
                 let im = v.images.get(&l);
@@ -784,10 +806,23 @@ fn counts(
 }
 
 fn unit_of(q: &str) -> &'static str {
-    QUANTITIES
-        .iter()
+    quantities()
         .find(|(n, _, _)| *n == q)
         .map_or("", |(_, u, _)| u)
+}
+
+/// Every quantity: [`QUANTITIES`] with each degradation kind's statistic after the
+/// motion blur's.
+fn quantities() -> impl Iterator<Item = (&'static str, &'static str, &'static str)> {
+    let at = QUANTITIES
+        .iter()
+        .position(|(n, _, _)| *n == "motion_px")
+        .map_or(QUANTITIES.len(), |i| i + 1);
+    QUANTITIES[..at]
+        .iter()
+        .copied()
+        .chain(KIND_STATS.iter().map(|k| k.stat))
+        .chain(QUANTITIES[at..].iter().copied())
 }
 
 fn summaries(st: &BuildStats) -> Vec<Summary> {
@@ -826,12 +861,14 @@ fn summaries(st: &BuildStats) -> Vec<Summary> {
             &present(v),
         ));
     }
-    for (l, v) in &st.defocus_coc_px {
-        out.push(summarize(
-            &format!("defocus_coc_px_{l}"),
-            unit_of("defocus_coc_px"),
-            &present(v),
-        ));
+    for (name, levels) in &st.kinds {
+        for (l, v) in levels {
+            out.push(summarize(
+                &format!("{name}_{l}"),
+                unit_of(name),
+                &present(v),
+            ));
+        }
     }
     for (l, v) in &st.render_psnr {
         out.push(summarize(

@@ -31,18 +31,51 @@ pub enum ImageKind {
     Blur(u32),
     /// Depth of field of a thin lens (`defocus_<l>`, issue 35).
     Defocus(u32),
+    /// A hand-held camera turning about its centre during the exposure (`shake_<l>`).
+    Shake(u32),
 }
 
-/// Each degraded kind's directory prefix, in level order (sharp comes first).
-const PREFIXES: [(&str, fn(u32) -> ImageKind); 2] =
-    [("blur_", ImageKind::Blur), ("defocus_", ImageKind::Defocus)];
+/// What sets a degraded kind's images apart, one row per kind in level order (sharp
+/// comes first).
+struct Row {
+    /// Its level directories' prefix.
+    prefix: &'static str,
+    make: fn(u32) -> ImageKind,
+    /// Its records' key in a view of meta.json (`views[i].<key>["<l>"]`).
+    record: &'static str,
+    /// Whether its images are seen from the written pose (a lens, a shake about the
+    /// camera's centre), or are means over a moving camera whose mean latent pose
+    /// meta.json records (motion blur).
+    written_pose: bool,
+}
+
+const PREFIXES: [Row; 3] = [
+    Row {
+        prefix: "blur_",
+        make: ImageKind::Blur,
+        record: "levels",
+        written_pose: false,
+    },
+    Row {
+        prefix: "defocus_",
+        make: ImageKind::Defocus,
+        record: "defocus",
+        written_pose: true,
+    },
+    Row {
+        prefix: "shake_",
+        make: ImageKind::Shake,
+        record: "shake",
+        written_pose: true,
+    },
+];
 
 impl ImageKind {
     /// The level directory of this image: `sharp` or `<prefix><l>`.
     pub fn dir(self) -> String {
         match self.degraded() {
             None => SHARP.to_string(),
-            Some((i, l)) => format!("{}{l}", PREFIXES[i].0),
+            Some((i, l)) => format!("{}{l}", PREFIXES[i].prefix),
         }
     }
 
@@ -52,15 +85,15 @@ impl ImageKind {
         if name == SHARP {
             return Some(ImageKind::Sharp);
         }
-        PREFIXES.iter().find_map(|(prefix, make)| {
-            let num = name.strip_prefix(prefix)?;
+        PREFIXES.iter().find_map(|row| {
+            let num = name.strip_prefix(row.prefix)?;
             if num.is_empty() || num.starts_with('0') || !num.bytes().all(|b| b.is_ascii_digit()) {
                 return None;
             }
             num.parse::<u32>()
                 .ok()
                 .filter(|l| (1..=MAX_LEVEL).contains(l))
-                .map(make)
+                .map(row.make)
         })
     }
 
@@ -72,6 +105,21 @@ impl ImageKind {
     /// Level order: sharp, then each kind's levels by number, kinds as in [`PREFIXES`].
     pub fn order(self) -> (usize, u32) {
         self.degraded().map_or((0, 0), |(i, l)| (i + 1, l))
+    }
+
+    /// Where meta.json records this image in each view: (the key of its kind's map,
+    /// its level's key in it), `("levels", "2")` for `blur_2`; None for the sharp image.
+    pub fn record(self) -> Option<(&'static str, String)> {
+        self.degraded()
+            .map(|(i, l)| (PREFIXES[i].record, l.to_string()))
+    }
+
+    /// Whether the image is seen from the view's written pose (the sharp image, a lens,
+    /// a shake about the camera's centre) rather than being a mean over a moving camera
+    /// whose mean latent pose meta.json records.
+    pub fn written_pose(self) -> bool {
+        self.degraded()
+            .is_none_or(|(i, _)| PREFIXES[i].written_pose)
     }
 
     /// The render phase of this image's renders, in the order a setting renders them:
@@ -86,6 +134,7 @@ impl ImageKind {
             ImageKind::Sharp => None,
             ImageKind::Blur(l) => Some((0, l)),
             ImageKind::Defocus(l) => Some((1, l)),
+            ImageKind::Shake(l) => Some((2, l)),
         }
     }
 }
@@ -115,6 +164,15 @@ mod tests {
         assert!(ImageKind::Sharp.phase() < ImageKind::Blur(9).phase());
         assert!(ImageKind::Blur(9).phase() < ImageKind::Defocus(1).phase());
         assert!(ImageKind::Blur(9).order() < ImageKind::Defocus(1).order());
+        // meta.json's records, and which images are seen from the written pose.
+        assert_eq!(ImageKind::Blur(2).record(), Some(("levels", "2".into())));
+        assert_eq!(
+            ImageKind::Defocus(3).record(),
+            Some(("defocus", "3".into()))
+        );
+        assert_eq!(ImageKind::Sharp.record(), None);
+        assert!(ImageKind::Sharp.written_pose() && ImageKind::Defocus(1).written_pose());
+        assert!(!ImageKind::Blur(1).written_pose());
     }
 
     #[test]

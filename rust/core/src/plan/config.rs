@@ -18,6 +18,7 @@ use super::spec::{config_error, convert};
 use super::target::TargetRule;
 use super::weights::Guards;
 use crate::error::Result;
+use crate::ground::kind::ImageKind;
 use crate::ground::names::{self, test_views};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -281,6 +282,16 @@ macro_rules! build_options {
             default",
         before: Some(Vec::new()),
     };
+    /// Camera shake levels (issue 49): `shake_<l>/` beside the blur levels, a hand-held
+    /// camera turning about its centre during the exposure ([`super::shake`]).
+    shake: Vec<u32> = Vec::new(), Spec::Levels, shapes {
+        help: "camera shake levels 1 to 7, e.g. 1,2,3,4: shake_<l>/ beside the blur \
+            levels, the camera turning about its centre during the exposure along a smooth \
+            random path that moves the image centre up to 2^(l+1) px at 512 px (scaled \
+            with --resolution), rendered as the blur levels are (--blur-method); none by \
+            default",
+        before: Some(Vec::new()),
+    };
     /// Depth, normals and masks of every view, in the sharp level (issue 35): depth and
     /// normals from one extra one-sample render per view and size, masks from coverage.
     passes: Vec<String> = Vec::new(), Spec::Passes, shapes {
@@ -489,6 +500,17 @@ impl BuildConfig {
                          a render target (--target-psnr, or a preset that sets one) does not \
                          drive them: drop one of the two",
                         self.defocus
+                    ),
+                ));
+            }
+            if !self.shake.is_empty() {
+                return Err(config_error(
+                    "shake",
+                    format!(
+                        "{:?}: shake levels render at the fixed sample counts of the blur \
+                         levels; a render target (--target-psnr, or a preset that sets one) \
+                         does not drive them: drop one of the two",
+                        self.shake
                     ),
                 ));
             }
@@ -805,6 +827,7 @@ impl BuildConfig {
             latent_sampling: self.latent_sampling,
             blur_budget: self.blur_budget,
             defocus: self.defocus.clone(),
+            shake: self.shake.clone(),
         }
     }
 
@@ -871,7 +894,8 @@ impl BuildConfig {
 
     /// Renders of a setting (an upper bound with latents auto).
     pub fn frames_per_setting(&self) -> usize {
-        self.views * (1 + self.levels.len() * self.max_latents() + self.defocus.len())
+        let shake = self.shake.len() * self.max_latents();
+        self.views * (1 + self.levels.len() * self.max_latents() + self.defocus.len() + shake)
     }
 
     /// The views whose blur levels hold a copy of the sharp image (the held-out views,
@@ -893,10 +917,11 @@ impl BuildConfig {
         }
     }
 
-    /// `sharp`, the blur levels' and then the defocus levels' directories.
+    /// `sharp`, the blur levels', the defocus levels' and the shake levels' directories.
     pub fn level_dirs(&self) -> Vec<String> {
         let mut dirs = names::level_dirs(&self.levels);
         dirs.extend(self.defocus.iter().map(|&l| names::defocus_dir(l)));
+        dirs.extend(self.shake.iter().map(|&l| ImageKind::Shake(l).dir()));
         dirs
     }
 

@@ -58,7 +58,7 @@ impl Degradation for Defocus {
             cx.resolution,
             cx.fov_deg,
             &mut (cx.stream)(Self::PURPOSE),
-            |level| (cx.seed)(Self::PURPOSE + u64::from(level)),
+            |level| (cx.seed)(Self::PURPOSE + u64::from(level), 0),
         )
     }
 

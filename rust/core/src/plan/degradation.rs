@@ -6,12 +6,19 @@
 use super::render::Render;
 use crate::ground::kind::ImageKind;
 use crate::rng::Stream;
-use serde::de::DeserializeOwned;
+use serde::de::{Deserialize, DeserializeOwned};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// What a kind's per-view draw knows of its view.
+/// Motion blur keys: Cycles interpolates the camera between its motion steps (position
+/// linearly, rotation by slerp); the steps are doubled until that interpolation stays
+/// within this many pixels of the true path everywhere over the exposure.
+pub const MOTION_KEY_TOLERANCE_PX: f64 = 0.02;
+/// Cycles' `motion_steps` range (2^steps + 1 camera positions over the shutter).
+pub const MOTION_STEPS_RANGE: (u32, u32) = (1, 7);
+
+/// What a kind's per-view draw knows of its view and of the build's exposure.
 pub struct ViewCx<'a> {
     /// The object's depth range along the viewing axis (its vertices, floored by the
     /// near guard), not the LLFF bounds.
@@ -19,11 +26,24 @@ pub struct ViewCx<'a> {
     pub far: f64,
     pub resolution: u32,
     pub fov_deg: f64,
+    /// The focal length in pixels.
+    pub focal_px: f64,
     /// The view's random stream of one purpose (a kind draws from its own, so adding
     /// or dropping a kind moves no other number of the plan).
     pub stream: &'a dyn Fn(u64) -> Stream,
-    /// The Cycles seed of a render of one purpose (a kind's purpose plus its level).
-    pub seed: &'a dyn Fn(u64) -> u32,
+    /// The Cycles seed of frame k of a render of one purpose (a kind's purpose plus
+    /// its level).
+    pub seed: &'a dyn Fn(u64, usize) -> u32,
+    /// Cycles seed of the view's sharp render, which sample subsets share.
+    pub sharp_seed: u32,
+    /// The exposure a kind rendered as latent frames takes: the build's `latents`
+    /// frames of `samples_per_frame` each, under sample subsets the blocks `offsets` of
+    /// a `sequence`-sample sequence on the sharp seed (None: independent frames).
+    pub latents: usize,
+    pub samples_per_frame: u32,
+    pub blocks: Option<(u32, Vec<u32>)>,
+    /// Whether the build renders an exposure as one Cycles motion blur render.
+    pub motion_blur: bool,
 }
 
 /// Where a view's renders of a kind go.
@@ -57,6 +77,29 @@ pub trait Degradation {
     fn renders(cx: &RenderCx, level: u32, rec: &Self::Level) -> Vec<Render>;
     /// The level's statistic ([`Self::STAT`]) from its record in meta.json.
     fn stat(rec: &Self::Read) -> f64;
+}
+
+/// A kind as the statistics see it: its key in a view of meta.json, its statistic
+/// (name, unit, help) and that statistic of one level's record.
+pub struct KindStat {
+    pub name: &'static str,
+    pub stat: (&'static str, &'static str, &'static str),
+    pub read: fn(&serde_json::Value) -> Option<f64>,
+}
+
+impl KindStat {
+    pub const fn of<D: Degradation>() -> KindStat {
+        KindStat {
+            name: D::NAME,
+            stat: D::STAT,
+            read: read_stat::<D>,
+        }
+    }
+}
+
+/// The statistic of one level's record (None: a record the kind cannot read).
+fn read_stat<D: Degradation>(v: &serde_json::Value) -> Option<f64> {
+    D::Read::deserialize(v).ok().map(|r| D::stat(&r))
 }
 
 /// The renders of every level of kind `D` of one view, in level order.

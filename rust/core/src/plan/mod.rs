@@ -12,6 +12,7 @@ pub mod region;
 pub mod render;
 pub mod renders;
 pub mod sampling;
+pub mod shake;
 pub mod spec;
 pub mod target;
 pub mod weights;

@@ -1,7 +1,6 @@
 //! The render list of a planned setting: what the Blender worker renders, in the order
 //! the driver streams the frames into accumulators (per view: sharp, then each level).
-use super::defocus::Defocus;
-use super::degradation::{kind_renders, RenderCx};
+use super::degradation::RenderCx;
 use super::region::{call_cost_px, object_region, render_calls, Region};
 pub use super::render::{Motion, Render};
 use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
@@ -113,7 +112,7 @@ impl SettingPlan {
                 exr_dir,
                 pin,
             };
-            out.extend(kind_renders::<Defocus>(&cx, &v.defocus));
+            out.extend(v.kind_renders(&cx));
         }
         self.with_regions(out)
     }

@@ -7,7 +7,9 @@
 use super::camera::{clamp_polar, depth_range, focal_px, orbit_c2w};
 use super::cost::{BlurChoice, ImagePrice, Pricing};
 use super::defocus::{Defocus, DefocusPlan, MAX_DEFOCUS_LEVEL};
-use super::degradation::{Degradation, ViewCx};
+use super::degradation::{kind_renders, Degradation, KindStat, RenderCx, ViewCx};
+use super::render::Render;
+use super::shake::{Shake, ShakePlan, MAX_SHAKE_LEVEL};
 use super::weights::{level_interval, scene_weight, Guards};
 use crate::error::{Error, Result};
 use crate::rng::{derive_seed, Stream};
@@ -61,12 +63,7 @@ pub const MAX_SEQUENCE: u64 = 1 << 24;
 
 use super::spec::MAX_SAMPLES;
 
-/// Motion blur keys: Cycles interpolates the camera between its motion steps (position
-/// linearly, rotation by slerp); the steps are doubled until that interpolation stays
-/// within this many pixels of the true orbit and look-at everywhere on the segment.
-pub const MOTION_KEY_TOLERANCE_PX: f64 = 0.02;
-/// Cycles' `motion_steps` range (2^steps + 1 camera positions over the shutter).
-pub const MOTION_STEPS_RANGE: (u32, u32) = (1, 7);
+pub use super::degradation::{MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE};
 
 /// Everything that shapes the sampling of a setting. Units: degrees, Δr in percent of r.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -106,6 +103,9 @@ pub struct SamplingConfig {
     /// Defocus levels (issue 35; [`super::defocus`]); none in a default build.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub defocus: Vec<u32>,
+    /// Camera shake levels ([`super::shake`]); none in a default build.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub shake: Vec<u32>,
 }
 
 impl Default for SamplingConfig {
@@ -133,6 +133,7 @@ impl Default for SamplingConfig {
             latent_sampling: LatentSampling::Subsets,
             blur_budget: BlurBudget::Parity,
             defocus: Vec::new(),
+            shake: Vec::new(),
         }
     }
 }
@@ -185,6 +186,17 @@ impl SamplingConfig {
         check("level_spread", &self.level_spread, &specs::LEVEL_SPREAD)?;
         check("levels", &self.levels, &Spec::Levels)?;
         check("defocus", &self.defocus, &Spec::Levels)?;
+        check("shake", &self.shake, &Spec::Levels)?;
+        if let Some(l) = self.shake.iter().find(|&&l| l > MAX_SHAKE_LEVEL) {
+            return Err(Error::Config {
+                option: "shake".into(),
+                detail: format!(
+                    "{l}: shake levels must be in 1..={MAX_SHAKE_LEVEL} (level l moves the \
+                     image centre up to 2^(l+1) px at 512 px; above {MAX_SHAKE_LEVEL} the \
+                     object turns out of the frame)"
+                ),
+            });
+        }
         if let Some(l) = self.defocus.iter().find(|&&l| l > MAX_DEFOCUS_LEVEL) {
             return Err(Error::Config {
                 option: "defocus".into(),
@@ -461,9 +473,22 @@ pub struct ViewPlan<L = LevelPlan> {
     /// Each defocus level's lens (issue 35), by level number; absent without them.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub defocus: BTreeMap<String, DefocusPlan>,
+    /// Each camera shake level's path, by level number; absent without them.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub shake: BTreeMap<String, ShakePlan>,
 }
 
+/// Every degradation kind beside motion blur, as the statistics see it, in level order.
+pub static KIND_STATS: &[KindStat] = &[KindStat::of::<Defocus>(), KindStat::of::<Shake>()];
+
 impl<L> ViewPlan<L> {
+    /// The renders of every level of every kind beside motion blur of this view.
+    pub fn kind_renders(&self, cx: &RenderCx) -> Vec<Render> {
+        let mut out = kind_renders::<Defocus>(cx, &self.defocus);
+        out.extend(kind_renders::<Shake>(cx, &self.shake));
+        out
+    }
+
     /// The same view with each level's record made by `f`.
     pub fn map_levels<M>(&self, f: impl Fn(&L) -> M) -> ViewPlan<M> {
         ViewPlan {
@@ -482,6 +507,7 @@ impl<L> ViewPlan<L> {
             c2w: self.c2w,
             levels: self.levels.iter().map(|(k, l)| (k.clone(), f(l))).collect(),
             defocus: self.defocus.clone(),
+            shake: self.shake.clone(),
         }
     }
 }
@@ -938,16 +964,26 @@ impl Setting<'_> {
         let w = scene_weight(near, far, bbox_dims, &cfg.guards);
         let sharp_seed = frame_seed(self.seed, index, 0, 0);
         let stream = |purpose| Stream::new(self.seed, stream_id(index, purpose));
-        let seed = |purpose| frame_seed(self.seed, index, purpose as u32, 0);
+        let seed = |purpose, k| frame_seed(self.seed, index, purpose as u32, k);
+        // A kind's exposure as frames: as many as a blurry image can have (one motion
+        // blur render), so its sample blocks fit the sequence the build is pinned to.
+        let m = cfg.max_latents();
         let cx = ViewCx {
             near: near.max(cfg.guards.near_floor),
             far: far.max(cfg.guards.near_floor),
             resolution: cfg.resolution,
             fov_deg: cfg.fov_deg,
+            focal_px: self.screen.focal,
             stream: &stream,
             seed: &seed,
+            sharp_seed,
+            latents: m,
+            samples_per_frame: cfg.samples_per_frame(m),
+            blocks: (cfg.latent_sampling == LatentSampling::Subsets).then(|| cfg.sample_blocks(m)),
+            motion_blur: cfg.blur_method == BlurMethod::MotionBlur,
         };
         let defocus = Defocus::plan_view(&cx, &cfg.defocus);
+        let shake = Shake::plan_view(&cx, &cfg.shake);
         let levels = cfg
             .levels
             .iter()
@@ -973,6 +1009,7 @@ impl Setting<'_> {
             c2w: rows(&c2w),
             levels,
             defocus,
+            shake,
         }
     }
 

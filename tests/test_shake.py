@@ -1,0 +1,169 @@
+"""`build --shake` (issue 49): camera shake levels beside the blur levels, a hand-held
+camera turning about its centre during the exposure, added through the degradation
+interface (rust/core/src/plan/shake.rs).
+
+The stand-in worker renders a pinhole image per frame, so the layout, the records and the
+other commands are checked with it; the images (they differ from the sharp image, grow
+with the level, repeat byte for byte from one seed) on real renders at a tiny size, by
+both blur methods. And the proof of the interface: shake touched few files."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from blurset import layout
+from blurset.image import read_exr
+
+from tests.conftest import run_cli, standin_build
+
+ROOT = Path(__file__).resolve().parents[1]
+SHAKE = ("--shake", "1,2")
+
+
+@pytest.fixture(scope="module")
+def shake_build(tmp_path_factory, standin_blender) -> Path:
+    out = tmp_path_factory.mktemp("shake") / "b"
+    standin_build(out, standin_blender, *SHAKE, "--keep-linear")
+    return out
+
+
+def test_shake_levels_sit_beside_the_blur_levels_with_the_written_poses(shake_build):
+    for setting in layout.complete_settings(shake_build):
+        meta = json.loads((setting / layout.META).read_text())
+        assert meta["levels"] == ["sharp", "blur_1", "blur_2", "shake_1", "shake_2"]
+        assert layout.setting_levels(setting) == meta["levels"]
+        sharp = setting / layout.SHARP
+        for level in ("shake_1", "shake_2"):
+            d = setting / level
+            # LLFF poses as the other levels: the written pose of every view.
+            assert (d / layout.POSES_BOUNDS).read_bytes() == (
+                sharp / layout.POSES_BOUNDS
+            ).read_bytes()
+            tf = json.loads((d / layout.TRANSFORMS).read_text())
+            assert tf["level"] == level and tf["test_view_images"] == "sharp"
+            for v in meta["test_views"]:
+                name = layout.image_name(v, len(meta["views"]))
+                assert (d / layout.IMAGES / name).read_bytes() == (
+                    sharp / layout.IMAGES / name
+                ).read_bytes()
+        for v in meta["views"]:
+            one, two = v["shake"]["1"], v["shake"]["2"]
+            # 2^(l+1) px at 512 px, at 32 px; one path per view, twice as far at level 2.
+            assert (one["amplitude_px"], two["amplitude_px"]) == (4 * 32 / 512, 8 * 32 / 512)
+            assert two["path_px"] == pytest.approx(2 * one["path_px"])
+            assert one["method"] == "average" and len(one["poses"]) == 2
+
+
+def test_a_default_build_has_no_shake(standin_build_dir):
+    setting = layout.complete_settings(standin_build_dir)[0]
+    meta = json.loads((setting / layout.META).read_text())
+    assert not any("shake" in lvl for lvl in meta["levels"])
+    assert all("shake" not in v for v in meta["views"])
+    assert "shake" not in meta["sampling"]
+
+
+def test_shake_under_a_render_target_is_refused_in_one_line(tmp_path, standin_blender):
+    out = tmp_path / "b"
+    proc = standin_build(out, standin_blender, *SHAKE, "--target-psnr", "40", check=False)
+    assert proc.returncode != 0 and not out.exists()
+    line = proc.stderr.strip().splitlines()[-1]
+    assert "shake" in line and "target" in line, proc.stderr
+
+
+def test_noise_export_stats_and_data_take_shake_levels(shake_build, tmp_path):
+    noisy = tmp_path / "noisy"
+    run_cli("noise", str(shake_build), "--gains", "4", "--levels", "shake_2", "--out", str(noisy))
+    setting = layout.complete_settings(shake_build)[0].name
+    assert layout.is_complete(noisy / setting / "shake_2" / layout.gain_name(4))
+    data = tmp_path / "data"
+    run_cli("export", str(shake_build), "--levels", "sharp,shake_1", "--out", str(data))
+    scenes = json.loads((data / "export.json").read_text())["scenes"]
+    assert f"{setting}__shake_1" in scenes
+    st = tmp_path / "stats"
+    run_cli("stats", str(shake_build), "--out", str(st))
+    doc = json.loads((st / "stats.json").read_text())
+    assert set(doc["shake_path_px"]) == {"1", "2"} and (st / "shake_path_px.png").is_file()
+    assert "shake_path_px" in {q["name"] for q in doc["quantities"]}
+    from blurset.data import open_scene
+
+    scene = open_scene(shake_build, setting, "shake_1", pose="mean")
+    sharp = open_scene(shake_build, setting)
+    # Shaken about the written pose: its cameras are the written ones.
+    np.testing.assert_array_equal(scene.c2w_opengl, sharp.c2w_opengl)
+    proc = run_cli("check-poses", str(shake_build / setting), "--level", "shake_1", check=False)
+    assert "--level must be" not in proc.stderr, proc.stderr
+
+
+# -- the proof: a kind is one file ---------------------------------------------------------
+
+
+def test_shake_touches_at_most_six_hand_edited_code_files_outside_its_own():
+    """The code files that name the shake kind, outside its own module and its tests:
+    the degradation interface keeps a new kind to a handful (defocus, before it: 22).
+    Generated files (schemas/, the stubs) are left out."""
+    own = {"rust/core/src/plan/shake.rs", "tests/test_shake.py"}
+    generated = {"python/blurset/_records.pyi", "python/blurset/_core.pyi"}
+    tracked = subprocess.run(
+        ["git", "ls-files", "--cached", "--others", "--exclude-standard",
+         "rust/core/src", "rust/py/src", "python/blurset", "blender_scripts"],
+        cwd=ROOT, capture_output=True, text=True, check=True,
+    ).stdout.split()  # fmt: skip
+    word = re.compile(r"shake", re.I)
+    touched = sorted(
+        f
+        for f in tracked
+        if f.endswith((".rs", ".py", ".pyi"))
+        and f not in own | generated
+        and word.search((ROOT / f).read_text())
+    )
+    assert 1 <= len(touched) <= 6, touched
+
+
+# -- real renders --------------------------------------------------------------------------
+
+
+def _build(out: Path, *args: str) -> Path:
+    run_cli("build", "--demo", "--out", str(out), "--resolution", "32", "--views", "3",
+            "--levels", "none", "--shake", "1,4", "--latents", "4", "--samples", "4",
+            "--sharp-samples", "8", "--settings-per-object", "1", "--keep-linear",
+            "--test-view-stride", "8", *args, "--quiet")  # fmt: skip
+    return out
+
+
+def _moved(setting: Path, level: str, name: str) -> float:
+    """How far a shake image is from the sharp one: mean absolute difference of the
+    linear RGBA."""
+    exr = layout.linear_name(name)
+    a = read_exr(setting / layout.SHARP / layout.LINEAR / exr).astype(np.float64)
+    b = read_exr(setting / level / layout.LINEAR / exr).astype(np.float64)
+    return float(np.abs(a - b).mean())
+
+
+@pytest.mark.blender
+@pytest.mark.parametrize("method", ["average", "motion_blur"])
+def test_real_shake_differs_from_sharp_grows_with_level_and_repeats(tmp_path, method):
+    a = _build(tmp_path / "a", "--blur-method", method)
+    b = _build(tmp_path / "b", "--blur-method", method)
+    for setting in layout.complete_settings(a):
+        meta = json.loads((setting / layout.META).read_text())
+        assert meta["levels"] == ["sharp", "shake_1", "shake_4"]
+        for v in meta["views"]:
+            assert v["shake"]["4"]["method"] == method
+            if v["index"] in meta["test_views"]:
+                continue
+            name = layout.image_name(v["index"], len(meta["views"]))
+            one, four = _moved(setting, "shake_1", name), _moved(setting, "shake_4", name)
+            assert 0 < one < four, (setting.name, v["index"], one, four)
+        for level in ("shake_1", "shake_4"):
+            # One seed, the same bytes; the same poses as the sharp level.
+            for f in sorted((setting / level / layout.IMAGES).iterdir()):
+                other = b / setting.name / level / layout.IMAGES / f.name
+                assert f.read_bytes() == other.read_bytes(), f
+            assert (setting / level / layout.POSES_BOUNDS).read_bytes() == (
+                setting / layout.SHARP / layout.POSES_BOUNDS
+            ).read_bytes()
