@@ -353,7 +353,7 @@ mod tests {
                 / 8.0;
             assert!(mean.abs() < 1e-12, "{l}: {mean}");
             let seeds: Vec<u32> = (0..8)
-                .map(|k| seed(2000 + l.parse::<u64>().unwrap(), k))
+                .map(|k| seed(2000 + l.parse::<u64>().expect("level"), k))
                 .collect();
             assert_eq!(p.seeds, seeds);
         }
