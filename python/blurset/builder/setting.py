@@ -253,6 +253,9 @@ class _Images:
         # Each image's method (under blur_method auto, the plan's per image): a motion
         # blur render carries its camera's motion.
         self.motion_blur = {(f["view"], f["level"]) for f in frames if f.get("motion")}
+        # The images of the plan's first phase (the sharp images): QA'd before any other
+        # phase renders, their coverage the mask the other images of their view share.
+        self.first = {(f["view"], f["level"]) for f in frames if f["phase"] == 0}
         self.need: dict[tuple[int, str], int] = {}
         for k in self.keys:
             self.need[k] = self.need.get(k, 0) + 1
@@ -281,7 +284,7 @@ class _Images:
             a.write_exr(level_dir / layout.LINEAR / layout.linear_name(name))
         if _masks(self.cfg):
             self._write_masks(key, name, a)
-        if level == layout.SHARP:
+        if key in self.first:
             self.qa[view] = a.qa()
 
     def _write_masks(self, key: tuple[int, str], name: str, a: _core.Accumulator) -> None:
@@ -291,7 +294,7 @@ class _Images:
         level = key[1]
         for f in [1, *self.cfg.downsample]:
             sub, file = layout.pass_dir("mask", f), layout.pass_file("mask", name)
-            if level == layout.SHARP:
+            if key in self.first:
                 a.write_mask(self.partial / level / sub / file, downsample=f)
             elif level in layout.own_mask_levels([level]):
                 a.write_exposure_mask(
