@@ -124,6 +124,17 @@ def test_shake_touches_at_most_six_hand_edited_code_files_outside_its_own():
     assert 1 <= len(touched) <= 6, touched
 
 
+def test_the_builder_schedules_render_phases_without_naming_a_kind():
+    """The builder renders the plan's phases in order (`Render.phase`): no degraded kind
+    is named in it, so a new kind schedules itself (defocus's images once had a phase
+    of their own there, picked by their folder names)."""
+    builder = ROOT / "python" / "blurset" / "builder"
+    named = re.compile(r"defocus|shake|\.startswith\(|is_level_dir|parse_level_dir")
+    for f in ("setting.py", "unit.py"):
+        hits = [ln for ln in (builder / f).read_text().splitlines() if named.search(ln)]
+        assert hits == [], (f, hits)
+
+
 # -- real renders --------------------------------------------------------------------------
 
 
