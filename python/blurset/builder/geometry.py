@@ -16,7 +16,7 @@ from blurset.config import BuildConfig
 
 if TYPE_CHECKING:
     from blurset._records import Render
-    from blurset.worker_client import Worker
+    from blurset.builder.ports import RenderWorker
 
 # The passes a geometry render gives (the mask comes from the sharp image).
 RENDERED = ("depth", "normal")
@@ -24,7 +24,7 @@ RENDERED = ("depth", "normal")
 
 def render_geometry(
     cfg: BuildConfig,
-    worker: Worker,
+    worker: RenderWorker,
     frames: list[Render],
     exr_dir: Path,
     sharp: Path,

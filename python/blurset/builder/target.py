@@ -18,7 +18,8 @@ from blurset.config import BuildConfig
 
 if TYPE_CHECKING:
     from blurset._records import ImageRender
-    from blurset.worker_client import RenderOptions, Worker
+    from blurset.builder.ports import RenderWorker
+    from blurset.worker_client import RenderOptions
 
 # An image of a setting: (view, level directory).
 Key = tuple[int, str]
@@ -27,7 +28,7 @@ Key = tuple[int, str]
 def render_to_target(
     plan: _core.Plan,
     cfg: BuildConfig,
-    worker: Worker,
+    worker: RenderWorker,
     exr_dir: Path,
     sharp_views: list[int],
     keys: list[Key],
