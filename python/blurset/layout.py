@@ -124,8 +124,8 @@ def level_dirs(levels: list[int]) -> list[str]:
 
 
 def is_level_dir(name: str) -> bool:
-    """`sharp`, `blur_<l>` or `defocus_<l>` with l in 1..64 (what `blurset build` can
-    write)."""
+    """`sharp`, or a level of any kind (`blur_<l>`, `defocus_<l>` …) with l in 1..64:
+    what `blurset build` can write."""
     return _core.is_level_dir(name)
 
 
