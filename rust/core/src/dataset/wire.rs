@@ -327,9 +327,14 @@ mod tests {
             "sample_sequence": 64, "region": [0, 0, 16, 16], "call": 3, "view": 1,
             "level": "blur_2", "kind": {"Blur": 2}, "phase": 1, "half": 0,
         }))
-        .unwrap();
-        let v = serde_json::to_value(&f).unwrap();
-        let keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+        .expect("a plan render is a frame");
+        let v = serde_json::to_value(&f).expect("a frame serializes");
+        let keys: Vec<&str> = v
+            .as_object()
+            .expect("an object")
+            .keys()
+            .map(|k| k.as_str())
+            .collect();
         let mut want = [
             "c2w",
             "seed",
@@ -345,19 +350,19 @@ mod tests {
         want.sort_unstable();
         assert_eq!(keys, want);
         // What the worker reads back is what was sent.
-        let back: WireFrame = serde_json::from_value(v).unwrap();
+        let back: WireFrame = serde_json::from_value(v).expect("the worker reads it back");
         assert_eq!(back, f);
     }
 
     #[test]
     fn a_half_sample_block_or_a_short_motion_path_is_refused() {
         let e = wire_frame(json!({"c2w": EYE, "seed": 1, "out": "a", "sample_offset": 4}));
-        assert!(e.unwrap_err().to_string().contains("sample_sequence"));
+        assert!(e.is_err_and(|e| e.to_string().contains("sample_sequence")));
         let e = wire_frame(json!({"c2w": EYE, "seed": 1, "out": "a",
                                   "motion": {"steps": 1, "keys": [EYE, EYE]}}));
-        assert!(e.unwrap_err().to_string().contains("not 3"));
+        assert!(e.is_err_and(|e| e.to_string().contains("not 3")));
         let e = wire_frame(json!({"seed": 1, "out": "a"}));
-        assert!(e.unwrap_err().to_string().contains("c2w"));
+        assert!(e.is_err_and(|e| e.to_string().contains("c2w")));
     }
 
     #[test]
@@ -369,7 +374,7 @@ mod tests {
         ));
         let odd = json!({"frame": 0, "out": "a.exr", "seconds": 0.1, "origin": null, "x": 1});
         assert!(serde_json::from_value::<Reply>(odd).is_err());
-        let quit: Request = serde_json::from_value(json!({"cmd": "quit"})).unwrap();
+        let quit: Request = serde_json::from_value(json!({"cmd": "quit"})).expect("quit");
         assert_eq!(quit, Request::Quit);
     }
 }
