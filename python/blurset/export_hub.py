@@ -48,7 +48,9 @@ from blurset.exceptions import ConfigError, InputError
 if TYPE_CHECKING:
     import pyarrow as pa
 
-TARGET = "hub"
+    from blurset import _records
+
+TARGET: _records.ExportTarget = "hub"
 DATA_DIR = "data"
 DEFAULT_SHARD_MB = 500.0
 # The shard's schema metadata: `huggingface` (the `datasets` features: the image

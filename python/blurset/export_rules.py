@@ -99,7 +99,7 @@ class Target:
     """An export target, `blurset export --for NAME`: the `TARGET` of its module in
     blurset.exports, the only place that names it."""
 
-    name: str  # `--for NAME`, the record's `for` (an ExportTarget of dataset/records.rs)
+    name: _records.ExportTarget  # `--for NAME`, the record's `for` (dataset/records.rs)
     help: str  # its part of `--for`'s help
     docs: str  # its page, relative to docs/
     output: SceneFolders | OwnOutput

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Protocol
 
 from blurset.worker_client import LoadedObject, RenderDone, Worker
 
@@ -20,7 +20,7 @@ class RenderWorker(Protocol):
     """Loads one object at a time and renders frames of it, each reported once on disk."""
 
     @property
-    def info(self) -> Mapping[str, Any]:
+    def info(self) -> Mapping[str, object]:
         """The worker's ready line (Blender version, device, CUDA archs)."""
         ...
 
@@ -32,7 +32,7 @@ class RenderWorker(Protocol):
 
     def render(
         self,
-        frames: Sequence[Mapping[str, Any]],
+        frames: Sequence[Mapping[str, object]],
         *,
         resolution: int,
         fov_deg: float,

@@ -27,7 +27,8 @@ from blurset.progress import Progress
 
 if TYPE_CHECKING:
     from blurset import _records
-    from blurset.worker_client import LoadedObject, RenderOptions, Worker
+    from blurset.builder.ports import RenderWorker
+    from blurset.worker_client import LoadedObject, RenderOptions
 
 
 @dataclass
@@ -114,7 +115,7 @@ def _object_record(obj: ObjectSpec, info: LoadedObject) -> _records.ObjectRecord
 def render_setting(
     job: SettingJob,
     cfg: BuildConfig,
-    worker: Worker,
+    worker: RenderWorker,
     info: LoadedObject,
     verts: np.ndarray,
     progress: Progress,
@@ -205,7 +206,7 @@ def _plan(
 def _render(
     plan: _core.Plan,
     cfg: BuildConfig,
-    worker: Worker,
+    worker: RenderWorker,
     exr_dir: Path,
     sharp: list[int],
     frames: list[_records.Render],
@@ -320,7 +321,7 @@ class _Images:
 
 def _render_fixed(
     cfg: BuildConfig,
-    worker: Worker,
+    worker: RenderWorker,
     frames: list[_records.Render],
     images: _Images,
     common: RenderOptions,
@@ -389,7 +390,7 @@ def _raise_on_qa(qa: dict[int, _core.FrameQa]) -> None:
 def _render_targeted(
     plan: _core.Plan,
     cfg: BuildConfig,
-    worker: Worker,
+    worker: RenderWorker,
     exr_dir: Path,
     sharp: list[int],
     keys: list[tuple[int, str]],

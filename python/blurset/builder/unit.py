@@ -14,6 +14,7 @@ import json
 import shutil
 import time
 import traceback
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -249,7 +250,7 @@ class ObjectUnit:
         self.progress.write(f"redoing {setting.name}: {problem}")
         return False
 
-    def _other_file(self, made_from: dict[str, Any]) -> str | None:
+    def _other_file(self, made_from: Mapping[str, object]) -> str | None:
         """Why a setting's meta.json `object` is not this object's file, or None. The
         file's content decides (a build moved elsewhere, or a demo object made again, is
         still the same object); without a recorded hash (a build before issue 19), its
