@@ -1287,9 +1287,7 @@ class FrameQa:
 def frame_qa(rgba_: npt.NDArray[np.float32], *, thresholds: QaThresholds | None = None) -> FrameQa:
     """QA of a premultiplied linear RGBA image (H, W, 4) under `thresholds`."""
 
-def frame_qa_exr(
-    path: str | PathLike[str], *, thresholds: QaThresholds | None = None
-) -> FrameQa:
+def frame_qa_exr(path: str | PathLike[str], *, thresholds: QaThresholds | None = None) -> FrameQa:
     """QA of an EXR (premultiplied linear RGBA), read and judged in the core."""
 
 def default_qa_thresholds() -> QaThresholds:
