@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+import numpy as np
 import pytest
 from blurset import outputs
 from blurset import worker_client as wc
@@ -151,6 +152,11 @@ def test_the_core_spells_a_frame_and_refuses_a_broken_one() -> None:
     request, _ = _validators()
     msg = {"cmd": "render", "resolution": 8, "fov_deg": 40.0, "samples": 1, "frames": [item]}
     assert not list(request.iter_errors(json.loads(json.dumps(msg))))
+    # A caller's NumPy camera, seed, region and samples go as plain numbers.
+    mixed = {"c2w": np.asarray(EYE), "seed": np.int64(9), "out": "/x/b.exr",
+             "region": np.array([0, 0, 8, 8]), "samples": np.int32(2)}  # fmt: skip
+    item = wc._frame_item(mixed)
+    assert (item["seed"], list(item["region"]), item["samples"]) == (9, [0, 0, 8, 8], 2)
     with pytest.raises(ValueError, match="sample_sequence"):
         wc._frame_item({**plan_render, "sample_offset": 4})
     with pytest.raises(ValueError, match="keys"):

@@ -52,9 +52,7 @@ def kill_all() -> None:
 def _frame_item(f: Mapping[str, Any]) -> dict[str, Any]:
     """One frame of a render request: the core's spelling of it (dataset/wire.rs, the
     contract in schemas/worker/), its numbers made plain and its EXR path absolute."""
-    plain = {**f, "c2w": _matrix(f["c2w"]), "seed": int(f["seed"]),
-             "out": str(Path(f["out"]).resolve())}  # fmt: skip
-    return dict(_core.wire_frame(plain))
+    return dict(_core.wire_frame({**_plain(f), "out": str(Path(f["out"]).resolve())}))
 
 
 class WorkerError(BlursetError):
@@ -540,8 +538,16 @@ class Worker:
             self._discard()
 
 
-def _matrix(m: Any) -> list[list[float]]:
-    return m.tolist() if hasattr(m, "tolist") else [list(map(float, r)) for r in m]
+def _plain(v: Any) -> Any:
+    """`v` with NumPy's arrays and scalars (a caller's camera, region or counts) as plain
+    Python lists and numbers, which the core's typed reading takes."""
+    if hasattr(v, "tolist"):  # an ndarray or a NumPy scalar (whose tolist is its item)
+        return v.tolist()
+    if isinstance(v, Mapping):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_plain(x) for x in v]
+    return v
 
 
 def _pump(stream: IO[bytes] | None, out: queue.Queue[bytes | None]) -> None:
