@@ -462,12 +462,16 @@ class Worker:
                 raise ValueError(f"render: frame {bare[0]} carries no samples and the call none")
             # The protocol's call-level count, which every frame's own overrides.
             samples = int(frames[0]["samples"]) if frames else 1
+        try:
+            items = [_frame_item(f) for f in frames]
+        except ValueError as e:  # refused before the worker sees it, as it would refuse
+            raise WorkerError(f"render failed: {e}") from None
         msg: dict[str, Any] = {
             "cmd": "render",
             "resolution": int(resolution),
             "fov_deg": float(fov_deg),
             "samples": int(samples),
-            "frames": [_frame_item(f) for f in frames],
+            "frames": items,
         }
         if exr_codec is not None:
             msg["exr_codec"] = str(exr_codec)

@@ -9,8 +9,8 @@ use pyo3::prelude::*;
 /// its wire fields, typed and checked; ValueError naming what is wrong.
 #[pyfunction]
 fn wire_frame<'py>(py: Python<'py>, render: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
-    let value: serde_json::Value = from_py("render frame", render)?;
-    let frame = wire::wire_frame(value).map_err(to_pyerr)?;
+    let loose: wire::LooseFrame = from_py("render frame", render)?;
+    let frame = wire::wire_frame(loose).map_err(to_pyerr)?;
     to_py(py, &frame)
 }
 

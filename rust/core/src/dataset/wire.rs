@@ -224,7 +224,7 @@ pub enum Reply {
 /// every wire field, and whatever else it carries (its kind, half, …), which the worker
 /// does not read.
 #[derive(Deserialize)]
-struct LooseFrame {
+pub struct LooseFrame {
     c2w: Matrix,
     seed: u64,
     out: String,
@@ -249,10 +249,18 @@ struct LooseFrame {
 }
 
 /// The wire frame of a render the builder holds: its wire fields, typed and checked
-/// (a sample block has both ends; a motion path has 2^steps + 1 keys).
-pub fn wire_frame(render: serde_json::Value) -> Result<WireFrame> {
-    let f: LooseFrame =
-        serde_json::from_value(render).map_err(|e| Error::Value(format!("render frame: {e}")))?;
+/// (finite cameras; a sample block has both ends; a motion path has 2^steps + 1 keys).
+pub fn wire_frame(f: LooseFrame) -> Result<WireFrame> {
+    let finite = |m: &Matrix| m.iter().flatten().all(|x| x.is_finite());
+    if !finite(&f.c2w)
+        || f.motion
+            .as_ref()
+            .is_some_and(|m| !m.keys.iter().all(finite))
+    {
+        return Err(Error::Value(
+            "render frame: c2w must be a finite 4x4 matrix".into(),
+        ));
+    }
     if f.sample_offset.is_some() != f.sample_sequence.is_some() {
         return Err(Error::Value(
             "render frame: sample_offset and sample_sequence go together".into(),
@@ -313,6 +321,12 @@ mod tests {
     use super::*;
     use serde_json::json;
 
+    fn frame(v: serde_json::Value) -> Result<WireFrame> {
+        let f: LooseFrame =
+            serde_json::from_value(v).map_err(|e| Error::Value(format!("render frame: {e}")))?;
+        wire_frame(f)
+    }
+
     const EYE: Matrix = [
         [1.0, 0.0, 0.0, 0.0],
         [0.0, 1.0, 0.0, 0.0],
@@ -322,7 +336,7 @@ mod tests {
 
     #[test]
     fn a_plan_render_keeps_its_wire_fields_only() {
-        let f = wire_frame(json!({
+        let f = frame(json!({
             "c2w": EYE, "seed": 7, "out": "/x/a.exr", "samples": 4, "sample_offset": 8,
             "sample_sequence": 64, "region": [0, 0, 16, 16], "call": 3, "view": 1,
             "level": "blur_2", "kind": {"Blur": 2}, "phase": 1, "half": 0,
@@ -356,13 +370,20 @@ mod tests {
 
     #[test]
     fn a_half_sample_block_or_a_short_motion_path_is_refused() {
-        let e = wire_frame(json!({"c2w": EYE, "seed": 1, "out": "a", "sample_offset": 4}));
+        let e = frame(json!({"c2w": EYE, "seed": 1, "out": "a", "sample_offset": 4}));
         assert!(e.is_err_and(|e| e.to_string().contains("sample_sequence")));
-        let e = wire_frame(json!({"c2w": EYE, "seed": 1, "out": "a",
+        let e = frame(json!({"c2w": EYE, "seed": 1, "out": "a",
                                   "motion": {"steps": 1, "keys": [EYE, EYE]}}));
         assert!(e.is_err_and(|e| e.to_string().contains("not 3")));
-        let e = wire_frame(json!({"seed": 1, "out": "a"}));
+        let e = frame(json!({"seed": 1, "out": "a"}));
         assert!(e.is_err_and(|e| e.to_string().contains("c2w")));
+        let mut bad = EYE;
+        bad[1][2] = f64::NAN;
+        let f = LooseFrame {
+            c2w: bad,
+            ..loose()
+        };
+        assert!(wire_frame(f).is_err_and(|e| e.to_string().contains("finite")));
     }
 
     #[test]
@@ -376,5 +397,9 @@ mod tests {
         assert!(serde_json::from_value::<Reply>(odd).is_err());
         let quit: Request = serde_json::from_value(json!({"cmd": "quit"})).expect("quit");
         assert_eq!(quit, Request::Quit);
+    }
+
+    fn loose() -> LooseFrame {
+        serde_json::from_value(json!({"c2w": EYE, "seed": 1, "out": "a"})).expect("a frame")
     }
 }
