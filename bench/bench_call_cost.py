@@ -27,6 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_device_costs import fit_costs  # noqa: E402
+
 HERE = Path(__file__).resolve().parent
 RESOLUTIONS = [int(r) for r in os.environ.get("BLURSET_BENCH_CALL_RES", "128,512").split(",")]
 SAMPLES = (1, 8, 32, 128)
@@ -45,10 +48,7 @@ def _probe(glb: Path, res: int) -> dict:
 def _entry(res: int, p: dict) -> dict:
     med = {int(s): v for s, v in p["medians"].items()}
     counts = sorted(med)
-    a = np.vstack([np.ones(len(counts)), np.asarray(counts, dtype=np.float64)]).T
-    (render_fixed, sample_s), *_ = np.linalg.lstsq(
-        a, np.asarray([med[s]["render_s"] for s in counts]), rcond=None
-    )
+    render_fixed, sample_s = fit_costs(counts, [med[s]["render_s"] for s in counts])
     other = {k: float(np.median([med[s][k] for s in counts])) for k in ("between_s", "reply_s")}
     fixed = float(render_fixed) + sum(other.values())
     cycles = max(0.0, float(render_fixed) - p["save_exr_s"])

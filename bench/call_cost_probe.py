@@ -79,11 +79,12 @@ def _job(frames: list[dict], res: int, samples: int) -> list[dict]:
     return out
 
 
-def main() -> None:
+def _measure(work: Path) -> dict:
+    """The stages' medians per sample count, the frame-change handler and the EXR write,
+    every file (the imported GLB's, the frames, the saves) under `work`."""
     glb, device, res, samples, n, repeats = sys.argv[-6:]
     res_i, n_i = int(res), int(n)
     counts = [int(s) for s in samples.split(",")]
-    work = Path(tempfile.mkdtemp(prefix="blurset-call-cost-"))
     warnings, _, doc = blender_scene.import_glb(glb, str(work), "lit")
     info = blender_scene.normalize(warnings)
     blender_scene.setup_scene(0)
@@ -109,9 +110,9 @@ def main() -> None:
         t0 = time.perf_counter()
         result.save_render(str(work / f"save{k}.exr"), scene=bpy.context.scene)
         saves.append(time.perf_counter() - t0)
-    print(json.dumps({"device": reported, "medians": medians, "apply_frame_s": apply_s,
-                      "save_exr_s": statistics.median(saves), "frames": n_i,
-                      "repeats": int(repeats)}))  # fmt: skip
+    return {"device": reported, "medians": medians, "apply_frame_s": apply_s,
+            "save_exr_s": statistics.median(saves), "frames": n_i, "repeats": int(repeats)}  # fmt: skip
 
 
-main()
+with tempfile.TemporaryDirectory(prefix="blurset-call-cost-") as d:
+    print(json.dumps(_measure(Path(d))))
