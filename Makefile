@@ -85,13 +85,13 @@ fmt:
 # The JSON Schema of every record blurset writes, from the core's serde types (a test
 # fails when schemas/ differs from them).
 schemas: venv
-	$(PY) -c "from blurset import outputs; outputs.write_schemas('schemas')"
-	$(PY) -c "from blurset import stubgen; stubgen.write()"
+	$(PY) -c "from blurset.services import outputs; outputs.write_schemas('schemas')"
+	$(PY) -c "from blurset.services import stubgen; stubgen.write()"
 
 # The typed option properties of _core.pyi, from the core's option declarations (a test
 # fails when the stub differs from them).
 stub: venv
-	$(PY) -c "from blurset import options; options.write_stub('python/blurset/_core.pyi'); options.write_stub('python/blurset/_core.pyi', 'NoiseConfig')"
+	$(PY) -c "from blurset.services import options; options.write_stub('python/blurset/_core.pyi'); options.write_stub('python/blurset/_core.pyi', 'NoiseConfig')"
 
 # The docs site into site/: the pages generated from the parsers, schemas/ and
 # bench/results.json (docs/gen/), the checks mkdocs cannot make, then a strict build

@@ -52,8 +52,8 @@ def render_frames(directory: Path, n: int = FRAMES, size: int = SIZE) -> list[Pa
     """n latent frames of the demo box along a short orbit, rendered by the worker."""
     import math
 
-    from blurset.demo import make_demo_objects
-    from blurset.worker_client import Worker
+    from blurset.services.demo import make_demo_objects
+    from blurset.services.worker_client import Worker
 
     glb = make_demo_objects(directory / "objs", seed=0)[0]
     frames: list[dict[str, Any]] = []

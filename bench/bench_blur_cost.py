@@ -150,9 +150,9 @@ def traced_px(frames, res: int) -> float:
 
 
 def measure(res: int = RESOLUTION, repeats: int = REPEATS) -> dict:
-    from blurset.demo import make_demo_objects
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.worker_client import Worker
+    from blurset.services.demo import make_demo_objects
+    from blurset.services.worker_client import Worker
 
     with tempfile.TemporaryDirectory(prefix="blurset-bench-") as tmp:
         work = Path(tmp)

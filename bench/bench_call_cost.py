@@ -77,7 +77,7 @@ def _entry(res: int, p: dict) -> dict:
 
 
 def run() -> list[dict]:
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     with tempfile.TemporaryDirectory(prefix="blurset-bench-call-") as d:
         glb = make_demo_objects(Path(d) / "objs")[0]

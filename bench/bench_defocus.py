@@ -57,10 +57,10 @@ def _render(
 
 
 def measure() -> dict:
-    from blurset.demo import make_demo_objects
     from blurset.image import object_error
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.worker_client import Worker
+    from blurset.services.demo import make_demo_objects
+    from blurset.services.worker_client import Worker
 
     rows: dict[str, dict] = {
         f"level{lvl}": {"mse_vs_sharp": [], "seconds_vs_sharp": []} for lvl in LEVELS

@@ -74,14 +74,14 @@ def _glb(work: Path) -> Path:
     p = HERE.parent.parent / "shared" / "data" / "glb" / "sketchfab_MapPin.glb"
     if p.exists():
         return p
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     return make_demo_objects(work / "obj")[0]
 
 
 def measure() -> dict:
-    from blurset.denoise import denoiser
     from blurset.image import Accumulator, image_error, read_exr
+    from blurset.services.denoise import denoiser
 
     den = denoiser("cpu")
     out = {}

@@ -75,10 +75,10 @@ def _render(w, work: Path, c2w, seed: int, res: int, fov: float, samples: int, g
 def measure() -> dict:
     sys.path.insert(0, str(HERE))
     from bench_settings_per_hour import _glbs
-    from blurset.denoise import denoiser, device_for
     from blurset.image import image_error
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.worker_client import Worker
+    from blurset.services.denoise import denoiser, device_for
+    from blurset.services.worker_client import Worker
 
     device = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")  # bench/run.py --device
     den = denoiser(device_for(device))  # on the render device, as a build denoises

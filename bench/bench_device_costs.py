@@ -58,9 +58,9 @@ def _frame_seconds(w, sharp: dict, work: Path, res: int, samples: int, tag: int)
 
 
 def _costs_at(res: int, device: str, name: str) -> dict:
-    from blurset.demo import make_demo_objects
     from blurset.plan import BuildConfig
-    from blurset.worker_client import Worker
+    from blurset.services.demo import make_demo_objects
+    from blurset.services.worker_client import Worker
     from harness import plan_object
 
     with tempfile.TemporaryDirectory(prefix="blurset-bench-cost-") as d:

@@ -57,7 +57,8 @@ def _blurset(*args: str, env: dict | None = None) -> subprocess.CompletedProcess
 
 def make_build(work: Path, n: int) -> Path:
     """A finished build of `n` settings: the stand-in's six, cloned."""
-    from blurset import layout, outputs, publish
+    from blurset import layout
+    from blurset.services import outputs, publish
 
     blender = work / "blender"
     script = ROOT / "tests" / "standin_worker.py"
@@ -133,7 +134,7 @@ def timed_export(b: Path, out: Path, shard_mb: int) -> tuple[float, float]:
 
 def idle_rss_mb() -> float:
     """Peak RSS of a process that imports what the export imports and does nothing."""
-    code = "import blurset.cli, blurset.export, blurset.export_hub, pyarrow.parquet"
+    code = "import blurset.cli, blurset.commands.export.cli, blurset.commands.export.hub, pyarrow.parquet"
     proc = subprocess.Popen([sys.executable, "-c", code])
     _, _, usage = os.wait4(proc.pid, 0)
     return usage.ru_maxrss / 1024

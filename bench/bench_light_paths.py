@@ -45,7 +45,7 @@ def measure() -> dict:
 
     from blurset.image import image_error, read_exr
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.worker_client import Worker, WorkerError
+    from blurset.services.worker_client import Worker, WorkerError
 
     out: dict = {"resolution": RES, "samples": SAMPLES, "repeats": REPEATS, "objects": {}}
     with tempfile.TemporaryDirectory(prefix="blurset-bench-lp-") as tmp:

@@ -26,7 +26,7 @@ def measure() -> dict:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_settings_per_hour import _glbs
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.worker_client import Worker
+    from blurset.services.worker_client import Worker
 
     out: dict = {}
     with tempfile.TemporaryDirectory(prefix="blurset-bench-need-") as tmp:

@@ -47,12 +47,12 @@ def _mse(a, b) -> float:
 
 
 def measure(res: int = RESOLUTION) -> dict:
-    from blurset.demo import make_demo_objects
+    from blurset.commands.tradeoff.render import REFERENCE_SEED_SALT
+    from blurset.commands.tradeoff.render import render_image as _render_image
+    from blurset.commands.tradeoff.render import sharp_frames as _sharp
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.tradeoff.render import REFERENCE_SEED_SALT
-    from blurset.tradeoff.render import render_image as _render_image
-    from blurset.tradeoff.render import sharp_frames as _sharp
-    from blurset.worker_client import Worker
+    from blurset.services.demo import make_demo_objects
+    from blurset.services.worker_client import Worker
 
     out: dict = {"resolution": res, "level": LEVEL, "factor": FACTOR, "presets": {}}
     with tempfile.TemporaryDirectory(prefix="blurset-bench-") as tmp:

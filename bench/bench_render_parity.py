@@ -60,12 +60,12 @@ def measure(res: int = RESOLUTION) -> dict:
     `samples` (BuildConfig.cycles_samples: Cycles sizes its sample pattern from the
     largest `samples` a process has rendered, so the pin shapes the sharp image's noise
     too). The converged references come from another worker."""
-    from blurset.demo import make_demo_objects
+    from blurset.commands.tradeoff.render import REFERENCE_SEED_SALT
+    from blurset.commands.tradeoff.render import render_image as _render_image
+    from blurset.commands.tradeoff.render import sharp_frames as _sharp
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.tradeoff.render import REFERENCE_SEED_SALT
-    from blurset.tradeoff.render import render_image as _render_image
-    from blurset.tradeoff.render import sharp_frames as _sharp
-    from blurset.worker_client import Worker
+    from blurset.services.demo import make_demo_objects
+    from blurset.services.worker_client import Worker
 
     out: dict = {"resolution": res, "reference_factor": REF, "rows": {}}
     with tempfile.TemporaryDirectory(prefix="blurset-bench-") as tmp:

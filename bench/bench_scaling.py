@@ -40,8 +40,8 @@ def _build(out: Path, workers: int, threads: int) -> float:
 
 def _render_times(work: Path) -> dict[str, float]:
     """Seconds of one 512² frame at a few sample counts, on a demo object."""
-    from blurset.demo import make_demo_objects
-    from blurset.worker_client import Worker
+    from blurset.services.demo import make_demo_objects
+    from blurset.services.worker_client import Worker
 
     glb = make_demo_objects(work / "objs", seed=0)[0]
     c2w = [[1, 0, 0, 0], [0, 0.5, -0.866, -2.6], [0, 0.866, 0.5, 1.5], [0, 0, 0, 1]]

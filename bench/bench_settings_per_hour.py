@@ -78,13 +78,13 @@ def _glbs(work: Path) -> list[Path]:
     found = [data / f"{n}.glb" for n in TEXTURED if (data / f"{n}.glb").exists()]
     if found:
         return found
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     return [make_demo_objects(work / "obj")[0]]
 
 
 def _config(out: Path, glb: Path, **kw):
-    from blurset.config import make_config
+    from blurset.services.config import make_config
 
     flags = {
         "objects": [str(glb)],

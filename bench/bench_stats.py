@@ -3,7 +3,7 @@
 Files: a synthetic build (tests.conftest.write_synthetic_build) of 10,000 complete
 settings × 34 views × 4 levels with the full meta.json structure `blurset build`
 writes, latent-frame records included (m = 4 per level, ~100 KB per file, ~1 GB in all;
-the paper's m = 34 makes files ~8× larger). Contender: `blurset.stats.build_stats`
+the paper's m = 34 makes files ~8× larger). Contender: `blurset.commands.stats.build_stats`
 (Rust, rayon, serde) plus `to_dict` of its document, i.e. what `blurset stats`
 holds in Python before drawing. Baseline: the same aggregation in plain Python (json
 per file, the same per-view lists, min / median / max / mean, counts). Medians of
@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from blurset.stats import build_stats  # noqa: E402
+from blurset.commands.stats import build_stats  # noqa: E402
 from harness import median_times  # noqa: E402
 
 from tests.conftest import write_synthetic_build  # noqa: E402

@@ -63,14 +63,14 @@ def held_out_glbs(work: Path | None) -> list[Path]:
     found = [data / f"{n}.glb" for n in HELD_OUT if (data / f"{n}.glb").exists()]
     if work is None:
         return found
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     return found + list(make_demo_objects(work / "demo_objects"))
 
 
 def config(out: Path, glb: Path, res: int, views: int, **flags):
     """One setting of `glb`, every view rendering its blurry images, linear EXRs kept."""
-    from blurset.config import make_config
+    from blurset.services.config import make_config
 
     return make_config(
         {},
@@ -123,7 +123,7 @@ def _references(cfg, glb: Path, setting: Path, meta: dict, work: Path) -> dict:
     probe's samples). The probe is the image's construction at half its samples (two
     halves on other seeds): with the image, it measures how fast this image's noise falls
     with samples, so the least that reaches the target is found from measurements."""
-    from blurset.worker_client import Worker
+    from blurset.services.worker_client import Worker
 
     per_frame = {}
     for v in meta["views"]:

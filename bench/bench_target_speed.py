@@ -100,7 +100,7 @@ def _continuous(glb: Path, work: Path) -> dict:
     """Per (view, level dir): the continuous blur of each level and the sharp view at as
     many samples (premultiplied linear RGBA), rendered on each of two seed sets no build
     uses."""
-    from blurset.worker_client import Worker
+    from blurset.services.worker_client import Worker
 
     cfg = continuous_config(glb, work)
     refs: dict[tuple[int, str], list[np.ndarray]] = {}
@@ -234,7 +234,7 @@ def _paper_noise(cfg, glb: Path, setting: Path, work: Path) -> tuple[dict, dict]
     calls per view."""
     from blurset import image, layout
     from blurset.image import read_exr
-    from blurset.worker_client import Worker
+    from blurset.services.worker_client import Worker
 
     out = {}
     work_n = {"samples_per_view": 0.0, "calls_per_view": 0.0}

@@ -22,7 +22,7 @@ os.environ["BLURSET_BENCH_SPEED_VIEWS"] = "1"
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_target_speed as b  # noqa: E402
 from blurset import image  # noqa: E402
-from blurset.worker_client import Worker  # noqa: E402
+from blurset.services.worker_client import Worker  # noqa: E402
 from harness import plan_object, render_mean  # noqa: E402
 
 HERE = Path(__file__).resolve().parent

@@ -43,7 +43,7 @@ def _locked(cmd: list[str]) -> list[str]:
 def render(work: Path, size: int) -> Path:
     """A build of the demo vase and box at `size` px, 34 views, levels 1 and 3 (demo
     defaults otherwise: 6 latent frames, 4 samples); resumed if it exists."""
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     # Made once: a build resumes only with the very files it was made from.
     objects = sorted((work / "objects").glob("demo_*.glb")) or make_demo_objects(
@@ -122,7 +122,7 @@ def measure(work: Path, sizes: list[int], view_counts: list[int]) -> list[dict]:
 
 # One check in a process of its own (COLMAP's memory and threads).
 _ONE = (
-    "import json, sys, pathlib; from blurset import check_poses; "
+    "import json, sys, pathlib; from blurset.commands import check_poses; "
     "pathlib.Path(sys.argv[2]).write_text(json.dumps(check_poses.check_scene(sys.argv[1])))"
 )
 

@@ -40,8 +40,8 @@ DEVICE_SIZES = {
 
 def pick_device(name: str) -> str:
     """The Cycles backend for `--device NAME`, or SystemExit naming what exists."""
-    from blurset import devices
     from blurset.exceptions import ConfigError
+    from blurset.services import devices
 
     if name == "cpu":
         return "CPU"

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from blurset import demo, layout
+from blurset import layout
+from blurset.services import demo
 from PIL import Image, ImageFilter
 from trimesh.visual.material import PBRMaterial
 

@@ -22,7 +22,7 @@ def continuous_reference(config: Callable, glb: Path, work: Path, res: int) -> d
     """Reference images (premultiplied linear RGBA) per (view, level dir): the continuous
     blur of each level, and the sharp view with as many samples. `config(out, glb,
     **flags)` makes the bench's build config."""
-    from blurset.worker_client import Worker
+    from blurset.services.worker_client import Worker
 
     cfg = config(work / "unused", glb, latents=REFERENCE[0], latent_positions="stratified",
                  samples=REFERENCE[1], blur_budget="flat")  # fmt: skip
@@ -65,7 +65,7 @@ def render_reference(
     these frames). `split`: render each image as two halves on two seed sets and measure
     the noise of their mean (else the noise is not measured: no entry)."""
     from blurset.image import image_error
-    from blurset.worker_client import Worker
+    from blurset.services.worker_client import Worker
 
     per_view = sum(samples.values())
     k = max(2 if split else 1, min(REF_FACTOR, REF_CAP // max(per_view, 1)))

@@ -475,7 +475,7 @@ def use_device(backend: str, gpus: list[int] | None) -> dict:
 
 def cuda_kernels() -> dict:
     """What the first CUDA or OptiX render will need, as facts for the driver to judge
-    (blurset.kernels): {"archs": ["sm_90", ...] of the GPUs this process sees, "kernels":
+    (blurset.services.kernels): {"archs": ["sm_90", ...] of the GPUs this process sees, "kernels":
     ["sm_89", ...] that Cycles ships compiled, "driver": the CUDA driver's version}.
     Cycles takes a shipped cubin for a GPU's arch; otherwise the driver compiles
     Blender's PTX before the first frame. No archs where there is no CUDA driver."""

@@ -293,7 +293,7 @@ def main() -> int:
     }
     if device["backend"] in ("CUDA", "OPTIX"):
         # Whether the first frame waits for the driver to compile kernels: the driver
-        # says so before it sends the first render (blurset.kernels).
+        # says so before it sends the first render (blurset.services.kernels).
         ready["cuda"] = blender_scene.cuda_kernels()
     send(ready)
     try:

@@ -286,7 +286,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.json:
         # The parent side only: the child runs under the client's Python, without blurset.
         from blurset.exceptions import ConfigError
-        from blurset.outputs import claim_report
+        from blurset.services.outputs import claim_report
 
         try:
             claim_report(a.json, is_report, "--json")

@@ -47,7 +47,7 @@ HAS_BPY = importlib.util.find_spec("bpy") is not None
 # In CI nothing may be skipped for want of bpy or the shared data: a hole there would
 # leave the run green with its render tests never run.
 IN_CI = os.environ.get("CI", "").strip().lower() in ("1", "true", "yes")
-# The builder's absolute paths go to the user's state directory (blurset.publish):
+# The builder's absolute paths go to the user's state directory (blurset.services.publish):
 # a test run keeps its own, never the user's ~/.local/state.
 os.environ.setdefault("BLURSET_STATE_DIR", tempfile.mkdtemp(prefix="blurset-state-"))
 # Fixtures that render a build: a test using one needs bpy.

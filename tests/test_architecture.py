@@ -186,12 +186,12 @@ def test_a_new_or_renamed_module_is_found() -> None:
     files = tree_files()
     # A module added without a word on the page.
     for fake in (f"{PKG}/export_zarr.py", f"{CORE}/plan/vignette.rs", "bench/bench_new.py",
-                 f"{PKG}/builder/shard.py"):  # fmt: skip
+                 f"{PKG}/commands/build/shard.py"):  # fmt: skip
         assert f"{fake} is not named under ## {_folder(fake)}" in problems(text, files | {fake})
     # A module renamed on the page (or in the tree): the old name is stale, the file unnamed.
     assert "`kernels.py`" in text
     found = problems(text.replace("`kernels.py`", "`kernel_cache.py`"), files)
-    assert f"{PKG}/kernels.py is not named under ## {PKG}" in found
+    assert f"{PKG}/services/kernels.py is not named under ## {PKG}" in found
     assert any("`kernel_cache.py`" in p for p in found), found
     # A file of a folder renamed: `plan/` names `defocus.rs`, which must exist there.
     found = problems(text.replace("`defocus.rs`", "`lens.rs`", 1), files)
@@ -218,7 +218,7 @@ def test_every_where_to_add_recipe_names_files_that_exist() -> None:
         (f"{CORE}/plan/choices.rs", "enum Preset"),
         (f"{CORE}/plan/presets.rs", "fn preset_values"),
         ("bench/fixed_presets.py", "PRESETS = {"),
-        (f"{PKG}/tradeoff/grid.py", "PRESETS = {"),
+        (f"{PKG}/commands/tradeoff/grid.py", "PRESETS = {"),
     ):
         assert path.split("/", 3)[-1] in preset or path in preset, path
         assert decl in (ROOT / path).read_text(), (path, decl)

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from blurset import plan
-from blurset.builder.setting import PRICE_BACKEND_ENV
-from blurset.config import make_config
+from blurset.commands.build.setting import PRICE_BACKEND_ENV
 from blurset.exceptions import ConfigError
+from blurset.services.config import make_config
 
 from tests.conftest import run_cli
 
@@ -59,7 +59,7 @@ def test_the_presets_price_the_method_and_paper_and_a_given_method_stay():
 
 @pytest.fixture(scope="module")
 def box(tmp_path_factory) -> Path:
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     return make_demo_objects(tmp_path_factory.mktemp("objects"), seed=0)[0]
 

@@ -164,7 +164,7 @@ def test_real_blurry_masks_cover_the_exposure(tmp_path):
     render's alpha > 0 plus the sharp mask, exactly, which is more than its alpha ≥ 0.5.
     Under a render target (rounds, two halves): the sharp mask and the mean's half cover.
     In each, some view's mask is larger than the sharp one: the object moved."""
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     box = make_demo_objects(tmp_path / "objects", seed=0)[0]
 
@@ -201,7 +201,7 @@ def test_a_build_made_before_blur_masks_is_still_whole_and_read_as_made(
     """A setting whose meta.json does not record `level_masks` (every --passes mask build
     before issue 48) holds masks in sharp/ only: verify finds it whole, open_scene and the
     nerfstudio export give every level the sharp masks, and a rerun keeps it."""
-    from blurset import publish
+    from blurset.services import publish
 
     old = copy_build(masks_build, tmp_path / "old")
     for setting in layout.complete_settings(old):

@@ -102,7 +102,7 @@ def test_test_views_every_16th(demo_build):
 
 def test_sharp_image_equals_a_render_at_p(demo_build, tmp_path):
     from blurset.image import Accumulator
-    from blurset.worker_client import Worker
+    from blurset.services.worker_client import Worker
 
     s = settings(demo_build)[0]
     meta = json.loads((s / "meta.json").read_text())
@@ -182,7 +182,7 @@ def test_centered_trajectory_puts_p_mid_exposure_with_the_same_draws(tmp_path):
     lies on p + t·w_l·δ with t ∈ [−½, ½] (meta.json), drawn with the same seeds as the
     default `start` (t − ½), so the sharp images and all pose files are the same bytes,
     and the mean latent pose recorded per view and level is the camera at the mean t."""
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     glb = make_demo_objects(tmp_path / "objects")[0]
     args = ("--objects", str(glb), "--views", "3", "--levels", "1,4", "--latents", "3",

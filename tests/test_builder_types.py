@@ -1,4 +1,4 @@
-"""The builder's functions are typed (issue 49): no parameter of python/blurset/builder/
+"""The builder's functions are typed (issue 49): no parameter of python/blurset/commands/build/
 takes `Any`, and the worker it drives is the RenderWorker port, not a concrete class."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-BUILDER = Path(__file__).resolve().parents[1] / "python" / "blurset" / "builder"
+BUILDER = Path(__file__).resolve().parents[1] / "python" / "blurset" / "commands" / "build"
 
 
 def _any_parameters(source: str, name: str) -> list[str]:

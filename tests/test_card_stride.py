@@ -4,7 +4,7 @@ by the stand-in worker: no rendering)."""
 from __future__ import annotations
 
 import pytest
-from blurset.card import make_card
+from blurset.commands.card import make_card
 
 from tests.conftest import standin_build
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from blurset import check_poses
+from blurset.commands import check_poses
 from blurset.exceptions import ConfigError, InputError
 from PIL import Image
 

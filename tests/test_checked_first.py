@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 from blurset import layout
-from blurset.card import make_card
+from blurset.commands.card import make_card
 
 from tests.conftest import one_error_line, run_cli
 

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 from blurset.cli import main
-from blurset.config import load_toml, make_config
 from blurset.exceptions import ConfigError
 from blurset.plan import BuildConfig
+from blurset.services.config import load_toml, make_config
 
 
 def refused(capsys, out: Path, *argv: str) -> str:
@@ -275,7 +275,7 @@ def test_an_out_built_before_sample_subsets_is_not_resumed_with_them(tmp_path):
     run-only options (device, gpus) never count."""
     import json
 
-    from blurset.builder.dataset import check_same_options
+    from blurset.commands.build.dataset import check_same_options
 
     out = tmp_path / "out"
     out.mkdir()

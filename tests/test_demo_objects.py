@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 import trimesh
-from blurset.demo import DEMO_OBJECTS, make_demo_objects, patch_texture
+from blurset.services.demo import DEMO_OBJECTS, make_demo_objects, patch_texture
 
 
 def _digests(paths):
@@ -66,7 +66,7 @@ def test_texture_has_structure_at_every_scale():
 def test_demo_objects_render_with_many_sift_features(tmp_path):
     import OpenEXR
     import pycolmap
-    from blurset.worker_client import Worker
+    from blurset.services.worker_client import Worker
 
     extractor = pycolmap.FeatureExtractor.create(
         pycolmap.FeatureExtractionOptions(), pycolmap.Device.cpu
@@ -102,7 +102,7 @@ def test_demo_objects_render_with_many_sift_features(tmp_path):
 def test_demo_objects_carry_blursets_licence(tmp_path):
     """The demo objects are blurset's own: their glTF asset says so, and a build
     attributes them (MIT, author blurset) as it does a Sketchfab export, not `unknown`."""
-    from blurset import attribution, preflight
+    from blurset.services import attribution, preflight
 
     for p in make_demo_objects(tmp_path, seed=2):
         a = attribution.attribution(attribution.from_asset(preflight.check(p).asset))

@@ -52,7 +52,7 @@ def test_missing_oidn_library_is_one_line_before_anything_is_written(tmp_path):
 
 def test_denoiser_on_arrays_keeps_a_flat_image_and_checks_shapes():
     needs_bpy()  # OIDN comes with the bpy wheel
-    from blurset.denoise import denoiser
+    from blurset.services.denoise import denoiser
 
     d = denoiser("cpu")
     assert d.device_type == "CPU" and d.record()["library"] == "OpenImageDenoise"
@@ -144,10 +144,10 @@ def test_denoising_keeps_the_motion_streak(tmp_path):
     """Level 4 of a textured object, its latent frames with their guides: the motion
     streak on the silhouette edge (10–90 % rise of the colour across it, along the axis
     the object moves) of the denoised mean stays within 10 % of the undenoised mean's."""
-    from blurset.denoise import denoiser
     from blurset.image import Accumulator
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.worker_client import Worker
+    from blurset.services.denoise import denoiser
+    from blurset.services.worker_client import Worker
 
     glb = shared("glb", "sketchfab_MapPin.glb")
     res, view, level = 96, 1, 4

@@ -7,9 +7,9 @@ from __future__ import annotations
 import json
 
 import pytest
-from blurset import devices
-from blurset.config import make_config
 from blurset.exceptions import ConfigError
+from blurset.services import devices
+from blurset.services.config import make_config
 
 from tests.conftest import run_cli
 

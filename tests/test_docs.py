@@ -81,7 +81,7 @@ def test_cli_reference_covers_every_command_and_option(tmp_path, monkeypatch) ->
             for flag in action.option_strings:
                 assert f"`{flag}`" in page, (name, flag)
     # The keys only a --config file sets, from the core's declarations.
-    from blurset.config import BUILD
+    from blurset.services.config import BUILD
 
     for d in BUILD.decls:
         if not d.flags and not d.via:

@@ -15,8 +15,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from blurset import data, export_hub, layout
+from blurset import data, layout
+from blurset.commands.export import hub as export_hub
 from blurset.data import open_scene
+from blurset.services import hub_format
 
 from tests.conftest import one_error_line, run_cli, standin_build, tree
 
@@ -58,7 +60,7 @@ def hub(hub_build, tmp_path_factory) -> Path:
 
 
 def _doc(out: Path) -> dict:
-    return export_hub.hub_doc(out) or {}
+    return hub_format.hub_doc(out) or {}
 
 
 def _configs(doc: dict) -> list[str]:
@@ -281,7 +283,7 @@ def test_a_rerun_after_the_build_changed_rewrites_only_what_changed(hub_build, t
     p = b / other / "blur_1" / "images" / "001.png"
     before = {k: (out / "data" / k).stat().st_ino for k in doc["shards"]}
     # Another image in the file (the manifest is rewritten as a rerun of the build would).
-    from blurset import publish
+    from blurset.services import publish
 
     shutil.copyfile(b / other / "blur_1" / "images" / "002.png", p)
     publish.write_manifest(b)

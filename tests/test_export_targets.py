@@ -1,5 +1,5 @@
 """The export targets are a registry (issue 49): each `--for` target is one module of
-blurset.exports, and everything else follows from it. The `--for` choices and help come
+blurset.commands.export.targets, and everything else follows from it. The `--for` choices and help come
 from the registry, every target is a name of the core's `ExportTarget` (which
 export.json's `for` is read as) and has its docs page, export.py names no target, and a
 target module export.py has never seen is exported with it unchanged."""
@@ -12,12 +12,14 @@ import re
 import sys
 
 import pytest
-from blurset import cli, exports, outputs
-from blurset.export_rules import OwnOutput, SceneFolders
+from blurset import cli
+from blurset.commands.export import targets as exports
+from blurset.commands.export.rules import OwnOutput, SceneFolders
+from blurset.services import outputs
 
 from tests.conftest import ROOT
 
-EXPORT_PY = ROOT / "python" / "blurset" / "export.py"
+EXPORT_PY = ROOT / "python" / "blurset" / "commands" / "export" / "cli.py"
 DOCS = ROOT / "docs"
 # The page that explains exports: every target has its row there.
 OVERVIEW = DOCS / "training" / "index.md"
@@ -34,7 +36,10 @@ def _for_action(parser):
 
 
 def test_every_target_is_found_and_is_its_modules_name() -> None:
-    files = sorted(p.stem for p in (ROOT / "python" / "blurset" / "exports").glob("*.py"))
+    files = sorted(
+        p.stem
+        for p in (ROOT / "python" / "blurset" / "commands" / "export" / "targets").glob("*.py")
+    )
     assert set(exports.targets()) == {f for f in files if f != "__init__"}
     assert exports.DEFAULT in exports.targets()
     for name, t in exports.targets().items():
@@ -127,7 +132,7 @@ def test_export_py_names_no_target() -> None:
 # A target export.py has never seen: scenes under flat/, the held-out views of a
 # setting each a scene of their own, and only the level's poses and a note written.
 THROWAWAY = """
-from blurset.export_rules import SceneFolders, Target
+from blurset.commands.export.rules import SceneFolders, Target
 
 
 def split(s):
@@ -159,11 +164,11 @@ def throwaway_registry(tmp_path, monkeypatch):
     pkg.mkdir()
     (pkg / "llff.py").write_text(THROWAWAY)
     monkeypatch.setattr(exports, "__path__", [str(pkg)])
-    monkeypatch.delitem(sys.modules, "blurset.exports.llff", raising=False)
+    monkeypatch.delitem(sys.modules, "blurset.commands.export.targets.llff", raising=False)
     exports.targets.cache_clear()
     yield
     exports.targets.cache_clear()
-    sys.modules.pop("blurset.exports.llff", None)
+    sys.modules.pop("blurset.commands.export.targets.llff", None)
 
 
 def test_a_new_target_module_is_exported_with_by_export_py_unchanged(

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from blurset.demo import make_demo_objects
 from blurset.exceptions import InputError
-from blurset.objects import resolve_objects
+from blurset.services.demo import make_demo_objects
+from blurset.services.objects import resolve_objects
 from PIL import Image
 
 from tests.conftest import run_cli

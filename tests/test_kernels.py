@@ -7,9 +7,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from blurset import kernels
-from blurset.demo import make_demo_objects
-from blurset.worker_client import Worker
+from blurset.services import kernels
+from blurset.services.demo import make_demo_objects
+from blurset.services.worker_client import Worker
 
 from tests.conftest import standin_build
 

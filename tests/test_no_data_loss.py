@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 from blurset import layout
-from blurset.demo import make_demo_objects
+from blurset.services.demo import make_demo_objects
 from PIL import Image
 
 from tests.conftest import (

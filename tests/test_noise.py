@@ -375,10 +375,10 @@ def test_the_core_plan_is_what_the_command_writes(small_scene, tmp_path):
     """The plan of a scene (issue 36) holds per gain the folder, key, sigmas and the
     whole noise.json; the command writes exactly that record, and the rng it names is
     the key the API reproduces."""
+    from blurset.commands.noise.cli import NoiseConfig
+    from blurset.commands.noise.params import planned
     from blurset.exceptions import ConfigError
-    from blurset.noise.cli import NoiseConfig
     from blurset.noise.model import plan_noise_scene
-    from blurset.noise.params import planned
 
     cfg = NoiseConfig(gains=["1", "8"], factor=2, seed=3, clean_views=2, frames=2)
     out = tmp_path / "out"

@@ -112,7 +112,7 @@ def test_keep_linear_stores_every_view_and_level(linear_build, tmp_path):
             png = np.asarray(Image.open(pngs[3]), np.float64)
             assert np.abs(np.round(srgb_encode(lin) * 255) - png).max() <= 1
     # The name in a TOML config too (the old write-linear still works).
-    from blurset.config import load_toml
+    from blurset.services.config import load_toml
 
     for key in ("keep-linear", "keep_linear", "write-linear"):
         (tmp_path / "c.toml").write_text(f"{key} = true\n")

@@ -8,9 +8,10 @@ import argparse
 from pathlib import Path
 
 import pytest
-from blurset import cli, options
+from blurset import cli
+from blurset.commands.noise.cli import NOISE, NoiseConfig, config_of
 from blurset.exceptions import ConfigError
-from blurset.noise.cli import NOISE, NoiseConfig, config_of
+from blurset.services import options
 
 from tests.conftest import help_text
 

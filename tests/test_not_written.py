@@ -12,7 +12,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from blurset import layout, outputs
+from blurset import layout
+from blurset.services import outputs
 
 from tests.conftest import copy_build, one_error_line, run_cli, shared, standin_build, tree
 
@@ -259,8 +260,8 @@ def test_a_lock_file_a_user_wrote_is_refused_by_name_and_kept(tmp_path):
     """A lock file says which run holds it; a file of that name that says anything else
     (a user's `.tradeoff.lock`) is named and left as it is, never truncated or removed.
     One a killed run left (its holder line, or nothing) is taken over and removed."""
-    from blurset import outputs
     from blurset.exceptions import InputError
+    from blurset.services import outputs
 
     mine = tmp_path / outputs.TRADEOFF_LOCK
     mine.write_text("my notes\n")

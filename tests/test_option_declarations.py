@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin
 
 from blurset import cli
-from blurset.builder.cli import default_text
-from blurset.builder.dataset import BEFORE_OPTION, RUN_OPTIONS
-from blurset.config import BuildConfig
+from blurset.commands.build.cli import default_text
+from blurset.commands.build.dataset import BEFORE_OPTION, RUN_OPTIONS
+from blurset.services.config import BuildConfig
 
 OPTIONS = BuildConfig.options()
 STUB = Path(__file__).resolve().parents[1] / "python" / "blurset" / "_core.pyi"

@@ -1,7 +1,7 @@
 """Adding an option is one declaration (issue 27): the flags of `blurset build`, their
 help and defaults, the TOML keys, the options that shape the outputs and the CLI
 reference are all made from the core's declarations (`BuildConfig.declarations()`,
-python/blurset/options.py). Checked both ways on the real table, and shown on a toy
+python/blurset/services/options.py). Checked both ways on the real table, and shown on a toy
 option that exists only as a declaration."""
 
 from __future__ import annotations
@@ -13,11 +13,12 @@ from types import SimpleNamespace
 from typing import Any
 
 import pytest
-from blurset import cli, options
-from blurset.builder.dataset import BEFORE_OPTION, RUN_OPTIONS, check_same_options
-from blurset.config import BUILD, BuildConfig, load_toml, make_config
+from blurset import cli
+from blurset.commands.build.dataset import BEFORE_OPTION, RUN_OPTIONS, check_same_options
 from blurset.exceptions import ConfigError
-from blurset.options import Options
+from blurset.services import options
+from blurset.services.config import BUILD, BuildConfig, load_toml, make_config
+from blurset.services.options import Options
 
 from tests.conftest import help_text
 

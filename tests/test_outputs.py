@@ -1,4 +1,4 @@
-"""Nothing a user keeps is ever deleted: one owner for every output (blurset.outputs,
+"""Nothing a user keeps is ever deleted: one owner for every output (blurset.services.outputs,
 blurset-core dataset::outputs), readers that check what they read. Each reproduction of
 the hostile user's report is a test here; the builds are real `blurset build` runs with
 the stand-in worker (tests/standin_worker.py), so none of them renders with Blender."""
@@ -16,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from blurset import layout, outputs, publish
-from blurset.demo import make_demo_objects
+from blurset import layout
+from blurset.services import outputs, publish
+from blurset.services.demo import make_demo_objects
 
 from tests.conftest import (
     ROOT,
@@ -566,8 +567,8 @@ def test_a_setting_records_its_source_by_relative_path(b):
 
 
 def test_the_preflight_budget_is_the_cores(tmp_path):
-    from blurset import preflight
     from blurset.plan import BuildConfig
+    from blurset.services import preflight
 
     cfg = BuildConfig(out=str(tmp_path), objects=["x.glb"])
     budget = preflight.Budget()
@@ -576,7 +577,7 @@ def test_the_preflight_budget_is_the_cores(tmp_path):
 
 
 def test_objaverse_licence_code_by_is_cc_by_4(tmp_path):
-    from blurset import attribution
+    from blurset.services import attribution
 
     rec = attribution.from_objaverse_annotation({"license": "by", "name": "t", "user": {}})
     assert attribution.attribution(rec)["license"] == "CC-BY-4.0"

@@ -1,5 +1,5 @@
 """Issue 34, "data lost or inputs changed": the commands outside the build path go
-through the output owner too (blurset.outputs). Each case is the hostile user's
+through the output owner too (blurset.services.outputs). Each case is the hostile user's
 reproduction, with real commands; the builds are stand-in builds (no Blender render)."""
 
 from __future__ import annotations
@@ -11,7 +11,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from blurset import layout, outputs
+from blurset import layout
+from blurset.services import outputs
 
 from tests.conftest import copy_build, one_error_line, run_cli, standin_build, tree
 
@@ -74,7 +75,7 @@ def test_tradeoff_refuses_a_build_and_a_folder_it_does_not_own(b, tmp_path):
 
 
 def test_tradeoff_writes_into_a_new_or_its_own_folder(tmp_path):
-    from blurset import tradeoff as t
+    from blurset.commands import tradeoff as t
 
     t.claim(tmp_path / "new")
     (tmp_path / "empty").mkdir()
@@ -299,7 +300,8 @@ def test_build_out_a_dangling_link_is_refused_and_its_target_not_made(tmp_path, 
 def test_a_stopped_stats_run_is_taken_back_by_its_rerun(b, tmp_path, monkeypatch):
     import errno
 
-    from blurset import cli, stats
+    from blurset import cli
+    from blurset.commands import stats
 
     def full_disk(*_a, **_k):
         raise OSError(errno.ENOSPC, "No space left on device")

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from blurset import layout
-from blurset.preflight import PreflightError, glb_inspect
+from blurset.services.preflight import PreflightError, glb_inspect
 
 from tests.conftest import copy_build, one_error_line, run_cli, standin_build, tree
 
@@ -187,7 +187,7 @@ def test_a_hostile_glb_header_is_one_preflight_line(name, tmp_path):
         glb_inspect.read_glb(str(path))
     assert str(e.value).endswith(f": {path}") and words in e.value.reason, e.value
     with pytest.raises(PreflightError) as p:
-        from blurset import preflight
+        from blurset.services import preflight
 
         preflight.check(path)
     assert words in str(p.value) and "\n" not in str(p.value), p.value

@@ -48,7 +48,7 @@ def _run(site: Path, cwd: Path, code: str) -> subprocess.CompletedProcess:
 
 def test_installed_wheel_uses_its_own_scripts(installed_wheel, tmp_path):
     p = _run(installed_wheel, tmp_path, (
-        "import json, blurset, blurset.preflight as pf, blurset.worker_client as wc\n"
+        "import json, blurset, blurset.services.preflight as pf, blurset.services.worker_client as wc\n"
         "print(json.dumps([blurset.__file__, str(wc.WORKER_SCRIPT), str(pf._GLB_INSPECT)]))"
     ))  # fmt: skip
     assert p.returncode == 0, p.stderr

@@ -11,10 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from blurset import check_poses, llff, outputs, preflight
-from blurset.export_rules import SceneFolders, SceneSource
-from blurset.exports import geonerf
+from blurset import llff
+from blurset.commands import check_poses
+from blurset.commands.export.rules import SceneFolders, SceneSource
+from blurset.commands.export.targets import geonerf
 from blurset.plan import BuildConfig
+from blurset.services import outputs, preflight
 
 from tests.conftest import ROOT
 

@@ -11,9 +11,9 @@ import shutil
 from pathlib import Path
 
 import pytest
-from blurset import preflight
-from blurset.demo import make_demo_objects
-from blurset.preflight import PreflightError, glb_inspect
+from blurset.services import preflight
+from blurset.services.demo import make_demo_objects
+from blurset.services.preflight import PreflightError, glb_inspect
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from blurset import preview
+from blurset.commands import preview
 from PIL import Image
 
 from tests.conftest import DEMO_ARGS, run_cli

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import pytest
 import yaml
-from blurset import attribution, publish
-from blurset.demo import make_demo_objects
 from blurset.exceptions import ConfigError
 from blurset.plan import BuildConfig
+from blurset.services import attribution, publish
+from blurset.services.demo import make_demo_objects
 
 from tests.conftest import run_cli, shared
 
@@ -431,7 +431,7 @@ def test_licenses_filter():
 
 
 def test_licenses_in_a_toml_config(tmp_path):
-    from blurset.config import load_toml, make_config
+    from blurset.services.config import load_toml, make_config
 
     toml = tmp_path / "b.toml"
     toml.write_text('objects = ["x.glb"]\nout = "o"\nlicenses = ["cc-by-4.0", "cc0-1.0"]\n')
@@ -494,7 +494,7 @@ def test_the_config_record_has_no_paths():
 def test_licenses_shape_outputs_so_a_rerun_must_match(tmp_path):
     """--licenses decides which objects a build holds: a rerun into OUT with another
     filter is refused (naming it) unless --allow-mixed, like any output-shaping option."""
-    from blurset.builder.dataset import RUN_OPTIONS, check_same_options
+    from blurset.commands.build.dataset import RUN_OPTIONS, check_same_options
 
     assert "licenses" not in RUN_OPTIONS
     out = tmp_path / "out"

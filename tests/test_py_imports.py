@@ -48,6 +48,8 @@ def test_the_check_sees_the_imports() -> None:
     """The reader finds top-level and function-level imports (a circle would not hide
     behind it)."""
     edges = _edges()
-    assert "blurset.layout" in edges["blurset.outputs"]  # top level
-    assert "blurset.builder.target" in edges["blurset.builder.setting"]  # inside a function
+    assert "blurset.layout" in edges["blurset.services.outputs"]  # top level
+    assert (
+        "blurset.commands.build.target" in edges["blurset.commands.build.setting"]
+    )  # inside a function
     assert "blurset.exceptions" in edges["blurset.layout"]

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from blurset import layout
-from blurset.demo import make_demo_objects
-from blurset.objects import resolve_objects, sanitize, setting_name
-from blurset.preflight import glb_inspect
+from blurset.services.demo import make_demo_objects
+from blurset.services.objects import resolve_objects, sanitize, setting_name
+from blurset.services.preflight import glb_inspect
 
 from tests.conftest import run_cli, shared_if_present, wait_for
 
@@ -56,7 +56,7 @@ def setting_dirs(out: Path) -> list[str]:
 def assert_complete_means_whole(out: Path) -> None:
     """What every reader (finalize, noise, preview, stats) counts as complete is whole:
     never a `.partial`, never a setting missing a file (issue 14)."""
-    from blurset.stats import load_stats  # stats' own scan, in Rust
+    from blurset.commands.stats import load_stats  # stats' own scan, in Rust
 
     names = setting_dirs(out)
     assert not any(n.endswith(".partial") for n in names), names

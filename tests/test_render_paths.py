@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from blurset.demo import make_demo_objects
 from blurset.image import Accumulator
 from blurset.plan import BuildConfig, Plan, plan_setting
-from blurset.worker_client import Worker, WorkerError
+from blurset.services.demo import make_demo_objects
+from blurset.services.worker_client import Worker, WorkerError
 
 from tests.test_worker import read_exr
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from blurset.image import Accumulator
 from blurset.plan import BuildConfig, plan_setting
-from blurset.worker_client import Worker
+from blurset.services.worker_client import Worker
 
 from tests.conftest import shared
 from tests.test_worker import read_exr

@@ -12,7 +12,8 @@ import shutil
 from pathlib import Path
 
 import pytest
-from blurset import layout, publish
+from blurset import layout
+from blurset.services import publish
 
 from tests.conftest import copy_build, run_cli, standin_build
 

@@ -15,10 +15,10 @@ import threading
 from pathlib import Path
 
 import pytest
-from blurset import objaverse_cache
-from blurset.demo import make_demo_objects
 from blurset.exceptions import InputError
-from blurset.objects import resolve_objects
+from blurset.services import objaverse_cache
+from blurset.services.demo import make_demo_objects
+from blurset.services.objects import resolve_objects
 
 from tests.conftest import run_cli
 
@@ -111,8 +111,8 @@ def test_local_pool_ray_and_shards_build_the_same_dataset(demo_glbs, tmp_path):
 
 
 def test_shards_partition_by_object_whatever_the_listing_order(demo_glbs, tmp_path):
-    from blurset.builder import job_objects
-    from blurset.config import make_config
+    from blurset.commands.build import job_objects
+    from blurset.services.config import make_config
 
     entries = [str(g) for g in demo_glbs]
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import jsonschema
 import pytest
-from blurset import outputs
+from blurset.services import outputs
 
 from tests.conftest import ROOT, copy_build, run_cli, shared, standin_build
 
@@ -39,7 +39,7 @@ def check_tree(root: Path, seen: dict[str, int]) -> None:
 def test_the_stubs_typed_dicts_are_the_cores():
     """blurset/_records.pyi (the types of the dicts crossing the FFI) is what the core's
     serde types make today (`make schemas` writes it), and _core.pyi uses them."""
-    from blurset import stubgen
+    from blurset.services import stubgen
 
     assert stubgen.STUB.read_text() == stubgen.render(), "run `make schemas`"
     text = stubgen.STUB.read_text()

@@ -19,7 +19,7 @@ LEVEL_DIRS = ["sharp", "blur_1", "blur_4"]
 
 @pytest.fixture(scope="module")
 def demo_glbs(tmp_path_factory) -> list[Path]:
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     return make_demo_objects(tmp_path_factory.mktemp("objects"), seed=0)
 
@@ -174,7 +174,7 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
 def test_motion_blur_equals_a_high_m_average_of_the_same_segment(tmp_path, demo_glbs):
     from blurset.image import Accumulator
     from blurset.plan import BuildConfig, plan_setting
-    from blurset.worker_client import Worker
+    from blurset.services.worker_client import Worker
 
     res, view, level = 64, 2, "4"
     with Worker(timeout=300) as w:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from blurset import layout
-from blurset.stats import BAR, load_stats
+from blurset.commands.stats import BAR, load_stats
 from PIL import Image
 
 from tests.conftest import DEMO_ARGS, run_cli, write_synthetic_build

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from blurset import image, plan
-from blurset.config import make_config
+from blurset.services.config import make_config
 
 from tests.conftest import run_cli
 
@@ -82,7 +82,7 @@ def test_a_build_says_when_latents_max_breaks_the_ghost_bound(tmp_path, standin_
 
 
 def test_a_preset_in_toml_and_any_case(tmp_path):
-    from blurset.config import load_toml
+    from blurset.services.config import load_toml
 
     f = tmp_path / "b.toml"
     f.write_text('preset = "FAST"\nobjects = ["x.glb"]\nout = "o"\n')
@@ -91,8 +91,8 @@ def test_a_preset_in_toml_and_any_case(tmp_path):
 
 
 def test_an_empty_out_in_toml_is_refused_by_name(tmp_path):
-    from blurset.config import load_toml
     from blurset.exceptions import ConfigError
+    from blurset.services.config import load_toml
 
     f = tmp_path / "b.toml"
     f.write_text('out = ""\nobjects = ["x.glb"]\n')
@@ -193,7 +193,7 @@ def test_the_bound_opens_where_a_few_pixels_carry_the_noise():
 
 @pytest.fixture(scope="module")
 def box(tmp_path_factory) -> Path:
-    from blurset.demo import make_demo_objects
+    from blurset.services.demo import make_demo_objects
 
     return make_demo_objects(tmp_path_factory.mktemp("objects"), seed=0)[0]
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from blurset import worker_client
 from blurset.cli import main
-from blurset.demo import make_demo_objects
+from blurset.services import worker_client
+from blurset.services.demo import make_demo_objects
 
 
 @pytest.fixture
@@ -127,7 +127,7 @@ def test_toml_demo_must_be_a_boolean(capsys, tmp_path, no_render, value):
 
 
 def test_ray_takes_gpus_per_task(tmp_path):
-    from blurset.config import make_config
+    from blurset.services.config import make_config
 
     cfg = make_config({}, {"demo": True, "out": tmp_path, "executor": "ray", "gpus_per_task": 2})
     assert cfg.gpus_per_task == 2.0

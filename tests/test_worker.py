@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 import pytest
-from blurset.demo import make_demo_objects
 from blurset.exceptions import BlursetError
-from blurset.worker_client import WORKER_SCRIPT, Worker, WorkerError, WorkerTimeout
+from blurset.services.demo import make_demo_objects
+from blurset.services.worker_client import WORKER_SCRIPT, Worker, WorkerError, WorkerTimeout
 
 from tests.conftest import shared, skip_or_fail_in_ci
 

@@ -14,9 +14,9 @@ from typing import Any
 import jsonschema
 import numpy as np
 import pytest
-from blurset import outputs
-from blurset import worker_client as wc
-from blurset.demo import make_demo_objects
+from blurset.services import outputs
+from blurset.services import worker_client as wc
+from blurset.services.demo import make_demo_objects
 
 ROOT = Path(__file__).resolve().parents[1]
 EYE = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 3.0], [0.0, 0.0, 0.0, 1.0]]

@@ -3,7 +3,7 @@
 Run by `make docs`. Nothing here lists an option by hand: every subcommand, option,
 choice, default and help text comes from the argparse parser the `blurset` command
 itself uses, whose build and noise flags are made from the core's option declarations
-(python/blurset/options.py), and the keys only a `--config` file sets come from those
+(python/blurset/services/options.py), and the keys only a `--config` file sets come from those
 declarations too; so the page changes when a declaration changes.
 """
 
@@ -113,7 +113,7 @@ def _options_table(parser: argparse.ArgumentParser) -> list[str]:
 def _toml_only_table() -> list[str]:
     """The options of `blurset build` a `--config` file sets but no flag does (the
     paper's constants), from the core's declarations."""
-    from blurset.config import BUILD
+    from blurset.services.config import BUILD
 
     rows = [d for d in BUILD.decls if not d.flags and not d.via]
     if not rows:
@@ -157,7 +157,7 @@ def synopsis(name: str) -> str:
     p = subcommands()[name]
     decls = {}
     if name == "build":
-        from blurset.config import BUILD
+        from blurset.services.config import BUILD
 
         decls = {d.name: d for d in BUILD.decls}
     exclusive = {id(a): g for g in p._mutually_exclusive_groups for a in g._group_actions}

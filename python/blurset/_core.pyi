@@ -11,7 +11,7 @@ from typing import Any, Literal, TypeAlias, TypedDict, final
 import numpy as np
 import numpy.typing as npt
 
-# The dicts that cross the FFI, typed from the core's serde types (blurset.stubgen).
+# The dicts that cross the FFI, typed from the core's serde types (blurset.services.stubgen).
 from blurset import _records as rec
 
 __version__: str
@@ -83,7 +83,7 @@ _OptionKind: TypeAlias = Literal[
 @final
 class OptionDecl:
     """One option as its declaration in the core states it: the flags, help, TOML keys,
-    range, defaults and whether it shapes the outputs (python/blurset/options.py makes the
+    range, defaults and whether it shapes the outputs (python/blurset/services/options.py makes the
     parsers and the CLI reference from these)."""
 
     @property

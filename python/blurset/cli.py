@@ -33,32 +33,35 @@ RESUME = {
 
 # subcommand -> (module, one-line help)
 COMMANDS = {
-    "build": ("blurset.builder.cli", "render an Objaverse-Blur style dataset from GLB objects"),
+    "build": (
+        "blurset.commands.build.cli",
+        "render an Objaverse-Blur style dataset from GLB objects",
+    ),
     "noise": (
-        "blurset.noise.cli",
+        "blurset.commands.noise.cli",
         "write reproducible noisy copies (LLFF-N style) of an LLFF scene or of a whole build",
     ),
-    "check-poses": ("blurset.check_poses", "cross-check a scene's poses with COLMAP"),
+    "check-poses": ("blurset.commands.check_poses", "cross-check a scene's poses with COLMAP"),
     "preview": (
-        "blurset.preview",
+        "blurset.commands.preview",
         "figure of a setting at every level, or a build's contact sheet",
     ),
     "tradeoff": (
-        "blurset.tradeoff",
+        "blurset.commands.tradeoff",
         "measure render time against PSNR for latent counts, samples and blur methods",
     ),
-    "stats": ("blurset.stats", "histograms, numbers and a report of a build's statistics"),
+    "stats": ("blurset.commands.stats", "histograms, numbers and a report of a build's statistics"),
     "export": (
-        "blurset.export",
+        "blurset.commands.export.cli",
         "one root of LLFF scenes (IBRNet/NAN/GNT/GeoNeRF) or nerfstudio scenes of a build",
     ),
     "card": (
-        "blurset.card",
+        "blurset.commands.card",
         "write a Hugging Face dataset card (README.md) for a build: licences, construction, "
         "counts, attribution",
     ),
     "verify": (
-        "blurset.verify",
+        "blurset.commands.verify",
         "check that a build (or a noise output) is whole: every file, every image decoded, "
         "counts, MANIFEST.sha256",
     ),
@@ -131,7 +134,7 @@ class EmptyPathError(BlursetError):
 
 def _nonempty(option: str, convert: Any, output: bool = False) -> Any:
     def check(text: str) -> Any:
-        from blurset.outputs import path_problem
+        from blurset.services.outputs import path_problem
 
         # The same check as a config file's path (config.make_config).
         if (problem := path_problem(text, output=output)) is not None:
@@ -234,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("blurset: interrupted", file=sys.stderr)
         return 130
-    from blurset import stop
+    from blurset.services import stop
 
     stop.install()
     try:

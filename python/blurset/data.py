@@ -173,13 +173,13 @@ def open_scene(
         # Rows: a `datasets` split (streaming or not) of the level's config.
         return _scene_from_rows(build, setting, level, gain, sharp_rows, downsample, pose)
     build = Path(build)
-    from blurset import export_hub
+    from blurset.services import hub_format
 
-    if export_hub.hub_doc(build) is not None:
+    if hub_format.hub_doc(build) is not None:
         # A `blurset export --for hub` folder: only the setting's row group of its shard.
-        config = export_hub.config_name(level, None if gain is None else layout.gain_name(gain))
-        found = export_hub.iter_rows(build, config, setting)
-        sharp = export_hub.iter_rows(build, layout.SHARP, setting)
+        config = hub_format.config_name(level, None if gain is None else layout.gain_name(gain))
+        found = hub_format.iter_rows(build, config, setting)
+        sharp = hub_format.iter_rows(build, layout.SHARP, setting)
         return _scene_from_rows(found, setting, level, gain, sharp, downsample, pose)
     sdir = build / setting
     if not layout.is_complete(sdir):
@@ -289,9 +289,9 @@ def _held_out(build: Path, setting: str) -> list[int]:
 def list_scenes(build: str | Path) -> list[tuple[str, str]]:
     """(setting, level) of every complete setting of a build, in order; of a `blurset
     export --for hub` folder, every setting and level its shards hold."""
-    from blurset import export_hub
+    from blurset.services import hub_format
 
-    doc = export_hub.hub_doc(Path(build))
+    doc = hub_format.hub_doc(Path(build))
     if doc is not None:
         held = {(s, r["config"]) for r in (doc.get("shards") or {}).values() for s in r["settings"]}
         return [(s, lvl) for s in sorted({s for s, _ in held}) for lvl in doc["levels"]
@@ -360,7 +360,7 @@ def _scene_from_rows(
     downsample: int,
     pose: str,
 ) -> Scene:
-    from blurset import export_hub
+    from blurset.services import hub_format
 
     mine = _setting_rows(rows, setting)
     if not mine:
@@ -410,7 +410,7 @@ def _scene_from_rows(
         "mask": ("masks", lambda b: _decode_png(b, "mask")[..., 0] > 0),
     }
     for kind, (field_name, read) in readers.items():
-        name = export_hub.pass_column(kind, downsample)
+        name = hub_format.pass_column(kind, downsample)
         if name in mine[0] and mine[0][name] is not None:
             passes[field_name] = np.stack([read(r[name]) for r in mine])
 

@@ -1,2 +1,2 @@
-"""LLFF-N style noise (DESIGN §5): `cli` (the command), `scene` (one LLFF scene), `build`
-(every level of a build), `params` (gains, the σ table, noise.json)."""
+"""The LLFF-N noise model, public (DESIGN §5): `model`. The command `blurset noise` is
+`blurset.commands.noise`."""

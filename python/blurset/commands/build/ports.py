@@ -1,0 +1,54 @@
+"""What the builder asks of a worker (issue 49): the one port between the build's
+orchestration and a renderer. `worker_client.Worker` (the Blender worker, or the tests'
+stand-in it starts in Blender's place) is its implementation; the messages behind it are
+typed in the core (dataset/wire.rs, schemas/worker/)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Protocol
+
+from blurset.services.worker_client import LoadedObject, RenderDone, Worker
+
+# A frame on disk: its index in the request, its EXR, and where a cropped EXR's pixels
+# sit in the image (None: a whole image).
+OnFrame = Callable[[int, str, "tuple[int, int] | None"], None]
+
+
+class RenderWorker(Protocol):
+    """Loads one object at a time and renders frames of it, each reported once on disk."""
+
+    @property
+    def info(self) -> Mapping[str, object]:
+        """The worker's ready line (Blender version, device, CUDA archs)."""
+        ...
+
+    def load(
+        self, glb: Path, vertices_out: Path, *, unlit: str = "lit", light_paths: str = "auto"
+    ) -> LoadedObject:
+        """Import, normalize and light one GLB, its QA views judged."""
+        ...
+
+    def render(
+        self,
+        frames: Sequence[Mapping[str, object]],
+        *,
+        resolution: int,
+        fov_deg: float,
+        samples: int | None = None,
+        on_frame: OnFrame | None = None,
+        exr_codec: str | None = None,
+        noise_threshold: float | None = None,
+        batch: bool = True,
+        crop: bool = False,
+        guides: bool = False,
+        geometry: bool = False,
+    ) -> RenderDone:
+        """Render `frames` in order; `on_frame` as each one is on disk."""
+        ...
+
+
+def _conforms(worker: Worker) -> RenderWorker:
+    """mypy holds Worker to the port here (an error names the method that drifted)."""
+    return worker

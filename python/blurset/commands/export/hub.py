@@ -1,0 +1,683 @@
+"""`blurset export BUILD --for hub --out DIR` (issue 50): a build as Parquet shards that
+`datasets.load_dataset` and the Hugging Face Hub's viewer read.
+
+    DIR/export.json                                   what was exported (shards, rows, sha256)
+    DIR/data/<config>/<split>-00000-of-00003.parquet  the shards
+
+One config per level (`sharp`, `blur_1` …, `defocus_1` …) and, with `--noise`, per
+noisy level and gain (`blur_4_gain_4`); splits `train` and `test` are the build's
+settings splits (splits.json). One row per image: its PNG's bytes unchanged in the
+`image` column (the `datasets` Image layout, struct {bytes, path}; `image_<f>` for each
+`images_<f>/` size), the setting, the view, whether it is a held-out view, its camera
+(the poses_bounds.npy row as written, the OpenGL camera-to-world, focal, near, far,
+the mean latent pose where meta.json records one), meta.json's per-image record
+(`meta`, as JSON, and its numbers as columns), and the build's passes (`depth`,
+`normal` as EXR bytes, `mask` as an image).
+
+A shard holds whole settings (one Parquet row group each), cut at `--shard-size` MB, so
+a scene streams whole. Shards are planned from the files' sizes before any is written,
+written one at a time through a temp name and a rename, with fixed compression and no
+timestamps: the same build gives the same bytes. A shard's schema metadata carries the
+key of what it was made from (the MANIFEST.sha256 lines of the folders its files lie in,
+each file's size and time where the manifest is older, the options): a rerun after a
+kill keeps every shard whose key is its plan's and writes the rest, so its shards are
+those of an uninterrupted export. The plan stats every file once and holds no line per
+file; writing holds one setting's rows at a time, never a whole shard. `blurset verify DIR` checks
+each shard against export.json (size, sha256, rows, settings) and decodes every image.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import shutil
+import signal
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from blurset import __version__, _core, layout
+from blurset.commands.export import rules as export_rules
+from blurset.exceptions import ConfigError, InputError
+from blurset.services import hub_format, outputs, publish, stop
+
+DEFAULT_SHARD_MB = 500.0
+# Fixed write options: same rows, same bytes (PNG bytes do not compress: none there).
+COMPRESSION = "zstd"
+COMPRESSION_LEVEL = 3
+
+
+def add_arguments(p) -> None:
+    """`--shard-size`: only `--for hub` reads it."""
+    p.add_argument(
+        "--shard-size",
+        type=float,
+        metavar="MB",
+        help=f"--for hub: the size a Parquet shard is cut at, in MB (default: "
+        f"{DEFAULT_SHARD_MB:g}; a shard holds whole settings: one setting larger than this is "
+        "a shard of its own)",
+    )
+
+
+# -- what is exported -------------------------------------------------------------------
+
+
+@dataclass
+class _Config:
+    """One config: a level of the build, or a gain of a level of the noise output."""
+
+    name: str
+    level: str
+    gain: str | None  # the gain folder (`gain_4`), or None
+    root: Path  # the build or the noise output
+
+
+@dataclass
+class _Shard:
+    """One planned shard: its name under data/, its config and split, its settings and
+    the input files' sizes (the plan's estimate of its bytes)."""
+
+    name: str
+    config: _Config
+    split: str
+    settings: list[str]
+    size: int = 0
+
+
+@dataclass
+class HubPlan:
+    build: Path
+    noise: Path | None
+    dataset: dict
+    splits: dict
+    configs: list[_Config]
+    factors: list[int]
+    passes: list[str]
+    held: str
+    shards: list[_Shard] = field(default_factory=list)
+    doc: dict = field(default_factory=dict)
+    # (config, setting) -> the digest of the files its rows are made from.
+    digests: dict[tuple[str, str], str] = field(default_factory=dict)
+
+
+def _shard_bytes(args) -> int:
+    mb = DEFAULT_SHARD_MB if args.shard_size is None else args.shard_size
+    if not (mb > 0) or mb != mb or mb == float("inf"):
+        raise ConfigError(f"--shard-size {mb:g}: a shard's size must be a number of MB above 0")
+    return max(1, int(mb * 1e6))
+
+
+def _inputs(args) -> HubPlan:
+    if args.copy:
+        raise ConfigError("--copy: --for hub writes the images' bytes into its shards")
+    build: Path = args.build.resolve()
+    state = outputs.finished_build(build)
+    dataset = outputs.read_record(build / layout.DATASET)
+    splits = outputs.read_record(build / layout.SPLITS)
+    if args.gains and args.noise is None:
+        raise ConfigError("--gains needs --noise (a `blurset noise BUILD` output)")
+    available = dataset.get("levels") or [layout.SHARP]
+    levels = export_rules.levels(args.levels, available)
+    configs = [_Config(hub_format.config_name(lvl), lvl, None, build) for lvl in levels]
+    noise = args.noise.resolve() if args.noise else None
+    if noise is not None:
+        doc = outputs.noise_of_build(noise, build)
+        if int((doc.get("params") or {}).get("frames", 1)) != 1:
+            raise ConfigError(
+                "--for hub: one row per view image; --noise holds several noisy frames per "
+                "view (blurset noise --frames)"
+            )
+        gains = export_rules.gains(noise, doc, args.gains)
+        for lvl in [lvl for lvl in levels if lvl in doc["levels"]]:
+            configs += [_Config(hub_format.config_name(lvl, g), lvl, g, noise) for g in gains]
+    passes = list(dataset["config"].get("passes") or [])
+    if args.no_masks:
+        passes = [p for p in passes if p != "mask"]
+    hp = HubPlan(
+        build=build,
+        noise=noise,
+        dataset=dataset,
+        splits=splits,
+        configs=configs,
+        factors=[int(f) for f in dataset["config"].get("downsample") or []],
+        passes=passes,
+        held=splits.get("test_view_images") or "blurry",
+    )
+    hp.doc = {"complete": state.complete}
+    return hp
+
+
+@dataclass
+class _RowSource:
+    """The files one row is made from (paths as strings: a build has ~10^5 of them)."""
+
+    view: int
+    image: str
+    sized: dict[int, str]
+    passes: dict[str, str]  # by column (hub_format.pass_column)
+
+    def files(self) -> list[str]:
+        return [self.image, *self.sized.values(), *self.passes.values()]
+
+
+def _row_sources(
+    hp: HubPlan, cfg: _Config, setting: str, meta: dict | None = None
+) -> list[_RowSource]:
+    """The files of each row of a setting in `cfg` (`meta`: its meta.json, read here when
+    the passes need it and it is not given)."""
+    sdir = hp.build / setting
+    n = len(_core.read_poses_bounds(sdir / cfg.level / layout.POSES_BOUNDS))
+    names = [layout.image_name(i, n) for i in range(n)]
+    src = _src(hp, cfg, setting)
+    if cfg.gain is not None:
+        if not layout.is_complete(src):
+            raise InputError(f"--noise has no complete {cfg.gain} here: {src}")
+        noise = layout.read_json(src / layout.NOISE, layout.NOISE)
+        by_view = {f["view"]: Path(f["image"]).name for f in noise["files"] if f["frame"] == 0}
+        try:
+            names = [by_view[i] for i in range(n)]
+        except KeyError:
+            raise InputError(f"{len(by_view)} noisy images for {n} views: {src}") from None
+    holders: dict[tuple[str, int], str] = {}
+    if hp.passes:
+        meta = meta if meta is not None else layout.read_json(sdir / layout.META, layout.META)
+        own = layout.level_masks(meta)
+        for kind in hp.passes:
+            for f in [1, *hp.factors]:
+                holder = sdir / layout.pass_level(kind, cfg.level, own) / layout.pass_dir(kind, f)
+                holders[kind, f] = str(holder)
+    dirs = {
+        f: str(src / (layout.IMAGES if f == 1 else layout.images_dir(f))) for f in [1, *hp.factors]
+    }
+    rows = []
+    for i, name in enumerate(names):
+        passes = {}
+        for kind in hp.passes:
+            base = layout.pass_file(kind, layout.image_name(i, n))
+            for f in [1, *hp.factors]:
+                passes[hub_format.pass_column(kind, f)] = os.path.join(holders[kind, f], base)
+        rows.append(
+            _RowSource(
+                view=i,
+                image=os.path.join(dirs[1], name),
+                sized={f: os.path.join(dirs[f], name) for f in hp.factors},
+                passes=passes,
+            )
+        )
+    return rows
+
+
+def _setting_digest(
+    hp: HubPlan, cfg: _Config, setting: str, manifests: dict[Path, _Manifest]
+) -> tuple[int, str]:
+    """The bytes of a setting's files in `cfg` (the plan's estimate of its rows) and the
+    digest of what its rows are made from: the manifest's digest of each folder they lie
+    in (the same build gives the same digest, wherever it lies), and each file's size
+    and time where the manifest does not cover it or is older than it. Stats each file
+    once; a missing one is named."""
+    h = hashlib.sha256()
+    size = 0
+    src = _src(hp, cfg, setting)
+    extra = [str(hp.build / setting / layout.META), str(src / layout.POSES_BOUNDS)]
+    files = [p for r in _row_sources(hp, cfg, setting) for p in r.files()]
+    folders: set[tuple[Path, str]] = set()
+    for k, p in enumerate([*extra, *files]):
+        root = cfg.root if p.startswith(str(cfg.root) + os.sep) else hp.build
+        depth = 3 if root != hp.build else 2
+        if root not in manifests:
+            manifests[root] = _manifest(root, depth)
+        try:
+            st = os.stat(p)
+        except FileNotFoundError:
+            raise InputError(f"missing file of the scene to export: {p}") from None
+        if k >= len(extra):
+            size += st.st_size
+        rel = p[len(str(root)) + 1 :].replace(os.sep, "/")
+        m = manifests[root]
+        bucket = m.bucket(rel, depth)
+        if bucket is None or st.st_mtime_ns > m.written_ns:
+            h.update(f"{rel}\0{st.st_size}:{st.st_mtime_ns}\n".encode())
+        if bucket is not None:
+            folders.add((root, "/".join(rel.split("/")[:depth])))
+    for root, folder in sorted(folders):
+        h.update(f"{folder}\0{manifests[root].buckets[folder]}\n".encode())
+    return size, h.hexdigest()
+
+
+def plan(args) -> HubPlan:
+    """The shards of the export, each with its settings, and export.json without the
+    shards' sizes and hashes (known once written)."""
+    target = _shard_bytes(args)
+    hp = _inputs(args)
+    complete: list[str] = hp.doc.pop("complete")
+    test = set(hp.splits["test"])
+    # (finished_build refused a damaged setting: the rerun's own cheap check.)
+    manifests: dict[Path, _Manifest] = {}
+    by_split = {
+        "train": [s for s in complete if s not in test],
+        "test": [s for s in complete if s in test],
+    }
+    for cfg in hp.configs:
+        for split, settings in by_split.items():
+            cut: list[list[str]] = []
+            sizes: list[int] = []
+            for s in settings:
+                size, hp.digests[cfg.name, s] = _setting_digest(hp, cfg, s, manifests)
+                if cut and sizes[-1] + size <= target:
+                    cut[-1].append(s)
+                    sizes[-1] += size
+                else:
+                    cut.append([s])
+                    sizes.append(size)
+            for k, (ss, size) in enumerate(zip(cut, sizes, strict=True)):
+                name = f"{cfg.name}/{split}-{k:05d}-of-{len(cut):05d}.parquet"
+                hp.shards.append(_Shard(name, cfg, split, ss, size))
+    if not hp.shards:
+        raise InputError(f"nothing to export (no complete setting): {args.build}")
+    hp.doc = {
+        "kind": "blurset export",
+        "blurset_version": __version__,
+        "for": hub_format.TARGET,
+        "build": hp.build.name,
+        "noise": hp.noise.name if hp.noise else None,
+        "levels": sorted({c.level for c in hp.configs}, key=[c.level for c in hp.configs].index),
+        "gains": sorted({c.gain for c in hp.configs if c.gain}),
+        "copy": False,
+        "llffhold": hp.splits["view_stride"],
+        "factors": hp.factors,
+        "test_view_images": hp.held,
+        "scenes_dir": hub_format.DATA_DIR,
+        # Every shard the export writes, by its config: the entries it owns.
+        "scenes": {s.name: s.config.name for s in hp.shards},
+        "train": [s.name for s in hp.shards if s.split == "train"],
+        "test": [s.name for s in hp.shards if s.split == "test"],
+        "shard_bytes": target,
+    }
+    if hp.passes:
+        hp.doc["passes"] = hp.passes
+    return hp
+
+
+# -- rows --------------------------------------------------------------------------------
+
+
+def _float_or_none(x: Any) -> float | None:
+    return float(x) if isinstance(x, int | float) and not isinstance(x, bool) else None
+
+
+def _int_or_none(x: Any) -> int | None:
+    return int(x) if isinstance(x, int | float) and not isinstance(x, bool) else None
+
+
+def _c2w_opengl(row: np.ndarray) -> list[list[float]]:
+    """An LLFF pose row's camera-to-world in OpenGL axes (blurset.data._cameras)."""
+    m = row[:15].reshape(3, 5)
+    down, right, back, t = m[:, 0], m[:, 1], m[:, 2], m[:, 3]
+    gl = np.eye(4)
+    gl[:3, 0], gl[:3, 1], gl[:3, 2], gl[:3, 3] = right, -down, back, t
+    return gl.tolist()
+
+
+def _view_record(meta: dict, view: int, level: str) -> dict:
+    """meta.json's records of one view at one level: the level's (`views[].levels[l]`),
+    its rendered image's (`views[].images[level]`) and another kind's (a defocus level's
+    lens: `views[].defocus[l]`), under the key of its kind (`level` for a blur level)."""
+    v = meta["views"][view]
+    rec: dict[str, Any] = {}
+    if (at := layout.level_record(level)) is not None:
+        kind, key = at
+        rec["level" if kind == "levels" else kind] = (v.get(kind) or {}).get(key)
+    if isinstance(im := (v.get("images") or {}).get(level), dict):
+        rec["image"] = im
+    return {k: x for k, x in rec.items() if x is not None}
+
+
+def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[str, list]:
+    """The columns of one setting's rows of one config."""
+    sdir = hp.build / setting
+    meta = layout.read_json(sdir / layout.META, layout.META)
+    src = _src(hp, cfg, setting)
+    rows = np.asarray(_core.read_poses_bounds(src / layout.POSES_BOUNDS), np.float64)
+    sources = _row_sources(hp, cfg, setting, meta)
+    if len(rows) != len(sources):
+        raise InputError(f"{len(rows)} pose rows for {len(sources)} views: {src}")
+    noise = layout.read_json(src / layout.NOISE, layout.NOISE) if cfg.gain else None
+    held = {int(v) for v in (hp.splits.get("test_views") or {}).get(setting, [])}
+    render = meta.get("render") or {}
+    w, h = (int(x) for x in meta["resolution"])
+    # The mean latent poses as open_scene(pose="mean") reads them (held-out views that
+    # hold the sharp copy keep its pose); None before meta.json recorded them.
+    means = layout.mean_poses(sdir, cfg.level) if cfg.level.startswith("blur_") else None
+    degraded = cfg.level != layout.SHARP
+    # Held-out views of a degraded level hold the sharp image (unless the build rendered
+    # them blurry): their records are the sharp image's.
+    clean_held = degraded and hp.held in ("sharp", "clean")
+    cols: dict[str, list] = {
+        n: [] for n, _ in hub_format.columns(hp.factors, hp.passes, bool(cfg.gain))
+    }
+
+    roots = [str(cfg.root) + os.sep, str(hp.build) + os.sep]
+
+    def image(p: str) -> dict:
+        # The path relative to the output holding the file (a noisy image's to the noise
+        # output, a pass's to the build).
+        root = roots[0] if p.startswith(roots[0]) else roots[1]
+        with open(p, "rb") as f:
+            data = f.read()
+        return {"bytes": data, "path": p[len(root) :].replace(os.sep, "/")}
+
+    for r in sources:
+        v = r.view
+        is_held = v in held
+        own = not (clean_held and is_held)
+        rec = _view_record(meta, v, cfg.level if own else layout.SHARP)
+        lv = rec.get("level") or {}
+        im = rec.get("image") or {}
+        mean = means[v] if means is not None else None
+        samples = im.get("samples")
+        if samples is None:
+            if lv:
+                samples = _int_or_none(lv.get("samples_per_frame"))
+                samples = samples * int(lv.get("latents", 1)) if samples is not None else None
+            elif not degraded or not own:
+                samples = _int_or_none(render.get("sharp_samples"))
+        cols["image"].append(image(r.image))
+        for f, p in r.sized.items():
+            cols[f"image_{f}"].append(image(p))
+        cols["setting"].append(setting)
+        cols["uid"].append(str(meta.get("uid", setting)))
+        cols["theta0_deg"].append(_float_or_none(meta.get("theta0_deg")))
+        cols["level"].append(cfg.level)
+        cols["gain"].append(float(noise["gain"]) if noise else None)
+        cols["view"].append(v)
+        cols["split"].append(split)
+        cols["held_out"].append(is_held)
+        cols["width"].append(w)
+        cols["height"].append(h)
+        cols["focal"].append(float(rows[v, 14]))
+        cols["near"].append(float(rows[v, 15]))
+        cols["far"].append(float(rows[v, 16]))
+        cols["poses_bounds"].append(rows[v].tolist())
+        cols["c2w"].append(_c2w_opengl(rows[v]))
+        cols["mean_c2w"].append(mean)
+        cols["w_l"].append(_float_or_none(lv.get("w_l")))
+        cols["motion_px"].append(_float_or_none(lv.get("motion_px")))
+        cols["latents"].append(_int_or_none(lv.get("latents")))
+        cols["samples"].append(samples)
+        cols["render_psnr_db"].append(_float_or_none(im.get("render_psnr_db")))
+        coc = (rec.get("defocus") or {}).get("coc_px")
+        cols["coc_px"].append([float(c) for c in coc] if isinstance(coc, list) else None)
+        cols["meta"].append(json.dumps(rec, sort_keys=True))
+        if noise is not None:
+            cols["sigma_read"].append(_float_or_none(noise.get("sigma_read")))
+            cols["sigma_shot"].append(_float_or_none(noise.get("sigma_shot")))
+            cols["noise"].append(json.dumps(noise, sort_keys=True))
+        for col, p in r.passes.items():
+            cols[col].append(image(p) if col.startswith("mask") else Path(p).read_bytes())
+    return cols
+
+
+# -- the shard's key and its writing ------------------------------------------------------
+
+
+@dataclass
+class _Manifest:
+    """An output's MANIFEST.sha256, folded into one digest per folder of `depth` path
+    components (`<setting>/<level>` of a build, `<setting>/<level>/<gain>` of a noise
+    output; a file at that depth, meta.json, is its own): the key of a setting's rows
+    without holding a line per file (a build lists ~10^5), and when it was written: a
+    file changed since then is keyed by its size and time as well."""
+
+    buckets: dict[str, str]
+    written_ns: int
+
+    def bucket(self, rel: str, depth: int) -> str | None:
+        return self.buckets.get("/".join(rel.split("/")[:depth]))
+
+
+def _manifest(root: Path, depth: int) -> _Manifest:
+    p = root / publish.MANIFEST
+    hashes: dict[str, Any] = {}
+    if p.is_file():
+        with open(p, encoding="utf-8") as f:
+            for line in f:
+                digest, _, rel = line.rstrip("\n").partition("  ")
+                if rel:
+                    key = "/".join(rel.split("/")[:depth])
+                    if key not in hashes:
+                        hashes[key] = hashlib.sha256()
+                    hashes[key].update(f"{rel}\0{digest}\n".encode())
+    return _Manifest(
+        {k: h.hexdigest() for k, h in hashes.items()}, p.stat().st_mtime_ns if p.is_file() else 0
+    )
+
+
+def shard_key(hp: HubPlan, shard: _Shard) -> str:
+    """What a shard is made from: its name, the options that shape its rows, and the
+    digest of each setting's files (_setting_digest)."""
+    head = {
+        "layout": hub_format.LAYOUT,
+        "blurset": __version__,
+        "shard": shard.name,
+        "split": shard.split,
+        "settings": shard.settings,
+        "factors": hp.factors,
+        "passes": hp.passes,
+        "held": hp.held,
+        "test_views": {s: (hp.splits.get("test_views") or {}).get(s) for s in shard.settings},
+        "files": [hp.digests[shard.config.name, s] for s in shard.settings],
+    }
+    return hashlib.sha256(json.dumps(head, sort_keys=True).encode()).hexdigest()
+
+
+def _src(hp: HubPlan, cfg: _Config, setting: str) -> Path:
+    if cfg.gain is None:
+        return hp.build / setting / cfg.level
+    return cfg.root / setting / cfg.level / cfg.gain
+
+
+class _HashingFile(io.RawIOBase):
+    """A file that hashes what is written to it (the shard's sha256 without reading it
+    back)."""
+
+    def __init__(self, path: Path) -> None:
+        self._f = open(path, "wb")  # noqa: SIM115 - closed in close()
+        self.sha = hashlib.sha256()
+        self.size = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, b) -> int:
+        mv = memoryview(b)
+        self.sha.update(mv)
+        self._f.write(mv)
+        self.size += len(mv)
+        return len(mv)
+
+    def tell(self) -> int:
+        return self.size
+
+    def flush(self) -> None:
+        if not self._f.closed:
+            self._f.flush()
+
+    def close(self) -> None:
+        if not self._f.closed:
+            self._f.flush()
+            os.fsync(self._f.fileno())
+            self._f.close()
+        super().close()
+
+
+# Fault injection for the tests: `kill_in:K` kills this process (SIGKILL) inside the K-th
+# shard it writes (from 0), once its first setting is in the temp file, so a test of the
+# resume kills at a known point instead of racing the run.
+FAULT = "BLURSET_HUB_FAULT"
+
+
+def write_shard(
+    hp: HubPlan, shard: _Shard, path: Path, key: str, kill: bool = False
+) -> tuple[int, str, int]:
+    """Write one shard to `path` (a temp name): one row group per setting, built and
+    written one setting at a time. Returns (rows, sha256, bytes). `kill`: the fault
+    injection's (FAULT) SIGKILL after the first setting."""
+    pa, pq = hub_format.pyarrow()
+    sch = hub_format.schema(hp.factors, hp.passes, shard.config.gain is not None, key)
+    sink = _HashingFile(path)
+    strings = [
+        f.name for f in sch if pa.types.is_string(f.type) and f.name not in ("meta", "noise")
+    ]
+    # PNG and EXR bytes do not compress: stored as they are; the rest zstd.
+    raw = {f.name for f in sch if pa.types.is_struct(f.type) or pa.types.is_binary(f.type)}
+    codecs = {c: ("NONE" if c.split(".")[0] in raw else COMPRESSION) for c in _leaf_columns(sch)}
+    n = 0
+    with pq.ParquetWriter(
+        sink,
+        sch,
+        compression=codecs,
+        compression_level={c: COMPRESSION_LEVEL for c, k in codecs.items() if k != "NONE"},
+        use_dictionary=strings,
+        write_statistics=False,
+        store_schema=True,
+    ) as w:
+        for s in shard.settings:
+            cols = _setting_rows(hp, shard.config, s, shard.split)
+            table = pa.table(
+                {name: pa.array(cols[name], type=sch.field(name).type) for name in sch.names},
+                schema=sch,
+            )
+            w.write_table(table, row_group_size=max(1, table.num_rows))
+            if kill:
+                sink.flush()
+                os.kill(os.getpid(), signal.SIGKILL)
+            n += table.num_rows
+            del table, cols
+    sink.close()
+    return n, sink.sha.hexdigest(), sink.size
+
+
+def _leaf_columns(sch) -> list[str]:
+    """The Parquet column paths of a schema (`image.bytes`, `c2w.list.element.list.element`)."""
+    import pyarrow.parquet as pq
+
+    buf = io.BytesIO()
+    pq.write_table(sch.empty_table(), buf)
+    meta = pq.ParquetFile(io.BytesIO(buf.getvalue())).metadata.schema
+    return [meta.column(i).path for i in range(len(meta))]
+
+
+def _sha256(path: Path) -> str:
+    return _core.sha256_file(path)
+
+
+# -- the run -----------------------------------------------------------------------------
+
+
+def run(args) -> int:
+    out: Path = args.out
+    hp = plan(args)
+    doc = hp.doc
+    inputs = [args.build] + ([args.noise] if args.noise else [])
+    export_rules.refuse_overlap(out, doc, inputs)  # type: ignore[arg-type]
+    outputs.refuse_inside_settings(out)
+    outputs.claim(out, export_rules.EXPORT, "--out")
+    with outputs.lock(out, export_rules.EXPORT):
+        how = outputs.claim(out, export_rules.EXPORT, "--out")
+        return _write(out, hp, how, overwrite=args.overwrite)
+
+
+def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
+    doc = hp.doc
+    top = [export_rules.EXPORT_FILE]
+    layout.remove_stale_temps(out, [export_rules.STAGE, export_rules.TRASH, *top])
+    for d in {(out / hub_format.DATA_DIR / s.name).parent for s in hp.shards}:
+        layout.remove_stale_temps(d, [Path(s.name).name for s in hp.shards])
+    old = outputs.read_record(out / export_rules.EXPORT_FILE) if how == "same" else None
+    if old is not None:
+        export_rules.refuse_other_export(old, doc, out, overwrite)  # type: ignore[arg-type]
+    owned = set(outputs.owned_entries(out, export_rules.EXPORT)) if old is not None else set()
+    new = [f"{hub_format.DATA_DIR}/{s.name}" for s in hp.shards] + top
+    export_rules.refuse_foreign(out, doc, owned, new)  # type: ignore[arg-type]
+    keys = {s.name: shard_key(hp, s) for s in hp.shards}
+    done_doc = old if isinstance(old, dict) and old.get("state") != "replacing" else None
+    recorded = (done_doc or {}).get("shards") or {}
+    final = {s.name: out / hub_format.DATA_DIR / s.name for s in hp.shards}
+    todo = [s for s in hp.shards if hub_format.read_key(final[s.name]) != keys[s.name]]
+    stale = sorted(owned - set(new))
+    if not todo and not stale and done_doc is not None:
+        want = dict(doc)
+        want["shards"] = recorded
+        if want == done_doc:
+            _say(want, out, hp, "up to date", 0)
+            return 0
+    export_rules.record_replacing(out, doc, owned | set(new))  # type: ignore[arg-type]
+    for rel in stale:
+        p = out / rel
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink(missing_ok=True)
+        export_rules.prune_empty_parents(out, rel)
+    shards: dict[str, Any] = {}
+    written = 0
+    fault = stop.fault_index(FAULT)
+    for s in hp.shards:
+        dst = final[s.name]
+        if s in todo:
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            tmp = layout.temp_path(dst)
+            try:
+                rows, sha, size = write_shard(hp, s, tmp, keys[s.name], written == fault)
+                os.replace(tmp, dst)
+            finally:
+                tmp.unlink(missing_ok=True)
+            written += 1
+        else:
+            # A finished shard of this plan (kept from a stopped run): its record, or
+            # its bytes read once more.
+            rec = recorded.get(s.name)
+            size = dst.stat().st_size
+            if rec and rec.get("bytes") == size:
+                rows, sha = rec["rows"], rec["sha256"]
+            else:
+                _, pq = hub_format.pyarrow()
+                rows, sha = pq.ParquetFile(dst).metadata.num_rows, _sha256(dst)
+        shards[s.name] = {
+            "config": s.config.name,
+            "split": s.split,
+            "settings": s.settings,
+            "rows": int(rows),
+            "bytes": int(size),
+            "sha256": sha,
+        }
+    _remove_empty_dirs(out / hub_format.DATA_DIR)
+    doc["shards"] = shards
+    outputs.write_record(out / export_rules.EXPORT_FILE, doc)
+    _say(doc, out, hp, "written", written)
+    return 0
+
+
+def _remove_empty_dirs(root: Path) -> None:
+    if not root.is_dir():
+        return
+    for d in sorted((p for p in root.iterdir() if p.is_dir()), reverse=True):
+        if not any(d.iterdir()):
+            d.rmdir()
+
+
+def _say(doc: dict, out: Path, hp: HubPlan, what: str, written: int) -> None:
+    shards = doc.get("shards") or {}
+    rows = sum(int(s["rows"]) for s in shards.values())
+    configs = sorted({c.name for c in hp.configs}, key=[c.name for c in hp.configs].index)
+    print(
+        f"blurset export: {len(shards)} shards ({written} written), {rows} rows in "
+        f"{len(configs)} configs ({', '.join(configs)}) {what} -> {out / hub_format.DATA_DIR}; "
+        f"`blurset card {hp.build.name} --hub {out}` writes its card",
+        file=sys.stdout,
+    )
