@@ -24,12 +24,11 @@ pub use crate::plan::choices::{BlurMethod, Choice, Preset};
 pub use crate::plan::config::BuildConfig;
 pub use crate::plan::cost::{BlurChoice, CostModel, Pricing};
 pub use crate::plan::defocus::{circle_of_confusion, DefocusPlan};
+pub use crate::plan::motion::{level_renders, LevelPlan};
 pub use crate::plan::options::OptionInfo;
 pub use crate::plan::presets::{preset_values, FLOOR_PSNR_DB};
-pub use crate::plan::renders::{level_renders, with_samples, Motion, Render};
-pub use crate::plan::sampling::{
-    plan_setting, plan_setting_priced, LevelPlan, SamplingConfig, SettingPlan,
-};
+pub use crate::plan::renders::{with_samples, Motion, Render};
+pub use crate::plan::sampling::{plan_setting, plan_setting_priced, SamplingConfig, SettingPlan};
 pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
 pub use crate::plan::target::{ImageState, TargetRule};
 

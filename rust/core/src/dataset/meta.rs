@@ -11,8 +11,10 @@ use crate::plan::camera::orbit_c2w;
 use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, LightPaths, Preset};
 use crate::plan::config::BuildConfig;
 use crate::plan::cost::BlurChoice;
+use crate::plan::degradation::Degradation;
+use crate::plan::motion::{MetaLevel, Motion, MotionStat};
 use crate::plan::sampling::{
-    rows, LevelPlan, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
+    rows, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
 };
 use crate::plan::target::{
     TargetRule, ACCEPT_BELOW_DB, AIM_ABOVE_DB, ALPHA_RANGE, FIRST_STEP_MAX, MAX_ROUNDS,
@@ -401,48 +403,6 @@ fn target_is(t: &TargetRule) -> String {
     )
 }
 
-/// A latent frame as meta.json records it (its camera matrix follows from r, φ, θ).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
-pub struct MetaLatent {
-    pub t: f64,
-    pub r: f64,
-    pub phi_deg: f64,
-    pub theta_deg: f64,
-    pub seed: u32,
-    /// First sample of the frame's block in its level's sample_sequence (0: independent).
-    pub sample_offset: u32,
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
-pub struct MetaKey {
-    pub t: f64,
-    pub r: f64,
-    pub phi_deg: f64,
-    pub theta_deg: f64,
-}
-
-/// A blur level as meta.json records it: the plan's, without camera matrices.
-pub type MetaLevel = LevelPlan<MetaLatent, MetaKey>;
-
-fn meta_level(lp: &LevelPlan) -> MetaLevel {
-    lp.map_frames(
-        |f| MetaLatent {
-            t: f.t,
-            r: f.r,
-            phi_deg: f.phi_deg,
-            theta_deg: f.theta_deg,
-            seed: f.seed,
-            sample_offset: f.sample_offset,
-        },
-        |k| MetaKey {
-            t: k.t,
-            r: k.r,
-            phi_deg: k.phi_deg,
-            theta_deg: k.theta_deg,
-        },
-    )
-}
-
 /// A view as meta.json records it: the plan's view with its levels' records and the
 /// render QA of its sharp image.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -460,7 +420,7 @@ pub struct MetaView {
 impl MetaView {
     fn of(v: &ViewPlan, qa: FrameQa) -> Self {
         MetaView {
-            view: v.map_levels(meta_level),
+            view: v.map_levels(Motion::record),
             qa,
             images: BTreeMap::new(),
         }
@@ -591,15 +551,6 @@ pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
 
 // -- what `blurset stats` reads of a meta.json (a subset of the above) -----------------
 
-/// One level of a view, as the statistics read it.
-#[derive(Debug, Deserialize)]
-pub struct ReadLevel {
-    pub w_l: f64,
-    pub latents: u64,
-    #[serde(default)]
-    pub motion_px: Option<f64>,
-}
-
 /// How an image of a target-driven build was rendered, as the statistics read it.
 #[derive(Debug, Deserialize)]
 pub struct ReadImage {
@@ -617,7 +568,7 @@ pub struct ReadView {
     pub orientation: f64,
     pub w_u: f64,
     #[serde(default)]
-    pub levels: BTreeMap<String, ReadLevel>,
+    pub levels: BTreeMap<String, MotionStat>,
     /// `--target-psnr` builds: per level directory.
     #[serde(default)]
     pub images: BTreeMap<String, ReadImage>,

@@ -72,8 +72,9 @@ pub fn value_schemas() -> Vec<(&'static str, serde_json::Value)> {
     use super::meta::{ImageRender, ObjectRecord, Timings};
     use super::records::DatasetDoc;
     use super::stats::BuildStats;
+    use crate::plan::motion::LevelPlan;
     use crate::plan::renders::Render;
-    use crate::plan::sampling::{LevelPlan, SamplingConfig, SettingPlan};
+    use crate::plan::sampling::{SamplingConfig, SettingPlan};
     use schemars::schema_for;
     vec![
         ("ImageRender", schema_for!(ImageRender).to_value()),

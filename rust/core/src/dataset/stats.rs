@@ -29,9 +29,11 @@ use super::failures;
 #[cfg(test)]
 use super::layout::MARKER;
 use super::layout::{self, Scan};
-use super::meta::{ReadLevel as MetaLevel, ReadMeta as Meta, ReadView as MetaView};
+use super::meta::{ReadMeta as Meta, ReadView as MetaView};
 use crate::error::{Error, Result};
 use crate::ground::names::parse_level_dir;
+use crate::plan::degradation::Degradation;
+use crate::plan::motion::{Motion, MotionStat as MetaLevel};
 use crate::plan::sampling::KIND_STATS;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -84,11 +86,8 @@ pub const QUANTITIES: &[(&str, &str, &str)] = &[
         "frames",
         "m, latent frames averaged into the blurry image at level l (one per blurry view)",
     ),
-    (
-        "motion_px",
-        "px",
-        "largest screen motion of a bounding-box corner over the trajectory at level l (one per blurry view)",
-    ),
+    // Motion blur's statistic (its w_l and m above are motion blur's too).
+    Motion::STAT,
     (
         "render_psnr",
         "dB",
@@ -477,7 +476,7 @@ fn read_view(
         let mut stat = BTreeMap::new();
         for (key, rec) in levels {
             let l = level_key(key, i, kind.name, path)?;
-            let x = (kind.read)(rec).ok_or_else(|| {
+            let read = (kind.read)(rec).ok_or_else(|| {
                 input_error(
                     format!(
                         "bad meta.json (view {i}: {} level {key} unreadable)",
@@ -486,7 +485,9 @@ fn read_view(
                     path,
                 )
             })?;
-            stat.insert(l, x);
+            if let Some(x) = read {
+                stat.insert(l, x);
+            }
         }
         kinds.insert(kind.stat.0, stat);
     }
@@ -728,7 +729,7 @@ fn add_views(st: &mut BuildStats, records: Vec<SettingRecord>, levels: &BTreeSet
                 st.motion_px
                     .entry(l)
                     .or_default()
-                    .push(lp.and_then(|x| x.motion_px));
+                    .push(lp.and_then(Motion::stat));
             }
             for &(name, l) in &kind_levels {
                 st.kinds

@@ -34,6 +34,7 @@ pub struct DefocusStat {
 
 impl Degradation for Defocus {
     type Level = DefocusPlan;
+    type Record = DefocusPlan;
     type Read = DefocusStat;
     const NAME: &'static str = "defocus";
     /// Its blur levels use purposes 1..=MAX_LEVEL; its renders' seeds are those of
@@ -81,8 +82,12 @@ impl Degradation for Defocus {
         }]
     }
 
-    fn stat(d: &DefocusStat) -> f64 {
-        d.coc_px[1]
+    fn record(l: &DefocusPlan) -> DefocusPlan {
+        l.clone()
+    }
+
+    fn stat(d: &DefocusStat) -> Option<f64> {
+        Some(d.coc_px[1])
     }
 }
 

@@ -1,13 +1,17 @@
-//! What a degradation is (issue 49): one file per kind beside the motion blur of
-//! Algorithm 1 (`defocus.rs`), each a [`Degradation`] holding its per-view draw, the
-//! renders of a level with the fields it adds to them, its record in meta.json
-//! (`views[i].<NAME>["<l>"]`, its `Level`) and its statistic. The plan, the render list
+//! What a degradation is (issue 49): one file per kind (`motion.rs`, the motion blur of
+//! Algorithm 1; `defocus.rs`; `shake.rs`), each a [`Degradation`] holding its per-view
+//! draw, the renders of a level with the fields it adds to them, its record in meta.json
+//! (`views[i].<NAME>["<l>"]`, its `Record`) and its statistic. The plan, the render list
 //! and the statistics call each kind through this interface only.
+use super::cost::{ImagePrice, Pricing};
+use super::motion::Trajectory;
 use super::render::Render;
+use super::sampling::SamplingConfig;
 use crate::ground::kind::ImageKind;
 use crate::rng::Stream;
 use serde::de::{Deserialize, DeserializeOwned};
 use serde::Serialize;
+use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -44,6 +48,23 @@ pub struct ViewCx<'a> {
     pub blocks: Option<(u32, Vec<u32>)>,
     /// Whether the build renders an exposure as one Cycles motion blur render.
     pub motion_blur: bool,
+    /// The build's sampling, whose latents, positions, anchor and sample budget shape
+    /// each blurry image of motion blur (`blur_method auto` included).
+    pub cfg: &'a SamplingConfig,
+    /// The view's camera p on its orbit (φ and θ in degrees), and δ, the trajectory drawn
+    /// with it: motion blur's segments run from p along δ.
+    pub r: f64,
+    pub phi_deg: f64,
+    pub theta_deg: f64,
+    pub trajectory: Trajectory,
+    /// The view's scene weight w_u (flatness, depth_range, orientation), which scales
+    /// each motion blur level's w_l.
+    pub w_u: f64,
+    /// The object's box, whose corners' screen motion measures a blurry image.
+    pub bbox_dims: [f64; 3],
+    /// Under `blur_method auto`: the device's prices, and the price of every blurry
+    /// image planned so far (the setting's record of the choice).
+    pub pricing: Option<(&'a Pricing, &'a RefCell<Vec<ImagePrice>>)>,
 }
 
 /// Where a view's renders of a kind go.
@@ -56,9 +77,13 @@ pub struct RenderCx<'a> {
     pub pin: Option<u32>,
 }
 
-/// One degradation kind: `Level` is what meta.json records of one level of one view.
+/// One degradation kind: `Level` is what the plan holds of one level of one view,
+/// `Record` what meta.json records of it.
 pub trait Degradation {
     type Level: Clone + Serialize;
+    /// The level as meta.json records it: the `Level` itself, or less of it (motion
+    /// blur's leaves out the camera matrices, which follow from r, φ, θ).
+    type Record: Clone + Serialize;
     /// What the statistics read of a level's record in a meta.json (the fields its
     /// statistic needs, so an older record with fewer fields is still read).
     type Read: DeserializeOwned;
@@ -75,8 +100,11 @@ pub trait Degradation {
     fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, Self::Level>;
     /// The renders of one level of one view.
     fn renders(cx: &RenderCx, level: u32, rec: &Self::Level) -> Vec<Render>;
-    /// The level's statistic ([`Self::STAT`]) from its record in meta.json.
-    fn stat(rec: &Self::Read) -> f64;
+    /// The level's record in meta.json.
+    fn record(level: &Self::Level) -> Self::Record;
+    /// The level's statistic ([`Self::STAT`]) from its record in meta.json; None for a
+    /// record written before the kind recorded it.
+    fn stat(rec: &Self::Read) -> Option<f64>;
 }
 
 /// A kind as the statistics see it: its key in a view of meta.json, its statistic
@@ -84,7 +112,7 @@ pub trait Degradation {
 pub struct KindStat {
     pub name: &'static str,
     pub stat: (&'static str, &'static str, &'static str),
-    pub read: fn(&serde_json::Value) -> Option<f64>,
+    pub read: fn(&serde_json::Value) -> Option<Option<f64>>,
 }
 
 impl KindStat {
@@ -97,9 +125,18 @@ impl KindStat {
     }
 }
 
-/// The statistic of one level's record (None: a record the kind cannot read).
-fn read_stat<D: Degradation>(v: &serde_json::Value) -> Option<f64> {
+/// The statistic of one level's record (None: a record the kind cannot read; Some(None):
+/// one from before the statistic).
+fn read_stat<D: Degradation>(v: &serde_json::Value) -> Option<Option<f64>> {
     D::Read::deserialize(v).ok().map(|r| D::stat(&r))
+}
+
+/// The records in meta.json of every level of kind `D` of one view.
+pub fn records<D: Degradation>(levels: &BTreeMap<String, D::Level>) -> BTreeMap<String, D::Record> {
+    levels
+        .iter()
+        .map(|(k, l)| (k.clone(), D::record(l)))
+        .collect()
 }
 
 /// The renders of every level of kind `D` of one view, in level order.

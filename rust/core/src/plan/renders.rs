@@ -1,66 +1,13 @@
 //! The render list of a planned setting: what the Blender worker renders, in the order
-//! the driver streams the frames into accumulators (per view: sharp, then each level).
+//! the driver streams the frames into accumulators (per view: sharp, then each level of
+//! each kind, motion blur's first).
 use super::degradation::RenderCx;
 use super::region::{call_cost_px, object_region, render_calls, Region};
 pub use super::render::{Motion, Render};
-use super::sampling::{LatentSampling, LevelPlan, SettingPlan};
+use super::sampling::SettingPlan;
 use crate::ground::kind::ImageKind;
 use glam::{DMat4, DVec3};
 use std::path::Path;
-
-/// The renders of one blurry image: its latent frames (average method) or its single
-/// motion blur render, writing `<prefix>_<k>.exr` / `<prefix>_mb.exr`. Under sample
-/// subsets frame k renders the block at its `sample_offset` of a sequence of `pin`
-/// samples (the build's [`crate::BuildConfig::cycles_samples`]; None: the level's own
-/// `sample_sequence`); independent frames render their own first samples.
-pub fn level_renders(
-    view: usize,
-    level: u32,
-    lp: &LevelPlan,
-    prefix: &str,
-    pin: Option<u32>,
-) -> Vec<Render> {
-    let kind = ImageKind::Blur(level);
-    let subsets = lp.latent_sampling == LatentSampling::Subsets;
-    let block = |offset: u32| {
-        if subsets {
-            (Some(offset), Some(pin.unwrap_or(lp.sample_sequence)))
-        } else {
-            (None, None)
-        }
-    };
-    if let Some(mb) = &lp.motion_blur {
-        let keys: Vec<_> = mb.keys.iter().map(|k| k.c2w).collect();
-        let (sample_offset, sample_sequence) = block(0);
-        let first = Render::still(view, kind, keys[0], mb.seed, format!("{prefix}_mb.exr"));
-        return vec![Render {
-            samples: Some(lp.samples_per_frame),
-            sample_offset,
-            sample_sequence,
-            motion: Some(Motion {
-                steps: mb.motion_steps,
-                keys,
-            }),
-            // The camera moves during the render, between its keys too: whole image.
-            region: None,
-            ..first
-        }];
-    }
-    lp.latent_frames
-        .iter()
-        .enumerate()
-        .map(|(k, f)| {
-            let (sample_offset, sample_sequence) = block(f.sample_offset);
-            let out = format!("{prefix}_{k:04}.exr");
-            Render {
-                samples: Some(lp.samples_per_frame),
-                sample_offset,
-                sample_sequence,
-                ..Render::still(view, kind, f.c2w, f.seed, out)
-            }
-        })
-        .collect()
-}
 
 /// `renders` each carrying its samples: those that carry none (the sharp image's, and a
 /// defocus image's, one render at the sharp image's count) take `sharp_samples`.
@@ -73,7 +20,8 @@ pub fn with_samples(mut renders: Vec<Render>, sharp_samples: u32) -> Vec<Render>
 
 impl SettingPlan {
     /// Every render of the setting, EXRs under `exr_dir`: per view the sharp render at p
-    /// (`<view>_s.exr`), then each level's renders (`<view>_<level>_…`). `pin`
+    /// (`<view>_s.exr`), then each level's renders (`<view>_<level>_…`, then each other
+    /// kind's). `pin`
     /// ([`crate::BuildConfig::cycles_samples`]): the sharp image renders the first samples
     /// of a `pin`-sample sequence and the latent frames their blocks of it.
     pub fn renders(&self, exr_dir: &Path, pin: Option<u32>) -> Vec<Render> {
@@ -99,12 +47,6 @@ impl SettingPlan {
             });
             if sharp_views.contains(&i) {
                 continue;
-            }
-            for (key, lp) in &v.levels {
-                let level: u32 = key.parse().unwrap_or(0);
-                let prefix = exr_dir.join(format!("{i:04}_{key}"));
-                let prefix = prefix.display().to_string();
-                out.extend(level_renders(i, level, lp, &prefix, pin));
             }
             let cx = RenderCx {
                 view: i,
@@ -171,7 +113,7 @@ impl SettingPlan {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::choices::{BlurBudget, BlurMethod};
+    use crate::plan::choices::{BlurBudget, BlurMethod, LatentSampling};
     use crate::plan::config::BuildConfig;
     use crate::plan::sampling::plan_setting;
 

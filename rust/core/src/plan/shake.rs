@@ -146,6 +146,7 @@ pub struct Shake;
 
 impl Degradation for Shake {
     type Level = ShakePlan;
+    type Record = ShakePlan;
     type Read = ShakeStat;
     const NAME: &'static str = "shake";
     const PURPOSE: u64 = 2000;
@@ -283,8 +284,12 @@ impl Degradation for Shake {
             .collect()
     }
 
-    fn stat(s: &ShakeStat) -> f64 {
-        s.path_px
+    fn record(l: &ShakePlan) -> ShakePlan {
+        l.clone()
+    }
+
+    fn stat(s: &ShakeStat) -> Option<f64> {
+        Some(s.path_px)
     }
 }
 
@@ -292,7 +297,13 @@ impl Degradation for Shake {
 mod tests {
     use super::*;
     use crate::plan::degradation::kind_renders;
+    use crate::plan::motion::Trajectory;
+    use crate::plan::sampling::SamplingConfig;
     use crate::rng::Stream;
+    use std::sync::LazyLock;
+
+    /// What shake does not read of the build's sampling.
+    static CFG: LazyLock<SamplingConfig> = LazyLock::new(SamplingConfig::default);
 
     fn cx<'a>(
         stream: &'a dyn Fn(u64) -> Stream,
@@ -313,6 +324,18 @@ mod tests {
             samples_per_frame: 4,
             blocks,
             motion_blur,
+            cfg: &CFG,
+            r: 3.0,
+            phi_deg: 60.0,
+            theta_deg: 0.0,
+            trajectory: Trajectory {
+                dr: 1.0,
+                dphi_deg: 1.0,
+                dtheta_deg: 1.0,
+            },
+            w_u: 1.0,
+            bbox_dims: [1.0; 3],
+            pricing: None,
         }
     }
 
