@@ -106,8 +106,9 @@ def test_the_check_sees_the_imports() -> None:
     edges = _edges()
     assert ("ground", "atomic") in edges[("dataset", "layout")]
     assert ("plan", "spec") in edges[("plan", "config")]
-    assert ("plan", "sampling") in edges[("plan", "config")]
+    assert ("plan", "sampling_config") in edges[("plan", "config")]
     assert ("plan", "camera") in edges[("image", "qa")]
+    assert ("plan", "sampling_config") in edges[("plan", "degradation")]
     assert set(LAYERS) == {p.name if p.is_dir() else p.stem for p in SRC.iterdir()} - {"lib"}
 
 

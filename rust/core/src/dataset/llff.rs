@@ -644,7 +644,7 @@ mod tests {
 
     #[test]
     fn setting_rows_point_at_the_object() -> Result<()> {
-        let cfg = crate::plan::sampling::SamplingConfig {
+        let cfg = crate::plan::sampling_config::SamplingConfig {
             views: 5,
             latents: 2,
             ..Default::default()
@@ -666,7 +666,7 @@ mod tests {
 
     #[test]
     fn level_transforms_name_their_files_and_split_the_views() -> Result<()> {
-        let cfg = crate::plan::sampling::SamplingConfig {
+        let cfg = crate::plan::sampling_config::SamplingConfig {
             views: 5,
             latents: 2,
             levels: vec![2],

@@ -8,14 +8,14 @@ use crate::ground::names;
 use crate::image::denoise::DenoiserRecord;
 use crate::image::qa::FrameQa;
 use crate::plan::camera::orbit_c2w;
+use crate::plan::camera::rows;
 use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, LightPaths, Preset};
 use crate::plan::config::BuildConfig;
 use crate::plan::cost::BlurChoice;
 use crate::plan::degradation::Degradation;
 use crate::plan::motion::{MetaLevel, Motion, MotionStat};
-use crate::plan::sampling::{
-    rows, SamplingConfig, SettingPlan, ViewPlan, NEED_SATURATION_PX, PARITY_EXPONENT,
-};
+use crate::plan::sampling::{SettingPlan, ViewPlan};
+use crate::plan::sampling_config::{SamplingConfig, NEED_SATURATION_PX, PARITY_EXPONENT};
 use crate::plan::target::{
     TargetRule, ACCEPT_BELOW_DB, AIM_ABOVE_DB, ALPHA_RANGE, FIRST_STEP_MAX, MAX_ROUNDS,
 };

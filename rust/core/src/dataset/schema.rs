@@ -74,7 +74,8 @@ pub fn value_schemas() -> Vec<(&'static str, serde_json::Value)> {
     use super::stats::BuildStats;
     use crate::plan::motion::LevelPlan;
     use crate::plan::renders::Render;
-    use crate::plan::sampling::{SamplingConfig, SettingPlan};
+    use crate::plan::sampling::SettingPlan;
+    use crate::plan::sampling_config::SamplingConfig;
     use schemars::schema_for;
     vec![
         ("ImageRender", schema_for!(ImageRender).to_value()),

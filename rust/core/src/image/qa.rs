@@ -130,8 +130,8 @@ pub fn frame_qa(width: u32, height: u32, rgba: &[f32]) -> Result<FrameQa> {
 /// renders these tiny, cheap views from opposite sides; the driver judges them here.
 pub mod object {
     use super::{FrameQa, QaThresholds};
+    use crate::plan::camera::bounding_radius;
     use crate::plan::camera::orbit_c2w;
-    use crate::plan::sampling::bounding_radius;
 
     pub const RESOLUTION: u32 = 48;
     pub const SAMPLES: u32 = 4;

@@ -2,8 +2,10 @@
 //!
 //! World is Z-up; φ is the polar angle from +Z, θ the azimuth from +X towards +Y.
 //! Camera-to-world matrices are OpenGL / Blender (columns right, up, backwards, position).
+use crate::rng::Stream;
 use glam::{DMat4, DVec3, DVec4};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 /// Polar angles are kept this far (degrees) from the poles, where the look-at with
 /// up = +Z degenerates.
@@ -76,6 +78,53 @@ pub fn depth_range(c2w: &DMat4, points: &[[f32; 3]]) -> (f64, f64) {
 /// Focal length in pixels for a square image of `size` px and field of view `fov_deg`.
 pub fn focal_px(size: u32, fov_deg: f64) -> f64 {
     0.5 * size as f64 / libm::tan(0.5 * fov_deg.to_radians())
+}
+
+/// The trajectory δ of a view (DESIGN §2), a displacement in the orbit's own coordinates
+/// (r, φ, θ): the view's camera moves from p along it over the exposure.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+pub struct Trajectory {
+    /// Δr in percent of r.
+    pub dr: f64,
+    pub dphi_deg: f64,
+    pub dtheta_deg: f64,
+}
+
+impl Trajectory {
+    /// δ of one view: each component's magnitude uniform in [δ0 / 2, δ0], its sign
+    /// random, so every view moves along all three coordinates.
+    pub fn draw(delta0: f64, s: &mut Stream) -> Trajectory {
+        let mut component = || {
+            let mag = s.uniform_in(delta0 / 2.0, delta0);
+            mag * s.sign()
+        };
+        Trajectory {
+            dr: component(),
+            dphi_deg: component(),
+            dtheta_deg: component(),
+        }
+    }
+}
+
+/// Radius of the sphere around the box (centred at the origin).
+pub fn bounding_radius(bbox_dims: [f64; 3]) -> f64 {
+    0.5 * DVec3::from_array(bbox_dims).length()
+}
+
+/// A row-major copy of a matrix (meta.json and the worker take rows).
+pub(crate) fn rows(m: &DMat4) -> [[f64; 4]; 4] {
+    m.transpose().to_cols_array_2d()
+}
+
+/// The corners of a box of dimensions `d` centred at the origin.
+pub(crate) fn corners(d: [f64; 3]) -> [DVec3; 8] {
+    std::array::from_fn(|i| {
+        DVec3::new(
+            if i & 1 == 0 { -0.5 } else { 0.5 } * d[0],
+            if i & 2 == 0 { -0.5 } else { 0.5 } * d[1],
+            if i & 4 == 0 { -0.5 } else { 0.5 } * d[2],
+        )
+    })
 }
 
 #[cfg(test)]

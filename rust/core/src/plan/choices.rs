@@ -153,7 +153,7 @@ choice_enum! {
 choice_enum! {
     /// How many samples a blurry image gets against the sharp image's budget.
     pub enum BlurBudget {
-        /// The budget times [`super::sampling::parity_factor`] of the image's m: a moving
+        /// The budget times [`super::sampling_config::parity_factor`] of the image's m: a moving
         /// camera shows a pixel other content in every latent frame, so the frames'
         /// sample blocks stop adding up to one stratified sequence and m frames at S/m
         /// samples carry more render noise than one frame at S. The factor buys that
@@ -163,7 +163,7 @@ choice_enum! {
         /// The budget as given: m frames at S/m samples (older builds).
         Flat = "flat",
         /// Parity bought by the image's measured motion:
-        /// [`super::sampling::need_factor`] of m and the screen motion between its
+        /// [`super::sampling_config::need_factor`] of m and the screen motion between its
         /// frames, never more than the parity factor. A level whose frames move ≪ 0.5 px
         /// apart still renders nearly one stratified sequence and needs little more than
         /// the budget.

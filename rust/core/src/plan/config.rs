@@ -12,7 +12,7 @@ use super::choices::{
 use super::cost::Pricing;
 use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use super::presets::preset_values;
-use super::sampling::SamplingConfig;
+use super::sampling_config::SamplingConfig;
 use super::spec::{check, specs, Kind, OptionValue, Raw, Spec, MIN_RENDER_PX};
 use super::spec::{config_error, convert};
 use super::target::TargetRule;

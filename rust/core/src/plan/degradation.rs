@@ -1,12 +1,12 @@
 //! What a degradation is (issue 49): one file per kind (`motion.rs`, the motion blur of
-//! Algorithm 1; `defocus.rs`; `shake.rs`), each a [`Degradation`] holding its per-view
+//! Algorithm 1, and each kind beside it), each a [`Degradation`] holding its per-view
 //! draw, the renders of a level with the fields it adds to them, its record in meta.json
 //! (`views[i].<NAME>["<l>"]`, its `Record`) and its statistic. The plan, the render list
 //! and the statistics call each kind through this interface only.
+use super::camera::Trajectory;
 use super::cost::{ImagePrice, Pricing};
-use super::motion::Trajectory;
 use super::render::Render;
-use super::sampling::SamplingConfig;
+use super::sampling_config::SamplingConfig;
 use crate::ground::kind::ImageKind;
 use crate::rng::Stream;
 use serde::de::{Deserialize, DeserializeOwned};

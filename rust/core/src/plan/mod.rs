@@ -14,6 +14,7 @@ pub mod region;
 pub mod render;
 pub mod renders;
 pub mod sampling;
+pub mod sampling_config;
 pub mod shake;
 pub mod spec;
 pub mod target;

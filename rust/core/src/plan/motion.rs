@@ -8,13 +8,13 @@
 //! δ comes from the view's own stream, after φ and θ ([`super::sampling::sample_view`]);
 //! level l draws w_l and then its latent positions from purpose l, so changing the number
 //! of latents moves no viewpoint and dropping a level changes no other.
-use super::camera::{clamp_polar, orbit_c2w};
+use super::camera::{bounding_radius, clamp_polar, corners, orbit_c2w, rows, Trajectory};
 use super::choices::{LatentPositions, LatentSampling};
 use super::degradation::{
     Degradation, RenderCx, ViewCx, MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
 };
 use super::render::{Motion as MotionPath, Render};
-use super::sampling::{bounding_radius, corners, rows, BlurMethod, SamplingConfig};
+use super::sampling_config::{BlurMethod, SamplingConfig};
 use super::weights::level_interval;
 use crate::ground::kind::ImageKind;
 use crate::rng::Stream;
@@ -97,30 +97,6 @@ impl Degradation for Motion {
 
     fn stat(s: &MotionStat) -> Option<f64> {
         s.motion_px
-    }
-}
-
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
-pub struct Trajectory {
-    /// Δr in percent of r.
-    pub dr: f64,
-    pub dphi_deg: f64,
-    pub dtheta_deg: f64,
-}
-
-impl Trajectory {
-    /// δ of one view: each component's magnitude uniform in [δ0 / 2, δ0], its sign
-    /// random, so every view moves along all three coordinates.
-    pub fn draw(delta0: f64, s: &mut Stream) -> Trajectory {
-        let mut component = || {
-            let mag = s.uniform_in(delta0 / 2.0, delta0);
-            mag * s.sign()
-        };
-        Trajectory {
-            dr: component(),
-            dphi_deg: component(),
-            dtheta_deg: component(),
-        }
     }
 }
 

@@ -296,9 +296,9 @@ impl Degradation for Shake {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::camera::Trajectory;
     use crate::plan::degradation::kind_renders;
-    use crate::plan::motion::Trajectory;
-    use crate::plan::sampling::SamplingConfig;
+    use crate::plan::sampling_config::SamplingConfig;
     use crate::rng::Stream;
     use std::sync::LazyLock;
 
