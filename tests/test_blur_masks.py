@@ -97,6 +97,26 @@ def test_motion_blur_and_target_builds_give_blur_levels_their_own_masks(
     assert run_cli("verify", str(out)).returncode == 0
 
 
+@pytest.mark.parametrize("method", ["average", "motion_blur"])
+def test_shake_levels_hold_their_own_masks_too(tmp_path, standin_blender, method):
+    """Shake moves the camera during the exposure as motion blur does: its levels hold
+    the pixels their exposure covered by the same rule (a lens, one instant at the
+    written pose, takes the sharp masks), and verify and nerfstudio's export take them."""
+    out = tmp_path / "b"
+    standin_build(out, standin_blender, *MASKS, "--levels", "none", "--shake", "2,4",
+                  "--blur-method", method, "--settings-per-object", "1")  # fmt: skip
+    for setting in layout.complete_settings(out):
+        assert _check_level(setting, "shake_4", lambda a: a > 0) > 0, setting.name
+        _check_level(setting, "shake_2", lambda a: a > 0)
+    assert run_cli("verify", str(out)).returncode == 0
+    ns = tmp_path / "ns"
+    run_cli("export", str(out), "--for", "nerfstudio", "--levels", "shake_4", "--out", str(ns))
+    doc = json.loads((ns / "export.json").read_text())
+    for scene, rel in doc["scenes"].items():
+        for p in sorted((out / rel / layout.pass_dir("mask", 1)).iterdir()):
+            assert (ns / scene / "masks" / p.name).read_bytes() == p.read_bytes(), scene
+
+
 def test_verify_and_the_rerun_hold_a_blur_levels_masks(masks_build, tmp_path, standin_blender):
     b = copy_build(masks_build, tmp_path / "b")
     setting = layout.complete_settings(b)[0]

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from blurset import layout
-from blurset.image import read_exr
+from blurset.image import read_exr, read_image
 
 from tests.conftest import run_cli, standin_build
 
@@ -142,8 +142,15 @@ def _build(out: Path, *args: str) -> Path:
     run_cli("build", "--demo", "--out", str(out), "--resolution", "32", "--views", "3",
             "--levels", "none", "--shake", "1,4", "--latents", "4", "--samples", "4",
             "--sharp-samples", "8", "--settings-per-object", "1", "--keep-linear",
-            "--test-view-stride", "8", *args, "--quiet")  # fmt: skip
+            "--test-view-stride", "8", "--passes", "mask", *args, "--quiet")  # fmt: skip
     return out
+
+
+def _masks(setting: Path, level: str, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(sharp mask, the level's own mask, the level's mean alpha) of one view."""
+    sub = layout.pass_dir("mask", 1)
+    sharp, own = (read_image(setting / lv / sub / name)[..., 0] > 0 for lv in (layout.SHARP, level))
+    return sharp, own, read_exr(setting / level / layout.LINEAR / layout.linear_name(name))[..., 3]
 
 
 def _moved(setting: Path, level: str, name: str) -> float:
@@ -160,6 +167,7 @@ def _moved(setting: Path, level: str, name: str) -> float:
 def test_real_shake_differs_from_sharp_grows_with_level_and_repeats(tmp_path, method):
     a = _build(tmp_path / "a", "--blur-method", method)
     b = _build(tmp_path / "b", "--blur-method", method)
+    larger = 0
     for setting in layout.complete_settings(a):
         meta = json.loads((setting / layout.META).read_text())
         assert meta["levels"] == ["sharp", "shake_1", "shake_4"]
@@ -170,6 +178,13 @@ def test_real_shake_differs_from_sharp_grows_with_level_and_repeats(tmp_path, me
             name = layout.image_name(v["index"], len(meta["views"]))
             one, four = _moved(setting, "shake_1", name), _moved(setting, "shake_4", name)
             assert 0 < one < four, (setting.name, v["index"], one, four)
+            # Its own masks: the sharp mask and every pixel the exposure covered half
+            # (motion blur: any coverage at all), as a blur level's.
+            sharp, own, alpha = _masks(setting, "shake_4", name)
+            assert not (sharp & ~own).any() and not ((alpha >= 0.5) & ~own).any()
+            if method == "motion_blur":
+                assert np.array_equal(own, sharp | (alpha > 0))
+            larger += int((own & ~sharp).any())
         for level in ("shake_1", "shake_4"):
             # One seed, the same bytes; the same poses as the sharp level.
             for f in sorted((setting / level / layout.IMAGES).iterdir()):
@@ -178,3 +193,5 @@ def test_real_shake_differs_from_sharp_grows_with_level_and_repeats(tmp_path, me
             assert (setting / level / layout.POSES_BOUNDS).read_bytes() == (
                 setting / layout.SHARP / layout.POSES_BOUNDS
             ).read_bytes()
+    # The shaken camera smears the object outside its sharp silhouette somewhere.
+    assert larger > 0

@@ -520,9 +520,9 @@ def pass_file(kind: str, image: str) -> str:
     """The file of an image's view in a pass's folder (`007.exr`; masks `007.png`)."""
 
 def pass_level(kind: str, level: str, level_masks: bool) -> str:
-    """The level folder that holds `level`'s files of pass `kind`: a blur level's own
-    masks (`blur_4`) where the setting records them (meta.json `render.level_masks`),
-    everything else the sharp level's (`sharp`)."""
+    """The level folder that holds `level`'s files of pass `kind`: a blur or shake
+    level's own masks (`blur_4`, `shake_2`) where the setting records them (meta.json
+    `render.level_masks`), everything else the sharp level's (`sharp`)."""
 
 def setting_name(uid: str, theta0_deg: float) -> str:
     """`<uid>_<theta0>`, the directory name of one setting (θ0 rounded, 3 digits)."""

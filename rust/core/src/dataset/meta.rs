@@ -4,6 +4,7 @@
 use super::splits::test_views;
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
+use crate::ground::kind::ImageKind;
 use crate::ground::names;
 use crate::image::denoise::DenoiserRecord;
 use crate::image::qa::FrameQa;
@@ -130,9 +131,10 @@ pub struct RenderRecord {
     pub passes: Vec<String>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub passes_are: BTreeMap<String, String>,
-    /// Each blur level holds masks of its own coverage (`blur_<l>/masks/`): true in a
-    /// setting with the mask pass made since issue 48; absent before, where every level
-    /// takes the sharp level's masks.
+    /// Each level whose camera moves during the exposure (`ImageKind::own_masks`) holds
+    /// masks of its own coverage (`blur_<l>/masks/` …): true in a setting with the
+    /// mask pass made since issue 48; absent before, where every level takes the sharp
+    /// level's masks.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub level_masks: bool,
     /// The `--preset` the build was asked for (the options it set are recorded as options).
@@ -301,14 +303,33 @@ impl RenderRecord {
             encoding: "sRGB (IEC 61966-2-1) of linear radiance, 8-bit PNG".into(),
             linear: cfg.write_linear,
             passes: cfg.passes.clone(),
-            passes_are: cfg.passes.iter().map(|p| (p.clone(), pass_is(p))).collect(),
+            passes_are: cfg
+                .passes
+                .iter()
+                .map(|p| (p.clone(), pass_is(p, &own_mask_kinds(&cfg.level_dirs()))))
+                .collect(),
             level_masks: cfg.passes.iter().any(|p| p == "mask"),
         }
     }
 }
 
 /// What one `--passes` output holds, in words (meta.json's `render.passes_are`).
-fn pass_is(pass: &str) -> String {
+/// The level directory patterns (`<prefix><l>`) of the kinds among `levels`, beside motion
+/// blur, whose levels hold masks of their own.
+fn own_mask_kinds(levels: &[String]) -> Vec<String> {
+    let mut out: Vec<String> = levels
+        .iter()
+        .filter_map(|d| ImageKind::parse(d))
+        .filter(|k| k.own_masks() && !matches!(k, ImageKind::Blur(_)))
+        .map(|k| k.dir_pattern())
+        .collect();
+    out.dedup();
+    out
+}
+
+/// What a pass's files are, for meta.json; `own`: the level patterns beside blur_<l> whose
+/// masks are their own (a build without such levels says what it said before they existed).
+fn pass_is(pass: &str, own: &[String]) -> String {
     let at = "per view in sharp/{dir}/ (and {dir}_<f>/ per --downsample factor, rendered \
               at that size), named as its image";
     let dir = |p: &str| names::pass_dir(p, 1);
@@ -328,13 +349,16 @@ fn pass_is(pass: &str) -> String {
         _ => format!(
             "{}: 8-bit PNG, 255 where the sharp image covers at least half the pixel (its \
              alpha, area-averaged to the size), else 0; each blur level holds its own in \
-             blur_<l>/{}/: 255 where the exposure covered the pixel (a latent frame's alpha \
+             blur_<l>/{}/{}: 255 where the exposure covered the pixel (a latent frame's alpha \
              at least one half, or with blur_method motion_blur the render's alpha above \
              0, area-averaged to the size) or the sharp mask is 255; a held-out view's is \
              the sharp mask",
             at.replace("{dir}", &dir(pass))
                 .replace(", rendered at that size", ""),
-            dir(pass)
+            dir(pass),
+            own.iter()
+                .map(|d| format!(", each {d} in {d}/{}/", dir(pass)))
+                .collect::<String>()
         ),
     }
 }
@@ -731,6 +755,23 @@ pub type Pose = [[f64; 4]; 4];
 mod tests {
     use super::*;
     use crate::plan::sampling::plan_setting;
+
+    #[test]
+    fn the_mask_pass_names_every_level_kind_that_holds_its_own() {
+        let levels = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        // Blur and defocus only: the text a build wrote before other kinds had masks.
+        let plain = pass_is(
+            "mask",
+            &own_mask_kinds(&levels(&["sharp", "blur_1", "defocus_2"])),
+        );
+        assert!(plain.contains("blur_<l>/masks/:") && !plain.contains("defocus_<l>/masks"));
+        let own = own_mask_kinds(&levels(&["sharp", "blur_1", "shake_1", "shake_4"]));
+        assert_eq!(own, ["shake_<l>"]);
+        assert!(
+            pass_is("mask", &own).contains("blur_<l>/masks/, each shake_<l> in shake_<l>/masks/:")
+        );
+        assert_eq!(pass_is("depth", &own), pass_is("depth", &[]));
+    }
 
     #[test]
     fn rounding_is_to_the_nearest_decimal_ties_to_even() {

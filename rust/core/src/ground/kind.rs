@@ -47,6 +47,11 @@ struct Row {
     /// camera's centre), or are means over a moving camera whose mean latent pose
     /// meta.json records (motion blur).
     written_pose: bool,
+    /// Whether its image integrates a camera that moves during the exposure, so the
+    /// object covers more than the sharp silhouette and the level holds masks of its
+    /// own (the pixels its exposure covered); else it takes the sharp masks (a lens
+    /// renders one instant at the written pose).
+    own_masks: bool,
 }
 
 const PREFIXES: [Row; 3] = [
@@ -55,18 +60,21 @@ const PREFIXES: [Row; 3] = [
         make: ImageKind::Blur,
         record: "levels",
         written_pose: false,
+        own_masks: true,
     },
     Row {
         prefix: "defocus_",
         make: ImageKind::Defocus,
         record: "defocus",
         written_pose: true,
+        own_masks: false,
     },
     Row {
         prefix: "shake_",
         make: ImageKind::Shake,
         record: "shake",
         written_pose: true,
+        own_masks: true,
     },
 ];
 
@@ -120,6 +128,20 @@ impl ImageKind {
     pub fn written_pose(self) -> bool {
         self.degraded()
             .is_none_or(|(i, _)| PREFIXES[i].written_pose)
+    }
+
+    /// The pattern of this kind's level directories: `sharp`, `blur_<l>`, `shake_<l>`.
+    pub fn dir_pattern(self) -> String {
+        match self.degraded() {
+            None => SHARP.to_string(),
+            Some((i, _)) => format!("{}<l>", PREFIXES[i].prefix),
+        }
+    }
+
+    /// Whether this image's level holds masks of its own (the coverage of a moving
+    /// exposure: motion blur, shake) rather than the sharp image's.
+    pub fn own_masks(self) -> bool {
+        self.degraded().is_some_and(|(i, _)| PREFIXES[i].own_masks)
     }
 
     /// The render phase of this image's renders, in the order a setting renders them:
