@@ -199,6 +199,8 @@ class ShakePlan(TypedDict):
     seeds: list[int]
 
 class Trajectory(TypedDict):
+    """The trajectory δ of a view (DESIGN §2), a displacement in the orbit's own coordinates (r, φ, θ): the view's camera moves from p along it over the exposure."""
+
     dphi_deg: float
     dr: float
     dtheta_deg: float
