@@ -109,6 +109,8 @@ def test_shake_levels_hold_their_own_masks_too(tmp_path, standin_blender, method
         assert _check_level(setting, "shake_4", lambda a: a > 0) > 0, setting.name
         _check_level(setting, "shake_2", lambda a: a > 0)
     assert run_cli("verify", str(out)).returncode == 0
+    render = json.loads((layout.complete_settings(out)[0] / layout.META).read_text())["render"]
+    assert "shake_<l>/masks/" in render["passes_are"]["mask"]
     ns = tmp_path / "ns"
     run_cli("export", str(out), "--for", "nerfstudio", "--levels", "shake_4", "--out", str(ns))
     doc = json.loads((ns / "export.json").read_text())

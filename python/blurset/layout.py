@@ -76,14 +76,14 @@ def nerfstudio_depth_dir(factor: int) -> str:
 
 def pass_level(p: str, level: str, level_masks: bool) -> str:
     """The level folder holding `level`'s files of pass `p`: the own masks of a level
-    whose camera moves during the exposure (motion blur, shake: the coverage of its
-    exposure) in a setting that records them (`level_masks`, meta.json
+    whose camera moves during the exposure (motion blur's, and every kind the core's
+    `ImageKind.own_masks` names: the coverage of its exposure) in a setting that records them (`level_masks`, meta.json
     `render.level_masks`), everything else the sharp level's."""
     return _core.pass_level(p, level, level_masks)
 
 
 def level_masks(meta: dict) -> bool:
-    """Whether a setting's moving-exposure levels (blur, shake) hold masks of their own
+    """Whether a setting's moving-exposure levels (blur …) hold masks of their own
     (its meta.json): false in a setting built before they had them, whose levels all take
     the sharp masks."""
     return bool((meta.get("render") or {}).get("level_masks", False))
@@ -91,7 +91,7 @@ def level_masks(meta: dict) -> bool:
 
 def own_mask_levels(levels: list[str]) -> list[str]:
     """The levels of `levels` that hold masks of their own in a build made now (the blur
-    and shake levels)."""
+    levels, and every level whose camera moves during the exposure)."""
     return [lv for lv in levels if lv != SHARP and pass_level("mask", lv, True) == lv]
 
 

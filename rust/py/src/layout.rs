@@ -130,7 +130,7 @@ fn nerfstudio_depth_dir(factor: u32) -> String {
     core::nerfstudio_depth_dir(factor)
 }
 
-/// The level folder that holds `level`'s files of pass `kind` (a blur or shake level's
+/// The level folder that holds `level`'s files of pass `kind` (a moving exposure's
 /// own masks where the setting records them; everything else the sharp level's).
 #[pyfunction]
 fn pass_level(kind: &str, level: &str, level_masks: bool) -> String {

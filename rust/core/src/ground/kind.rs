@@ -195,6 +195,10 @@ mod tests {
         assert_eq!(ImageKind::Sharp.record(), None);
         assert!(ImageKind::Sharp.written_pose() && ImageKind::Defocus(1).written_pose());
         assert!(!ImageKind::Blur(1).written_pose());
+        // Which kinds' levels hold masks of their own: those whose camera moves.
+        assert!(ImageKind::Blur(1).own_masks() && ImageKind::Shake(2).own_masks());
+        assert!(!ImageKind::Sharp.own_masks() && !ImageKind::Defocus(2).own_masks());
+        assert_eq!(ImageKind::Shake(4).dir_pattern(), "shake_<l>");
     }
 
     #[test]

@@ -95,8 +95,8 @@ pub fn pass_dir(pass: &str, factor: u32) -> String {
 
 /// The level folder that holds `level`'s files of `pass`: in a setting whose levels hold
 /// masks of their own (`level_masks`, meta.json `render.level_masks`), a level of a kind
-/// whose camera moves during the exposure (motion blur `blur_<l>`, shake `shake_<l>`:
-/// [`ImageKind::own_masks`]) holds its masks, because its image covers more than the
+/// whose camera moves during the exposure (motion blur's `blur_<l>` and any other
+/// [`ImageKind::own_masks`] says) holds its masks, because its image covers more than the
 /// sharp silhouette (issue 48); every other pass, the masks of the sharp and defocus
 /// levels (one render at the written pose each) and every mask of a setting built
 /// before blur levels had their own, are the sharp level's.
@@ -277,19 +277,14 @@ mod tests {
     #[test]
     fn a_moving_exposure_holds_its_own_masks_and_nothing_else_of_the_passes() {
         assert_eq!(pass_level("mask", "blur_4", true), "blur_4");
-        // Shake moves the camera during the exposure as motion blur does.
-        assert_eq!(pass_level("mask", "shake_2", true), "shake_2");
         // A setting built before blur levels had masks of their own: the sharp one.
         assert_eq!(pass_level("mask", "blur_4", false), SHARP);
-        assert_eq!(pass_level("mask", "shake_2", false), SHARP);
         for (pass, level) in [
             ("mask", SHARP),
             ("mask", "defocus_2"),
             ("depth", "blur_4"),
             ("normal", "blur_1"),
-            ("depth", "shake_3"),
             ("mask", "blur_04"),
-            ("mask", "shake_0"),
         ] {
             assert_eq!(pass_level(pass, level, true), SHARP, "{pass} of {level}");
         }

@@ -437,4 +437,15 @@ mod tests {
         assert_eq!(r[0].out, "/x/0002_sh3_mb.exr");
         assert_eq!(mb["3"].method, BlurMethod::MotionBlur);
     }
+
+    #[test]
+    fn a_shake_level_holds_masks_of_its_own() {
+        use crate::ground::names::{pass_level, SHARP};
+        // Its camera turns during the exposure: the smear lies outside the silhouette.
+        assert_eq!(pass_level("mask", "shake_2", true), "shake_2");
+        // A setting made before levels had masks of their own; other passes.
+        assert_eq!(pass_level("mask", "shake_2", false), SHARP);
+        assert_eq!(pass_level("depth", "shake_3", true), SHARP);
+        assert_eq!(pass_level("mask", "shake_0", true), SHARP);
+    }
 }
