@@ -181,7 +181,8 @@ def test_the_bound_opens_where_a_few_pixels_carry_the_noise():
         return h
 
     smooth = image.half_noise_bound(half(False), half(False))
-    assert smooth["estimate"]["psnr"] - smooth["psnr_bound"] < 0.3
+    # 2.809 · √(4/3 / n_eff) of the estimate: under half a dB over 4096 pixels.
+    assert smooth["estimate"]["psnr"] - smooth["psnr_bound"] < 0.45
     assert smooth["n_eff"] > n / 4
     spiky = image.half_noise_bound(half(True), half(True))
     assert spiky["n_eff"] < 40
@@ -260,20 +261,26 @@ def test_an_image_that_needs_more_gets_more(tmp_path, box):
             total["lo"] += rec["samples"]
             total["hi"] += vh["images"][level]["samples"]
     assert total["hi"] > 1.5 * total["lo"], total
-    # Within one build: the samples of an image done after its second round follow from
-    # its own pilot estimate's bound (variance as samples^-2, aimed 0.2 dB above the
-    # target, at most 8x the pilot in one step), so a noisier image at the pilot gets more.
+    # Within one build: the samples of an image after its second round follow from its
+    # own pilot estimate's bound (variance as samples^-2, aimed 0.2 dB above the target,
+    # at most 8x the pilot in one step), so a noisier image at the pilot gets more: done
+    # after that round, exactly those; after more rounds, which only add, at least those.
     checked = 0
     for meta, target in ((lo, 38), (hi, 44)):
         for v in meta["views"]:
             for level, rec in v["images"].items():
-                if rec["rounds"] != 2:
+                if rec["rounds"] < 2:
                     continue
                 m = 1 if level == "sharp" else v["levels"][level.removeprefix("blur_")]["latents"]
                 pilot = max(1, math.ceil(16 / m))
                 aim = target + 0.2
                 need = min(pilot * 10 ** ((aim - rec["pilot_psnr_db"]) / 20), 8 * pilot)
-                assert rec["samples"] == pytest.approx(2 * m * need, abs=2 * m + 0.01 * need * m)
+                if rec["rounds"] == 2:
+                    assert rec["samples"] == pytest.approx(
+                        2 * m * need, abs=2 * m + 0.01 * need * m
+                    )
+                else:
+                    assert rec["samples"] >= 2 * m * need - 2 * m, (level, rec)
                 checked += 1
     assert checked > 0
 
