@@ -659,21 +659,11 @@ pub fn level_renders(
 mod tests {
     use super::*;
     use crate::plan::choices::{BlurBudget, TrajectoryAnchor};
+    use crate::plan::sampling::tests::{cube_vertices, plan};
     use crate::plan::sampling::{
         frame_seed, plan_setting, plan_setting_priced, stream_id, SettingPlan,
     };
     use crate::plan::spec::MAX_COUNT;
-
-    fn cube_vertices(d: [f64; 3]) -> Vec<[f32; 3]> {
-        corners(d)
-            .iter()
-            .map(|c| [c.x as f32, c.y as f32, c.z as f32])
-            .collect()
-    }
-
-    fn plan(cfg: &SamplingConfig, seed: u64, d: [f64; 3]) -> SettingPlan {
-        plan_setting(cfg, "obj", 90.0, seed, d, &cube_vertices(d)).expect("valid plan")
-    }
 
     #[test]
     fn stratified_positions_fill_every_stratum() {

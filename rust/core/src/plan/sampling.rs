@@ -434,7 +434,7 @@ impl Setting<'_> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     // The config's budget rules are tested here, on the plans they shape.
     use crate::plan::camera::bounding_radius;
@@ -443,14 +443,17 @@ mod tests {
 
     use proptest::prelude::*;
 
-    fn cube_vertices(d: [f64; 3]) -> Vec<[f32; 3]> {
+    /// The corners of a box of dimensions `d` as an object's vertices (motion.rs's tests
+    /// use them too).
+    pub(crate) fn cube_vertices(d: [f64; 3]) -> Vec<[f32; 3]> {
         corners(d)
             .iter()
             .map(|c| [c.x as f32, c.y as f32, c.z as f32])
             .collect()
     }
 
-    fn plan(cfg: &SamplingConfig, seed: u64, d: [f64; 3]) -> SettingPlan {
+    /// The plan of a box of dimensions `d`.
+    pub(crate) fn plan(cfg: &SamplingConfig, seed: u64, d: [f64; 3]) -> SettingPlan {
         plan_setting(cfg, "obj", 90.0, seed, d, &cube_vertices(d)).expect("valid plan")
     }
 
