@@ -306,6 +306,7 @@ def measure_model(glb: Path, work: Path) -> dict:
             "samples": CONTINUOUS_SAMPLES,
             "renders": 2,
             "detail_ratio": "over the noise-free part",
+            "reference_noise": "taken out",
         },
     }
     builds = [paper]

@@ -899,8 +899,8 @@ def _per_kind_table(quality: list[dict]) -> list[str]:
         "",
         "Equal accuracy against the continuous blur, per image kind: the paper preset's worst",
         "image of the kind against the continuous blur (the kind's target), the worst its own",
-        "build reached (object pixels), that build's work per view and wall time, and how its",
-        "blurry images were rendered.",
+        "build reached (object pixels, the reference's own render noise taken out; † left in),",
+        "that build's work per view and wall time, and how its blurry images were rendered.",
         "",
         "| model | kind | paper worst dB | reached worst dB | samples / view | calls / view "
         "| build s | method |",
@@ -910,16 +910,23 @@ def _per_kind_table(quality: list[dict]) -> list[str]:
         for kind, k in sorted(r["at_paper_continuous"].get("kinds", {}).items()):
             method = ", ".join(k.get("methods") or [])
             out.append(
-                f"| `{r.get('model')}`{_at(r)} | {kind} | {_fmt(k.get('paper_worst_db'))} | "
+                f"| `{r.get('model')}`{_at(r)}{'†' if _noise_left_in(r) else ''} | {kind} | "
+                f"{_fmt(k.get('paper_worst_db'))} | "
                 f"{_fmt(k.get('worst_db'))} | {_count(k.get('samples_per_view'))} | "
                 f"{_count(k.get('calls_per_view'))} | {_fmt(k.get('build_s'))} | {method} |"
             )
     return out
 
 
+def _noise_left_in(r: dict) -> bool:
+    """A row scored before the reference's own render noise was taken out of its PSNR."""
+    return (r.get("continuous") or {}).get("reference_noise") != "taken out"
+
+
 def _continuous_table(quality: list[dict]) -> list[str]:
     """Each build against the continuous blur, and its work per view."""
     older = any(not r.get("continuous") for r in quality)
+    noisy = {r["name"] for r in quality if _noise_left_in(r)}
     out = [
         "Each build against the continuous blur (stratified frames at most 0.5 px apart on",
         "screen sharing 1,024 samples"
@@ -928,9 +935,16 @@ def _continuous_table(quality: list[dict]) -> list[str]:
             if older
             else ""
         )
-        + "; the sharp image at 1,024 samples), on object pixels: the blurry images' mean",
-        "and worst",
-        "PSNR, the sharp images' mean, and the detail ratio (high-frequency energy over the",
+        + "; the sharp image at 1,024 samples, rendered twice on independent seeds), on",
+        "object pixels: the blurry images' mean and worst PSNR against the two renders' mean,",
+        "that mean's own render noise taken out (MSE(r₁, r₂) / 4"
+        + (
+            "; rows marked † were scored with it left in, which reads low where an image is as"
+            " noisy as the reference"
+            if noisy
+            else ""
+        )
+        + "), the sharp images' mean, and the detail ratio (high-frequency energy over the",
         "reference's, blurry / sharp: under 1 is texture smoothed away, over 1 noise on top);",
         "the texture kept (core `detail_kept`, blurry / sharp: the share of the reference's",
         "Laplacian the image keeps, from two independent reference renders, so that noise",
@@ -950,7 +964,8 @@ def _continuous_table(quality: list[dict]) -> list[str]:
                 # builds have their own table)
                 continue
             out.append(
-                f"| `{r.get('model')}`{_at(r)}{'*' if older and r.get('continuous') else ''} | "
+                f"| `{r.get('model')}`{_at(r)}{'*' if older and r.get('continuous') else ''}"
+                f"{'†' if r['name'] in noisy else ''} | "
                 f"{label} | "
                 f"{_fmt(b.get('blur_vs_continuous_mean_db'))} / "
                 f"{_fmt(b.get('blur_vs_continuous_worst_db'))} | "
