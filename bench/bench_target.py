@@ -46,6 +46,12 @@ SEED = 5
 SALTS = (0x5BD1E995, 0x2545F491)
 PROBE_SALTS = (0x27D4EB2F, 0x165667B1)
 HELD_OUT = ("textured_panel_blender_reexport", "khronos_2CylinderEngine", "khronos_BoxTextured")
+# The blur method of the target builds (BLURSET_BENCH_TARGET_BLUR_METHOD; unset: the
+# preset's, which a CPU prices as averaged frames): `motion_blur` measures what a GPU's
+# choice renders (one Cycles motion-blur call per half and round), on this CPU's pixels.
+# Its results are named target_<res>px_<db>db_motion_blur_<model>.
+BLUR_METHOD = os.environ.get("BLURSET_BENCH_TARGET_BLUR_METHOD", "")
+TAG = f"_{BLUR_METHOD}" if BLUR_METHOD else ""
 # Views of each specular model of our own (bench/specular_models.py; 0: none).
 SPECULAR_VIEWS = int(os.environ.get("BLURSET_BENCH_TARGET_SPECULAR_VIEWS", "3"))
 # A bound "holds" on an image measuring at most this far under it: the rule accepts an
@@ -171,7 +177,8 @@ def measure_model(glb: Path, work: Path, views: int = VIEWS) -> dict:
     from blurset.image import read_exr
 
     out = work / f"build_{glb.stem}"
-    cfg = config(out, glb, RES, views, preset="balanced", target_psnr=TARGET)
+    method = {"blur_method": BLUR_METHOD} if BLUR_METHOD else {}
+    cfg = config(out, glb, RES, views, preset="balanced", target_psnr=TARGET, **method)
     wall, setting, meta = timed_build(cfg)
     refs = _references(cfg, glb, setting, meta, work)
     target_mse = 10 ** (-TARGET / 10)
@@ -307,7 +314,7 @@ def run() -> list[dict]:
     for row in m["summary"]:
         res.append(
             {
-                "name": f"target_{RES}px_{TARGET:g}db_{row['model']}",
+                "name": f"target_{RES}px_{TARGET:g}db{TAG}_{row['model']}",
                 "ratio": row["spent_over_least"],
                 "ratio_is": "samples a target-driven build spent over the least that reaches "
                 "the target (from converged references), this model",
@@ -323,7 +330,7 @@ def run() -> list[dict]:
         )
     res.append(
         {
-            "name": f"target_{RES}px_{TARGET:g}db_estimate",
+            "name": f"target_{RES}px_{TARGET:g}db{TAG}_estimate",
             "ratio": honest,
             "ratio_is": "share of images whose estimated render PSNR is within 1 dB of the "
             "measured one, every held-out model",
@@ -347,7 +354,7 @@ def run() -> list[dict]:
     for row in m["specular_summary"]:
         res.append(
             {
-                "name": f"target_{RES}px_{TARGET:g}db_{row['model']}",
+                "name": f"target_{RES}px_{TARGET:g}db{TAG}_{row['model']}",
                 "ratio": row["bound_holds_share"],
                 "ratio_is": "share of images measuring at or above their render-noise bound "
                 "(within 0.25 dB), this specular model",
@@ -363,7 +370,7 @@ def run() -> list[dict]:
     if spec:
         res.append(
             {
-                "name": f"target_{RES}px_{TARGET:g}db_specular_bound",
+                "name": f"target_{RES}px_{TARGET:g}db{TAG}_specular_bound",
                 "ratio": sum(r["measured_db"] >= r["bound_db"] - BOUND_SLACK_DB for r in spec)
                 / len(spec),
                 "ratio_is": "share of images measuring at or above their render-noise bound "

@@ -48,7 +48,9 @@ COST = re.compile(
 )
 LIGHT = re.compile(r"^light_paths_(?P<glb>.+)$")
 GAIN = re.compile(r"^denoise_gain_(?P<glb>.+)_(?P<res>\d+)px$")
-TARGET = re.compile(r"^target_(?P<res>\d+)px_(?P<db>[\d.]+)db_(?P<model>.+)$")
+TARGET = re.compile(
+    r"^target_(?P<res>\d+)px_(?P<db>[\d.]+)db(?:_(?P<method>motion_blur|average))?_(?P<model>.+)$"
+)
 SPEED = re.compile(r"^target_speed_(?P<res>\d+)px_(?P<model>.+)$")
 DETAIL = re.compile(r"^target_detail_(?P<res>\d+)px_(?P<model>.+)$")
 DEVICE_COSTS = re.compile(r"^device_costs_(?:(?P<cpu>cpu)_)?(?P<res>\d+)px$")
@@ -734,12 +736,16 @@ def targets_page(rs: list[dict]) -> list[str]:
     overall = {r["name"]: r for r in rs if _match(TARGET, r["name"])["model"] == "estimate"}
     if not per_model:
         return out + ["No `target_*` result in bench/results.json yet."]
-    runs: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    runs: dict[tuple[str, str, str], list[dict]] = defaultdict(list)
     for r in per_model:
         m = _match(TARGET, r["name"])
-        runs[(m["res"], m["db"])].append(r)
-    for (res, db), group in sorted(runs.items(), key=lambda kv: (int(kv[0][0]), kv[0][1])):
-        out += _target_run(res, db, group, overall.get(f"target_{res}px_{db}db_estimate"))
+        runs[(m["res"], m["db"], m["method"] or "")].append(r)
+    for (res, db, method), group in sorted(
+        runs.items(), key=lambda kv: (int(kv[0][0]), kv[0][1], kv[0][2])
+    ):
+        tag = f"_{method}" if method else ""
+        out += _target_run(res, db, group, overall.get(f"target_{res}px_{db}db{tag}_estimate"),
+                           method)  # fmt: skip
     return out + _specular_section(specular)
 
 
@@ -778,14 +784,23 @@ def _specular_section(rs: list[dict]) -> list[str]:
     return [*out, ""]
 
 
-def _target_run(res: str, db: str, group: list[dict], est: dict | None) -> list[str]:
-    """One target and size: the per-model table, the misses and plot, more per model."""
+def _target_run(
+    res: str, db: str, group: list[dict], est: dict | None, method: str = ""
+) -> list[str]:
+    """One target, size and blur method: the per-model table, the misses and plot, more
+    per model."""
     first = group[0]
     out = [
-        f"## {db} dB at {res} px",
+        f"## {db} dB at {res} px" + (f", {method.replace('_', ' ')}" if method else ""),
         "",
         f"{_fmt(first.get('views_measured'))} views a model, references at "
-        f"{_fmt(first.get('reference_factor'))}× the samples.",
+        f"{_fmt(first.get('reference_factor'))}× the samples"
+        + (
+            f"; every blurry image rendered by `--blur-method {method}` (what the accuracy "
+            "presets choose on a GPU, rendered here on the CPU)."
+            if method == "motion_blur"
+            else "."
+        ),
         "",
     ]
     if est:
@@ -807,7 +822,8 @@ def _target_run(res: str, db: str, group: list[dict], est: dict | None) -> list[
     out.append("")
     if est and isinstance(est.get("per_image"), dict):
         out += _target_misses(est["per_image"])
-        out += _target_plot(est["per_image"], float(db), f"targets_{res}_{db}.png")
+        png = f"targets_{res}_{db}{'_' + method if method else ''}.png"
+        out += _target_plot(est["per_image"], float(db), png)
     more = [
         ("spent_over_least_median_image", "samples over the least, median image"),
         ("spent_over_least_max_image", "samples over the least, worst image"),
