@@ -6,8 +6,8 @@ none of which any preset or threshold was fitted to, and the three demo objects)
 setting of BLURSET_BENCH_TARGET_VIEWS views is built at BLURSET_BENCH_TARGET_RES px with
 `--target-psnr T` (every view renders its blurry images too). Each image's own frames are
 then rendered again, undenoised, at BLURSET_BENCH_TARGET_REF times its samples as two
-halves on other Cycles seeds: the reference. On the object's pixels (alpha > 0 in the image
-or the reference), the image's measured render MSE is its MSE against the reference less
+halves on other Cycles seeds: the reference. On the object's pixels (alpha over 10⁻⁶, Cycles'
+rounding, in the image or the reference), the image's measured render MSE is its MSE against the reference less
 the reference's own noise, MSE(r₁, r₂) / 4 (independent seeds: the two add).
 
 Per model: the share of images measuring ≥ T − 0.5 dB, the share whose estimate

@@ -1022,7 +1022,8 @@ def detail_kept(
 
 @final
 class ObjectError:
-    """Error on the object's pixels (alpha > 0 in either image; DESIGN §8)."""
+    """Error on the object's pixels (alpha over 1e-6, Cycles' rounding, in either image;
+    DESIGN §8)."""
 
     @property
     def psnr(self) -> float:

@@ -2,7 +2,7 @@
 //! the Pareto front of (seconds, PSNR).
 use crate::error::{Error, Result};
 use crate::image::color::{composite_over, srgb_encode_f64};
-use crate::image::CH;
+use crate::image::{covers, CH};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -70,7 +70,8 @@ pub fn image_error(image: &[f32], reference: &[f32], background: [f64; 3]) -> Re
 }
 
 /// The error of an image against a reference on the object's pixels (DESIGN §8): those
-/// with coverage (alpha > 0) in the image or in the reference. The background is exact in
+/// with coverage (alpha above [`COVERAGE_EPS`], Cycles' rounding) in the image or in the
+/// reference. The background is exact in
 /// both, so a whole-frame figure reads 10·log10(1 / coverage) dB high; this one is the
 /// per-pixel figure the 8-bit floor (58.9 dB) is.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -105,7 +106,7 @@ fn object_se(a: &[f32], b: &[f32], background: [f64; 3]) -> Result<(f64, f64, u6
         if !a.iter().chain(b).all(|v| v.is_finite()) {
             return Some((f64::NAN, f64::NAN));
         }
-        if a[3] <= 0.0 && b[3] <= 0.0 {
+        if !covers(a[3]) && !covers(b[3]) {
             return None;
         }
         let (ca, cb) = (
@@ -527,6 +528,15 @@ mod tests {
         let mut c = b.clone();
         c[7] = 0.5;
         assert_eq!(object_error(&a, &c, [1.0; 3]).unwrap().object_px, 2);
+        // Cycles' rounding on a background (alpha 1.6e-8, measured) is not coverage; one
+        // sample's hit in 65,536 is.
+        let mut fuzz = b.clone();
+        for p in fuzz.chunks_exact_mut(CH).skip(1) {
+            p[3] = 1.6e-8;
+        }
+        assert_eq!(object_error(&a, &fuzz, [1.0; 3]).unwrap().object_px, 1);
+        fuzz[7] = 1.0 / 65_536.0;
+        assert_eq!(object_error(&a, &fuzz, [1.0; 3]).unwrap().object_px, 2);
         // Nothing covered: exact.
         let z = vec![0.0f32; 16];
         let e = object_error(&z, &z, [1.0; 3]).unwrap();

@@ -100,7 +100,8 @@ fn detail_kept(
     crate::run_detached(py, || core::detail_kept(a, [b, c], width, bg))
 }
 
-/// Error on the object's pixels (alpha > 0 in either image; DESIGN §8).
+/// Error on the object's pixels (alpha over 1e-6, Cycles' rounding, in either image;
+/// DESIGN §8).
 #[pyclass(frozen, get_all, name = "ObjectError", module = "blurset._core")]
 pub struct ObjectError {
     /// PSNR (dB, peak 1) of the sRGB image over the background, on object pixels (≤ 200).

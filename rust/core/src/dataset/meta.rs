@@ -174,7 +174,8 @@ pub struct ImageRender {
     /// The estimate after the pilot round, from which the samples it needed were
     /// extrapolated (its bound, in builds that record `render_psnr_bound_db`).
     pub pilot_psnr_db: f64,
-    /// Fraction of the frame that is object pixels (alpha > 0 in either half).
+    /// Fraction of the frame that is object pixels (alpha over 1e-6, Cycles' rounding, in
+    /// either half).
     pub coverage: f64,
     /// The bound is at the target (within 0.25 dB); false: the sample cap or the round
     /// limit stopped it first.

@@ -8,7 +8,7 @@ use super::exr::passes::{decode_named, PassSpec};
 use super::exr::write::write_encoded;
 use super::io::{read_image, Samples};
 use super::resample::check_factor;
-use super::CH;
+use super::{covers, CH};
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
 use crate::plan::choices::BlurMethod;
@@ -167,7 +167,8 @@ pub fn mask_from_coverage(rgba: &[f32], width: u32, height: u32, factor: u32) ->
 /// - `MotionBlur`: the whole exposure, averaged over time by Cycles: the union of its
 ///   instants is not observable from that mean (a thin part crossing a pixel for a
 ///   moment leaves a small alpha), so every pixel the render saw the object in at all
-///   (alpha > 0) is in, the smallest rule that never drops a pixel an instant covered.
+///   (alpha above Cycles' rounding, [`super::COVERAGE_EPS`]) is in, the smallest rule
+///   that never drops a pixel an instant covered.
 pub fn exposure_mask(
     covered: &[f32],
     width: u32,
@@ -184,7 +185,7 @@ pub fn exposure_mask(
     match method {
         BlurMethod::Average => half_covered(width, height, factor, |i| f64::from(covered[i])),
         BlurMethod::MotionBlur => half_covered(width, height, factor, |i| {
-            if covered[i] > 0.0 {
+            if covers(covered[i]) {
                 1.0
             } else {
                 0.0
@@ -421,6 +422,22 @@ mod tests {
         assert_eq!(
             exposure_mask(&covered, 4, 2, 1, BlurMethod::Average)?,
             [255, 255, 0, 255, 0, 255, 0, 0]
+        );
+        // Cycles' rounding over a background (1.6e-8, measured) is no exposure; one
+        // sample's hit in 65,536 is.
+        let fuzz = [
+            1.6e-8f32,
+            1.6e-8,
+            1.0 / 65_536.0,
+            0.0,
+            1.6e-8,
+            1.6e-8,
+            1.6e-8,
+            1.6e-8,
+        ];
+        assert_eq!(
+            exposure_mask(&fuzz, 4, 2, 1, BlurMethod::MotionBlur)?,
+            [0, 0, 255, 0, 0, 0, 0, 0]
         );
         assert!(exposure_mask(&covered[..7], 4, 2, 1, BlurMethod::Average).is_err());
         assert!(exposure_mask(&covered, 4, 2, 3, BlurMethod::Average).is_err());
