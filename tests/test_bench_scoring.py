@@ -1,0 +1,46 @@
+"""The benches' own scoring (bench/bench_target_speed.py): an image against the continuous
+blur, whose reference is the mean of two renders with render noise of its own. Left in,
+that noise counts against the image as error it does not have (it made the sharp kind of
+issue 47's rule (b) read 0.6-1.1 dB short of the paper preset's figure)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+def _scoring():
+    sys.path.insert(0, str(BENCH))
+    try:
+        import bench_target_speed
+    finally:
+        sys.path.remove(str(BENCH))
+    return bench_target_speed
+
+
+def test_the_reference_noise_is_taken_out_of_an_images_psnr_against_the_continuous_blur():
+    from blurset import image
+
+    rng = np.random.default_rng(3)
+    h = w = 256
+    truth = np.zeros((h, w, 4), np.float32)
+    truth[32:224, 32:224] = [0.4, 0.3, 0.2, 1.0]  # premultiplied; the rest background
+
+    def render(sd: float) -> np.ndarray:
+        out = truth.copy()
+        out[32:224, 32:224, :3] += rng.normal(0.0, sd, (192, 192, 3)).astype(np.float32)
+        return out
+
+    img, r1, r2 = render(0.01), render(0.01), render(0.01)
+    own = image.object_error(img, truth).psnr  # the image's render noise alone
+    naive = image.object_error(img, (r1 + r2) / 2).psnr
+    scored = _scoring()._vs_continuous_db(img, r1, r2)
+    # A reference as noisy as the image, halved by the mean: 1.5x the MSE, 1.76 dB low.
+    assert abs((own - naive) - 10 * np.log10(1.5)) < 0.1, (own, naive)
+    assert abs(scored - own) < 0.1, (scored, own)
+    # A noise-free reference (r1 = r2 = truth) leaves the image's own error as it is.
+    assert abs(_scoring()._vs_continuous_db(img, truth, truth) - own) < 1e-9
