@@ -59,6 +59,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_target import _db  # noqa: E402
 from harness import plan_object, render_mean, timed_build  # noqa: E402
 
 if TYPE_CHECKING:
@@ -146,8 +147,7 @@ def _vs_continuous_db(img: np.ndarray, r1: np.ndarray, r2: np.ndarray) -> float:
     renders' mean, less that mean's own render noise (independent seeds: the two add)."""
     from blurset import image
 
-    mse = image.object_error(img, (r1 + r2) / 2).mse - image.object_error(r1, r2).mse / 4.0
-    return 200.0 if mse <= 1e-20 else float(-10.0 * np.log10(mse))
+    return _db(image.object_error(img, (r1 + r2) / 2).mse - image.half_noise(r1, r2).mse)
 
 
 def _kind_worst(setting: Path, cont: dict, only: str | None = None) -> dict[str, float]:

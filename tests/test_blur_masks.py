@@ -229,7 +229,7 @@ def test_real_blurry_masks_cover_the_exposure(tmp_path):
     rendered = [v for v in meta["views"] if "blur_4" in v["images"]]
     assert rendered
     for v in rendered:
-        name = Path(layout.image_name(v["index"], len(meta["views"]))).with_suffix(".exr").name
+        name = layout.linear_name(layout.image_name(v["index"], len(meta["views"])))
         alpha = read_exr(setting / "blur_4" / layout.LINEAR / name)[..., 3]
         coverage = v["images"]["blur_4"]["coverage"]
         assert abs(coverage - (alpha > COVERAGE_EPS).mean()) < 0.02, (v["index"], coverage)

@@ -49,7 +49,7 @@ COST = re.compile(
 LIGHT = re.compile(r"^light_paths_(?P<glb>.+)$")
 GAIN = re.compile(r"^denoise_gain_(?P<glb>.+)_(?P<res>\d+)px$")
 TARGET = re.compile(
-    r"^target_(?P<res>\d+)px_(?P<db>[\d.]+)db(?:_(?P<method>motion_blur|average))?_(?P<model>.+)$"
+    r"^target_(?P<res>\d+)px_(?P<db>[\d.]+)db(?:_(?P<method>motion_blur|average|auto))?_(?P<model>.+)$"
 )
 SPEED = re.compile(r"^target_speed_(?P<res>\d+)px_(?P<model>.+)$")
 DETAIL = re.compile(r"^target_detail_(?P<res>\d+)px_(?P<model>.+)$")
