@@ -44,3 +44,32 @@ def test_the_reference_noise_is_taken_out_of_an_images_psnr_against_the_continuo
     assert abs(scored - own) < 0.1, (scored, own)
     # A noise-free reference (r1 = r2 = truth) leaves the image's own error as it is.
     assert abs(_scoring()._vs_continuous_db(img, truth, truth) - own) < 1e-9
+
+
+def _target_bench():
+    sys.path.insert(0, str(BENCH))
+    try:
+        import bench_target
+    finally:
+        sys.path.remove(str(BENCH))
+    return bench_target
+
+
+def test_the_least_samples_follow_the_measured_fall_of_the_noise_within_its_limits():
+    bt = _target_bench()
+    goal = 10 ** (-bt.TARGET / 10)
+    # Noise falling as 1/n (a probe at a quarter of the samples, 4x the MSE): an image at
+    # twice the target's MSE needed twice its samples.
+    least, alpha = bt._least(1000, 10, 2 * goal, 8 * goal, 250)
+    assert abs(alpha - 1.0) < 1e-9 and abs(least - 2000) < 1e-6
+    # Falling as 1/n^2 (16x at a quarter): sqrt(2)x the samples.
+    least, alpha = bt._least(1000, 10, 2 * goal, 32 * goal, 250)
+    assert abs(alpha - 2.0) < 1e-9 and abs(least - 1000 * 2**0.5) < 1e-6
+    # A fall steeper than any rule allows, or flatter (noise of the reference, not of the
+    # image), is held to [1, 2], so a lucky probe never promises fewer samples than 1/n^2.
+    assert bt._least(1000, 10, 2 * goal, 1000 * goal, 250)[1] == 2.0
+    assert bt._least(1000, 10, 2 * goal, 2.1 * goal, 250)[1] == 1.0
+    # Without a probe (an image too small to halve) the 1/n fall is assumed.
+    assert bt._least(1000, 10, goal / 2, None, 0) == (500.0, 1.0)
+    # An image far above the target still rendered one sample per frame and half.
+    assert bt._least(1000, 300, goal / 100, None, 0) == (600.0, 1.0)
