@@ -1040,7 +1040,10 @@ def detail_lines(rs: list[dict]) -> list[str]:
         "render's, over the two renders' against each other; render noise on neither side",
         "counts): 1 kept, under 1 smoothed away. *Energy* is the image's high-frequency energy",
         "over the reference's noise-free part, 2 E(mean of the two) - (E(r1) + E(r2)) / 2:",
-        "over 1 where render noise sits on top of the image. PSNR is against the mean of the two.",
+        "over 1 where render noise sits on top of the image. PSNR is against the mean of the two,",
+        "its own render noise taken out; rows marked † were measured before that and before",
+        "object pixels left out Cycles' rounding of a background's alpha (about 10⁻⁸), so their",
+        "PSNR may read high or low.",
         "",
         "| result | size | views | T dB | kept blurry: mean (lowest, highest) | kept sharp "
         "| energy blurry / sharp | blurry vs continuous: mean / worst dB | largest gap px |",
@@ -1049,7 +1052,7 @@ def detail_lines(rs: list[dict]) -> list[str]:
     for r in sorted(rs, key=lambda r: r["name"]):
         lo, hi = r.get("detail_kept_blur_range") or (None, None)
         out.append(
-            f"| `{r['name']}` | {_fmt(r.get('resolution'))} px | "
+            f"| `{r['name']}`{'†' if _noise_left_in(r) else ''} | {_fmt(r.get('resolution'))} px | "
             f"{_fmt(r.get('views_measured'))} | {_fmt(r.get('target_db'))} | "
             f"{_fmt(r.get('detail_kept_blur'))} ({_fmt(lo)}, {_fmt(hi)}) | "
             f"{_fmt(r.get('detail_kept_sharp'))} | "
