@@ -1,10 +1,12 @@
-"""The benches' own scoring (bench/bench_target_speed.py): an image against the continuous
+"""The benches' own scoring. bench/bench_target_speed.py: an image against the continuous
 blur, whose reference is the mean of two renders with render noise of its own. Left in,
 that noise counts against the image as error it does not have (it made the sharp kind of
-issue 47's rule (b) read 0.6-1.1 dB short of the paper preset's figure)."""
+issue 47's rule (b) read 0.6-1.1 dB short of the paper preset's figure). bench/bench_target.py:
+the least samples that reach a target, the divisor of every spent / least figure."""
 
 from __future__ import annotations
 
+import importlib
 import sys
 from pathlib import Path
 
@@ -13,13 +15,13 @@ import numpy as np
 BENCH = Path(__file__).resolve().parents[1] / "bench"
 
 
-def _scoring():
+def _bench(name: str):
+    """A bench module, imported as bench/run.py imports it (bench/ on the path)."""
     sys.path.insert(0, str(BENCH))
     try:
-        import bench_target_speed
+        return importlib.import_module(name)
     finally:
         sys.path.remove(str(BENCH))
-    return bench_target_speed
 
 
 def test_the_reference_noise_is_taken_out_of_an_images_psnr_against_the_continuous_blur():
@@ -38,25 +40,17 @@ def test_the_reference_noise_is_taken_out_of_an_images_psnr_against_the_continuo
     img, r1, r2 = render(0.01), render(0.01), render(0.01)
     own = image.object_error(img, truth).psnr  # the image's render noise alone
     naive = image.object_error(img, (r1 + r2) / 2).psnr
-    scored = _scoring()._vs_continuous_db(img, r1, r2)
+    vs_continuous_db = _bench("bench_target_speed")._vs_continuous_db
+    scored = vs_continuous_db(img, r1, r2)
     # A reference as noisy as the image, halved by the mean: 1.5x the MSE, 1.76 dB low.
     assert abs((own - naive) - 10 * np.log10(1.5)) < 0.1, (own, naive)
     assert abs(scored - own) < 0.1, (scored, own)
     # A noise-free reference (r1 = r2 = truth) leaves the image's own error as it is.
-    assert abs(_scoring()._vs_continuous_db(img, truth, truth) - own) < 1e-9
-
-
-def _target_bench():
-    sys.path.insert(0, str(BENCH))
-    try:
-        import bench_target
-    finally:
-        sys.path.remove(str(BENCH))
-    return bench_target
+    assert abs(vs_continuous_db(img, truth, truth) - own) < 1e-9
 
 
 def test_the_least_samples_follow_the_measured_fall_of_the_noise_within_its_limits():
-    bt = _target_bench()
+    bt = _bench("bench_target")
     goal = 10 ** (-bt.TARGET / 10)
     # Noise falling as 1/n (a probe at a quarter of the samples, 4x the MSE): an image at
     # twice the target's MSE needed twice its samples.
