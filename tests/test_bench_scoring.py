@@ -1,9 +1,9 @@
 """The benches' own scoring. bench/bench_target_speed.py: an image against the continuous
 blur, whose reference is the mean of two renders with render noise of its own. Left in,
 that noise counts against the image as error it does not have (it made the sharp kind of
-issue 47's rule (b) read 0.6-1.1 dB short of the paper preset's figure) and reads as texture
-the image lacks (its detail ratio reads low). bench/bench_target.py:
-the least samples that reach a target, the divisor of every spent / least figure."""
+issue 47's rule (b) read 0.6-1.1 dB short of the paper preset's figure) and reads as
+texture the image lacks (its detail ratio reads low). bench/bench_target.py: the least
+samples that reach a target, the divisor of every spent / least figure."""
 
 from __future__ import annotations
 
