@@ -7,10 +7,21 @@ render)."""
 from __future__ import annotations
 
 import json
+import shutil
+from pathlib import Path
 
+import pytest
+from blurset import layout
+from blurset.exceptions import InputError
 from blurset.services import outputs
 
-from tests.conftest import run_cli
+from tests.conftest import copy_build, one_error_line, run_cli, standin_build
+
+
+@pytest.fixture
+def b(standin_build_dir, tmp_path) -> Path:
+    return copy_build(standin_build_dir, tmp_path / "b")
+
 
 # -- tradeoff's scratch is its temp name, never a user's `work/` (a planted bug) ------------
 
@@ -34,3 +45,67 @@ def test_tradeoff_never_takes_a_users_work_folder_for_its_scratch(tmp_path):
     assert sorted(p.name for p in (out / "work").iterdir()) == ["notes.txt"]
     # The scratch it made (a failed run's, which the next run removes) is its own name.
     assert len(list(out.glob(".work.tmp*"))) == 1
+
+
+# -- a lock file that is a link is never followed --------------------------------------------
+
+
+def _linked_lock(out: Path, name: str, target: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).symlink_to(target)
+
+
+@pytest.mark.parametrize("held", ["pid 12345\n", ""])
+def test_an_export_lock_that_is_a_link_is_refused_and_its_target_untouched(b, tmp_path, held):
+    outside = tmp_path / "outside.txt"
+    outside.write_text(held)
+    out = tmp_path / "e"
+    _linked_lock(out, ".export.lock", outside)
+    for how in ([], ["--for", "hub"]):
+        proc = run_cli("export", str(b), "--out", str(out), *how, check=False)
+        one_error_line(proc, str(out / ".export.lock"), "link")
+        assert outside.read_text() == held
+        assert sorted(p.name for p in out.iterdir()) == [".export.lock"]
+        assert (out / ".export.lock").is_symlink()
+
+
+def test_a_build_or_noise_lock_that_is_a_link_is_refused(b, tmp_path, standin_blender):
+    # The build's shared lock, a link to nothing: following it would create the file.
+    objs = tmp_path / "objs"
+    objs.mkdir()
+    shutil.copy(sorted(b.glob(f"{layout.DEMO_OBJECTS}/*.glb"))[0], objs / "a.glb")
+    nowhere = tmp_path / "nowhere" / "made.txt"
+    nowhere.parent.mkdir()
+    out = tmp_path / "out"
+    _linked_lock(out, layout.BUILD_LOCK, nowhere)
+    proc = standin_build(out, standin_blender, "--objects", str(objs), check=False)
+    one_error_line(proc, str(out / layout.BUILD_LOCK), "link")
+    assert not nowhere.exists() and list(nowhere.parent.iterdir()) == []
+    assert sorted(p.name for p in out.iterdir()) == [layout.BUILD_LOCK]
+    # The noise lock, a link to a file holding a pid.
+    outside = tmp_path / "outside.txt"
+    outside.write_text("pid 12345\n")
+    n = tmp_path / "n"
+    _linked_lock(n, ".noise.lock", outside)
+    proc = run_cli("noise", str(b), "--out", str(n), "--gains", "1", check=False)
+    one_error_line(proc, str(n / ".noise.lock"), "link")
+    assert outside.read_text() == "pid 12345\n"
+    assert sorted(p.name for p in n.iterdir()) == [".noise.lock"]
+
+
+def test_every_lock_opens_without_following_a_link(tmp_path):
+    """flock_file (every output's lock, an object's, tradeoff's) and the build's shared
+    lock refuse a link by the lock's name; a real lock file is taken as before."""
+    from blurset.commands.build.dataset import build_lock
+
+    target = tmp_path / "target"
+    (tmp_path / "l").symlink_to(target)
+    with pytest.raises(InputError, match="is a link"), outputs.flock_file(tmp_path / "l"):
+        pass
+    (tmp_path / layout.BUILD_LOCK).symlink_to(target)
+    with pytest.raises(InputError, match="is a link"), build_lock(tmp_path):
+        pass
+    assert not target.exists()
+    with outputs.flock_file(tmp_path / "real.lock"):
+        assert (tmp_path / "real.lock").read_text().startswith("pid ")
+    assert not (tmp_path / "real.lock").exists()

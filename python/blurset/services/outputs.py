@@ -20,6 +20,7 @@ owner (blurset-core `dataset::outputs`, DESIGN §10).
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import json
 import os
@@ -27,7 +28,7 @@ import re
 import socket
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from blurset import _core, layout
 from blurset.exceptions import ConfigError, InputError
@@ -62,8 +63,12 @@ def claim(
     `beside` (an export among other things); ConfigError naming `option` and the folder
     when the command may not write there (a file, another kind's output, a foreign
     folder, a folder inside another output: only `within`, the output a command
-    describes, e.g. a build's own stats/, may hold it)."""
+    describes, e.g. a build's own stats/, may hold it). A link by the name of the kind's
+    lock is refused (InputError) here, before anything is written."""
     refuse_inside_output(path, option, within=within)
+    lock_path = Path(path) / kind.lock_name
+    if lock_path.is_symlink():
+        raise _not_a_lock(lock_path, "a link")
     return _core.claim(Path(path), kind, option)
 
 
@@ -296,6 +301,28 @@ def noise_of_build(noise: Path, build: Path, option: str = "--noise") -> dict:
 _HOLDER = re.compile(r"pid \d+(?: on host \S*)?\s*")
 
 
+def open_lock(lock_path: Path) -> IO[str]:
+    """Open (create) a lock file for reading and appending, never through a link: a link
+    by that name (to a user's file outside the folder, or to nothing) would have blurset
+    write who holds the lock into what it points to. Such a link, or a folder by that
+    name, is an InputError naming it."""
+    flags = os.O_RDWR | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_CLOEXEC
+    try:
+        fd = os.open(lock_path, flags, 0o666)
+    except OSError as e:
+        if e.errno not in (errno.ELOOP, errno.EISDIR):
+            raise
+        raise _not_a_lock(lock_path, "a link" if e.errno == errno.ELOOP else "a folder") from None
+    return os.fdopen(fd, "a+")
+
+
+def _not_a_lock(lock_path: Path, what: str) -> InputError:
+    return InputError(
+        f"{lock_path} is {what}, not a lock file (blurset never writes a lock through a "
+        "link); move it away"
+    )
+
+
 @contextlib.contextmanager
 def flock_file(lock_path: Path, on_busy: Callable[[str], None] | None = None) -> Iterator[None]:
     """Hold an exclusive flock on `lock_path`, writing who holds it into the file. When
@@ -303,7 +330,7 @@ def flock_file(lock_path: Path, on_busy: Callable[[str], None] | None = None) ->
     returns to wait. The file is removed on release; a waiter that then holds the
     removed file sees another inode and tries again."""
     while True:
-        f = open(lock_path, "a+")  # noqa: SIM115 - held across the yield
+        f = open_lock(lock_path)
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -317,7 +344,7 @@ def flock_file(lock_path: Path, on_busy: Callable[[str], None] | None = None) ->
                 f.close()
                 raise
         try:
-            same = os.fstat(f.fileno()).st_ino == os.stat(lock_path).st_ino
+            same = os.fstat(f.fileno()).st_ino == os.lstat(lock_path).st_ino
         except FileNotFoundError:
             same = False
         if same:

@@ -30,7 +30,7 @@ SHARED_FILES = (layout.FAILURES, layout.SPLITS, layout.DATASET, layout.MANIFEST)
 @contextlib.contextmanager
 def build_lock(out: Path) -> Iterator[None]:
     """Serialize the writes shared by every process building into OUT."""
-    with open(out / layout.BUILD_LOCK, "a") as f:
+    with outputs.open_lock(out / layout.BUILD_LOCK) as f:
         fcntl.flock(f, fcntl.LOCK_EX)
         try:
             yield
