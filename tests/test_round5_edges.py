@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 from blurset import layout
-from blurset.exceptions import InputError
+from blurset.exceptions import ConfigError, InputError
 from blurset.services import outputs
 
 from tests.conftest import copy_build, one_error_line, run_cli, standin_build
@@ -109,3 +109,41 @@ def test_every_lock_opens_without_following_a_link(tmp_path):
     with outputs.flock_file(tmp_path / "real.lock"):
         assert (tmp_path / "real.lock").read_text().startswith("pid ")
     assert not (tmp_path / "real.lock").exists()
+
+
+# -- --workers-per-gpu on a Ray cluster without GPUs: the local executor's rule ------------
+
+
+def test_workers_per_gpu_on_a_ray_cluster_without_gpus_is_refused_before_writing(
+    tmp_path, standin_blender
+):
+    """A real local Ray cluster (this machine has no GPU), as --executor ray starts one;
+    the same line as the local executor's, naming what the cluster has."""
+    pytest.importorskip("ray")
+    out = tmp_path / "out"
+    proc = standin_build(out, standin_blender, "--workers-per-gpu", "2", "--executor", "ray",
+                         check=False)  # fmt: skip
+    # Ray says it started a local instance (its own log lines); then the one error.
+    errors = [x for x in proc.stderr.splitlines() if "error" in x.lower()]
+    assert proc.returncode == 2 and len(errors) == 1, proc.stderr
+    assert errors[0] == proc.stderr.strip().splitlines()[-1], proc.stderr
+    for words in ("--workers-per-gpu 2: rendering on the CPU", "Ray cluster", "0 GPUs"):
+        assert words in errors[0], proc.stderr
+    assert not out.exists()
+    local = standin_build(out, standin_blender, "--workers-per-gpu", "2", check=False)
+    assert one_error_line(local, "--workers-per-gpu 2: rendering on the CPU")
+    assert not out.exists()
+
+
+def test_the_ray_rule_is_the_local_one():
+    from blurset.services import devices
+    from blurset.services.config import make_config
+
+    def cfg(**kw):
+        return make_config({"executor": "ray", **kw}, {"demo": True, "out": "o"})
+
+    for device in ("auto", "cuda"):
+        with pytest.raises(ConfigError, match="--workers-per-gpu 4: rendering on the CPU"):
+            devices.check_ray(cfg(workers_per_gpu=4, device=device), {"CPU": 8.0})
+        devices.check_ray(cfg(workers_per_gpu=4, device=device), {"CPU": 8.0, "GPU": 2.0})
+    devices.check_ray(cfg(), {"CPU": 8.0})  # no sharing asked: the CPU renders

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+from collections.abc import Mapping
 
 from blurset.exceptions import ConfigError
 
@@ -125,13 +126,36 @@ def plan_local(cfg) -> list[Device]:
         return [(backend, None)] * max(1, cfg.workers)
     available = probe(cfg.blender)
     backend, gpus = resolve(cfg.device, cfg.gpus, available)
-    if per_gpu is not None and backend == "CPU":
-        raise ConfigError(
-            f"--workers-per-gpu {per_gpu}: rendering on the CPU, there is no GPU to share "
-            f"(Cycles: {describe(available)}); the CPU takes --workers"
-        )
+    if backend == "CPU":
+        refuse_sharing_no_gpu(per_gpu, f"Cycles: {describe(available)}")
     n = len(available.get(backend, []))
     return [(backend, g) for g in worker_slots(backend, gpus, n, cfg.workers, per_gpu)]
+
+
+def refuse_sharing_no_gpu(
+    per_gpu: int | None, where: str, hint: str = "the CPU takes --workers"
+) -> None:
+    """--workers-per-gpu shares GPUs among workers: a build that renders on the CPU has
+    none to share. One rule for the local executor and Ray (`where`: what the machine
+    or cluster has), refused before the build writes anything."""
+    if per_gpu is not None:
+        raise ConfigError(
+            f"--workers-per-gpu {per_gpu}: rendering on the CPU, there is no GPU to share "
+            f"({where}); {hint}"
+        )
+
+
+def check_ray(cfg, cluster: Mapping[str, float]) -> None:
+    """A Ray build's devices, checked against the cluster's resources before the build
+    writes anything: a cluster without GPUs renders on the CPU (tasks reserve no GPU,
+    ray_gpus_per_task), so --workers-per-gpu is refused as on a machine without one."""
+    gpus = cluster.get("GPU", 0)
+    if cfg.device == "cpu" or not gpus > 0:
+        refuse_sharing_no_gpu(
+            cfg.workers_per_gpu,
+            f"Ray cluster: {cluster.get('CPU', 0):g} CPUs, {gpus:g} GPUs",
+            "Ray runs one task per object on its CPUs without it",
+        )
 
 
 def for_ray(cfg) -> Device:

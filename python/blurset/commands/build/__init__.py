@@ -23,7 +23,7 @@ from blurset.commands.build.dataset import (
     finalize,
     sweep,
 )
-from blurset.commands.build.executors import run_local, run_ray
+from blurset.commands.build.executors import ray_cluster, run_local, run_ray
 from blurset.commands.build.setting import frames_per_setting
 from blurset.commands.build.unit import ObjectResult, objaverse
 from blurset.exceptions import ConfigError
@@ -116,6 +116,19 @@ def build(cfg: BuildConfig, *, progress: bool = True) -> dict:
     cfg = cfg.replace(out=str(out_dir(cfg).resolve()))
     out = out_dir(cfg)
     everything, slots = _check(cfg, out)
+    # Ray's cluster is joined for the whole build, its devices checked before a byte is
+    # written (the local executor's were, in _check).
+    with ray_cluster(cfg):
+        return _build(cfg, out, everything, slots, progress)
+
+
+def _build(
+    cfg: BuildConfig,
+    out: Path,
+    everything: list[ObjectSpec] | None,
+    slots: list,
+    progress: bool,
+) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     # Every object of the build (all shards), for the sweep's one-file-one-set rule; the
     # demo's are written into OUT now.

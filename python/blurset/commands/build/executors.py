@@ -4,9 +4,10 @@ workers, each driving its own Blender process) or as Ray tasks (DESIGN §11)."""
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import os
 import queue
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 from blurset.commands.build.unit import ObjectResult, build_object
 from blurset.exceptions import BlursetError
@@ -62,11 +63,14 @@ def run_local(
     pool.shutdown(wait=True)
 
 
-def run_ray(
-    objs: list[ObjectSpec], cfg: BuildConfig, progress: Progress, on_result: OnResult
-) -> None:
-    """One Ray task per object. A task is idempotent (complete settings are skipped,
-    partial ones redone), so Ray may retry it after a lost worker or node."""
+@contextlib.contextmanager
+def ray_cluster(cfg: BuildConfig) -> Iterator[None]:
+    """For a Ray build, the cluster joined (or a local one started) for the whole build
+    and its devices checked (devices.check_ray) before the build writes anything; the
+    local executor: nothing."""
+    if cfg.executor != "ray":
+        yield
+        return
     try:
         import ray
     except ImportError:
@@ -84,9 +88,25 @@ def run_ray(
         except (ConnectionError, RuntimeError, ValueError) as e:
             raise BlursetError(f"--ray-address {cfg.ray_address}: {_first_line(e)}") from None
     try:
+        devices.check_ray(cfg, ray.cluster_resources())
+        yield
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_ray(
+    objs: list[ObjectSpec], cfg: BuildConfig, progress: Progress, on_result: OnResult
+) -> None:
+    """One Ray task per object, on the cluster ray_cluster joined. A task is idempotent
+    (complete settings are skipped, partial ones redone), so Ray may retry it after a
+    lost worker or node."""
+    import ray
+
+    pending: list = []
+    try:
         gpus = devices.ray_gpus_per_task(cfg, ray.cluster_resources().get("GPU", 0))
         remote = ray.remote(num_cpus=max(1, cfg.threads), num_gpus=gpus, max_retries=2)(_ray_unit)
-        pending: list = []
         pending = [remote.remote(o, cfg) for o in objs]
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
@@ -105,9 +125,6 @@ def run_ray(
             except Exception:  # noqa: BLE001 - best effort while stopping
                 pass
         raise
-    finally:
-        if started:
-            ray.shutdown()
 
 
 def _first_line(e: BaseException) -> str:
