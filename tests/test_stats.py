@@ -440,3 +440,27 @@ def test_blur_levels_count_the_blurry_views_only_and_a_constant_is_one_number(tm
     assert 0.0005 < np.all(a == bar, axis=-1).mean() < 0.02  # the number, no bars
     assert np.all(b == bar, axis=-1).mean() > 0.01
     assert "| sharp_copy_views | 6 |" in (out / "report.md").read_text()
+
+
+def test_report_names_what_the_numbers_leave_out() -> None:
+    """report.md's Skipped section: incomplete settings, failed objects and licence skips,
+    the first 50 of each named and the rest counted; no section when nothing was left out."""
+    from blurset.commands.stats import _skipped_lines
+
+    none = {"incomplete": [], "failures": [], "licence_skipped": []}
+    assert _skipped_lines(none) == []
+    stats = {
+        "incomplete": [f"s_{i:03d}" for i in range(53)],
+        "failures": [{"uid": "bad", "stage": "import", "reason": "draco"}]
+        + [{"setting": f"x_{i}", "reason": "timeout"} for i in range(51)],
+        "licence_skipped": [{"uid": "nc", "reason": "CC-BY-NC"}],
+    }
+    lines = _skipped_lines(stats)
+    assert lines[:2] == ["## Skipped", ""] and lines[-1] == ""
+    assert lines[2].startswith("- incomplete settings: `s_000`, ") and lines[2].endswith(
+        "`s_049` and 3 more"
+    )
+    assert "- failed object `bad` (import): draco" in lines
+    assert "- failed setting `x_0` (?): timeout" in lines
+    assert "- and 2 more failed objects (failures.jsonl)" in lines
+    assert "- skipped object `nc` (CC-BY-NC)" in lines

@@ -467,28 +467,33 @@ def report_markdown(stats: dict, figures: list[Path]) -> str:
     for f in figures:
         lines += [f"![{f.stem}]({f.name})", ""]
     lines += _damaged_lines(stats.get("damaged") or [])
-    skips = stats.get("licence_skipped") or []
-    if stats["incomplete"] or stats["failures"] or skips:
-        lines += ["## Skipped", ""]
-        shown = stats["incomplete"][:50]
-        if shown:
-            more = len(stats["incomplete"]) - len(shown)
-            lines += [
-                f"- incomplete settings: {', '.join(f'`{n}`' for n in shown)}"
-                + (f" and {more} more" if more else "")
-            ]
-        for f in stats["failures"][:50]:
-            what = f"setting `{f['setting']}`" if f.get("setting") else f"object `{f['uid']}`"
-            lines += [f"- failed {what} ({f.get('stage') or '?'}): {f.get('reason') or ''}"]
-        if len(stats["failures"]) > 50:
-            lines += [f"- and {len(stats['failures']) - 50} more failed objects (failures.jsonl)"]
-        lines += [
-            f"- skipped object `{f['uid']}` ({f.get('reason') or 'licence'})" for f in skips[:50]
-        ]
-        if len(skips) > 50:
-            lines += [f"- and {len(skips) - 50} more objects skipped by --licenses"]
-        lines += [""]
+    lines += _skipped_lines(stats)
     return "\n".join(lines)
+
+
+def _skipped_lines(stats: dict) -> list[str]:
+    """report.md's section on what the numbers leave out: incomplete settings, failed
+    objects and objects skipped by --licenses (the first 50 of each named)."""
+    skips = stats.get("licence_skipped") or []
+    if not (stats["incomplete"] or stats["failures"] or skips):
+        return []
+    lines = ["## Skipped", ""]
+    shown = stats["incomplete"][:50]
+    if shown:
+        more = len(stats["incomplete"]) - len(shown)
+        lines += [
+            f"- incomplete settings: {', '.join(f'`{n}`' for n in shown)}"
+            + (f" and {more} more" if more else "")
+        ]
+    for f in stats["failures"][:50]:
+        what = f"setting `{f['setting']}`" if f.get("setting") else f"object `{f['uid']}`"
+        lines += [f"- failed {what} ({f.get('stage') or '?'}): {f.get('reason') or ''}"]
+    if len(stats["failures"]) > 50:
+        lines += [f"- and {len(stats['failures']) - 50} more failed objects (failures.jsonl)"]
+    lines += [f"- skipped object `{f['uid']}` ({f.get('reason') or 'licence'})" for f in skips[:50]]
+    if len(skips) > 50:
+        lines += [f"- and {len(skips) - 50} more objects skipped by --licenses"]
+    return [*lines, ""]
 
 
 def _damaged_lines(damaged: list[dict]) -> list[str]:
