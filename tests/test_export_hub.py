@@ -411,7 +411,12 @@ def test_an_llff_export_and_a_hub_export_replace_each_other_whole(hub_build, tmp
     ]  # fmt: skip
     run_cli("export", str(b), "--for", "hub", "--out", str(out), "--levels", "sharp",
             "--overwrite")  # fmt: skip
-    assert sorted(p.name for p in out.iterdir()) == ["data", "export.json", "notes.txt"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "README.md",
+        "data",
+        "export.json",
+        "notes.txt",
+    ]
     assert (out / "notes.txt").read_text() == "mine"
     assert run_cli("verify", str(out)).returncode == 0
 

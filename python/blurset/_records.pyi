@@ -804,6 +804,7 @@ class ExportReplacing(TypedDict):
     owns: list[str]
     scenes: dict[str, str]
     scenes_dir: str
+    shards: NotRequired[dict[str, HubShard] | None]
     state: str
 
 ExportRecord = ExportDoc | ExportReplacing

@@ -18,7 +18,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from blurset import __version__, layout
+from blurset import __version__, _core, layout
 from blurset.exceptions import ConfigError, InputError
 from blurset.services import attribution, outputs, publish
 
@@ -199,7 +199,7 @@ def _feature_yaml(name: str, feature: dict) -> dict[str, Any]:
     def inner(f: dict) -> Any:
         if f["_type"] == "Image":
             return "image"
-        if f["_type"] == "List":
+        if f["_type"] == "Sequence":
             return {"list": inner(f["feature"])}
         return f["dtype"]
 
@@ -801,6 +801,37 @@ def _attribution(objects: dict[str, dict], licences: Counter) -> list[str]:
         )
     rows.append("")
     return rows
+
+
+def write_hub_card(build: Path, hub: Path, noise: Path | None = None) -> None:
+    """HUB/README.md as `blurset card BUILD --hub HUB` writes it, written by `blurset
+    export --for hub` itself: without its `configs:`, `load_dataset(HUB)` reads one
+    `default` config mixing every level's rows. A card already current is not touched
+    (a rerun that is up to date changes nothing); a README someone edited, or that
+    blurset did not write, is theirs: kept, and the line says how to replace it."""
+    out = Path(hub) / "README.md"
+    text = make_card(build, noise=[noise] if noise else None, card_dir=Path(hub).resolve(), hub=hub)
+    owner = _core.text_owner(out, "card")
+    if owner in ("edited", "foreign"):
+        what = "edited since blurset wrote it" if owner == "edited" else "not blurset's"
+        print(
+            f"blurset export: kept {out} ({what}); `blurset card {build} --hub {hub} --force` "
+            "replaces it with the export's card",
+            file=sys.stderr,
+        )
+        return
+    marked = _core.mark_text(text, "card")
+    if owner == "absent" or out.read_text(encoding="utf-8") != marked:
+        layout.write_text_atomic(out, marked)
+
+
+def drop_hub_card(out: Path) -> None:
+    """An export of another target replacing a hub export in `out` takes the hub card
+    with the shards it described (README.md, only as blurset wrote it: an edited one is
+    the user's)."""
+    card = Path(out) / "README.md"
+    if _core.text_owner(card, "card") == "ours":
+        card.unlink()
 
 
 def run(args: argparse.Namespace) -> int:

@@ -498,28 +498,114 @@ def verify_hub(root: Path, *, decode: bool = True) -> Report:
         rep.settings += 1
         if pf.metadata.num_rows != rec["rows"]:
             rep.bad(rel, f"{pf.metadata.num_rows} rows, {record} says {rec['rows']}")
-        images = [c for c in pf.schema_arrow.names if c == "image" or c.startswith("image_")]
+        kinds = _hub_kinds(pf.schema_arrow)
         settings = []
         for g in range(pf.num_row_groups):
-            t = pf.read_row_group(g, columns=["setting", "view", "width", "height", *images])
-            cells = t.to_pylist()
+            cells = pf.read_row_group(g).to_pylist()
             names = sorted({str(r["setting"]) for r in cells})
             settings += names
             if len(names) != 1 or [r["view"] for r in cells] != list(range(len(cells))):
                 rep.bad(rel, f"row group {g} is not one setting's views in order")
                 continue
             views.setdefault(rec["config"], {})[names[0]] = len(cells)
-            for r in cells:
-                for c in images:
-                    f = int(c.partition("_")[2] or 1)
-                    problem = _image_problem(r[c], r["width"] // f, r["height"] // f, decode)
-                    rep.images += 1
-                    if problem:
-                        rep.bad(f"{rel}: {r['setting']} view {r['view']} {c}", problem)
+            _hub_cells(rel, cells, kinds, decode, rep)
         if settings != rec["settings"]:
             rep.bad(rel, f"holds the settings {', '.join(settings[:3])}…, {record} lists others")
     _hub_counts(root, doc, views, rep)
     return rep
+
+
+def _hub_kinds(schema: Any) -> dict[str, str]:
+    """How each column of a shard is read: `image` (an Image cell, PNG bytes), `exr`
+    (a pass's EXR bytes), `json` (meta.json's and noise.json's records), `value`."""
+    import pyarrow as pa
+
+    kinds = {}
+    for f in schema:
+        if pa.types.is_struct(f.type):
+            kinds[f.name] = "image"
+        elif pa.types.is_binary(f.type):
+            kinds[f.name] = "exr"
+        elif f.name in ("meta", "noise"):
+            kinds[f.name] = "json"
+        else:
+            kinds[f.name] = "value"
+    return kinds
+
+
+def _factor(column: str) -> int:
+    """The downsampling factor of an image or pass column (`image_4`, `depth_4`: 4)."""
+    tail = column.rpartition("_")[2]
+    return int(tail) if tail.isdigit() else 1
+
+
+def _hub_cells(
+    rel: str, rows: list[dict], kinds: dict[str, str], decode: bool, rep: Report
+) -> None:
+    """Every cell of one setting's rows, read as a loader reads it: an image decodes at
+    the row's size (1/f of it for `_<f>` columns), an EXR pass decodes (in blurset-core,
+    at its size), a record parses as JSON, and every number is finite."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="blurset-verify-") as tmp:
+        exrs: list[tuple[str, Path, int, int]] = []
+        for r in rows:
+            where = f"{rel}: {r['setting']} view {r['view']}"
+            for c, kind in kinds.items():
+                x = r[c]
+                w, h = r["width"] // _factor(c), r["height"] // _factor(c)
+                problem = None
+                if kind == "image":
+                    problem = _image_problem(x, w, h, decode)
+                    rep.images += 1
+                elif kind == "exr" and not x:
+                    problem = "no EXR bytes"
+                elif kind == "exr":
+                    p = Path(tmp) / f"{len(exrs)}.exr"
+                    p.write_bytes(x)
+                    exrs.append((f"{where} {c}", p, w, h))
+                elif kind == "json":
+                    problem = _json_problem(x)
+                elif _not_finite(x):
+                    problem = f"not a finite number ({x})"
+                if problem:
+                    rep.bad(f"{where} {c}", problem)
+        found = _core.check_images([(str(p), w, h) for _, p, w, h in exrs]) if decode else []
+        for (name, *_), problem in zip(exrs, found, strict=False):
+            if problem:
+                rep.bad(name, problem)
+        rep.images += len(exrs)
+
+
+def _json_problem(text: Any) -> str | None:
+    """What is wrong with a record cell: not a JSON object, or a number not finite."""
+
+    def refuse(word: str) -> Any:
+        raise ValueError(f"{word} is not a number JSON allows")
+
+    if not isinstance(text, str):
+        return "no record"
+    try:
+        value = json.loads(text, parse_constant=refuse)
+    except ValueError as e:
+        return f"does not parse as JSON ({reason_of(e)})"
+    if not isinstance(value, dict):
+        return "is not a JSON object"
+    return "holds a number that is not finite" if _not_finite(value) else None
+
+
+def _not_finite(x: Any) -> bool:
+    """Whether a cell's value (a number, a list of them, a parsed record) holds a NaN or
+    an infinity."""
+    import math
+
+    if isinstance(x, float):
+        return not math.isfinite(x)
+    if isinstance(x, list):
+        return any(_not_finite(v) for v in x)
+    if isinstance(x, dict):
+        return any(_not_finite(v) for v in x.values())
+    return False
 
 
 def _hub_counts(root: Path, doc: dict, views: dict[str, dict[str, int]], rep: Report) -> None:

@@ -23,8 +23,9 @@ DATA_DIR = "data"
 # The shard's schema metadata: `huggingface` (the `datasets` features: the image
 # columns are Images) and ours, the key of what the shard was made from.
 KEY = b"blurset"
-# The row layout's version: a change of columns changes every key.
-LAYOUT = 1
+# The row layout's version: a change of columns changes every key. 2: lists spelled
+# `Sequence` (datasets 3.x reads no `List`); a moving camera's amplitude and path.
+LAYOUT = 2
 
 
 def pyarrow():
@@ -48,7 +49,10 @@ def columns(factors: list[int], passes: list[str], noise: bool) -> list[tuple[st
     f64 = {"dtype": "float64", "_type": "Value"}
     i32 = {"dtype": "int32", "_type": "Value"}
     s = {"dtype": "string", "_type": "Value"}
-    mat = {"feature": {"feature": f64, "_type": "List"}, "_type": "List"}
+    # A list is spelled `Sequence`, which every `datasets` from 3.0 reads as a list of the
+    # value: 4.0 renamed it `List` and still reads the old name so, 3.x knows no `List`.
+    vec = {"feature": f64, "_type": "Sequence"}
+    mat = {"feature": vec, "_type": "Sequence"}
     cols: list[tuple[str, Any]] = [("image", {"_type": "Image"})]
     cols += [(f"image_{f}", {"_type": "Image"}) for f in factors]
     cols += [
@@ -65,7 +69,7 @@ def columns(factors: list[int], passes: list[str], noise: bool) -> list[tuple[st
         ("focal", f64),
         ("near", f64),
         ("far", f64),
-        ("poses_bounds", {"feature": f64, "_type": "List"}),
+        ("poses_bounds", vec),
         ("c2w", mat),
         ("mean_c2w", mat),
         ("w_l", f64),
@@ -73,7 +77,9 @@ def columns(factors: list[int], passes: list[str], noise: bool) -> list[tuple[st
         ("latents", i32),
         ("samples", i32),
         ("render_psnr_db", f64),
-        ("coc_px", {"feature": f64, "_type": "List"}),
+        ("coc_px", vec),
+        ("amplitude_px", f64),
+        ("path_px", f64),
         ("meta", s),
     ]
     if noise:
@@ -93,7 +99,7 @@ def _arrow_type(pa, feature: dict):
     t = feature["_type"]
     if t == "Image":
         return pa.struct([("bytes", pa.binary()), ("path", pa.string())])
-    if t == "List":
+    if t == "Sequence":
         return pa.list_(_arrow_type(pa, feature["feature"]))
     return {
         "float64": pa.float64(),

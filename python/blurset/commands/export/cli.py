@@ -330,6 +330,10 @@ def _replace(
     new = [_entry(doc, s) for s in doc["scenes"]] + list(LISTS)
     _refuse_foreign(out, doc, owned, new)
     _put_in_place(out, folders, doc, sources, build_root, owned, new)
+    if isinstance(old, dict) and old.get("for") == "hub":
+        from blurset.commands import card
+
+        card.drop_hub_card(out)
     _say(folders, doc, out, "written")
     return 0
 

@@ -337,6 +337,26 @@ def _view_record(meta: dict, view: int, level: str) -> dict:
     return {k: x for k, x in rec.items() if x is not None}
 
 
+def _kind_fields(meta: dict, view: int, level: str, rec: dict) -> dict[str, Any]:
+    """The columns another kind's record gives a row (`rec`: _view_record's): a moving
+    camera's latent frames (None under motion blur: one render along keys), its image's
+    samples (each render's, times its renders), amplitude and path; and whether the level
+    is a camera moving about its written pose (its mean pose, for a held-out view that
+    holds the sharp image too)."""
+    krec: dict[str, Any] = next((x for k, x in rec.items() if k not in ("level", "image")), {})
+    renders = len(krec.get("seeds") or [])
+    spf = _int_or_none(krec.get("samples_per_frame"))
+    mine = _view_record(meta, view, level)
+    own: dict[str, Any] = next((x for k, x in mine.items() if k != "image"), {})
+    return {
+        "latents": renders if krec.get("method") == "average" else None,
+        "samples": spf * renders if spf is not None and renders else None,
+        "amplitude_px": _float_or_none(krec.get("amplitude_px")),
+        "path_px": _float_or_none(krec.get("path_px")),
+        "about_written": bool(own.get("poses")) and layout.written_pose(level),
+    }
+
+
 def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[str, list]:
     """The columns of one setting's rows of one config."""
     sdir = hp.build / setting
@@ -379,11 +399,16 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
         lv = rec.get("level") or {}
         im = rec.get("image") or {}
         mean = means[v] if means is not None else None
+        kind = _kind_fields(meta, v, cfg.level, rec)
+        if kind["about_written"]:
+            mean = _c2w_opengl(rows[v])
         samples = im.get("samples")
         if samples is None:
             if lv:
                 samples = _int_or_none(lv.get("samples_per_frame"))
                 samples = samples * int(lv.get("latents", 1)) if samples is not None else None
+            elif kind["samples"] is not None:
+                samples = kind["samples"]
             elif not degraded or not own:
                 samples = _int_or_none(render.get("sharp_samples"))
         cols["image"].append(image(r.image))
@@ -407,8 +432,10 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
         cols["mean_c2w"].append(mean)
         cols["w_l"].append(_float_or_none(lv.get("w_l")))
         cols["motion_px"].append(_float_or_none(lv.get("motion_px")))
-        cols["latents"].append(_int_or_none(lv.get("latents")))
+        cols["latents"].append(_int_or_none(lv.get("latents")) if lv else kind["latents"])
         cols["samples"].append(samples)
+        cols["amplitude_px"].append(kind["amplitude_px"])
+        cols["path_px"].append(kind["path_px"])
         cols["render_psnr_db"].append(_float_or_none(im.get("render_psnr_db")))
         coc = (rec.get("defocus") or {}).get("coc_px")
         cols["coc_px"].append([float(c) for c in coc] if isinstance(coc, list) else None)
@@ -589,7 +616,12 @@ def run(args) -> int:
     outputs.claim(out, export_rules.EXPORT, "--out")
     with outputs.lock(out, export_rules.EXPORT):
         how = outputs.claim(out, export_rules.EXPORT, "--out")
-        return _write(out, hp, how, overwrite=args.overwrite)
+        _write(out, hp, how, overwrite=args.overwrite)
+        # The card's configs make the export load by level as it is (blurset card's).
+        from blurset.commands import card
+
+        card.write_hub_card(hp.build, out, args.noise)
+        return 0
 
 
 def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:

@@ -218,20 +218,24 @@ def refuse_foreign(out: Path, doc: _records.ExportDoc, owned: set[str], new: lis
     outputs.refuse_not_written(out, EXPORT, scenes, "export")
 
 
-def record_replacing(out: Path, doc: _records.ExportDoc, owns: set[str]) -> None:
+def record_replacing(
+    out: Path, doc: _records.ExportDoc, owns: set[str], shards: dict | None = None
+) -> None:
     """What a run may put in place, recorded before it writes: an export stopped half-way
-    still owns every entry it wrote, and its rerun replaces (or keeps) them."""
-    outputs.write_record(
-        out / EXPORT_FILE,
-        {
-            "kind": "blurset export",
-            "state": "replacing",
-            "build": doc["build"],
-            "scenes_dir": doc["scenes_dir"],
-            "scenes": {},
-            "owns": sorted(owns),
-        },
-    )
+    still owns every entry it wrote, and its rerun replaces (or keeps) them. `shards`
+    (`--for hub`): the records of the shards the run wrote or checked so far, which its
+    rerun checks a kept shard against."""
+    rec: dict = {
+        "kind": "blurset export",
+        "state": "replacing",
+        "build": doc["build"],
+        "scenes_dir": doc["scenes_dir"],
+        "scenes": {},
+        "owns": sorted(owns),
+    }
+    if shards is not None:
+        rec["shards"] = shards
+    outputs.write_record(out / EXPORT_FILE, rec)
 
 
 def prune_empty_parents(out: Path, rel: str) -> None:

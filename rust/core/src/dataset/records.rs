@@ -389,6 +389,11 @@ pub struct ExportReplacing {
     pub scenes: BTreeMap<String, String>,
     /// Entries (relative paths) the export owns while it replaces them.
     pub owns: Vec<String>,
+    /// `--for hub`: the shards this run has written, or checked against the record
+    /// before keeping them, so far: a rerun after a kill keeps a shard only when its
+    /// bytes are these (a shard no record vouches for is written again).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shards: Option<BTreeMap<String, HubShard>>,
 }
 
 /// export.json: a finished export, or one replacing its entries.
