@@ -651,9 +651,6 @@ def render_job(
     # '#' in a directory would be read as the frame number: stage in a temp dir then.
     stage = tempfile.mkdtemp(prefix="blurset-job-") if "#" in d else d
     pattern = os.path.join(stage, f".blurset-{os.getpid()}-job-#########.exr")
-    r = scene.render
-    saved = (scene.frame_start, scene.frame_end, scene.frame_current, scene.frame_step)
-    saved_r = (r.filepath, r.use_overwrite, r.use_placeholder)
     state: dict = {"error": None, "t": time.perf_counter(), "done": 0}
 
     def k_of(sc) -> int:
@@ -686,6 +683,25 @@ def render_job(
         except Exception as e:
             state["error"] = e
 
+    try:
+        _render_animation(scene, n, pattern, (on_change, on_write), state)
+    finally:
+        if stage != d:
+            shutil.rmtree(stage, ignore_errors=True)
+    if state["error"] is not None:
+        raise state["error"]
+    if state["done"] != n:
+        raise RuntimeError(f"Blender wrote {state['done']} of {n} frames")
+
+
+def _render_animation(scene, n: int, pattern: str, handlers, state: dict) -> None:
+    """Frames 1..n of `scene` as one animation render to `pattern`, with `handlers`
+    (frame change, render write) installed for its duration; the scene's frame range
+    and output settings are restored after it, whatever happens."""
+    on_change, on_write = handlers
+    r = scene.render
+    saved = (scene.frame_start, scene.frame_end, scene.frame_current, scene.frame_step)
+    saved_r = (r.filepath, r.use_overwrite, r.use_placeholder)
     h = bpy.app.handlers
     h.frame_change_pre.append(on_change)
     h.render_write.append(on_write)
@@ -702,12 +718,6 @@ def render_job(
         r.filepath, r.use_overwrite, r.use_placeholder = saved_r
         scene.frame_start, scene.frame_end, _, scene.frame_step = saved
         scene.frame_set(saved[2])
-        if stage != d:
-            shutil.rmtree(stage, ignore_errors=True)
-    if state["error"] is not None:
-        raise state["error"]
-    if state["done"] != n:
-        raise RuntimeError(f"Blender wrote {state['done']} of {n} frames")
 
 
 def _move(tmp: str, path: str) -> None:
