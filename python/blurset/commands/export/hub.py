@@ -19,11 +19,15 @@ a scene streams whole. Shards are planned from the files' sizes before any is wr
 written one at a time through a temp name and a rename, with fixed compression and no
 timestamps: the same build gives the same bytes. A shard's schema metadata carries the
 key of what it was made from (the MANIFEST.sha256 lines of the folders its files lie in,
-each file's size and time where the manifest is older, the options): a rerun after a
-kill keeps every shard whose key is its plan's and writes the rest, so its shards are
-those of an uninterrupted export. The plan stats every file once and holds no line per
-file; writing holds one setting's rows at a time, never a whole shard. `blurset verify DIR` checks
-each shard against export.json (size, sha256, rows, settings) and decodes every image.
+each file's size and time where the manifest is older, the options), and export.json
+its size and sha256, recorded as each shard is finished (in its `replacing` state while
+the run goes on). A rerun keeps a shard whose key is its plan's and whose bytes are the
+ones recorded, and writes the rest, so its shards are those of an uninterrupted export;
+it never hashes a shard it did not write into the record. The plan stats every file
+once and holds no line per file; writing holds one setting's rows at a time, never a
+whole shard. `blurset verify DIR` checks each shard against export.json (size, sha256,
+rows, settings) and reads every cell (images and passes decoded, records parsed,
+numbers finite).
 """
 
 from __future__ import annotations
@@ -105,10 +109,18 @@ class HubPlan:
     digests: dict[tuple[str, str], str] = field(default_factory=dict)
 
 
+# A shard holds whole settings: past a terabyte a larger cut changes nothing but
+# export.json's number, which must fit its record (u64 bytes).
+MAX_SHARD_MB = 1e6
+
+
 def _shard_bytes(args) -> int:
     mb = DEFAULT_SHARD_MB if args.shard_size is None else args.shard_size
-    if not (mb > 0) or mb != mb or mb == float("inf"):
-        raise ConfigError(f"--shard-size {mb:g}: a shard's size must be a number of MB above 0")
+    if not (0 < mb <= MAX_SHARD_MB):  # (NaN fails both)
+        raise ConfigError(
+            f"--shard-size {mb:g}: a shard's size must be a number of MB above 0 and at "
+            f"most {MAX_SHARD_MB:g}"
+        )
     return max(1, int(mb * 1e6))
 
 
@@ -638,17 +650,16 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
     export_rules.refuse_foreign(out, doc, owned, new)  # type: ignore[arg-type]
     keys = {s.name: shard_key(hp, s) for s in hp.shards}
     done_doc = old if isinstance(old, dict) and old.get("state") != "replacing" else None
-    recorded = (done_doc or {}).get("shards") or {}
-    final = {s.name: out / hub_format.DATA_DIR / s.name for s in hp.shards}
-    todo = [s for s in hp.shards if hub_format.read_key(final[s.name]) != keys[s.name]]
+    vouched = _kept_shards(out, hp, keys, _trusted_records(old))
     stale = sorted(owned - set(new))
-    if not todo and not stale and done_doc is not None:
+    if len(vouched) == len(hp.shards) and not stale and done_doc is not None:
         want = dict(doc)
-        want["shards"] = recorded
+        want["shards"] = {s.name: vouched[s.name] for s in hp.shards}
         if want == done_doc:
             _say(want, out, hp, "up to date", 0)
             return 0
-    export_rules.record_replacing(out, doc, owned | set(new))  # type: ignore[arg-type]
+    owns = owned | set(new)
+    export_rules.record_replacing(out, doc, owns, vouched)  # type: ignore[arg-type]
     for rel in stale:
         p = out / rel
         if p.is_dir() and not p.is_symlink():
@@ -656,43 +667,100 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
         else:
             p.unlink(missing_ok=True)
         export_rules.prune_empty_parents(out, rel)
-    shards: dict[str, Any] = {}
     written = 0
     fault = stop.fault_index(FAULT)
     for s in hp.shards:
-        dst = final[s.name]
-        if s in todo:
-            dst.parent.mkdir(parents=True, exist_ok=True)
-            tmp = layout.temp_path(dst)
-            try:
-                rows, sha, size = write_shard(hp, s, tmp, keys[s.name], written == fault)
-                os.replace(tmp, dst)
-            finally:
-                tmp.unlink(missing_ok=True)
-            written += 1
-        else:
-            # A finished shard of this plan (kept from a stopped run): its record, or
-            # its bytes read once more.
-            rec = recorded.get(s.name)
-            size = dst.stat().st_size
-            if rec and rec.get("bytes") == size:
-                rows, sha = rec["rows"], rec["sha256"]
-            else:
-                _, pq = hub_format.pyarrow()
-                rows, sha = pq.ParquetFile(dst).metadata.num_rows, _sha256(dst)
-        shards[s.name] = {
-            "config": s.config.name,
-            "split": s.split,
-            "settings": s.settings,
-            "rows": int(rows),
-            "bytes": int(size),
-            "sha256": sha,
-        }
+        if s.name in vouched:
+            continue
+        vouched[s.name] = _write_one(hp, s, out, keys[s.name], written == fault)
+        written += 1
+        # A kill from here on keeps this shard: the rerun checks it against this line.
+        export_rules.record_replacing(out, doc, owns, vouched)  # type: ignore[arg-type]
     _remove_empty_dirs(out / hub_format.DATA_DIR)
-    doc["shards"] = shards
+    doc["shards"] = {s.name: vouched[s.name] for s in hp.shards}
     outputs.write_record(out / export_rules.EXPORT_FILE, doc)
     _say(doc, out, hp, "written", written)
     return 0
+
+
+def _trusted_records(old: Any) -> dict[str, dict]:
+    """The shard records a rerun checks the shards on disk against: a finished export's,
+    or those a stopped run carried in its `replacing` state (each a shard it wrote, or
+    checked before keeping it). An older stopped run carried none: its shards are
+    written again, never hashed into a record."""
+    return dict(old.get("shards") or {}) if isinstance(old, dict) else {}
+
+
+def _kept_shards(
+    out: Path, hp: HubPlan, keys: dict[str, str], trusted: dict[str, dict]
+) -> dict[str, dict]:
+    """The shards of this plan on disk that are kept, with their records: made from the
+    plan's files (the key in their footer) and holding the very bytes a trusted record
+    lists (size, then sha256). Any other is written again, and a damaged one named on
+    stderr, as a build's rerun redoes a setting that differs from its manifest: a record
+    certifies only bytes this run wrote or checked."""
+    kept: dict[str, dict] = {}
+    for s in hp.shards:
+        path = out / hub_format.DATA_DIR / s.name
+        if not path.is_file() or hub_format.read_key(path) != keys[s.name]:
+            continue  # not written yet, or made from other files: nothing to say
+        problem = _shard_problem(s, path, trusted.get(s.name))
+        if problem is None:
+            rec = trusted[s.name]
+            kept[s.name] = _record(s, rec["rows"], rec["bytes"], rec["sha256"])
+        else:
+            print(f"redoing {hub_format.DATA_DIR}/{s.name}: {problem}", file=sys.stderr)
+    return kept
+
+
+def _shard_problem(s: _Shard, path: Path, rec: dict | None) -> str | None:
+    """Why a finished shard is not the one its record lists, or None."""
+    record = export_rules.EXPORT_FILE
+    if rec is None:
+        return f"no line of {record} vouches for it (a run was stopped)"
+    if (rec.get("config"), rec.get("split"), rec.get("settings")) != (
+        s.config.name,
+        s.split,
+        s.settings,
+    ):
+        return f"{record} lists other rows for it"
+    size = path.stat().st_size
+    if size != rec.get("bytes"):
+        return f"{size} bytes, {record} says {rec.get('bytes')}"
+    if _sha256(path) != rec.get("sha256"):
+        return f"sha256 differs from {record}'s"
+    return None
+
+
+def _record(s: _Shard, rows: int, size: int, sha256: str) -> dict:
+    return {
+        "config": s.config.name,
+        "split": s.split,
+        "settings": s.settings,
+        "rows": int(rows),
+        "bytes": int(size),
+        "sha256": sha256,
+    }
+
+
+def _write_one(hp: HubPlan, s: _Shard, out: Path, key: str, kill: bool) -> dict:
+    """Write one shard through a temp name; its record. A failed write (a full disk)
+    names the shard: the sink's own errors carry no file name."""
+    dst = out / hub_format.DATA_DIR / s.name
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    tmp = layout.temp_path(dst)
+    try:
+        rows, sha, size = write_shard(hp, s, tmp, key, kill)
+        os.replace(tmp, dst)
+    except OSError as e:
+        if e.filename is not None:
+            raise
+        if e.errno is None:
+            raise OSError(f"cannot write {dst}: {e}") from None
+        raise OSError(e.errno, e.strerror, str(dst)) from None
+    finally:
+        tmp.unlink(missing_ok=True)
+    return _record(s, rows, size, sha)
 
 
 def _remove_empty_dirs(root: Path) -> None:
