@@ -7,7 +7,9 @@ render)."""
 from __future__ import annotations
 
 import json
+import math
 import shutil
+import struct
 from pathlib import Path
 
 import pytest
@@ -147,3 +149,86 @@ def test_the_ray_rule_is_the_local_one():
             devices.check_ray(cfg(workers_per_gpu=4, device=device), {"CPU": 8.0})
         devices.check_ray(cfg(workers_per_gpu=4, device=device), {"CPU": 8.0, "GPU": 2.0})
     devices.check_ray(cfg(), {"CPU": 8.0})  # no sharing asked: the CPU renders
+
+
+# -- a GLB whose vertex buffer holds NaN or Inf is that object's failure --------------------
+
+
+def triangle_glb(corner: float, *, sparse: bool = False) -> bytes:
+    """One triangle whose third vertex has x = `corner`; the accessor's min/max say a
+    finite unit triangle whatever the buffer holds. `sparse`: the buffer is finite and
+    the accessor's sparse substitution carries `corner` instead."""
+    verts = struct.pack("<9f", 0, 0, 0, 1, 0, 0, 1.0 if sparse else corner, 1, 0)
+    acc: dict = {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                 "min": [0, 0, 0], "max": [1, 1, 0]}  # fmt: skip
+    views = [{"buffer": 0, "byteOffset": 0, "byteLength": 36}]
+    extra = b""
+    if sparse:
+        extra = struct.pack("<I3f", 2, corner, 1, 0)  # index 2, then its value
+        views += [{"buffer": 0, "byteOffset": 36, "byteLength": 4},
+                  {"buffer": 0, "byteOffset": 40, "byteLength": 12}]  # fmt: skip
+        acc["sparse"] = {"count": 1, "indices": {"bufferView": 1, "componentType": 5125},
+                         "values": {"bufferView": 2}}  # fmt: skip
+    bin_ = verts + extra
+    doc = {
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "accessors": [acc],
+        "bufferViews": views,
+        "buffers": [{"byteLength": len(bin_)}],
+    }
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    chunks = struct.pack("<II", len(text), 0x4E4F534A) + text
+    chunks += struct.pack("<II", len(bin_), 0x004E4942) + bin_
+    return b"glTF" + struct.pack("<II", 2, 12 + len(chunks)) + chunks
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_a_non_finite_vertex_is_refused_by_preflight(tmp_path, sparse):
+    from blurset.services import preflight
+
+    ok = tmp_path / "ok.glb"
+    ok.write_bytes(triangle_glb(0.5, sparse=sparse))
+    assert preflight.check(ok).triangles == 1
+    for corner in (math.nan, math.inf, -math.inf):
+        bad = tmp_path / "bad.glb"
+        bad.write_bytes(triangle_glb(corner, sparse=sparse))
+        with pytest.raises(preflight.PreflightError) as e:
+            preflight.check(bad)
+        msg = str(e.value)
+        assert msg.startswith("non-finite vertex position: accessor 0") and "\n" not in msg
+        assert repr(corner) in msg, msg
+
+
+def test_a_gltf_with_a_non_finite_vertex_in_its_bin_file_is_refused(tmp_path):
+    from blurset.services import preflight
+
+    data = triangle_glb(math.nan)
+    doc_len = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20 : 20 + doc_len])
+    doc["buffers"][0]["uri"] = "tri.bin"
+    (tmp_path / "tri.bin").write_bytes(data[20 + doc_len + 8 :])
+    (tmp_path / "tri.gltf").write_text(json.dumps(doc))
+    with pytest.raises(preflight.PreflightError, match="non-finite vertex position"):
+        preflight.check(tmp_path / "tri.gltf")
+
+
+def test_a_build_records_a_non_finite_glb_by_its_file_and_goes_on(tmp_path, standin_blender):
+    """Beside the demo objects, which build."""
+    objs = tmp_path / "objs"
+    objs.mkdir()
+    (objs / "nan_vertex.glb").write_bytes(triangle_glb(math.nan))
+    out = tmp_path / "out"
+    proc = standin_build(out, standin_blender, "--objects", str(objs), check=False)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert "1 of 4 objects failed" in proc.stderr, proc.stderr
+    recs = [json.loads(x) for x in (out / layout.FAILURES).read_text().splitlines()]
+    assert [(r["uid"], r["stage"], r["path"]) for r in recs] == [
+        ("nan_vertex", "preflight", "nan_vertex.glb")
+    ], recs
+    assert "non-finite vertex position" in recs[0]["reason"]
+    assert not list(out.glob("nan_vertex_*")) and len(layout.complete_settings(out)) == 6

@@ -19,7 +19,10 @@ import json
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path, PureWindowsPath
+from typing import Any
 from urllib.parse import unquote
+
+import numpy as np
 
 from blurset import _core
 from blurset.exceptions import BlursetError
@@ -35,6 +38,7 @@ _spec.loader.exec_module(glb_inspect)
 _TRIANGLE_MODES = {4: lambda n: n // 3, 5: lambda n: max(0, n - 2), 6: lambda n: max(0, n - 2)}
 # Keyed by what a glTF file may hold there (any JSON value; unknown ones are refused).
 _COMPONENT_BYTES: dict[object, int] = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_FLOAT = 5126
 _TYPE_COMPONENTS: dict[object, int] = {
     "SCALAR": 1,
     "VEC2": 2,
@@ -138,6 +142,7 @@ def _check_document(doc: dict, bin_chunk: bytes | None, base: Path, budget: Budg
     accessors = _list(doc, "accessors")
     for i, a in enumerate(accessors):
         _check_accessor(i, a, views)
+    _check_positions(doc, accessors, views, _Buffers(_list(doc, "buffers"), bin_chunk, base))
     triangles = _triangles(doc, accessors)
     if triangles == 0:
         raise PreflightError("no triangles: the file has no renderable mesh")
@@ -237,6 +242,81 @@ def _check_accessor(i: int, a: dict, views: list[dict]) -> None:
             f"truncated data: accessor {i} needs {need} bytes of bufferView {v}, "
             f"which has {views[v].get('byteLength', 0)}"
         )
+
+
+class _Buffers:
+    """A file's buffers by index, each read once when first asked for: the GLB's BIN
+    chunk, a data: URI's bytes, or an external file mapped (not read) into memory."""
+
+    def __init__(self, buffers: list[dict], bin_chunk: bytes | None, base: Path) -> None:
+        self.buffers, self.bin_chunk, self.base = buffers, bin_chunk, base
+        self.data: dict[int, Any] = {}
+
+    def __getitem__(self, i: int) -> Any:
+        if i not in self.data:
+            uri = self.buffers[i].get("uri")
+            if uri is None:
+                self.data[i] = self.bin_chunk or b""
+            elif (data := _data_uri(uri)) is not None:
+                self.data[i] = data
+            else:
+                path = _external(uri, self.base, f"buffer {i}")
+                self.data[i] = np.memmap(path, mode="r") if path.stat().st_size else b""
+        return self.data[i]
+
+
+def _position_accessors(doc: dict) -> dict[int, str]:
+    """The accessors that place vertices (each primitive's POSITION, its morph targets'),
+    with how a message names them."""
+    found: dict[int, str] = {}
+    for mi, mesh in enumerate(_list(doc, "meshes")):
+        for prim in mesh.get("primitives") or []:
+            for k, attrs in enumerate([prim.get("attributes") or {}, *(prim.get("targets") or [])]):
+                a = attrs.get("POSITION")
+                if isinstance(a, int) and not isinstance(a, bool):
+                    found.setdefault(a, f"mesh {mi}" + (f" morph target {k - 1}" if k else ""))
+    return found
+
+
+def _check_positions(doc: dict, accessors: list[dict], views: list[dict], data: _Buffers) -> None:
+    """Every vertex position is a finite number. Blender's importer sets a NaN or
+    infinite coordinate to 0 without a word (its mesh validation), so such a file would
+    build as another shape, normalized as if whole: it is this file's failure instead.
+    (Draco-compressed positions are decoded by Blender only; not seen here.)"""
+    for i, where in sorted(_position_accessors(doc).items()):
+        if not 0 <= i < len(accessors) or accessors[i].get("componentType") != _FLOAT:
+            continue  # a missing accessor is the importer's to refuse; integers are finite
+        a = accessors[i]
+        ncomp = _TYPE_COMPONENTS[a.get("type")]
+        parts = []
+        if isinstance(v := a.get("bufferView"), int):
+            start = int(views[v].get("byteOffset", 0)) + int(a.get("byteOffset", 0))
+            stride = int(views[v].get("byteStride") or 4 * ncomp)
+            arr = _floats(data[views[v]["buffer"]], start, int(a["count"]), ncomp, stride)
+            parts.append(("vertex", arr))
+        sparse = a.get("sparse")
+        if isinstance(sparse, dict):
+            values = sparse["values"]
+            view = views[values["bufferView"]]
+            start = int(view.get("byteOffset", 0)) + int(values.get("byteOffset", 0))
+            arr = _floats(data[view["buffer"]], start, int(sparse["count"]), ncomp, 4 * ncomp)
+            parts.append(("sparse value", arr))
+        for what, arr in parts:
+            bad = ~np.isfinite(arr).all(axis=1)
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise PreflightError(
+                    f"non-finite vertex position: accessor {i} (POSITION of {where}) holds "
+                    f"{arr[k].tolist()} at {what} {k} (Blender's importer would set it to 0 without a word)"
+                )
+
+
+def _floats(buf: Any, start: int, count: int, ncomp: int, stride: int) -> Any:
+    """`count` little-endian float32 elements of `ncomp` components at `start`, `stride`
+    bytes apart, viewed in `buf` without a copy (ValueError/TypeError past its end)."""
+    if count == 0:
+        return np.zeros((0, ncomp), dtype="<f4")
+    return np.ndarray((count, ncomp), dtype="<f4", buffer=buf, offset=start, strides=(stride, 4))
 
 
 def _triangles(doc: dict, accessors: list[dict]) -> int:
