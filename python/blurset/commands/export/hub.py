@@ -778,6 +778,6 @@ def _say(doc: dict, out: Path, hp: HubPlan, what: str, written: int) -> None:
     print(
         f"blurset export: {len(shards)} shards ({written} written), {rows} rows in "
         f"{len(configs)} configs ({', '.join(configs)}) {what} -> {out / hub_format.DATA_DIR}; "
-        f"`blurset card {hp.build.name} --hub {out}` writes its card",
+        f"its card, one config each: {out / 'README.md'}",
         file=sys.stdout,
     )
