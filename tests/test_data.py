@@ -116,3 +116,16 @@ def test_mean_pose_path_names_the_setting(setting, tmp_path: Path):
     (build / "obj_000" / "meta.json").write_text("{")
     with pytest.raises(InputError, match="meta.json"):
         open_scene(build, "obj_000", "blur_2", pose="mean")
+
+
+def test_downsample_none_is_the_full_size_and_a_bad_one_is_named(setting):
+    """`downsample=None` reads the full size, as 1 does (issue 60: it raised a bare
+    TypeError); a factor that is no whole number of 1 or more is refused by name."""
+    build, _, _ = setting
+    full = open_scene(build, "obj_000", "blur_2")
+    none = open_scene(build, "obj_000", "blur_2", downsample=None)
+    assert none.downsample == 1 and np.array_equal(none.images, full.images)
+    assert np.array_equal(none.intrinsics, full.intrinsics)
+    for bad in (0, -2, 2.5, "4", True):
+        with pytest.raises(ValueError, match=r"downsample must be .*got"):
+            open_scene(build, "obj_000", "blur_2", downsample=bad)

@@ -140,6 +140,18 @@ def _mean_cameras(sdir: Path, level: str, n: int) -> tuple[np.ndarray, np.ndarra
     return gl * np.array([1.0, -1.0, -1.0, 1.0]), gl
 
 
+def _downsample(d: Any) -> int:
+    """`open_scene`'s downsample as a factor: None is the full size, as 1."""
+    if d is None:
+        return 1
+    if isinstance(d, bool) or not isinstance(d, int | np.integer) or d < 1:
+        raise ValueError(
+            f"downsample must be a whole factor of 1 or more (images_<f>/; None or 1 for "
+            f"the full size), got {d!r}"
+        )
+    return int(d)
+
+
 def open_scene(
     build: str | Path,
     setting: str,
@@ -147,13 +159,13 @@ def open_scene(
     gain: float | None = None,
     *,
     noise: str | Path | None = None,
-    downsample: int = 1,
+    downsample: int | None = 1,
     pose: str = "written",
     sharp_rows: Iterable[Mapping[str, Any]] | None = None,
 ) -> Scene:
     """Read one scene of a build: `level` (`sharp`, `blur_<l>`) of `setting`, or with
     `gain` the noisy copy of it in `noise` (a `blurset noise BUILD` output), at full
-    size or from `images_<downsample>/`.
+    size (`downsample` 1 or None) or from `images_<downsample>/`.
 
     `build` may also be a `blurset export --for hub` folder (the same scene from its
     Parquet shards: `noise` is not needed, the gain's config is in it), or the rows of
@@ -169,6 +181,7 @@ def open_scene(
     Raises InputError naming a missing file, or a meta.json from before mean poses."""
     if pose not in POSES:
         raise ValueError(f"pose must be one of {', '.join(map(repr, POSES))}, got {pose!r}")
+    downsample = _downsample(downsample)
     if not isinstance(build, str | Path):
         # Rows: a `datasets` split (streaming or not) of the level's config.
         return _scene_from_rows(build, setting, level, gain, sharp_rows, downsample, pose)
