@@ -46,7 +46,7 @@ def proc_cpu(pid: int) -> float:
 def plan_object(cfg, glb: Path, w, work: Path):
     """The plan of `glb`'s first setting under `cfg`, as a build makes it (its vertices
     loaded by the worker `w`)."""
-    from blurset.commands.build.setting import pricing_backend
+    from blurset.commands.builder.setting import pricing_backend
     from blurset.plan import plan_setting, seed_for
 
     info = w.load(glb, work / "v.npy")
@@ -75,7 +75,7 @@ def render_mean(w, frames: list, samples: int, res: int, fov_deg: float) -> np.n
 
 def timed_build(cfg) -> tuple[float, Path, dict[str, Any]]:
     """One `blurset build` of one setting: (wall seconds, the setting's folder, its meta)."""
-    from blurset.commands.build import build
+    from blurset.commands.builder import build
 
     t0 = time.perf_counter()
     summary = build(cfg, progress=False)

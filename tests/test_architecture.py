@@ -186,7 +186,7 @@ def test_a_new_or_renamed_module_is_found() -> None:
     files = tree_files()
     # A module added without a word on the page.
     for fake in (f"{PKG}/export_zarr.py", f"{CORE}/plan/vignette.rs", "bench/bench_new.py",
-                 f"{PKG}/commands/build/shard.py"):  # fmt: skip
+                 f"{PKG}/commands/builder/shard.py"):  # fmt: skip
         assert f"{fake} is not named under ## {_folder(fake)}" in problems(text, files | {fake})
     # A module renamed on the page (or in the tree): the old name is stale, the file unnamed.
     assert "`kernels.py`" in text

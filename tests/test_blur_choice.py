@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from blurset import plan
-from blurset.commands.build.setting import PRICE_BACKEND_ENV
+from blurset.commands.builder.setting import PRICE_BACKEND_ENV
 from blurset.exceptions import ConfigError
 from blurset.services.config import make_config
 

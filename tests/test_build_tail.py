@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 
-from blurset.commands.build.dataset import append_failures, finalize
+from blurset.commands.builder.dataset import append_failures, finalize
 from blurset.services.config import make_config
 
 from tests.conftest import write_synthetic_build

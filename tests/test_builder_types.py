@@ -1,4 +1,4 @@
-"""The builder's functions are typed (issue 49): no parameter of python/blurset/commands/build/
+"""The builder's functions are typed (issue 49): no parameter of python/blurset/commands/builder/
 takes `Any`, and the worker it drives is the RenderWorker port, not a concrete class."""
 
 from __future__ import annotations

@@ -88,7 +88,7 @@ def test_build_resol_is_refused_on_the_command_line(capsys: pytest.CaptureFixtur
 
 
 def test_build_help_defaults_come_from_the_core() -> None:
-    from blurset.commands.build.cli import default_text
+    from blurset.commands.builder.cli import default_text
     from blurset.services.config import BuildConfig
 
     core = BuildConfig()

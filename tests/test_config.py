@@ -275,7 +275,7 @@ def test_an_out_built_before_sample_subsets_is_not_resumed_with_them(tmp_path):
     run-only options (device, gpus) never count."""
     import json
 
-    from blurset.commands.build.dataset import check_same_options
+    from blurset.commands.builder.dataset import check_same_options
 
     out = tmp_path / "out"
     out.mkdir()

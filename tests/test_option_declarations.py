@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin
 
 from blurset import cli
-from blurset.commands.build.cli import default_text
-from blurset.commands.build.dataset import BEFORE_OPTION, RUN_OPTIONS
+from blurset.commands.builder.cli import default_text
+from blurset.commands.builder.dataset import BEFORE_OPTION, RUN_OPTIONS
 from blurset.services.config import BuildConfig
 
 OPTIONS = BuildConfig.options()

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 from blurset import cli
-from blurset.commands.build.dataset import BEFORE_OPTION, RUN_OPTIONS, check_same_options
+from blurset.commands.builder.dataset import BEFORE_OPTION, RUN_OPTIONS, check_same_options
 from blurset.exceptions import ConfigError
 from blurset.services import options
 from blurset.services.config import BUILD, BuildConfig, load_toml, make_config

@@ -7,7 +7,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from blurset.commands.build import resumed_settings
+from blurset.commands.builder import resumed_settings
 from blurset.services.config import make_config
 from blurset.services.objects import ObjectSpec
 from blurset.services.progress import Progress, duration
@@ -72,7 +72,7 @@ def test_a_resumed_build_counts_the_settings_it_found_complete(tmp_path):
 
 def test_an_interrupted_build_says_how_to_resume(tmp_path):
     code = (
-        "import sys, blurset.commands.build.cli as c\n"
+        "import sys, blurset.commands.builder.cli as c\n"
         "def run(args): raise KeyboardInterrupt()\n"
         "c.run = run\n"
         "from blurset.cli import main\n"

@@ -494,7 +494,7 @@ def test_the_config_record_has_no_paths():
 def test_licenses_shape_outputs_so_a_rerun_must_match(tmp_path):
     """--licenses decides which objects a build holds: a rerun into OUT with another
     filter is refused (naming it) unless --allow-mixed, like any output-shaping option."""
-    from blurset.commands.build.dataset import RUN_OPTIONS, check_same_options
+    from blurset.commands.builder.dataset import RUN_OPTIONS, check_same_options
 
     assert "licenses" not in RUN_OPTIONS
     out = tmp_path / "out"

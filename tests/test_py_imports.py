@@ -50,6 +50,6 @@ def test_the_check_sees_the_imports() -> None:
     edges = _edges()
     assert "blurset.layout" in edges["blurset.services.outputs"]  # top level
     assert (
-        "blurset.commands.build.target" in edges["blurset.commands.build.setting"]
+        "blurset.commands.builder.target" in edges["blurset.commands.builder.setting"]
     )  # inside a function
     assert "blurset.exceptions" in edges["blurset.layout"]

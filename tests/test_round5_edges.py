@@ -98,7 +98,7 @@ def test_a_build_or_noise_lock_that_is_a_link_is_refused(b, tmp_path, standin_bl
 def test_every_lock_opens_without_following_a_link(tmp_path):
     """flock_file (every output's lock, an object's, tradeoff's) and the build's shared
     lock refuse a link by the lock's name; a real lock file is taken as before."""
-    from blurset.commands.build.dataset import build_lock
+    from blurset.commands.builder.dataset import build_lock
 
     target = tmp_path / "target"
     (tmp_path / "l").symlink_to(target)

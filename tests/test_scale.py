@@ -111,7 +111,7 @@ def test_local_pool_ray_and_shards_build_the_same_dataset(demo_glbs, tmp_path):
 
 
 def test_shards_partition_by_object_whatever_the_listing_order(demo_glbs, tmp_path):
-    from blurset.commands.build import job_objects
+    from blurset.commands.builder import job_objects
     from blurset.services.config import make_config
 
     entries = [str(g) for g in demo_glbs]

@@ -232,7 +232,7 @@ def test_blurry_test_views_and_no_downsample_keep_the_old_layout(tmp_path):
 def test_split_options_flags_and_toml_keys(tmp_path):
     import argparse
 
-    from blurset.commands.build.cli import add_arguments, config_from_args
+    from blurset.commands.builder.cli import add_arguments, config_from_args
     from blurset.exceptions import ConfigError
     from blurset.services.config import load_toml
 

@@ -34,7 +34,7 @@ RESUME = {
 # subcommand -> (module, one-line help)
 COMMANDS = {
     "build": (
-        "blurset.commands.build.cli",
+        "blurset.commands.builder.cli",
         "render an Objaverse-Blur style dataset from GLB objects",
     ),
     "noise": (

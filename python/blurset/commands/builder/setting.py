@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from blurset import _core, layout
-from blurset.commands.build.geometry import render_geometry
+from blurset.commands.builder.geometry import render_geometry
 from blurset.exceptions import BlursetError
 from blurset.services.config import BuildConfig, out_dir
 from blurset.services.objects import ObjectSpec
@@ -27,7 +27,7 @@ from blurset.services.progress import Progress
 
 if TYPE_CHECKING:
     from blurset import _records
-    from blurset.commands.build.ports import RenderWorker
+    from blurset.commands.builder.ports import RenderWorker
     from blurset.services.worker_client import LoadedObject, RenderOptions
 
 
@@ -403,7 +403,7 @@ def _render_targeted(
     """Every image to the config's target (builder/target.py): the sharp images first, QA,
     then the blurry ones. The progress bar counts renders up to the setting's share.
     Returns each image's record, the renders, and the seconds of each phase."""
-    from blurset.commands.build.target import render_to_target
+    from blurset.commands.builder.target import render_to_target
 
     order = list(dict.fromkeys(keys))
     done = [0]

@@ -16,16 +16,16 @@ import time
 from pathlib import Path
 
 from blurset import _core, layout
-from blurset.commands.build.dataset import (
+from blurset.commands.builder.dataset import (
     append_failures,
     build_lock,
     check_same_options,
     finalize,
     sweep,
 )
-from blurset.commands.build.executors import ray_cluster, run_local, run_ray
-from blurset.commands.build.setting import frames_per_setting
-from blurset.commands.build.unit import ObjectResult, objaverse
+from blurset.commands.builder.executors import ray_cluster, run_local, run_ray
+from blurset.commands.builder.setting import frames_per_setting
+from blurset.commands.builder.unit import ObjectResult, objaverse
 from blurset.exceptions import ConfigError
 from blurset.services import devices, outputs, publish
 from blurset.services.config import BuildConfig, flag, out_dir

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from blurset import _core, layout
-from blurset.commands.build.setting import SettingFailed, SettingJob, render_setting
+from blurset.commands.builder.setting import SettingFailed, SettingJob, render_setting
 from blurset.exceptions import BlursetError
 from blurset.services import attribution, objaverse_cache, outputs, preflight, publish
 from blurset.services.config import BuildConfig, out_dir

@@ -16,7 +16,7 @@ from blurset.services.config import BuildConfig
 
 if TYPE_CHECKING:
     from blurset._records import Render
-    from blurset.commands.build.ports import RenderWorker
+    from blurset.commands.builder.ports import RenderWorker
 
 # The passes a geometry render gives (the mask comes from the sharp image).
 RENDERED = ("depth", "normal")

@@ -31,7 +31,7 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
 
 
 def run(args: argparse.Namespace) -> int:
-    from blurset.commands.build import build
+    from blurset.commands.builder import build
 
     cfg = config_from_args(args)
     summary = build(cfg, progress=not args.quiet)

@@ -9,7 +9,7 @@ import os
 import queue
 from collections.abc import Callable, Iterator
 
-from blurset.commands.build.unit import ObjectResult, build_object
+from blurset.commands.builder.unit import ObjectResult, build_object
 from blurset.exceptions import BlursetError
 from blurset.services import devices
 from blurset.services.config import BuildConfig

@@ -18,7 +18,7 @@ from blurset.services.config import BuildConfig
 
 if TYPE_CHECKING:
     from blurset._records import ImageRender
-    from blurset.commands.build.ports import RenderWorker
+    from blurset.commands.builder.ports import RenderWorker
     from blurset.services.worker_client import RenderOptions
 
 # An image of a setting: (view, level directory).
