@@ -49,19 +49,7 @@ def read_glb(path: str) -> tuple[dict, bytes | None]:
     left, the JSON chunk against MAX_GLB_JSON_BYTES), so a hostile or truncated header
     is a GlbError naming the file, never a huge allocation or a traceback."""
     with open(path, "rb") as f:
-        size = os.fstat(f.fileno()).st_size
-        head = f.read(12)
-        if len(head) < 12 or head[:4] != GLB_MAGIC:
-            raise GlbError("not a binary glTF (GLB) file", path)
-        version, total = struct.unpack_from("<II", head, 4)
-        if version != 2:
-            raise GlbError(f"glTF version {version} is not supported (need 2)", path)
-        if total > size:
-            raise GlbError(
-                f"truncated GLB: its header declares {total} bytes, the file has {size}", path
-            )
-        if total < 20:
-            raise GlbError(f"GLB header declares {total} bytes, too few for one chunk", path)
+        total = _glb_total(f, path)
         offset = 12
         doc = None
         bin_chunk = None
@@ -94,22 +82,46 @@ def read_glb(path: str) -> tuple[dict, bytes | None]:
             if len(body) != length:
                 raise GlbError(f"truncated GLB chunk at byte {offset}", path)
             if ctype == CHUNK_JSON:
-                try:
-                    text = body.decode("utf-8")
-                except UnicodeDecodeError as e:
-                    raise GlbError(
-                        f"the JSON chunk is not UTF-8 (glTF requires UTF-8; byte {e.start})", path
-                    ) from None
-                try:
-                    doc = json.loads(text)
-                except (ValueError, RecursionError) as e:
-                    raise GlbError(f"GLB JSON chunk is not valid JSON ({e})", path) from None
+                doc = _glb_json(body, path)
             else:
                 bin_chunk = body
             offset += 8 + length
     if not isinstance(doc, dict):
         raise GlbError("GLB has no JSON chunk", path)
     return doc, bin_chunk
+
+
+def _glb_total(f, path: str) -> int:
+    """The byte count a GLB's 12-byte header declares, checked against the file's real
+    size and the least a chunk needs; `f` is left after the header."""
+    size = os.fstat(f.fileno()).st_size
+    head = f.read(12)
+    if len(head) < 12 or head[:4] != GLB_MAGIC:
+        raise GlbError("not a binary glTF (GLB) file", path)
+    version, total = struct.unpack_from("<II", head, 4)
+    if version != 2:
+        raise GlbError(f"glTF version {version} is not supported (need 2)", path)
+    if total > size:
+        raise GlbError(
+            f"truncated GLB: its header declares {total} bytes, the file has {size}", path
+        )
+    if total < 20:
+        raise GlbError(f"GLB header declares {total} bytes, too few for one chunk", path)
+    return total
+
+
+def _glb_json(body: bytes, path: str) -> object:
+    """A GLB's JSON chunk, decoded (glTF requires UTF-8)."""
+    try:
+        text = body.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise GlbError(
+            f"the JSON chunk is not UTF-8 (glTF requires UTF-8; byte {e.start})", path
+        ) from None
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError) as e:
+        raise GlbError(f"GLB JSON chunk is not valid JSON ({e})", path) from None
 
 
 def read_model(path: str) -> tuple[dict, bytes | None]:
