@@ -119,6 +119,7 @@ def test_a_killed_rerun_over_damaged_shards_never_certifies_them(
     assert proc.returncode == -9, proc.stderr
     rec = json.loads((out / "export.json").read_text())
     assert rec["state"] == "replacing"
+    one_error_line(run_cli("verify", str(out), check=False), "not finished", str(out))
     assert sorted(rec["shards"]) == sorted(set(names) - {names[0], names[2]})
     inodes = {n: (out / "data" / n).stat().st_ino for n in rec["shards"]}
     proc = _export(standin_build_dir, out)

@@ -653,6 +653,12 @@ def verify(path: Path, *, decode: bool = True) -> Report:
 
         if hub_format.hub_doc(root) is not None:
             return verify_hub(root, decode=decode)
+        record = root / outputs.OutputKind.EXPORT.record
+        if (outputs.read_record(record) or {}).get("state") == "replacing":
+            raise InputError(
+                f"an export that has not finished (a run was stopped while writing it): "
+                f"rerun it, then verify: {path}"
+            )
     raise InputError(
         f"not a blurset build (dataset.json), noise output ({NOISE_DATASET}) or "
         f"`export --for hub` output: {path}"
