@@ -12,6 +12,12 @@ same files (shutil.copytree of every level's images and images_4/, the files the
 hold) from the page cache; both after a warm-up read. The ratio is copy time / export
 time (above 1: the export is faster than copying the files).
 
+Against the whole build (`hub_export_vs_cp_build`, SMALL_SETTINGS settings, the size a
+user measured at): `cp -r BUILD` (every file of the build, what a user copying it would
+copy), `shutil.copytree` of the image folders and the export, one after the other in
+each of SMALL_REPEATS rounds, the medians side by side. `BLURSET_BENCH_HUB=small` runs
+this comparison only.
+
 Memory: one more export with BIG_SHARD_MB shards, its peak RSS (ru_maxrss of the
 process) above that of an idle process importing the same modules, against the largest
 shard it wrote (`ratio` above 1: no whole shard was ever held), and the peak RSS of the
@@ -39,6 +45,8 @@ SHARD_MB = 20
 # (and stays below one shard) holds no whole shard.
 BIG_SHARD_MB = 200
 REPEATS = 2
+SMALL_SETTINGS = 100
+SMALL_REPEATS = 5
 BUILD_ARGS = (
     "--demo", "--views", "34", "--levels", "1,4", "--latents", "2", "--samples", "2",
     "--resolution", "128", "--settings-per-object", "2", "--quiet",
@@ -140,7 +148,58 @@ def idle_rss_mb() -> float:
     return usage.ru_maxrss / 1024
 
 
+def against_the_build() -> dict:
+    """The export against `cp -r` of the build and a copy of its image folders, side by
+    side, at SMALL_SETTINGS settings: medians of SMALL_REPEATS rounds."""
+    work = Path(tempfile.mkdtemp(prefix="bench-hub-small-"))
+    try:
+        b = make_build(work, SMALL_SETTINGS)
+        total = warm(b)
+        build_files = sum(len(fs) for _, _, fs in os.walk(b))
+        build_bytes = sum(p.stat().st_size for p in b.rglob("*") if p.is_file())
+        t = {"cp_r": [], "images": [], "export": []}
+        for _ in range(SMALL_REPEATS):
+            t0 = time.perf_counter()
+            subprocess.run(["cp", "-r", str(b), str(work / "cp")], check=True)
+            t["cp_r"].append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            copy_files(b, work / "images")
+            t["images"].append(time.perf_counter() - t0)
+            t["export"].append(timed_export(b, work / "hub", SHARD_MB)[0])
+            for d in ("cp", "images", "hub"):
+                shutil.rmtree(work / d)
+        med = {k: statistics.median(v) for k, v in t.items()}
+        return {
+            "name": "hub_export_vs_cp_build",
+            "ratio": med["cp_r"] / med["export"],
+            "ratio_is": "cp -r of the build's time / the export's (above 1: the export is faster)",
+            "contender": f"blurset export --for hub ({SMALL_SETTINGS} settings, 128 px)",
+            "baseline": "cp -r of the whole build",
+            "export_s": med["export"],
+            "cp_r_s": med["cp_r"],
+            "copy_images_s": med["images"],
+            "images_ratio": med["images"] / med["export"],
+            "runs_s": t,
+            # The least loaded round of each side: a shared machine's load swings a median.
+            "fastest_s": {k: min(v) for k, v in t.items()},
+            "settings": SMALL_SETTINGS,
+            "build_files": build_files,
+            "build_megabytes": build_bytes / 1e6,
+            "image_megabytes": total / 1e6,
+            "repeats": SMALL_REPEATS,
+        }
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
 def run() -> list[dict]:
+    small = against_the_build()
+    if os.environ.get("BLURSET_BENCH_HUB") == "small":
+        return [small]
+    return [small, *at_scale()]
+
+
+def at_scale() -> list[dict]:
     work = Path(tempfile.mkdtemp(prefix="bench-hub-"))
     try:
         idle = idle_rss_mb()
