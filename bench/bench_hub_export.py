@@ -157,7 +157,7 @@ def against_the_build() -> dict:
         total = warm(b)
         build_files = sum(len(fs) for _, _, fs in os.walk(b))
         build_bytes = sum(p.stat().st_size for p in b.rglob("*") if p.is_file())
-        t = {"cp_r": [], "images": [], "export": []}
+        t: dict[str, list[float]] = {"cp_r": [], "images": [], "export": []}
         for _ in range(SMALL_REPEATS):
             t0 = time.perf_counter()
             subprocess.run(["cp", "-r", str(b), str(work / "cp")], check=True)

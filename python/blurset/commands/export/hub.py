@@ -369,6 +369,20 @@ def _kind_fields(meta: dict, view: int, level: str, rec: dict) -> dict[str, Any]
     }
 
 
+def _samples(im: dict, lv: dict, kind: dict, sharp_render: dict) -> int | None:
+    """An image's samples: its record's (a targeted render), its blur level's (per frame
+    times its latent frames), another kind's (_kind_fields), or the sharp render's
+    (`sharp_render`: meta.json's `render`, empty for a degraded image of its own)."""
+    if im.get("samples") is not None:
+        return im["samples"]
+    if lv:
+        spf = _int_or_none(lv.get("samples_per_frame"))
+        return spf * int(lv.get("latents", 1)) if spf is not None else None
+    if kind["samples"] is not None:
+        return kind["samples"]
+    return _int_or_none(sharp_render.get("sharp_samples"))
+
+
 def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[str, list]:
     """The columns of one setting's rows of one config."""
     sdir = hp.build / setting
@@ -414,15 +428,7 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
         kind = _kind_fields(meta, v, cfg.level, rec)
         if kind["about_written"]:
             mean = _c2w_opengl(rows[v])
-        samples = im.get("samples")
-        if samples is None:
-            if lv:
-                samples = _int_or_none(lv.get("samples_per_frame"))
-                samples = samples * int(lv.get("latents", 1)) if samples is not None else None
-            elif kind["samples"] is not None:
-                samples = kind["samples"]
-            elif not degraded or not own:
-                samples = _int_or_none(render.get("sharp_samples"))
+        samples = _samples(im, lv, kind, render if not degraded or not own else {})
         cols["image"].append(image(r.image))
         for f, p in r.sized.items():
             cols[f"image_{f}"].append(image(p))
