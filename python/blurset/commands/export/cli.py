@@ -330,12 +330,17 @@ def _replace(
     new = [_entry(doc, s) for s in doc["scenes"]] + list(LISTS)
     _refuse_foreign(out, doc, owned, new)
     _put_in_place(out, folders, doc, sources, build_root, owned, new)
-    if isinstance(old, dict) and old.get("for") == "hub":
-        from blurset.commands import card
-
-        card.drop_hub_card(out)
+    if isinstance(old, dict):
+        _leave_replaced(old, out)
     _say(folders, doc, out, "written")
     return 0
+
+
+def _leave_replaced(old: dict, out: Path) -> None:
+    """What the export this one replaced wrote beside its entries goes with it."""
+    prev = exports.targets().get(str(old.get("for")))
+    if prev is not None and isinstance(prev.output, OwnOutput) and prev.output.replaced:
+        prev.output.replaced(out)
 
 
 def _sweep_stale(out: Path, doc: _records.ExportDoc) -> None:

@@ -624,6 +624,14 @@ def _sha256(path: Path) -> str:
 # -- the run -----------------------------------------------------------------------------
 
 
+def drop_card(out: Path) -> None:
+    """An export of another target replacing this one takes the card with the shards it
+    described (only as blurset wrote it: an edited one is the user's)."""
+    from blurset.commands import card
+
+    card.drop_hub_card(out)
+
+
 def run(args) -> int:
     out: Path = args.out
     hp = plan(args)

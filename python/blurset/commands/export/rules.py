@@ -93,6 +93,9 @@ class OwnOutput:
     add_arguments: Callable[[argparse.ArgumentParser], None]
     options: tuple[str, ...]  # the options' dests: refused with another target
     does: str  # what they are for, as that refusal says (`writes shards`)
+    # What an export of another target that replaces this one in OUT removes beside the
+    # entries export.json lists (hub: its dataset card), given OUT.
+    replaced: Callable[[Path], None] | None = None
 
 
 @dataclass(frozen=True)

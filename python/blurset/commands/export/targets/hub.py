@@ -20,5 +20,6 @@ TARGET = Target(
         add_arguments=export_hub.add_arguments,
         options=("shard_size",),
         does="writes shards",
+        replaced=export_hub.drop_card,
     ),
 )
