@@ -194,6 +194,19 @@ def open_scene(
         found = hub_format.iter_rows(build, config, setting)
         sharp = hub_format.iter_rows(build, layout.SHARP, setting)
         return _scene_from_rows(found, setting, level, gain, sharp, downsample, pose)
+    return _scene_from_folders(build, setting, level, gain, noise, downsample, pose)
+
+
+def _scene_from_folders(
+    build: Path,
+    setting: str,
+    level: str,
+    gain: float | None,
+    noise: str | Path | None,
+    downsample: int,
+    pose: str,
+) -> Scene:
+    """open_scene of a build's folders (or, with `gain`, of `noise`'s)."""
     sdir = build / setting
     if not layout.is_complete(sdir):
         raise InputError(f"no complete setting {setting!r} in the build: {sdir}")
@@ -364,17 +377,15 @@ def _column(rows: list[Mapping[str, Any]], name: str, setting: str) -> list[Any]
     return [r[name] for r in rows]
 
 
-def _scene_from_rows(
+def _checked_rows(
     rows: Iterable[Mapping[str, Any]],
     setting: str,
     level: str,
     gain: float | None,
     sharp_rows: Iterable[Mapping[str, Any]] | None,
-    downsample: int,
-    pose: str,
-) -> Scene:
-    from blurset.services import hub_format
-
+) -> tuple[list[Mapping[str, Any]], list[Mapping[str, Any]]]:
+    """The setting's rows of `level` (and `gain`) and the rows of its clean images (the
+    `sharp` config's; the same rows for `sharp`), one per view in view order."""
     mine = _setting_rows(rows, setting)
     if not mine:
         raise InputError(f"no rows of the setting {setting!r} (level {level})")
@@ -393,6 +404,20 @@ def _scene_from_rows(
     n = len(mine)
     if [int(r["view"]) for r in mine] != list(range(n)) or len(clean_rows) != n:
         raise InputError(f"the rows of {setting} are not one per view ({n} rows)")
+    return mine, clean_rows
+
+
+def _scene_from_rows(
+    rows: Iterable[Mapping[str, Any]],
+    setting: str,
+    level: str,
+    gain: float | None,
+    sharp_rows: Iterable[Mapping[str, Any]] | None,
+    downsample: int,
+    pose: str,
+) -> Scene:
+    mine, clean_rows = _checked_rows(rows, setting, level, gain, sharp_rows)
+    n = len(mine)
     col = "image" if downsample == 1 else f"image_{downsample}"
     images = np.stack([_decode_png(v, col)[..., :3] for v in _column(mine, col, setting)])
     clean = np.stack([_decode_png(v, col)[..., :3] for v in _column(clean_rows, col, setting)])
@@ -403,29 +428,13 @@ def _scene_from_rows(
     pb = np.asarray([r["poses_bounds"] for r in mine], dtype=np.float64)
     cv, gl = _cameras(pb)
     if pose == "mean" and not layout.written_pose(level):
-        means = [r.get("mean_c2w") for r in mine]
-        if any(m is None for m in means):
-            raise InputError(
-                f"the rows of {setting} record no mean latent poses (a build from before "
-                "them): use pose='written'"
-            )
-        gl = np.asarray(means, dtype=np.float64)
-        cv = gl * np.array([1.0, -1.0, -1.0, 1.0])
+        cv, gl = _row_mean_cameras(mine, setting)
     h, w = images.shape[1:3]
     focal = pb[0, 14] * w / pb[0, 9]
     k = np.array([[focal, 0, w / 2], [0, focal, h / 2], [0, 0, 1]], dtype=np.float64)
     held = [int(r["view"]) for r in mine if r["held_out"]]
     noise = json.loads(mine[0]["noise"]) if mine[0].get("noise") else None
-    passes: dict[str, np.ndarray] = {}
-    readers = {
-        "depth": ("depth", lambda b: _decode_with(_core.read_depth, b, ".exr")),
-        "normal": ("normals", lambda b: _decode_with(_core.read_exr, b, ".exr")[..., :3]),
-        "mask": ("masks", lambda b: _decode_png(b, "mask")[..., 0] > 0),
-    }
-    for kind, (field_name, read) in readers.items():
-        name = hub_format.pass_column(kind, downsample)
-        if name in mine[0] and mine[0][name] is not None:
-            passes[field_name] = np.stack([read(r[name]) for r in mine])
+    passes = _row_passes(mine, downsample)
 
     def files(rs: list[Mapping[str, Any]]) -> list[Path]:
         return [Path(v["path"]) if isinstance(v, Mapping) else Path() for v in (r[col] for r in rs)]
@@ -450,3 +459,34 @@ def _scene_from_rows(
         pose=pose,
         **passes,
     )
+
+
+def _row_mean_cameras(mine: list[Mapping[str, Any]], setting: str) -> tuple[np.ndarray, np.ndarray]:
+    """(OpenCV, OpenGL) camera-to-world of each row's mean latent pose (`mean_c2w`), as
+    _mean_cameras reads them from meta.json."""
+    means = [r.get("mean_c2w") for r in mine]
+    if any(m is None for m in means):
+        raise InputError(
+            f"the rows of {setting} record no mean latent poses (a build from before "
+            "them): use pose='written'"
+        )
+    gl = np.asarray(means, dtype=np.float64)
+    return gl * np.array([1.0, -1.0, -1.0, 1.0]), gl
+
+
+def _row_passes(mine: list[Mapping[str, Any]], downsample: int) -> dict[str, np.ndarray]:
+    """The pass columns of the rows at one size, as Scene's fields (none without), as
+    _passes reads the files."""
+    from blurset.services import hub_format
+
+    passes: dict[str, np.ndarray] = {}
+    readers = {
+        "depth": ("depth", lambda b: _decode_with(_core.read_depth, b, ".exr")),
+        "normal": ("normals", lambda b: _decode_with(_core.read_exr, b, ".exr")[..., :3]),
+        "mask": ("masks", lambda b: _decode_png(b, "mask")[..., 0] > 0),
+    }
+    for kind, (field_name, read) in readers.items():
+        name = hub_format.pass_column(kind, downsample)
+        if name in mine[0] and mine[0][name] is not None:
+            passes[field_name] = np.stack([read(r[name]) for r in mine])
+    return passes

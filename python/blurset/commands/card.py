@@ -387,15 +387,8 @@ def make_card(
     levels = list(dataset.get("levels") or metas[0].get("levels") or [])
     licences = Counter(str(o.get("license", attribution.UNKNOWN)) for o in objects.values())
     name = pretty_name or f"blurset Objaverse-Blur: {build.resolve().name}"
-    n_images = int(counts.get("images", 0))
     noise_docs = _noise_outputs(build, noise)
-    header = {
-        "pretty_name": name,
-        **licence_header(licences),
-        "task_categories": list(TASKS),
-        "size_categories": [size_category(n_images)],
-        "tags": list(TAGS) + (["denoising"] if noise_docs else []),
-    }
+    header = _card_header(name, licences, int(counts.get("images", 0)), bool(noise_docs))
     hub_doc = _hub_doc(hub, build) if hub is not None else None
     if hub_doc is not None:
         header.update(hub_header(hub, hub_doc))  # type: ignore[arg-type]
@@ -404,32 +397,8 @@ def make_card(
     out: list[str] = [yaml_header(header), f"# {name}", ""]
     out += _contents(name, dataset, splits, m0, levels, res)
     if hub_doc is not None:
-        # The card of a hub export describes its shards; the folders are the build's.
-        out += [
-            "This repository holds the build as Parquet shards (`blurset export --for hub`):",
-            "",
-            "```",
-            "export.json                                  every shard: its config, split, "
-            "settings, rows and sha256",
-            "data/<config>/<split>-00000-of-00004.parquet  one config per level (and gain), "
-            "whole settings per shard",
-            "```",
-            "",
-            "The layout above is the build's, which the shards were made from; "
-            "`blurset verify .` checks every shard and decodes every image.",
-            "",
-        ]
-    if any((s / layout.SHARP / layout.LINEAR).is_dir() for s in settings[:1]):
-        out += [
-            "Each level also holds `linear/<view>.exr`: the linear premultiplied RGBA "
-            "image before compositing and sRGB.",
-            "",
-        ]
-    passes = (m0.get("render") or {}).get("passes_are") or {}
-    if passes:
-        out += ["Per view, beside the sharp images (`build --passes`):", ""]
-        out += [f"- **{k}**: {what}" for k, what in passes.items()]
-        out += [""]
+        out += _hub_shards()
+    out += _per_view_outputs(settings, m0)
     out += _construction(cfg, m0, metas, levels)
     out += _defocus_table(metas, levels)
     for path, doc in noise_docs:
@@ -442,6 +411,53 @@ def make_card(
     out += _attribution(objects, licences)
     out += ["## Citation", "", "```bibtex", BIBTEX, "```", ""]
     return "\n".join(out)
+
+
+def _card_header(name: str, licences: Counter, n_images: int, denoising: bool) -> dict:
+    """The card's YAML header before a hub export's configs: what the Hub indexes."""
+    return {
+        "pretty_name": name,
+        **licence_header(licences),
+        "task_categories": list(TASKS),
+        "size_categories": [size_category(n_images)],
+        "tags": list(TAGS) + (["denoising"] if denoising else []),
+    }
+
+
+def _hub_shards() -> list[str]:
+    """The card of a hub export describes its shards; the folders are the build's."""
+    return [
+        "This repository holds the build as Parquet shards (`blurset export --for hub`):",
+        "",
+        "```",
+        "export.json                                  every shard: its config, split, "
+        "settings, rows and sha256",
+        "data/<config>/<split>-00000-of-00004.parquet  one config per level (and gain), "
+        "whole settings per shard",
+        "```",
+        "",
+        "The layout above is the build's, which the shards were made from; "
+        "`blurset verify .` checks every shard and decodes every image.",
+        "",
+    ]
+
+
+def _per_view_outputs(settings: list[Path], m0: dict) -> list[str]:
+    """What a view holds beside its images (`linear/`, `build --passes`), as the first
+    setting has it."""
+    out: list[str] = []
+    if any((s / layout.SHARP / layout.LINEAR).is_dir() for s in settings[:1]):
+        out += [
+            "Each level also holds `linear/<view>.exr`: the linear premultiplied RGBA "
+            "image before compositing and sRGB.",
+            "",
+        ]
+    passes = (m0.get("render") or {}).get("passes_are") or {}
+    if passes:
+        out += ["Per view, beside the sharp images (`build --passes`):", ""]
+        out += [f"- **{k}**: {what}" for k, what in passes.items()]
+        out += [""]
+    return out
 
 
 def _contents(
@@ -569,7 +585,8 @@ def _render_table(metas: list[dict], levels: list[str], target: Any) -> list[str
     return [*rows, ""]
 
 
-def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> list[str]:
+def _parameter_table(cfg: dict, m0: dict, metas: list[dict]) -> list[str]:
+    """The sampled parameters beside the paper's, then those only this build states."""
     sampling = m0.get("sampling") or {}
     render = m0.get("render") or {}
 
@@ -612,6 +629,12 @@ def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> 
     ]
     for label, value in extra:
         table.append(f"| {label} | - | {_fmt(value)} |")
+    return table
+
+
+def _construction(cfg: dict, m0: dict, metas: list[dict], levels: list[str]) -> list[str]:
+    render = m0.get("render") or {}
+    table = _parameter_table(cfg, m0, metas)
     return [
         "## Construction",
         "",

@@ -259,6 +259,12 @@ fn write_dataset_json(py: Python<'_>, path: PathBuf, doc: &Bound<'_, PyAny>) -> 
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    register_names(m)?;
+    register_functions(m)
+}
+
+/// The module's names of markers, folders and files.
+fn register_names(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MARKER", core::MARKER)?;
     m.add("PARTIAL_SUFFIX", core::PARTIAL_SUFFIX)?;
     m.add("SHARP", core::SHARP)?;
@@ -281,6 +287,11 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     ] {
         m.add(name, value)?;
     }
+    Ok(())
+}
+
+/// The module's functions.
+fn register_functions(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(images_dir, m)?)?;
     m.add_function(wrap_pyfunction!(work_dir, m)?)?;
     m.add_function(wrap_pyfunction!(object_lock, m)?)?;

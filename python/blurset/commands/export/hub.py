@@ -383,6 +383,31 @@ def _samples(im: dict, lv: dict, kind: dict, sharp_render: dict) -> int | None:
     return _int_or_none(sharp_render.get("sharp_samples"))
 
 
+def _view_cells(
+    rec: dict, lv: dict, im: dict, kind: dict, row: np.ndarray, mean: Any, samples: int | None
+) -> dict[str, Any]:
+    """The columns of a view's row that its pose row and its record give (`rec`, `lv`,
+    `im`, `kind`: as _setting_rows reads them for the view)."""
+    coc = (rec.get("defocus") or {}).get("coc_px")
+    return {
+        "focal": float(row[14]),
+        "near": float(row[15]),
+        "far": float(row[16]),
+        "poses_bounds": row.tolist(),
+        "c2w": _c2w_opengl(row),
+        "mean_c2w": mean,
+        "w_l": _float_or_none(lv.get("w_l")),
+        "motion_px": _float_or_none(lv.get("motion_px")),
+        "latents": _int_or_none(lv.get("latents")) if lv else kind["latents"],
+        "samples": samples,
+        "amplitude_px": kind["amplitude_px"],
+        "path_px": kind["path_px"],
+        "render_psnr_db": _float_or_none(im.get("render_psnr_db")),
+        "coc_px": [float(c) for c in coc] if isinstance(coc, list) else None,
+        "meta": json.dumps(rec, sort_keys=True),
+    }
+
+
 def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[str, list]:
     """The columns of one setting's rows of one config."""
     sdir = hp.build / setting
@@ -442,22 +467,8 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
         cols["held_out"].append(is_held)
         cols["width"].append(w)
         cols["height"].append(h)
-        cols["focal"].append(float(rows[v, 14]))
-        cols["near"].append(float(rows[v, 15]))
-        cols["far"].append(float(rows[v, 16]))
-        cols["poses_bounds"].append(rows[v].tolist())
-        cols["c2w"].append(_c2w_opengl(rows[v]))
-        cols["mean_c2w"].append(mean)
-        cols["w_l"].append(_float_or_none(lv.get("w_l")))
-        cols["motion_px"].append(_float_or_none(lv.get("motion_px")))
-        cols["latents"].append(_int_or_none(lv.get("latents")) if lv else kind["latents"])
-        cols["samples"].append(samples)
-        cols["amplitude_px"].append(kind["amplitude_px"])
-        cols["path_px"].append(kind["path_px"])
-        cols["render_psnr_db"].append(_float_or_none(im.get("render_psnr_db")))
-        coc = (rec.get("defocus") or {}).get("coc_px")
-        cols["coc_px"].append([float(c) for c in coc] if isinstance(coc, list) else None)
-        cols["meta"].append(json.dumps(rec, sort_keys=True))
+        for name, value in _view_cells(rec, lv, im, kind, rows[v], mean, samples).items():
+            cols[name].append(value)
         if noise is not None:
             cols["sigma_read"].append(_float_or_none(noise.get("sigma_read")))
             cols["sigma_shot"].append(_float_or_none(noise.get("sigma_shot")))

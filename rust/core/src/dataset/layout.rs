@@ -657,10 +657,24 @@ mod tests {
         }
     }
 
+    /// The smallest file `setting_problem` takes for a whole PNG.
+    fn tiny_png() -> Vec<u8> {
+        let mut png = PNG_MAGIC.to_vec();
+        png.extend([0u8; 60]);
+        png.extend(b"\0\0\0\0IEND\xaeB`\x82");
+        png
+    }
+
+    /// A fresh folder for a test setting, named after `tag`.
+    fn problem_dir(tag: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("blurset-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        dir
+    }
+
     #[test]
     fn setting_problems_are_named() -> Result<()> {
-        let dir = std::env::temp_dir().join(format!("blurset-problem-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = problem_dir("problem");
         let put = |rel: &str, bytes: &[u8]| write_atomic(&dir.join(rel), bytes);
         assert_eq!(
             setting_problem(&dir).as_deref(),
@@ -682,9 +696,7 @@ mod tests {
             setting_problem(&dir).as_deref(),
             Some("level folder sharp/ is missing")
         );
-        let mut png = PNG_MAGIC.to_vec();
-        png.extend([0u8; 60]);
-        png.extend(b"\0\0\0\0IEND\xaeB`\x82");
+        let png = tiny_png();
         put("sharp/images/000.png", &png)?;
         assert_eq!(
             setting_problem(&dir).as_deref(),
@@ -707,6 +719,19 @@ mod tests {
         );
         put("sharp/poses_bounds.npy", &[0u8; 400])?;
         assert_eq!(setting_problem(&dir), None);
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn problems_of_copies_and_of_many_files_are_named() -> Result<()> {
+        let dir = problem_dir("problems");
+        let put = |rel: &str, bytes: &[u8]| write_atomic(&dir.join(rel), bytes);
+        let png = tiny_png();
+        put("transforms.json", b"{}")?;
+        put("sharp/images/000.png", &png)?;
+        put("sharp/images/001.png", &png)?;
+        put("sharp/poses_bounds.npy", &[0u8; 400])?;
         // A build with `images_<f>/` copies: each must hold every view, whole.
         put(
             "meta.json",
@@ -749,12 +774,11 @@ mod tests {
         Ok(())
     }
 
-    #[test]
-    fn exrs_of_a_complete_setting_are_decoded() -> Result<()> {
+    /// A complete sharp-only setting of two views with linear and depth EXRs.
+    fn exr_setting(tag: &str) -> Result<std::path::PathBuf> {
         use crate::image::exr::write::write_exr;
         use crate::image::geometry::{write_depth_exr, Geometry};
-        let dir = std::env::temp_dir().join(format!("blurset-exrs-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = problem_dir(tag);
         let put = |rel: &str, bytes: &[u8]| write_atomic(&dir.join(rel), bytes);
         put(
             "meta.json",
@@ -762,9 +786,7 @@ mod tests {
         )?;
         put("transforms.json", b"{}")?;
         put("sharp/poses_bounds.npy", &[0u8; 400])?;
-        let mut png = PNG_MAGIC.to_vec();
-        png.extend([0u8; 60]);
-        png.extend(b"\0\0\0\0IEND\xaeB`\x82");
+        let png = tiny_png();
         let (w, h) = (48usize, 40usize);
         // Varied pixels, so each block is compressed data a flipped byte breaks.
         let px: Vec<f32> = (0..w * h * 4)
@@ -786,7 +808,21 @@ mod tests {
             )?;
             write_depth_exr(&dir.join(format!("sharp/depth/{v}.exr")), &g)?;
         }
+        Ok(dir)
+    }
+
+    #[test]
+    fn a_complete_setting_with_exrs_has_no_problem() -> Result<()> {
+        let dir = exr_setting("exrs-whole")?;
         assert_eq!(setting_problems(&dir), vec![]);
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn exrs_of_a_complete_setting_are_decoded() -> Result<()> {
+        let dir = exr_setting("exrs")?;
+        let put = |rel: &str, bytes: &[u8]| write_atomic(&dir.join(rel), bytes);
         let read = |rel: &str| std::fs::read(dir.join(rel)).unwrap_or_default();
         let whole_linear = read("sharp/linear/001.exr");
         let whole_depth = read("sharp/depth/000.exr");

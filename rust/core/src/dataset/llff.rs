@@ -664,8 +664,9 @@ mod tests {
         Ok(())
     }
 
-    #[test]
-    fn level_transforms_name_their_files_and_split_the_views() -> Result<()> {
+    /// A 5-view setting with a sharp and a blur_2 level, its poses written (test views
+    /// 0 and 4), in a fresh folder named after `tag`.
+    fn written_setting(tag: &str) -> Result<std::path::PathBuf> {
         let cfg = crate::plan::sampling_config::SamplingConfig {
             views: 5,
             latents: 2,
@@ -674,16 +675,24 @@ mod tests {
         };
         let verts: Vec<[f32; 3]> = vec![[-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]];
         let plan = crate::plan::sampling::plan_setting(&cfg, "u", 0.0, 4, [1.0; 3], &verts)?;
-        let dir = tmp("setting");
+        let dir = tmp(tag);
         let levels = ["sharp".to_string(), "blur_2".to_string()];
         for l in &levels {
             std::fs::create_dir_all(dir.join(l)).map_err(|e| Error::io("mkdir", &dir, e))?;
         }
         write_setting_poses(&plan, &dir, &levels, &[0, 4], true)?;
-        let read = |p: std::path::PathBuf| -> Result<serde_json::Value> {
-            let t = std::fs::read_to_string(&p).map_err(|e| Error::io("read", &p, e))?;
-            serde_json::from_str(&t).map_err(|e| Error::Value(e.to_string()))
-        };
+        Ok(dir)
+    }
+
+    fn read_json(p: std::path::PathBuf) -> Result<serde_json::Value> {
+        let t = std::fs::read_to_string(&p).map_err(|e| Error::io("read", &p, e))?;
+        serde_json::from_str(&t).map_err(|e| Error::Value(e.to_string()))
+    }
+
+    #[test]
+    fn level_transforms_name_their_files_and_split_the_views() -> Result<()> {
+        let dir = written_setting("setting")?;
+        let read = read_json;
         let setting = read(dir.join("transforms.json"))?;
         let blur = read(dir.join("blur_2/transforms.json"))?;
         assert_eq!(blur["test_view_images"], "sharp");
@@ -707,6 +716,14 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(e.contains("view 9"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn a_noisy_scene_is_written_from_the_setting_file() -> Result<()> {
+        let dir = written_setting("noisy-scene")?;
+        let read = read_json;
         // A noisy copy's scene from the setting's file: an integral gain is an integer.
         let noisy = dir.join("gain.json");
         let fields = |gain| SceneFields {

@@ -577,9 +577,16 @@ mod tests {
         Ok(())
     }
 
-    #[test]
-    fn a_rerun_certifies_only_what_it_wrote() -> Result<()> {
-        let d = tmp("rerun");
+    /// The manifest's lines, by file.
+    fn listed(d: &Path) -> Result<BTreeMap<String, String>> {
+        let text = std::fs::read_to_string(d.join(MANIFEST)).unwrap_or_default();
+        Ok(parse_manifest(&text, d)?.into_iter().collect())
+    }
+
+    /// Two settings and a card under a manifest (its lines returned), damaged since: one
+    /// image copied over the other, the card edited, one gone.
+    fn damaged(name: &str) -> Result<(PathBuf, BTreeMap<String, String>)> {
+        let d = tmp(name);
         put(&d, "dataset.json", b"{}")?;
         put(&d, "a_000/meta.json", b"{}")?;
         put(&d, "a_000/sharp/images/000.png", b"one")?;
@@ -588,16 +595,29 @@ mod tests {
         put(&d, "b_000/sharp/images/000.png", b"three")?;
         put(&d, "README.md", b"card")?;
         assert_eq!(write_manifest(&d)?, 7);
-        let listed = |d: &Path| -> Result<BTreeMap<String, String>> {
-            let text = std::fs::read_to_string(d.join(MANIFEST)).unwrap_or_default();
-            Ok(parse_manifest(&text, d)?.into_iter().collect())
-        };
         let before = listed(&d)?;
-        // Damage since: one image copied over the other, the card edited, one gone.
         put(&d, "a_000/sharp/images/001.png", b"one")?;
         put(&d, "README.md", b"edited")?;
         std::fs::remove_file(d.join("b_000/sharp/images/000.png"))
             .map_err(|e| Error::io("rm", &d, e))?;
+        Ok((d, before))
+    }
+
+    /// A rerun of `damaged` that wrote only dataset.json and a new setting's file, beside
+    /// a user's files (one in a setting, one at the top); the problems found before it.
+    fn rerun_writing_dataset_json(d: &Path) -> Result<Vec<(String, ManifestProblem)>> {
+        let problems = check_manifest(d)?;
+        put(d, "dataset.json", b"{\"new\": 1}")?;
+        put(d, "c_000/meta.json", b"{}")?;
+        put(d, "a_000/mynote.txt", b"mine")?;
+        put(d, "notes.txt", b"mine")?;
+        rewrite_manifest(d, &["dataset.json".to_string()], true)?;
+        Ok(problems)
+    }
+
+    #[test]
+    fn a_settings_damage_is_found_in_that_setting() -> Result<()> {
+        let (d, _) = damaged("setting")?;
         assert_eq!(
             manifest_mismatches(&d, "a_000")?,
             vec![(
@@ -613,14 +633,16 @@ mod tests {
             )]
         );
         assert_eq!(manifest_mismatches(&d, "a_00")?, vec![]); // a folder, not a prefix
-        let problems = check_manifest(&d)?;
-        // A rerun that wrote only dataset.json and a new file: nothing it did not write
-        // is certified anew, and a user's file in a setting is never listed.
-        put(&d, "dataset.json", b"{\"new\": 1}")?;
-        put(&d, "c_000/meta.json", b"{}")?;
-        put(&d, "a_000/mynote.txt", b"mine")?;
-        put(&d, "notes.txt", b"mine")?;
-        rewrite_manifest(&d, &["dataset.json".to_string()], true)?;
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn a_rerun_certifies_only_what_it_wrote() -> Result<()> {
+        let (d, before) = damaged("rerun")?;
+        // Nothing the rerun did not write is certified anew, and a user's file in a
+        // setting is never listed.
+        let problems = rerun_writing_dataset_json(&d)?;
         let after = listed(&d)?;
         let unlisted = |rel: &str| (rel.to_string(), ManifestProblem::Unlisted);
         let mut now = problems.clone();
@@ -640,14 +662,17 @@ mod tests {
         ] {
             assert_eq!(after[kept], before[kept], "{kept}");
         }
-        // A redone setting (written) is hashed anew, a removed one drops its lines.
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn a_redone_setting_is_hashed_anew_and_a_removed_one_drops_its_lines() -> Result<()> {
+        let (d, _) = damaged("redone")?;
+        rerun_writing_dataset_json(&d)?;
         std::fs::remove_dir_all(d.join("b_000")).map_err(|e| Error::io("rm", &d, e))?;
         let c = "c_000".to_string();
-        rewrite_manifest(
-            &d,
-            &["a_000".to_string(), "b_000".to_string(), c.clone()],
-            true,
-        )?;
+        rewrite_manifest(&d, &["a_000".to_string(), "b_000".to_string(), c], true)?;
         let problems = check_manifest(&d)?;
         assert_eq!(
             problems,
@@ -656,9 +681,19 @@ mod tests {
                 ("notes.txt".to_string(), ManifestProblem::Unlisted)
             ]
         );
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn without_a_manifest_only_what_is_vouched_for_is_listed() -> Result<()> {
+        let (d, _) = damaged("vouched")?;
+        rerun_writing_dataset_json(&d)?;
+        std::fs::remove_dir_all(d.join("b_000")).map_err(|e| Error::io("rm", &d, e))?;
         // Without a manifest (or without keeping it) only what is vouched for is listed.
         std::fs::remove_file(d.join(MANIFEST)).map_err(|e| Error::io("rm", &d, e))?;
         assert_eq!(rewrite_manifest(&d, &[], true)?, 0);
+        let c = "c_000".to_string();
         assert_eq!(rewrite_manifest(&d, &["a_000".to_string(), c], false)?, 4);
         assert_eq!(manifest_mismatches(&d, "a_000")?, vec![]);
         assert!(!listed(&d)?.contains_key("notes.txt"));

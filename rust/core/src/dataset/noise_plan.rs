@@ -1006,9 +1006,10 @@ mod tests {
         Ok(dir)
     }
 
-    #[test]
-    fn a_scene_plan_holds_seeds_keys_sigmas_and_its_records() -> Result<()> {
-        let dir = scene("plan", 5)?;
+    /// The plan of a five-view scene at gains 1, 4 and 20 (seed 7, two frames, every
+    /// third view clean, images_2 too), its folder and the default levels.
+    fn scene_plan(tag: &str) -> Result<(PathBuf, NoiseLevels, NoisePlan)> {
+        let dir = scene(tag, 5)?;
         let c = cfg(&[
             ("gains", gains(&["1", "4", "20"])),
             ("seed", Raw::Int(7)),
@@ -1018,6 +1019,12 @@ mod tests {
         ])?;
         let t = NoiseLevels::DEFAULT;
         let plan = plan_scene(&dir, &dir.join("out"), &c, &t)?;
+        Ok((dir, t, plan))
+    }
+
+    #[test]
+    fn a_scene_plan_records_the_runs_options_and_the_scene_by_name() -> Result<()> {
+        let (dir, t, plan) = scene_plan("plan")?;
         assert_eq!((plan.gamma.as_str(), plan.units.len()), ("2.2", 1));
         // The run's options as noise_dataset.json records them; the scene by its name.
         let p = &plan.params;
@@ -1031,6 +1038,13 @@ mod tests {
             Some(plan.input.as_str()),
             dir.file_name().and_then(|n| n.to_str())
         );
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn a_scene_unit_holds_its_clean_views_names_and_rows_per_frame() -> Result<()> {
+        let (dir, _, plan) = scene_plan("unit")?;
         let u = &plan.units[0];
         assert_eq!(u.clean_views, vec![0, 3]);
         assert_eq!(u.names[..3], ["000_f00", "000_f01", "001_f00"]);
@@ -1041,6 +1055,14 @@ mod tests {
             (u.rows.len(), u.rows[1][4], u.rows[1][9], u.rows[2][0]),
             (10, 4.0, 8.0, 2.0)
         );
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn each_gain_holds_its_key_sigmas_and_record() -> Result<()> {
+        let (dir, t, plan) = scene_plan("gains")?;
+        let u = &plan.units[0];
         for (g, want) in u.gains.iter().zip([1.0, 4.0, 20.0]) {
             let (sr, ss) = t.sigmas(want)?;
             assert_eq!(

@@ -458,6 +458,24 @@ fn read_view(
             v.far, v.near
         )
     })?;
+    let images = read_view_images(v, path)?;
+    let kinds = read_view_kinds(v, sharp_copy, path)?;
+    Ok(ViewRecord {
+        index: i,
+        scene_range: sr,
+        flatness: v.flatness,
+        depth_range: v.depth_range,
+        orientation: v.orientation,
+        w_u: v.w_u,
+        levels,
+        images,
+        kinds,
+    })
+}
+
+/// The images a view records, by level: (samples, render PSNR).
+fn read_view_images(v: &MetaView, path: &Path) -> Result<BTreeMap<u32, (u64, f64)>> {
+    let i = v.index;
     let mut images = BTreeMap::new();
     for (dir, im) in &v.images {
         let l = parse_level_dir(dir).ok_or_else(|| {
@@ -468,6 +486,16 @@ fn read_view(
         })?;
         images.insert(l, (im.samples, im.render_psnr_db));
     }
+    Ok(images)
+}
+
+/// Each degradation kind's statistic per level (none for a `sharp_copy`).
+fn read_view_kinds(
+    v: &MetaView,
+    sharp_copy: bool,
+    path: &Path,
+) -> Result<BTreeMap<&'static str, BTreeMap<u32, f64>>> {
+    let i = v.index;
     let mut kinds = BTreeMap::new();
     for kind in KIND_STATS.iter().filter(|_| !sharp_copy) {
         let Some(levels) = v.rest.get(kind.name).and_then(|x| x.as_object()) else {
@@ -491,17 +519,7 @@ fn read_view(
         }
         kinds.insert(kind.stat.0, stat);
     }
-    Ok(ViewRecord {
-        index: i,
-        scene_range: sr,
-        flatness: v.flatness,
-        depth_range: v.depth_range,
-        orientation: v.orientation,
-        w_u: v.w_u,
-        levels,
-        images,
-        kinds,
-    })
+    Ok(kinds)
 }
 
 /// A view's blur levels by number, each w_l checked; every key goes into `level_keys`
@@ -961,9 +979,12 @@ mod tests {
         Ok(())
     }
 
-    #[test]
-    fn numbers_counts_and_skips() -> Result<()> {
-        let t = TempDir::new("numbers")?;
+    /// Three complete settings of two objects, two half-written ones (a copy with its
+    /// marker under .partial, one without a marker), a worker's scratch folder, a user's
+    /// folder, failures.jsonl with a torn last line, and splits naming a setting gone;
+    /// no dataset.json yet. Their statistics.
+    fn numbers(tag: &str) -> Result<(TempDir, BuildStats)> {
+        let t = TempDir::new(tag)?;
         let out = &t.0;
         setting(
             out,
@@ -1007,9 +1028,21 @@ mod tests {
             .to_string(),
         )?;
         let s = build_stats(out)?;
+        Ok((t, s))
+    }
+
+    #[test]
+    fn complete_settings_are_read_and_half_written_ones_named() -> Result<()> {
+        let (_t, s) = numbers("complete")?;
         let names: Vec<&str> = s.settings.iter().map(|x| x.name.as_str()).collect();
         assert_eq!(names, ["a_0", "a_90", "b_0"]);
         assert_eq!(s.incomplete, ["c_0.partial", "c_90"]);
+        Ok(())
+    }
+
+    #[test]
+    fn per_view_numbers_follow_the_settings_in_order() -> Result<()> {
+        let (_t, s) = numbers("views")?;
         assert_eq!(s.scene_range, [3.0 / 2.0, 5.0 / 4.0, 2.0 / 1.0, 4.0 / 3.0]);
         assert_eq!(s.view_setting, [0, 0, 1, 2]);
         assert_eq!(s.view_index, [0, 1, 0, 0]);
@@ -1020,6 +1053,12 @@ mod tests {
             [Some(1.0), Some(2.0), Some(1.0), Some(1.0)]
         );
         assert_eq!(s.latent_frames[&2], [Some(6); 4]);
+        Ok(())
+    }
+
+    #[test]
+    fn counts_of_objects_views_images_and_the_split() -> Result<()> {
+        let (_t, s) = numbers("counts")?;
         let c = &s.counts;
         assert_eq!((c.objects, c.settings, c.views), (2, 3, 4));
         assert_eq!(c.images, 2 * 3 + 3 + 2);
@@ -1028,12 +1067,25 @@ mod tests {
             (Some(1), Some(1), Some(2))
         );
         assert_eq!(c.unsplit_settings, Some(0));
+        Ok(())
+    }
+
+    #[test]
+    fn failures_are_kept_before_dataset_json_and_a_torn_line_skipped() -> Result<()> {
+        let (_t, s) = numbers("failures")?;
+        let c = &s.counts;
         // No dataset.json yet (a first build still running): object records stay, even
         // for `a`, whose settings are complete; the torn last line is skipped.
         assert_eq!((c.failures, c.incomplete_settings), (2, 2));
         assert_eq!(c.failure_lines_skipped, 1);
         let reasons: Vec<_> = s.failures.iter().map(|f| f.reason.as_deref()).collect();
         assert_eq!(reasons, [Some("retried ok"), Some("bad glb")]);
+        Ok(())
+    }
+
+    #[test]
+    fn summaries_of_the_numbers_and_a_document_without_nan() -> Result<()> {
+        let (_t, s) = numbers("summary")?;
         let sum = |q: &str| s.summary.iter().find(|x| x.quantity == q).cloned();
         let b1 = sum("blur_weight_1").ok_or_else(|| Error::Value("no summary".into()))?;
         assert_eq!(

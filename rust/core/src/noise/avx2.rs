@@ -88,6 +88,16 @@ pub(super) struct Rgb8Batch<'a> {
     pub v0: u64,
 }
 
+/// The inputs of the vector loops for the lanes' channels: one set per phase of a
+/// 24-value (8-pixel) cycle.
+struct Lanes {
+    table_base: __m256i,
+    first: __m256i,
+    span: __m256i,
+    start_base: __m256i,
+    thr_base: __m256i,
+}
+
 /// Noise the values of a batch, 8 at a time; returns how many were done (a multiple of
 /// 8: the caller does the rest with the scalar kernel).
 ///
@@ -95,7 +105,7 @@ pub(super) struct Rgb8Batch<'a> {
 /// The CPU must support AVX2. `table` holds 3 · 256 (clean, std) pairs, channel-major.
 #[target_feature(enable = "avx2")]
 pub(super) unsafe fn rgb8(
-    b: Rgb8Batch<'_>,
+    mut b: Rgb8Batch<'_>,
     z: &Ziggurat,
     table: &[[f32; 2]],
     enc: &Rgb8Encoders,
@@ -110,46 +120,60 @@ pub(super) unsafe fn rgb8(
     if table.len() < 3 * 256 {
         return 0;
     }
-    // Pairs are gathered as 64-bit elements: four per gather, half the elements of
-    // two 32-bit gathers.
-    let table = table.as_ptr() as *const i64;
-    let zig = z.pairs32.as_ptr() as *const i64;
-    let start = enc.start.as_ptr() as *const i32;
-    let thr = enc.thresholds.as_ptr() as *const i64;
-    // Lane channels for the three vector phases of a 24-value (8-pixel) cycle.
+    let lanes = lanes_of(enc);
+    noise_pass(&mut b, z, table, &lanes, fallback_key, n);
+    encode_pass(&mut b, enc, &lanes, n)
+}
+
+/// The lanes' constants for the three vector phases of a 24-value (8-pixel) cycle.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn lanes_of(enc: &Rgb8Encoders) -> [Lanes; 3] {
+    // Lane channels of each phase.
     let phases = [
         _mm256_setr_epi32(0, 1, 2, 0, 1, 2, 0, 1),
         _mm256_setr_epi32(2, 0, 1, 2, 0, 1, 2, 0),
         _mm256_setr_epi32(1, 2, 0, 1, 2, 0, 1, 2),
     ];
-    struct Lanes {
-        table_base: __m256i,
-        first: __m256i,
-        span: __m256i,
-        start_base: __m256i,
-        thr_base: __m256i,
+    phases.map(|ch| {
+        // SAFETY: the caller runs on AVX2; this closure only forwards to `lane`.
+        unsafe { lane(enc, ch) }
+    })
+}
+
+/// The lanes' constants for lanes whose channels are `ch`.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn lane(enc: &Rgb8Encoders, ch: __m256i) -> Lanes {
+    Lanes {
+        table_base: _mm256_slli_epi32(ch, 8), // 256 (clean, std) pairs per channel
+        first: per_lane(enc.first_bin, ch),
+        span: per_lane(enc.span, ch),
+        start_base: per_lane(enc.start_base, ch),
+        thr_base: per_lane(enc.threshold_base, ch),
     }
-    // (A loop, not a closure: closures do not take the function's target features.)
-    let mut lanes = Vec::with_capacity(3);
-    for ch in phases {
-        lanes.push(Lanes {
-            table_base: _mm256_slli_epi32(ch, 8), // 256 (clean, std) pairs per channel
-            first: per_lane(enc.first_bin, ch),
-            span: per_lane(enc.span, ch),
-            start_base: per_lane(enc.start_base, ch),
-            thr_base: per_lane(enc.threshold_base, ch),
-        });
-    }
+}
+
+/// First pass, the noise: the linear noisy values of the batch's first `n` values (a
+/// multiple of 8 of them) into `b.lin`.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn noise_pass(
+    b: &mut Rgb8Batch<'_>,
+    z: &Ziggurat,
+    table: &[[f32; 2]],
+    lanes: &[Lanes; 3],
+    fallback_key: u64,
+    n: usize,
+) {
+    // Pairs are gathered as 64-bit elements: four per gather, half the elements of
+    // two 32-bit gathers.
+    let table = table.as_ptr() as *const i64;
+    let zig = z.pairs32.as_ptr() as *const i64;
     let byte_mask = _mm256_set1_epi32(127);
     let sign_mask = _mm256_set1_epi32(128);
     let half = _mm256_set1_ps(0.5);
     let scale = _mm256_set1_ps(1.0 / 16_777_216.0);
-    let zero = _mm256_setzero_si256();
-    // Byte 0 of every 32-bit lane, per 128-bit half.
-    let pick = _mm256_setr_epi8(
-        0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, 0, 4, 8, 12, -1, -1, -1, -1,
-        -1, -1, -1, -1, -1, -1, -1, -1,
-    );
     let mut i = 0;
     while i + 8 <= n {
         let l = &lanes[(i / 8) % 3];
@@ -184,8 +208,27 @@ pub(super) unsafe fn rgb8(
         _mm256_storeu_ps(b.lin.as_mut_ptr().add(i), noisy);
         i += 8;
     }
-    // Second pass, the encoding: split from the noise so that each loop has a short
-    // chain of dependent gathers and many iterations can be in flight.
+}
+
+/// Second pass, the encoding of `b.lin` into `b.out`: split from the noise so that each
+/// loop has a short chain of dependent gathers and many iterations can be in flight.
+/// Returns how many values were done.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn encode_pass(
+    b: &mut Rgb8Batch<'_>,
+    enc: &Rgb8Encoders,
+    lanes: &[Lanes; 3],
+    n: usize,
+) -> usize {
+    let start = enc.start.as_ptr() as *const i32;
+    let thr = enc.thresholds.as_ptr() as *const i64;
+    let zero = _mm256_setzero_si256();
+    // Byte 0 of every 32-bit lane, per 128-bit half.
+    let pick = _mm256_setr_epi8(
+        0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, 0, 4, 8, 12, -1, -1, -1, -1,
+        -1, -1, -1, -1, -1, -1, -1, -1,
+    );
     let mut i = 0;
     while i + 8 <= n {
         let l = &lanes[(i / 8) % 3];

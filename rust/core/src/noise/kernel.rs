@@ -2,7 +2,7 @@
 //! per-code tables, the normals drawn `LANES` Philox blocks at a time. With AVX2 the
 //! 8-bit RGB case runs in `avx2`, bit for bit the scalar path.
 use super::model::{Gamma, NoiseModel};
-use super::ziggurat::{zig_normal, ziggurat};
+use super::ziggurat::{zig_normal, ziggurat, Ziggurat};
 use crate::error::Result;
 use crate::image::io::{Image, Samples};
 use crate::rng::{self, PHILOX_M0, PHILOX_M1, PHILOX_W0, PHILOX_W1};
@@ -267,11 +267,15 @@ fn apply_layout<T: Sample, const CC: usize, const CH: usize>(
     let z = ziggurat();
     let w = img.width as usize;
     let lc = if CH > CC { 4 } else { 3 };
-    let max = img.samples.max_code() as f32;
     let fallback_key = rng::derive_seed(key, &[rng::fnv1a64(b"ziggurat_fallback"), stream]);
-    let tables: [&[[f32; 2]]; CC] =
-        std::array::from_fn(|c| &plan.table[c * plan.codes..(c + 1) * plan.codes]);
-    let encoders: [EncoderView<'_>; CC] = std::array::from_fn(|c| plan.encoders[c].view());
+    let cx = BatchCx::<CC> {
+        plan,
+        z,
+        tables: std::array::from_fn(|c| &plan.table[c * plan.codes..(c + 1) * plan.codes]),
+        encoders: std::array::from_fn(|c| plan.encoders[c].view()),
+        fallback_key,
+        max: img.samples.max_code() as f32,
+    };
     let mut linear = vec![0.0f32; src.len() / CH * lc];
     let mut processed = src.to_vec();
     linear
@@ -298,52 +302,96 @@ fn apply_layout<T: Sample, const CC: usize, const CH: usize>(
                     let out_b = &mut out[p0 * CH..(p0 + np) * CH];
                     let lin_b = &mut lin[p0 * lc..(p0 + np) * lc];
                     let words = &words[skip..skip + np * CC];
-                    let done =
-                        simd_batch::<T, CC, CH>(plan, words, src_b, lin_b, out_b, v0, fallback_key);
-                    if done > 0 {
-                        // The few values the vector kernel left (RGB: value i is channel i % 3).
-                        for i in done..np * CC {
-                            let c = i % CC;
-                            let n = zig_normal(z, words[i], fallback_key, v0 + i as u64);
-                            let [clean, std] = tables[c][src_b[i].code()];
-                            let noisy = clean + std * n;
-                            lin_b[i] = noisy;
-                            out_b[i] = T::from_code(encoders[c].code(noisy));
-                        }
-                        continue;
-                    }
-                    // Channel by channel, so each channel's tables stay in registers, and in
-                    // two passes (noise, then encoding), each with a short dependency chain
-                    // per value so that many values are in flight at once.
-                    for c in 0..CC {
-                        let table = tables[c];
-                        let mut v = v0 + c as u64;
-                        for k in 0..np {
-                            let n = zig_normal(z, words[k * CC + c], fallback_key, v);
-                            let [clean, std] = table[src_b[k * CH + c].code()];
-                            lin_b[k * lc + c] = clean + std * n;
-                            v += CC as u64;
-                        }
-                        let enc = encoders[c];
-                        for k in 0..np {
-                            out_b[k * CH + c] = T::from_code(enc.code(lin_b[k * lc + c]));
-                        }
-                        if CC == 1 {
-                            for l in lin_b.chunks_exact_mut(lc) {
-                                l[1] = l[0];
-                                l[2] = l[0];
-                            }
-                        }
-                    }
-                    if CH > CC {
-                        for (s, l) in src_b.chunks_exact(CH).zip(lin_b.chunks_exact_mut(lc)) {
-                            l[3] = s[CC].code() as f32 / max;
-                        }
-                    }
+                    let batch = Batch {
+                        words,
+                        src: src_b,
+                        lin: lin_b,
+                        out: out_b,
+                        v0,
+                    };
+                    noise_batch::<T, CC, CH>(&cx, batch);
                 }
             },
         );
     (linear, processed)
+}
+
+/// What every batch of one image's noise shares.
+struct BatchCx<'a, const CC: usize> {
+    plan: &'a Plan,
+    z: &'a Ziggurat,
+    tables: [&'a [[f32; 2]]; CC],
+    encoders: [EncoderView<'a>; CC],
+    fallback_key: u64,
+    max: f32,
+}
+
+/// One batch of a row: its random words, source values and both outputs, from value
+/// index `v0`.
+struct Batch<'a, T> {
+    words: &'a [u32],
+    src: &'a [T],
+    lin: &'a mut [f32],
+    out: &'a mut [T],
+    v0: u64,
+}
+
+/// The noise of one batch: the vector kernel where it applies, the scalar one for the
+/// rest. Inlined so the per-layout loops unroll as they did in the caller.
+#[inline(always)]
+fn noise_batch<T: Sample, const CC: usize, const CH: usize>(cx: &BatchCx<'_, CC>, b: Batch<'_, T>) {
+    let Batch {
+        words,
+        src: src_b,
+        lin: lin_b,
+        out: out_b,
+        v0,
+    } = b;
+    let (z, fallback_key) = (cx.z, cx.fallback_key);
+    let (tables, encoders) = (&cx.tables, &cx.encoders);
+    let lc = if CH > CC { 4 } else { 3 };
+    let np = src_b.len() / CH;
+    let done = simd_batch::<T, CC, CH>(cx.plan, words, src_b, lin_b, out_b, v0, fallback_key);
+    if done > 0 {
+        // The few values the vector kernel left (RGB: value i is channel i % 3).
+        for i in done..np * CC {
+            let c = i % CC;
+            let n = zig_normal(z, words[i], fallback_key, v0 + i as u64);
+            let [clean, std] = tables[c][src_b[i].code()];
+            let noisy = clean + std * n;
+            lin_b[i] = noisy;
+            out_b[i] = T::from_code(encoders[c].code(noisy));
+        }
+        return;
+    }
+    // Channel by channel, so each channel's tables stay in registers, and in two passes
+    // (noise, then encoding), each with a short dependency chain per value so that many
+    // values are in flight at once.
+    for c in 0..CC {
+        let table = tables[c];
+        let mut v = v0 + c as u64;
+        for k in 0..np {
+            let n = zig_normal(z, words[k * CC + c], fallback_key, v);
+            let [clean, std] = table[src_b[k * CH + c].code()];
+            lin_b[k * lc + c] = clean + std * n;
+            v += CC as u64;
+        }
+        let enc = encoders[c];
+        for k in 0..np {
+            out_b[k * CH + c] = T::from_code(enc.code(lin_b[k * lc + c]));
+        }
+        if CC == 1 {
+            for l in lin_b.chunks_exact_mut(lc) {
+                l[1] = l[0];
+                l[2] = l[0];
+            }
+        }
+    }
+    if CH > CC {
+        for (s, l) in src_b.chunks_exact(CH).zip(lin_b.chunks_exact_mut(lc)) {
+            l[3] = s[CC].code() as f32 / cx.max;
+        }
+    }
 }
 
 /// Tests compare the vector kernel with the scalar one by switching it off.

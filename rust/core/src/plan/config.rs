@@ -548,6 +548,15 @@ impl BuildConfig {
 
     /// Where the build runs: the options of one executor are refused under the other.
     fn check_executor(&self) -> Result<()> {
+        self.check_ray_address()?;
+        self.check_shard()?;
+        self.check_ray_placement()?;
+        self.check_workers_per_gpu()?;
+        self.check_gpus_per_task()
+    }
+
+    /// `ray_address` only with executor ray.
+    fn check_ray_address(&self) -> Result<()> {
         if self.ray_address.is_some() && self.executor != Executor::Ray {
             return Err(config_error(
                 "ray_address",
@@ -557,6 +566,11 @@ impl BuildConfig {
                 ),
             ));
         }
+        Ok(())
+    }
+
+    /// `shard` is i/N with 0 ≤ i < N.
+    fn check_shard(&self) -> Result<()> {
         if let Some(s) = &self.shard {
             if parse_shard(s).is_none() {
                 return Err(config_error(
@@ -565,6 +579,11 @@ impl BuildConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// Under Ray, which places the tasks, no `gpus` and one worker.
+    fn check_ray_placement(&self) -> Result<()> {
         if self.executor == Executor::Ray {
             // Ray places the tasks: it hands each its GPUs and runs as many as fit.
             if let Some(g) = &self.gpus {
@@ -588,6 +607,12 @@ impl BuildConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// `workers_per_gpu` only on a GPU device, and neither with `workers` nor
+    /// `gpus_per_task`.
+    fn check_workers_per_gpu(&self) -> Result<()> {
         if let Some(k) = self.workers_per_gpu {
             if self.device == Device::Cpu {
                 return Err(config_error(
@@ -608,6 +633,11 @@ impl BuildConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// `gpus_per_task` only with executor ray.
+    fn check_gpus_per_task(&self) -> Result<()> {
         if let Some(g) = self.gpus_per_task {
             if self.executor != Executor::Ray {
                 return Err(config_error(
@@ -1085,41 +1115,24 @@ mod tests {
             .starts_with("timeout inf: must be a number in (0, 31536000]"));
         assert!(err(&[("max_texture_pixels", Raw::Float(f64::INFINITY))])
             .starts_with("max_texture_pixels inf"));
+        assert!(err(&[("samples", Raw::Int(1 << 21))]).contains("1..=1048576"));
+        assert!(err(&[("sharp_samples", Raw::Int(1 << 21))]).contains("1..=1048576"));
+        assert!(err(&[("timeout", Raw::Float(1e308))]).starts_with("timeout 1e308: must be"));
+        assert!(err(&[("object_timeout", Raw::Float(1e308))]).starts_with("object_timeout"));
+        assert!(err(&[("workers_per_gpu", Raw::Int(0))]).starts_with("workers_per_gpu 0"));
+        assert!(err(&[("phi0_deg", Raw::Float(5.0))]).contains("pole"));
+        assert!(err(&[("test_settings", Raw::Int(0))]).starts_with("test_settings 0"));
+        assert!(err(&[("gpus_per_task", Raw::Float(65.0))]).contains("[0, 64]"));
+    }
+
+    #[test]
+    fn lists_must_hold_distinct_values_in_range() {
         assert!(
             err(&[("levels", Raw::List(vec![Raw::Int(1), Raw::Float(2.5)]))])
                 .starts_with("levels [1, 2.5]: must be distinct")
         );
         assert!(err(&[("levels", Raw::List(vec![Raw::Int(1), Raw::Int(1)]))]).contains("distinct"));
         assert!(err(&[("levels", Raw::List(vec![Raw::Int(65)]))]).contains("1..=64"));
-        assert!(err(&[("views", Raw::Bool(true))]).starts_with("views true"));
-        assert!(err(&[("views", Raw::Table)]).starts_with("views a table"));
-        assert!(err(&[("blur_method", Raw::Str("fast".into()))])
-            .contains("one of average, motion_blur"));
-        assert!(err(&[("nope", Raw::Int(1))]).starts_with("nope is not an option"));
-        assert!(err(&[("samples", Raw::Int(1 << 21))]).contains("1..=1048576"));
-        assert!(err(&[("sharp_samples", Raw::Int(1 << 21))]).contains("1..=1048576"));
-        assert!(err(&[("shard", Raw::Str("2/2".into()))]).starts_with("shard \"2/2\""));
-        for bad in ["-1/2", "+1/2", " 1/2", "1/ 2", "1/2/3", "/2", "a/2", "1/0"] {
-            assert!(
-                err(&[("shard", Raw::Str(bad.into()))]).starts_with("shard"),
-                "{bad}"
-            );
-        }
-        assert!(err(&[("timeout", Raw::Float(1e308))]).starts_with("timeout 1e308: must be"));
-        assert!(err(&[("object_timeout", Raw::Float(1e308))]).starts_with("object_timeout"));
-        assert!(err(&[("gpus_per_task", Raw::Float(1.0))])
-            .starts_with("gpus_per_task 1.0: only with executor ray"));
-        let k = ("workers_per_gpu", Raw::Int(2));
-        assert!(err(&[k.clone(), ("device", Raw::Str("cpu".into()))])
-            .starts_with("workers_per_gpu 2: only with a GPU device"));
-        assert!(err(&[k.clone(), ("workers", Raw::Int(4))]).contains("give one of them"));
-        assert!(err(&[("workers_per_gpu", Raw::Int(0))]).starts_with("workers_per_gpu 0"));
-        let ray = ("executor", Raw::Str("ray".into()));
-        assert!(err(&[ray.clone(), ("gpus", Raw::List(vec![Raw::Int(0)]))])
-            .starts_with("gpus [0]: only with executor local"));
-        assert!(err(&[ray, ("workers", Raw::Int(4))]).starts_with("workers 4: only with"));
-        assert!(err(&[("phi0_deg", Raw::Float(5.0))]).contains("pole"));
-        assert!(err(&[("ray_address", Raw::Str("auto".into()))]).contains("executor ray"));
         assert!(err(&[("background", Raw::List(vec![Raw::Int(1)]))]).starts_with("background [1]"));
         assert!(err(&[("downsample", Raw::List(vec![Raw::Int(1)]))]).contains("2..=64"));
         assert!(
@@ -1127,14 +1140,19 @@ mod tests {
         );
         assert!(err(&[("downsample", Raw::List(vec![Raw::Int(3)]))])
             .starts_with("downsample 3: does not divide resolution 512"));
-        assert!(err(&[("test_settings", Raw::Int(0))]).starts_with("test_settings 0"));
         assert!(check_downsample(&[4, 8]).is_ok() && check_downsample(&[]).is_ok());
         assert!(check_downsample(&[8, 8]).is_err() && check_downsample(&[65]).is_err());
-        assert!(err(&[
-            ("test_settings", Raw::Int(5)),
-            ("test_objects", Raw::Str("a".into()))
-        ])
-        .starts_with("test_settings and test_objects"));
+        assert!(err(&[("gpus", Raw::List(vec![Raw::Int(0), Raw::Int(0)]))]).contains("distinct"));
+        assert!(err(&[("gpus", Raw::List(vec![Raw::Int(-1)]))]).contains("0..=1023"));
+    }
+
+    #[test]
+    fn a_value_of_the_wrong_kind_or_an_unknown_name_is_named() {
+        assert!(err(&[("views", Raw::Bool(true))]).starts_with("views true"));
+        assert!(err(&[("views", Raw::Table)]).starts_with("views a table"));
+        assert!(err(&[("blur_method", Raw::Str("fast".into()))])
+            .contains("one of average, motion_blur"));
+        assert!(err(&[("nope", Raw::Int(1))]).starts_with("nope is not an option"));
         assert!(err(&[("licenses", Raw::Str("cc-by-4".into()))])
             .starts_with("licenses \"cc-by-4\": must be licence ids"));
         assert!(err(&[("licenses", Raw::Str(" , ".into()))]).starts_with("licenses"));
@@ -1142,9 +1160,41 @@ mod tests {
         assert!(err(&[("latent_sampling", Raw::Str("mixed".into()))])
             .contains("one of subsets, independent"));
         assert!(err(&[("device", Raw::Str("tpu".into()))]).starts_with("device \"tpu\""));
-        assert!(err(&[("gpus", Raw::List(vec![Raw::Int(0), Raw::Int(0)]))]).contains("distinct"));
-        assert!(err(&[("gpus", Raw::List(vec![Raw::Int(-1)]))]).contains("0..=1023"));
-        assert!(err(&[("gpus_per_task", Raw::Float(65.0))]).contains("[0, 64]"));
+    }
+
+    #[test]
+    fn a_shard_must_be_i_of_n() {
+        assert!(err(&[("shard", Raw::Str("2/2".into()))]).starts_with("shard \"2/2\""));
+        for bad in ["-1/2", "+1/2", " 1/2", "1/ 2", "1/2/3", "/2", "a/2", "1/0"] {
+            assert!(
+                err(&[("shard", Raw::Str(bad.into()))]).starts_with("shard"),
+                "{bad}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_options_of_one_executor_are_refused_under_the_other() {
+        assert!(err(&[("gpus_per_task", Raw::Float(1.0))])
+            .starts_with("gpus_per_task 1.0: only with executor ray"));
+        let k = ("workers_per_gpu", Raw::Int(2));
+        assert!(err(&[k.clone(), ("device", Raw::Str("cpu".into()))])
+            .starts_with("workers_per_gpu 2: only with a GPU device"));
+        assert!(err(&[k.clone(), ("workers", Raw::Int(4))]).contains("give one of them"));
+        let ray = ("executor", Raw::Str("ray".into()));
+        assert!(err(&[ray.clone(), ("gpus", Raw::List(vec![Raw::Int(0)]))])
+            .starts_with("gpus [0]: only with executor local"));
+        assert!(err(&[ray, ("workers", Raw::Int(4))]).starts_with("workers 4: only with"));
+        assert!(err(&[("ray_address", Raw::Str("auto".into()))]).contains("executor ray"));
+    }
+
+    #[test]
+    fn options_that_conflict_are_refused_by_name() {
+        assert!(err(&[
+            ("test_settings", Raw::Int(5)),
+            ("test_objects", Raw::Str("a".into()))
+        ])
+        .starts_with("test_settings and test_objects"));
         // A sequence Cycles cannot hold is named by the scheme that makes it.
         assert!(
             err(&[("latents", Raw::Int(4096)), ("samples", Raw::Int(8192))])

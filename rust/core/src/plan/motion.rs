@@ -661,7 +661,7 @@ mod tests {
     use crate::plan::choices::{BlurBudget, TrajectoryAnchor};
     use crate::plan::sampling::tests::{cube_vertices, plan};
     use crate::plan::sampling::{
-        frame_seed, plan_setting, plan_setting_priced, stream_id, SettingPlan,
+        frame_seed, plan_setting, plan_setting_priced, stream_id, SettingPlan, ViewPlan,
     };
     use crate::plan::spec::MAX_COUNT;
 
@@ -970,22 +970,48 @@ mod tests {
 
     const ANCHORS: [TrajectoryAnchor; 2] = [TrajectoryAnchor::Start, TrajectoryAnchor::Centered];
 
+    /// The object the centred plans below are made for.
+    const CENTERED_D: [f64; 3] = [1.0, 0.7, 0.4];
+
+    /// The same setting (nine latents, random and stratified) planned from its start and
+    /// centred, on the same seeds.
+    fn start_and_centered() -> Vec<(LatentPositions, SettingPlan, SettingPlan)> {
+        let d = CENTERED_D;
+        [LatentPositions::Random, LatentPositions::Stratified]
+            .into_iter()
+            .map(|positions| {
+                let start = SamplingConfig {
+                    latents: 9,
+                    views: 6,
+                    latent_positions: positions,
+                    ..Default::default()
+                };
+                let centered = SamplingConfig {
+                    trajectory: TrajectoryAnchor::Centered,
+                    ..start.clone()
+                };
+                (positions, plan(&start, 21, d), plan(&centered, 21, d))
+            })
+            .collect()
+    }
+
+    /// Every level of every view of `start_and_centered`: (positions, start's view and
+    /// level, centred's view and level).
+    fn each_centered_level(
+        mut each: impl FnMut(LatentPositions, (&ViewPlan, &LevelPlan), (&ViewPlan, &LevelPlan)),
+    ) {
+        for (positions, a, b) in start_and_centered() {
+            for (va, vb) in a.views.iter().zip(&b.views) {
+                for (l, lb) in &vb.levels {
+                    each(positions, (va, &va.levels[l]), (vb, lb));
+                }
+            }
+        }
+    }
+
     #[test]
-    fn centered_latents_lie_on_p_plus_t_w_delta_around_p() {
-        let d = [1.0, 0.7, 0.4];
-        let r_min = 1.05 * bounding_radius(d);
-        for positions in [LatentPositions::Random, LatentPositions::Stratified] {
-            let start = SamplingConfig {
-                latents: 9,
-                views: 6,
-                latent_positions: positions,
-                ..Default::default()
-            };
-            let centered = SamplingConfig {
-                trajectory: TrajectoryAnchor::Centered,
-                ..start.clone()
-            };
-            let (a, b) = (plan(&start, 21, d), plan(&centered, 21, d));
+    fn centering_keeps_the_views_seeds_and_blur_weights() {
+        for (_, a, b) in start_and_centered() {
             for (va, vb) in a.views.iter().zip(&b.views) {
                 // Same seeds: the same views, δ, sharp image and written pose.
                 assert_eq!(
@@ -1005,54 +1031,80 @@ mod tests {
                     )
                 );
                 for (l, lb) in &vb.levels {
-                    let la = &va.levels[l];
-                    assert_eq!(lb.w_l, la.w_l);
-                    for (fa, fb) in la.latent_frames.iter().zip(&lb.latent_frames) {
-                        // The same draw, half a segment earlier, with the same Cycles seed.
-                        assert_eq!((fb.t, fb.seed), (fa.t - 0.5, fa.seed));
-                        assert!((-0.5..=0.5).contains(&fb.t), "{}", fb.t);
-                        assert!((0.0..=1.0).contains(&fa.t), "{}", fa.t);
-                        // On p + t · w_l · δ, p the view's own pose.
-                        for (v, lp, f) in [(va, la, fa), (vb, lb, fb)] {
-                            let want = along(
-                                v.r,
-                                v.phi_deg,
-                                v.theta_deg,
-                                &v.trajectory,
-                                f.t * lp.w_l,
-                                r_min,
-                            );
-                            assert_eq!((f.r, f.phi_deg, f.theta_deg), want);
-                            assert_eq!(f.c2w, rows(&orbit_c2w(want.0, want.1, want.2)));
-                        }
-                    }
-                    // The mean latent pose: the camera at the mean t.
-                    for (v, lp) in [(va, la), (vb, lb)] {
-                        let ts: Vec<f64> = lp.latent_frames.iter().map(|f| f.t).collect();
-                        let mean = ts.iter().sum::<f64>() / ts.len() as f64;
-                        let mp = &lp.mean_pose;
-                        assert_eq!(mp.t, mean);
-                        let want = along(
-                            v.r,
-                            v.phi_deg,
-                            v.theta_deg,
-                            &v.trajectory,
-                            mean * lp.w_l,
-                            r_min,
-                        );
-                        assert_eq!((mp.r, mp.phi_deg, mp.theta_deg), want);
-                    }
-                    // Centred, the mean pose is about p: nine draws of U(−½, ½) average
-                    // within ±½ and, stratified, within ±1/(2·9) of 0.
-                    let bound = match positions {
-                        LatentPositions::Random => 0.5,
-                        LatentPositions::Stratified => 0.5 / 9.0 + 1e-12,
-                    };
-                    assert!(lb.mean_pose.t.abs() <= bound, "{}", lb.mean_pose.t);
-                    assert!((la.mean_pose.t - 0.5).abs() <= bound);
+                    assert_eq!(lb.w_l, va.levels[l].w_l);
                 }
             }
         }
+    }
+
+    #[test]
+    fn centered_latents_are_the_start_draws_half_a_segment_earlier() {
+        each_centered_level(|_, (_, la), (_, lb)| {
+            for (fa, fb) in la.latent_frames.iter().zip(&lb.latent_frames) {
+                // The same draw, half a segment earlier, with the same Cycles seed.
+                assert_eq!((fb.t, fb.seed), (fa.t - 0.5, fa.seed));
+                assert!((-0.5..=0.5).contains(&fb.t), "{}", fb.t);
+                assert!((0.0..=1.0).contains(&fa.t), "{}", fa.t);
+            }
+        });
+    }
+
+    #[test]
+    fn centered_latents_lie_on_p_plus_t_w_delta_around_p() {
+        let r_min = 1.05 * bounding_radius(CENTERED_D);
+        each_centered_level(|_, (va, la), (vb, lb)| {
+            for (fa, fb) in la.latent_frames.iter().zip(&lb.latent_frames) {
+                // On p + t · w_l · δ, p the view's own pose.
+                for (v, lp, f) in [(va, la, fa), (vb, lb, fb)] {
+                    let want = along(
+                        v.r,
+                        v.phi_deg,
+                        v.theta_deg,
+                        &v.trajectory,
+                        f.t * lp.w_l,
+                        r_min,
+                    );
+                    assert_eq!((f.r, f.phi_deg, f.theta_deg), want);
+                    assert_eq!(f.c2w, rows(&orbit_c2w(want.0, want.1, want.2)));
+                }
+            }
+        });
+    }
+
+    #[test]
+    fn the_mean_latent_pose_is_the_camera_at_the_mean_t() {
+        let r_min = 1.05 * bounding_radius(CENTERED_D);
+        each_centered_level(|_, (va, la), (vb, lb)| {
+            for (v, lp) in [(va, la), (vb, lb)] {
+                let ts: Vec<f64> = lp.latent_frames.iter().map(|f| f.t).collect();
+                let mean = ts.iter().sum::<f64>() / ts.len() as f64;
+                let mp = &lp.mean_pose;
+                assert_eq!(mp.t, mean);
+                let want = along(
+                    v.r,
+                    v.phi_deg,
+                    v.theta_deg,
+                    &v.trajectory,
+                    mean * lp.w_l,
+                    r_min,
+                );
+                assert_eq!((mp.r, mp.phi_deg, mp.theta_deg), want);
+            }
+        });
+    }
+
+    #[test]
+    fn centred_the_mean_pose_is_about_p() {
+        each_centered_level(|positions, (_, la), (_, lb)| {
+            // Centred, the mean pose is about p: nine draws of U(−½, ½) average within ±½
+            // and, stratified, within ±1/(2·9) of 0.
+            let bound = match positions {
+                LatentPositions::Random => 0.5,
+                LatentPositions::Stratified => 0.5 / 9.0 + 1e-12,
+            };
+            assert!(lb.mean_pose.t.abs() <= bound, "{}", lb.mean_pose.t);
+            assert!((la.mean_pose.t - 0.5).abs() <= bound);
+        });
     }
 
     #[test]

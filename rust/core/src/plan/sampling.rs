@@ -38,6 +38,24 @@ impl SamplingConfig {
         check("radius_margin", &self.radius_margin, &specs::RADIUS_MARGIN)?;
         check("phi0_deg", &self.phi0_deg, &specs::PHI0_DEG)?;
         check("window_deg", &self.window_deg, &specs::WINDOW_DEG)?;
+        self.check_sequence()?;
+        self.check_poles()?;
+        check("delta0", &self.delta0, &specs::DELTA0)?;
+        check("level_spread", &self.level_spread, &specs::LEVEL_SPREAD)?;
+        check("levels", &self.levels, &Spec::Levels)?;
+        check("defocus", &self.defocus, &Spec::Levels)?;
+        check("shake", &self.shake, &Spec::Levels)?;
+        self.check_kind_levels()?;
+        check(
+            "orientation_max",
+            &self.guards.orientation_max,
+            &specs::ORIENTATION_MAX,
+        )?;
+        check("near_floor", &self.guards.near_floor, &specs::NEAR_FLOOR)
+    }
+
+    /// Subset sampling puts every latent's samples in one Cycles sequence: it must fit.
+    fn check_sequence(&self) -> Result<()> {
         if self.latent_sampling == LatentSampling::Subsets && self.blur_method.averages() {
             let m = self.max_latents();
             let seq = m as u64 * self.samples_per_frame(m) as u64;
@@ -53,6 +71,11 @@ impl SamplingConfig {
                 });
             }
         }
+        Ok(())
+    }
+
+    /// The view window must keep cameras off the poles.
+    fn check_poles(&self) -> Result<()> {
         let (lo, hi) = (
             self.phi0_deg - self.window_deg,
             self.phi0_deg + self.window_deg,
@@ -66,11 +89,11 @@ impl SamplingConfig {
                 ),
             });
         }
-        check("delta0", &self.delta0, &specs::DELTA0)?;
-        check("level_spread", &self.level_spread, &specs::LEVEL_SPREAD)?;
-        check("levels", &self.levels, &Spec::Levels)?;
-        check("defocus", &self.defocus, &Spec::Levels)?;
-        check("shake", &self.shake, &Spec::Levels)?;
+        Ok(())
+    }
+
+    /// Each kind's levels within the range its construction keeps meaningful.
+    fn check_kind_levels(&self) -> Result<()> {
         if let Some(l) = self.shake.iter().find(|&&l| l > MAX_SHAKE_LEVEL) {
             return Err(Error::Config {
                 option: "shake".into(),
@@ -91,12 +114,7 @@ impl SamplingConfig {
                 ),
             });
         }
-        check(
-            "orientation_max",
-            &self.guards.orientation_max,
-            &specs::ORIENTATION_MAX,
-        )?;
-        check("near_floor", &self.guards.near_floor, &specs::NEAR_FLOOR)
+        Ok(())
     }
 }
 

@@ -167,68 +167,9 @@ impl Degradation for Shake {
             return BTreeMap::new();
         }
         let path = Path::draw(&mut (cx.stream)(Self::PURPOSE));
-        let (largest, length) = path.measure();
         levels
             .iter()
-            .map(|&level| {
-                let amplitude = amplitude_px(level, cx.resolution);
-                let scale = if largest > 0.0 {
-                    amplitude / largest
-                } else {
-                    0.0
-                };
-                let d = |t: f64| path.at(t).map(|x| x * scale);
-                let purpose = Self::PURPOSE + u64::from(level);
-                let (times, steps): (Vec<f64>, Option<u32>) = if cx.motion_blur {
-                    let steps = motion_steps(d);
-                    let n = 1u32 << steps;
-                    let keys = (0..=n).map(|k| f64::from(k) / f64::from(n)).collect();
-                    (keys, Some(steps))
-                } else {
-                    let m = cx.latents.max(1);
-                    ((0..m).map(|k| (k as f64 + 0.5) / m as f64).collect(), None)
-                };
-                let poses = times
-                    .iter()
-                    .map(|&t| {
-                        let [u, v] = d(t);
-                        ShakePose {
-                            t,
-                            yaw_deg: (u / cx.focal_px).atan().to_degrees(),
-                            pitch_deg: (v / cx.focal_px).atan().to_degrees(),
-                        }
-                    })
-                    .collect();
-                let renders = if cx.motion_blur { 1 } else { times.len() };
-                let (seeds, sample_offsets, sample_sequence) = match &cx.blocks {
-                    Some((sequence, offsets)) => (
-                        vec![cx.sharp_seed; renders],
-                        offsets.clone(),
-                        Some(*sequence),
-                    ),
-                    None => (
-                        (0..renders).map(|k| (cx.seed)(purpose, k)).collect(),
-                        Vec::new(),
-                        None,
-                    ),
-                };
-                let plan = ShakePlan {
-                    amplitude_px: amplitude,
-                    path_px: length * scale,
-                    method: if cx.motion_blur {
-                        BlurMethod::MotionBlur
-                    } else {
-                        BlurMethod::Average
-                    },
-                    samples_per_frame: cx.samples_per_frame,
-                    poses,
-                    seeds,
-                    sample_offsets,
-                    sample_sequence,
-                    motion_steps: steps,
-                };
-                (level.to_string(), plan)
-            })
+            .map(|&level| (level.to_string(), plan_level(cx, &path, level)))
             .collect()
     }
 
@@ -290,6 +231,68 @@ impl Degradation for Shake {
 
     fn stat(s: &ShakeStat) -> Option<f64> {
         Some(s.path_px)
+    }
+}
+
+/// One level's plan: the drawn path scaled to the level's amplitude, sampled at the
+/// frames' times (or motion-blur keys), with their seeds.
+fn plan_level(cx: &ViewCx, path: &Path, level: u32) -> ShakePlan {
+    let (largest, length) = path.measure();
+    let amplitude = amplitude_px(level, cx.resolution);
+    let scale = if largest > 0.0 {
+        amplitude / largest
+    } else {
+        0.0
+    };
+    let d = |t: f64| path.at(t).map(|x| x * scale);
+    let purpose = <Shake as Degradation>::PURPOSE + u64::from(level);
+    let (times, steps): (Vec<f64>, Option<u32>) = if cx.motion_blur {
+        let steps = motion_steps(d);
+        let n = 1u32 << steps;
+        let keys = (0..=n).map(|k| f64::from(k) / f64::from(n)).collect();
+        (keys, Some(steps))
+    } else {
+        let m = cx.latents.max(1);
+        ((0..m).map(|k| (k as f64 + 0.5) / m as f64).collect(), None)
+    };
+    let poses = times
+        .iter()
+        .map(|&t| {
+            let [u, v] = d(t);
+            ShakePose {
+                t,
+                yaw_deg: (u / cx.focal_px).atan().to_degrees(),
+                pitch_deg: (v / cx.focal_px).atan().to_degrees(),
+            }
+        })
+        .collect();
+    let renders = if cx.motion_blur { 1 } else { times.len() };
+    let (seeds, sample_offsets, sample_sequence) = match &cx.blocks {
+        Some((sequence, offsets)) => (
+            vec![cx.sharp_seed; renders],
+            offsets.clone(),
+            Some(*sequence),
+        ),
+        None => (
+            (0..renders).map(|k| (cx.seed)(purpose, k)).collect(),
+            Vec::new(),
+            None,
+        ),
+    };
+    ShakePlan {
+        amplitude_px: amplitude,
+        path_px: length * scale,
+        method: if cx.motion_blur {
+            BlurMethod::MotionBlur
+        } else {
+            BlurMethod::Average
+        },
+        samples_per_frame: cx.samples_per_frame,
+        poses,
+        seeds,
+        sample_offsets,
+        sample_sequence,
+        motion_steps: steps,
     }
 }
 
