@@ -37,7 +37,9 @@ pub use crate::plan::target::{ImageState, TargetRule};
 pub use crate::image::accumulate::Accumulator;
 pub use crate::image::color::srgb_encode_slice;
 pub use crate::image::denoise::{DenoiseDevice, Denoiser, DenoiserRecord};
-pub use crate::image::exr::read::{decode_exr, read_exr, Frame};
+pub use crate::image::exr::read::{
+    check_exr_size, decode_exr, exr_size, header_size_other_than, read_exr, Frame,
+};
 // The depth reader `verify` tries after the colour one, for the fuzz target exr_memory.
 pub use crate::image::geometry::decode_depth_exr;
 pub use crate::image::geometry::{

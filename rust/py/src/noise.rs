@@ -311,7 +311,9 @@ fn noise_write_variants(
         clean_views: clean_views.into_iter().collect(),
     };
     run_detached(py, || match bg {
-        Some(bg) => core::write_variants_linear(&sources, &names, frames, &variants, bg, &opts),
+        Some(bg) => {
+            core::write_variants_linear(&sources, &names, frames, &variants, bg, None, &opts)
+        }
         None => core::write_variants(&sources, &names, frames, &variants, &opts),
     })
 }

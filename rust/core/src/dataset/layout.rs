@@ -11,6 +11,7 @@ use crate::error::{Error, Result};
 use crate::ground::atomic::{replace_dir, write_atomic};
 use crate::ground::names::{files, images_dir, is_level_dir, pass_dir, pass_level};
 use crate::ground::names::{sort_level_dirs, SHARP, WORK_PREFIX};
+use crate::image::exr::read::header_size_other_than;
 use std::path::{Path, PathBuf};
 
 /// The marker a setting directory gets last, when it is complete.
@@ -138,7 +139,7 @@ pub enum Fault {
         want: usize,
         of: &'static str,
     },
-    /// A whole PNG of another size than meta.json's.
+    /// A whole PNG, or an EXR by its header, of another size than meta.json's.
     Size { got: (u32, u32), want: (u32, u32) },
     /// Not a PNG at all.
     NotPng,
@@ -261,7 +262,13 @@ pub fn setting_problems(setting: &Path) -> Vec<SettingProblem> {
         }
         if counts.linear {
             let rel = format!("{lvl}/{}", files::LINEAR);
-            out.extend(exr_problems(&d.join(files::LINEAR), &rel, counts.views));
+            let want = counts.resolution.map(|[w, h]| (w, h));
+            out.extend(exr_problems(
+                &d.join(files::LINEAR),
+                &rel,
+                counts.views,
+                want,
+            ));
         }
         out.extend(pass_problems(&d, lvl, &counts));
         let npy = format!("{lvl}/poses_bounds.npy");
@@ -287,13 +294,13 @@ fn pass_problems(level: &Path, lvl: &str, counts: &SettingCounts) -> Vec<Setting
         for factor in std::iter::once(1).chain(counts.downsample.iter().copied()) {
             let sub = pass_dir(pass, factor);
             let rel = format!("{lvl}/{sub}");
+            let want = counts.resolution.map(|[w, h]| (w / factor, h / factor));
             if pass == "mask" {
-                let want = counts.resolution.map(|[w, h]| (w / factor, h / factor));
                 let dir = level.join(&sub);
                 out.extend(image_problems(&dir, &rel, counts.views, want, "masks"));
                 continue;
             }
-            out.extend(exr_problems(&level.join(&sub), &rel, counts.views));
+            out.extend(exr_problems(&level.join(&sub), &rel, counts.views, want));
         }
     }
     out
@@ -401,15 +408,20 @@ fn count_problem(
 
 /// The problems of a folder of EXRs (`rel`, relative to the setting: a level's linear/,
 /// the sharp level's depth/ and normals/): a count other than `views`, an empty file,
-/// one that does not decode. A rerun would otherwise keep (and its manifest certify) a
+/// one whose header is not of meta.json's size `want`, one that does not decode. A rerun would otherwise keep (and its manifest certify) a
 /// cut or bit-flipped EXR: no header read or size finds a block that no longer
 /// inflates, so each is decoded (in parallel), as `blurset verify` does.
-fn exr_problems(dir: &Path, rel: &str, views: usize) -> Vec<SettingProblem> {
+fn exr_problems(
+    dir: &Path,
+    rel: &str,
+    views: usize,
+    want: Option<(u32, u32)>,
+) -> Vec<SettingProblem> {
     use rayon::prelude::*;
     let mut out = Vec::new();
     let exrs = files_with(dir, "exr");
     out.extend(count_problem(rel.into(), exrs.len(), views, "EXRs"));
-    let faults: Vec<Option<Fault>> = exrs.par_iter().map(|(_, p)| exr_fault(p)).collect();
+    let faults: Vec<Option<Fault>> = exrs.par_iter().map(|(_, p)| exr_fault(p, want)).collect();
     for ((name, _), fault) in exrs.iter().zip(faults) {
         if let Some(fault) = fault {
             out.push(SettingProblem::new(format!("{rel}/{name}"), fault));
@@ -418,15 +430,25 @@ fn exr_problems(dir: &Path, rel: &str, views: usize) -> Vec<SettingProblem> {
     out
 }
 
-/// What is wrong with an EXR of a setting (empty, or does not decode), or None.
-fn exr_fault(path: &Path) -> Option<Fault> {
-    match std::fs::read(path) {
-        Ok(bytes) if bytes.is_empty() => Some(Fault::Empty),
-        Ok(bytes) => decode_exr_size(&bytes, path)
-            .err()
-            .map(|e| Fault::Undecodable(error_reason(&e.to_string()))),
-        Err(e) => Some(Fault::Unreadable(e.kind().to_string())),
+/// What is wrong with an EXR of a setting (empty, another size than `want` by its
+/// header, read before anything of the size it claims is allocated, or does not
+/// decode), or None.
+fn exr_fault(path: &Path, want: Option<(u32, u32)>) -> Option<Fault> {
+    let bytes = match std::fs::read(path) {
+        Ok(bytes) => bytes,
+        Err(e) => return Some(Fault::Unreadable(e.kind().to_string())),
+    };
+    if bytes.is_empty() {
+        return Some(Fault::Empty);
     }
+    if let Some(want) = want {
+        if let Some(got) = header_size_other_than(&bytes, want) {
+            return Some(Fault::Size { got, want });
+        }
+    }
+    decode_exr_size(&bytes, path)
+        .err()
+        .map(|e| Fault::Undecodable(error_reason(&e.to_string())))
 }
 
 /// The width and height of a build's EXR, decoded whole: a colour EXR (linear/,
@@ -852,6 +874,36 @@ mod tests {
             said.starts_with("sharp/linear/001.exr does not decode ("),
             "{said}"
         );
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn an_exr_of_another_size_is_named_from_its_header() -> Result<()> {
+        let dir = exr_setting("exrs-size")?;
+        let put = |rel: &str, bytes: &[u8]| write_atomic(&dir.join(rel), bytes);
+        let meta = br#"{"views": [{}, {}], "levels": ["sharp"], "resolution": [48, 40],
+            "render": {"linear": true, "passes": ["depth"]}}"#;
+        put("meta.json", meta)?;
+        // A header that claims 16384² (its blocks cannot hold it): its size is named
+        // from the header, nothing of that size decoded.
+        let mut big = std::fs::read(dir.join("sharp/linear/001.exr")).unwrap_or_default();
+        let name = b"dataWindow\0box2i\0";
+        if let Some(i) = big.windows(name.len()).position(|x| x == name) {
+            let at = i + name.len() + 4;
+            big[at + 8..at + 16].copy_from_slice(&[0xFF, 0x3F, 0, 0, 0xFF, 0x3F, 0, 0]);
+        }
+        put("sharp/linear/001.exr", &big)?;
+        let found: Vec<(String, String)> = setting_problems(&dir)
+            .into_iter()
+            .filter(|p| p.path.ends_with(".exr"))
+            .map(|p| (p.path, p.fault.what()))
+            .collect();
+        let want = (
+            "sharp/linear/001.exr".into(),
+            "16384x16384 px, not 48x40".into(),
+        );
+        assert_eq!(found, vec![want]);
         let _ = std::fs::remove_dir_all(&dir);
         Ok(())
     }

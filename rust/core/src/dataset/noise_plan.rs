@@ -901,7 +901,13 @@ impl NoiseUnit {
         };
         let (src, names, frames) = (&self.sources, &self.names, self.frames);
         match self.background {
-            Some(bg) => write_variants_linear(src, names, frames, &variants, bg, &opts),
+            Some(bg) => {
+                // The level's images are its size: a linear EXR of another is refused
+                // from its header before any is decoded.
+                let size = self.images.first().map(|p| image_info(p)).transpose()?;
+                let size = size.map(|(w, h, _, _)| (w, h));
+                write_variants_linear(src, names, frames, &variants, bg, size, &opts)
+            }
             None => write_variants(src, names, frames, &variants, &opts),
         }
     }

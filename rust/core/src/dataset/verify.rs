@@ -5,7 +5,7 @@
 use super::layout::{decode_exr_size, error_reason as reason};
 use crate::error::Error;
 use crate::ground::limits::MAX_PARALLEL_DECODE_BYTES;
-use crate::image::exr::read::decode_cost as exr_decode_cost;
+use crate::image::exr::read::{decode_cost as exr_decode_cost, header_size_other_than};
 use crate::image::io::{image_info, read_image};
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -70,17 +70,22 @@ fn check_one(item: &ImageCheck) -> Option<String> {
     if !item.path.is_file() {
         return Some("missing".into());
     }
+    let want = (item.width, item.height);
     let size = if is_exr(item) {
-        // The file is read once, decoded as the cheap check of a rerun decodes it.
+        // The file is read once, decoded as the cheap check of a rerun decodes it; a
+        // header of another size is named before anything of its size is allocated.
         std::fs::read(&item.path)
             .map_err(|e| Error::io("cannot open EXR", &item.path, e))
-            .and_then(|bytes| decode_exr_size(&bytes, &item.path))
+            .and_then(|bytes| match header_size_other_than(&bytes, want) {
+                Some(size) => Ok(size),
+                None => decode_exr_size(&bytes, &item.path),
+            })
     } else {
         read_image(&item.path).map(|i| (i.width, i.height))
     };
     match size {
         Err(e) => Some(format!("does not decode ({})", reason(&e.to_string()))),
-        Ok((w, h)) if (w, h) != (item.width, item.height) => Some(format!(
+        Ok((w, h)) if (w, h) != want => Some(format!(
             "is {w}x{h}, expected {}x{}",
             item.width, item.height
         )),
@@ -141,6 +146,34 @@ mod tests {
         }
         std::fs::write(&exr, &huge).ok();
         assert_eq!(decode_cost(&item(&exr)), huge.len() as u64);
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn an_exr_of_another_size_is_named_from_its_header() -> crate::Result<()> {
+        let d = std::env::temp_dir().join(format!("blurset-verify-size-{}", std::process::id()));
+        std::fs::create_dir_all(&d).ok();
+        let exr = d.join("a.exr");
+        crate::image::exr::write::write_exr(&exr, 40, 30, &[0.5; 40 * 30 * 4])?;
+        // A header that claims 16384² (its blocks cannot hold it): named by its size,
+        // read from the header, where a decode would have refused the blocks.
+        let mut big = std::fs::read(&exr).unwrap_or_default();
+        let name = b"dataWindow\0box2i\0";
+        if let Some(i) = big.windows(name.len()).position(|x| x == name) {
+            let at = i + name.len() + 4;
+            big[at + 8..at + 16].copy_from_slice(&[0xFF, 0x3F, 0, 0, 0xFF, 0x3F, 0, 0]);
+        }
+        let big_path = d.join("big.exr");
+        std::fs::write(&big_path, &big).ok();
+        let item = |p: &std::path::Path| ImageCheck {
+            path: p.to_path_buf(),
+            width: 40,
+            height: 30,
+        };
+        let got = check_images(&[item(&exr), item(&big_path)]);
+        assert_eq!(got[0], None);
+        assert_eq!(got[1].as_deref(), Some("is 16384x16384, expected 40x30"));
         let _ = std::fs::remove_dir_all(&d);
         Ok(())
     }

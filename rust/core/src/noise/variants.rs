@@ -4,6 +4,7 @@ use super::kernel::{apply_plan, Noisy, Plan};
 use super::linear::{add_noise_linear, linear_from_codes, read_linear, LinearRgb};
 use super::model::{factor_key, stream_id, NoiseModel};
 use crate::error::{Error, Result};
+use crate::image::exr::read::{check_exr_size, exr_size};
 use crate::image::exr::write::exr_bytes;
 use crate::image::io as image_io;
 use crate::image::resample::check_factor;
@@ -112,17 +113,24 @@ pub fn write_variants(
 /// (composited over `background`) and write, per variant and frame,
 /// `out_dir/images/<name>.png` (8-bit RGB) and `out_dir/linear/<name>.exr` (RGB float),
 /// and their downsampled copies. Keys and streams are those of the PNG path
-/// (`stream_id(view, frame)`). All images must share one size. Files are written in
-/// place; callers make the tree atomic.
+/// (`stream_id(view, frame)`). All images must be `size` (width, height; None: the
+/// first one's), read from every file's header before any is decoded: a file that
+/// claims another size costs its header, not the frame it claims (issue 60). Files
+/// are written in place; callers make the tree atomic.
 pub fn write_variants_linear(
     sources: &[PathBuf],
     names: &[String],
     frames: u32,
     variants: &[Variant],
     background: [f64; 3],
+    size: Option<(u32, u32)>,
     opts: &VariantOptions,
 ) -> Result<()> {
     prepare(sources, names, frames, variants, opts)?;
+    if let Some(first) = sources.first() {
+        let want = size.map_or_else(|| exr_size(first), Ok)?;
+        sources.iter().try_for_each(|p| check_exr_size(p, want))?;
+    }
     let size = std::sync::OnceLock::new();
     sources.par_iter().enumerate().try_for_each(|(i, path)| {
         let img = read_linear(path, background)?;
@@ -313,17 +321,18 @@ mod tests {
         Ok(())
     }
 
-    #[test]
-    fn exr_files_round_trip_through_the_writer() -> Result<()> {
-        let dir = std::env::temp_dir().join(format!("blurset-noise-linear-{}", std::process::id()));
-        let (w, h) = (8u32, 6u32);
-        let rgba: Vec<f32> = (0..w * h * 4).map(|i| (i % 13) as f32 / 13.0).collect();
+    /// Two 8 x 6 linear EXRs, their pixels, a variant and the output names.
+    type Sources = (Vec<PathBuf>, Vec<f32>, Variant, Vec<String>);
+
+    /// [`Sources`] under `dir` (the EXRs in src/, the variant writing to out/).
+    fn linear_sources(dir: &Path) -> Result<Sources> {
+        let rgba: Vec<f32> = (0..8 * 6 * 4).map(|i| (i % 13) as f32 / 13.0).collect();
         let src = dir.join("src");
         let paths: Vec<PathBuf> = (0..2).map(|i| src.join(format!("{i:03}.exr"))).collect();
         for p in &paths {
-            crate::image::exr::write::write_exr(p, w, h, &rgba)?;
+            crate::image::exr::write::write_exr(p, 8, 6, &rgba)?;
         }
-        let m = NoiseModel {
+        let model = NoiseModel {
             sigma_read: 0.02,
             sigma_shot: 0.03,
             gamma: Gamma::Srgb,
@@ -332,21 +341,41 @@ mod tests {
         };
         let v = Variant {
             out_dir: dir.join("out"),
-            model: m,
+            model,
             key: 4,
         };
-        let names = vec!["000".to_string(), "001".to_string()];
+        Ok((paths, rgba, v, vec!["000".to_string(), "001".to_string()]))
+    }
+
+    /// `write_variants_linear` of one variant, its error's words (empty when it wrote).
+    fn linear_error(
+        paths: &[PathBuf],
+        names: &[String],
+        v: &Variant,
+        size: Option<(u32, u32)>,
+    ) -> String {
         write_variants_linear(
-            &paths,
-            &names,
+            paths,
+            names,
             1,
-            std::slice::from_ref(&v),
+            std::slice::from_ref(v),
             [1.0; 3],
+            size,
             &VariantOptions::default(),
-        )?;
+        )
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default()
+    }
+
+    #[test]
+    fn exr_files_round_trip_through_the_writer() -> Result<()> {
+        let dir = std::env::temp_dir().join(format!("blurset-noise-linear-{}", std::process::id()));
+        let (paths, _, v, names) = linear_sources(&dir)?;
+        assert_eq!(linear_error(&paths, &names, &v, None), "");
         let back = read_exr(&dir.join("out/linear/001.exr"))?;
         let img = read_linear(&paths[1], [1.0; 3])?;
-        let want = add_noise_linear(&img, &m, 4, stream_id(1, 0))?;
+        let want = add_noise_linear(&img, &v.model, 4, stream_id(1, 0))?;
         let got: Vec<f32> = back
             .rgba
             .chunks_exact(4)
@@ -354,23 +383,30 @@ mod tests {
             .collect();
         assert_eq!(got, want.linear);
         let png = image_io::read_image(&dir.join("out/images/000.png"))?;
-        assert_eq!((png.width, png.height, png.channels), (w, h, 3));
-        // A NaN in a source names the file.
+        assert_eq!((png.width, png.height, png.channels), (8, 6, 3));
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn a_linear_source_with_a_nan_or_of_another_size_is_named() -> Result<()> {
+        let dir = std::env::temp_dir().join(format!("blurset-noise-bad-{}", std::process::id()));
+        let (paths, rgba, v, names) = linear_sources(&dir)?;
         let mut bad = rgba.clone();
         bad[5] = f32::NAN;
-        crate::image::exr::write::write_exr(&paths[0], w, h, &bad)?;
-        let e = write_variants_linear(
-            &paths,
-            &names,
-            1,
-            &[v],
-            [1.0; 3],
-            &VariantOptions::default(),
-        )
-        .err()
-        .map(|e| e.to_string())
-        .unwrap_or_default();
+        crate::image::exr::write::write_exr(&paths[0], 8, 6, &bad)?;
+        let e = linear_error(&paths, &names, &v, Some((8, 6)));
         assert!(e.contains("000.exr") && e.contains("non-finite"), "{e}");
+        // A source of another size than the one given (or the first's) is refused from
+        // its header, before any source is decoded: the NaN in the first is not reached.
+        crate::image::exr::write::write_exr(&paths[1], 16, 6, &[0.5; 16 * 6 * 4])?;
+        for size in [Some((8, 6)), None] {
+            let e = linear_error(&paths, &names, &v, size);
+            assert!(
+                e.contains("001.exr") && e.contains("EXR is 16x6, expected 8x6; refused before"),
+                "{e}"
+            );
+        }
         let _ = std::fs::remove_dir_all(&dir);
         Ok(())
     }

@@ -63,6 +63,57 @@ pub fn decode_exr(bytes: &[u8]) -> Result<Frame> {
     })
 }
 
+/// The first layer size (width, height) in `meta` other than `want`.
+fn other_size(meta: &MetaData, want: (u32, u32)) -> Option<(u32, u32)> {
+    let side = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+    meta.headers
+        .iter()
+        .map(|h| (side(h.layer_size.width()), side(h.layer_size.height())))
+        .find(|&s| s != want)
+}
+
+/// The size of the first layer of the EXR file `bytes` that is not `want` (width,
+/// height), read from its headers alone; None when every layer is `want` or the headers
+/// do not parse (its decode then says why). A caller that knows the size a file must
+/// have (a build's meta.json) refuses one of another size before anything of the size
+/// it claims is allocated: a valid 4 MB ZIP file holds a blank 16384² frame of 4 GiB,
+/// as blank frames compress that well (issue 60).
+pub fn header_size_other_than(bytes: &[u8], want: (u32, u32)) -> Option<(u32, u32)> {
+    MetaData::read_from_buffered(Cursor::new(bytes), false)
+        .ok()
+        .and_then(|meta| other_size(&meta, want))
+}
+
+/// The size (width, height) of the first layer of the EXR file at `path`, from its
+/// headers alone.
+pub fn exr_size(path: &Path) -> Result<(u32, u32)> {
+    let meta = MetaData::read_from_file(path, false).map_err(|e| Error::Image {
+        reason: exr_reason(e),
+        path: path.to_path_buf(),
+    })?;
+    let side = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+    Ok(meta.headers.first().map_or((0, 0), |h| {
+        (side(h.layer_size.width()), side(h.layer_size.height()))
+    }))
+}
+
+/// Refuse the EXR file at `path` unless every layer its headers describe is `want`
+/// (width, height), from the headers alone: see [`header_size_other_than`].
+pub fn check_exr_size(path: &Path, want: (u32, u32)) -> Result<()> {
+    let bad = |reason: String| Error::Image {
+        reason,
+        path: path.to_path_buf(),
+    };
+    let meta = MetaData::read_from_file(path, false).map_err(|e| bad(exr_reason(e)))?;
+    match other_size(&meta, want) {
+        None => Ok(()),
+        Some((w, h)) => Err(bad(format!(
+            "EXR is {w}x{h}, expected {}x{}; refused before decoding it",
+            want.0, want.1
+        ))),
+    }
+}
+
 /// Refuse a file whose headers promise a layer past [`MAX_IMAGE_SIDE`] or
 /// [`MAX_IMAGE_PIXELS`], or more samples than the file's `file_len` bytes can hold under
 /// its codecs ([`max_expansion`]), before anything of that size is allocated: the
@@ -347,8 +398,8 @@ fn decode_layer(
         let blocks = decompress_chunks(chunks, meta)?;
         // The crate's blocks write the channels the file has: a missing alpha reads 1.
         let has_alpha = slots.contains(&Some(3));
-        rgba.clear();
-        rgba.resize(width * height * CH, if has_alpha { 0.0 } else { 1.0 });
+        let fill = if has_alpha { 0.0 } else { 1.0 };
+        sized_frame(rgba, width, height, fill)?;
         for b in &blocks {
             place_block(b, &header.channels, slots, rgba, width)?;
         }
@@ -377,12 +428,31 @@ fn decode_layer(
     }
     // Every value of the frame is written (a missing block is an error), so a
     // buffer of the right size is reused as it is.
-    let n = width * height * CH;
-    if rgba.len() != n {
-        rgba.clear();
-        rgba.resize(n, 0.0);
+    if rgba.len() != width * height * CH {
+        sized_frame(rgba, width, height, 0.0)?;
     }
     decode_scanlines(&blocks, header, slots, width, height, rgba)
+}
+
+/// `rgba` as a `width` x `height` RGBA frame of `fill`, or the reason it cannot be held:
+/// a frame past the memory the process may take (an address-space cap, a small
+/// machine) is an error naming the file, not an abort.
+fn sized_frame(
+    rgba: &mut Vec<f32>,
+    width: usize,
+    height: usize,
+    fill: f32,
+) -> std::result::Result<(), String> {
+    let n = width * height * CH;
+    rgba.clear();
+    rgba.try_reserve_exact(n).map_err(|_| {
+        format!(
+            "cannot allocate {} bytes for its {width}x{height} RGBA frame",
+            (n as u64).saturating_mul(4)
+        )
+    })?;
+    rgba.resize(n, fill);
+    Ok(())
 }
 
 /// The chunks of one layer's full-resolution level, cut (copied) by the `exr` crate.
@@ -539,6 +609,9 @@ fn decode_block(
     }
     SCRATCH.with(|s| {
         let mut buf = s.borrow_mut();
+        let more = expected.saturating_sub(buf.len());
+        buf.try_reserve(more)
+            .map_err(|_| format!("cannot allocate {expected} bytes for a block"))?;
         buf.resize(expected, 0);
         inflate_zlib(data, &mut buf)?;
         undo_predictor(&mut buf);
@@ -1109,6 +1182,51 @@ mod tests {
         let e = words(decode_exr(&dwa).map(|_| ()));
         assert!(e.contains("EXR dwaa compression is not read"), "{e}");
         Ok(())
+    }
+
+    #[test]
+    fn a_size_the_caller_knows_is_checked_from_the_header_alone() -> Result<()> {
+        // 16384² over ZIP blocks of 8 bytes: its decode is refused, its size read.
+        let big = tiny_blocks(&["B", "G", "R"], 3, 16, 16384, 16384, 8);
+        assert_eq!(header_size_other_than(&big, (48, 48)), Some((16384, 16384)));
+        assert_eq!(header_size_other_than(&big, (16384, 16384)), None);
+        assert_eq!(header_size_other_than(b"not an EXR", (48, 48)), None);
+        // Every part counts: the normal's part is 3 px wider than the others.
+        let parts = passes_file(true, 3)?;
+        assert_eq!(header_size_other_than(&parts, (19, 11)), Some((22, 11)));
+        assert_eq!(
+            header_size_other_than(&passes_file(true, 0)?, (19, 11)),
+            None
+        );
+        let d = std::env::temp_dir().join(format!("blurset-exr-size-{}", std::process::id()));
+        std::fs::create_dir_all(&d).map_err(|e| Error::io("mkdir", &d, e))?;
+        let p = d.join("big.exr");
+        std::fs::write(&p, &big).map_err(|e| Error::io("write", &p, e))?;
+        assert_eq!(exr_size(&p)?, (16384, 16384));
+        check_exr_size(&p, (16384, 16384))?;
+        let e = check_exr_size(&p, (48, 48)).err().map(|e| e.to_string());
+        let e = e.unwrap_or_default();
+        assert!(
+            e.contains("EXR is 16384x16384, expected 48x48; refused before decoding it")
+                && e.contains("big.exr"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&d);
+        Ok(())
+    }
+
+    #[test]
+    fn a_frame_past_what_can_be_allocated_is_an_error() {
+        let mut rgba = vec![1.0f32; 8];
+        let e = sized_frame(&mut rgba, 1 << 30, 1 << 30, 0.0)
+            .err()
+            .unwrap_or_default();
+        assert!(
+            e.contains("cannot allocate") && e.contains("1073741824x1073741824"),
+            "{e}"
+        );
+        assert_eq!(sized_frame(&mut rgba, 3, 2, 0.5), Ok(()));
+        assert_eq!(rgba, vec![0.5; 24]);
     }
 
     /// A multi-layer render as Blender writes one: the combined pass and the guides in

@@ -1,0 +1,158 @@
+"""Issue 60 (H5z), untrusted input: a 4.2 MB ZIP EXR that is a valid, blank 16384² RGBA
+float frame (blank frames compress about 1000:1, the deflate bound issue 48's check
+allows) made `verify` peak at 4.26 GB, `noise --source linear` over three such files at
+8.2 GB, and both abort (rc 134) under an address-space cap. A caller that knows the size
+a file must have checks its header first; a reader that does not fails cleanly when the
+frame cannot be held. Each command runs under issue 48's 1.5 GB cap."""
+
+from __future__ import annotations
+
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import pytest
+from blurset import layout
+
+from tests.conftest import one_error_line, standin_build
+from tests.test_bounded_memory import _capped, run_capped
+
+
+def zip_bomb(side: int = 16384, lines: int = 16) -> bytes:
+    """A valid ZIP scan-line EXR (`lines` a block) of a `side`² RGBA float frame of zeros:
+    4.2 MB at 16384²."""
+
+    def attr(name: str, ty: str, value: bytes) -> bytes:
+        return name.encode() + b"\0" + ty.encode() + b"\0" + struct.pack("<i", len(value)) + value
+
+    chlist = b"".join(bytes([c]) + b"\0" + struct.pack("<iiii", 2, 0, 1, 1) for c in b"ABGR")
+    window = struct.pack("<iiii", 0, 0, side - 1, side - 1)
+    head = struct.pack("<ii", 20000630, 2) + b"".join([
+        attr("channels", "chlist", chlist + b"\0"),
+        attr("compression", "compression", bytes([3])),  # ZIP: 16 lines a block
+        attr("dataWindow", "box2i", window),
+        attr("displayWindow", "box2i", window),
+        attr("lineOrder", "lineOrder", b"\0"),
+        attr("pixelAspectRatio", "float", struct.pack("<f", 1.0)),
+        attr("screenWindowCenter", "v2f", struct.pack("<ff", 0, 0)),
+        attr("screenWindowWidth", "float", struct.pack("<f", 1.0)),
+    ]) + b"\0"  # fmt: skip
+
+    def data(rows: int) -> bytes:
+        # Zeros after ZIP's byte predictor: the first byte 0, every other one 128.
+        return zlib.compress(b"\0" + b"\x80" * (rows * side * 16 - 1), 9)
+
+    full = data(lines)
+    blocks = []
+    for y in range(0, side, lines):
+        d = full if y + lines <= side else data(side - y)
+        blocks.append(struct.pack("<ii", y, len(d)) + d)
+    offsets, at = [], len(head) + 8 * len(blocks)
+    for b in blocks:
+        offsets.append(at)
+        at += len(b)
+    return head + struct.pack(f"<{len(blocks)}Q", *offsets) + b"".join(blocks)
+
+
+def test_the_crafted_file_is_a_valid_frame(tmp_path):
+    """The small one decodes whole: the big one is no broken file but a blank frame."""
+    from blurset.image import read_exr
+
+    p = tmp_path / "small.exr"
+    p.write_bytes(zip_bomb(40))
+    frame = read_exr(p)
+    assert frame.shape == (40, 40, 4) and float(abs(frame).max()) == 0.0
+    assert 4_000_000 < len(zip_bomb()) < 4_400_000
+
+
+@pytest.fixture
+def bombed(standin_blender, tmp_path) -> tuple[Path, list[Path]]:
+    """A `--keep-linear` stand-in build (32 px) whose first setting's first three sharp
+    linear EXRs are the 16384² ZIP frame."""
+    out = tmp_path / "b"
+    standin_build(out, standin_blender, "--keep-linear")
+    setting = layout.complete_settings(out)[0]
+    exrs = sorted((setting / "sharp" / "linear").glob("*.exr"))[:3]
+    bomb = zip_bomb()
+    for p in exrs:
+        p.write_bytes(bomb)
+    return out, exrs
+
+
+def _no_abort(proc: subprocess.CompletedProcess) -> None:
+    assert proc.returncode not in (134, -6), proc.stderr[-2000:]
+    for words in ("memory allocation of", "panicked", "Traceback"):
+        assert words not in proc.stderr, proc.stderr[-2000:]
+
+
+def test_verify_names_the_size_from_the_header(bombed):
+    out, exrs = bombed
+    proc = run_capped("verify", str(out))
+    _no_abort(proc)
+    assert proc.returncode == 1, (proc.returncode, proc.stderr[-2000:])
+    for p in exrs:
+        said = [x for x in proc.stdout.splitlines() if p.name in x and str(p.parent.name) in x]
+        assert any("16384x16384" in x and "32x32" in x for x in said), proc.stdout
+        assert not any("decode" in x for x in said), said
+
+
+def test_noise_linear_refuses_the_file_before_decoding(bombed, tmp_path):
+    """The build's cheap check names the size from the header (the noise run refuses a
+    damaged setting before it plans a unit)."""
+    out, exrs = bombed
+    proc = run_capped("noise", str(out), "--gains", "1", "--out", str(tmp_path / "n"))
+    _no_abort(proc)
+    line = one_error_line(proc, "16384x16384 px, not 32x32", code=proc.returncode)
+    assert proc.returncode != 0
+    assert any(p.name in line for p in exrs), line
+    assert not (tmp_path / "n").exists() or not any((tmp_path / "n").rglob("*.png"))
+
+
+def test_the_linear_writer_reads_every_size_before_decoding(tmp_path):
+    """`noise_write_variants_linear` (no size given: the first source's) over a 32 px
+    frame and two 16384² ones: refused from the second's header, nothing decoded."""
+    good = tmp_path / "src" / "000.exr"
+    good.parent.mkdir()
+    good.write_bytes(zip_bomb(32))
+    for name in ("001.exr", "002.exr"):
+        (good.parent / name).write_bytes(zip_bomb())
+    code = (
+        "import sys\nfrom pathlib import Path\n"
+        "from blurset.noise.model import noise_write_variants_linear\n"
+        "src = sorted(Path(sys.argv[1]).glob('*.exr'))\n"
+        "try:\n    noise_write_variants_linear(src, [p.stem for p in src],"
+        " [(sys.argv[2], 0.01, 0.01, 1)])\n"
+        "except Exception as e:\n    print(type(e).__name__, e)\n    sys.exit(3)\n"
+    )
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(good.parent), str(out)],
+        capture_output=True, text=True, preexec_fn=_capped,
+    )  # fmt: skip
+    _no_abort(proc)
+    assert proc.returncode == 3, (proc.returncode, proc.stdout, proc.stderr[-2000:])
+    said = "EXR is 16384x16384, expected 32x32; refused before decoding it"
+    assert said in proc.stdout and "001.exr" in proc.stdout, proc.stdout
+    assert not any(out.rglob("*.png")), "a frame was written"
+
+
+def test_a_reader_without_a_size_fails_cleanly_when_the_frame_cannot_be_held(tmp_path):
+    """`blurset.image.read_exr` knows no size: the 4 GiB frame the valid file holds, past the cap, is an
+    ImageError naming the file, not an abort."""
+    bomb = tmp_path / "bomb.exr"
+    bomb.write_bytes(zip_bomb())
+    code = (
+        "import sys\nfrom blurset.image import read_exr\n"
+        "try:\n    read_exr(sys.argv[1])\n"
+        "except Exception as e:\n    print(type(e).__name__, e)\n    sys.exit(3)\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(bomb)],
+        capture_output=True, text=True, preexec_fn=_capped,
+    )  # fmt: skip
+    _no_abort(proc)
+    assert proc.returncode == 3, (proc.returncode, proc.stdout, proc.stderr[-2000:])
+    assert "cannot allocate" in proc.stdout and "16384x16384" in proc.stdout, proc.stdout
+    assert "bomb.exr" in proc.stdout, proc.stdout
