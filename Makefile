@@ -70,6 +70,7 @@ lint: venv
 	cargo clippy --workspace --all-targets -- -D warnings
 	$(VENV)/bin/ruff check python tests blender_scripts bench docs scripts
 	$(VENV)/bin/ruff format --check python tests blender_scripts bench docs scripts
+	$(PY) scripts/check_lengths.py
 	$(PY) -m mypy.stubtest blurset._core --allowlist stubtest_allowlist.txt
 	$(MAKE) typecheck
 
