@@ -6,7 +6,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-BUILDER = Path(__file__).resolve().parents[1] / "python" / "blurset" / "commands" / "build"
+BUILDER = Path(__file__).resolve().parents[1] / "python" / "blurset" / "commands" / "builder"
 
 
 def _any_parameters(source: str, name: str) -> list[str]:
@@ -26,6 +26,8 @@ def _any_parameters(source: str, name: str) -> list[str]:
 
 
 def test_no_builder_parameter_is_any() -> None:
+    # The folder is there and holds the builder (a moved folder must not pass unseen).
+    assert (BUILDER / "setting.py").is_file() and len(list(BUILDER.glob("*.py"))) >= 8
     found = [
         p for f in sorted(BUILDER.glob("*.py")) for p in _any_parameters(f.read_text(), f.name)
     ]

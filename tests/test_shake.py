@@ -128,7 +128,7 @@ def test_the_builder_schedules_render_phases_without_naming_a_kind():
     """The builder renders the plan's phases in order (`Render.phase`): no degraded kind
     is named in it, so a new kind schedules itself (defocus's images once had a phase
     of their own there, picked by their folder names)."""
-    builder = ROOT / "python" / "blurset" / "commands" / "build"
+    builder = ROOT / "python" / "blurset" / "commands" / "builder"
     named = re.compile(r"defocus|shake|\.startswith\(|is_level_dir|parse_level_dir")
     for f in ("setting.py", "unit.py"):
         hits = [ln for ln in (builder / f).read_text().splitlines() if named.search(ln)]
