@@ -90,6 +90,11 @@ def test_fern_passes(fern_report):
     assert "COLMAP's own poses agree (20/20" in line
 
 
+# COLMAP sees the images and the intrinsics (hwf), never the poses we check: the tests
+# that plant wrong poses below check them against fern's stored models (`fern_colmap`,
+# real COLMAP runs made once), as test_fern_passes does against a run of its own.
+
+
 def fern_copy(tmp_path: Path) -> Path:
     scene = tmp_path / "fern"
     scene.mkdir()
@@ -99,7 +104,8 @@ def fern_copy(tmp_path: Path) -> Path:
     return scene
 
 
-def test_fern_one_view_rotated_5deg_fails_naming_it(tmp_path):
+def test_fern_one_view_rotated_5deg_fails_naming_it(tmp_path, fern_colmap, monkeypatch):
+    serve_models(monkeypatch, fern_colmap, {})
     scene = fern_copy(tmp_path)
     rotate_view(scene, 7, 5.0)
     out = tmp_path / "report.json"
@@ -116,7 +122,8 @@ def test_fern_one_view_rotated_5deg_fails_naming_it(tmp_path):
     assert all(v["ok"] for v in r["views"] if v["index"] != 7)
 
 
-def test_fern_two_views_swapped_fail_naming_both(tmp_path):
+def test_fern_two_views_swapped_fail_naming_both(tmp_path, fern_colmap, monkeypatch):
+    serve_models(monkeypatch, fern_colmap, {})
     scene = fern_copy(tmp_path)
     swap_views(scene, 3, 12)
     r = check_poses.check_scene(scene, factor=8)
@@ -124,8 +131,9 @@ def test_fern_two_views_swapped_fail_naming_both(tmp_path):
     assert sorted(r["failed_views"]) == ["image003.png", "image012.png"]
 
 
-def test_fern_wrong_convention_fails(tmp_path):
+def test_fern_wrong_convention_fails(tmp_path, fern_colmap, monkeypatch):
     """Rows written as OpenGL [right, up, back] instead of LLFF [down, right, back]."""
+    serve_models(monkeypatch, fern_colmap, {})
     scene = fern_copy(tmp_path)
     pb = np.array(read_poses_bounds(scene / "poses_bounds.npy"))
     m = pb[:, :15].reshape(-1, 3, 5).copy()
