@@ -12,7 +12,8 @@ from tests.conftest import standin_build
 @pytest.mark.parametrize("stride", [8, 16])
 def test_card_llffhold_is_the_builds_view_stride(tmp_path, standin_blender, stride):
     out = tmp_path / "build"
-    standin_build(out, standin_blender, "--views", "17", "--test-view-stride", str(stride))
+    standin_build(out, standin_blender, "--views", "17", "--test-view-stride", str(stride),
+                  "--settings-per-object", "1")  # fmt: skip
     card = make_card(out)
     assert f"use `--llffhold {stride}`" in card
     assert card.count("--llffhold") == 1
