@@ -5,10 +5,14 @@
 //! the size its header promises. Both readers `blurset verify` tries are measured: the
 //! colour one and the depth one (the `exr` crate's generic reader).
 //!
-//! Half the inputs are files as they come; the other half are built from the input as
+//! A quarter of the inputs are files as they come; half are built from the input as
 //! issue 48's file was (a header whose size is drawn up to the pixel limit, a whole
 //! offset table, blocks cut from the rest of the input), so the fuzzer reaches valid
-//! headers that promise far more than their blocks hold within seconds.
+//! headers that promise far more than their blocks hold within seconds; a quarter are
+//! valid ZIP files as issue 60's (blocks that deflate to exactly their size, up to
+//! 1032:1): each must decode, at a cost bounded by its frame. On every file, a caller
+//! that knows the size (verify, noise) reads another from the header alone, at a cost
+//! bounded by the file.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -78,7 +82,7 @@ fn measure<T>(
     file: &[u8],
     decode: impl FnOnce(&[u8]) -> Option<T>,
     held: impl Fn(&T) -> usize,
-) {
+) -> Option<T> {
     let base = NOW.load(Relaxed);
     PEAK.store(base, Relaxed);
     let got = decode(file);
@@ -94,6 +98,7 @@ fn measure<T>(
         file.len(),
         if got.is_some() { "decoded" } else { "refused" }
     );
+    got
 }
 
 /// A scan-line EXR as issue 48's: `p` picks the compression, the channels (R, G, B or
@@ -120,6 +125,47 @@ fn crafted(p: &[u8; 6], rest: &[u8]) -> Vec<u8> {
     };
     let side = |b: u8| 1i32 << (b % 15); // 1 to 16384
     let (w, h) = (side(p[2]), side(p[3]));
+    let n = ((h + lines - 1) / lines) as usize;
+    // Each block gets an equal share of `rest` (at most the bytes `p` allows).
+    let share = (rest.len() / n).min(usize::from(u16::from_le_bytes([p[4], p[5]])));
+    let blocks = (0..n).map(|i| rest[i * share..(i + 1) * share].to_vec());
+    with_blocks(header(names, ty, code, w, h), lines, blocks.collect())
+}
+
+/// A valid scan-line EXR as issue 60's: `p` picks ZIP or ZIPS, the channels (R, G, B,
+/// optional A; half or float), a size up to 511 x 511 and the deflate level; each
+/// block is `rest` repeated to the block's bytes and deflated whole (any bytes are the
+/// split, predicted form of some samples). Returns the file and its size.
+fn valid_zip(p: &[u8; 6], rest: &[u8]) -> (Vec<u8>, (usize, usize)) {
+    let (code, lines) = if p[0] & 1 == 0 { (2, 1) } else { (3, 16) };
+    let (ty, bytes) = if p[1] & 1 == 0 { (1, 2) } else { (2, 4) };
+    let names: &[&str] = if p[1] & 2 == 0 {
+        &["B", "G", "R"]
+    } else {
+        &["A", "B", "G", "R"]
+    };
+    let (w, h) = (1 + 2 * usize::from(p[2]), 1 + 2 * usize::from(p[3]));
+    let level = i32::from(p[4] % 10);
+    let pattern: &[u8] = if rest.is_empty() { &[0] } else { rest };
+    let blocks = (0..h.div_ceil(lines)).map(|i| {
+        let rows = lines.min(h - i * lines);
+        let raw: Vec<u8> = pattern
+            .iter()
+            .cycle()
+            .take(rows * w * names.len() * bytes)
+            .copied()
+            .collect();
+        let mut out = vec![0u8; zlib_rs::compress_bound(raw.len())];
+        let (z, _) = zlib_rs::compress_slice(&mut out, &raw, zlib_rs::DeflateConfig::new(level));
+        z.to_vec()
+    });
+    let head = header(names, ty, code, w as i32, h as i32);
+    (with_blocks(head, lines as i32, blocks.collect()), (w, h))
+}
+
+/// A single-part scan-line EXR header: `names` channels of sample type `ty` (1 half,
+/// 2 float), OpenEXR compression number `code`, a `w` x `h` data and display window.
+fn header(names: &[&str], ty: i32, code: u8, w: i32, h: i32) -> Vec<u8> {
     let ints = |v: &[i32]| -> Vec<u8> { v.iter().flat_map(|x| x.to_le_bytes()).collect() };
     let attr = |out: &mut Vec<u8>, name: &str, ty: &str, value: &[u8]| {
         for s in [name, ty] {
@@ -147,41 +193,81 @@ fn crafted(p: &[u8; 6], rest: &[u8]) -> Vec<u8> {
     attr(&mut out, "screenWindowCenter", "v2f", &[0; 8]);
     attr(&mut out, "screenWindowWidth", "float", &1f32.to_le_bytes());
     out.push(0);
-    let n = ((h + lines - 1) / lines) as usize;
-    // Each block gets an equal share of `rest` (at most the bytes `p` allows).
-    let share = (rest.len() / n).min(usize::from(u16::from_le_bytes([p[4], p[5]])));
-    let first = (out.len() + 8 * n) as u64;
-    for i in 0..n as u64 {
-        out.extend_from_slice(&(first + i * (8 + share as u64)).to_le_bytes());
+    out
+}
+
+/// `head` followed by a whole offset table and `blocks` (`lines` scan lines each).
+fn with_blocks(mut out: Vec<u8>, lines: i32, blocks: Vec<Vec<u8>>) -> Vec<u8> {
+    let mut at = (out.len() + 8 * blocks.len()) as u64;
+    for b in &blocks {
+        out.extend_from_slice(&at.to_le_bytes());
+        at += 8 + b.len() as u64;
     }
-    for i in 0..n {
-        let block = &rest[i * share..(i + 1) * share];
-        out.extend(ints(&[i as i32 * lines, block.len() as i32]));
-        out.extend_from_slice(block);
+    for (i, b) in blocks.iter().enumerate() {
+        out.extend_from_slice(&(i as i32 * lines).to_le_bytes());
+        out.extend_from_slice(&(b.len() as i32).to_le_bytes());
+        out.extend_from_slice(b);
     }
     out
 }
 
+/// The size a caller expects, other than the file's: read from the header alone, at a
+/// cost bounded by the file.
+fn other_size_is_named(file: &[u8]) {
+    let Ok(size) = exr_size_of(file) else {
+        return;
+    };
+    let want = (size.0.wrapping_add(1), size.1);
+    let got = measure(
+        "header_size_other_than",
+        file,
+        |b| blurset_core::header_size_other_than(b, want),
+        |_| 0,
+    );
+    assert_eq!(got, Some(size), "the header's size is not named");
+}
+
+/// The first layer's size by the `exr` crate's header reader.
+fn exr_size_of(file: &[u8]) -> Result<(u32, u32), ()> {
+    let meta = exr::meta::MetaData::read_from_buffered(file, false).map_err(|_| ())?;
+    let h = meta.headers.first().ok_or(())?;
+    let side = |n: usize| u32::try_from(n).map_err(|_| ());
+    Ok((side(h.layer_size.width())?, side(h.layer_size.height())?))
+}
+
 fuzz_target!(|data: &[u8]| {
     let built;
+    let mut size = None;
     let file = match data.split_first() {
         Some((&pick, rest)) if pick & 1 == 1 && rest.len() >= 6 => {
             let (p, rest) = rest.split_at(6);
             built = crafted(&p.try_into().unwrap_or([0; 6]), rest);
             &built[..]
         }
+        Some((&pick, rest)) if pick & 3 == 2 && rest.len() >= 6 => {
+            let (p, rest) = rest.split_at(6);
+            let (file, wh) = valid_zip(&p.try_into().unwrap_or([0; 6]), rest);
+            (built, size) = (file, Some(wh));
+            &built[..]
+        }
         _ => data,
     };
-    measure(
+    let frame = measure(
         "decode_exr",
         file,
         |b| blurset_core::decode_exr(b).ok(),
         |f| f.rgba.len() * 4,
     );
+    if let Some((w, h)) = size {
+        // A valid file decodes whole, however well it compresses.
+        let got = frame.map(|f| (f.width as usize, f.height as usize));
+        assert_eq!(got, Some((w, h)), "a valid ZIP file did not decode");
+    }
     measure(
         "decode_depth_exr",
         file,
         |b| blurset_core::decode_depth_exr(b, std::path::Path::new("fuzz.exr")).ok(),
         |d| d.2.len() * 4,
     );
+    other_size_is_named(file);
 });
