@@ -47,6 +47,10 @@ def test_the_stubs_typed_dicts_are_the_cores():
         assert f"class {name}(TypedDict)" in text, name
     core_stub = (stubgen.STUB.parent / "_core.pyi").read_text()
     assert "-> list[rec.Render]" in core_stub and "def record(self) -> rec.NoiseDoc" in core_stub
+    # Nothing the core hands back is an untyped dict: each has its generated type.
+    assert "dict[str, Any]" not in core_stub
+    for name in ("HalfNoise", "WireFrame", "Failure"):
+        assert f"rec.{name}" in core_stub, name
 
 
 def test_the_shipped_schemas_are_the_cores():

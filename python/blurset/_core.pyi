@@ -628,7 +628,7 @@ def write_build_tail(
     python_version: str,
     created: str,
     seconds: float,
-) -> tuple[int, list[dict[str, Any]], int, list[tuple[str, str]]]:
+) -> tuple[int, list[rec.Failure], int, list[tuple[str, str]]]:
     """Write failures.jsonl (the failures now), splits.json and dataset.json of the build
     at `out` made with `config`, from its complete settings' meta.json (call under the
     build's lock). Returns (settings complete, the failures now, test settings, the
@@ -1059,7 +1059,7 @@ def half_noise_bound(
     half_b: npt.NDArray[np.float32],
     *,
     background: tuple[float, float, float] = ...,
-) -> dict[str, Any]:
+) -> rec.HalfNoise:
     """half_noise with its upper bound where the noise is heavy-tailed: `estimate` (psnr,
     mse, coverage, object_px), `mse_bound`, `psnr_bound` (the PSNR reached at least) and
     `n_eff` (how many pixels the estimate effectively rests on)."""
@@ -1509,7 +1509,7 @@ def value_schemas() -> list[tuple[str, Any]]:
     """(type name, JSON Schema) of every value the bindings hand across as a dict (what
     blurset/_records.pyi is generated from)."""
 
-def wire_frame(render: Mapping[str, Any]) -> dict[str, Any]:
+def wire_frame(render: Mapping[str, Any]) -> rec.WireFrame:
     """A render (a plan's, or a caller's dict) as one frame of a worker's render request:
     its wire fields, typed and checked; ValueError naming what is wrong."""
 

@@ -489,6 +489,50 @@ class BuildStats(TypedDict):
     view_setting: list[int]
     w_u: list[float]
 
+class ObjectError(TypedDict):
+    """The error of an image against a reference on the object's pixels (DESIGN §8): those with coverage (alpha above [`COVERAGE_EPS`], Cycles' rounding) in the image or in the reference. The background is exact in both, so a whole-frame figure reads 10·log10(1 / coverage) dB high; this one is the per-pixel figure the 8-bit floor (58.9 dB) is."""
+
+    coverage: float
+    mse: float
+    object_px: int
+    psnr: float
+
+class HalfNoise(TypedDict):
+    """[`half_noise`] with a bound on it that holds where the noise is heavy-tailed."""
+
+    estimate: ObjectError
+    mse_bound: float
+    n_eff: float
+    psnr_bound: float
+
+class WireDof(TypedDict):
+    """A defocus render's thin lens (world units)."""
+
+    aperture_radius: float
+    focus_distance: float
+
+class WireMotion(TypedDict):
+    """The camera path of one Cycles motion blur render: 2^steps + 1 keys."""
+
+    keys: list[list[list[float]]]
+    steps: int
+
+class WireFrame(TypedDict):
+    """One frame of a render request."""
+
+    c2w: list[list[float]]
+    call: NotRequired[int | None]
+    dof: NotRequired[WireDof | None]
+    level: NotRequired[str | None]
+    motion: NotRequired[WireMotion | None]
+    out: str
+    region: NotRequired[list[int] | None]
+    sample_offset: NotRequired[int | None]
+    sample_sequence: NotRequired[int | None]
+    samples: NotRequired[int | None]
+    seed: int
+    view: NotRequired[int | None]
+
 class CostSeconds(TypedDict):
     """The priced seconds of a setting's blurry images (one pilot round each)."""
 

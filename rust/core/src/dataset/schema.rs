@@ -90,6 +90,11 @@ pub fn value_schemas() -> Vec<(&'static str, serde_json::Value)> {
         ("NoiseDoc", schema_for!(NoiseDoc).to_value()),
         ("Splits", schema_for!(Splits).to_value()),
         ("BuildStats", schema_for!(BuildStats).to_value()),
+        (
+            "HalfNoise",
+            schema_for!(crate::metrics::HalfNoise).to_value(),
+        ),
+        ("WireFrame", schema_for!(super::wire::WireFrame).to_value()),
     ]
 }
 
