@@ -33,9 +33,13 @@ demo: venv
 # release-wheel build, which has its own target; CI runs both.
 test: test-rust test-py
 
-# The fast layer: Rust and the Python tests that render nothing (a couple of minutes).
+# The fast layer: Rust and the Python tests that render nothing, spread over the cores
+# (pytest-xdist; a file's tests stay on one worker, so its fixtures are made once):
+# about 3.5 minutes on 2 cores. Tests that render run one at a time (Blender takes
+# every core).
+PYTEST_WORKERS ?= auto
 test-fast: test-rust venv
-	$(PYTEST) -m "not blender and not packaging" tests
+	$(PYTEST) -n $(PYTEST_WORKERS) --dist loadfile -m "not blender and not packaging" tests
 
 # --release: the dependencies maturin compiled for the extension module are reused.
 test-rust:
