@@ -156,3 +156,61 @@ def test_a_reader_without_a_size_fails_cleanly_when_the_frame_cannot_be_held(tmp
     assert proc.returncode == 3, (proc.returncode, proc.stdout, proc.stderr[-2000:])
     assert "cannot allocate" in proc.stdout and "16384x16384" in proc.stdout, proc.stdout
     assert "bomb.exr" in proc.stdout, proc.stdout
+
+
+_OPEN = (
+    "import sys\nfrom blurset.data import open_scene\n"
+    "try:\n    open_scene(sys.argv[1], sys.argv[2])\n"
+    "except Exception as e:\n    print(type(e).__name__, e)\n    sys.exit(3)\n"
+)
+
+
+def _open_capped(root: Path, setting: str) -> subprocess.CompletedProcess:
+    proc = subprocess.run(
+        [sys.executable, "-c", _OPEN, str(root), setting],
+        capture_output=True, text=True, preexec_fn=_capped,
+    )  # fmt: skip
+    _no_abort(proc)
+    assert proc.returncode == 3, (proc.returncode, proc.stdout, proc.stderr[-2000:])
+    return proc
+
+
+@pytest.fixture
+def passes_build(standin_blender, tmp_path) -> Path:
+    out = tmp_path / "p"
+    standin_build(out, standin_blender, "--passes", "depth,normal", "--settings-per-object", "1")
+    return out
+
+
+def test_open_scene_refuses_a_pass_file_of_another_size_from_its_header(passes_build):
+    """open_scene reads a build's depth and normals at the images' size: a 16384² depth
+    file is refused from its header, named, under the cap (it aborted: a 1 GiB frame)."""
+    setting = layout.complete_settings(passes_build)[0]
+    bombed = setting / "sharp" / "depth" / "000.exr"
+    bombed.write_bytes(zip_bomb())
+    proc = _open_capped(passes_build, setting.name)
+    assert "EXR is 16384x16384, expected 32x32" in proc.stdout, proc.stdout
+    assert str(bombed) in proc.stdout, proc.stdout
+
+
+def test_open_scene_refuses_a_hub_pass_cell_of_another_size_naming_it(passes_build, tmp_path):
+    """The same through a hub export whose depth cell was swapped for the 16384² frame
+    (shard and export.json rewritten to match, as a hostile upload would): refused from
+    the cell's header, named by setting, view and column."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    hub = tmp_path / "h"
+    subprocess.run([sys.executable, "-m", "blurset.cli", "export", str(passes_build),
+                    "--for", "hub", "--out", str(hub)], check=True, capture_output=True)  # fmt: skip
+    shard = next((hub / "data" / "sharp").glob("*.parquet"))
+    table = pq.read_table(shard)
+    i = table.schema.get_field_index("depth")
+    cells = table.column(i).to_pylist()
+    cells[0] = zip_bomb()
+    table = table.set_column(i, table.schema.field(i), pa.array(cells, pa.binary()))
+    pq.write_table(table.replace_schema_metadata(pq.read_schema(shard).metadata), shard)
+    setting = table.column("setting")[0].as_py()
+    proc = _open_capped(hub, setting)
+    said = f"the depth cell of {setting} view {table.column('view')[0].as_py()} does not decode"
+    assert said in proc.stdout and "EXR is 16384x16384, expected 32x32" in proc.stdout, proc.stdout

@@ -756,8 +756,11 @@ class Denoiser:
 def srgb_encode(linear: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
     """Exact IEC 61966-2-1 encoding, clamped to [0, 1] (NaN -> 0); same shape."""
 
-def read_exr(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
-    """The first RGB(A) layer of an EXR as float32 (H, W, 4), values as stored."""
+def read_exr(
+    path: str | PathLike[str], *, size: tuple[int, int] | None = None
+) -> npt.NDArray[np.float32]:
+    """The first RGB(A) layer of an EXR as float32 (H, W, 4), values as stored; with
+    `size` (width, height), a file of another size is refused from its header first."""
 
 # --- geometry (rust/py/src/geometry.rs) --------------------------------------------------
 
@@ -771,8 +774,11 @@ def write_geometry(
     EXR (one channel Y, world units along the viewing axis, 0: no surface) and/or normal
     EXR (world-frame x, y, z in R, G, B; 0: no surface)."""
 
-def read_depth(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
-    """A depth EXR as float32 (H, W)."""
+def read_depth(
+    path: str | PathLike[str], *, size: tuple[int, int] | None = None
+) -> npt.NDArray[np.float32]:
+    """A depth EXR as float32 (H, W); with `size` (width, height), a file of another size
+    is refused from its header first."""
 
 def circle_of_confusion(
     depth: npt.NDArray[np.float32], focus: float, aperture_radius: float, focal_px: float

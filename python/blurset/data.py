@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from blurset import _core, layout
-from blurset.exceptions import InputError
+from blurset.exceptions import ImageError, InputError, reason_of
 
 __all__ = ["Scene", "open_scene", "list_scenes", "POSES"]
 
@@ -252,13 +252,16 @@ def _scene_from_folders(
         test_views=test,
         noise=meta,
         pose=pose,
-        **_passes(sdir, level, n, downsample),
+        **_passes(sdir, level, n, downsample, (w, h)),
     )
 
 
-def _passes(sdir: Path, level: str, n: int, downsample: int) -> dict[str, np.ndarray]:
+def _passes(
+    sdir: Path, level: str, n: int, downsample: int, size: tuple[int, int]
+) -> dict[str, np.ndarray]:
     """The `--passes` files of `level` at one size, as Scene's fields (none without): the
-    sharp level's, but a blur level's own masks (`layout.pass_level`)."""
+    sharp level's, but a blur level's own masks (`layout.pass_level`). An EXR that is
+    not the images' `size` (width, height) is refused from its header, never decoded."""
     meta = layout.read_json(sdir / layout.META, layout.META)
     kinds = (meta.get("render") or {}).get("passes") or []
     names = [layout.image_name(i, n) for i in range(n)]
@@ -274,9 +277,9 @@ def _passes(sdir: Path, level: str, n: int, downsample: int) -> dict[str, np.nda
 
     out: dict[str, np.ndarray] = {}
     if "depth" in kinds:
-        out["depth"] = np.stack([_core.read_depth(p) for p in files("depth")])
+        out["depth"] = np.stack([_core.read_depth(p, size=size) for p in files("depth")])
     if "normal" in kinds:
-        out["normals"] = np.stack([_core.read_exr(p)[..., :3] for p in files("normal")])
+        out["normals"] = np.stack([_core.read_exr(p, size=size)[..., :3] for p in files("normal")])
     if "mask" in kinds:
         out["masks"] = np.stack([_core.read_image(p)[..., 0] > 0 for p in files("mask")])
     return out
@@ -360,15 +363,27 @@ def _decode_png(value: Any, what: str) -> np.ndarray:
     return a[..., None] if a.ndim == 2 else a
 
 
-def _decode_with(reader: Any, data: bytes, suffix: str) -> np.ndarray:
+def _cell(read: Any, row: Mapping[str, Any], name: str) -> np.ndarray:
+    """One pass cell of a row decoded; a cell that does not is named by its setting, view
+    and column (its bytes went through a temp file, whose name would say nothing)."""
+    try:
+        return read(row[name])
+    except ImageError as e:
+        raise InputError(
+            f"the {name} cell of {row.get('setting')} view {row.get('view')} does not "
+            f"decode: {reason_of(e)}"
+        ) from None
+
+
+def _decode_with(reader: Any, data: bytes, suffix: str, size: tuple[int, int]) -> np.ndarray:
     """A pass file's bytes decoded by the core's reader of that file (through a temp
-    file: the readers take paths)."""
+    file: the readers take paths), refused from its header unless it is `size`."""
     import tempfile
 
     with tempfile.NamedTemporaryFile(suffix=suffix) as f:
         f.write(data)
         f.flush()
-        return np.asarray(reader(f.name))
+        return np.asarray(reader(f.name, size=size))
 
 
 def _column(rows: list[Mapping[str, Any]], name: str, setting: str) -> list[Any]:
@@ -434,7 +449,7 @@ def _scene_from_rows(
     k = np.array([[focal, 0, w / 2], [0, focal, h / 2], [0, 0, 1]], dtype=np.float64)
     held = [int(r["view"]) for r in mine if r["held_out"]]
     noise = json.loads(mine[0]["noise"]) if mine[0].get("noise") else None
-    passes = _row_passes(mine, downsample)
+    passes = _row_passes(mine, downsample, (w, h))
 
     def files(rs: list[Mapping[str, Any]]) -> list[Path]:
         return [Path(v["path"]) if isinstance(v, Mapping) else Path() for v in (r[col] for r in rs)]
@@ -474,19 +489,21 @@ def _row_mean_cameras(mine: list[Mapping[str, Any]], setting: str) -> tuple[np.n
     return gl * np.array([1.0, -1.0, -1.0, 1.0]), gl
 
 
-def _row_passes(mine: list[Mapping[str, Any]], downsample: int) -> dict[str, np.ndarray]:
+def _row_passes(
+    mine: list[Mapping[str, Any]], downsample: int, size: tuple[int, int]
+) -> dict[str, np.ndarray]:
     """The pass columns of the rows at one size, as Scene's fields (none without), as
-    _passes reads the files."""
+    _passes reads the files (an EXR of another `size` than the images' refused)."""
     from blurset.services import hub_format
 
     passes: dict[str, np.ndarray] = {}
     readers = {
-        "depth": ("depth", lambda b: _decode_with(_core.read_depth, b, ".exr")),
-        "normal": ("normals", lambda b: _decode_with(_core.read_exr, b, ".exr")[..., :3]),
+        "depth": ("depth", lambda b: _decode_with(_core.read_depth, b, ".exr", size)),
+        "normal": ("normals", lambda b: _decode_with(_core.read_exr, b, ".exr", size)[..., :3]),
         "mask": ("masks", lambda b: _decode_png(b, "mask")[..., 0] > 0),
     }
     for kind, (field_name, read) in readers.items():
         name = hub_format.pass_column(kind, downsample)
         if name in mine[0] and mine[0][name] is not None:
-            passes[field_name] = np.stack([read(r[name]) for r in mine])
+            passes[field_name] = np.stack([_cell(read, r, name) for r in mine])
     return passes

@@ -381,10 +381,22 @@ fn srgb_encode<'py>(
     PyArray1::from_vec(py, out).reshape(shape)
 }
 
-/// Read an EXR as premultiplied linear RGBA float32 (H, W, 4), values as stored.
+/// Read an EXR as premultiplied linear RGBA float32 (H, W, 4), values as stored. With
+/// `size` (width, height), a file of another size is refused from its header, before
+/// anything of its size is decoded.
 #[pyfunction]
-fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, numpy::PyArray3<f32>>> {
-    let frame = run_detached(py, move || core::read_exr(&path))?;
+#[pyo3(signature = (path, *, size = None))]
+fn read_exr(
+    py: Python<'_>,
+    path: PathBuf,
+    size: Option<(u32, u32)>,
+) -> PyResult<Bound<'_, numpy::PyArray3<f32>>> {
+    let frame = run_detached(py, move || {
+        if let Some(want) = size {
+            core::check_exr_size(&path, want)?;
+        }
+        core::read_exr(&path)
+    })?;
     rgba_to_py(py, frame)
 }
 

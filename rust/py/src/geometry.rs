@@ -21,9 +21,21 @@ fn write_geometry(
 }
 
 /// A depth EXR as float32 (H, W): world units along the viewing axis, 0 where no surface.
+/// With `size` (width, height), a file of another size is refused from its header,
+/// before anything of its size is decoded.
 #[pyfunction]
-fn read_depth(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, numpy::PyArray2<f32>>> {
-    let (w, h, depth) = run_detached(py, move || core::read_depth_exr(&path))?;
+#[pyo3(signature = (path, *, size = None))]
+fn read_depth(
+    py: Python<'_>,
+    path: PathBuf,
+    size: Option<(u32, u32)>,
+) -> PyResult<Bound<'_, numpy::PyArray2<f32>>> {
+    let (w, h, depth) = run_detached(py, move || {
+        if let Some(want) = size {
+            core::check_exr_size(&path, want)?;
+        }
+        core::read_depth_exr(&path)
+    })?;
     PyArray1::from_vec(py, depth).reshape([h, w])
 }
 
