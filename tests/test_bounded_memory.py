@@ -20,19 +20,21 @@ from tests.conftest import one_error_line, standin_build
 CAP = 1536 << 20  # bytes of address space: a third of one 16384² RGBA f32 frame
 
 
-def tiny_blocks(side: int = 16384, block: int = 16) -> bytes:
-    """A ZIPS scan-line EXR (R, G, B half; a block a line) with a `side`² data and
-    display window and a whole, valid offset table of blocks of `block` zero bytes:
-    525 KB at 16384², the issue's file."""
+def exr_header(channels: bytes, pixel_type: int, compression: int, side: int) -> bytes:
+    """A scan-line EXR's magic, version and header: `channels` (one byte a name) of
+    `pixel_type` (1 half, 2 float), a `side`² data and display window, `compression`
+    (2 ZIPS, 3 ZIP)."""
 
     def attr(name: str, ty: str, value: bytes) -> bytes:
         return name.encode() + b"\0" + ty.encode() + b"\0" + struct.pack("<i", len(value)) + value
 
-    chlist = b"".join(c + b"\0" + struct.pack("<iiii", 1, 0, 1, 1) for c in (b"B", b"G", b"R"))
+    chlist = b"".join(
+        bytes([c]) + b"\0" + struct.pack("<iiii", pixel_type, 0, 1, 1) for c in channels
+    )
     window = struct.pack("<iiii", 0, 0, side - 1, side - 1)
-    head = struct.pack("<ii", 20000630, 2) + b"".join([
+    return struct.pack("<ii", 20000630, 2) + b"".join([
         attr("channels", "chlist", chlist + b"\0"),
-        attr("compression", "compression", bytes([2])),  # ZIPS: one line a block
+        attr("compression", "compression", bytes([compression])),
         attr("dataWindow", "box2i", window),
         attr("displayWindow", "box2i", window),
         attr("lineOrder", "lineOrder", b"\0"),
@@ -40,6 +42,13 @@ def tiny_blocks(side: int = 16384, block: int = 16) -> bytes:
         attr("screenWindowCenter", "v2f", struct.pack("<ff", 0, 0)),
         attr("screenWindowWidth", "float", struct.pack("<f", 1.0)),
     ]) + b"\0"  # fmt: skip
+
+
+def tiny_blocks(side: int = 16384, block: int = 16) -> bytes:
+    """A ZIPS scan-line EXR (R, G, B half; a block a line) with a `side`² data and
+    display window and a whole, valid offset table of blocks of `block` zero bytes:
+    525 KB at 16384², the issue's file."""
+    head = exr_header(b"BGR", 1, 2, side)  # ZIPS: one line a block
     first = len(head) + 8 * side
     table = b"".join(struct.pack("<Q", first + y * (8 + block)) for y in range(side))
     blocks = b"".join(struct.pack("<ii", y, block) + bytes(block) for y in range(side))

@@ -17,28 +17,13 @@ import pytest
 from blurset import layout
 
 from tests.conftest import one_error_line, standin_build
-from tests.test_bounded_memory import _capped, run_capped
+from tests.test_bounded_memory import _capped, exr_header, run_capped
 
 
 def zip_bomb(side: int = 16384, lines: int = 16) -> bytes:
     """A valid ZIP scan-line EXR (`lines` a block) of a `side`² RGBA float frame of zeros:
     4.2 MB at 16384²."""
-
-    def attr(name: str, ty: str, value: bytes) -> bytes:
-        return name.encode() + b"\0" + ty.encode() + b"\0" + struct.pack("<i", len(value)) + value
-
-    chlist = b"".join(bytes([c]) + b"\0" + struct.pack("<iiii", 2, 0, 1, 1) for c in b"ABGR")
-    window = struct.pack("<iiii", 0, 0, side - 1, side - 1)
-    head = struct.pack("<ii", 20000630, 2) + b"".join([
-        attr("channels", "chlist", chlist + b"\0"),
-        attr("compression", "compression", bytes([3])),  # ZIP: 16 lines a block
-        attr("dataWindow", "box2i", window),
-        attr("displayWindow", "box2i", window),
-        attr("lineOrder", "lineOrder", b"\0"),
-        attr("pixelAspectRatio", "float", struct.pack("<f", 1.0)),
-        attr("screenWindowCenter", "v2f", struct.pack("<ff", 0, 0)),
-        attr("screenWindowWidth", "float", struct.pack("<f", 1.0)),
-    ]) + b"\0"  # fmt: skip
+    head = exr_header(b"ABGR", 2, 3, side)  # ZIP: 16 lines a block
 
     def data(rows: int) -> bytes:
         # Zeros after ZIP's byte predictor: the first byte 0, every other one 128.
