@@ -204,3 +204,17 @@ def test_the_probes_digest_sees_every_image_byte(shake_hub, tmp_path):
     pq.write_table(type(t).from_pylist(rows, schema=t.schema), copy / "data" / name)
     got = _expected(copy)
     assert got["shake_1"] != want["shake_1"] and got["blur_1"] == want["blur_1"]
+
+
+def test_a_card_made_with_other_options_survives_an_up_to_date_rerun(shake_hub, tmp_path):
+    """`blurset card --hub --pretty-name` replaces the export's card (blurset's own file);
+    an export rerun that changes no shard leaves that card as it is."""
+    b, hub = shake_hub
+    other = tmp_path / "named"
+    shutil.copytree(hub, other)
+    run_cli("card", str(b), "--hub", str(other), "--pretty-name", "My blur set")
+    named = (other / "README.md").read_text()
+    assert "My blur set" in named
+    proc = run_cli("export", str(b), "--for", "hub", "--out", str(other), "--shard-size", "0.02")
+    assert "up to date" in proc.stdout
+    assert (other / "README.md").read_text() == named

@@ -826,14 +826,16 @@ def _attribution(objects: dict[str, dict], licences: Counter) -> list[str]:
     return rows
 
 
-def write_hub_card(build: Path, hub: Path, noise: Path | None = None) -> None:
+def write_hub_card(
+    build: Path, hub: Path, noise: Path | None = None, *, refresh: bool = True
+) -> None:
     """HUB/README.md as `blurset card BUILD --hub HUB` writes it, written by `blurset
     export --for hub` itself: without its `configs:`, `load_dataset(HUB)` reads one
-    `default` config mixing every level's rows. A card already current is not touched
-    (a rerun that is up to date changes nothing); a README someone edited, or that
+    `default` config mixing every level's rows. A card already current is not touched,
+    nor, without `refresh` (an export rerun that changed nothing), one blurset wrote with
+    other options (`blurset card --pretty-name`); a README someone edited, or that
     blurset did not write, is theirs: kept, and the line says how to replace it."""
     out = Path(hub) / "README.md"
-    text = make_card(build, noise=[noise] if noise else None, card_dir=Path(hub).resolve(), hub=hub)
     owner = _core.text_owner(out, "card")
     if owner in ("edited", "foreign"):
         what = "edited since blurset wrote it" if owner == "edited" else "not blurset's"
@@ -843,9 +845,11 @@ def write_hub_card(build: Path, hub: Path, noise: Path | None = None) -> None:
             file=sys.stderr,
         )
         return
-    marked = _core.mark_text(text, "card")
-    if owner == "absent" or out.read_text(encoding="utf-8") != marked:
-        layout.write_text_atomic(out, marked)
+    if owner == "ours" and not refresh:
+        return
+    text = make_card(build, noise=[noise] if noise else None, card_dir=Path(hub).resolve(), hub=hub)
+    if owner == "absent" or out.read_text(encoding="utf-8") != _core.mark_text(text, "card"):
+        outputs.write_marked_text(out, text, command="card")
 
 
 def drop_hub_card(out: Path) -> None:

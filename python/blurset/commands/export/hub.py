@@ -653,15 +653,17 @@ def run(args) -> int:
     outputs.claim(out, export_rules.EXPORT, "--out")
     with outputs.lock(out, export_rules.EXPORT):
         how = outputs.claim(out, export_rules.EXPORT, "--out")
-        _write(out, hp, how, overwrite=args.overwrite)
+        changed = _write(out, hp, how, overwrite=args.overwrite)
         # The card's configs make the export load by level as it is (blurset card's).
         from blurset.commands import card
 
-        card.write_hub_card(hp.build, out, args.noise)
+        card.write_hub_card(hp.build, out, args.noise, refresh=changed)
         return 0
 
 
-def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
+def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> bool:
+    """Write the plan's shards and export.json; whether anything changed (False: up to
+    date)."""
     doc = hp.doc
     top = [export_rules.EXPORT_FILE]
     layout.remove_stale_temps(out, [export_rules.STAGE, export_rules.TRASH, *top])
@@ -682,7 +684,7 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
         want["shards"] = {s.name: vouched[s.name] for s in hp.shards}
         if want == done_doc:
             _say(want, out, hp, "up to date", 0)
-            return 0
+            return False
     owns = owned | set(new)
     export_rules.record_replacing(out, doc, owns, vouched)  # type: ignore[arg-type]
     for rel in stale:
@@ -705,7 +707,7 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> int:
     doc["shards"] = {s.name: vouched[s.name] for s in hp.shards}
     outputs.write_record(out / export_rules.EXPORT_FILE, doc)
     _say(doc, out, hp, "written", written)
-    return 0
+    return True
 
 
 def _trusted_records(old: Any) -> dict[str, dict]:
