@@ -533,12 +533,6 @@ def _hub_kinds(schema: Any) -> dict[str, str]:
     return kinds
 
 
-def _factor(column: str) -> int:
-    """The downsampling factor of an image or pass column (`image_4`, `depth_4`: 4)."""
-    tail = column.rpartition("_")[2]
-    return int(tail) if tail.isdigit() else 1
-
-
 def _hub_cells(
     rel: str, rows: list[dict], kinds: dict[str, str], decode: bool, rep: Report
 ) -> None:
@@ -547,13 +541,16 @@ def _hub_cells(
     at its size), a record parses as JSON, and every number is finite."""
     import tempfile
 
+    from blurset.services import hub_format
+
     with tempfile.TemporaryDirectory(prefix="blurset-verify-") as tmp:
         exrs: list[tuple[str, Path, int, int]] = []
         for r in rows:
             where = f"{rel}: {r['setting']} view {r['view']}"
             for c, kind in kinds.items():
                 x = r[c]
-                w, h = r["width"] // _factor(c), r["height"] // _factor(c)
+                f = hub_format.column_factor(c)
+                w, h = r["width"] // f, r["height"] // f
                 problem = None
                 if kind == "image":
                     problem = _image_problem(x, w, h, decode)

@@ -95,6 +95,13 @@ def pass_column(kind: str, factor: int) -> str:
     return kind if factor == 1 else f"{kind}_{factor}"
 
 
+def column_factor(column: str) -> int:
+    """The factor of an image or pass column (`image_4`, `depth_4`: 4; `image`: 1), as
+    `columns` and `pass_column` name them."""
+    tail = column.rpartition("_")[2]
+    return int(tail) if tail.isdigit() else 1
+
+
 def _arrow_type(pa, feature: dict):
     t = feature["_type"]
     if t == "Image":
