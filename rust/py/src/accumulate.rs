@@ -391,12 +391,7 @@ fn read_exr(
     path: PathBuf,
     size: Option<(u32, u32)>,
 ) -> PyResult<Bound<'_, numpy::PyArray3<f32>>> {
-    let frame = run_detached(py, move || {
-        if let Some(want) = size {
-            core::check_exr_size(&path, want)?;
-        }
-        core::read_exr(&path)
-    })?;
+    let frame = run_detached(py, move || core::read_exr_sized(&path, size))?;
     rgba_to_py(py, frame)
 }
 

@@ -30,12 +30,7 @@ fn read_depth(
     path: PathBuf,
     size: Option<(u32, u32)>,
 ) -> PyResult<Bound<'_, numpy::PyArray2<f32>>> {
-    let (w, h, depth) = run_detached(py, move || {
-        if let Some(want) = size {
-            core::check_exr_size(&path, want)?;
-        }
-        core::read_depth_exr(&path)
-    })?;
+    let (w, h, depth) = run_detached(py, move || core::read_depth_exr_sized(&path, size))?;
     PyArray1::from_vec(py, depth).reshape([h, w])
 }
 

@@ -127,6 +127,18 @@ pub fn write_geometry(render: &Path, depth: Option<&Path>, normal: Option<&Path>
     Ok(())
 }
 
+/// [`read_depth_exr`] of a file that must be `want` (width, height) when given: another
+/// size is refused from its header before anything is decoded.
+pub fn read_depth_exr_sized(
+    path: &Path,
+    want: Option<(u32, u32)>,
+) -> Result<(usize, usize, Vec<f32>)> {
+    if let Some(want) = want {
+        crate::image::exr::read::check_exr_size(path, want)?;
+    }
+    read_depth_exr(path)
+}
+
 /// Read a depth EXR back: (width, height, depth).
 pub fn read_depth_exr(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
     let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read", path, e))?;

@@ -32,6 +32,15 @@ pub struct Frame {
     pub rgba: Vec<f32>,
 }
 
+/// [`read_exr`] of a file that must be `want` (width, height) when given: another size
+/// is refused from its header ([`check_exr_size`]) before anything is decoded.
+pub fn read_exr_sized(path: &Path, want: Option<(u32, u32)>) -> Result<Frame> {
+    if let Some(want) = want {
+        check_exr_size(path, want)?;
+    }
+    read_exr(path)
+}
+
 /// Read the first RGB(A) layer of an EXR file as RGBA f32 (alpha 1 when the file has none).
 ///
 /// Channels are matched by name (`R`, `G`, `B`, optional `A`; half, float or uint
