@@ -385,6 +385,7 @@ class NoiseDoc(TypedDict):
     levels: NoiseTableRecord
     model: str
     profile: str
+    raw_model: NotRequired[Any]
     rng: str
     seed: int
     sigma_read: float
@@ -762,6 +763,7 @@ class NoiseParams(TypedDict):
     frames: int
     gamma: str
     levels_table: NoiseTableParams
+    model: NotRequired[str]
     profile: str
     seed: int
     source: str
@@ -798,6 +800,7 @@ class NoiseSceneRecord(TypedDict):
     blurset_version: str
     gains: list[str]
     kind: str
+    model: NotRequired[str]
     profile: str
     scene: str
     seed: int

@@ -56,6 +56,7 @@ pub(crate) fn variants_from_py(
                 out_dir,
                 model: model(sr, ss, gamma, white_balance, white_level)?,
                 key,
+                raw: None,
             })
         })
         .collect()

@@ -154,6 +154,7 @@ impl NoisePlan {
             gains: gains.iter().map(|g| g.dir.clone()).collect(),
             seed: self.params.seed,
             profile: self.params.profile.clone(),
+            model: self.params.model.clone(),
         }
     }
 
@@ -197,6 +198,7 @@ mod tests {
                 },
                 downsample: vec![2],
                 clean_views: "test_views".into(),
+                model: "paper".into(),
             },
             build_levels: build_levels.iter().map(|l| l.to_string()).collect(),
             build_seed: Some(11),

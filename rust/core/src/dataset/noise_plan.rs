@@ -20,6 +20,7 @@ use crate::image::io::image_info;
 use crate::noise::config::NoiseConfig;
 use crate::noise::model::{noise_key, sample_white_balance, scene_seed, Gamma};
 use crate::noise::model::{NoiseLevels, NoiseModel, WhiteBalance};
+use crate::noise::raw_model::{Display, ModelKind, RawModel};
 use crate::noise::variants::{write_variants, write_variants_linear, Variant, VariantOptions};
 use crate::plan::choices::{Choice, NoiseGamma, NoiseProfile, NoiseSource};
 use crate::plan::spec::config_error;
@@ -37,6 +38,16 @@ pub const SEED_DERIVATION: &str = "noise_scene_seed(seed, setting, level) = \
     `blurset noise SCENE --seed <scene seed>`";
 
 const MODEL: &str = "y' = y + sqrt(sigma_read^2 + sigma_shot^2 * y) * N(0, 1)";
+/// noise.json `model` of the camera models (their parameters are in `raw_model`).
+const RAW_MODEL: &str = "raw pipeline: linear RGB -> camera RGB (inverse colour matrix) -> \
+    inverse white balance -> RGGB mosaic -> DN (black level) -> noise per photosite -> \
+    quantization, clip -> demosaic of the noise -> white balance -> colour matrix -> linear \
+    RGB (linear/*.exr) -> transfer -> 8-bit codes; sigma_read, sigma_shot are the \
+    equivalent sigmas in raw signal units";
+/// noise.json `rng` of the camera models.
+const RAW_RNG: &str = "philox4x32-10, key derive_seed(noise_key(seed, gain), \
+    [fnv1a64('raw_noise'), view<<32|frame]), sensor row r: photosites stream 2r, row noise \
+    stream 2r+1; unprocess scene draws derive_seed(seed, [fnv1a64('unprocess')])";
 const SCENE_CLEAN: &str = "y = white_level * decode(x) / wb";
 const CLEAN_LINEAR: &str = "y = white_level * clip(composite(L, background), 0, 1) / wb, L the \
     build's linear premultiplied RGBA (linear/*.exr)";
@@ -54,6 +65,8 @@ pub struct NoiseGain {
     pub sigma_shot: f64,
     /// The gain's noise.json.
     pub record: NoiseDoc,
+    /// The camera model of `--model` (None: the paper's).
+    pub raw: Option<RawModel>,
 }
 
 /// One scene to noise and what each of its gains writes.
@@ -136,6 +149,9 @@ fn params(
         },
         downsample: downsample.to_vec(),
         clean_views: if clean { "test_views" } else { "none" }.into(),
+        model: cfg
+            .model_kind()
+            .map_or_else(|_| cfg.model.clone(), |k| k.name()),
     }
 }
 
@@ -144,6 +160,7 @@ struct Common {
     gains: Vec<(f64, String, f64, f64)>,
     gamma: Gamma,
     base: NoiseDoc,
+    kind: ModelKind,
 }
 
 impl Common {
@@ -175,6 +192,7 @@ impl Common {
             downsample: Vec::new(),
             clean_views: Vec::new(),
             rng: RNG.into(),
+            raw_model: None,
             blurset_version: env!("CARGO_PKG_VERSION").into(),
             files: Vec::new(),
         };
@@ -182,25 +200,44 @@ impl Common {
             gains: gain_sigmas(cfg, table)?,
             gamma: Gamma::parse(gamma.name())?,
             base,
+            kind: cfg.model_kind()?,
         })
     }
 
-    /// The gains of a unit of seed `seed`, each with its record made from `doc`.
-    fn gains(&self, seed: u64, doc: &NoiseDoc) -> Vec<NoiseGain> {
-        let gains = self.gains.iter().map(|(g, dir, sr, ss)| NoiseGain {
-            gain: *g,
-            dir: dir.clone(),
-            key: noise_key(seed, *g),
-            sigma_read: *sr,
-            sigma_shot: *ss,
-            record: NoiseDoc {
+    /// The gains of a unit of seed `seed` and white balance `wb`, each with its record
+    /// made from `doc` (a camera model's σ are its equivalents, its parameters in
+    /// `raw_model`).
+    fn gains(&self, seed: u64, wb: Option<WhiteBalance>, doc: &NoiseDoc) -> Result<Vec<NoiseGain>> {
+        let display = Display {
+            gamma: self.gamma,
+            white_balance: wb,
+            white_level: doc.white_level,
+        };
+        let one = |(g, dir, sr, ss): &(f64, String, f64, f64)| {
+            let raw = RawModel::of(self.kind, seed, *g, display)?;
+            let (sr, ss) = raw.as_ref().map_or((*sr, *ss), RawModel::sigma_equivalents);
+            let mut record = NoiseDoc {
                 gain: gain_number(*g),
-                sigma_read: *sr,
-                sigma_shot: *ss,
+                sigma_read: sr,
+                sigma_shot: ss,
                 ..doc.clone()
-            },
-        });
-        gains.collect()
+            };
+            if let Some(r) = &raw {
+                record.model = RAW_MODEL.into();
+                record.rng = RAW_RNG.into();
+                record.raw_model = Some(r.record.clone());
+            }
+            Ok(NoiseGain {
+                gain: *g,
+                dir: dir.clone(),
+                key: noise_key(seed, *g),
+                sigma_read: sr,
+                sigma_shot: ss,
+                record,
+                raw,
+            })
+        };
+        self.gains.iter().map(one).collect()
     }
 }
 
@@ -524,7 +561,7 @@ fn scene_unit(
         test_views: Vec::new(),
         clean_views,
         transforms: None,
-        gains: common.gains(cfg.seed, &doc),
+        gains: common.gains(cfg.seed, wb, &doc)?,
     })
 }
 
@@ -793,7 +830,7 @@ impl BuildUnit<'_> {
             test_views,
             clean_views,
             transforms: Some(self.build.join(setting).join(files::TRANSFORMS)),
-            gains: self.common.gains(seed, &doc),
+            gains: self.common.gains(seed, wb, &doc)?,
         })
     }
 
@@ -893,6 +930,7 @@ impl NoiseUnit {
                 out_dir: dir.clone(),
                 model: self.model(g)?,
                 key: g.key,
+                raw: g.raw.clone(),
             });
         }
         let opts = VariantOptions {

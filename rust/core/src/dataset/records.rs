@@ -149,6 +149,10 @@ pub struct NoiseDoc {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub clean_views: Vec<usize>,
     pub rng: String,
+    /// A camera model's parameters and sources (`--model unprocess`, `eld:<camera>`);
+    /// absent for the paper's model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub raw_model: Option<serde_json::Value>,
     pub blurset_version: String,
     pub files: Vec<NoiseFile>,
 }
@@ -210,6 +214,17 @@ pub struct NoiseParams {
     pub downsample: Vec<u32>,
     /// `test_views` (the build's test views stay clean) or `none`.
     pub clean_views: String,
+    /// `--model`: absent for `paper` (the records before it).
+    #[serde(default = "paper", skip_serializing_if = "is_paper")]
+    pub model: String,
+}
+
+fn paper() -> String {
+    "paper".into()
+}
+
+fn is_paper(m: &str) -> bool {
+    m == "paper"
 }
 
 /// The σ(gain) table a noise output is made with (noise.json's, without KPN's file name).
@@ -295,6 +310,9 @@ pub struct NoiseSceneDoc {
     pub gains: Vec<String>,
     pub seed: u64,
     pub profile: String,
+    /// `--model`: absent for `paper` (the records before it).
+    #[serde(default = "paper", skip_serializing_if = "is_paper")]
+    pub model: String,
 }
 
 /// The loader layout an export is made for, `blurset export --for`: one module of

@@ -4,6 +4,7 @@
 //! [`NoiseConfig::declarations`] and passes the validated config through the noise
 //! modes; an error names the option, which Python turns into its flag.
 use crate::error::Result;
+use crate::noise::raw_model::ModelKind;
 use crate::plan::choices::{choice, NoiseGamma, NoiseProfile, NoiseSource};
 use crate::plan::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use crate::plan::spec::{check, config_error, convert, specs, Kind, Raw, Spec};
@@ -48,6 +49,13 @@ macro_rules! noise_options {
     };
     profile: NoiseProfile = NoiseProfile::Paper, choice::<NoiseProfile>(), shapes {
         help: "paper: random white balance per scene; nan: none (parity with NAN's evaluation)",
+    };
+    /// The noise model: `paper`, `unprocess` or `eld:<Camera>` (issue 61).
+    model: String = "paper".into(), Spec::Str, shapes {
+        help: "noise model: paper (LLFF-N, the default), unprocess (Brooks et al. 2019) or \
+            eld:<camera> (Wei et al. ELD: SonyA7S2, NikonD850, CanonEOS70D, CanonEOS700D, \
+            CanonEOS5D4); see the noise guide",
+        metavar: Some("MODEL"),
     };
     frames: u32 = 1, Spec::int(1, MAX_FRAMES as i128), shapes {
         help: "independent noisy frames per view",
@@ -125,7 +133,13 @@ impl NoiseConfig {
     pub fn validate(&self) -> Result<()> {
         self.check_fields()?;
         self.gain_values()?;
+        self.model_kind()?;
         Ok(())
+    }
+
+    /// The model `model` names; an unknown name names the option.
+    pub fn model_kind(&self) -> Result<ModelKind> {
+        ModelKind::parse(&self.model).map_err(|e| config_error("model", e.to_string()))
     }
 
     /// The gains as numbers, in the order given: each a positive finite number, one of
@@ -202,6 +216,12 @@ mod tests {
         assert!(err("factor", Raw::Int(0)).starts_with("factor 0:"));
         assert!(err("clean_views", Raw::Int(0)).starts_with("clean_views 0:"));
         assert!(err("profile", Raw::Str("x".into())).starts_with("profile"));
+        assert!(err("model", Raw::Str("eld:Pixel4".into())).contains("SonyA7S2"));
+        let eld = with("model", Raw::Str("ELD:sonya7s2".into()));
+        assert_eq!(
+            eld.ok().and_then(|c| c.model_kind().ok()).map(|k| k.name()),
+            Some("eld:SonyA7S2".into())
+        );
         let g = |v: &[&str]| Raw::List(v.iter().map(|s| Raw::Str(s.to_string())).collect());
         assert!(err("gains", g(&["1", "3"])).contains("unknown gain '3'"));
         assert!(err("gains", g(&["x"])).contains("not a number"));

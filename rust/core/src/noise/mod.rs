@@ -16,10 +16,17 @@
 //! `model` holds the model and the addressing of draws, `ziggurat` the normals,
 //! `kernel` the per-image kernel (AVX2 where the CPU has it, bit for bit the scalar
 //! path), `linear` the same noise from a build's linear EXRs, and `variants` the files
-//! of a scene's variants.
+//! of a scene's variants. `raw_model`, `raw` and their helpers (`camera`, `draws`,
+//! `matrix`, `mosaic`) are the camera models of `--model` (issue 61).
+pub mod camera;
 pub mod config;
+pub mod draws;
 pub mod kernel;
 pub mod linear;
+pub mod matrix;
 pub mod model;
+pub mod mosaic;
+pub mod raw;
+pub mod raw_model;
 pub mod variants;
 mod ziggurat;

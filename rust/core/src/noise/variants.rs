@@ -3,6 +3,8 @@
 use super::kernel::{apply_plan, Noisy, Plan};
 use super::linear::{add_noise_linear, linear_from_codes, read_linear, LinearRgb};
 use super::model::{factor_key, stream_id, NoiseModel};
+use super::raw::raw_frame;
+use super::raw_model::RawModel;
 use crate::error::{Error, Result};
 use crate::image::exr::read::{check_exr_size, exr_size};
 use crate::image::exr::write::exr_bytes;
@@ -19,6 +21,9 @@ pub struct Variant {
     pub out_dir: PathBuf,
     pub model: NoiseModel,
     pub key: u64,
+    /// A camera model of `--model` (issue 61) in place of `model`'s noise; `model`
+    /// still holds the transfer, white balance and white level.
+    pub raw: Option<RawModel>,
 }
 
 /// What every variant of a scene writes besides full-size noisy images.
@@ -42,6 +47,25 @@ impl VariantOptions {
             }
         } else {
             v.model
+        }
+    }
+
+    /// One frame of variant `v` from the clean linear image of view `view`: its raw
+    /// model's (the clean pipeline for a clean view), else the paper's linear path.
+    fn linear_frame(
+        &self,
+        v: &Variant,
+        view: usize,
+        img: &LinearRgb,
+        key: u64,
+        stream: u64,
+    ) -> Result<Noisy> {
+        match &v.raw {
+            Some(raw) if self.clean_views.contains(&view) => {
+                raw_frame(img, &raw.clean(), key, stream)
+            }
+            Some(raw) => raw_frame(img, raw, key, stream),
+            None => add_noise_linear(img, &self.model(v, view), key, stream),
         }
     }
 }
@@ -87,7 +111,17 @@ pub fn write_variants(
         let slot = usize::from(clean) * 4
             + usize::from(img.samples.max_code() > 255) * 2
             + usize::from(img.channels >= 3);
+        let raw_linear = RawLinear::new(&img, variants);
         for (v, plan) in variants.iter().zip(&plans) {
+            if v.raw.is_some() {
+                let lin = raw_linear.get(path)?;
+                for k in 0..frames {
+                    let noisy = opts.linear_frame(v, i, lin, v.key, stream_id(i as u32, k))?;
+                    let name = &names[i * frames as usize + k as usize];
+                    write_frame(v, "", name, img.width, img.height, &noisy)?;
+                }
+                continue;
+            }
             let model = opts.model(v, i);
             let plan = plan[slot]
                 .get_or_init(|| Plan::new(&model, img.samples.max_code(), img.color_channels()));
@@ -145,9 +179,8 @@ pub fn write_variants_linear(
             });
         }
         for v in variants {
-            let model = opts.model(v, i);
             for k in 0..frames {
-                let noisy = add_noise_linear(&img, &model, v.key, stream_id(i as u32, k))?;
+                let noisy = opts.linear_frame(v, i, &img, v.key, stream_id(i as u32, k))?;
                 let name = &names[i * frames as usize + k as usize];
                 write_frame(v, "", name, img.width, img.height, &noisy)?;
             }
@@ -160,6 +193,38 @@ pub fn write_variants_linear(
             e => e,
         })
     })
+}
+
+/// The clean linear image of a PNG source for the raw models, decoded once on first
+/// use with the variants' transfer curve.
+struct RawLinear<'a> {
+    img: &'a image_io::Image,
+    gamma: super::model::Gamma,
+    lin: OnceLock<LinearRgb>,
+}
+
+impl<'a> RawLinear<'a> {
+    fn new(img: &'a image_io::Image, variants: &[Variant]) -> Self {
+        let gamma = variants
+            .first()
+            .map_or(super::model::Gamma::Srgb, |v| v.model.gamma);
+        RawLinear {
+            img,
+            gamma,
+            lin: OnceLock::new(),
+        }
+    }
+
+    fn get(&self, path: &Path) -> Result<&LinearRgb> {
+        if let Some(l) = self.lin.get() {
+            return Ok(l);
+        }
+        let l = linear_from_codes(self.img, self.gamma).map_err(|e| Error::Image {
+            reason: format!("{e} (the camera models need RGB images)"),
+            path: path.to_path_buf(),
+        })?;
+        Ok(self.lin.get_or_init(|| l))
+    }
 }
 
 /// The `images_<f>/` and `linear_<f>/` files of view `i` from its clean linear image.
@@ -175,10 +240,9 @@ fn write_downsampled(
         let small = img.downsample(f)?;
         let suffix = format!("_{f}");
         for v in variants {
-            let model = opts.model(v, i);
             for k in 0..frames {
-                let noisy =
-                    add_noise_linear(&small, &model, factor_key(v.key, f), stream_id(i as u32, k))?;
+                let (key, stream) = (factor_key(v.key, f), stream_id(i as u32, k));
+                let noisy = opts.linear_frame(v, i, &small, key, stream)?;
                 let name = &names[i * frames as usize + k as usize];
                 write_frame(v, &suffix, name, small.width, small.height, &noisy)?;
             }
@@ -283,6 +347,7 @@ mod tests {
             out_dir: dir.join("out"),
             model: m,
             key: 9,
+            raw: None,
         };
         let names = vec!["000".to_string(), "001".to_string()];
         let opts = VariantOptions {
@@ -343,6 +408,7 @@ mod tests {
             out_dir: dir.join("out"),
             model,
             key: 4,
+            raw: None,
         };
         Ok((paths, rgba, v, vec!["000".to_string(), "001".to_string()]))
     }

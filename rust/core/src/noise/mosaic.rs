@@ -1,0 +1,105 @@
+//! The Bayer colour filter array (RGGB) and its bilinear demosaic.
+//!
+//! Demosaic: per channel, the weighted mean of that channel's photosites in the 3 × 3
+//! neighbourhood under the bilinear kernels (green `[0 1 0; 1 4 1; 0 1 0]`, red and
+//! blue `[1 2 1; 2 4 2; 1 2 1]`), which is the standard bilinear interpolation inside
+//! the image; at the borders the weights are renormalised over the photosites there.
+use rayon::prelude::*;
+
+/// The demosaic named in noise.json.
+pub const DEMOSAIC: &str = "bilinear (3x3 kernels, green [0 1 0;1 4 1;0 1 0]/4, red/blue \
+    [1 2 1;2 4 2;1 2 1]/4, renormalised at borders)";
+
+/// The channel (0 R, 1 G, 2 B) of photosite (x, y) of an RGGB mosaic.
+pub fn cfa_channel(x: usize, y: usize) -> usize {
+    (x & 1) + (y & 1)
+}
+
+/// One row of the bilinear kernel of channel `c` at offset `d` ∈ {−1, 0, 1}.
+fn weight(c: usize, dx: isize, dy: isize) -> f64 {
+    let (ax, ay) = (dx.unsigned_abs(), dy.unsigned_abs());
+    if c == 1 {
+        match ax + ay {
+            0 => 4.0,
+            1 => 1.0,
+            _ => 0.0,
+        }
+    } else {
+        [4.0, 2.0, 1.0][ax + ay]
+    }
+}
+
+/// The RGB of pixel (x, y) from the mosaic `m` (`w` × `h`, row-major).
+fn pixel(m: &[f64], w: usize, h: usize, x: usize, y: usize) -> [f64; 3] {
+    let mut sum = [0.0; 3];
+    let mut norm = [0.0; 3];
+    for dy in -1isize..=1 {
+        let Some(yy) = y.checked_add_signed(dy).filter(|v| *v < h) else {
+            continue;
+        };
+        for dx in -1isize..=1 {
+            let Some(xx) = x.checked_add_signed(dx).filter(|v| *v < w) else {
+                continue;
+            };
+            let c = cfa_channel(xx, yy);
+            let k = weight(c, dx, dy);
+            sum[c] += k * m[yy * w + xx];
+            norm[c] += k;
+        }
+    }
+    [0, 1, 2].map(|c| if norm[c] > 0.0 { sum[c] / norm[c] } else { 0.0 })
+}
+
+/// The bilinear demosaic of a `w` × `h` RGGB mosaic: interleaved RGB, row-major.
+pub fn demosaic_bilinear(m: &[f64], w: usize, h: usize) -> Vec<f64> {
+    let mut out = vec![0.0; w * h * 3];
+    out.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
+        for x in 0..w {
+            row[x * 3..x * 3 + 3].copy_from_slice(&pixel(m, w, h, x, y));
+        }
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rggb_layout() {
+        assert_eq!(
+            [
+                cfa_channel(0, 0),
+                cfa_channel(1, 0),
+                cfa_channel(0, 1),
+                cfa_channel(1, 1)
+            ],
+            [0, 1, 1, 2]
+        );
+    }
+
+    #[test]
+    fn a_flat_mosaic_demosaics_to_its_channels_and_sites_keep_their_value() {
+        let (w, h) = (7, 5);
+        let level = [0.2, 0.5, 0.9];
+        let m: Vec<f64> = (0..w * h)
+            .map(|i| level[cfa_channel(i % w, i / w)])
+            .collect();
+        let rgb = demosaic_bilinear(&m, w, h);
+        for p in rgb.chunks_exact(3) {
+            for c in 0..3 {
+                assert!((p[c] - level[c]).abs() < 1e-12);
+            }
+        }
+        // A photosite keeps its own value; a linear ramp is reproduced inside.
+        let ramp: Vec<f64> = (0..w * h).map(|i| (i % w) as f64).collect();
+        let rgb = demosaic_bilinear(&ramp, w, h);
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                for c in 0..3 {
+                    assert!((rgb[(y * w + x) * 3 + c] - x as f64).abs() < 1e-12);
+                }
+            }
+        }
+    }
+}
