@@ -11,6 +11,7 @@ import json
 import numpy as np
 import pytest
 from blurset.image import read_image
+from blurset.noise.model import noise_image_model, noise_key, noise_white_balance
 
 from tests.conftest import copy_build, run_cli
 from tests.test_noise import blurset_noise, make_scene, ok, read_exr, tree_bytes
@@ -105,6 +106,25 @@ def test_noise_json_names_the_model_and_outputs_read_back(model, smooth_scene, t
     assert err[20] > 2 * err[1], err
     record = json.loads((out / "noise_scene.json").read_text())
     assert record["model"] == model
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_the_binding_makes_what_the_command_writes(model, smooth_scene, tmp_path):
+    out = tmp_path / "out"
+    run(smooth_scene, out, model, "--seed", 9)
+    src = read_image(smooth_scene / "images_2" / "img001.png")
+    lin = ((src.astype(np.float64) / 255) ** 2.2).astype(np.float32)
+    linear, png, record = noise_image_model(
+        lin, model=model, gain=20, seed=9, key=noise_key(9, 20), view=1, gamma="2.2",
+        white_balance=noise_white_balance(9),
+    )  # fmt: skip
+    assert (
+        json.loads(record) == json.loads((out / "gain_20" / "noise.json").read_text())["raw_model"]
+    )
+    np.testing.assert_array_equal(png, read_image(out / "gain_20" / "images" / "img001.png"))
+    np.testing.assert_allclose(
+        linear, read_exr(out / "gain_20" / "linear" / "img001.exr"), atol=1e-6
+    )
 
 
 def test_clean_views_are_the_scenes_own_files(smooth_scene, tmp_path):

@@ -821,6 +821,25 @@ def image_info(path: str | PathLike[str]) -> tuple[int, int, int, int]:
 def read_image(path: str | PathLike[str]) -> npt.NDArray[np.uint8] | npt.NDArray[np.uint16]:
     """Decode PNG (8/16-bit) or JPEG to (H, W, C), C in 1..4, in the file's own depth."""
 
+def noise_image_model(
+    image: npt.NDArray[np.float32],
+    *,
+    model: str,
+    gain: float,
+    seed: int,
+    key: int,
+    view: int = 0,
+    frame: int = 0,
+    gamma: str = "srgb",
+    white_balance: tuple[float, float] | None = None,
+    white_level: float = 1.0,
+    clean: bool = False,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8], str]:
+    """One noisy frame of a camera model (`unprocess`, `eld:<camera>`) from linear
+    float32 (H, W, 3): (linear float32 (H, W, 3), processed uint8 (H, W, 3), the model's
+    noise.json `raw_model` as JSON text), as `blurset noise --model` writes it for view
+    `view`, frame `frame`, key `noise_key(seed, gain)` (seed the scene's)."""
+
 def noise_image(
     image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16] | npt.NDArray[np.float32],
     *,

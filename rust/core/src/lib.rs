@@ -60,6 +60,8 @@ pub use crate::noise::model::{
     noise_key, sample_white_balance, scene_seed, stream_id as noise_stream_id, Gamma, NoiseLevels,
     NoiseModel, WhiteBalance,
 };
+pub use crate::noise::raw::raw_frame;
+pub use crate::noise::raw_model::{Display as RawDisplay, ModelKind, RawModel};
 pub use crate::noise::variants::{write_variants, write_variants_linear, Variant, VariantOptions};
 
 // The files of a build.

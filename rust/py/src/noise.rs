@@ -319,7 +319,49 @@ fn noise_write_variants(
     })
 }
 
+/// One noisy frame of a camera model (`unprocess`, `eld:<camera>`) from a linear
+/// float32 (H, W, 3) image: (linear float32 (H, W, 3), processed uint8 (H, W, 3), the
+/// model's noise.json `raw_model` as JSON text). `seed` is the scene's (unprocess draws
+/// its colour matrix and noise levels from it), `key` the gain's Philox key.
+#[pyfunction]
+#[pyo3(signature = (image, *, model, gain, seed, key, view=0, frame=0, gamma="srgb", white_balance=None, white_level=1.0, clean=false))]
+#[allow(clippy::too_many_arguments)]
+fn noise_image_model(
+    py: Python<'_>,
+    image: PyReadonlyArray3<'_, f32>,
+    model: &str,
+    gain: f64,
+    seed: u64,
+    key: u64,
+    view: u32,
+    frame: u32,
+    gamma: &str,
+    white_balance: Option<(f64, f64)>,
+    white_level: f64,
+    clean: bool,
+) -> PyResult<(Py<PyAny>, Py<PyAny>, String)> {
+    let kind = core::ModelKind::parse(model).map_err(value_err)?;
+    let display = core::RawDisplay {
+        gamma: Gamma::parse(gamma).map_err(value_err)?,
+        white_balance: white_balance.map(|(red, blue)| WhiteBalance { red, blue }),
+        white_level,
+    };
+    let raw = core::RawModel::of(kind, seed, gain, display)
+        .map_err(value_err)?
+        .ok_or_else(|| PyValueError::new_err("model paper: use noise_image"))?;
+    let raw = if clean { raw.clean() } else { raw };
+    let img = linear_from_py(image)?;
+    let stream = core::noise_stream_id(view, frame);
+    let noisy = run_detached(py, || core::raw_frame(&img, &raw, key, stream))?;
+    Ok((
+        rgb_to_py(py, img.width, img.height, noisy.linear)?,
+        image_to_py(py, noisy.processed)?,
+        raw.record.to_string(),
+    ))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(noise_image_model, m)?)?;
     m.add_function(wrap_pyfunction!(noise_default_levels, m)?)?;
     m.add_function(wrap_pyfunction!(noise_levels_from_kpn, m)?)?;
     m.add_function(wrap_pyfunction!(noise_sigmas, m)?)?;

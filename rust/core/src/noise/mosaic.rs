@@ -50,12 +50,36 @@ fn pixel(m: &[f64], w: usize, h: usize, x: usize, y: usize) -> [f64; 3] {
     [0, 1, 2].map(|c| if norm[c] > 0.0 { sum[c] / norm[c] } else { 0.0 })
 }
 
+/// [`pixel`] away from the borders, by the kernels' closed forms: at a green site the
+/// two horizontal and the two vertical neighbours give the other channels; at a red or
+/// blue site the four orthogonal ones give green and the four diagonal ones the other.
+fn pixel_inside(m: &[f64], w: usize, x: usize, y: usize) -> [f64; 3] {
+    let i = y * w + x;
+    let c = cfa_channel(x, y);
+    let mut out = [0.0; 3];
+    out[c] = m[i];
+    if c == 1 {
+        out[cfa_channel(x + 1, y)] = 0.5 * (m[i - 1] + m[i + 1]);
+        out[cfa_channel(x, y + 1)] = 0.5 * (m[i - w] + m[i + w]);
+    } else {
+        out[1] = 0.25 * (m[i - 1] + m[i + 1] + m[i - w] + m[i + w]);
+        out[2 - c] = 0.25 * (m[i - w - 1] + m[i - w + 1] + m[i + w - 1] + m[i + w + 1]);
+    }
+    out
+}
+
 /// The bilinear demosaic of a `w` × `h` RGGB mosaic: interleaved RGB, row-major.
 pub fn demosaic_bilinear(m: &[f64], w: usize, h: usize) -> Vec<f64> {
     let mut out = vec![0.0; w * h * 3];
     out.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
+        let inner = y > 0 && y + 1 < h;
         for x in 0..w {
-            row[x * 3..x * 3 + 3].copy_from_slice(&pixel(m, w, h, x, y));
+            let p = if inner && x > 0 && x + 1 < w {
+                pixel_inside(m, w, x, y)
+            } else {
+                pixel(m, w, h, x, y)
+            };
+            row[x * 3..x * 3 + 3].copy_from_slice(&p);
         }
     });
     out
@@ -64,6 +88,20 @@ pub fn demosaic_bilinear(m: &[f64], w: usize, h: usize) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_closed_forms_inside_are_the_kernels() {
+        let (w, h) = (9, 8);
+        let m: Vec<f64> = (0..w * h).map(|i| ((i * 37) % 101) as f64 / 7.0).collect();
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                let (a, b) = (pixel_inside(&m, w, x, y), pixel(&m, w, h, x, y));
+                for c in 0..3 {
+                    assert!((a[c] - b[c]).abs() < 1e-12, "({x}, {y}) {c}: {a:?} {b:?}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn rggb_layout() {

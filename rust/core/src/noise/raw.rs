@@ -23,7 +23,9 @@ use crate::image::io::{Image, Samples};
 use crate::rng::{self, Stream};
 use rayon::prelude::*;
 
-/// Brooks' smoothstep tone curve and its inverse on [0, 1].
+/// Brooks' smoothstep tone curve and its inverse on [0, 1] (the curve itself runs as
+/// [`code_steps`]; the tests check those against it).
+#[cfg(test)]
 fn smoothstep(x: f64) -> f64 {
     let x = x.clamp(0.0, 1.0);
     x * x * (3.0 - 2.0 * x)
@@ -44,7 +46,8 @@ pub fn to_scene(m: &RawModel, l: f64) -> f64 {
     }
 }
 
-/// A scene-linear value → code value in [0, 1].
+/// A scene-linear value → code value in [0, 1]: the curve [`code_steps`] rounds.
+#[cfg(test)]
 pub fn to_code(m: &RawModel, s: f64) -> f64 {
     if m.tone_curve {
         smoothstep(libm::pow(s.clamp(0.0, 1.0), 1.0 / 2.2))
@@ -53,16 +56,66 @@ pub fn to_code(m: &RawModel, s: f64) -> f64 {
     }
 }
 
+/// The scene-linear value of a code value in [0, 1] (the inverse of [`to_code`]).
+fn from_code(m: &RawModel, c: f64) -> f64 {
+    if m.tone_curve {
+        libm::pow(smoothstep_inverse(c), 2.2)
+    } else {
+        m.gamma.decode(c)
+    }
+}
+
+/// The 255 scene-linear values where the 8-bit code steps up: the code of `s` is the
+/// number of them at or below it, which is `round(255 · to_code(s))` without a
+/// transcendental function per value.
+fn code_steps(m: &RawModel) -> Vec<f64> {
+    (0..255)
+        .map(|k| from_code(m, (f64::from(k) + 0.5) / 255.0))
+        .collect()
+}
+
+/// [`to_scene`] through a small cache keyed by the value's bits: an image decoded from
+/// 8-bit codes holds at most 256 values per channel, so the curves run once per value.
+struct SceneCache<'a> {
+    m: &'a RawModel,
+    slots: Vec<(u32, f64)>,
+}
+
+impl<'a> SceneCache<'a> {
+    fn new(m: &'a RawModel) -> Self {
+        SceneCache {
+            m,
+            slots: vec![(f32::NAN.to_bits(), 0.0); 4096],
+        }
+    }
+
+    fn get(&mut self, l: f32) -> f64 {
+        if !self.m.tone_curve {
+            return to_scene(self.m, f64::from(l));
+        }
+        let bits = l.to_bits();
+        let slot = &mut self.slots[(bits.wrapping_mul(0x9E37_79B1) >> 20) as usize];
+        if slot.0 != bits {
+            *slot = (bits, to_scene(self.m, f64::from(l)));
+        }
+        slot.1
+    }
+}
+
 /// The clean camera raw per pixel and channel (signal units, white = 1).
 pub fn clean_raw(img: &LinearRgb, m: &RawModel) -> Vec<f64> {
     let mut out = vec![0.0; img.rgb.len()];
-    out.par_chunks_mut(3)
-        .zip(img.rgb.par_chunks_exact(3))
+    let chunk = (img.width as usize * 3 * 64).max(3);
+    out.par_chunks_mut(chunk)
+        .zip(img.rgb.par_chunks(chunk))
         .for_each(|(o, p)| {
-            let s = [0, 1, 2].map(|c| to_scene(m, f64::from(p[c])) * m.white_level);
-            let cam = apply(&m.cam_from_rgb, s);
-            for c in 0..3 {
-                o[c] = cam[c] / m.wb[c];
+            let mut cache = SceneCache::new(m);
+            for (o, p) in o.chunks_exact_mut(3).zip(p.chunks_exact(3)) {
+                let s = [0, 1, 2].map(|c| cache.get(p[c]) * m.white_level);
+                let cam = apply(&m.cam_from_rgb, s);
+                for c in 0..3 {
+                    o[c] = cam[c] / m.wb[c];
+                }
             }
         });
     out
@@ -136,12 +189,13 @@ pub fn raw_frame(img: &LinearRgb, m: &RawModel, key: u64, stream: u64) -> Result
             .zip(noise.par_iter())
             .for_each(|(r, n)| *r += n);
     }
+    let steps = code_steps(m);
     let (linear, codes): (Vec<[f32; 3]>, Vec<[u8; 3]>) = raw
         .par_chunks_exact(3)
         .map(|p| {
             let cam = [0, 1, 2].map(|c| p[c] * m.wb[c]);
             let rgb = apply(&m.rgb_from_cam, cam).map(|v| v / m.white_level);
-            let code = rgb.map(|v| libm::round(to_code(m, v) * 255.0) as u8);
+            let code = rgb.map(|v| steps.partition_point(|t| v >= *t) as u8);
             (rgb.map(|v| v as f32), code)
         })
         .unzip();

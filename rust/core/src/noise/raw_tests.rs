@@ -294,3 +294,18 @@ fn demosaicked_noise_is_correlated_in_space_and_across_channels() -> Result<()> 
     assert!(across.abs() > 0.05, "{across}");
     Ok(())
 }
+
+#[test]
+fn code_steps_round_the_forward_curve() {
+    for gamma in [Gamma::Power22, Gamma::Srgb] {
+        for m in all_models(2.0, gamma) {
+            let steps = code_steps(&m);
+            for i in 0..20_000 {
+                let s = -0.1 + 1.2 * f64::from(i) / 20_000.0;
+                let by_steps = steps.partition_point(|t| s >= *t);
+                let by_curve = libm::round(to_code(&m, s) * 255.0) as usize;
+                assert_eq!(by_steps, by_curve, "{} {gamma:?} at {s}", m.name);
+            }
+        }
+    }
+}
