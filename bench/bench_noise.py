@@ -17,6 +17,7 @@ over the model's as the ratio (the issue's goal: a model at most 3x the paper's)
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -174,6 +175,99 @@ def run() -> list[dict]:
     ]
 
 
+# --- the noise guide's figure: one crop under each model at matched noise power --------
+
+FIGURE = Path(__file__).resolve().parents[1] / "docs" / "images" / "noise_models.png"
+FIGURE_MODELS = ("paper", "unprocess", "eld:SonyA7S2", "eld:NikonD850")
+# The noise power every model is matched to: the Sony A7S2's at the top of ELD's
+# calibrated range (K = Kmax = 64 Kmin).
+REFERENCE = ("eld:SonyA7S2", 64.0)
+
+
+def _noisy_crop(model: str, gain: float, lin: np.ndarray) -> np.ndarray:
+    """The processed 8-bit crop under `model` at `gain` (gamma 2.2, the scene default)."""
+    key, wb = noise_key(SEED, gain), noise_white_balance(SEED)
+    if model == "paper":
+        sr, ss = noise_sigmas(gain, noise_default_levels())
+        _, png = noise_image(lin, sigma_read=sr, sigma_shot=ss, key=key, gamma="2.2",
+                             white_balance=wb)  # fmt: skip
+    else:
+        _, png, _ = noise_image_model(lin, model=model, gain=gain, seed=SEED, key=key,
+                                      gamma="2.2", white_balance=wb)  # fmt: skip
+    return png.astype(np.float64)
+
+
+def _matched_gain(model: str, lin: np.ndarray, clean: np.ndarray, target: float) -> float:
+    """The gain at which `model`'s residual standard deviation (codes) is `target`:
+    bisection in log gain (the residual grows with the gain)."""
+    lo, hi = -8.0, 14.0
+    for _ in range(40):
+        mid = (lo + hi) / 2
+        std = float(np.std(_noisy_crop(model, 2.0**mid, lin) - clean))
+        lo, hi = (mid, hi) if std < target else (lo, mid)
+    return 2.0 ** ((lo + hi) / 2)
+
+
+def _radial_power(res: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The residual's power spectrum (mean over channels), averaged over rings of
+    spatial frequency (cycles per pixel)."""
+    p = np.mean([np.abs(np.fft.fft2(res[..., c] - res[..., c].mean())) ** 2 for c in range(3)], 0)
+    fy, fx = np.meshgrid(np.fft.fftfreq(res.shape[0]), np.fft.fftfreq(res.shape[1]), indexing="ij")
+    r = np.hypot(fy, fx).ravel()
+    bins = np.linspace(0, 0.5, 17)
+    idx = np.digitize(r, bins)
+    f = (bins[:-1] + bins[1:]) / 2
+    power = np.array([p.ravel()[idx == i + 1].mean() for i in range(len(f))])
+    return f, power / res.size
+
+
+def _stats(res: np.ndarray) -> dict:
+    """Neighbour correlation (green, horizontal) and red-green correlation of a residual."""
+    g = res[..., 1]
+    space = float(np.corrcoef(g[:, :-1].ravel(), g[:, 1:].ravel())[0, 1])
+    across = float(np.corrcoef(res[..., 0].ravel(), g.ravel())[0, 1])
+    return {"neighbour_corr": space, "red_green_corr": across, "std": float(res.std())}
+
+
+def figure(out: Path = FIGURE) -> dict:
+    """The crop under each model at the noise power of REFERENCE, with the residual's
+    radially averaged power spectrum; returns what it measured."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    src = np.asarray(Image.open(sorted((FERN / "images_8").glob("*.png"))[0]))
+    h, w = src.shape[:2]
+    crop = src[h // 2 - 48 : h // 2 + 48, w // 2 - 48 : w // 2 + 48]
+    lin = ((crop.astype(np.float64) / 255) ** 2.2).astype(np.float32)
+    clean = crop.astype(np.float64)
+    target = float(np.std(_noisy_crop(*REFERENCE, lin) - clean))
+    fig, axes = plt.subplots(
+        1, len(FIGURE_MODELS) + 1, figsize=(3.2 * (len(FIGURE_MODELS) + 1), 3.4)
+    )
+    measured: dict = {"target_std_codes": target, "models": {}}
+    for ax, m in zip(axes[:-1], FIGURE_MODELS, strict=True):
+        g = REFERENCE[1] if m == REFERENCE[0] else _matched_gain(m, lin, clean, target)
+        noisy = _noisy_crop(m, g, lin)
+        st = _stats(noisy - clean)
+        measured["models"][m] = {"gain": g, **st}
+        ax.imshow(noisy.astype(np.uint8), interpolation="nearest")
+        ax.set_title(f"{m}\ngain {g:.3g}, std {st['std']:.1f}", fontsize=9)
+        ax.axis("off")
+        f, pw = _radial_power(noisy - clean)
+        axes[-1].semilogy(f[1:], pw[1:], label=m)
+    axes[-1].set_xlabel("cycles / pixel")
+    axes[-1].set_title("noise power spectrum", fontsize=9)
+    axes[-1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out, dpi=90)
+    return measured
+
+
 if __name__ == "__main__":
-    for r in run():
-        print(r)
+    if sys.argv[1:] == ["--figure"]:
+        print(json.dumps(figure(), indent=2))
+    else:
+        for r in run():
+            print(r)
