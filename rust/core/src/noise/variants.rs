@@ -455,6 +455,52 @@ mod tests {
     }
 
     #[test]
+    fn a_camera_model_writes_its_raw_frames_from_linear_sources() -> Result<()> {
+        use crate::noise::camera::eld_camera;
+        use crate::noise::raw_model::{Display, RawModel};
+        let dir = std::env::temp_dir().join(format!("blurset-noise-raw-{}", std::process::id()));
+        let (paths, _, mut v, names) = linear_sources(&dir)?;
+        let cam = eld_camera("CanonEOS700D").ok_or_else(|| Error::Value("camera".into()))?;
+        let display = Display {
+            gamma: Gamma::Srgb,
+            white_balance: None,
+            white_level: 1.0,
+        };
+        let raw = RawModel::eld(cam, 16.0, display)?;
+        v.raw = Some(raw.clone());
+        let opts = VariantOptions {
+            downsample: vec![2],
+            clean_views: [0].into(),
+        };
+        let one = std::slice::from_ref(&v);
+        write_variants_linear(&paths, &names, 1, one, [1.0; 3], None, &opts)?;
+        let exr = |sub: &str, name: &str| -> Result<Vec<f32>> {
+            let f = read_exr(&dir.join("out").join(sub).join(name))?;
+            Ok(f.rgba
+                .chunks_exact(4)
+                .flat_map(|p| [p[0], p[1], p[2]])
+                .collect())
+        };
+        let img = read_linear(&paths[1], [1.0; 3])?;
+        // The noisy view: the raw pipeline's frame under the variant's key and stream.
+        let want = raw_frame(&img, &raw, 4, stream_id(1, 0))?;
+        assert_eq!(exr("linear", "001.exr")?, want.linear);
+        // The clean view: the pipeline without noise, its input back (f32 rounding).
+        let clean = exr("linear", "000.exr")?;
+        let src = read_linear(&paths[0], [1.0; 3])?;
+        let worst = clean
+            .iter()
+            .zip(&src.rgb)
+            .map(|(a, b)| (a - b.clamp(0.0, 1.0)).abs());
+        assert!(worst.fold(0.0f32, f32::max) < 1e-5);
+        // The half-size copy: drawn afresh under the factor's key.
+        let small = raw_frame(&img.downsample(2)?, &raw, factor_key(4, 2), stream_id(1, 0))?;
+        assert_eq!(exr("linear_2", "001.exr")?, small.linear);
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
     fn a_linear_source_with_a_nan_or_of_another_size_is_named() -> Result<()> {
         let dir = std::env::temp_dir().join(format!("blurset-noise-bad-{}", std::process::id()));
         let (paths, rgba, v, names) = linear_sources(&dir)?;
