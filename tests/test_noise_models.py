@@ -171,3 +171,12 @@ def test_build_mode_verify_and_export_read_a_camera_model(standin_build_dir, tmp
     run_cli("export", str(b), "--out", str(tmp_path / "en"), "--noise", str(n))
     scenes = sorted((tmp_path / "en" / "nerf_llff_data").glob("*__blur_1__gain_4"))
     assert scenes and all(any((s / "images").glob("*.png")) for s in scenes)
+    # The Hub export carries each image's noise.json (its raw_model included), verified.
+    hub = tmp_path / "hub"
+    run_cli("export", str(b), "--out", str(hub), "--for", "hub", "--noise", str(n))
+    assert run_cli("verify", str(hub)).returncode == 0
+    import pyarrow.parquet as pq
+
+    shard = next(p for p in sorted(hub.rglob("*.parquet")) if "gain_4" in str(p))
+    cells = pq.read_table(shard, columns=["noise"]).column("noise").to_pylist()
+    assert cells and all(json.loads(c)["raw_model"]["system_gain_k"] > 0 for c in cells)
