@@ -292,6 +292,26 @@ fn demosaicked_noise_is_correlated_in_space_and_across_channels() -> Result<()> 
     eprintln!("green neighbour correlation {space:.3}, red-green {across:.3}");
     assert!(space > 0.2, "{space}");
     assert!(across.abs() > 0.05, "{across}");
+    // The paper's model on the same image: both near zero.
+    let paper = crate::noise::model::NoiseModel {
+        sigma_read: 0.02,
+        sigma_shot: 0.05,
+        gamma: Gamma::Srgb,
+        white_balance: None,
+        white_level: 1.0,
+    };
+    let p = crate::noise::linear::add_noise_linear(&img, &paper, 1, 1)?.linear;
+    let n: Vec<f64> = p.iter().map(|v| f64::from(*v) - 0.2).collect();
+    let chan = |c: usize| -> Vec<f64> { n.iter().skip(c).step_by(3).copied().collect() };
+    let (r, g) = (chan(0), chan(1));
+    let right: Vec<f64> = pairs.iter().map(|&i| g[i + 1]).collect();
+    let left: Vec<f64> = pairs.iter().map(|&i| g[i]).collect();
+    let (space, across) = (corr(&left, &right), corr(&r, &g));
+    eprintln!("paper: green neighbour correlation {space:.4}, red-green {across:.4}");
+    assert!(
+        space.abs() < 0.02 && across.abs() < 0.02,
+        "{space} {across}"
+    );
     Ok(())
 }
 
