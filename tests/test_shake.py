@@ -67,14 +67,6 @@ def test_a_default_build_has_no_shake(standin_build_dir):
     assert "shake" not in meta["sampling"]
 
 
-def test_shake_under_a_render_target_is_refused_in_one_line(tmp_path, standin_blender):
-    out = tmp_path / "b"
-    proc = standin_build(out, standin_blender, *SHAKE, "--target-psnr", "40", check=False)
-    assert proc.returncode != 0 and not out.exists()
-    line = proc.stderr.strip().splitlines()[-1]
-    assert "shake" in line and "target" in line, proc.stderr
-
-
 def test_noise_export_stats_and_data_take_shake_levels(shake_build, tmp_path):
     noisy = tmp_path / "noisy"
     run_cli("noise", str(shake_build), "--gains", "4", "--levels", "shake_2", "--out", str(noisy))

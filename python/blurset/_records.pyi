@@ -189,6 +189,7 @@ class ShakePlan(TypedDict):
     """One shake level of one view, as meta.json records it (`views[i].shake[l]`)."""
 
     amplitude_px: float
+    max_gap_px: NotRequired[float | None]
     method: BlurMethod
     motion_steps: NotRequired[int | None]
     path_px: float

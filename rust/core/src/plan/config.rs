@@ -492,28 +492,6 @@ impl BuildConfig {
         self.check_outputs()?;
         if let Some(t) = self.target_psnr {
             self.check_target(t)?;
-            if !self.defocus.is_empty() {
-                return Err(config_error(
-                    "defocus",
-                    format!(
-                        "{:?}: defocus levels render at the sharp image's fixed sample count; \
-                         a render target (--target-psnr, or a preset that sets one) does not \
-                         drive them: drop one of the two",
-                        self.defocus
-                    ),
-                ));
-            }
-            if !self.shake.is_empty() {
-                return Err(config_error(
-                    "shake",
-                    format!(
-                        "{:?}: shake levels render at the fixed sample counts of the blur \
-                         levels; a render target (--target-psnr, or a preset that sets one) \
-                         does not drive them: drop one of the two",
-                        self.shake
-                    ),
-                ));
-            }
         }
         if self.latents_auto && self.blur_method == BlurMethod::MotionBlur {
             return Err(config_error(
