@@ -35,9 +35,20 @@ def kind_of(level: str) -> str:
     return level.rpartition("_")[0] or level
 
 
+# A JSON-lines file each model's rows are appended to as soon as it is measured (a long
+# run keeps what it measured if it is stopped).
+PARTIAL = os.environ.get("BLURSET_BENCH_KINDS_PARTIAL")
+
+
 def _models(work: Path, res: int, views: int, glbs: list[Path]) -> list[dict]:
     bench_target.RES = res  # the references' size: the module reads it at render time
-    return [bench_target.measure_model(g, work / f"{res}", views, **KINDS) for g in glbs]
+    models = []
+    for g in glbs:
+        models.append(bench_target.measure_model(g, work / f"{res}", views, **KINDS))
+        if PARTIAL:
+            with open(PARTIAL, "a") as f:
+                f.write(json.dumps({"resolution": res, "views": views, **models[-1]}) + "\n")
+    return models
 
 
 def per_kind(models: list[dict], res: int, views: int) -> list[dict]:
