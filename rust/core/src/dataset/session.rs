@@ -287,10 +287,10 @@ impl FixedPhase {
 mod tests {
     use super::*;
     use crate::image::exr::write::write_exr;
-    use std::collections::BTreeSet;
     use crate::plan::config::BuildConfig;
     use crate::plan::renders::with_samples;
     use crate::plan::sampling::plan_setting;
+    use std::collections::BTreeSet;
 
     const SIZE: u32 = 16;
 

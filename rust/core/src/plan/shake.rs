@@ -25,6 +25,10 @@ use std::f64::consts::TAU;
 /// Sinusoids per coordinate of the path.
 pub const HARMONICS: usize = 3;
 
+/// The fewest averaged frames a shake level takes: evenly spread frames cancel each
+/// harmonic j (their mean is the written pose) only when their count does not divide j.
+pub const MIN_FRAMES: usize = HARMONICS + 1;
+
 /// The highest shake level: its largest displacement, 2^8 = 256 px at 512 px, is half
 /// the image; a higher level would turn the object out of the frame.
 pub const MAX_SHAKE_LEVEL: u32 = 7;
@@ -169,9 +173,9 @@ fn frame_times(cx: &ViewCx, d: impl Fn(f64) -> [f64; 2]) -> (Vec<f64>, f64) {
     let length: f64 = (0..GRID)
         .map(|i| dist(d(i as f64 / GRID as f64), d((i + 1) as f64 / GRID as f64)))
         .sum();
-    let first = ((length / cfg.max_ghost_px - 1e-9).ceil().max(1.0) as usize)
+    let first = ((length / cfg.max_ghost_px - 1e-9).ceil() as usize)
         .min(cfg.latents_max)
-        .max(1);
+        .max(MIN_FRAMES);
     let mut best = (Vec::new(), f64::INFINITY);
     for m in first..=cfg.latents_max.max(first) {
         let ts = times(m);
