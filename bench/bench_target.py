@@ -106,7 +106,7 @@ def _halves(w, frames: list, per_frame: int, salts: tuple[int, int], pin: int, c
         half = []
         for k, f in enumerate(frames):
             g: dict[str, Any] = {
-                x: f[x] for x in ("c2w", "region", "call", "motion") if f.get(x) is not None
+                x: f[x] for x in ("c2w", "region", "call", "motion", "dof") if f.get(x) is not None
             }
             g.update(seed=(f["seed"] ^ salt) & 0x7FFFFFFF, samples=per_frame,
                      sample_offset=k * per_frame, sample_sequence=pin,
@@ -172,13 +172,27 @@ def _db(mse: float) -> float:
     return 200.0 if mse <= 0 else min(200.0, -10.0 * math.log10(mse))
 
 
-def measure_model(glb: Path, work: Path, views: int = VIEWS) -> dict:
+def frames_of(view: dict, level: str) -> int:
+    """The renders one half of an image takes per round: a blur or shake level's frames
+    (one under motion blur), one for the sharp and a defocus image."""
+    kind, _, lvl = level.rpartition("_")
+    if kind == "blur":
+        return view["levels"][lvl]["latents"]
+    if kind == "shake":
+        shake = view["shake"][lvl]
+        return 1 if shake["method"] == "motion_blur" else len(shake["poses"])
+    return 1
+
+
+def measure_model(glb: Path, work: Path, views: int = VIEWS, **kinds: list[int]) -> dict:
+    """One model's build and its per-image rows; `kinds` adds other kinds' levels
+    (defocus=[1, 4], shake=[1, 4]) beside the blur levels."""
     from blurset import image, layout
     from blurset.image import read_exr
 
     out = work / f"build_{glb.stem}"
     method = {"blur_method": BLUR_METHOD} if BLUR_METHOD else {}
-    cfg = config(out, glb, RES, views, preset="balanced", target_psnr=TARGET, **method)
+    cfg = config(out, glb, RES, views, preset="balanced", target_psnr=TARGET, **method, **kinds)
     wall, setting, meta = timed_build(cfg)
     refs = _references(cfg, glb, setting, meta, work)
     target_mse = 10 ** (-TARGET / 10)
@@ -190,7 +204,7 @@ def measure_model(glb: Path, work: Path, views: int = VIEWS) -> dict:
             ref, ref_noise, probe = refs[(v["index"], level)]
             e = image.object_error(img, ref)
             mse = max(e.mse - ref_noise, 1e-20)
-            frames = 1 if level == "sharp" else v["levels"][level.removeprefix("blur_")]["latents"]
+            frames = frames_of(v, level)
             probe_mse, probe_n = None, 0
             if probe is not None:
                 probe_mse = max(image.object_error(probe[0], ref).mse - ref_noise, 1e-20)

@@ -51,8 +51,9 @@ def plan_object(cfg, glb: Path, w, work: Path):
 
     info = w.load(glb, work / "v.npy")
     verts = np.ascontiguousarray(np.load(work / "v.npy"), dtype=np.float32)
-    # blur_method auto is priced on the device the worker renders on, as a build's is.
-    backend = pricing_backend({"device": w.info.get("device")}, cfg)
+    # blur_method auto is priced on the device the worker renders on (its load reply's),
+    # as a build's is.
+    backend = pricing_backend(info, cfg)
     return plan_setting(cfg, uid=glb.stem, theta0_deg=0.0, seed=seed_for(cfg.seed, glb.stem, 0),
                         bbox_dims=info["bbox_dims"], vertices=verts, backend=backend)  # fmt: skip
 

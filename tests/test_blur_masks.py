@@ -107,7 +107,7 @@ def test_shake_levels_hold_their_own_masks_too(tmp_path, standin_blender, method
     written pose, takes the sharp masks), and verify and nerfstudio's export take them."""
     out = tmp_path / "b"
     standin_build(out, standin_blender, *MASKS, "--levels", "none", "--shake", "2,4",
-                  "--blur-method", method, "--settings-per-object", "1")  # fmt: skip
+                  "--latents", "4", "--blur-method", method, "--settings-per-object", "1")  # fmt: skip
     for setting in layout.complete_settings(out):
         assert _check_level(setting, "shake_4", lambda a: a > 0) > 0, setting.name
         _check_level(setting, "shake_2", lambda a: a > 0)

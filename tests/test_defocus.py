@@ -69,14 +69,6 @@ def test_a_default_build_has_no_defocus(standin_build_dir):
     assert "defocus" not in meta["sampling"]
 
 
-def test_defocus_under_a_render_target_is_refused_in_one_line(tmp_path, standin_blender):
-    out = tmp_path / "b"
-    proc = standin_build(out, standin_blender, *DEFOCUS, "--target-psnr", "40", check=False)
-    assert proc.returncode != 0 and not out.exists()
-    line = proc.stderr.strip().splitlines()[-1]
-    assert "defocus" in line and "target" in line, proc.stderr
-
-
 def test_noise_export_stats_and_check_poses_take_defocus_levels(defocus_build, tmp_path):
     noisy = tmp_path / "noisy"
     run_cli(

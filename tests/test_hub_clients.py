@@ -91,7 +91,7 @@ def shake_hub(tmp_path_factory, standin_blender) -> tuple[Path, Path]:
     card`: the export is loadable as it is)."""
     root = tmp_path_factory.mktemp("hub_clients")
     b, hub = root / "b", root / "hub"
-    standin_build(b, standin_blender, "--shake", "1", "--defocus", "1")
+    standin_build(b, standin_blender, "--shake", "1", "--latents", "4", "--defocus", "1")
     run_cli("export", str(b), "--for", "hub", "--out", str(hub), "--shard-size", "0.02")
     return b, hub
 

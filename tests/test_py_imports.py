@@ -50,6 +50,6 @@ def test_the_check_sees_the_imports() -> None:
     edges = _edges()
     assert "blurset.layout" in edges["blurset.services.outputs"]  # top level
     assert (
-        "blurset.commands.builder.target" in edges["blurset.commands.builder.setting"]
+        "blurset.services.denoise" in edges["blurset.commands.builder.setting"]
     )  # inside a function
     assert "blurset.exceptions" in edges["blurset.layout"]

@@ -237,11 +237,58 @@ def test_target_build_records_every_image_and_gives_the_same_bytes_twice(tmp_pat
     st = json.loads((tmp_path / "st" / "stats.json").read_text())
     n_images = sum(len(v["images"]) for v in a["views"])
     assert sum(x is not None for xs in st["render_psnr"].values() for x in xs) == n_images
-    assert sorted(st["image_samples"], key=int) == ["0", "1", "4"]
+    assert sorted(st["image_samples"]) == ["blur_1", "blur_4", "sharp"]
     assert (tmp_path / "st" / "render_psnr.png").stat().st_size > 1000
     run_cli("card", str(tmp_path / "a"), "--out", str(tmp_path / "card.md"))
     card = (tmp_path / "card.md").read_text()
     assert "| preset | - | fast |" in card and "render PSNR dB (worst, 5th pct, median)" in card
+
+
+@pytest.mark.blender
+def test_every_kind_is_certified_under_a_preset(tmp_path, box):
+    """Defocus and shake images render to the target as blur images do: each image of
+    each kind has its estimate and bound on object pixels, the rounds stop on the bound,
+    and a shake level under latents auto takes the frames its ghost bound needs."""
+    kinds = ("--defocus", "1,2", "--shake", "1,4", "--passes", "mask")
+    a = _build(tmp_path / "a", box, "--preset", "fast", *kinds)
+    b = _build(tmp_path / "b", box, "--preset", "fast", *kinds)
+    want = ["sharp", "blur_1", "blur_4", "defocus_1", "defocus_2", "shake_1", "shake_4"]
+    for v in a["views"]:
+        if v["index"] in a["test_views"]:
+            assert sorted(v["images"]) == ["sharp"]
+            continue
+        assert sorted(v["images"]) == sorted(want)
+        for level, rec in v["images"].items():
+            assert rec["rounds"] >= 1 and 0 < rec["coverage"] < 1, level
+            assert rec["render_psnr_bound_db"] <= rec["render_psnr_db"], level
+            assert rec["reached"] and rec["render_psnr_bound_db"] >= 40.0 - 0.25, (level, rec)
+        for lvl, shake in v["shake"].items():
+            # --preset fast bounds the ghost gap at 2 px: the frames follow the path.
+            assert shake["max_gap_px"] <= 2.0, (lvl, shake["max_gap_px"])
+            assert len(shake["poses"]) < 4096
+        # At least the four frames whose mean is the written pose; level 4 moves 8 times
+        # farther than level 1 and takes more.
+        frames = [len(v["shake"][lvl]["poses"]) for lvl in ("1", "4")]
+        assert 4 == frames[0] < frames[1], frames
+        # Every frame of a shake image is one of the image's: its samples are even
+        # (two halves) and at least one per frame and half.
+        assert v["images"]["shake_4"]["samples"] >= 2 * frames[1]
+    assert [v["images"] for v in a["views"]] == [v["images"] for v in b["views"]]
+
+    def images(out: Path) -> list[str]:
+        lines = (out / "MANIFEST.sha256").read_text().splitlines()
+        return [x for x in lines if x.endswith(".png")]
+
+    lines = images(tmp_path / "a")
+    assert lines == images(tmp_path / "b")
+    assert any("/defocus_2/" in x for x in lines) and any("/shake_4/" in x for x in lines)
+    assert run_cli("verify", str(tmp_path / "a")).returncode == 0
+    run_cli("stats", str(tmp_path / "a"), "--out", str(tmp_path / "st"))
+    st = json.loads((tmp_path / "st" / "stats.json").read_text())
+    n_images = sum(len(v["images"]) for v in a["views"])
+    assert sum(x is not None for xs in st["render_psnr"].values() for x in xs) == n_images
+    assert set(st["render_psnr"]) == set(want)
+    assert (tmp_path / "st" / "render_psnr.png").stat().st_size > 1000
 
 
 @pytest.mark.blender

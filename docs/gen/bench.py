@@ -52,6 +52,9 @@ TARGET = re.compile(
     r"^target_(?P<res>\d+)px_(?P<db>[\d.]+)db(?:_(?P<method>motion_blur|average|auto))?_(?P<model>.+)$"
 )
 SPEED = re.compile(r"^target_speed_(?P<res>\d+)px_(?P<model>.+)$")
+KINDS = re.compile(
+    r"^target_kinds_(?P<res>\d+)px_(?P<db>[\d.]+)db_(?P<kind>sharp|[a-z]+)_(?P<model>.+)$"
+)
 DETAIL = re.compile(r"^target_detail_(?P<res>\d+)px_(?P<model>.+)$")
 DEVICE_COSTS = re.compile(r"^device_costs_(?:(?P<cpu>cpu)_)?(?P<res>\d+)px$")
 ONE_SETTING = re.compile(r"^one_setting_(?P<res>\d+)px_(?P<preset>\w+)$")
@@ -750,6 +753,51 @@ def targets_page(rs: list[dict]) -> list[str]:
     return out + _specular_section(specular)
 
 
+def kinds_lines(rs: list[dict]) -> list[str]:
+    """Every kind under a target (bench/bench_target_kinds.py): per resolution, a row per
+    kind and model, the kind over every model first."""
+    if not rs:
+        return []
+    out = [
+        "## Every kind of image",
+        "",
+        "`bench/bench_target_kinds.py` builds each held-out model with defocus and shake",
+        "levels beside the blur levels, under `--preset balanced` and the target, and judges",
+        "each image against its own references as above. Per kind (the sharp images, blur,",
+        "defocus and shake levels) and model:",
+        "",
+    ]
+    runs: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in rs:
+        m = _match(KINDS, r["name"])
+        runs[(m["res"], m["db"])].append(r)
+    head = (
+        "| kind | model | images | at T − 0.5 dB | bound holds | estimate within 1 dB "
+        "| estimate − measured (dB) | spent / least |"
+    )
+    for (res, db), group in sorted(runs.items(), key=lambda kv: int(kv[0][0])):
+        levels = group[0].get("levels") or {}
+        named = ", ".join(f"{k} {','.join(map(str, v))}" for k, v in sorted(levels.items()))
+        out += [
+            f"### {res} px, {db} dB ({_fmt(group[0].get('views_measured'))} views a model; "
+            f"levels {named})",
+            "",
+            head,
+            "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        order = sorted(group, key=lambda r: (r["kind"], r["model"] != "all", r["model"]))
+        for r in order:
+            lo, hi = r.get("estimate_over_measured_db_range") or [math.nan, math.nan]
+            model = "**every model**" if r["model"] == "all" else f"`{r['model']}`"
+            out.append(
+                f"| {r['kind']} | {model} | {r['images']} | {r['at_target_share']:.0%} | "
+                f"{r['bound_holds_share']:.0%} | {r['estimate_within_1db_share']:.0%} | "
+                f"{lo:+.2f} … {hi:+.2f} | {r['spent_over_least']:.2f}× |"
+            )
+        out.append("")
+    return out
+
+
 def _specular_section(rs: list[dict]) -> list[str]:
     """The bound on specular PBR models of our own (bench/specular_models.py), where a few
     fireflies carry the render noise and one round's estimate scatters by decibels."""
@@ -1269,6 +1317,7 @@ def _by_page(results: list[dict]) -> dict[str, list[dict]]:
         ("gain", GAIN.match),
         ("target", TARGET.match),
         ("speed", SPEED.match),
+        ("kinds", KINDS.match),
         ("detail", DETAIL.match),
     ]
     out: dict[str, list[dict]] = {k: [] for k, _ in [*kinds, ("other", None)]}
@@ -1308,9 +1357,10 @@ def main(figures_too: bool = True) -> int:
             "targets.md",
             "Render targets",
             targets_page(kind["target"])
+            + kinds_lines(kind["kinds"])
             + speed_lines(kind["speed"])
             + detail_lines(kind["detail"]),
-            len(kind["target"]) + len(kind["speed"]) + len(kind["detail"]),
+            len(kind["target"]) + len(kind["kinds"]) + len(kind["speed"]) + len(kind["detail"]),
         ),
     ]
     gpu = json.loads(RESULTS_GPU.read_text()) if RESULTS_GPU.exists() else None

@@ -1335,37 +1335,45 @@ def object_qa_verdict(
 ) -> str | None:
     """The reason an object fails its load-time QA (invisible or black in every view), or None."""
 
-# --- the target loop (rust/py/src/target.rs) ------------------------------------------
+# --- the render session (rust/py/src/session.rs) -------------------------------------
 
 @final
-class TargetImages:
-    """The images of one render phase of a setting rendered to the config's target: each
-    image's two halves and its rounds stay in the core (`dataset/target_loop.rs`)."""
+class Session:
+    """One setting's images, rendered phase by phase (the sharp images, their render QA,
+    then each kind's) at fixed counts or to the config's target, and written under its
+    partial folder: every image's state stays in the core (`dataset/session.rs`)."""
 
     def __new__(
         cls,
         plan: Plan,
         config: BuildConfig,
-        keys: list[tuple[int, str]],
         *,
+        partial: str | PathLike[str],
         exr_dir: str | PathLike[str],
         sharp_views: list[int],
-    ) -> TargetImages:
-        """The images `keys` ((view, level), in render order) of `plan`, their EXRs in
-        `exr_dir`; `sharp_views` as for `Plan.renders`. ValueError without a target."""
+        denoiser: Denoiser | None = None,
+    ) -> Session:
+        """The images of `plan` under `config`, written under `partial` (whose image
+        folders it makes), their frames' EXRs in `exr_dir`; `sharp_views` as for
+        `Plan.renders`; `denoiser`: --denoise oidn's."""
     def next_renders(self) -> list[rec.Render]:
-        """The renders of the next round of every image in flight, after estimating the
-        round just rendered; an empty list: every image is done. ValueError when an image
-        did not get each of its EXRs."""
+        """The renders to make next, after taking in the last ones; an empty list: every
+        image is written, or the sharp images failed render QA (`failure`)."""
     def add_exr(
         self, i: int, path: str | PathLike[str], origin: tuple[int, int] | None = None
     ) -> None:
-        """The EXR of render `i` of the last `next_renders` into its image's half; the
-        file is deleted once read. `origin`: where a cropped render lies."""
-    def take_finished(self) -> list[tuple[int, str, Accumulator]]:
-        """The images done since the last call: (view, level, the mean of both halves)."""
+        """The EXR of render `i` of the last `next_renders` into its image (deleted once
+        read); an image that holds all its frames is written."""
+    @property
+    def failure(self) -> str | None:
+        """Why the setting failed render QA, or None."""
+    @property
+    def phases_started(self) -> int:
+        """Render phases started so far: 1 while the sharp images render."""
+    def qa(self) -> list[FrameQa]:
+        """The render QA of every view's sharp image, in view order."""
     def records(self) -> list[tuple[int, str, rec.ImageRender]]:
-        """The record (meta.json `views[].images`) of every image done so far."""
+        """Under a render target, each image's record (meta.json `views[].images`)."""
 
 # --- stats (rust/py/src/stats.rs) ---------------------------------------------------
 

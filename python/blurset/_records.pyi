@@ -189,6 +189,7 @@ class ShakePlan(TypedDict):
     """One shake level of one view, as meta.json records it (`views[i].shake[l]`)."""
 
     amplitude_px: float
+    max_gap_px: NotRequired[float | None]
     method: BlurMethod
     motion_steps: NotRequired[int | None]
     path_px: float
@@ -534,6 +535,49 @@ class WireFrame(TypedDict):
     seed: int
     view: NotRequired[int | None]
 
+class Bounces(TypedDict):
+    """The Cycles bounce limits a worker set (`blender_scene.FIXED_BOUNCES`'s keys)."""
+
+    diffuse_bounces: int
+    glossy_bounces: int
+    max_bounces: int
+    transmission_bounces: int
+    transparent_max_bounces: int
+    volume_bounces: int
+
+LightPaths = Literal["auto", "fixed"]
+
+class LightPathsRecord(TypedDict):
+    """The light paths of an object's renders, as its worker reported them: the bounce limits and what the materials can do that decided them under `auto`."""
+
+    bounces: Bounces
+    mode: LightPaths
+    transmission: bool
+    transparency: bool
+    unlit_only: bool
+
+class Loaded(TypedDict):
+    """A GLB loaded: the normalized object and how it will render."""
+
+    bbox_dims: list[float]
+    center: list[float]
+    device: DeviceRecord
+    light_paths: LightPathsRecord
+    n_triangles: int
+    n_vertices: int
+    ok: bool
+    scale: float
+    seconds: float
+    unlit_fixed: bool
+    warnings: list[str]
+
+class Rendered(TypedDict):
+    """A render request done."""
+
+    done: int
+    jobs: int
+    ok: bool
+
 class CostSeconds(TypedDict):
     """The priced seconds of a setting's blurry images (one pilot round each)."""
 
@@ -570,27 +614,6 @@ class DenoiserRecord(TypedDict):
     device: str
     library: str
     version: str
-
-class Bounces(TypedDict):
-    """The Cycles bounce limits a worker set (`blender_scene.FIXED_BOUNCES`'s keys)."""
-
-    diffuse_bounces: int
-    glossy_bounces: int
-    max_bounces: int
-    transmission_bounces: int
-    transparent_max_bounces: int
-    volume_bounces: int
-
-LightPaths = Literal["auto", "fixed"]
-
-class LightPathsRecord(TypedDict):
-    """The light paths of an object's renders, as its worker reported them: the bounce limits and what the materials can do that decided them under `auto`."""
-
-    bounces: Bounces
-    mode: LightPaths
-    transmission: bool
-    transparency: bool
-    unlit_only: bool
 
 Preset = Literal["paper", "balanced", "floor", "fast"]
 

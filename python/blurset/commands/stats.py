@@ -70,12 +70,12 @@ FIGURES = {
         "views",
     ),
     "render_psnr": (
-        "Render PSNR per image (level 0: sharp)",
+        "Render PSNR per image",
         "estimated render PSNR on the object's pixels  (dB)",
         "rendered images",
     ),
     "image_samples": (
-        "Samples per image (level 0: sharp)",
+        "Samples per image",
         "Cycles samples, every latent frame and both halves  (samples)",
         "rendered images",
     ),
@@ -264,11 +264,20 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
 KINDS = {"defocus_coc_px": "defocus", "shake_path_px": "shake"}
 # The per-level figures, in report order; latent_frames as bars of counts, the rest as
 # histograms. render_psnr and image_samples from --target-psnr builds only: what each
-# image cost and reached (level "0" is the sharp image).
+# image cost and reached, per level directory (sharp, blur_1, defocus_2, ...).
 PER_LEVEL = (
     "blur_weight", "latent_frames", "motion_px", *KINDS, "render_psnr", "image_samples",
 )  # fmt: skip
 PER_IMAGE = ("render_psnr", "image_samples")
+
+
+def level_order(level: str) -> tuple[str, int]:
+    """Levels in reading order: a blur level's number, or a level directory (the sharp
+    image first, then each kind's prefix and level)."""
+    if level.isdigit():
+        return "", int(level)
+    prefix, _, n = level.rpartition("_")
+    return prefix, int(n) if n.isdigit() else -1
 
 
 def _single_figure(stats: dict, name: str, n_label: str, out_dir: Path, max_bins: int) -> Path:
@@ -292,7 +301,7 @@ def _per_level_figure(stats: dict, name: str, blurry: str, out_dir: Path, max_bi
     """One panel per level, or one number for all when every level has the same."""
     by_level = stats.get(name) or {}
     title, xlabel, ylabel = FIGURES[name]
-    levels = sorted(by_level, key=int) or ["-"]
+    levels = sorted(by_level, key=level_order) or ["-"]
     one = constant([x for lvl in by_level for x in by_level[lvl]]) if by_level else None
     if one is not None:
         # One number at every level (a fixed --latents): one panel says it.
@@ -311,7 +320,7 @@ def _per_level_figure(stats: dict, name: str, blurry: str, out_dir: Path, max_bi
             _hist(ax, values, max_bins, _median(stats, f"{name}_{lvl}"))
         per_image = name in PER_IMAGE
         what = f"{n} images" if per_image else f"{n} blurry views"
-        label = "sharp" if per_image and lvl == "0" else f"level {lvl}"
+        label = lvl if per_image else f"level {lvl}"
         if name in KINDS:
             what, label = f"{n} views", f"{KINDS[name]}_{lvl}"
         panel = f"{label} ({what})" if by_level else "no blur levels (sharp only)"
@@ -363,7 +372,7 @@ def write_csvs(stats: dict, out_dir: Path) -> list[Path]:
     per_level = [
         (f"{name}_{lvl}", stats[name][lvl])
         for name in ("blur_weight", "latent_frames", "motion_px", "render_psnr", "image_samples")
-        for lvl in sorted(stats.get(name) or {}, key=int)
+        for lvl in sorted(stats.get(name) or {}, key=level_order)
     ]
     view_cols = ["scene_range", "flatness", "depth_range", "orientation", "w_u"]
     settings = stats["settings"]

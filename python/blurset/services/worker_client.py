@@ -123,29 +123,24 @@ def worker_command(
     ]
 
 
-class LoadedObject(TypedDict, total=False):
-    """What `Worker.load` returns: the worker's reply (blender_scripts/worker.py: the
-    normalized object, its import warnings, light paths and device), the driver's QA
-    measures, and what the build adds before it writes meta.json's `object`."""
+if TYPE_CHECKING:
 
-    ok: bool
-    reason: str
-    bbox_dims: list[float]
-    n_vertices: int
-    n_triangles: int
-    scale: float
-    center: list[float]
-    warnings: list[str]
-    unlit_fixed: bool
-    light_paths: _records.LightPathsRecord
-    device: _records.DeviceRecord
-    seconds: float
-    qa_coverage: list[float]
-    qa_luminance: list[float]
-    # Added by the build (builder/unit.py).
-    load_s: float
-    provenance: dict[str, Any]
-    blender_version: str | None
+    class LoadedObject(_records.Loaded, total=False):
+        """What `Worker.load` returns: the worker's reply (the core's wire type, whose
+        schema the worker is held to), the driver's QA measures, and what the build adds
+        before it writes meta.json's `object`."""
+
+        qa_coverage: list[float]
+        qa_luminance: list[float]
+        # Added by the build (builder/unit.py).
+        load_s: float
+        provenance: dict[str, Any]
+        blender_version: str | None
+
+    # The worker's final reply to a render request (frames written, render calls).
+    RenderDone = _records.Rendered
+else:  # the types are the core's schemas, for the type checker; at run time, dicts
+    LoadedObject = RenderDone = dict
 
 
 class RenderOptions(TypedDict):
@@ -155,15 +150,6 @@ class RenderOptions(TypedDict):
     fov_deg: float
     crop: bool
     guides: bool
-
-
-class RenderDone(TypedDict, total=False):
-    """The worker's final reply to a render request: frames written, render calls."""
-
-    ok: bool
-    done: int
-    jobs: int
-    reason: str
 
 
 class Worker:

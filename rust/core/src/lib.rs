@@ -69,6 +69,7 @@ pub use crate::dataset::build_tail::{write_build_tail, BuildTail, RunFacts};
 pub use crate::dataset::failures::{
     current as current_failures, read_records as read_failure_records,
 };
+pub use crate::dataset::finished::ImageWriter;
 pub use crate::dataset::layout::{
     complete_settings, is_complete, is_image_folder, parse_temp_name, partial_dir, png_fault,
     publish, setting_levels, setting_problem, setting_problems, temp_path, Fault, SettingProblem,
@@ -98,6 +99,7 @@ pub use crate::dataset::records::{write_dataset, DatasetDoc};
 pub use crate::dataset::schema::{
     schema, schema_file, value_schemas, write_record, StatsFile, SCHEMA_RECORDS,
 };
+pub use crate::dataset::session::{Counts, Session};
 pub use crate::dataset::splits::{make_splits, seeded_subset, Holdout, SettingEntry, Splits};
 pub use crate::dataset::stats::{build_stats, BuildStats};
 pub use crate::dataset::target_loop::{Finished, ImageKey, TargetImages};

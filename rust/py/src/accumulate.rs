@@ -267,7 +267,8 @@ impl PyAccumulator {
 /// Open Image Denoise loaded at run time (core `Denoiser`).
 #[pyclass(frozen, name = "Denoiser", module = "blurset._core")]
 pub struct PyDenoiser {
-    inner: core::Denoiser,
+    /// Shared with the render sessions that denoise with it.
+    pub(crate) inner: std::sync::Arc<core::Denoiser>,
 }
 
 /// A C-contiguous float32 (H, W, 3) image.
@@ -302,7 +303,9 @@ impl PyDenoiser {
             }
         };
         let inner = run_detached(py, move || core::Denoiser::open(&library, device))?;
-        Ok(PyDenoiser { inner })
+        Ok(PyDenoiser {
+            inner: std::sync::Arc::new(inner),
+        })
     }
 
     #[getter]

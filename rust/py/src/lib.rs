@@ -18,8 +18,8 @@ mod outputs;
 mod publish;
 mod qa;
 mod sampling;
+mod session;
 mod stats;
-mod target;
 mod tradeoff;
 mod wire;
 
@@ -52,7 +52,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     qa::register(m)?;
     tradeoff::register(m)?;
     stats::register(m)?;
-    target::register(m)?;
+    session::register(m)?;
     wire::register(m)?;
     Ok(())
 }

@@ -423,7 +423,7 @@ def _setting_rows(hp: HubPlan, cfg: _Config, setting: str, split: str) -> dict[s
     w, h = (int(x) for x in meta["resolution"])
     # The mean latent poses as open_scene(pose="mean") reads them (held-out views that
     # hold the sharp copy keep its pose); None before meta.json recorded them.
-    means = layout.mean_poses(sdir, cfg.level) if cfg.level.startswith("blur_") else None
+    means = None if layout.written_pose(cfg.level) else layout.mean_poses(sdir, cfg.level)
     degraded = cfg.level != layout.SHARP
     # Held-out views of a degraded level hold the sharp image (unless the build rendered
     # them blurry): their records are the sharp image's.

@@ -3,6 +3,7 @@
 //! licence ids are `ground`'s).
 pub mod build_tail;
 pub mod failures;
+pub mod finished;
 pub mod layout;
 pub mod llff;
 pub mod manifest;
@@ -13,6 +14,7 @@ pub mod outputs;
 pub mod read;
 pub mod records;
 pub mod schema;
+pub mod session;
 pub mod splits;
 pub mod stats;
 pub mod target_loop;

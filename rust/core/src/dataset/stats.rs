@@ -31,7 +31,7 @@ use super::layout::MARKER;
 use super::layout::{self, Scan};
 use super::meta::{ReadMeta as Meta, ReadView as MetaView};
 use crate::error::{Error, Result};
-use crate::ground::names::parse_level_dir;
+use crate::ground::kind::ImageKind;
 use crate::plan::degradation::Degradation;
 use crate::plan::motion::{Motion, MotionStat as MetaLevel};
 use crate::plan::sampling::KIND_STATS;
@@ -92,13 +92,13 @@ pub const QUANTITIES: &[(&str, &str, &str)] = &[
         "render_psnr",
         "dB",
         "render PSNR of an image on its object's pixels, estimated from its two halves \
-         (--target-psnr builds; level 0 is the sharp image; one per rendered image)",
+         (--target-psnr builds; per level directory, every kind's; one per rendered image)",
     ),
     (
         "image_samples",
         "samples",
         "Cycles samples an image rendered, every latent frame and both halves \
-         (--target-psnr builds; level 0 is the sharp image; one per rendered image)",
+         (--target-psnr builds; per level directory, every kind's; one per rendered image)",
     ),
 ];
 
@@ -258,11 +258,12 @@ pub struct BuildStats {
     /// level, null where the view holds the sharp image; absent without the kind.
     #[serde(flatten)]
     pub kinds: BTreeMap<String, BTreeMap<u32, Vec<Option<f64>>>>,
-    /// `--target-psnr` builds (absent otherwise): per level, 0 the sharp image.
+    /// `--target-psnr` builds (absent otherwise): per level directory (`sharp`,
+    /// `blur_1`, `defocus_2`, …: every kind's images are certified).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub render_psnr: BTreeMap<u32, Vec<Option<f64>>>,
+    pub render_psnr: BTreeMap<String, Vec<Option<f64>>>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub image_samples: BTreeMap<u32, Vec<Option<u64>>>,
+    pub image_samples: BTreeMap<String, Vec<Option<u64>>>,
 }
 
 // -- the formulas ----------------------------------------------------------------------
@@ -341,8 +342,8 @@ struct ViewRecord {
     orientation: f64,
     w_u: f64,
     levels: BTreeMap<u32, MetaLevel>,
-    /// Under a target: (samples, estimated render PSNR) per level, 0 the sharp image.
-    images: BTreeMap<u32, (u64, f64)>,
+    /// Under a target: (samples, estimated render PSNR) per level directory.
+    images: BTreeMap<String, (u64, f64)>,
     /// Each degradation kind's statistic per level, by the statistic's name; none where
     /// the view holds the sharp image.
     kinds: BTreeMap<&'static str, BTreeMap<u32, f64>>,
@@ -473,18 +474,18 @@ fn read_view(
     })
 }
 
-/// The images a view records, by level: (samples, render PSNR).
-fn read_view_images(v: &MetaView, path: &Path) -> Result<BTreeMap<u32, (u64, f64)>> {
+/// The images a view records, by level directory: (samples, render PSNR).
+fn read_view_images(v: &MetaView, path: &Path) -> Result<BTreeMap<String, (u64, f64)>> {
     let i = v.index;
     let mut images = BTreeMap::new();
     for (dir, im) in &v.images {
-        let l = parse_level_dir(dir).ok_or_else(|| {
+        let kind = ImageKind::parse(dir).ok_or_else(|| {
             input_error(
                 format!("bad meta.json (view {i}: image of {dir:?}, not a level directory)"),
                 path,
             )
         })?;
-        images.insert(l, (im.samples, im.render_psnr_db));
+        images.insert(kind.dir(), (im.samples, im.render_psnr_db));
     }
     Ok(images)
 }
@@ -727,7 +728,12 @@ fn add_views(st: &mut BuildStats, records: Vec<SettingRecord>, levels: &BTreeSet
                 .flat_map(|(name, m)| m.keys().map(move |&l| (*name, l)))
         })
         .collect();
-    let with_sharp: Vec<u32> = std::iter::once(0).chain(levels.iter().copied()).collect();
+    // Every level directory any view recorded an image of.
+    let image_dirs: BTreeSet<String> = records
+        .iter()
+        .flat_map(|r| r.views.iter())
+        .flat_map(|v| v.images.keys().cloned())
+        .collect();
     for (k, r) in records.into_iter().enumerate() {
         for v in &r.views {
             st.view_setting.push(k);
@@ -757,10 +763,12 @@ fn add_views(st: &mut BuildStats, records: Vec<SettingRecord>, levels: &BTreeSet
                     .or_default()
                     .push(v.kinds.get(name).and_then(|m| m.get(&l)).copied());
             }
-            for &l in &with_sharp {
-                let im = v.images.get(&l);
-                st.render_psnr.entry(l).or_default().push(im.map(|x| x.1));
-                st.image_samples.entry(l).or_default().push(im.map(|x| x.0));
+            for dir in &image_dirs {
+                let im = v.images.get(dir);
+                let psnr = st.render_psnr.entry(dir.clone()).or_default();
+                psnr.push(im.map(|x| x.1));
+                let samples = st.image_samples.entry(dir.clone()).or_default();
+                samples.push(im.map(|x| x.0));
             }
         }
         st.scene_dimension.push(r.scene_dimension);

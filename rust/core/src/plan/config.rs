@@ -484,6 +484,33 @@ impl BuildConfig {
         Ok(())
     }
 
+    /// Shake levels rendered as averaged frames need at least
+    /// [`shake::MIN_FRAMES`](super::shake::MIN_FRAMES) of them: with fewer, the frames'
+    /// mean is not the written pose.
+    fn check_shake_frames(&self) -> Result<()> {
+        use super::shake::{HARMONICS, MIN_FRAMES};
+        if self.shake.is_empty() || self.blur_method == BlurMethod::MotionBlur {
+            return Ok(());
+        }
+        let (option, most) = if self.latents_auto {
+            ("latents_max", self.latents_max)
+        } else {
+            ("latents", self.latents)
+        };
+        if most >= MIN_FRAMES {
+            return Ok(());
+        }
+        Err(config_error(
+            option,
+            format!(
+                "{most}: shake levels ({:?}) average their frames to the written pose only \
+                 from {MIN_FRAMES} frames on (each axis of the path is {HARMONICS} \
+                 harmonics); give {MIN_FRAMES} or more, or blur_method motion_blur",
+                self.shake
+            ),
+        ))
+    }
+
     /// The one validator: every field in its range, then what holds between fields.
     pub fn validate(&self) -> Result<()> {
         self.check_fields()?;
@@ -492,29 +519,8 @@ impl BuildConfig {
         self.check_outputs()?;
         if let Some(t) = self.target_psnr {
             self.check_target(t)?;
-            if !self.defocus.is_empty() {
-                return Err(config_error(
-                    "defocus",
-                    format!(
-                        "{:?}: defocus levels render at the sharp image's fixed sample count; \
-                         a render target (--target-psnr, or a preset that sets one) does not \
-                         drive them: drop one of the two",
-                        self.defocus
-                    ),
-                ));
-            }
-            if !self.shake.is_empty() {
-                return Err(config_error(
-                    "shake",
-                    format!(
-                        "{:?}: shake levels render at the fixed sample counts of the blur \
-                         levels; a render target (--target-psnr, or a preset that sets one) \
-                         does not drive them: drop one of the two",
-                        self.shake
-                    ),
-                ));
-            }
         }
+        self.check_shake_frames()?;
         if self.latents_auto && self.blur_method == BlurMethod::MotionBlur {
             return Err(config_error(
                 "latents",
@@ -1034,6 +1040,35 @@ mod tests {
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default()
+    }
+
+    #[test]
+    fn shake_levels_need_the_frames_that_average_to_the_written_pose() -> Result<()> {
+        let shake = ("shake", Raw::List(vec![Raw::Int(2)]));
+        let e = err(&[shake.clone(), ("latents", Raw::Int(3))]);
+        assert!(
+            e.starts_with("latents 3: shake levels") && e.contains("4 frames"),
+            "{e}"
+        );
+        let e = err(&[
+            shake.clone(),
+            ("latents_auto", Raw::Bool(true)),
+            ("latents_max", Raw::Int(2)),
+        ]);
+        assert!(e.starts_with("latents_max 2: shake levels"), "{e}");
+        // Four frames, or one motion blur render, or no shake level: accepted.
+        for ok in [
+            vec![shake.clone(), ("latents", Raw::Int(4))],
+            vec![
+                shake.clone(),
+                ("latents", Raw::Int(2)),
+                ("blur_method", Raw::Str("motion_blur".into())),
+            ],
+            vec![("latents", Raw::Int(2))],
+        ] {
+            BuildConfig::from_values(&values(&ok))?;
+        }
+        Ok(())
     }
 
     #[test]

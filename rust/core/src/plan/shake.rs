@@ -11,7 +11,7 @@
 //! (4, 8, 16, 32 px for levels 1–4), scaled with the resolution. The camera turns by
 //! yaw atan(u / F) and pitch atan(v / F) (F the focal length in pixels), which moves the
 //! image centre by d to first order in the angles.
-use super::choices::BlurMethod;
+use super::choices::{BlurMethod, LatentSampling};
 use super::degradation::{
     Degradation, RenderCx, ViewCx, MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
 };
@@ -24,6 +24,10 @@ use std::f64::consts::TAU;
 
 /// Sinusoids per coordinate of the path.
 pub const HARMONICS: usize = 3;
+
+/// The fewest averaged frames a shake level takes: evenly spread frames cancel each
+/// harmonic j (their mean is the written pose) only when their count does not divide j.
+pub const MIN_FRAMES: usize = HARMONICS + 1;
 
 /// The highest shake level: its largest displacement, 2^8 = 256 px at 512 px, is half
 /// the image; a higher level would turn the object out of the frame.
@@ -65,6 +69,10 @@ pub struct ShakePlan {
     pub method: BlurMethod,
     /// Cycles samples of each render.
     pub samples_per_frame: u32,
+    /// Under latents auto: the largest gap (px) between consecutive latent frames on
+    /// the image centre's path, within `max_ghost_px` unless `latents_max` capped them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_gap_px: Option<f64>,
     /// The camera at each latent frame (average) or motion key (motion blur).
     pub poses: Vec<ShakePose>,
     /// Cycles seed of each render (one under motion blur).
@@ -139,6 +147,57 @@ fn motion_steps(d: impl Fn(f64) -> [f64; 2]) -> u32 {
             })
         })
         .unwrap_or(hi)
+}
+
+/// The latent frames' times, evenly spread over the exposure, and the largest gap (px)
+/// between consecutive frames on the path `d`, the two uncovered ends counting as one
+/// gap (as a blur level's, `motion::max_gap`). The build's `latents` frames, or under
+/// latents auto the fewest m <= `latents_max` whose gap is within `max_ghost_px`, so a
+/// shake image is a smear to the same bound as a blur image, not a few ghost copies.
+fn frame_times(cx: &ViewCx, d: impl Fn(f64) -> [f64; 2]) -> (Vec<f64>, f64) {
+    let dist = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+    let times = |m: usize| -> Vec<f64> { (0..m).map(|k| (k as f64 + 0.5) / m as f64).collect() };
+    let gap = |ts: &[f64]| {
+        let ends = dist(d(0.0), d(ts[0])) + dist(d(ts[ts.len() - 1]), d(1.0));
+        ts.windows(2)
+            .map(|w| dist(d(w[0]), d(w[1])))
+            .fold(ends, f64::max)
+    };
+    let cfg = cx.cfg;
+    if !cfg.latents_auto {
+        let ts = times(cx.latents.max(1));
+        let g = gap(&ts);
+        return (ts, g);
+    }
+    // Evenly spread frames leave gaps of about path / m, so the search starts there.
+    let length: f64 = (0..GRID)
+        .map(|i| dist(d(i as f64 / GRID as f64), d((i + 1) as f64 / GRID as f64)))
+        .sum();
+    let first = ((length / cfg.max_ghost_px - 1e-9).ceil() as usize)
+        .min(cfg.latents_max)
+        .max(MIN_FRAMES);
+    let mut best = (Vec::new(), f64::INFINITY);
+    for m in first..=cfg.latents_max.max(first) {
+        let ts = times(m);
+        let g = gap(&ts);
+        best = (ts, g);
+        if g <= cfg.max_ghost_px {
+            break;
+        }
+    }
+    best
+}
+
+/// (samples of each render, sample blocks) of a level of `own` frames (latents auto),
+/// else the build's exposure, which is every level's.
+fn exposure(cx: &ViewCx, own: Option<usize>) -> (u32, Option<(u32, Vec<u32>)>) {
+    match own {
+        Some(m) => (
+            cx.cfg.samples_per_frame(m),
+            (cx.cfg.latent_sampling == LatentSampling::Subsets).then(|| cx.cfg.sample_blocks(m)),
+        ),
+        None => (cx.samples_per_frame, cx.blocks.clone()),
+    }
 }
 
 /// Camera shake as a [`Degradation`].
@@ -246,14 +305,14 @@ fn plan_level(cx: &ViewCx, path: &Path, level: u32) -> ShakePlan {
     };
     let d = |t: f64| path.at(t).map(|x| x * scale);
     let purpose = <Shake as Degradation>::PURPOSE + u64::from(level);
-    let (times, steps): (Vec<f64>, Option<u32>) = if cx.motion_blur {
+    let (times, steps, gap): (Vec<f64>, Option<u32>, f64) = if cx.motion_blur {
         let steps = motion_steps(d);
         let n = 1u32 << steps;
         let keys = (0..=n).map(|k| f64::from(k) / f64::from(n)).collect();
-        (keys, Some(steps))
+        (keys, Some(steps), 0.0)
     } else {
-        let m = cx.latents.max(1);
-        ((0..m).map(|k| (k as f64 + 0.5) / m as f64).collect(), None)
+        let (ts, gap) = frame_times(cx, d);
+        (ts, None, gap)
     };
     let poses = times
         .iter()
@@ -267,12 +326,10 @@ fn plan_level(cx: &ViewCx, path: &Path, level: u32) -> ShakePlan {
         })
         .collect();
     let renders = if cx.motion_blur { 1 } else { times.len() };
-    let (seeds, sample_offsets, sample_sequence) = match &cx.blocks {
-        Some((sequence, offsets)) => (
-            vec![cx.sharp_seed; renders],
-            offsets.clone(),
-            Some(*sequence),
-        ),
+    let own = cx.cfg.latents_auto && !cx.motion_blur;
+    let (samples_per_frame, blocks) = exposure(cx, own.then_some(renders));
+    let (seeds, sample_offsets, sample_sequence) = match blocks {
+        Some((sequence, offsets)) => (vec![cx.sharp_seed; renders], offsets, Some(sequence)),
         None => (
             (0..renders).map(|k| (cx.seed)(purpose, k)).collect(),
             Vec::new(),
@@ -287,7 +344,8 @@ fn plan_level(cx: &ViewCx, path: &Path, level: u32) -> ShakePlan {
         } else {
             BlurMethod::Average
         },
-        samples_per_frame: cx.samples_per_frame,
+        samples_per_frame,
+        max_gap_px: own.then_some(gap),
         poses,
         seeds,
         sample_offsets,
@@ -391,6 +449,64 @@ mod tests {
         let other = |p| Stream::new(9, p + 1);
         let d = cx(&other, &seed, false, None);
         assert_ne!(Shake::plan_view(&d, &[2])["2"].poses, plan["2"].poses);
+    }
+
+    #[test]
+    fn under_latents_auto_a_level_takes_the_frames_its_ghost_bound_needs() {
+        let stream = |p| Stream::new(9, p);
+        let seed = |p: u64, k: usize| (p as u32) * 100 + k as u32;
+        let auto = SamplingConfig {
+            latents_auto: true,
+            latents_max: 4096,
+            max_ghost_px: 1.0,
+            ..SamplingConfig::default()
+        };
+        let c = ViewCx {
+            cfg: &auto,
+            ..cx(&stream, &seed, false, None)
+        };
+        let plan = Shake::plan_view(&c, &[1, 2, 3, 4]);
+        let frames: Vec<usize> = ["1", "2", "3", "4"].map(|l| plan[l].poses.len()).to_vec();
+        for l in ["1", "2", "3", "4"] {
+            let p = &plan[l];
+            let gap = p.max_gap_px.expect("auto records its gap");
+            // Within the bound, and not by far more frames than it needs: one frame
+            // fewer would leave a gap near the path's length over that count.
+            assert!(gap <= 1.0, "{l}: {gap}");
+            let m = p.poses.len();
+            // A loop of three harmonics moves at most about 3x its mean speed.
+            assert!((m as f64) < 3.0 * p.path_px + 2.0, "{l}: {m} frames");
+            assert!(
+                m as f64 >= p.path_px - 1e-9,
+                "{l}: {m} frames for {}",
+                p.path_px
+            );
+            // The level's blocks are its own: one per frame, equal, in one sequence.
+            assert_eq!(p.seeds.len(), m);
+            assert_eq!(p.sample_offsets.len(), m);
+            assert_eq!(p.samples_per_frame, auto.samples_per_frame(m), "{l}");
+        }
+        // Larger levels move farther, so they take more frames, never 4096; a bound
+        // twice as loose takes about half the frames (the fewest that meet it).
+        assert!(frames.windows(2).all(|w| w[0] < w[1]), "{frames:?}");
+        assert!(frames[3] < 4096, "{frames:?}");
+        let loose = SamplingConfig {
+            max_ghost_px: 2.0,
+            ..auto.clone()
+        };
+        let c2 = ViewCx {
+            cfg: &loose,
+            ..cx(&stream, &seed, false, None)
+        };
+        for (l, &m) in ["1", "2", "3", "4"].iter().zip(&frames) {
+            let half = Shake::plan_view(&c2, &[l.parse().expect("level")])[*l]
+                .poses
+                .len();
+            assert!(half <= m / 2 + 1 && half + 2 >= m / 2, "{l}: {half} vs {m}");
+        }
+        // Without latents auto nothing new is recorded.
+        let fixed = Shake::plan_view(&cx(&stream, &seed, false, None), &[2]);
+        assert_eq!(fixed["2"].max_gap_px, None);
     }
 
     #[test]
