@@ -159,6 +159,7 @@ def test_build_mode_verify_and_export_read_a_camera_model(standin_build_dir, tmp
     for p in records:
         meta = json.loads(p.read_text())
         assert meta["raw_model"]["camera"] == "NikonD850"
+        assert "raw pipeline" in meta["clean"] and "/ wb" not in meta["clean"]
         for f in meta["files"]:
             for factor in [1, *meta["downsample"]]:
                 sub = "" if factor == 1 else f"_{factor}"

@@ -53,6 +53,11 @@ const CLEAN_LINEAR: &str = "y = white_level * clip(composite(L, background), 0, 
     build's linear premultiplied RGBA (linear/*.exr)";
 const CLEAN_PNG: &str = "y = white_level * decode(x) / wb, x the build's 8-bit sRGB PNG \
     (images/*.png)";
+/// The clean image a camera model starts from (build mode), by source.
+const RAW_CLEAN_LINEAR: &str = "L = clip(composite(L, background), 0, 1), L the build's \
+    linear premultiplied RGBA (linear/*.exr), into the raw pipeline of raw_model";
+const RAW_CLEAN_PNG: &str = "L = decode(x), x the build's 8-bit sRGB PNG (images/*.png), \
+    into the raw pipeline of raw_model";
 
 /// One gain of a unit: its folder, key, σ and record.
 #[derive(Clone, Debug)]
@@ -223,6 +228,14 @@ impl Common {
                 ..doc.clone()
             };
             if let Some(r) = &raw {
+                record.clean = record.clean.as_deref().map(|c| {
+                    if c == CLEAN_LINEAR {
+                        RAW_CLEAN_LINEAR
+                    } else {
+                        RAW_CLEAN_PNG
+                    }
+                    .into()
+                });
                 record.model = RAW_MODEL.into();
                 record.rng = RAW_RNG.into();
                 record.raw_model = Some(r.record.clone());
