@@ -172,6 +172,9 @@ def test_build_mode_verify_and_export_read_a_camera_model(standin_build_dir, tmp
     run_cli("export", str(b), "--out", str(tmp_path / "en"), "--noise", str(n))
     scenes = sorted((tmp_path / "en" / "nerf_llff_data").glob("*__blur_1__gain_4"))
     assert scenes and all(any((s / "images").glob("*.png")) for s in scenes)
+    run_cli("card", str(b), "--noise", str(n), "--out", str(tmp_path / "card.md"))
+    card = (tmp_path / "card.md").read_text()
+    assert "`--model eld:NikonD850`" in card and "LLFF-N style" not in card
     # The Hub export carries each image's noise.json (its raw_model included), verified.
     hub = tmp_path / "hub"
     run_cli("export", str(b), "--out", str(hub), "--for", "hub", "--noise", str(n))

@@ -669,12 +669,21 @@ def _noise_section(path: Path, doc: dict) -> list[str]:
         for g in gains
     ]
     counts = doc.get("counts") or {}
+    model = params.get("model", "paper")
+    what = (
+        "LLFF-N style sensor noise on levels {levels}: "
+        "y' = y + sqrt(σ_read² + σ_shot²·y)·N(0, 1) in linear light, after inverse gamma "
+        if model == "paper"
+        else f"Camera sensor noise (`--model {model}`) on levels {{levels}}: a raw pipeline "
+        "(inverse colour matrix and white balance, Bayer mosaic, noise per photosite, "
+        "bilinear demosaic; σ below are the equivalent read and shot σ in raw units, every "
+        "parameter and its source in each `noise.json`'s `raw_model`), transfer "
+    )
     return [
         f"## Noise variants (`{path.name}/`)",
         "",
-        f"LLFF-N style sensor noise on levels {', '.join(doc.get('levels', []))}: "
-        "y' = y + sqrt(σ_read² + σ_shot²·y)·N(0, 1) in linear light, after inverse gamma "
-        f"({params.get('gamma')}) and "
+        what.format(levels=", ".join(doc.get("levels", [])))
+        + f"({params.get('gamma')}) and "
         + (
             "a random white balance per scene"
             if params.get("profile") == "paper"
