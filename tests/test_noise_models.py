@@ -79,7 +79,8 @@ def test_noise_json_names_the_model_and_outputs_read_back(model, smooth_scene, t
             assert raw["camera"] == "SonyA7S2" and "Vandermode/ELD" in raw["source"]
             assert raw["system_gain_k"] == pytest.approx(gain * raw["k_min"])
             assert raw["read_noise"]["distribution"] == "tukey-lambda"
-            assert raw["bits"] == 14 and raw["black_level"] < raw["white_level"]
+            assert raw["bits"] == 14 and raw["black_level_dn"] < raw["white_level_dn"]
+            assert raw["iso_stops_above_k_min"] == pytest.approx(np.log2(gain))
         else:
             assert "Brooks" in raw["source"] and len(raw["ccm_weights"]) == 4
             assert raw["shot_noise"] == pytest.approx(gain * raw["shot_noise_gain_1"])
