@@ -103,6 +103,37 @@ def run() -> list[dict]:
     return [{**r, "load_average": load} for r in rows]
 
 
+def rows_from_partial(path: Path) -> list[dict]:
+    """The rows of a run stopped part-way, from its BLURSET_BENCH_KINDS_PARTIAL file: per
+    resolution, the models it measured (each row names them)."""
+    by_res: dict[tuple[int, int], list[dict]] = {}
+    for line in path.read_text().splitlines():
+        m = json.loads(line)
+        by_res.setdefault((m.pop("resolution"), m.pop("views")), []).append(m)
+    rows = []
+    for (res, views), models in sorted(by_res.items()):
+        names = [m["model"] for m in models]
+        rows += [{**r, "models_measured": names} for r in per_kind(models, res, views)]
+    return rows
+
+
+def merge_into_results(rows: list[dict]) -> Path:
+    """`rows` into bench/results.json, replacing entries of the same name (as run.py
+    does for a partial run)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from run import machine
+
+    out = Path(__file__).resolve().parent / "results.json"
+    new = {r["name"] for r in rows}
+    kept = [r for r in json.loads(out.read_text()) if r["name"] not in new]
+    out.write_text(json.dumps(kept + [{**r, "machine": machine()} for r in rows], indent=2) + "\n")
+    return out
+
+
 if __name__ == "__main__":
-    json.dump(run(), sys.stdout, indent=1, default=str)
-    print()
+    # `bench_target_kinds.py --merge-partial FILE`: a stopped run's rows into results.json.
+    if len(sys.argv) == 3 and sys.argv[1] == "--merge-partial":
+        print(merge_into_results(rows_from_partial(Path(sys.argv[2]))))
+    else:
+        json.dump(run(), sys.stdout, indent=1, default=str)
+        print()
