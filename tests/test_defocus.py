@@ -172,7 +172,7 @@ def test_real_circles_of_confusion_are_meta_jsons(tmp_path):
         exr = layout.linear_name(name)
         if v["index"] in meta["test_views"]:
             for lvl in v["defocus"]:
-                d = setting / layout.defocus_dir(int(lvl))
+                d = setting / f"defocus_{lvl}"
                 assert (d / layout.IMAGES / name).read_bytes() == (
                     setting / layout.SHARP / layout.IMAGES / name
                 ).read_bytes()
@@ -182,7 +182,7 @@ def test_real_circles_of_confusion_are_meta_jsons(tmp_path):
         outside = a0 < 0.5
         spills, wants = [], []
         for lvl, d in sorted(v["defocus"].items(), key=lambda kv: int(kv[0])):
-            a = read_exr(setting / layout.defocus_dir(int(lvl)) / layout.LINEAR / exr)[..., 3]
+            a = read_exr(setting / f"defocus_{lvl}" / layout.LINEAR / exr)[..., 3]
             coc = circle_of_confusion(
                 depth, d["focus_distance"], d["aperture_radius"], meta["focal_px"]
             )

@@ -196,3 +196,13 @@ def test_real_shake_differs_from_sharp_grows_with_level_and_repeats(tmp_path, me
             ).read_bytes()
     # The shaken camera smears the object outside its sharp silhouette somewhere.
     assert larger > 0
+
+
+def test_the_card_says_what_a_shake_level_is(shake_build, tmp_path):
+    """The card names every kind its levels hold (the kind's own sentence, from the
+    core's table of kinds), not only blur and defocus."""
+    card = tmp_path / "card.md"
+    run_cli("card", str(shake_build), "--out", str(card))
+    text = card.read_text()
+    assert "`shake_l` the same views shaken by a hand-held camera at level l" in text
+    assert "`blur_l` the same views blurred at level l" in text and "`defocus_l`" not in text

@@ -544,11 +544,12 @@ def level_dirs(levels: list[int]) -> list[str]:
 def parse_level_dir(name: str) -> int | None:
     """The level of a level directory name (`sharp` -> 0, `blur_<l>` -> l), or None."""
 
-def defocus_dir(level: int) -> str:
-    """Directory of a defocus level (`defocus_<l>`)."""
+def level_kind(name: str) -> str | None:
+    """The kind of a level directory (sharp, blur, defocus …), or None."""
 
-def parse_defocus_dir(name: str) -> int | None:
-    """The level of a defocus level's directory (`defocus_<l>` -> l), or None."""
+def level_means(name: str) -> tuple[str, str] | None:
+    """What a level directory's kind is, as a dataset card says it: (its directories'
+    pattern, `blur_<l>`, and its sentence); None for `sharp` and a non-level name."""
 
 def is_level_dir(name: str) -> bool:
     """Whether a name is a level directory a build writes (sharp, blur_<l>, defocus_<l>)."""

@@ -131,14 +131,17 @@ def is_level_dir(name: str) -> bool:
     return _core.is_level_dir(name)
 
 
-def defocus_dir(level: int) -> str:
-    """Directory of a defocus level (`defocus_<l>`)."""
-    return _core.defocus_dir(level)
+def level_kind(name: str) -> str | None:
+    """The kind of a level directory (`sharp`, `blur`, `defocus` …: the core's
+    ImageKind), or None for a name that is no level directory."""
+    return _core.level_kind(name)
 
 
-def is_defocus_dir(name: str) -> bool:
-    """`defocus_<l>`: a defocus level, whose cameras are the written poses."""
-    return _core.parse_defocus_dir(name) is not None
+def level_means(name: str) -> tuple[str, str] | None:
+    """What a level's kind is, as a dataset card says it: (`blur_l`, "the same views
+    blurred at level l"); None for `sharp` and a name that is no level directory."""
+    m = _core.level_means(name)
+    return None if m is None else (m[0].replace("<l>", "l"), m[1])
 
 
 def level_record(name: str) -> tuple[str, str] | None:

@@ -334,9 +334,14 @@ def _level_table(metas: list[dict], levels: list[str]) -> list[str]:
     return rows
 
 
+def _kinds_meant(levels: list[str]) -> list[tuple[str, str]]:
+    """Each kind among `levels` once, in level order: (`blur_l`, what its levels are)."""
+    return list(dict.fromkeys(m for lvl in levels if (m := layout.level_means(lvl))))
+
+
 def _defocus_table(metas: list[dict], levels: list[str]) -> list[str]:
     """The defocus levels: the largest circle of confusion on the object and the lens."""
-    defocus = [lvl for lvl in levels if layout.is_defocus_dir(lvl)]
+    defocus = [lvl for lvl in levels if layout.level_kind(lvl) == "defocus"]
     if not defocus:
         return []
     rows = [
@@ -483,13 +488,8 @@ def _contents(
         f"| {counts.get('images')} | {counts.get('objects_failed', 0)} |",
         "",
         f"Images are {res[0]} x {res[1]} px sRGB PNG. Levels: {', '.join(levels)} "
-        "(`sharp` is the ground truth of every view; `blur_l` the same views blurred at "
-        "level l"
-        + (
-            "; `defocus_l` the same views out of focus at level l"
-            if any(layout.is_defocus_dir(lvl) for lvl in levels)
-            else ""
-        )
+        "(`sharp` is the ground truth of every view"
+        + "".join(f"; `{p}` {means}" for p, means in _kinds_meant(levels))
         + ").",
         "",
         "### Splits",

@@ -113,10 +113,10 @@ pub use crate::ground::license::{
 };
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
-    defocus_dir, files, gain_name, image_name, images_dir, is_level_dir, level_dir, level_dirs,
-    linear_dir, linear_name, nerfstudio_depth_dir, object_lock, parse_defocus_dir, parse_level_dir,
-    pass_dir, pass_file, pass_level, setting_name, sort_level_dirs, theta0s, work_dir,
-    OBJECT_LOCK_PREFIX, PASSES, SHARP, WORK_PREFIX,
+    files, gain_name, image_name, images_dir, is_level_dir, level_dir, level_dirs, linear_dir,
+    linear_name, nerfstudio_depth_dir, object_lock, parse_level_dir, pass_dir, pass_file,
+    pass_level, setting_name, sort_level_dirs, theta0s, work_dir, OBJECT_LOCK_PREFIX, PASSES,
+    SHARP, WORK_PREFIX,
 };
 
 // Image error against a reference and the speed/quality front.

@@ -40,16 +40,20 @@ fn parse_level_dir(name: &str) -> Option<u32> {
     core::parse_level_dir(name)
 }
 
-/// Directory of a defocus level (`defocus_<l>`).
+/// The kind of a level directory (`sharp`, `blur`, `defocus` …), or None for a name
+/// that is no level directory.
 #[pyfunction]
-fn defocus_dir(level: u32) -> String {
-    core::defocus_dir(level)
+fn level_kind(name: &str) -> Option<&'static str> {
+    core::ImageKind::parse(name).map(core::ImageKind::name)
 }
 
-/// The level of a defocus level's directory (`defocus_<l>` → l), or None.
+/// What a level directory's kind is, as a dataset card says it: (its directories'
+/// pattern, `blur_<l>`, and its sentence); None for `sharp` and a name that is no level
+/// directory.
 #[pyfunction]
-fn parse_defocus_dir(name: &str) -> Option<u32> {
-    core::parse_defocus_dir(name)
+fn level_means(name: &str) -> Option<(String, &'static str)> {
+    let kind = core::ImageKind::parse(name)?;
+    Some((kind.dir_pattern(), kind.means()?))
 }
 
 /// Whether a name is a level directory a build writes (sharp, blur_<l>, defocus_<l>).
@@ -307,8 +311,8 @@ fn register_functions(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(level_dir, m)?)?;
     m.add_function(wrap_pyfunction!(level_dirs, m)?)?;
     m.add_function(wrap_pyfunction!(parse_level_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(defocus_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(parse_defocus_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(level_kind, m)?)?;
+    m.add_function(wrap_pyfunction!(level_means, m)?)?;
     m.add_function(wrap_pyfunction!(level_record, m)?)?;
     m.add_function(wrap_pyfunction!(written_pose, m)?)?;
     m.add_function(wrap_pyfunction!(is_level_dir, m)?)?;

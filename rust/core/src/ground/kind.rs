@@ -52,6 +52,9 @@ struct Row {
     /// own (the pixels its exposure covered); else it takes the sharp masks (a lens
     /// renders one instant at the written pose).
     own_masks: bool,
+    /// What a level of the kind is, as a dataset card says it ("`blur_l` the same views
+    /// blurred at level l").
+    means: &'static str,
 }
 
 const PREFIXES: [Row; 3] = [
@@ -61,6 +64,7 @@ const PREFIXES: [Row; 3] = [
         record: "levels",
         written_pose: false,
         own_masks: true,
+        means: "the same views blurred at level l",
     },
     Row {
         prefix: "defocus_",
@@ -68,6 +72,7 @@ const PREFIXES: [Row; 3] = [
         record: "defocus",
         written_pose: true,
         own_masks: false,
+        means: "the same views out of focus at level l",
     },
     Row {
         prefix: "shake_",
@@ -75,6 +80,7 @@ const PREFIXES: [Row; 3] = [
         record: "shake",
         written_pose: true,
         own_masks: true,
+        means: "the same views shaken by a hand-held camera at level l",
     },
 ];
 
@@ -128,6 +134,19 @@ impl ImageKind {
     pub fn written_pose(self) -> bool {
         self.degraded()
             .is_none_or(|(i, _)| PREFIXES[i].written_pose)
+    }
+
+    /// The kind's name (its meta.json tag): `sharp`, `blur`, `defocus`, `shake`.
+    pub fn name(self) -> &'static str {
+        match self.degraded() {
+            None => SHARP,
+            Some((i, _)) => PREFIXES[i].prefix.trim_end_matches('_'),
+        }
+    }
+
+    /// What a level of this kind is, as a dataset card says it (None: the sharp image).
+    pub fn means(self) -> Option<&'static str> {
+        self.degraded().map(|(i, _)| PREFIXES[i].means)
     }
 
     /// The pattern of this kind's level directories: `sharp`, `blur_<l>`, `shake_<l>`.
@@ -199,6 +218,14 @@ mod tests {
         assert!(ImageKind::Blur(1).own_masks() && ImageKind::Shake(2).own_masks());
         assert!(!ImageKind::Sharp.own_masks() && !ImageKind::Defocus(2).own_masks());
         assert_eq!(ImageKind::Shake(4).dir_pattern(), "shake_<l>");
+        assert_eq!(ImageKind::Sharp.means(), None);
+        assert_eq!(
+            (ImageKind::Defocus(2).name(), ImageKind::Sharp.name()),
+            ("defocus", "sharp")
+        );
+        assert!(ImageKind::Shake(1)
+            .means()
+            .is_some_and(|m| m.contains("hand-held")));
     }
 
     #[test]

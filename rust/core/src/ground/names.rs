@@ -182,20 +182,6 @@ pub fn parse_level_dir(name: &str) -> Option<u32> {
     }
 }
 
-/// Directory of defocus level `level` (1..=MAX_LEVEL): `defocus_<l>`.
-pub fn defocus_dir(level: u32) -> String {
-    ImageKind::Defocus(level).dir()
-}
-
-/// The level of a defocus level's directory (`defocus_<l>`, l in 1..=MAX_LEVEL without
-/// leading zeros); anything else → None.
-pub fn parse_defocus_dir(name: &str) -> Option<u32> {
-    match ImageKind::parse(name)? {
-        ImageKind::Defocus(l) => Some(l),
-        _ => None,
-    }
-}
-
 /// Whether `name` is a level directory a build writes: `sharp` or a level of any kind.
 pub fn is_level_dir(name: &str) -> bool {
     ImageKind::parse(name).is_some()

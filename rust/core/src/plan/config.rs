@@ -956,7 +956,7 @@ impl BuildConfig {
     /// `sharp`, the blur levels', the defocus levels' and the shake levels' directories.
     pub fn level_dirs(&self) -> Vec<String> {
         let mut dirs = names::level_dirs(&self.levels);
-        dirs.extend(self.defocus.iter().map(|&l| names::defocus_dir(l)));
+        dirs.extend(self.defocus.iter().map(|&l| ImageKind::Defocus(l).dir()));
         dirs.extend(self.shake.iter().map(|&l| ImageKind::Shake(l).dir()));
         dirs
     }
