@@ -47,7 +47,8 @@ def _models(work: Path, res: int, views: int, glbs: list[Path]) -> list[dict]:
         models.append(bench_target.measure_model(g, work / f"{res}", views, **KINDS))
         if PARTIAL:
             with open(PARTIAL, "a") as f:
-                f.write(json.dumps({"resolution": res, "views": views, **models[-1]}) + "\n")
+                head = {"resolution": res, "views": views, "reference_factor": bench_target.REF}
+                f.write(json.dumps({**head, **models[-1]}) + "\n")
     return models
 
 
@@ -105,10 +106,12 @@ def run() -> list[dict]:
 
 def rows_from_partial(path: Path) -> list[dict]:
     """The rows of a run stopped part-way, from its BLURSET_BENCH_KINDS_PARTIAL file: per
-    resolution, the models it measured (each row names them)."""
+    resolution, the models it measured (each row names them). The reference factor is the
+    file's (else BLURSET_BENCH_TARGET_REF, as the run was given it)."""
     by_res: dict[tuple[int, int], list[dict]] = {}
     for line in path.read_text().splitlines():
         m = json.loads(line)
+        bench_target.REF = m.pop("reference_factor", bench_target.REF)
         by_res.setdefault((m.pop("resolution"), m.pop("views")), []).append(m)
     rows = []
     for (res, views), models in sorted(by_res.items()):

@@ -779,7 +779,8 @@ def kinds_lines(rs: list[dict]) -> list[str]:
         levels = group[0].get("levels") or {}
         named = ", ".join(f"{k} {','.join(map(str, v))}" for k, v in sorted(levels.items()))
         out += [
-            f"### {res} px, {db} dB ({_fmt(group[0].get('views_measured'))} views a model; "
+            f"### {res} px, {db} dB ({_fmt(group[0].get('views_measured'))} views a model, "
+            f"references at {_fmt(group[0].get('reference_factor'))}× the samples; "
             f"levels {named})",
             "",
             head,
