@@ -136,11 +136,14 @@ def test_benchmark_pages_plot_every_result(tmp_path, monkeypatch) -> None:
         light = bench.LIGHT.match(r["name"])
         gain = bench.GAIN.match(r["name"])
         target = bench.TARGET.match(r["name"])
+        kinds = bench.KINDS.match(r["name"])
+        model = kinds and ("**every model**" if kinds["model"] == "all" else f"`{kinds['model']}`")
         shown = (
             r["name"] in pages
             or (light and f"| {light['glb']} |" in pages)
             or (gain and f"| `{gain['glb']}` | {gain['res']} |" in pages)
             or (target and f"| `{target['model']}` |" in pages)
+            or (kinds and f"| {kinds['kind']} | {model} |" in pages)
         )
         assert shown or bench.PRESETS.match(r["name"]), r["name"]
     assert list((tmp_path / "bench").glob("*.png"))
