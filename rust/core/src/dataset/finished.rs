@@ -69,16 +69,18 @@ impl ImageWriter {
         Ok(w)
     }
 
+    /// The image sizes a setting writes: full size, then each `--downsample` factor.
+    fn factors(&self) -> impl Iterator<Item = u32> + '_ {
+        std::iter::once(1).chain(self.downsample.iter().copied())
+    }
+
     /// Every level's image folders, and the mask folders of the levels that hold masks.
     fn make_dirs(&self, levels: &[String]) -> Result<()> {
         let mkdir = |p: PathBuf| {
             std::fs::create_dir_all(&p).map_err(|e| crate::Error::io("cannot create", &p, e))
         };
-        let factors: Vec<u32> = std::iter::once(1)
-            .chain(self.downsample.iter().copied())
-            .collect();
         for level in levels {
-            for &f in &factors {
+            for f in self.factors() {
                 mkdir(self.partial.join(level).join(images_dir(f)))?;
                 if self.masks && (level == SHARP || own_masks(level)) {
                     mkdir(self.partial.join(level).join(pass_dir("mask", f)))?;
@@ -97,8 +99,7 @@ impl ImageWriter {
         let (view, level) = key;
         let name = image_name(*view, self.n_views);
         let dir = self.partial.join(level);
-        a.write_png_downsampled(&dir.join(images_dir(1)).join(&name), self.background, 1)?;
-        for &f in &self.downsample {
+        for f in self.factors() {
             a.write_png_downsampled(&dir.join(images_dir(f)).join(&name), self.background, f)?;
         }
         if self.linear {
@@ -124,7 +125,7 @@ impl ImageWriter {
         } else {
             BlurMethod::Average
         };
-        for f in std::iter::once(1).chain(self.downsample.iter().copied()) {
+        for f in self.factors() {
             let (sub, file) = (pass_dir("mask", f), pass_file("mask", name));
             let path = self.partial.join(level).join(&sub).join(&file);
             if first {

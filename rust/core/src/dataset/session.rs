@@ -33,8 +33,10 @@ pub enum Counts {
 /// One phase's images of a fixed-count build: the renders asked for, and each image's
 /// frames as they arrive.
 struct FixedPhase {
-    renders: Vec<Render>,
+    /// The image of each render asked for, in its order.
+    images: Vec<ImageKey>,
     guides: bool,
+    /// Frames each unfinished image still needs (a finished one leaves).
     need: BTreeMap<ImageKey, u32>,
     open: BTreeMap<ImageKey, Accumulator>,
 }
@@ -126,7 +128,7 @@ impl Session {
         match self.current.take() {
             None => Ok(None),
             Some(Phase::Fixed(p)) => {
-                if !p.open.is_empty() || p.need.values().any(|&n| n > 0) {
+                if !p.need.is_empty() {
                     return Err(Error::Value(format!(
                         "{} view/level images incomplete after rendering",
                         p.need.len()
@@ -161,12 +163,14 @@ impl Session {
                     .filter(|r| keys.contains(&(r.view, r.level.clone())))
                     .cloned()
                     .collect();
+                let images: Vec<ImageKey> =
+                    renders.iter().map(|r| (r.view, r.level.clone())).collect();
                 let mut need = BTreeMap::new();
-                for r in &renders {
-                    *need.entry((r.view, r.level.clone())).or_insert(0) += 1;
+                for key in &images {
+                    *need.entry(key.clone()).or_insert(0) += 1;
                 }
                 let phase = FixedPhase {
-                    renders: renders.clone(),
+                    images,
                     guides: self.guides,
                     need,
                     open: BTreeMap::new(),
@@ -250,13 +254,12 @@ impl FixedPhase {
         origin: Option<(u32, u32)>,
         size: u32,
     ) -> Result<Option<(ImageKey, Accumulator)>> {
-        let r = self.renders.get(i).ok_or_else(|| {
+        let key = self.images.get(i).cloned().ok_or_else(|| {
             Error::Value(format!(
                 "render {i} was not asked for (the phase has {})",
-                self.renders.len()
+                self.images.len()
             ))
         })?;
-        let key = (r.view, r.level.clone());
         let guides = self.guides;
         let a = self.open.entry(key.clone()).or_insert_with(|| {
             if guides {

@@ -67,6 +67,26 @@ pub struct ViewCx<'a> {
     pub pricing: Option<(&'a Pricing, &'a RefCell<Vec<ImagePrice>>)>,
 }
 
+/// The latent frames of the fewest count m in `first..=max` whose largest gap is within
+/// `bound` (`latents auto`): `draw(m)` gives m frames and their largest gap (px). Each m
+/// has its fixed draw, so the choice is reproducible; at `max` the gap may exceed the
+/// bound (the caller records it).
+pub fn fewest_frames(
+    first: usize,
+    max: usize,
+    bound: f64,
+    draw: impl Fn(usize) -> (Vec<f64>, f64),
+) -> (Vec<f64>, f64) {
+    let mut best = (Vec::new(), f64::INFINITY);
+    for m in first..=max.max(first) {
+        best = draw(m);
+        if best.1 <= bound {
+            break;
+        }
+    }
+    best
+}
+
 /// Where a view's renders of a kind go.
 pub struct RenderCx<'a> {
     pub view: usize,

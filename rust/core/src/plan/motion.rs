@@ -11,7 +11,7 @@
 use super::camera::{bounding_radius, clamp_polar, corners, orbit_c2w, rows, Trajectory};
 use super::choices::{LatentPositions, LatentSampling};
 use super::degradation::{
-    Degradation, RenderCx, ViewCx, MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
+    fewest_frames, Degradation, RenderCx, ViewCx, MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
 };
 use super::render::{Motion as MotionPath, Render};
 use super::sampling_config::{BlurMethod, SamplingConfig};
@@ -413,16 +413,11 @@ fn latent_positions(
     }
     let lower = (motion_px / cfg.max_ghost_px - 1e-9).ceil().max(1.0);
     let first = (lower as usize).min(cfg.latents_max);
-    let mut best = (Vec::new(), f64::INFINITY);
-    for m in first..=cfg.latents_max {
+    fewest_frames(first, cfg.latents_max, cfg.max_ghost_px, |m| {
         let ts = draw(m);
         let gap = gap_of(&ts);
-        best = (ts, gap);
-        if gap <= cfg.max_ghost_px {
-            break;
-        }
-    }
-    best
+        (ts, gap)
+    })
 }
 
 /// Keys of the motion blur method: 2^n + 1 cameras at t_k = open + k / 2^n, with the smallest

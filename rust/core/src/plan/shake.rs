@@ -13,7 +13,7 @@
 //! image centre by d to first order in the angles.
 use super::choices::{BlurMethod, LatentSampling};
 use super::degradation::{
-    Degradation, RenderCx, ViewCx, MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
+    fewest_frames, Degradation, RenderCx, ViewCx, MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
 };
 use super::render::{Motion, Render};
 use crate::ground::kind::ImageKind;
@@ -176,16 +176,11 @@ fn frame_times(cx: &ViewCx, d: impl Fn(f64) -> [f64; 2]) -> (Vec<f64>, f64) {
     let first = ((length / cfg.max_ghost_px - 1e-9).ceil() as usize)
         .min(cfg.latents_max)
         .max(MIN_FRAMES);
-    let mut best = (Vec::new(), f64::INFINITY);
-    for m in first..=cfg.latents_max.max(first) {
+    fewest_frames(first, cfg.latents_max, cfg.max_ghost_px, |m| {
         let ts = times(m);
         let g = gap(&ts);
-        best = (ts, g);
-        if g <= cfg.max_ghost_px {
-            break;
-        }
-    }
-    best
+        (ts, g)
+    })
 }
 
 /// (samples of each render, sample blocks) of a level of `own` frames (latents auto),
