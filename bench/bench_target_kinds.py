@@ -123,14 +123,9 @@ def rows_from_partial(path: Path) -> list[dict]:
 def merge_into_results(rows: list[dict]) -> Path:
     """`rows` into bench/results.json, replacing entries of the same name (as run.py
     does for a partial run)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from run import machine
+    from harness import merge_into_results as merge
 
-    out = Path(__file__).resolve().parent / "results.json"
-    new = {r["name"] for r in rows}
-    kept = [r for r in json.loads(out.read_text()) if r["name"] not in new]
-    out.write_text(json.dumps(kept + [{**r, "machine": machine()} for r in rows], indent=2) + "\n")
-    return out
+    return merge(rows)
 
 
 if __name__ == "__main__":

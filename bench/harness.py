@@ -1,5 +1,6 @@
-"""What the benches share: timing two sides side by side, a process's CPU time, and the
-steps of a rendering bench (one setting's plan, a mean of rendered frames, a timed build).
+"""What the benches share: timing two sides side by side (or several, round by round), a
+process's CPU time, the steps of a rendering bench (one setting's plan, a mean of
+rendered frames, a timed build), and merging a part's rows into bench/results.json.
 
 Not a bench itself (bench/run.py runs `bench_*.py` only)."""
 
@@ -35,6 +36,36 @@ def median_times(
     if cpu is not None:
         cpu["a"], cpu["b"] = statistics.median(ca), statistics.median(cb)
     return statistics.median(ta), statistics.median(tb)
+
+
+def interleaved_times(
+    thunks: dict[str, Callable[[], object]], repeats: int
+) -> dict[str, list[float]]:
+    """Wall seconds of `repeats` rounds of several thunks, each round running every thunk
+    once in turn (as median_times does for two), so load from other processes hits them
+    alike: per name, its time in each round."""
+    times: dict[str, list[float]] = {k: [] for k in thunks}
+    for _ in range(repeats):
+        for name, fn in thunks.items():
+            t0 = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t0)
+    return times
+
+
+RESULTS = Path(__file__).resolve().parent / "results.json"
+
+
+def merge_into_results(rows: list[dict], out: Path = RESULTS) -> Path:
+    """`rows` into bench/results.json, replacing entries of the same name (as bench/run.py
+    does for a partial run), each with the machine it was measured on."""
+    from run import machine
+
+    new = {r["name"] for r in rows}
+    kept = [r for r in json.loads(out.read_text()) if r["name"] not in new]
+    rows = [{**r, "machine": r.get("machine", machine())} for r in rows]
+    out.write_text(json.dumps(kept + rows, indent=2) + "\n")
+    return out
 
 
 def proc_cpu(pid: int) -> float:
