@@ -39,7 +39,7 @@ test: test-rust test-py
 # every core).
 PYTEST_WORKERS ?= auto
 test-fast: test-rust venv
-	$(PYTEST) -n $(PYTEST_WORKERS) --dist loadfile -m "not blender and not packaging" tests
+	$(PYTEST) -n $(PYTEST_WORKERS) --dist loadfile -m "not blender and not packaging and not rebuild" tests
 
 # --release: the dependencies maturin compiled for the extension module are reused.
 test-rust:
@@ -48,7 +48,7 @@ test-rust:
 # Every Python test but the long end-to-end builds (marked slow) and packaging: real
 # renders included, for checking a change to the render path before the full run.
 test-quick: test-rust venv
-	$(PYTEST) -m "not slow and not packaging" tests
+	$(PYTEST) -m "not slow and not packaging and not rebuild" tests
 
 test-py: venv
 	$(PYTEST) -m "not packaging" tests

@@ -193,9 +193,9 @@ def test_a_new_or_renamed_module_is_found() -> None:
     found = problems(text.replace("`kernels.py`", "`kernel_cache.py`"), files)
     assert f"{PKG}/services/kernels.py is not named under ## {PKG}" in found
     assert any("`kernel_cache.py`" in p for p in found), found
-    # A file of a folder renamed: `plan/` names `defocus.rs`, which must exist there.
-    found = problems(text.replace("`defocus.rs`", "`lens.rs`", 1), files)
-    assert f"{CORE}/plan/defocus.rs is not named under ## {CORE}" in found
+    # A file of a folder renamed: `plan/` names `kinds.rs`, which must exist there.
+    found = problems(text.replace("`kinds.rs`", "`lens.rs`", 1), files)
+    assert f"{CORE}/plan/kinds.rs is not named under ## {CORE}" in found
     # A stale path, a stale module and a stale make target anywhere on the page.
     found = problems(text + "\n`bench/bench_gone.py`, `blurset.gone`, `make gone`\n", files)
     assert "`bench/bench_gone.py` names no file of the repository" in found

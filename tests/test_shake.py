@@ -1,17 +1,16 @@
 """`build --shake` (issue 49): camera shake levels beside the blur levels, a hand-held
 camera turning about its centre during the exposure, added through the degradation
-interface (rust/core/src/plan/shake.rs).
+interface (rust/core/src/plan/kinds/shake.rs).
 
 The stand-in worker renders a pinhole image per frame, so the layout, the records and the
 other commands are checked with it; the images (they differ from the sharp image, grow
 with the level, repeat byte for byte from one seed) on real renders at a tiny size, by
-both blur methods. And the proof of the interface: shake touched few files."""
+both blur methods."""
 
 from __future__ import annotations
 
 import json
 import re
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -100,29 +99,7 @@ def test_noise_export_stats_and_data_take_shake_levels(shake_build, tmp_path):
     assert "--level must be" not in proc.stderr, proc.stderr
 
 
-# -- the proof: a kind is one file ---------------------------------------------------------
-
-
-def test_shake_touches_at_most_six_hand_edited_code_files_outside_its_own():
-    """The code files that name the shake kind, outside its own module and its tests:
-    the degradation interface keeps a new kind to a handful (defocus, before it: 22).
-    Generated files (schemas/, the stubs) are left out."""
-    own = {"rust/core/src/plan/shake.rs", "tests/test_shake.py"}
-    generated = {"python/blurset/_records.pyi", "python/blurset/_core.pyi"}
-    tracked = subprocess.run(
-        ["git", "ls-files", "--cached", "--others", "--exclude-standard",
-         "rust/core/src", "rust/py/src", "python/blurset", "blender_scripts"],
-        cwd=ROOT, capture_output=True, text=True, check=True,
-    ).stdout.split()  # fmt: skip
-    word = re.compile(r"shake", re.I)
-    touched = sorted(
-        f
-        for f in tracked
-        if f.endswith((".rs", ".py", ".pyi"))
-        and f not in own | generated
-        and word.search((ROOT / f).read_text())
-    )
-    assert 1 <= len(touched) <= 6, touched
+# -- a kind is its file and one line of the registry: tests/test_kinds.py ----------------
 
 
 def test_the_builder_schedules_render_phases_without_naming_a_kind():

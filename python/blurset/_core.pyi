@@ -1401,6 +1401,10 @@ def build_stats(out: str | PathLike[str]) -> BuildStats:
     corrupt meta.json of a complete setting, corrupt splits.json or failures.jsonl.
     """
 
+def kind_figures() -> list[tuple[str, str, str, str]]:
+    """Each degradation kind beside motion blur, in level order, as its histogram shows
+    it: (kind, its statistic's name in stats.json, figure title, x axis label)."""
+
 # -- failures.jsonl ---------------------------------------------------------------------
 
 def current_failures(

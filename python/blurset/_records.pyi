@@ -40,13 +40,13 @@ class ImageKindOf1(TypedDict):
     type: Literal["blur"]
 
 class ImageKindOf2(TypedDict):
-    """Depth of field of a thin lens (`defocus_<l>`, issue 35)."""
+    """A level of defocus (`defocus_<l>`)."""
 
     level: int
     type: Literal["defocus"]
 
 class ImageKindOf3(TypedDict):
-    """A hand-held camera turning about its centre during the exposure (`shake_<l>`)."""
+    """A level of shake (`shake_<l>`)."""
 
     level: int
     type: Literal["shake"]

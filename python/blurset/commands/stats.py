@@ -59,16 +59,8 @@ FIGURES = {
         "largest bounding-box corner motion  (px at build resolution)",
         "views",
     ),
-    "defocus_coc_px": (
-        "Defocus blur extent per level",
-        "largest circle of confusion on the object  (px at build resolution)",
-        "views",
-    ),
-    "shake_path_px": (
-        "Camera shake per level",
-        "length of the image centre's path over the exposure  (px at build resolution)",
-        "views",
-    ),
+    # Each other kind's statistic, as the kind declares its histogram in the core.
+    **{stat: (title, xlabel, "views") for _, stat, title, xlabel in _core.kind_figures()},
     "render_psnr": (
         "Render PSNR per image",
         "estimated render PSNR on the object's pixels  (dB)",
@@ -259,12 +251,12 @@ def write_figures(stats: dict, out_dir: Path, *, max_bins: int = 40) -> list[Pat
     return written
 
 
-# Each degradation kind's statistic beside motion blur (the core's KIND_STATS), by the
-# prefix of its level folders: from builds with that kind only.
-KINDS = {"defocus_coc_px": "defocus", "shake_path_px": "shake"}
+# Each degradation kind's statistic beside motion blur (the core's registry of kinds), to
+# the prefix of its level folders: from builds with that kind only.
+KINDS = {stat: kind for kind, stat, _, _ in _core.kind_figures()}
 # The per-level figures, in report order; latent_frames as bars of counts, the rest as
 # histograms. render_psnr and image_samples from --target-psnr builds only: what each
-# image cost and reached, per level directory (sharp, blur_1, defocus_2, ...).
+# image cost and reached, per level directory (sharp, blur_1, and each kind's).
 PER_LEVEL = (
     "blur_weight", "latent_frames", "motion_px", *KINDS, "render_psnr", "image_samples",
 )  # fmt: skip

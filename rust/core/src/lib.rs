@@ -23,7 +23,8 @@ pub use crate::rng::seed_for;
 pub use crate::plan::choices::{BlurMethod, Choice, Preset};
 pub use crate::plan::config::BuildConfig;
 pub use crate::plan::cost::{BlurChoice, CostModel, Pricing};
-pub use crate::plan::defocus::{circle_of_confusion, DefocusPlan};
+pub use crate::plan::kinds::defocus::{circle_of_confusion, DefocusPlan};
+pub use crate::plan::kinds::KIND_STATS;
 pub use crate::plan::motion::{level_renders, LevelPlan};
 pub use crate::plan::options::OptionInfo;
 pub use crate::plan::presets::{preset_values, FLOOR_PSNR_DB};
@@ -107,17 +108,20 @@ pub use crate::dataset::verify::{check_images, ImageCheck};
 /// The worker contract: the JSON lines to and from a Blender worker, typed.
 pub use crate::dataset::wire;
 pub use crate::ground::atomic::{replace_dir, write_atomic};
-pub use crate::ground::kind::ImageKind;
 pub use crate::ground::license::{
     allowed as license_allowed, canonical as canonical_license, spdx_ids, spdx_of,
 };
 pub use crate::ground::names::test_views;
 pub use crate::ground::names::{
-    files, gain_name, image_name, images_dir, is_level_dir, level_dir, level_dirs, linear_dir,
-    linear_name, nerfstudio_depth_dir, object_lock, parse_level_dir, pass_dir, pass_file,
-    pass_level, setting_name, sort_level_dirs, theta0s, work_dir, OBJECT_LOCK_PREFIX, PASSES,
+    files, gain_name, image_name, images_dir, linear_dir, linear_name, nerfstudio_depth_dir,
+    object_lock, pass_dir, pass_file, setting_name, theta0s, work_dir, OBJECT_LOCK_PREFIX, PASSES,
     SHARP, WORK_PREFIX,
 };
+pub use crate::plan::kind::ImageKind;
+pub use crate::plan::kind::{
+    is_level_dir, level_dir, level_dirs, parse_level_dir, sort_level_dirs,
+};
+pub use crate::plan::kinds::pass_level;
 
 // Image error against a reference and the speed/quality front.
 pub use crate::metrics::{

@@ -51,8 +51,19 @@ fn build_stats(py: Python<'_>, out: PathBuf) -> PyResult<BuildStats> {
     crate::run_detached(py, || core::build_stats(&out)).map(BuildStats)
 }
 
+/// Each degradation kind beside motion blur, in level order, as its histogram shows it:
+/// (kind, its statistic's name in stats.json, figure title, x axis label).
+#[pyfunction]
+fn kind_figures() -> Vec<(&'static str, &'static str, &'static str, &'static str)> {
+    core::KIND_STATS
+        .iter()
+        .map(|k| (k.name, k.stat.0, k.figure.0, k.figure.1))
+        .collect()
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<BuildStats>()?;
     m.add_function(wrap_pyfunction!(build_stats, m)?)?;
+    m.add_function(wrap_pyfunction!(kind_figures, m)?)?;
     Ok(())
 }

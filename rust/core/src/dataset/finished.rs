@@ -4,7 +4,6 @@
 //! ([`super::session`]) hands each image here as soon as it holds all its frames.
 use super::target_loop::ImageKey;
 use crate::error::Result;
-use crate::ground::kind::ImageKind;
 use crate::ground::names::{
     files, image_name, images_dir, linear_name, pass_dir, pass_file, SHARP,
 };
@@ -13,6 +12,7 @@ use crate::image::denoise::Denoiser;
 use crate::image::qa::FrameQa;
 use crate::plan::choices::BlurMethod;
 use crate::plan::config::BuildConfig;
+use crate::plan::kind::ImageKind;
 use crate::plan::renders::Render;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};

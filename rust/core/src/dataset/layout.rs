@@ -9,9 +9,10 @@
 //! - a build's setting directories are scanned once, here ([`scan`]).
 use crate::error::{Error, Result};
 use crate::ground::atomic::{replace_dir, write_atomic};
-use crate::ground::names::{files, images_dir, is_level_dir, pass_dir, pass_level};
-use crate::ground::names::{sort_level_dirs, SHARP, WORK_PREFIX};
+use crate::ground::names::{files, images_dir, pass_dir, SHARP, WORK_PREFIX};
 use crate::image::exr::read::header_size_other_than;
+use crate::plan::kind::{is_level_dir, sort_level_dirs};
+use crate::plan::kinds::pass_level;
 use std::path::{Path, PathBuf};
 
 /// The marker a setting directory gets last, when it is complete.
@@ -620,9 +621,8 @@ pub fn parse_temp_name(name: &str) -> Option<(String, u32)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ground::names::{
-        gain_name, image_name, level_dirs, parse_level_dir, setting_name, theta0s,
-    };
+    use crate::ground::names::{gain_name, image_name, setting_name, theta0s};
+    use crate::plan::kind::{level_dirs, parse_level_dir};
 
     #[test]
     fn names_and_azimuths() {

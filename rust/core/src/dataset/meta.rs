@@ -4,7 +4,6 @@
 use super::splits::test_views;
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
-use crate::ground::kind::ImageKind;
 use crate::ground::names;
 use crate::image::denoise::DenoiserRecord;
 use crate::image::qa::FrameQa;
@@ -14,6 +13,7 @@ use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, Ligh
 use crate::plan::config::BuildConfig;
 use crate::plan::cost::BlurChoice;
 use crate::plan::degradation::Degradation;
+use crate::plan::kind::ImageKind;
 use crate::plan::motion::{MetaLevel, Motion, MotionStat};
 use crate::plan::sampling::{SettingPlan, ViewPlan};
 use crate::plan::sampling_config::{SamplingConfig, NEED_SATURATION_PX, PARITY_EXPONENT};
@@ -598,7 +598,7 @@ pub struct ReadView {
     #[serde(default)]
     pub images: BTreeMap<String, ReadImage>,
     /// The view's other fields, among them each degradation kind's levels (`defocus`
-    /// …), which the statistics read through the kind ([`crate::plan::sampling::KIND_STATS`]).
+    /// …), which the statistics read through the kind ([`crate::plan::kinds::KIND_STATS`]).
     #[serde(flatten)]
     pub rest: BTreeMap<String, serde_json::Value>,
 }

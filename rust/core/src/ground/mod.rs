@@ -2,7 +2,6 @@
 //! licence ids, the limits of what a file read may make blurset allocate.
 //! They import nothing of blurset-core but `error`.
 pub mod atomic;
-pub mod kind;
 pub mod license;
 pub mod limits;
 pub mod names;

@@ -3,7 +3,10 @@
 //! writes or plans (`plan`, `image`, `noise`, `dataset`). What is on disk and what
 //! "complete" means stays in `dataset::layout`.
 
-pub use super::kind::{ImageKind, MAX_LEVEL, SHARP};
+/// The level directory of the sharp image.
+pub const SHARP: &str = "sharp";
+/// Largest level of any kind a build can write.
+pub const MAX_LEVEL: u32 = 64;
 
 /// The files and folders of the layout, named here only: every reader and writer (the
 /// core's and Python's, through `blurset.layout`) spells them with these.
@@ -93,20 +96,6 @@ pub fn pass_dir(pass: &str, factor: u32) -> String {
     }
 }
 
-/// The level folder that holds `level`'s files of `pass`: in a setting whose levels hold
-/// masks of their own (`level_masks`, meta.json `render.level_masks`), a level of a kind
-/// whose camera moves during the exposure (motion blur's `blur_<l>` and any other
-/// [`ImageKind::own_masks`] says) holds its masks, because its image covers more than the
-/// sharp silhouette (issue 48); every other pass, the masks of the sharp and defocus
-/// levels (one render at the written pose each) and every mask of a setting built
-/// before blur levels had their own, are the sharp level's.
-pub fn pass_level<'a>(pass: &str, level: &'a str, level_masks: bool) -> &'a str {
-    match ImageKind::parse(level) {
-        Some(k) if k.own_masks() && pass == "mask" && level_masks => level,
-        _ => SHARP,
-    }
-}
-
 /// The file of view `image` (`007.png`) in a pass's folder: `007.exr` (depth, normals:
 /// float), `007.png` (masks: 8-bit).
 pub fn pass_file(pass: &str, image: &str) -> String {
@@ -153,52 +142,6 @@ pub fn theta0s(settings_per_object: usize) -> Vec<f64> {
 pub fn image_name(index: usize, n: usize) -> String {
     let width = n.saturating_sub(1).to_string().len().max(3);
     format!("{index:0width$}.png")
-}
-
-/// Directory of a blur level (`blur_<l>`); level 0 is the sharp image.
-pub fn level_dir(level: u32) -> String {
-    if level == 0 {
-        ImageKind::Sharp.dir()
-    } else {
-        ImageKind::Blur(level).dir()
-    }
-}
-
-/// `sharp`, then `blur_<l>` of every blur level, in the given order.
-pub fn level_dirs(levels: &[u32]) -> Vec<String> {
-    std::iter::once(0)
-        .chain(levels.iter().copied())
-        .map(level_dir)
-        .collect()
-}
-
-/// The level of a level directory name: `sharp` → 0, `blur_<l>` → l for l in
-/// 1..=MAX_LEVEL written without leading zeros; anything else → None.
-pub fn parse_level_dir(name: &str) -> Option<u32> {
-    match ImageKind::parse(name)? {
-        ImageKind::Sharp => Some(0),
-        ImageKind::Blur(l) => Some(l),
-        _ => None,
-    }
-}
-
-/// Whether `name` is a level directory a build writes: `sharp` or a level of any kind.
-pub fn is_level_dir(name: &str) -> bool {
-    ImageKind::parse(name).is_some()
-}
-
-/// Level directories sorted in level order (sharp first, then the blur levels by number,
-/// then the defocus levels); names that are not level directories are dropped.
-pub fn sort_level_dirs<S: AsRef<str>>(names: &[S]) -> Vec<String> {
-    let mut v: Vec<((usize, u32), String)> = names
-        .iter()
-        .filter_map(|n| {
-            let kind = ImageKind::parse(n.as_ref())?;
-            Some((kind.order(), n.as_ref().to_string()))
-        })
-        .collect();
-    v.sort();
-    v.into_iter().map(|(_, n)| n).collect()
 }
 
 /// Every `stride`-th view index below `views` (the held-out views, LLFF's llffhold).
@@ -258,21 +201,5 @@ mod tests {
         assert!(object_lock("abc").starts_with(OBJECT_LOCK_PREFIX));
         assert_eq!(linear_name("007.png"), "007.exr");
         assert_eq!(linear_name(&image_name(7, 1500)), "0007.exr");
-    }
-
-    #[test]
-    fn a_moving_exposure_holds_its_own_masks_and_nothing_else_of_the_passes() {
-        assert_eq!(pass_level("mask", "blur_4", true), "blur_4");
-        // A setting built before blur levels had masks of their own: the sharp one.
-        assert_eq!(pass_level("mask", "blur_4", false), SHARP);
-        for (pass, level) in [
-            ("mask", SHARP),
-            ("mask", "defocus_2"),
-            ("depth", "blur_4"),
-            ("normal", "blur_1"),
-            ("mask", "blur_04"),
-        ] {
-            assert_eq!(pass_level(pass, level, true), SHARP, "{pass} of {level}");
-        }
     }
 }

@@ -10,6 +10,7 @@ use super::choices::{
     LightPaths, Preset, TrajectoryAnchor,
 };
 use super::cost::Pricing;
+use super::kind_levels::KindLevels;
 use super::options::{config_struct, shapes_outputs, Meta, OptionInfo};
 use super::presets::preset_values;
 use super::sampling_config::SamplingConfig;
@@ -18,7 +19,6 @@ use super::spec::{config_error, convert};
 use super::target::TargetRule;
 use super::weights::Guards;
 use crate::error::Result;
-use crate::ground::kind::ImageKind;
 use crate::ground::names::{self, test_views};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -34,7 +34,7 @@ const SAMPLING: fn() -> SamplingConfig = SamplingConfig::default;
 /// reference from [`BuildConfig::declarations`].
 #[macro_export]
 macro_rules! build_options {
-    ($then:ident $({ $($extra:tt)* })?) => { $then! { $({ $($extra)* })?
+    ($then:ident $({ $($extra:tt)* })?) => { $crate::kinds! { [$crate::kind_rows] { $then { $({ $($extra)* })?
     /// Every option of `blurset build` (see the module docs).
     BuildConfig, "blurset build";
     /// GLB files, folders of them, list files, objaverse ids (resolved by Python).
@@ -273,25 +273,8 @@ macro_rules! build_options {
             (e.g. 4 8, or none)",
         before: Some(Vec::new()),
     };
-    /// Defocus levels (issue 35): `defocus_<l>/` beside the blur levels, depth of field
-    /// rendered by Cycles ([`super::defocus`]).
-    defocus: Vec<u32> = Vec::new(), Spec::Levels, shapes {
-        help: "defocus levels 1 to 9, e.g. 1,2,3,4: defocus_<l>/ beside the blur levels, \
-            each view focused inside the object's depth range and the largest circle of \
-            confusion on the object 2^l px at 512 px (scaled with --resolution); none by \
-            default",
-        before: Some(Vec::new()),
-    };
-    /// Camera shake levels (issue 49): `shake_<l>/` beside the blur levels, a hand-held
-    /// camera turning about its centre during the exposure ([`super::shake`]).
-    shake: Vec<u32> = Vec::new(), Spec::Levels, shapes {
-        help: "camera shake levels 1 to 7, e.g. 1,2,3,4: shake_<l>/ beside the blur \
-            levels, the camera turning about its centre during the exposure along a smooth \
-            random path that moves the image centre up to 2^(l+1) px at 512 px (scaled \
-            with --resolution), rendered as the blur levels are (--blur-method); none by \
-            default",
-        before: Some(Vec::new()),
-    };
+    // Here each registered kind's option (`defocus`, `shake`, …), made by `kind_rows!`.
+    } {
     /// Depth, normals and masks of every view, in the sharp level (issue 35): depth and
     /// normals from one extra one-sample render per view and size, masks from coverage.
     passes: Vec<String> = Vec::new(), Spec::Passes, shapes {
@@ -380,10 +363,24 @@ macro_rules! build_options {
             skipped before rendering and recorded in failures.jsonl (stage license)",
         unset: Some("every licence"),
     };
-    } };
+    } } } };
 }
 
 build_options!(config_struct);
+
+/// The registered kinds' levels of a build, from their options.
+macro_rules! kind_levels_of {
+    ({} $($module:ident :: $Kind:ident),* $(,)?) => {
+        impl BuildConfig {
+            /// The registered kinds' levels of this build (their options).
+            pub fn kind_levels(&self) -> KindLevels {
+                KindLevels { $($module: self.$module.clone(),)* }
+            }
+        }
+    };
+}
+
+crate::kinds!([kind_levels_of] {});
 
 impl BuildConfig {
     /// Defaults overridden by `values` (option name → value), then validated.
@@ -484,33 +481,6 @@ impl BuildConfig {
         Ok(())
     }
 
-    /// Shake levels rendered as averaged frames need at least
-    /// [`shake::MIN_FRAMES`](super::shake::MIN_FRAMES) of them: with fewer, the frames'
-    /// mean is not the written pose.
-    fn check_shake_frames(&self) -> Result<()> {
-        use super::shake::{HARMONICS, MIN_FRAMES};
-        if self.shake.is_empty() || self.blur_method == BlurMethod::MotionBlur {
-            return Ok(());
-        }
-        let (option, most) = if self.latents_auto {
-            ("latents_max", self.latents_max)
-        } else {
-            ("latents", self.latents)
-        };
-        if most >= MIN_FRAMES {
-            return Ok(());
-        }
-        Err(config_error(
-            option,
-            format!(
-                "{most}: shake levels ({:?}) average their frames to the written pose only \
-                 from {MIN_FRAMES} frames on (each axis of the path is {HARMONICS} \
-                 harmonics); give {MIN_FRAMES} or more, or blur_method motion_blur",
-                self.shake
-            ),
-        ))
-    }
-
     /// The one validator: every field in its range, then what holds between fields.
     pub fn validate(&self) -> Result<()> {
         self.check_fields()?;
@@ -520,7 +490,6 @@ impl BuildConfig {
         if let Some(t) = self.target_psnr {
             self.check_target(t)?;
         }
-        self.check_shake_frames()?;
         if self.latents_auto && self.blur_method == BlurMethod::MotionBlur {
             return Err(config_error(
                 "latents",
@@ -862,8 +831,7 @@ impl BuildConfig {
             samples_total: self.samples_total,
             latent_sampling: self.latent_sampling,
             blur_budget: self.blur_budget,
-            defocus: self.defocus.clone(),
-            shake: self.shake.clone(),
+            kinds: self.kind_levels(),
         }
     }
 
@@ -930,8 +898,9 @@ impl BuildConfig {
 
     /// Renders of a setting (an upper bound with latents auto).
     pub fn frames_per_setting(&self) -> usize {
-        let shake = self.shake.len() * self.max_latents();
-        self.views * (1 + self.levels.len() * self.max_latents() + self.defocus.len() + shake)
+        let s = self.sampling();
+        self.views
+            * (1 + self.levels.len() * self.max_latents() + super::kinds::frames(&s.kinds, &s))
     }
 
     /// The views whose blur levels hold a copy of the sharp image (the held-out views,
@@ -953,11 +922,10 @@ impl BuildConfig {
         }
     }
 
-    /// `sharp`, the blur levels', the defocus levels' and the shake levels' directories.
+    /// `sharp`, the blur levels' and every other kind's level directories.
     pub fn level_dirs(&self) -> Vec<String> {
-        let mut dirs = names::level_dirs(&self.levels);
-        dirs.extend(self.defocus.iter().map(|&l| ImageKind::Defocus(l).dir()));
-        dirs.extend(self.shake.iter().map(|&l| ImageKind::Shake(l).dir()));
+        let mut dirs = super::kind::level_dirs(&self.levels);
+        dirs.extend(self.kind_levels().dirs());
         dirs
     }
 

@@ -1,13 +1,16 @@
 //! What a degradation is (issue 49): one file per kind (`motion.rs`, the motion blur of
 //! Algorithm 1, and each kind beside it), each a [`Degradation`] holding its per-view
 //! draw, the renders of a level with the fields it adds to them, its record in meta.json
-//! (`views[i].<NAME>["<l>"]`, its `Record`) and its statistic. The plan, the render list
-//! and the statistics call each kind through this interface only.
+//! (`views[i].<NAME>["<l>"]`, its `Record`), its statistic and the constants that set
+//! its images apart (prefix, highest level, written pose, own masks). The plan, the
+//! render list, the config and the statistics call each kind through this interface
+//! only; the registry ([`super::kinds`]) lists the kinds.
 use super::camera::Trajectory;
 use super::cost::{ImagePrice, Pricing};
 use super::render::Render;
 use super::sampling_config::SamplingConfig;
-use crate::ground::kind::ImageKind;
+use crate::error::Result;
+use crate::plan::kind::{ImageKind, MAX_LEVEL};
 use crate::rng::Stream;
 use serde::de::{Deserialize, DeserializeOwned};
 use serde::Serialize;
@@ -107,15 +110,46 @@ pub trait Degradation {
     /// What the statistics read of a level's record in a meta.json (the fields its
     /// statistic needs, so an older record with fewer fields is still read).
     type Read: DeserializeOwned;
-    /// Its key in a view of meta.json (and of the plan): `views[i].<NAME>`.
+    /// Its key in a view of meta.json (and of the plan): `views[i].<NAME>`; for a
+    /// registered kind its module's name, which is also its option and the prefix of its
+    /// level directories ([`super::kind`]).
     const NAME: &'static str;
     /// The purpose of its random stream and render seeds (distinct per kind).
     const PURPOSE: u64;
     /// Its statistic, one value per view and level: (name, unit, help).
     const STAT: (&'static str, &'static str, &'static str);
 
+    /// Its statistic's histogram in `blurset stats`: (title, x axis label with unit).
+    const FIGURE: (&'static str, &'static str);
+    /// What a level of the kind is, as a dataset card says it ("`defocus_l` the same
+    /// views out of focus at level l").
+    const MEANS: &'static str;
+    /// Whether its images are seen from the view's written pose (a lens, a shake about
+    /// the camera's centre) rather than being means over a moving camera whose mean
+    /// latent pose meta.json records (motion blur).
+    const WRITTEN_POSE: bool = true;
+    /// Whether its image integrates a camera that moves during the exposure, so its
+    /// level holds masks of its own (the pixels the exposure covered) rather than the
+    /// sharp image's.
+    const OWN_MASKS: bool = false;
+    /// Its highest level, and why no higher level is meaningful (an error says it).
+    const MAX_LEVEL: u32 = MAX_LEVEL;
+    const LEVEL_RANGE: &'static str = "";
+    /// The help of its option of `blurset build` (`--<NAME>`): what a level is.
+    const OPTION_HELP: &'static str = "";
+
     /// The image of level `level` of this kind.
     fn kind(level: u32) -> ImageKind;
+    /// The renders one view's level takes at most under `cfg` (one still render; an
+    /// exposure of latent frames takes as many as a blurry image can).
+    fn frames_per_level(_cfg: &SamplingConfig) -> usize {
+        1
+    }
+    /// What the kind needs of the rest of the config, given its `levels` (not empty):
+    /// a config error naming the option to change.
+    fn check(_cfg: &SamplingConfig, _levels: &[u32]) -> Result<()> {
+        Ok(())
+    }
     /// The levels `levels` of one view, keyed by level number.
     fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, Self::Level>;
     /// The renders of one level of one view.
@@ -132,6 +166,8 @@ pub trait Degradation {
 pub struct KindStat {
     pub name: &'static str,
     pub stat: (&'static str, &'static str, &'static str),
+    /// Its histogram's (title, x axis label).
+    pub figure: (&'static str, &'static str),
     pub read: fn(&serde_json::Value) -> Option<Option<f64>>,
 }
 
@@ -140,6 +176,7 @@ impl KindStat {
         KindStat {
             name: D::NAME,
             stat: D::STAT,
+            figure: D::FIGURE,
             read: read_stat::<D>,
         }
     }

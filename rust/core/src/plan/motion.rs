@@ -16,7 +16,7 @@ use super::degradation::{
 use super::render::{Motion as MotionPath, Render};
 use super::sampling_config::{BlurMethod, SamplingConfig};
 use super::weights::level_interval;
-use crate::ground::kind::ImageKind;
+use crate::plan::kind::ImageKind;
 use crate::rng::Stream;
 use glam::{DMat4, DVec3};
 use serde::{Deserialize, Serialize};
@@ -50,6 +50,14 @@ impl Degradation for Motion {
         "px",
         "largest screen motion of a bounding-box corner over the trajectory at level l (one per blurry view)",
     );
+    const FIGURE: (&'static str, &'static str) = (
+        "Blur extent per level",
+        "largest bounding-box corner motion  (px at build resolution)",
+    );
+    const MEANS: &'static str = "the same views blurred at level l";
+    /// A blurry image is the mean over a moving camera; meta.json records its mean pose.
+    const WRITTEN_POSE: bool = false;
+    const OWN_MASKS: bool = true;
 
     fn kind(level: u32) -> ImageKind {
         ImageKind::Blur(level)

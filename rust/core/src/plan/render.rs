@@ -2,7 +2,7 @@
 //! samples, the EXR it writes, the image it is accumulated into, and the fields a
 //! degradation adds (a motion blur render's camera path, a defocus render's lens).
 use super::region::Region;
-use crate::ground::kind::ImageKind;
+use crate::plan::kind::ImageKind;
 use serde::Serialize;
 
 /// The camera path of one Cycles motion blur render.

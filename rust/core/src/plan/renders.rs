@@ -5,7 +5,7 @@ use super::degradation::RenderCx;
 use super::region::{call_cost_px, object_region, render_calls, Region};
 pub use super::render::{Motion, Render};
 use super::sampling::SettingPlan;
-use crate::ground::kind::ImageKind;
+use crate::plan::kind::ImageKind;
 use glam::{DMat4, DVec3};
 use std::path::Path;
 

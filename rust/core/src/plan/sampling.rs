@@ -1,19 +1,18 @@
 //! The sampling of one setting (DESIGN §2): its config, its views (φ, θ, the camera at p,
 //! the depth range, the scene weight w_u), every Cycles seed, and the plan that asks each
 //! degradation kind for its levels of every view: the motion blur of Algorithm 1
-//! ([`super::motion`]), defocus and camera shake.
+//! ([`super::motion`]) and each kind of the registry ([`super::kinds`]).
 //!
 //! Every draw comes from a Philox stream keyed by the setting seed; the stream id names
 //! what is drawn (view, purpose), so changing the number of latents does not move the
 //! viewpoints, and dropping a level or a kind does not change the others.
 use super::camera::{corners, depth_range, focal_px, orbit_c2w, rows, Trajectory};
 use super::cost::{BlurChoice, ImagePrice, Pricing};
-use super::defocus::{Defocus, DefocusPlan, MAX_DEFOCUS_LEVEL};
-use super::degradation::{kind_renders, records, Degradation, KindStat, RenderCx, ViewCx};
+use super::degradation::{kind_renders, Degradation, RenderCx, ViewCx};
+use super::kinds::ViewKinds;
 use super::motion::{LevelPlan, Motion};
 use super::render::Render;
 use super::sampling_config::{BlurMethod, LatentSampling, SamplingConfig, MAX_SEQUENCE};
-use super::shake::{Shake, ShakePlan, MAX_SHAKE_LEVEL};
 use super::weights::{scene_weight, Guards};
 use crate::error::{Error, Result};
 use crate::rng::{derive_seed, Stream};
@@ -43,9 +42,7 @@ impl SamplingConfig {
         check("delta0", &self.delta0, &specs::DELTA0)?;
         check("level_spread", &self.level_spread, &specs::LEVEL_SPREAD)?;
         check("levels", &self.levels, &Spec::Levels)?;
-        check("defocus", &self.defocus, &Spec::Levels)?;
-        check("shake", &self.shake, &Spec::Levels)?;
-        self.check_kind_levels()?;
+        super::kinds::check(&self.kinds, self)?;
         check(
             "orientation_max",
             &self.guards.orientation_max,
@@ -91,31 +88,6 @@ impl SamplingConfig {
         }
         Ok(())
     }
-
-    /// Each kind's levels within the range its construction keeps meaningful.
-    fn check_kind_levels(&self) -> Result<()> {
-        if let Some(l) = self.shake.iter().find(|&&l| l > MAX_SHAKE_LEVEL) {
-            return Err(Error::Config {
-                option: "shake".into(),
-                detail: format!(
-                    "{l}: shake levels must be in 1..={MAX_SHAKE_LEVEL} (level l moves the \
-                     image centre up to 2^(l+1) px at 512 px; above {MAX_SHAKE_LEVEL} the \
-                     object turns out of the frame)"
-                ),
-            });
-        }
-        if let Some(l) = self.defocus.iter().find(|&&l| l > MAX_DEFOCUS_LEVEL) {
-            return Err(Error::Config {
-                option: "defocus".into(),
-                detail: format!(
-                    "{l}: defocus levels must be in 1..={MAX_DEFOCUS_LEVEL} (level l blurs \
-                     the object by circles of up to 2^l px at 512 px; above \
-                     {MAX_DEFOCUS_LEVEL} they are wider than the image)"
-                ),
-            });
-        }
-        Ok(())
-    }
 }
 
 /// One view of a setting; `L` is what each blur level records (the plan's [`LevelPlan`],
@@ -138,26 +110,17 @@ pub struct ViewPlan<L = LevelPlan> {
     /// OpenGL camera-to-world at p (the pose written for every level), row-major.
     pub c2w: [[f64; 4]; 4],
     pub levels: BTreeMap<String, L>,
-    /// Each defocus level's lens (issue 35), by level number; absent without them.
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub defocus: BTreeMap<String, DefocusPlan>,
-    /// Each camera shake level's path, by level number; absent without them.
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub shake: BTreeMap<String, ShakePlan>,
+    /// Each other kind's levels, by kind ([`super::kinds`]): `defocus`, `shake`, ….
+    #[serde(flatten)]
+    pub kinds: ViewKinds,
 }
-
-/// Every degradation kind beside motion blur, as the statistics see it, in level order.
-/// Motion blur's statistic ([`Motion`]'s) is listed with its w_l and m, which stats.json
-/// keeps as fields of their own.
-pub static KIND_STATS: &[KindStat] = &[KindStat::of::<Defocus>(), KindStat::of::<Shake>()];
 
 impl ViewPlan {
     /// The renders of every level of every kind of this view: motion blur's, then each
     /// other kind's.
     pub fn kind_renders(&self, cx: &RenderCx) -> Vec<Render> {
         let mut out = kind_renders::<Motion>(cx, &self.levels);
-        out.extend(kind_renders::<Defocus>(cx, &self.defocus));
-        out.extend(kind_renders::<Shake>(cx, &self.shake));
+        out.extend(self.kinds.renders(cx));
         out
     }
 }
@@ -181,8 +144,7 @@ impl<L> ViewPlan<L> {
             sharp_seed: self.sharp_seed,
             c2w: self.c2w,
             levels: self.levels.iter().map(|(k, l)| (k.clone(), f(l))).collect(),
-            defocus: records::<Defocus>(&self.defocus),
-            shake: records::<Shake>(&self.shake),
+            kinds: self.kinds.records(),
         }
     }
 }
@@ -427,8 +389,7 @@ impl Setting<'_> {
             pricing: self.pricing.map(|p| (p, &self.prices)),
         };
         let levels = Motion::plan_view(&cx, &cfg.levels);
-        let defocus = Defocus::plan_view(&cx, &cfg.defocus);
-        let shake = Shake::plan_view(&cx, &cfg.shake);
+        let kinds = ViewKinds::plan(&cx, &cfg.kinds);
         let (near, far) = bounds(near, far, &cfg.guards);
         ViewPlan {
             index,
@@ -445,8 +406,7 @@ impl Setting<'_> {
             sharp_seed,
             c2w: rows(&c2w),
             levels,
-            defocus,
-            shake,
+            kinds,
         }
     }
 }

@@ -4,6 +4,7 @@
 //! degradation kind, which all read it; the plan checks a kind's levels against the
 //! kind's own range (`sampling.rs`'s `validate`).
 use super::camera::bounding_radius;
+use super::kind_levels::KindLevels;
 use super::spec::MAX_SAMPLES;
 use super::weights::Guards;
 use serde::{Deserialize, Serialize};
@@ -53,7 +54,8 @@ pub const MAX_SEQUENCE: u64 = 1 << 24;
 
 /// Everything that shapes the sampling of a setting. Units: degrees, Δr in percent of r.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
-#[serde(default, deny_unknown_fields)]
+// Not deny_unknown_fields: the kinds' levels are flattened in, which serde cannot check.
+#[serde(default)]
 pub struct SamplingConfig {
     pub views: usize,
     pub phi0_deg: f64,
@@ -86,12 +88,9 @@ pub struct SamplingConfig {
     pub samples_total: Option<u32>,
     pub latent_sampling: LatentSampling,
     pub blur_budget: BlurBudget,
-    /// Defocus levels (issue 35; [`super::defocus`]); none in a default build.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub defocus: Vec<u32>,
-    /// Camera shake levels ([`super::shake`]); none in a default build.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub shake: Vec<u32>,
+    /// Each registered kind's levels beside motion blur ([`super::kinds`]).
+    #[serde(flatten)]
+    pub kinds: KindLevels,
 }
 
 impl Default for SamplingConfig {
@@ -118,8 +117,7 @@ impl Default for SamplingConfig {
             samples_total: None,
             latent_sampling: LatentSampling::Subsets,
             blur_budget: BlurBudget::Parity,
-            defocus: Vec::new(),
-            shake: Vec::new(),
+            kinds: KindLevels::default(),
         }
     }
 }

@@ -359,7 +359,7 @@ mod tests {
     }
 
     fn frame(view: usize, level: &str, k: usize, call: Option<usize>) -> Render {
-        let kind = crate::ground::kind::ImageKind::parse(level).expect("level");
+        let kind = crate::plan::kind::ImageKind::parse(level).expect("level");
         Render {
             view,
             level: level.into(),

@@ -14,9 +14,9 @@
 //! largest circle on the object, at near or far, is [`coc_px`]`(l)`: 2^l px at 512 px,
 //! scaled with the resolution (2, 4, 8, 16 px for levels 1–4), as the motion levels double
 //! their blur level to level.
-use super::degradation::{Degradation, RenderCx, ViewCx};
-use super::render::{Dof, Render};
-use crate::ground::kind::ImageKind;
+use crate::plan::degradation::{Degradation, RenderCx, ViewCx};
+use crate::plan::render::{Dof, Render};
+use crate::plan::kind::ImageKind;
 use crate::rng::Stream;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -46,6 +46,18 @@ impl Degradation for Defocus {
         "largest circle of confusion (diameter) on the object at defocus level l: 2^l px at \
          512 px, scaled with the resolution (--defocus builds; one per defocused view)",
     );
+    const FIGURE: (&'static str, &'static str) = (
+        "Defocus blur extent per level",
+        "largest circle of confusion on the object  (px at build resolution)",
+    );
+    const MEANS: &'static str = "the same views out of focus at level l";
+    const MAX_LEVEL: u32 = MAX_DEFOCUS_LEVEL;
+    const LEVEL_RANGE: &'static str = "level l blurs the object by circles of up to 2^l px \
+        at 512 px; a higher level's are wider than the image";
+    const OPTION_HELP: &'static str = "defocus levels 1 to 9, e.g. 1,2,3,4: defocus_<l>/ \
+        beside the blur levels, each view focused inside the object's depth range and the \
+        largest circle of confusion on the object 2^l px at 512 px (scaled with \
+        --resolution); none by default";
 
     fn kind(level: u32) -> ImageKind {
         ImageKind::Defocus(level)

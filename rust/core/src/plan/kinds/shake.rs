@@ -11,12 +11,15 @@
 //! (4, 8, 16, 32 px for levels 1–4), scaled with the resolution. The camera turns by
 //! yaw atan(u / F) and pitch atan(v / F) (F the focal length in pixels), which moves the
 //! image centre by d to first order in the angles.
-use super::choices::{BlurMethod, LatentSampling};
-use super::degradation::{
+use crate::error::Result;
+use crate::plan::choices::{BlurMethod, LatentSampling};
+use crate::plan::degradation::{
     fewest_frames, Degradation, RenderCx, ViewCx, MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
 };
-use super::render::{Motion, Render};
-use crate::ground::kind::ImageKind;
+use crate::plan::render::{Motion, Render};
+use crate::plan::sampling_config::SamplingConfig;
+use crate::plan::spec::config_error;
+use crate::plan::kind::ImageKind;
 use glam::{DMat3, DMat4};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -211,9 +214,54 @@ impl Degradation for Shake {
          largest displacement is 2^(l+1) px at 512 px, scaled with the resolution (--shake \
          builds; one per shaken view)",
     );
+    const FIGURE: (&'static str, &'static str) = (
+        "Camera shake per level",
+        "length of the image centre's path over the exposure  (px at build resolution)",
+    );
+    const MEANS: &'static str = "the same views shaken by a hand-held camera at level l";
+    /// The camera turns during the exposure: the object covers more than the sharp
+    /// silhouette.
+    const OWN_MASKS: bool = true;
+    const MAX_LEVEL: u32 = MAX_SHAKE_LEVEL;
+    const LEVEL_RANGE: &'static str = "level l moves the image centre up to 2^(l+1) px at \
+        512 px; a higher level turns the object out of the frame";
+    const OPTION_HELP: &'static str = "camera shake levels 1 to 7, e.g. 1,2,3,4: shake_<l>/ \
+        beside the blur levels, the camera turning about its centre during the exposure \
+        along a smooth random path that moves the image centre up to 2^(l+1) px at 512 px \
+        (scaled with --resolution), rendered as the blur levels are (--blur-method); none \
+        by default";
 
     fn kind(level: u32) -> ImageKind {
         ImageKind::Shake(level)
+    }
+
+    /// An exposure of as many frames as a blurry image can have.
+    fn frames_per_level(cfg: &SamplingConfig) -> usize {
+        cfg.max_latents()
+    }
+
+    /// Averaged frames need at least [`MIN_FRAMES`] of them: with fewer, the frames'
+    /// mean is not the written pose.
+    fn check(cfg: &SamplingConfig, levels: &[u32]) -> Result<()> {
+        if cfg.blur_method == BlurMethod::MotionBlur {
+            return Ok(());
+        }
+        let (option, most) = if cfg.latents_auto {
+            ("latents_max", cfg.latents_max)
+        } else {
+            ("latents", cfg.latents)
+        };
+        if most >= MIN_FRAMES {
+            return Ok(());
+        }
+        Err(config_error(
+            option,
+            format!(
+                "{most}: shake levels ({levels:?}) average their frames to the written pose \
+                 only from {MIN_FRAMES} frames on (each axis of the path is {HARMONICS} \
+                 harmonics); give {MIN_FRAMES} or more, or blur_method motion_blur"
+            ),
+        ))
     }
 
     fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, ShakePlan> {
@@ -554,7 +602,8 @@ mod tests {
 
     #[test]
     fn a_shake_level_holds_masks_of_its_own() {
-        use crate::ground::names::{pass_level, SHARP};
+        use crate::plan::kind::SHARP;
+        use crate::plan::kinds::pass_level;
         // Its camera turns during the exposure: the smear lies outside the silhouette.
         assert_eq!(pass_level("mask", "shake_2", true), "shake_2");
         // A setting made before levels had masks of their own; other passes.
