@@ -739,12 +739,17 @@ def set_exr_codec(codec: str) -> None:
     bpy.context.scene.render.image_settings.exr_codec = codec
 
 
-def render_motion_blur(keys, motion_steps: int, out: str, seed: int) -> float:
+def render_motion_blur(
+    keys, motion_steps: int, out: str, seed: int, rolling: bool = False
+) -> float:
     """One render whose shutter spans the camera path `keys` (c2w matrices at t_k =
     k / 2^motion_steps): keys at frames 1 + t_k, a shutter of one frame opening at
     frame 1, and Cycles motion steps on the camera object, so its 2^steps + 1 motion
     samples fall on the keys; between them Cycles interpolates (linear position,
     slerp rotation), and each path sample gets a uniform time over the shutter.
+    `rolling`: through Cycles' rolling shutter instead (issue 59), each row at its own
+    time, the top row at t = 0 and the bottom one at t = 1, read at once (scanline
+    exposure 0): skew without blur.
     Camera, resolution and samples are set with `set_camera` first."""
     scene = bpy.context.scene
     cam = scene.camera
@@ -775,13 +780,23 @@ def render_motion_blur(keys, motion_steps: int, out: str, seed: int) -> float:
         r.use_motion_blur = True
         r.motion_blur_shutter = 1.0
         r.motion_blur_position = "START"
+        set_rolling_shutter(rolling)
         scene.frame_set(1)
         return render_frame(out, seed)
     finally:
         prefs.keyframe_new_interpolation_type = interp
         cam.animation_data_clear()
         scene.render.use_motion_blur = False
+        set_rolling_shutter(False)
         scene.frame_set(1)
+
+
+def set_rolling_shutter(on: bool) -> None:
+    """Cycles' rolling shutter over the motion blur shutter: rows read top to bottom,
+    each at once (scanline exposure 0); off: every row over the whole shutter."""
+    c = bpy.context.scene.cycles
+    c.rolling_shutter_type = "TOP" if on else "NONE"
+    c.rolling_shutter_duration = 0.0 if on else 0.1
 
 
 def set_region(region, resolution: int, crop: bool = False):

@@ -30,13 +30,14 @@ same in short.
    "frames":[{"c2w":[[4x4 row-major]],"seed":I,"out":EXR[,"samples":S_i]
               [,"sample_offset":O,"sample_sequence":Q]
               [,"motion":{"steps":n,"keys":[c2w, ...]}][,"region":[x0,y0,x1,y1]]
-              [,"dof":{"focus_distance":s,"aperture_radius":R}]
+              [,"dof":{"focus_distance":s,"aperture_radius":R}][,"rolling_shutter":true]
               [,"call":C][,"view":V,"level":L]}, ...]}
       -> {"frame":i,"out":EXR,"seconds":t,"origin":[x0,y0]|null} per frame, then
          {"ok":true,"done":n,"jobs":j}
       A frame's "samples" overrides S; with "sample_offset" it renders the samples
       [O, O + S_i) of a Q-sample sequence (Cycles sample subsets). A frame with "motion" is
-      one Cycles motion blur render along its 2^n + 1 keys (blender_scene.render_motion_blur).
+      one Cycles motion blur render along its 2^n + 1 keys (blender_scene.render_motion_blur),
+      with "rolling_shutter": true through Cycles' rolling shutter (rows top to bottom).
       A frame with "dof" renders through a thin lens focused at s with an aperture of
       radius R (blender_scene.set_dof); without it, the pinhole camera.
       "noise_threshold" turns Cycles adaptive sampling on for this command (off without).
@@ -256,7 +257,11 @@ class Worker:
             origin = blender_scene.set_region(None if motion else fr.get("region"), res, crop)
             if motion:
                 secs = blender_scene.render_motion_blur(
-                    motion["keys"], int(motion["steps"]), str(fr["out"]), int(fr["seed"])
+                    motion["keys"],
+                    int(motion["steps"]),
+                    str(fr["out"]),
+                    int(fr["seed"]),
+                    rolling=bool(fr.get("rolling_shutter", False)),
                 )
             else:
                 secs = blender_scene.render_frame(str(fr["out"]), int(fr["seed"]))

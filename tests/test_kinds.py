@@ -47,7 +47,7 @@ def test_python_takes_each_kinds_option_and_figure_from_the_core():
     build = next(a for a in parser._actions if a.choices and "build" in a.choices)
     flags = {f for a in build.choices["build"]._actions for f in a.option_strings}
     for stat, kind in stats.KINDS.items():
-        assert f"--{kind}" in flags
+        assert f"--{kind.replace('_', '-')}" in flags
         title, xlabel, ylabel = stats.FIGURES[stat]
         assert title and xlabel and ylabel == "views" and stat.startswith(f"{kind}_")
     # stats.py names no kind: a new one needs no edit there.

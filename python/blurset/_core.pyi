@@ -190,6 +190,7 @@ class BuildConfigRecord(TypedDict):
     downsample: list[int]
     defocus: list[int]
     shake: list[int]
+    rolling_shutter: list[int]
     passes: list[str]
     workers: int
     workers_per_gpu: int | None
@@ -373,6 +374,8 @@ class BuildConfig:
     def defocus(self) -> list[int]: ...
     @property
     def shake(self) -> list[int]: ...
+    @property
+    def rolling_shutter(self) -> list[int]: ...
     @property
     def passes(self) -> list[str]: ...
     @property

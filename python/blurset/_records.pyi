@@ -24,6 +24,12 @@ class Spread(TypedDict):
     p5: float
     worst: float
 
+class Band(TypedDict):
+    """The rows a render exposes of its image: `rows` [top, bottom), one of `of` bands that tile the image's rows once."""
+
+    of: int
+    rows: list[int]
+
 class Dof(TypedDict):
     """The thin lens of a defocus render ([`super::defocus`])."""
 
@@ -51,7 +57,13 @@ class ImageKindOf3(TypedDict):
     level: int
     type: Literal["shake"]
 
-ImageKind = ImageKindOf0 | ImageKindOf1 | ImageKindOf2 | ImageKindOf3
+class ImageKindOf4(TypedDict):
+    """A level of rolling_shutter (`rolling_shutter_<l>`)."""
+
+    level: int
+    type: Literal["rolling_shutter"]
+
+ImageKind = ImageKindOf0 | ImageKindOf1 | ImageKindOf2 | ImageKindOf3 | ImageKindOf4
 
 class Motion(TypedDict):
     """The camera path of one Cycles motion blur render."""
@@ -62,6 +74,7 @@ class Motion(TypedDict):
 class Render(TypedDict):
     """One render: the camera, its Cycles seed and samples, the EXR it writes, and the view and image it is accumulated into."""
 
+    band: NotRequired[Band | None]
     c2w: list[list[float]]
     call: NotRequired[int | None]
     dof: NotRequired[Dof | None]
@@ -72,6 +85,7 @@ class Render(TypedDict):
     out: str
     phase: int
     region: NotRequired[list[int] | None]
+    rolling_shutter: NotRequired[bool | None]
     sample_offset: NotRequired[int | None]
     sample_sequence: NotRequired[int | None]
     samples: NotRequired[int | None]
@@ -112,6 +126,7 @@ class SamplingConfig(TypedDict):
     phi0_deg: NotRequired[float]
     radius_margin: NotRequired[float]
     resolution: NotRequired[int]
+    rolling_shutter: NotRequired[list[int]]
     samples: NotRequired[int]
     samples_total: NotRequired[int | None]
     shake: NotRequired[list[int]]
@@ -178,6 +193,19 @@ class LevelPlan(TypedDict):
     samples_per_frame: int
     w_l: float
 
+class RollingShutterPlan(TypedDict):
+    """One rolling shutter level of one view, as meta.json records it."""
+
+    amplitude_px: float
+    bands: NotRequired[list[list[int]]]
+    direction_deg: float
+    max_step_px: NotRequired[float | None]
+    method: BlurMethod
+    seeds: list[int]
+    times: list[float]
+    turn_deg: float
+    turns_deg: list[float]
+
 class ShakePose(TypedDict):
     """The camera's turn at one instant of the exposure."""
 
@@ -220,6 +248,7 @@ class ViewPlan(TypedDict):
     orientation: float
     phi_deg: float
     r: float
+    rolling_shutter: NotRequired[dict[str, RollingShutterPlan]]
     shake: NotRequired[dict[str, ShakePlan]]
     sharp_seed: int
     theta_deg: float
@@ -529,6 +558,7 @@ class WireFrame(TypedDict):
     motion: NotRequired[WireMotion | None]
     out: str
     region: NotRequired[list[int] | None]
+    rolling_shutter: NotRequired[bool | None]
     sample_offset: NotRequired[int | None]
     sample_sequence: NotRequired[int | None]
     samples: NotRequired[int | None]
@@ -713,6 +743,7 @@ class MetaView(TypedDict):
     phi_deg: float
     qa: FrameQa
     r: float
+    rolling_shutter: NotRequired[dict[str, RollingShutterPlan]]
     shake: NotRequired[dict[str, ShakePlan]]
     sharp_seed: int
     theta_deg: float

@@ -31,7 +31,6 @@ impl Degradation for Tilt {
     const STAT: (&'static str, &'static str, &'static str) =
         ("tilt_roll_deg", "deg", "roll of the camera at tilt level l");
     const FIGURE: (&'static str, &'static str) = ("Tilt per level", "roll  (deg)");
-    const PREFIX: &'static str = "tilt";
     const MEANS: &'static str = "the same views rolled by 2·l degrees";
     const MAX_LEVEL: u32 = 4;
     const LEVEL_RANGE: &'static str = "level l rolls the camera by 2·l degrees";

@@ -35,6 +35,8 @@ pub enum Counts {
 struct FixedPhase {
     /// The image of each render asked for, in its order.
     images: Vec<ImageKey>,
+    /// The share of a whole image each render's frame is (`Render::share`).
+    shares: Vec<f64>,
     guides: bool,
     /// Frames each unfinished image still needs (a finished one leaves).
     need: BTreeMap<ImageKey, u32>,
@@ -171,6 +173,7 @@ impl Session {
                 }
                 let phase = FixedPhase {
                     images,
+                    shares: renders.iter().map(Render::share).collect(),
                     guides: self.guides,
                     need,
                     open: BTreeMap::new(),
@@ -260,12 +263,12 @@ impl FixedPhase {
                 self.images.len()
             ))
         })?;
-        let guides = self.guides;
+        let (guides, share) = (self.guides, self.shares.get(i).copied().unwrap_or(1.0));
         let a = self.open.entry(key.clone()).or_insert_with(|| {
             if guides {
-                Accumulator::with_guides(size, size)
+                Accumulator::with_guides(size, size).with_share(share)
             } else {
-                Accumulator::new(size, size)
+                Accumulator::new(size, size).with_share(share)
             }
         });
         a.add_exr_at(path, origin)?;

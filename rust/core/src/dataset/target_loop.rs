@@ -183,15 +183,18 @@ impl TargetImages {
             let n = GROUP.min(self.waiting.len());
             let keys: Vec<ImageKey> = self.waiting.drain(..n).collect();
             for key in keys {
-                let frames = self
+                let frames: Vec<&Render> = self
                     .base
                     .iter()
-                    .filter(|r| r.view == key.0 && r.level == key.1);
+                    .filter(|r| r.view == key.0 && r.level == key.1)
+                    .collect();
+                let share = frames.first().map_or(1.0, |r| r.share());
                 let (w, h) = self.size;
+                let half = || Accumulator::new(w, h).with_share(share);
                 self.group.push(Image {
-                    frames: frames.count() as u32,
+                    frames: frames.len() as u32,
                     key,
-                    halves: [Accumulator::new(w, h), Accumulator::new(w, h)],
+                    halves: [half(), half()],
                     spent: 0,
                     rounds: 0,
                     estimate: None,

@@ -57,6 +57,9 @@ pub struct WireFrame {
     /// A thin lens; absent: the pinhole camera.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dof: Option<WireDof>,
+    /// With `motion`: Cycles' rolling shutter, rows exposed top to bottom along the keys.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rolling_shutter: Option<bool>,
     /// The render call it belongs to: consecutive frames of one call are one job.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub call: Option<u64>,
@@ -241,6 +244,8 @@ pub struct LooseFrame {
     #[serde(default)]
     dof: Option<WireDof>,
     #[serde(default)]
+    rolling_shutter: Option<bool>,
+    #[serde(default)]
     call: Option<u64>,
     #[serde(default)]
     view: Option<u64>,
@@ -266,6 +271,11 @@ pub fn wire_frame(f: LooseFrame) -> Result<WireFrame> {
             "render frame: sample_offset and sample_sequence go together".into(),
         ));
     }
+    if f.rolling_shutter == Some(true) && f.motion.is_none() {
+        return Err(Error::Value(
+            "render frame: a rolling shutter needs a motion path".into(),
+        ));
+    }
     if let Some(m) = &f.motion {
         let want = (1usize << m.steps.min(16)) + 1;
         if m.keys.len() != want {
@@ -286,6 +296,7 @@ pub fn wire_frame(f: LooseFrame) -> Result<WireFrame> {
         motion: f.motion,
         region: f.region,
         dof: f.dof,
+        rolling_shutter: f.rolling_shutter,
         call: f.call,
         view: f.view,
         level: f.level,

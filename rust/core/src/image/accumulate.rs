@@ -82,6 +82,10 @@ pub struct Accumulator {
     guides: Option<Vec<f64>>,
     /// The mean was replaced by its denoised version: nothing more may be added.
     denoised: bool,
+    /// The share of a whole image each frame is in the weight (its weight × share):
+    /// 1, or 1/n for frames that are n bands tiling the image (a rolling shutter's,
+    /// each pixel in one band), whose sum is then the image.
+    share: f64,
 }
 
 /// Values per pixel of the guide sums: albedo RGB, then normal XYZ.
@@ -100,6 +104,7 @@ impl Accumulator {
             file: Vec::new(),
             guides: None,
             denoised: false,
+            share: 1.0,
         }
     }
 
@@ -454,7 +459,17 @@ impl Accumulator {
 
     fn count_frame(&mut self, weight: f64) {
         self.count += 1;
-        self.weight += weight;
+        self.weight += weight * self.share;
+    }
+
+    /// This accumulator with each frame counting `share` of a whole image in the mean
+    /// (`Render::share`: 1/n for each of n bands that tile the image, so their sum is
+    /// the image); 1 by default.
+    pub fn with_share(mut self, share: f64) -> Self {
+        if share.is_finite() && share > 0.0 {
+            self.share = share;
+        }
+        self
     }
 
     /// Add the frames of `other` (same size, neither denoised nor with guides): the two
@@ -638,6 +653,33 @@ mod tests {
             .flat_map(|p| composite_over([p[0], p[1], p[2], p[3]].map(f64::from), bg))
             .map(srgb_encode_u8)
             .collect()
+    }
+
+    #[test]
+    fn bands_that_tile_the_image_sum_to_it_and_a_share_of_one_changes_no_bit() -> Result<()> {
+        // A rolling shutter's bands: each frame holds only its rows (0 elsewhere, as a
+        // render traced in its band holds), each a 1/n share of the image.
+        let (w, h) = (3, 4);
+        let img = frame(w, h, 7);
+        let row = (w * 4) as usize;
+        let mut acc = Accumulator::new(w, h).with_share(0.5);
+        for rows in [0..1usize, 1..4] {
+            let mut part = vec![0.0f32; img.len()];
+            part[rows.start * row..rows.end * row]
+                .copy_from_slice(&img[rows.start * row..rows.end * row]);
+            acc.add_frame(&part)?;
+        }
+        assert_eq!(acc.mean()?, img);
+        let (mut one, mut plain) = (
+            Accumulator::new(w, h).with_share(1.0),
+            Accumulator::new(w, h),
+        );
+        for seed in 1..4 {
+            one.add_frame(&frame(w, h, seed))?;
+            plain.add_frame(&frame(w, h, seed))?;
+        }
+        assert_eq!(one.mean()?, plain.mean()?);
+        Ok(())
     }
 
     #[test]

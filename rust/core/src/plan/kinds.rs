@@ -28,6 +28,7 @@ macro_rules! kinds {
         $($then)*! { { $($args)* }
             defocus::Defocus,
             shake::Shake,
+            rolling_shutter::RollingShutter,
         }
     };
 }
@@ -229,7 +230,7 @@ mod tests {
         // The variant's tag, the meta.json key, the option and the folders' prefix are
         // one name; levels are ordered as the registry lists the kinds.
         let names: Vec<&str> = KIND_STATS.iter().map(|s| s.name).collect();
-        assert_eq!(names, ["defocus", "shake"]);
+        assert_eq!(names, ["defocus", "shake", "rolling_shutter"]);
         // Each kind's NAME (its meta.json key and statistic's kind) is its module's
         // name, which names its variant's folders and tag.
         for name in &names {
@@ -246,7 +247,8 @@ mod tests {
         let decls = BuildConfig::declarations();
         for name in names {
             let d = decls.iter().find(|d| d.name == name);
-            assert!(d.is_some_and(|d| d.flags == [format!("--{name}")] && d.shapes_outputs));
+            let flag = format!("--{}", name.replace('_', "-"));
+            assert!(d.is_some_and(|d| d.flags == [flag] && d.shapes_outputs));
         }
     }
 }

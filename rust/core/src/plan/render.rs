@@ -63,6 +63,22 @@ pub struct Render {
     /// A defocus render's lens (issue 35); None: a pinhole camera.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dof: Option<Dof>,
+    /// A rolling shutter's band ([`crate::plan::kinds::rolling`]): this render exposes
+    /// only some rows of its image, one of the bands that tile it; None: every row.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub band: Option<Band>,
+    /// A motion blur render through Cycles' rolling shutter: each row exposed at its own
+    /// time along the keys, top row first; None: every row at once.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rolling_shutter: Option<bool>,
+}
+
+/// The rows a render exposes of its image: `rows` [top, bottom), one of `of` bands that
+/// tile the image's rows once.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, schemars::JsonSchema)]
+pub struct Band {
+    pub rows: [u32; 2],
+    pub of: u32,
 }
 
 impl Render {
@@ -91,6 +107,8 @@ impl Render {
             call: None,
             half: None,
             dof: None,
+            band: None,
+            rolling_shutter: None,
         }
     }
 
@@ -98,5 +116,11 @@ impl Render {
     /// defocus render, whose blur spills past the object's pinhole footprint.
     pub(crate) fn whole(&self) -> bool {
         self.motion.is_some() || self.dof.is_some()
+    }
+
+    /// The share of a whole image one frame of this render's image is in its mean's
+    /// weight: 1, or 1/n for each of n bands that tile the image (each pixel gets one).
+    pub fn share(&self) -> f64 {
+        self.band.map_or(1.0, |b| 1.0 / f64::from(b.of.max(1)))
     }
 }

@@ -85,6 +85,7 @@ impl SettingPlan {
             while j < renders.len()
                 && !renders[i].whole()
                 && !renders[j].whole()
+                && renders[i].band.is_none()
                 && (renders[j].view, &renders[j].level) == (image.0, &image.1)
             {
                 j += 1;
@@ -92,6 +93,9 @@ impl SettingPlan {
             let samples = renders[i].samples.unwrap_or(1);
             let calls = if renders[i].whole() {
                 vec![(i..j, None)]
+            } else if let Some(b) = renders[i].band {
+                // A band is a call of its own, traced only where its rows meet the object.
+                vec![(i..i + 1, band_region(own[i], b.rows, size))]
             } else {
                 render_calls(&own[i..j], size, call_cost_px(samples))
                     .into_iter()
@@ -107,6 +111,24 @@ impl SettingPlan {
             i = j;
         }
         renders
+    }
+}
+
+/// The pixels a band of `rows` traces: its rows of the object's region (all of them when
+/// the region is the whole image), or a one-pixel strip when the object is outside the
+/// band (the band is background; Cycles still needs a border to render).
+fn band_region(object: Option<Region>, rows: [u32; 2], size: u32) -> Option<Region> {
+    let [x0, y0, x1, y1] = object.unwrap_or([0, 0, size, size]);
+    let (top, bottom) = (rows[0].max(y0), rows[1].min(y1));
+    if top < bottom && x0 < x1 {
+        Some([x0, top, x1, bottom])
+    } else {
+        Some([
+            0,
+            rows[0],
+            1.min(size),
+            (rows[0] + 1).min(rows[1].max(rows[0] + 1)),
+        ])
     }
 }
 

@@ -376,6 +376,8 @@ mod tests {
             call,
             half: None,
             dof: None,
+            band: None,
+            rolling_shutter: None,
         }
     }
 

@@ -1,0 +1,362 @@
+//! Rolling shutter levels (issue 59): a phone's CMOS sensor reads its rows out top to
+//! bottom while the camera turns, so each row sees the scene at its own time: straight
+//! edges lean and bend, and the image stays sharp. Recorded in meta.json as
+//! `views[i].rolling_shutter["<l>"]`.
+//!
+//! Per view the camera turns about its centre at a constant rate, about a fixed axis in
+//! its image plane, so the image centre moves along a direction ψ drawn uniformly per
+//! view. Level l sets the turn so the image centre moves [`amplitude_px`]`(l)` over the
+//! readout: 2^l px at 512 px (2, 4, 8, 16 px for levels 1–4), scaled with the
+//! resolution. Row y of H is read at t = (y + ½) / H, the middle row at the written pose
+//! (the rows' mean turn is zero), each row at once: a short exposure in daylight, skew
+//! without blur.
+//!
+//! Rendered as a blur level is, by `--blur-method`:
+//! - `motion_blur`: one Cycles render along the turn's keys through Cycles' own rolling
+//!   shutter (rows top to bottom, scanline exposure 0);
+//! - `average`: n bands of rows, band k rendered only where its rows meet the object,
+//!   at the time of its middle row; the bands tile the image, so the image is their sum
+//!   (each frame a 1/n share of it). n is the build's `latents`, or under latents auto
+//!   the fewest whose step between neighbouring bands is within `max_ghost_px`
+//!   (`max_step_px` records it); at most one band per row.
+use crate::plan::choices::BlurMethod;
+use crate::plan::degradation::{Degradation, RenderCx, ViewCx};
+use crate::plan::kind::ImageKind;
+use crate::plan::render::{Band, Motion, Render};
+use crate::plan::sampling_config::SamplingConfig;
+use glam::{DMat4, DVec3};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The highest level: the image centre moves 2^7 = 128 px at 512 px over the readout, a
+/// quarter of the image; a higher level would turn the object out of the frame.
+pub const MAX_ROLLING_LEVEL: u32 = 7;
+
+/// The resolution the amplitudes are stated at.
+const REFERENCE_PX: f64 = 512.0;
+
+/// How far the image centre moves over the readout (px) at level `level` at
+/// `resolution` pixels wide: 2^level at 512 px.
+pub fn amplitude_px(level: u32, resolution: u32) -> f64 {
+    2f64.powi(level.min(MAX_ROLLING_LEVEL) as i32) * f64::from(resolution) / REFERENCE_PX
+}
+
+/// One rolling shutter level of one view, as meta.json records it.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RollingShutterPlan {
+    /// How far the image centre moves over the readout (px): the skew between the top
+    /// and the bottom row.
+    pub amplitude_px: f64,
+    /// The direction the image centre moves in, degrees from the image's x axis
+    /// towards its y axis (rows downwards).
+    pub direction_deg: f64,
+    /// The camera's turn over the readout (degrees), about an axis in its image plane.
+    pub turn_deg: f64,
+    /// `average` (bands of rows) or `motion_blur` (one render through Cycles' rolling
+    /// shutter).
+    pub method: BlurMethod,
+    /// Average: the rows [top, bottom) of each band, top first; each band is rendered
+    /// at the time of its middle row.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bands: Vec<[u32; 2]>,
+    /// Average: the largest step of the image centre between neighbouring bands (px),
+    /// the tear a band edge can show.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_step_px: Option<f64>,
+    /// The time (0 top row … 1 bottom row) and the turn (degrees) of each band, or of
+    /// each motion key.
+    pub times: Vec<f64>,
+    pub turns_deg: Vec<f64>,
+    /// Cycles seed of each render (one under motion blur); every render takes the
+    /// sharp image's samples, as each pixel is seen once.
+    pub seeds: Vec<u32>,
+}
+
+/// A view's rolling shutter level, as the statistics read it from meta.json.
+#[derive(Debug, Deserialize)]
+pub struct RollingShutterStat {
+    pub amplitude_px: f64,
+}
+
+/// Rolling shutter as a [`Degradation`].
+pub struct RollingShutter;
+
+impl Degradation for RollingShutter {
+    type Level = RollingShutterPlan;
+    type Record = RollingShutterPlan;
+    type Read = RollingShutterStat;
+    const NAME: &'static str = "rolling_shutter";
+    const PURPOSE: u64 = 3000;
+    const STAT: (&'static str, &'static str, &'static str) = (
+        "rolling_shutter_px",
+        "px",
+        "how far the image centre moves over the readout at rolling shutter level l: 2^l \
+         px at 512 px, scaled with the resolution (--rolling-shutter builds; one per view)",
+    );
+    const FIGURE: (&'static str, &'static str) = (
+        "Rolling shutter skew per level",
+        "image centre's motion over the readout  (px at build resolution)",
+    );
+    const MEANS: &'static str =
+        "the same views read out row by row by a turning phone camera (rolling shutter) at level l";
+    /// Each row sees the camera at its own time: the object covers more (or less) than
+    /// the sharp silhouette.
+    const OWN_MASKS: bool = true;
+    const MAX_LEVEL: u32 = MAX_ROLLING_LEVEL;
+    const LEVEL_RANGE: &'static str = "level l moves the image centre 2^l px at 512 px over \
+        the readout; a higher level turns the object out of the frame";
+    const OPTION_HELP: &'static str = "rolling shutter levels 1 to 7, e.g. 1,2,3,4: \
+        rolling_shutter_<l>/ beside the blur levels, each row read out top to bottom at its \
+        own time while the camera turns, so the image centre moves 2^l px at 512 px (scaled \
+        with --resolution) from the top row to the bottom one; rendered by --blur-method, as \
+        bands of rows or through Cycles' rolling shutter; none by default";
+
+    fn kind(level: u32) -> ImageKind {
+        ImageKind::RollingShutter(level)
+    }
+
+    /// Bands of rows (as many as a blurry image's frames), or one render.
+    fn frames_per_level(cfg: &SamplingConfig) -> usize {
+        cfg.max_latents().min(cfg.resolution as usize)
+    }
+
+    fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, RollingShutterPlan> {
+        if levels.is_empty() {
+            return BTreeMap::new();
+        }
+        let direction_deg = (cx.stream)(Self::PURPOSE).uniform_in(0.0, 360.0);
+        levels
+            .iter()
+            .map(|&level| (level.to_string(), plan_level(cx, direction_deg, level)))
+            .collect()
+    }
+
+    fn renders(cx: &RenderCx, level: u32, p: &RollingShutterPlan) -> Vec<Render> {
+        let base = DMat4::from_cols_array_2d(&cx.c2w).transpose();
+        let psi = p.direction_deg.to_radians();
+        // Turning about the image plane's axis normal to ψ moves the centre along ψ.
+        let axis = DVec3::new(psi.sin(), psi.cos(), 0.0);
+        let c2w = |turn_deg: f64| {
+            (base * DMat4::from_axis_angle(axis, turn_deg.to_radians()))
+                .transpose()
+                .to_cols_array_2d()
+        };
+        let prefix = cx.exr_dir.join(format!("{:04}_rs{level}", cx.view));
+        let prefix = prefix.display().to_string();
+        let still = |k: usize, out: String| Render {
+            sample_offset: cx.pin.map(|_| 0),
+            sample_sequence: cx.pin,
+            ..Render::still(cx.view, Self::kind(level), c2w(p.turns_deg[k]), p.seeds[k], out)
+        };
+        if p.method == BlurMethod::MotionBlur {
+            let keys = p.turns_deg.iter().map(|&t| c2w(t)).collect();
+            return vec![Render {
+                motion: Some(Motion { steps: 1, keys }),
+                rolling_shutter: Some(true),
+                ..still(0, format!("{prefix}_mb.exr"))
+            }];
+        }
+        let of = p.bands.len() as u32;
+        p.bands
+            .iter()
+            .enumerate()
+            .map(|(k, &rows)| Render {
+                band: Some(Band { rows, of }),
+                ..still(k, format!("{prefix}_{k:04}.exr"))
+            })
+            .collect()
+    }
+
+    fn record(l: &RollingShutterPlan) -> RollingShutterPlan {
+        l.clone()
+    }
+
+    fn stat(s: &RollingShutterStat) -> Option<f64> {
+        Some(s.amplitude_px)
+    }
+}
+
+/// The rows of `n` bands tiling `height` rows, top first, as even as whole rows allow.
+fn bands(n: u32, height: u32) -> Vec<[u32; 2]> {
+    let n = n.clamp(1, height.max(1));
+    let edge = |k: u32| (u64::from(k) * u64::from(height) / u64::from(n)) as u32;
+    (0..n).map(|k| [edge(k), edge(k + 1)]).collect()
+}
+
+/// One level's plan: the turn over the readout, and the bands (or motion keys) with
+/// their times, turns and seeds.
+fn plan_level(cx: &ViewCx, direction_deg: f64, level: u32) -> RollingShutterPlan {
+    let amplitude = amplitude_px(level, cx.resolution);
+    // The centre moves F·tan(θ) for a turn θ: ±A/2 at the first and last row.
+    let half_turn = (amplitude / 2.0 / cx.focal_px).atan().to_degrees();
+    let turn = |t: f64| (2.0 * t - 1.0) * half_turn;
+    let centre = |t: f64| cx.focal_px * turn(t).to_radians().tan();
+    let purpose = <RollingShutter as Degradation>::PURPOSE + u64::from(level);
+    let step = |times: &[f64]| {
+        times
+            .windows(2)
+            .map(|w| (centre(w[1]) - centre(w[0])).abs())
+            .fold(0.0, f64::max)
+    };
+    // n bands of rows, each at the time of its middle row, and their largest step.
+    let banded = |n: usize| {
+        let rows = bands(n as u32, cx.resolution);
+        let h = f64::from(cx.resolution);
+        let times: Vec<f64> = rows
+            .iter()
+            .map(|b| (f64::from(b[0]) + f64::from(b[1])) / 2.0 / h)
+            .collect();
+        let s = step(&times);
+        (rows, times, s)
+    };
+    let (method, rows, times, max_step_px) = if cx.motion_blur {
+        // A constant-rate turn about one axis: Cycles' slerp between keys is exact.
+        (BlurMethod::MotionBlur, Vec::new(), vec![0.0, 0.5, 1.0], None)
+    } else {
+        let cfg = cx.cfg;
+        let (rows, times, s) = if cfg.latents_auto {
+            let first = (amplitude / cfg.max_ghost_px - 1e-9).ceil().max(1.0) as usize;
+            let most = cfg.latents_max.min(cx.resolution as usize).max(1);
+            let mut best = banded(first.min(most));
+            for n in first.min(most) + 1..=most {
+                if best.2 <= cfg.max_ghost_px {
+                    break;
+                }
+                best = banded(n);
+            }
+            best
+        } else {
+            banded(cx.latents)
+        };
+        (BlurMethod::Average, rows, times, Some(s))
+    };
+    let renders = if rows.is_empty() { 1 } else { rows.len() };
+    RollingShutterPlan {
+        amplitude_px: amplitude,
+        direction_deg,
+        turn_deg: 2.0 * half_turn,
+        method,
+        bands: rows,
+        max_step_px,
+        turns_deg: times.iter().map(|&t| turn(t)).collect(),
+        times,
+        seeds: (0..renders).map(|k| (cx.seed)(purpose, k)).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::config::BuildConfig;
+    use crate::plan::sampling::plan_setting;
+    use std::path::Path;
+
+    fn plan(cfg: &BuildConfig) -> crate::plan::sampling::SettingPlan {
+        let plan = plan_setting(&cfg.sampling(), "u", 90.0, 3, [1.0, 0.6, 0.4], &[]);
+        plan.unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    fn config(method: BlurMethod) -> BuildConfig {
+        BuildConfig {
+            views: 3,
+            levels: vec![],
+            rolling_shutter: vec![1, 3],
+            latents: 5,
+            resolution: 64,
+            blur_method: method,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn bands_tile_the_rows_once_top_first() {
+        for (n, h) in [(1, 10), (3, 10), (7, 64), (64, 64), (100, 16)] {
+            let b = bands(n, h);
+            assert_eq!(b.len() as u32, n.min(h));
+            assert_eq!((b[0][0], b[b.len() - 1][1]), (0, h));
+            assert!(b.windows(2).all(|w| w[0][1] == w[1][0] && w[0][0] < w[0][1]));
+        }
+    }
+
+    #[test]
+    fn each_level_moves_the_centre_by_its_amplitude_about_the_written_pose() {
+        let p = plan(&config(BlurMethod::Average));
+        for v in &p.views {
+            let (one, three) = (
+                &v.kinds.rolling_shutter["1"],
+                &v.kinds.rolling_shutter["3"],
+            );
+            // 2^l px at 512 px, at 64 px; one direction per view.
+            assert_eq!((one.amplitude_px, three.amplitude_px), (0.25, 1.0));
+            assert_eq!(one.direction_deg, three.direction_deg);
+            assert_eq!((one.bands.len(), one.times.len()), (5, 5));
+            // The middle row is the written pose: the rows' mean turn is zero.
+            let rows: f64 = three
+                .bands
+                .iter()
+                .zip(&three.turns_deg)
+                .map(|(b, t)| f64::from(b[1] - b[0]) * t)
+                .sum();
+            assert!((rows / 64.0).abs() < 1e-12, "{rows}");
+            assert!(three.turns_deg.windows(2).all(|w| w[0] < w[1]));
+            let step = three.max_step_px.unwrap_or_default();
+            assert!((step - 1.0 / 5.0).abs() < 0.01, "{step}");
+        }
+        let views: Vec<f64> = p
+            .views
+            .iter()
+            .map(|v| v.kinds.rolling_shutter["1"].direction_deg)
+            .collect();
+        assert!(views[0] != views[1] && views.iter().all(|d| (0.0..360.0).contains(d)));
+    }
+
+    #[test]
+    fn bands_render_their_rows_and_motion_blur_renders_once_through_the_rolling_shutter() {
+        let p = plan(&config(BlurMethod::Average));
+        let renders = p.renders(Path::new("/x"), Some(64));
+        let bands: Vec<&Render> = renders
+            .iter()
+            .filter(|r| r.level == "rolling_shutter_3")
+            .collect();
+        assert_eq!(bands.len(), 3 * 5);
+        for r in &bands {
+            let b = r.band.unwrap_or_else(|| panic!("a band"));
+            assert_eq!(b.of, 5);
+            assert!(r.share() == 0.2 && r.samples.is_none() && r.sample_offset == Some(0));
+            // Traced only within its rows.
+            let region = r.region.unwrap_or([0, 0, 64, 64]);
+            assert!(region[1] >= b.rows[0] && region[3] <= b.rows[1], "{region:?} {b:?}");
+        }
+        // Distinct calls, each its own band.
+        let calls: std::collections::BTreeSet<_> = bands.iter().map(|r| r.call).collect();
+        assert_eq!(calls.len(), bands.len());
+        let p = plan(&config(BlurMethod::MotionBlur));
+        let renders = p.renders(Path::new("/x"), None);
+        let mb: Vec<&Render> = renders
+            .iter()
+            .filter(|r| r.level == "rolling_shutter_1")
+            .collect();
+        assert_eq!(mb.len(), 3);
+        assert!(mb.iter().all(|r| r.rolling_shutter == Some(true)
+            && r.motion.as_ref().is_some_and(|m| m.keys.len() == 3)
+            && r.band.is_none()));
+    }
+
+    #[test]
+    fn latents_auto_takes_the_fewest_bands_within_the_step_bound() {
+        let cfg = BuildConfig {
+            latents_auto: true,
+            latents_max: 40,
+            max_ghost_px: 1.0,
+            resolution: 512,
+            ..config(BlurMethod::Average)
+        };
+        let p = plan(&cfg);
+        let three = &p.views[0].kinds.rolling_shutter["3"];
+        // 8 px over the readout: about 8 bands of 1 px steps, the fewest within it.
+        let n = three.bands.len();
+        assert!((8..=9).contains(&n), "{n}");
+        assert!(three.max_step_px.is_some_and(|s| s <= 1.0));
+    }
+}
