@@ -87,11 +87,12 @@ def _datasets_dir(version: str) -> Path:
 
 @pytest.fixture(scope="module")
 def shake_hub(tmp_path_factory, standin_blender) -> tuple[Path, Path]:
-    """A build with blur, defocus and shake levels, exported --for hub (no `blurset
+    """A build with blur, defocus, shake and rolling shutter levels, exported --for hub (no `blurset
     card`: the export is loadable as it is)."""
     root = tmp_path_factory.mktemp("hub_clients")
     b, hub = root / "b", root / "hub"
-    standin_build(b, standin_blender, "--shake", "1", "--latents", "4", "--defocus", "1")
+    standin_build(b, standin_blender, "--shake", "1", "--latents", "4", "--defocus", "1",
+                  "--rolling-shutter", "3")  # fmt: skip
     run_cli("export", str(b), "--for", "hub", "--out", str(hub), "--shard-size", "0.02")
     return b, hub
 
@@ -138,7 +139,7 @@ def test_every_documented_route_loads_every_config_with_the_allowed_datasets(sha
     got = _probe(hub, path)
     assert Version(got["version"]) == Version(version)
     want = _expected(hub)
-    assert set(want) == {"sharp", "blur_1", "blur_2", "defocus_1", "shake_1"}
+    assert set(want) == {"sharp", "blur_1", "blur_2", "defocus_1", "shake_1", "rolling_shutter_3"}
     for route, configs in got["routes"].items():
         assert configs == want, f"{route} with datasets {got['version']}"
 

@@ -87,9 +87,9 @@ def test_noise_export_stats_card_and_data_take_rolling_shutter_levels(rs_build, 
     assert layout.is_complete(noisy / setting / "rolling_shutter_2" / layout.gain_name(4))
     data = tmp_path / "data"
     run_cli("export", str(rs_build), "--levels", "sharp,rolling_shutter_3", "--out", str(data))
-    assert f"{setting}__rolling_shutter_3" in json.loads((data / "export.json").read_text())[
-        "scenes"
-    ]
+    assert (
+        f"{setting}__rolling_shutter_3" in json.loads((data / "export.json").read_text())["scenes"]
+    )
     st = tmp_path / "stats"
     run_cli("stats", str(rs_build), "--out", str(st))
     doc = json.loads((st / "stats.json").read_text())

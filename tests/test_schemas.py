@@ -49,7 +49,7 @@ def test_the_stubs_typed_dicts_are_the_cores():
     assert "-> list[rec.Render]" in core_stub and "def record(self) -> rec.NoiseDoc" in core_stub
     # Nothing the core hands back is an untyped dict: each has its generated type.
     assert "dict[str, Any]" not in core_stub
-    for name in ("HalfNoise", "WireFrame", "Failure"):
+    for name in ("HalfNoise", "Render", "Failure"):
         assert f"rec.{name}" in core_stub, name
 
 

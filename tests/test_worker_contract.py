@@ -35,18 +35,18 @@ def _traced(monkeypatch) -> tuple[list[dict], list[dict]]:
     copy: the client adds its own fields to a load reply afterwards)."""
     sent: list[dict] = []
     got: list[dict] = []
-    send, receive = wc.Worker._send, wc.Worker._receive
+    send, receive = wc.Worker._send_line, wc.Worker._receive
 
-    def _send(self: wc.Worker, msg: dict[str, Any]) -> None:
-        sent.append(json.loads(json.dumps(msg)))
-        send(self, msg)
+    def _send_line(self: wc.Worker, line: str) -> None:
+        sent.append(json.loads(line))
+        send(self, line)
 
     def _receive(self: wc.Worker, **kw: Any) -> dict[str, Any]:
         msg = receive(self, **kw)
         got.append(copy.deepcopy(msg))
         return msg
 
-    monkeypatch.setattr(wc.Worker, "_send", _send)
+    monkeypatch.setattr(wc.Worker, "_send_line", _send_line)
     monkeypatch.setattr(wc.Worker, "_receive", _receive)
     return sent, got
 
@@ -61,10 +61,11 @@ def _exercise(w: wc.Worker, work: Path) -> None:
     w.load(make_demo_objects(work / "objs")[0], work / "v.npy")
     frames = [
         {"c2w": EYE, "seed": 1, "out": work / "a.exr", "region": [0, 0, 16, 16], "call": 0,
-         "view": 0, "level": "sharp", "kind": "Sharp", "phase": 0},
+         "view": 0, "level": "sharp", "kind": {"type": "sharp"}, "phase": 0},
         {"c2w": EYE, "seed": 2, "out": work / "b.exr", "samples": 2, "sample_offset": 2,
          "sample_sequence": 4, "view": 0, "level": "blur_1", "half": 1},
-        {"c2w": EYE, "seed": 3, "out": work / "c.exr", "motion": {"steps": 1, "keys": [EYE] * 3}},
+        {"c2w": EYE, "seed": 3, "out": work / "c.exr", "motion": {"steps": 1, "keys": [EYE] * 3},
+         "rolling_shutter": True},
         {"c2w": EYE, "seed": 4, "out": work / "d.exr",
          "dof": {"focus_distance": 3.0, "aperture_radius": 0.01}},
     ]  # fmt: skip
@@ -143,21 +144,29 @@ def test_a_message_outside_the_contract_is_refused() -> None:
 
 
 def test_the_core_spells_a_frame_and_refuses_a_broken_one() -> None:
-    """worker_client sends what _core.wire_frame makes of a render: its wire fields only
-    (a plan render's kind, phase and half stay home), checked."""
-    plan_render = {"view": 2, "level": "blur_1", "kind": {"Blur": 1}, "phase": 1, "half": 0,
-                   "c2w": EYE, "seed": 9, "out": "/x/a.exr", "samples": 4, "call": 7}  # fmt: skip
-    item = wc._frame_item(plan_render)
-    assert set(item) == {"view", "level", "c2w", "seed", "out", "samples", "call"}
+    """worker_client sends the request line the core makes of the renders: each frame the
+    plan's Render as it is (the worker leaves its kind, phase and half), checked."""
+    plan_render = {"view": 2, "level": "blur_1", "kind": {"type": "blur", "level": 1},
+                   "phase": 1, "half": 0, "c2w": EYE, "seed": 9, "out": "/x/a.exr",
+                   "samples": 4, "call": 7}  # fmt: skip
+
+    def line(frames):
+        return json.loads(wc.request_line(frames, resolution=8, fov_deg=40.0, samples=1))
+
+    msg = line([plan_render])
+    assert msg["cmd"] == "render" and msg["frames"] == [plan_render]
     request, _ = _validators()
-    msg = {"cmd": "render", "resolution": 8, "fov_deg": 40.0, "samples": 1, "frames": [item]}
-    assert not list(request.iter_errors(json.loads(json.dumps(msg))))
-    # A caller's NumPy camera, seed, region and samples go as plain numbers.
-    mixed = {"c2w": np.asarray(EYE), "seed": np.int64(9), "out": "/x/b.exr",
+    assert not list(request.iter_errors(msg))
+    # A caller's NumPy camera, seed, region and samples go as plain numbers, its EXR
+    # path absolute.
+    mixed = {"c2w": np.asarray(EYE), "seed": np.int64(9), "out": Path("b.exr"),
              "region": np.array([0, 0, 8, 8]), "samples": np.int32(2)}  # fmt: skip
-    item = wc._frame_item(mixed)
-    assert (item["seed"], list(item["region"]), item["samples"]) == (9, [0, 0, 8, 8], 2)
+    item = line([mixed])["frames"][0]
+    assert (item["seed"], item["region"], item["samples"]) == (9, [0, 0, 8, 8], 2)
+    assert Path(item["out"]).is_absolute()
     with pytest.raises(ValueError, match="sample_sequence"):
-        wc._frame_item({**plan_render, "sample_offset": 4})
+        line([{**plan_render, "sample_offset": 4}])
     with pytest.raises(ValueError, match="keys"):
-        wc._frame_item({**plan_render, "motion": {"steps": 2, "keys": [EYE] * 3}})
+        line([{**plan_render, "motion": {"steps": 2, "keys": [EYE] * 3}}])
+    with pytest.raises(ValueError, match="sampels"):
+        line([{**plan_render, "sampels": 2}])

@@ -3,7 +3,7 @@
 One section per binding file; keep each section next to its Rust counterpart's name.
 """
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from os import PathLike
 from pathlib import Path
 from typing import Any, Literal, TypeAlias, TypedDict, final
@@ -1552,9 +1552,22 @@ def value_schemas() -> list[tuple[str, Any]]:
     """(type name, JSON Schema) of every value the bindings hand across as a dict (what
     blurset/_records.pyi is generated from)."""
 
-def wire_frame(render: Mapping[str, Any]) -> rec.WireFrame:
-    """A render (a plan's, or a caller's dict) as one frame of a worker's render request:
-    its wire fields, typed and checked; ValueError naming what is wrong."""
+def render_request(
+    frames: Sequence[Mapping[str, Any]],
+    *,
+    resolution: int,
+    fov_deg: float,
+    samples: int,
+    exr_codec: str | None = None,
+    noise_threshold: float | None = None,
+    batch: bool = True,
+    crop: bool = False,
+    guides: bool = False,
+    geometry: bool = False,
+) -> str:
+    """The JSON line of a render request of `frames` (the plan's renders, or a caller's
+    frames of `c2w`, `seed` and `out`): each frame typed as the core's Render and checked,
+    its EXR path made absolute; ValueError naming what is wrong."""
 
 def worker_schemas() -> list[tuple[str, Any]]:
     """(file stem, JSON Schema) of the worker's requests and replies."""

@@ -31,7 +31,7 @@ class Band(TypedDict):
     rows: list[int]
 
 class Dof(TypedDict):
-    """The thin lens of a defocus render ([`super::defocus`])."""
+    """The thin lens of a defocus render ([`crate::plan::kinds::defocus`])."""
 
     aperture_radius: float
     focus_distance: float
@@ -66,31 +66,31 @@ class ImageKindOf4(TypedDict):
 ImageKind = ImageKindOf0 | ImageKindOf1 | ImageKindOf2 | ImageKindOf3 | ImageKindOf4
 
 class Motion(TypedDict):
-    """The camera path of one Cycles motion blur render."""
+    """The camera path of one Cycles motion blur render: 2^steps + 1 keys."""
 
     keys: list[list[list[float]]]
     steps: int
 
 class Render(TypedDict):
-    """One render: the camera, its Cycles seed and samples, the EXR it writes, and the view and image it is accumulated into."""
+    """One render: the camera, its Cycles seed and samples, the EXR it writes, and the view and image it is accumulated into. A caller's frame (an object's QA view, a geometry render) may give only `c2w`, `seed` and `out`."""
 
     band: NotRequired[Band | None]
     c2w: list[list[float]]
     call: NotRequired[int | None]
     dof: NotRequired[Dof | None]
     half: NotRequired[int | None]
-    kind: ImageKind
-    level: str
+    kind: NotRequired[ImageKind]
+    level: NotRequired[str]
     motion: NotRequired[Motion | None]
     out: str
-    phase: int
+    phase: NotRequired[int]
     region: NotRequired[list[int] | None]
     rolling_shutter: NotRequired[bool | None]
     sample_offset: NotRequired[int | None]
     sample_sequence: NotRequired[int | None]
     samples: NotRequired[int | None]
     seed: int
-    view: int
+    view: NotRequired[int]
 
 BlurBudget = Literal["parity", "flat", "need"]
 
@@ -535,35 +535,6 @@ class HalfNoise(TypedDict):
     mse_bound: float
     n_eff: float
     psnr_bound: float
-
-class WireDof(TypedDict):
-    """A defocus render's thin lens (world units)."""
-
-    aperture_radius: float
-    focus_distance: float
-
-class WireMotion(TypedDict):
-    """The camera path of one Cycles motion blur render: 2^steps + 1 keys."""
-
-    keys: list[list[list[float]]]
-    steps: int
-
-class WireFrame(TypedDict):
-    """One frame of a render request."""
-
-    c2w: list[list[float]]
-    call: NotRequired[int | None]
-    dof: NotRequired[WireDof | None]
-    level: NotRequired[str | None]
-    motion: NotRequired[WireMotion | None]
-    out: str
-    region: NotRequired[list[int] | None]
-    rolling_shutter: NotRequired[bool | None]
-    sample_offset: NotRequired[int | None]
-    sample_sequence: NotRequired[int | None]
-    samples: NotRequired[int | None]
-    seed: int
-    view: NotRequired[int | None]
 
 class Bounces(TypedDict):
     """The Cycles bounce limits a worker set (`blender_scene.FIXED_BOUNCES`'s keys)."""

@@ -50,10 +50,13 @@ def kill_all() -> None:
         w.kill()
 
 
-def _frame_item(f: Mapping[str, Any]) -> dict[str, Any]:
-    """One frame of a render request: the core's spelling of it (dataset/wire.rs, the
-    contract in schemas/worker/), its numbers made plain and its EXR path absolute."""
-    return dict(_core.wire_frame({**_plain(f), "out": str(Path(f["out"]).resolve())}))
+def request_line(frames: Sequence[Mapping[str, Any]], **request: Any) -> str:
+    """The render request of `frames` as the line the worker reads: the core types each
+    frame as its Render (the plan's renders as they are; a caller's `c2w`, `seed` and
+    `out`, NumPy numbers made plain), checks it and makes its EXR path absolute
+    (dataset/wire.rs, the contract in schemas/worker/); ValueError naming what is wrong.
+    `request`: resolution, fov_deg, samples and the render options."""
+    return _core.render_request([{**_plain(f), "out": str(f["out"])} for f in frames], **request)
 
 
 class WorkerError(BlursetError):
@@ -284,10 +287,13 @@ class Worker:
     # -- protocol -----------------------------------------------------------------------
 
     def _send(self, msg: dict[str, Any]) -> None:
+        self._send_line(json.dumps(msg))
+
+    def _send_line(self, line: str) -> None:
         self._ensure_started()
         assert self._proc is not None and self._proc.stdin is not None
         try:
-            self._proc.stdin.write((json.dumps(msg) + "\n").encode("utf-8"))
+            self._proc.stdin.write((line + "\n").encode("utf-8"))
             self._proc.stdin.flush()
         except (BrokenPipeError, OSError):
             self._crashed()
@@ -450,29 +456,21 @@ class Worker:
             # The protocol's call-level count, which every frame's own overrides.
             samples = int(frames[0]["samples"]) if frames else 1
         try:
-            items = [_frame_item(f) for f in frames]
+            line = request_line(
+                frames,
+                resolution=resolution,
+                fov_deg=fov_deg,
+                samples=samples,
+                exr_codec=exr_codec,
+                noise_threshold=noise_threshold,
+                batch=batch,
+                crop=crop,
+                guides=guides,
+                geometry=geometry,
+            )
         except ValueError as e:  # refused before the worker sees it, as it would refuse
             raise WorkerError(f"render failed: {e}") from None
-        msg: dict[str, Any] = {
-            "cmd": "render",
-            "resolution": int(resolution),
-            "fov_deg": float(fov_deg),
-            "samples": int(samples),
-            "frames": items,
-        }
-        if exr_codec is not None:
-            msg["exr_codec"] = str(exr_codec)
-        if noise_threshold is not None:
-            msg["noise_threshold"] = float(noise_threshold)
-        if not batch:
-            msg["batch"] = False
-        if crop:
-            msg["crop"] = True
-        if guides:
-            msg["guides"] = True
-        if geometry:
-            msg["geometry"] = True
-        self._send(msg)
+        self._send_line(line)
         return self._await_render(len(frames), on_frame)
 
     def _await_render(

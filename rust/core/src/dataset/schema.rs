@@ -94,7 +94,6 @@ pub fn value_schemas() -> Vec<(&'static str, serde_json::Value)> {
             "HalfNoise",
             schema_for!(crate::metrics::HalfNoise).to_value(),
         ),
-        ("WireFrame", schema_for!(super::wire::WireFrame).to_value()),
         ("Loaded", schema_for!(super::wire::Loaded).to_value()),
         ("Rendered", schema_for!(super::wire::Rendered).to_value()),
     ]

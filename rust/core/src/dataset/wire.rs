@@ -4,71 +4,16 @@
 //! A request goes to the worker's stdin, one object a line; its replies come back one
 //! object a line. `schemas/worker_request.schema.json` and `worker_reply.schema.json` are
 //! these types' schemas (`make schemas`); tests check every message the real worker and
-//! the stand-in exchange against them. The builder's render dicts become a request's
-//! frames here ([`wire_frame`]), so the spelling of a frame lives in one place.
+//! the stand-in exchange against them. A request's frames are the plan's [`Render`]s
+//! ([`RenderRequest::line`] checks them), so a frame is spelled in one place.
 use super::meta::{DeviceRecord, LightPathsRecord};
 use crate::error::{Error, Result};
+use crate::plan::render::Render;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 /// A camera-to-world matrix, OpenGL axes, row-major.
 pub type Matrix = [[f64; 4]; 4];
-
-/// The camera path of one Cycles motion blur render: 2^steps + 1 keys.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct WireMotion {
-    pub steps: u32,
-    pub keys: Vec<Matrix>,
-}
-
-/// A defocus render's thin lens (world units).
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct WireDof {
-    pub focus_distance: f64,
-    pub aperture_radius: f64,
-}
-
-/// One frame of a render request.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct WireFrame {
-    pub c2w: Matrix,
-    /// Cycles seed (the worker folds it into Cycles' signed 32-bit range).
-    pub seed: u64,
-    /// The EXR the worker writes, an absolute path.
-    pub out: String,
-    /// This frame's samples; absent: the request's.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub samples: Option<u32>,
-    /// With `sample_sequence`: the samples [offset, offset + samples) of a sequence of
-    /// that many (Cycles sample subsets).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub sample_offset: Option<u32>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub sample_sequence: Option<u32>,
-    /// One Cycles motion blur render along these keys instead of one camera.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub motion: Option<WireMotion>,
-    /// The pixels [x0, y0, x1, y1) that can see the object; absent: the whole image.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub region: Option<[u32; 4]>,
-    /// A thin lens; absent: the pinhole camera.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub dof: Option<WireDof>,
-    /// With `motion`: Cycles' rolling shutter, rows exposed top to bottom along the keys.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub rolling_shutter: Option<bool>,
-    /// The render call it belongs to: consecutive frames of one call are one job.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub call: Option<u64>,
-    /// Without `call`: consecutive frames of one view and level are one job.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub view: Option<u64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub level: Option<String>,
-}
 
 /// `{"cmd":"load"}`: import, normalize and light one GLB.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -93,7 +38,10 @@ pub struct RenderRequest {
     pub fov_deg: f64,
     /// Samples of every frame that carries none.
     pub samples: u32,
-    pub frames: Vec<WireFrame>,
+    /// The renders, as the plan spells them ([`Render`]): the worker reads the camera,
+    /// seed, EXR, samples and sample block, motion path, region, lens, rolling shutter and
+    /// render call of each, and leaves the rest.
+    pub frames: Vec<Render>,
     /// The EXRs' codec (default NONE).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exr_codec: Option<String>,
@@ -223,84 +171,18 @@ pub enum Reply {
     Probe(Probe),
 }
 
-/// A render as the builder holds it (the plan's renders and the frames callers make):
-/// every wire field, and whatever else it carries (its kind, half, …), which the worker
-/// does not read.
-#[derive(Deserialize)]
-pub struct LooseFrame {
-    c2w: Matrix,
-    seed: u64,
-    out: String,
-    #[serde(default)]
-    samples: Option<u32>,
-    #[serde(default)]
-    sample_offset: Option<u32>,
-    #[serde(default)]
-    sample_sequence: Option<u32>,
-    #[serde(default)]
-    motion: Option<WireMotion>,
-    #[serde(default)]
-    region: Option<[u32; 4]>,
-    #[serde(default)]
-    dof: Option<WireDof>,
-    #[serde(default)]
-    rolling_shutter: Option<bool>,
-    #[serde(default)]
-    call: Option<u64>,
-    #[serde(default)]
-    view: Option<u64>,
-    #[serde(default)]
-    level: Option<String>,
-}
-
-/// The wire frame of a render the builder holds: its wire fields, typed and checked
-/// (finite cameras; a sample block has both ends; a motion path has 2^steps + 1 keys).
-pub fn wire_frame(f: LooseFrame) -> Result<WireFrame> {
-    let finite = |m: &Matrix| m.iter().flatten().all(|x| x.is_finite());
-    if !finite(&f.c2w)
-        || f.motion
-            .as_ref()
-            .is_some_and(|m| !m.keys.iter().all(finite))
-    {
-        return Err(Error::Value(
-            "render frame: c2w must be a finite 4x4 matrix".into(),
-        ));
-    }
-    if f.sample_offset.is_some() != f.sample_sequence.is_some() {
-        return Err(Error::Value(
-            "render frame: sample_offset and sample_sequence go together".into(),
-        ));
-    }
-    if f.rolling_shutter == Some(true) && f.motion.is_none() {
-        return Err(Error::Value(
-            "render frame: a rolling shutter needs a motion path".into(),
-        ));
-    }
-    if let Some(m) = &f.motion {
-        let want = (1usize << m.steps.min(16)) + 1;
-        if m.keys.len() != want {
-            return Err(Error::Value(format!(
-                "render frame: motion of {} steps has {} keys, not {want}",
-                m.steps,
-                m.keys.len()
-            )));
+impl RenderRequest {
+    /// The request as the line the worker reads: every frame checked ([`Render::check`])
+    /// and its EXR path made absolute (the worker runs in a folder of its own).
+    pub fn line(mut self) -> Result<String> {
+        for f in &mut self.frames {
+            f.check()?;
+            let out = std::path::absolute(&f.out)
+                .map_err(|e| Error::io("cannot resolve", std::path::Path::new(&f.out), e))?;
+            f.out = out.display().to_string();
         }
+        serde_json::to_string(&Request::Render(self)).map_err(|e| Error::Value(e.to_string()))
     }
-    Ok(WireFrame {
-        c2w: f.c2w,
-        seed: f.seed,
-        out: f.out,
-        samples: f.samples,
-        sample_offset: f.sample_offset,
-        sample_sequence: f.sample_sequence,
-        motion: f.motion,
-        region: f.region,
-        dof: f.dof,
-        rolling_shutter: f.rolling_shutter,
-        call: f.call,
-        view: f.view,
-        level: f.level,
-    })
 }
 
 /// The schemas of the two directions, by file stem (`schemas/<stem>.schema.json`).
@@ -332,12 +214,6 @@ mod tests {
     use super::*;
     use serde_json::json;
 
-    fn frame(v: serde_json::Value) -> Result<WireFrame> {
-        let f: LooseFrame =
-            serde_json::from_value(v).map_err(|e| Error::Value(format!("render frame: {e}")))?;
-        wire_frame(f)
-    }
-
     const EYE: Matrix = [
         [1.0, 0.0, 0.0, 0.0],
         [0.0, 1.0, 0.0, 0.0],
@@ -345,56 +221,64 @@ mod tests {
         [0.0, 0.0, 0.0, 1.0],
     ];
 
-    #[test]
-    fn a_plan_render_keeps_its_wire_fields_only() {
-        let f = frame(json!({
-            "c2w": EYE, "seed": 7, "out": "/x/a.exr", "samples": 4, "sample_offset": 8,
-            "sample_sequence": 64, "region": [0, 0, 16, 16], "call": 3, "view": 1,
-            "level": "blur_2", "kind": {"Blur": 2}, "phase": 1, "half": 0,
-        }))
-        .expect("a plan render is a frame");
-        let v = serde_json::to_value(&f).expect("a frame serializes");
-        let keys: Vec<&str> = v
-            .as_object()
-            .expect("an object")
-            .keys()
-            .map(|k| k.as_str())
-            .collect();
-        let mut want = [
-            "c2w",
-            "seed",
-            "out",
-            "samples",
-            "sample_offset",
-            "sample_sequence",
-            "region",
-            "call",
-            "view",
-            "level",
-        ];
-        want.sort_unstable();
-        assert_eq!(keys, want);
-        // What the worker reads back is what was sent.
-        let back: WireFrame = serde_json::from_value(v).expect("the worker reads it back");
-        assert_eq!(back, f);
+    fn line(frames: serde_json::Value) -> Result<String> {
+        let frames: Vec<Render> = serde_json::from_value(frames)
+            .map_err(|e| Error::Value(format!("render frame: {e}")))?;
+        let req = RenderRequest {
+            resolution: 8,
+            fov_deg: 40.0,
+            samples: 1,
+            frames,
+            exr_codec: None,
+            noise_threshold: None,
+            batch: None,
+            crop: None,
+            guides: None,
+            geometry: None,
+        };
+        req.line()
     }
 
     #[test]
-    fn a_half_sample_block_or_a_short_motion_path_is_refused() {
-        let e = frame(json!({"c2w": EYE, "seed": 1, "out": "a", "sample_offset": 4}));
-        assert!(e.is_err_and(|e| e.to_string().contains("sample_sequence")));
-        let e = frame(json!({"c2w": EYE, "seed": 1, "out": "a",
-                                  "motion": {"steps": 1, "keys": [EYE, EYE]}}));
-        assert!(e.is_err_and(|e| e.to_string().contains("not 3")));
-        let e = frame(json!({"seed": 1, "out": "a"}));
-        assert!(e.is_err_and(|e| e.to_string().contains("c2w")));
-        let mut bad = EYE;
-        bad[1][2] = f64::NAN;
-        let f = LooseFrame {
-            c2w: bad,
-            ..loose()
+    fn a_plan_render_is_the_frame_the_worker_reads_back() {
+        let render = json!({
+            "c2w": EYE, "seed": 7, "out": "/x/a.exr", "samples": 4, "sample_offset": 8,
+            "sample_sequence": 64, "region": [0, 0, 16, 16], "call": 3, "view": 1,
+            "level": "blur_2", "kind": {"type": "blur", "level": 2}, "phase": 1, "half": 0,
+        });
+        let text = line(json!([render.clone()])).expect("a plan render is a frame");
+        let back: Request = serde_json::from_str(&text).expect("the worker reads it back");
+        let Request::Render(r) = back else {
+            panic!("a render request")
         };
-        assert!(wire_frame(f).is_err_and(|e| e.to_string().contains("finite")));
+        assert_eq!(serde_json::to_value(&r.frames[0]).ok(), Some(render));
+        // A caller's frame: a camera, a seed and an EXR, made absolute.
+        let text = line(json!([{"c2w": EYE, "seed": 1, "out": "a.exr"}])).expect("a frame");
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+        let out = v["frames"][0]["out"].as_str().unwrap_or_default();
+        assert!(
+            std::path::Path::new(out).is_absolute() && out.ends_with("a.exr"),
+            "{out}"
+        );
+    }
+
+    #[test]
+    fn a_half_sample_block_a_short_motion_path_or_an_odd_field_is_refused() {
+        let e = line(json!([{"c2w": EYE, "seed": 1, "out": "a", "sample_offset": 4}]));
+        assert!(e.is_err_and(|e| e.to_string().contains("sample_sequence")));
+        let e = line(json!([{"c2w": EYE, "seed": 1, "out": "a",
+                              "motion": {"steps": 1, "keys": [EYE, EYE]}}]));
+        assert!(e.is_err_and(|e| e.to_string().contains("not 3")));
+        let e = line(json!([{"seed": 1, "out": "a"}]));
+        assert!(e.is_err_and(|e| e.to_string().contains("c2w")));
+        let e = line(json!([{"c2w": EYE, "seed": 1, "out": "a", "sampels": 2}]));
+        assert!(e.is_err_and(|e| e.to_string().contains("sampels")));
+        let e = line(json!([{"c2w": EYE, "seed": 1, "out": "a", "rolling_shutter": true}]));
+        assert!(e.is_err_and(|e| e.to_string().contains("motion path")));
+        let mut bad: Render =
+            serde_json::from_value(json!({"c2w": EYE, "seed": 1, "out": "a"})).expect("a frame");
+        bad.c2w[1][2] = f64::NAN;
+        assert!(bad.check().is_err_and(|e| e.to_string().contains("finite")));
     }
 
     #[test]
@@ -408,9 +292,5 @@ mod tests {
         assert!(serde_json::from_value::<Reply>(odd).is_err());
         let quit: Request = serde_json::from_value(json!({"cmd": "quit"})).expect("quit");
         assert_eq!(quit, Request::Quit);
-    }
-
-    fn loose() -> LooseFrame {
-        serde_json::from_value(json!({"c2w": EYE, "seed": 1, "out": "a"})).expect("a frame")
     }
 }

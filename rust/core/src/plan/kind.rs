@@ -17,11 +17,12 @@ macro_rules! image_kind {
         /// ([`crate::kinds!`]), its variant named as its type. Crosses the FFI as
         /// `{"type": "blur", "level": 2}`.
         #[derive(
-            Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
-            schemars::JsonSchema,
+            Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize,
+            Deserialize, schemars::JsonSchema,
         )]
         #[serde(tag = "type", content = "level", rename_all = "snake_case")]
         pub enum ImageKind {
+            #[default]
             Sharp,
             /// Motion blur of the camera's trajectory during the exposure (`blur_<l>`).
             Blur(u32),
