@@ -105,6 +105,32 @@ def test_noise_export_stats_card_and_data_take_rolling_shutter_levels(rs_build, 
     np.testing.assert_array_equal(scene.c2w_opengl, sharp.c2w_opengl)
 
 
+@pytest.mark.parametrize("method", ["average", "motion_blur"])
+def test_its_levels_hold_their_own_masks_and_verify_and_nerfstudio_take_them(
+    tmp_path, standin_blender, method
+):
+    out = tmp_path / "b"
+    run_cli("build", "--demo", "--views", "4", "--levels", "none", "--resolution", "32",
+            "--settings-per-object", "1", "--rolling-shutter", "3", "--latents", "4",
+            "--samples", "2", "--passes", "mask", "--blur-method", method, "--quiet",
+            "--blender", str(standin_blender), "--out", str(out))  # fmt: skip
+    for setting in layout.complete_settings(out):
+        masks = setting / "rolling_shutter_3" / layout.pass_dir("mask", 1)
+        meta = json.loads((setting / layout.META).read_text())
+        assert len(list(masks.iterdir())) == len(meta["views"])
+    assert run_cli("verify", str(out)).returncode == 0
+    ns = tmp_path / "ns"
+    run_cli("export", str(out), "--for", "nerfstudio", "--levels", "rolling_shutter_3",
+            "--out", str(ns))  # fmt: skip
+    doc = json.loads((ns / "export.json").read_text())
+    assert doc["scenes"]
+    for scene, rel in doc["scenes"].items():
+        tf = json.loads((ns / scene / "transforms.json").read_text())
+        assert all("mask_path" in f for f in tf["frames"])
+        for p in sorted((out / rel / layout.pass_dir("mask", 1)).iterdir()):
+            assert (ns / scene / "masks" / p.name).read_bytes() == p.read_bytes(), scene
+
+
 # -- real renders --------------------------------------------------------------------------
 
 
