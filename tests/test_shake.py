@@ -21,7 +21,7 @@ from blurset.image import read_exr, read_image
 from tests.conftest import run_cli, standin_build
 
 ROOT = Path(__file__).resolve().parents[1]
-# Four frames: the fewest whose mean is the written pose (the path's three harmonics).
+# Four averaged frames (any count from two has the written pose as its mean).
 SHAKE = ("--shake", "1,2", "--latents", "4")
 
 
@@ -53,10 +53,22 @@ def test_shake_levels_sit_beside_the_blur_levels_with_the_written_poses(shake_bu
                 ).read_bytes()
         for v in meta["views"]:
             one, two = v["shake"]["1"], v["shake"]["2"]
-            # 2^(l+1) px at 512 px, at 32 px; one path per view, twice as far at level 2.
-            assert (one["amplitude_px"], two["amplitude_px"]) == (4 * 32 / 512, 8 * 32 / 512)
-            assert two["path_px"] == pytest.approx(2 * one["path_px"])
+            # Extent 2^(l+2) px at 512 px, at 32 px; one trajectory per view, about
+            # twice as far at level 2.
+            assert (one["extent_px"], two["extent_px"]) == (8 * 32 / 512, 16 * 32 / 512)
+            assert two["path_px"] == pytest.approx(2 * one["path_px"], rel=0.02)
+            assert two["extent_deg"] == pytest.approx(2 * one["extent_deg"], rel=0.02)
             assert one["method"] == "average" and len(one["poses"]) == 4
+            # What was rendered: the frames' gap at the centre and corners, and their
+            # turns, roll included, about the written pose (their mean).
+            assert 0 < one["max_gap_px"] and one["path_px"] <= 3 * one["max_gap_px"] + 1e-9
+            poses = one["poses"]
+            assert any(abs(q["roll_deg"]) > 0 for q in poses)
+            for key in ("yaw_deg", "pitch_deg", "roll_deg"):
+                assert (
+                    abs(sum(q[key] for q in poses) / 4)
+                    < 1e-2 * max(abs(q[key]) for q in poses) + 1e-12
+                )
 
 
 def test_a_default_build_has_no_shake(standin_build_dir):
@@ -67,12 +79,13 @@ def test_a_default_build_has_no_shake(standin_build_dir):
     assert "shake" not in meta["sampling"]
 
 
-def test_too_few_frames_for_the_written_pose_are_refused_in_one_line(tmp_path, standin_blender):
+def test_one_frame_at_the_written_pose_is_refused_in_one_line(tmp_path, standin_blender):
+    # The frames' mean is the written pose at any count, so one frame is the sharp image.
     out = tmp_path / "b"
-    proc = standin_build(out, standin_blender, "--shake", "1", "--latents", "3", check=False)
+    proc = standin_build(out, standin_blender, "--shake", "1", "--latents", "1", check=False)
     assert proc.returncode != 0 and not out.exists()
     line = proc.stderr.strip().splitlines()[-1]
-    assert "--latents 3" in line and "written pose" in line, proc.stderr
+    assert "--latents 1" in line and "written pose" in line, proc.stderr
 
 
 def test_noise_export_stats_and_data_take_shake_levels(shake_build, tmp_path):

@@ -54,6 +54,10 @@ ALLOWED: list[tuple[str, str]] = [
     (r"A 4× downsample|about\s+4×", "a 4× area average cuts σ 4×: arithmetic"),
     (r"within 10 % of", "a tested bound of the denoiser"),
     (r"459 s in\s+tools/DEVICE\.md", "the kernel compile on an H200, measured by tools/DEVICE.md"),
+    (
+        r"\| (?:18\.75|37\.5|75|150) \| (?:0\.375|0\.75|1\.5|3) s \|",
+        "shake levels as exposures: the reciprocal rule's arithmetic (shake.rs), not a timing",
+    ),
 ]
 
 

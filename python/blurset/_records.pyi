@@ -207,9 +207,10 @@ class RollingShutterPlan(TypedDict):
     turns_deg: list[float]
 
 class ShakePose(TypedDict):
-    """The camera's turn at one instant of the exposure."""
+    """The camera's turn at one instant of the exposure, as a rotation `Rz(roll) · Ry(yaw) · Rx(pitch)` of the camera at its written pose (roll about the written viewing axis, so it moves the image centre nowhere)."""
 
     pitch_deg: float
+    roll_deg: NotRequired[float]
     t: float
     yaw_deg: float
 
@@ -217,6 +218,8 @@ class ShakePlan(TypedDict):
     """One shake level of one view, as meta.json records it (`views[i].shake[l]`)."""
 
     amplitude_px: float
+    extent_deg: NotRequired[float]
+    extent_px: NotRequired[float]
     max_gap_px: NotRequired[float | None]
     method: BlurMethod
     motion_steps: NotRequired[int | None]
