@@ -266,10 +266,10 @@ def test_every_kind_is_certified_under_a_preset(tmp_path, box):
             # --preset fast bounds the ghost gap at 2 px: the frames follow the path.
             assert shake["max_gap_px"] <= 2.0, (lvl, shake["max_gap_px"])
             assert len(shake["poses"]) < 4096
-        # At least the four frames whose mean is the written pose; level 4 moves 8 times
-        # farther than level 1 and takes more.
+        # At least two frames (one is the sharp image); level 4 moves 8 times farther
+        # than level 1 and takes more.
         frames = [len(v["shake"][lvl]["poses"]) for lvl in ("1", "4")]
-        assert 4 == frames[0] < frames[1], frames
+        assert 2 <= frames[0] < frames[1], frames
         # Every frame of a shake image is one of the image's: its samples are even
         # (two halves) and at least one per frame and half.
         assert v["images"]["shake_4"]["samples"] >= 2 * frames[1]

@@ -129,6 +129,18 @@ impl Stream {
     }
 }
 
+/// A uniform in (0, 1), never 0 or 1 (the midpoint of a 53-bit cell).
+pub fn open_uniform(s: &mut Stream) -> f64 {
+    ((s.next_u64() >> 11) as f64 + 0.5) * (1.0 / (1u64 << 53) as f64)
+}
+
+/// A standard normal (one Box–Muller draw per call; the sine half is discarded).
+pub fn normal(s: &mut Stream) -> f64 {
+    let u1 = open_uniform(s);
+    let u2 = s.uniform();
+    libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(std::f64::consts::TAU * u2)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -4,18 +4,8 @@
 //! transformed rejection PTRS above, as numpy's generator does it) and Tukey-lambda
 //! variates by their quantile function.
 use crate::rng::Stream;
-
-/// A uniform in (0, 1), never 0 or 1 (the midpoint of a 53-bit cell).
-pub fn open_uniform(s: &mut Stream) -> f64 {
-    ((s.next_u64() >> 11) as f64 + 0.5) * (1.0 / (1u64 << 53) as f64)
-}
-
-/// A standard normal (one Box–Muller draw per call; the sine half is discarded).
-pub fn normal(s: &mut Stream) -> f64 {
-    let u1 = open_uniform(s);
-    let u2 = s.uniform();
-    libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(std::f64::consts::TAU * u2)
-}
+// The plan draws standard normals too (a hand's shake): they live with the stream.
+pub use crate::rng::{normal, open_uniform};
 
 /// The Tukey-lambda quantile `Q(p) = (p^λ − (1 − p)^λ) / λ` (the logistic `ln(p/(1−p))`
 /// at λ = 0).

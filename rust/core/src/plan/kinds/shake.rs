@@ -48,7 +48,7 @@
 //! most); under `--latents auto` a level takes the fewest frames within
 //! `--max-ghost-px`, as a blur level does.
 use crate::error::Result;
-use crate::noise::draws::normal;
+use crate::rng::normal;
 use crate::plan::choices::{BlurMethod, LatentSampling};
 use crate::plan::degradation::{
     fewest_frames, Degradation, RenderCx, ViewCx, MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
