@@ -114,22 +114,17 @@ impl SettingPlan {
     }
 }
 
-/// The pixels a band of `rows` traces: its rows of the object's region (all of them when
-/// the region is the whole image), or a one-pixel strip when the object is outside the
-/// band (the band is background; Cycles still needs a border to render).
+/// The pixels a band of `rows` (at least one) traces: its rows of the object's region
+/// (all of them when the region is the whole image), or its first pixel when the object
+/// is outside the band (the band is background; Cycles still needs a border to render).
 fn band_region(object: Option<Region>, rows: [u32; 2], size: u32) -> Option<Region> {
     let [x0, y0, x1, y1] = object.unwrap_or([0, 0, size, size]);
     let (top, bottom) = (rows[0].max(y0), rows[1].min(y1));
-    if top < bottom && x0 < x1 {
-        Some([x0, top, x1, bottom])
+    Some(if top < bottom && x0 < x1 {
+        [x0, top, x1, bottom]
     } else {
-        Some([
-            0,
-            rows[0],
-            1.min(size),
-            (rows[0] + 1).min(rows[1].max(rows[0] + 1)),
-        ])
-    }
+        [0, rows[0], 1, rows[0] + 1]
+    })
 }
 
 #[cfg(test)]

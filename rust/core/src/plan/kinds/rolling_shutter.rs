@@ -20,7 +20,7 @@
 //!   the fewest whose step between neighbouring bands is within `max_ghost_px`
 //!   (`max_step_px` records it); at most one band per row.
 use crate::plan::choices::BlurMethod;
-use crate::plan::degradation::{Degradation, RenderCx, ViewCx};
+use crate::plan::degradation::{fewest_frames, Degradation, RenderCx, ViewCx};
 use crate::plan::kind::ImageKind;
 use crate::plan::render::{Band, Motion, Render};
 use crate::plan::sampling_config::SamplingConfig;
@@ -199,36 +199,29 @@ fn plan_level(cx: &ViewCx, direction_deg: f64, level: u32) -> RollingShutterPlan
             .map(|w| (centre(w[1]) - centre(w[0])).abs())
             .fold(0.0, f64::max)
     };
-    // n bands of rows, each at the time of its middle row, and their largest step.
-    let banded = |n: usize| {
-        let rows = bands(n as u32, cx.resolution);
-        let h = f64::from(cx.resolution);
-        let times: Vec<f64> = rows
+    // n bands of rows, each read at the time of its middle row, and their largest step.
+    let h = f64::from(cx.resolution);
+    let timed = |n: usize| {
+        let times: Vec<f64> = bands(n as u32, cx.resolution)
             .iter()
             .map(|b| (f64::from(b[0]) + f64::from(b[1])) / 2.0 / h)
             .collect();
         let s = step(&times);
-        (rows, times, s)
+        (times, s)
     };
     let (method, rows, times, max_step_px) = if cx.motion_blur {
         // A constant-rate turn about one axis: Cycles' slerp between keys is exact.
         (BlurMethod::MotionBlur, Vec::new(), vec![0.0, 0.5, 1.0], None)
     } else {
         let cfg = cx.cfg;
-        let (rows, times, s) = if cfg.latents_auto {
+        let (times, s) = if cfg.latents_auto {
             let first = (amplitude / cfg.max_ghost_px - 1e-9).ceil().max(1.0) as usize;
             let most = cfg.latents_max.min(cx.resolution as usize).max(1);
-            let mut best = banded(first.min(most));
-            for n in first.min(most) + 1..=most {
-                if best.2 <= cfg.max_ghost_px {
-                    break;
-                }
-                best = banded(n);
-            }
-            best
+            fewest_frames(first.min(most), most, cfg.max_ghost_px, timed)
         } else {
-            banded(cx.latents)
+            timed(cx.latents)
         };
+        let rows = bands(times.len() as u32, cx.resolution);
         (BlurMethod::Average, rows, times, Some(s))
     };
     let renders = if rows.is_empty() { 1 } else { rows.len() };
