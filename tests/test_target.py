@@ -158,9 +158,10 @@ def test_half_noise_on_object_pixels_only():
     e = image.half_noise(a, b)
     assert e.object_px == 256 and e.coverage == pytest.approx(0.25)
     whole = image.image_error(a, b)
-    # The whole frame reads 10·log10(1/coverage) high; the half estimate 6 dB above MSE.
+    # The whole frame reads 10·log10(1/coverage) high; the half estimate 6 dB above MSE
+    # (to sRGB's bend over a 1 % spread, which it takes about the merged image).
     assert whole.psnr - image.object_error(a, b).psnr == pytest.approx(10 * math.log10(4))
-    assert e.psnr - image.object_error(a, b).psnr == pytest.approx(10 * math.log10(4))
+    assert e.psnr - image.object_error(a, b).psnr == pytest.approx(10 * math.log10(4), abs=1e-3)
 
 
 def test_the_bound_opens_where_a_few_pixels_carry_the_noise():
