@@ -25,6 +25,7 @@ import math
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -74,7 +75,13 @@ def render(glb: Path, out: Path, views: int, reps: int) -> None:
     with Worker(timeout=7200, workdir=out / "scratch", device="CPU") as w:
         plan = plan_object(cfg, glb, w, out)
         pin = max(cfg.target_max_samples // 2, REF_N)
-        meta = {"model": glb.stem, "grid": list(GRID), "reps": reps, "ref_n": REF_N, "images": []}
+        meta: dict[str, Any] = {
+            "model": glb.stem,
+            "grid": list(GRID),
+            "reps": reps,
+            "ref_n": REF_N,
+            "images": [],
+        }
         for f in plan.renders(str(out / "r"), cfg.cycles_samples, sharp_views=[]):
             if f["level"] != "sharp":
                 continue
@@ -120,7 +127,7 @@ def estimates(a_img, b_img, ref, ref_noise, ref_mask) -> dict:
         "plain": ((_srgb(a) - _srgb(b)) ** 2).sum(-1)[m],
         "about_merged": (2 * ((_srgb(a) - merged) ** 2 + (_srgb(b) - merged) ** 2)).sum(-1)[m],
     }
-    row = {}
+    row: dict[str, Any] = {}
     for name, q in qs.items():
         est = float(q.sum()) / (12 * n)
         n_eff = float(q.sum() ** 2 / (q**2).sum()) if q.sum() > 0 else n
