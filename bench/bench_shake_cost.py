@@ -39,6 +39,9 @@ GHOSTS = (1.0, 2.0)
 VIEWS = int(os.environ.get("BLURSET_BENCH_SHAKE_VIEWS", "60"))
 SEED = 5
 UNIT_COSTS = "blur_cost_vs_sharp"
+# Views whose paths through frames KEY_GHOST_PX apart measure the motion keys' error.
+KEY_VIEWS = int(os.environ.get("BLURSET_BENCH_SHAKE_KEY_VIEWS", "10"))
+KEY_GHOST_PX = 0.05
 
 
 def image_seconds(m: int, unit: dict) -> float:
@@ -80,9 +83,21 @@ def motion_steps() -> dict[str, dict[int, list[int]]]:
     }  # fmt: skip
 
 
+def key_errors(steps: dict[int, list[int]]) -> dict[int, list[float]]:
+    """Per level: for KEY_VIEWS views, how far the hand shake's motion keys (its planned
+    steps) stray from its path at the image centre (px)."""
+    paths = sp.model_paths(KEY_VIEWS, LEVELS, ghost_px=KEY_GHOST_PX, seed=SEED)
+    return {
+        lv: [sp.key_midpoint_error(v["path"], np.array([q["t"] for q in v["record"]["poses"]]),
+                                   steps[lv][i]) for i, v in enumerate(paths[lv])]
+        for lv in LEVELS
+    }  # fmt: skip
+
+
 def run() -> list[dict]:
     unit = unit_costs()
     steps = motion_steps()
+    keys = key_errors(steps["new"])
     top = sp.MOTION_STEPS_RANGE[1]
     rows = []
     for g in GHOSTS:
@@ -114,6 +129,9 @@ def run() -> list[dict]:
                 # At the top of the range the keys may stray more than 0.02 px from the path.
                 "motion_steps_new_at_top_share": float(np.mean(np.array(steps["new"][lv]) == top)),
                 "motion_steps_old_at_top_share": float(np.mean(np.array(steps["old"][lv]) == top)),
+                "motion_key_error_px_median": float(np.median(keys[lv])),
+                "motion_key_error_px_max": float(np.max(keys[lv])),
+                "motion_key_error_views": KEY_VIEWS,
             }
             if unit is not None:
                 sn = float(np.median([image_seconds(int(m), unit) for m in new]))

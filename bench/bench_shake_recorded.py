@@ -61,7 +61,11 @@ def recorded_row(path: Path) -> dict:
             "extent_share_of_kernel": s["extent_px"] / k.shape[0],
             **s,
         })  # fmt: skip
-    med = {f"{k}_median": float(np.median([p[k] for p in per])) for k in per[0]}
+    med = {
+        f"{k}_{name}": float(fn([p[k] for p in per]))
+        for k in per[0]
+        for name, fn in (("median", np.median), ("min", np.min), ("max", np.max))
+    }
     return {
         "name": "shake_recorded_levin09",
         "ratio": med["extent_share_of_image_median"],

@@ -14,7 +14,9 @@ over the exposure: a path with its time order lost. On its support (the pixels a
   diagonal √2; the stroke's length along itself, each part once) over the extent: 1 for
   a straight stroke, larger the more it bends or folds;
 - `ends_share`: the straight distance between that path's two ends over the extent: near
-  1 for a stroke that goes one way, small for one that comes back where it began;
+  1 for a stroke that goes one way (and for a closed ring, whose longest shortest path
+  is half of it: length_over_extent π/2 tells it apart), small for a stroke that bends
+  back on itself (a U);
 - `dwell_share`: the share of the kernel's mass in the brightest fifth of its support:
   a fifth for a stroke drawn at constant speed, more where the hand slowed down;
 - `width_px`: the support's pixels over the longest shortest path's length plus one: the
@@ -293,6 +295,21 @@ OLD_MIN_FRAMES = OLD_HARMONICS + 1
 OLD_GRID = 512
 MOTION_KEY_TOLERANCE_PX = 0.02  # degradation.rs
 MOTION_STEPS_RANGE = (1, 7)  # degradation.rs
+
+
+def key_midpoint_error(path: Array, times: Array, steps: int) -> float:
+    """The largest distance (px) at the middle of each of 2^steps equal intervals between
+    `path` (dense, at `times`; linear between them) and the straight line joining its
+    ends: how far a motion-blur render along 2^steps + 1 keys strays from the path (the
+    core's `motion_steps` check, measured on the path through dense frames)."""
+    n = 1 << steps
+    a = np.arange(n) / n
+    b, mid = a + 1 / n, a + 0.5 / n
+
+    def at(t: Array) -> Array:
+        return np.stack([np.interp(t, times, path[:, 0]), np.interp(t, times, path[:, 1])], 1)
+
+    return float(np.hypot(*(at(mid) - (at(a) + at(b)) / 2).T).max())
 
 
 def old_draw(rng: np.random.Generator) -> Array:
