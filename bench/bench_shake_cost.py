@@ -55,11 +55,21 @@ def unit_costs() -> dict | None:
     return rows.get(UNIT_COSTS)
 
 
+def _peak_over_mean(path: np.ndarray) -> float:
+    """The image centre's fastest step over its mean step, along points at equal times."""
+    steps = np.hypot(*np.diff(path, axis=0).T)
+    return float(steps.max() / steps.mean())
+
+
 def frames(ghost_px: float) -> dict[str, dict[int, list[float]]]:
-    """Per model and level: each view's frame count, then its extent (px)."""
+    """Per model and level: each view's frame count, its extent and path length (px)."""
     plan = sp.plan_shake(VIEWS, LEVELS, resolution=sp.REFERENCE_PX, ghost_px=ghost_px,
                          seed=SEED)  # fmt: skip
     new = {lv: [float(len(v["shake"][str(lv)]["poses"])) for v in plan["views"]] for lv in LEVELS}
+    new_path = {lv: [v["shake"][str(lv)]["path_px"] for v in plan["views"]] for lv in LEVELS}
+    f = sp.focal_px(sp.REFERENCE_PX, plan["fov_deg"])
+    new_speed = {lv: [_peak_over_mean(sp.centre_path(v["shake"][str(lv)]["poses"], f))
+                      for v in plan["views"]] for lv in LEVELS}  # fmt: skip
     rng = np.random.default_rng(SEED)
     draws = [sp.old_draw(rng) for _ in range(VIEWS)]
     old = {lv: [float(sp.old_frames(sp.old_level(h, lv, sp.REFERENCE_PX), ghost_px))
@@ -67,7 +77,12 @@ def frames(ghost_px: float) -> dict[str, dict[int, list[float]]]:
     grid = np.linspace(0, 1, sp.OLD_GRID + 1)
     old_extent = {lv: [sp.extent(sp.old_level(h, lv, sp.REFERENCE_PX)(grid)) for h in draws]
                   for lv in LEVELS}  # fmt: skip
-    return {"new": new, "old": old, "old_extent": old_extent}
+    old_path = {lv: [sp.polyline_length(sp.old_level(h, lv, sp.REFERENCE_PX)(grid)) for h in draws]
+                for lv in LEVELS}  # fmt: skip
+    old_speed = {lv: [_peak_over_mean(sp.old_level(h, lv, sp.REFERENCE_PX)(grid)) for h in draws]
+                 for lv in LEVELS}  # fmt: skip
+    return {"new": new, "old": old, "old_extent": old_extent, "new_path": new_path,
+            "old_path": old_path, "new_speed": new_speed, "old_speed": old_speed}  # fmt: skip
 
 
 def motion_steps() -> dict[str, dict[int, list[int]]]:
@@ -124,6 +139,14 @@ def run() -> list[dict]:
                 "frames_ratio_per_view_median": float(np.median(np.array(new) / np.array(old))),
                 "extent_new_px": 2.0 ** (lv + 2),
                 "extent_old_px_median": float(np.median(f["old_extent"][lv])),
+                # The image centre's path: the hand shake's through its frames, the
+                # harmonics' over the exposure.
+                "path_new_px_median": float(np.median(f["new_path"][lv])),
+                "path_old_px_median": float(np.median(f["old_path"][lv])),
+                # Evenly spread frames are as far apart as the path is fast: the hand
+                # shake's particle moves at constant speed, the harmonics' does not.
+                "speed_peak_over_mean_new_median": float(np.median(f["new_speed"][lv])),
+                "speed_peak_over_mean_old_median": float(np.median(f["old_speed"][lv])),
                 "motion_steps_new_median": float(np.median(steps["new"][lv])),
                 "motion_steps_old_median": float(np.median(steps["old"][lv])),
                 # At the top of the range the keys may stray more than 0.02 px from the path.
