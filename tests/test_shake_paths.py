@@ -55,6 +55,11 @@ def _element(t: int, payload: bytes) -> bytes:
     return struct.pack("<II", t, len(payload)) + payload + b"\0" * ((-len(payload)) % 8)
 
 
+def _small(t: int, payload: bytes) -> bytes:
+    """A small data element, as MATLAB writes up to 4 bytes: type and size in one word."""
+    return struct.pack("<I", (len(payload) << 16) | t) + payload.ljust(4, b"\0")
+
+
 def _matrix(name: str, value) -> bytes:
     if isinstance(value, list):  # a cell array, one row
         flags, dims = 1, (1, len(value))
@@ -66,7 +71,7 @@ def _matrix(name: str, value) -> bytes:
     return (
         _element(6, struct.pack("<II", flags, 0))
         + _element(5, struct.pack(f"<{len(dims)}i", *dims))
-        + _element(1, name.encode())
+        + (_small(1, name.encode()) if len(name) <= 4 else _element(1, name.encode()))
         + body
     )
 
