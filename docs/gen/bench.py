@@ -28,6 +28,7 @@ import matplotlib.ticker  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import figures  # noqa: E402
 import noise_guide  # noqa: E402
+import shake_guide  # noqa: E402
 from common import sanitize  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -1331,7 +1332,8 @@ def _by_page(results: list[dict]) -> dict[str, list[dict]]:
 def main(figures_too: bool = True) -> int:
     """The benchmark pages, then (`figures_too`) the figures quoted in README.md and the
     guides rewritten from the same results (docs/gen/figures.py), the noise guide's
-    tables and figure among them (docs/gen/noise_guide.py)."""
+    tables and figure among them (docs/gen/noise_guide.py), and the build guide's shake
+    tables and figure (docs/gen/shake_guide.py)."""
     results = json.loads(RESULTS.read_text())
     if OUT.exists():
         shutil.rmtree(OUT)
@@ -1378,6 +1380,7 @@ def main(figures_too: bool = True) -> int:
     by_name = {r["name"]: r for r in results}
     # The noise guide's generated blocks (their values are figure markers) and figure.
     bad = noise_guide.update(results=by_name)
+    bad += shake_guide.update(results=by_name)
     bad += figures.update(results=by_name)
     bad += figures.problems(results=by_name)
     for b in bad:
