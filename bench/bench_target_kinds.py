@@ -29,6 +29,8 @@ VIEWS_512 = int(os.environ.get("BLURSET_BENCH_KINDS_VIEWS_512", "1"))
 # The levels of each kind beside the blur levels: the mildest and the strongest the
 # build guide shows.
 KINDS = {"defocus": [1, 4], "shake": [1, 4]}
+# metrics::half_noise_bound's estimate: each half's sRGB distance from the merged image.
+ESTIMATOR = "about_merged"
 
 
 def kind_of(level: str) -> str:
@@ -84,6 +86,10 @@ def per_kind(models: list[dict], res: int, views: int) -> list[dict]:
                     "views_measured": views,
                     "target_db": target,
                     "reference_factor": bench_target.REF,
+                    # Which half-noise estimate the build recorded and stopped on
+                    # (bench/check_half_noise.py compares them): rows without the field
+                    # were measured with the plain one.
+                    "estimator": ESTIMATOR,
                     "levels": {k: v for k, v in KINDS.items()} | {"blur": [1, 2, 3, 4]},
                     "per_image": [r for m in only for r in m["images"]]
                     if row["model"] == "all"

@@ -231,6 +231,29 @@ def _summary(rows: list[dict]) -> dict:
     return out
 
 
+def result_rows(summary: dict) -> list[dict]:
+    """bench/results.json's rows of a summary: per model (and every model) and estimate."""
+    rows = []
+    for model in ["all", *summary["models"]]:
+        for est in ("plain", "about_merged"):
+            s = summary[model][est]
+            rows.append(
+                {
+                    "name": f"half_noise_{model}_{est}",
+                    "ratio": s["stopped_bound_holds_share"],
+                    "ratio_is": "share of images stopped by the target rule whose bound holds",
+                    "model": model,
+                    "estimator": est,
+                    "images": summary[model]["images"],
+                    "target_db": TARGET,
+                    "resolution": RES,
+                    "reference_samples_per_half": REF_N,
+                    **s,
+                }
+            )
+    return rows
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "render":
         views = int(sys.argv[4]) if len(sys.argv) > 4 else 2
@@ -239,4 +262,6 @@ if __name__ == "__main__":
     else:
         res = summarize([Path(p) for p in sys.argv[2:]])
         (HERE / "check_half_noise.json").write_text(json.dumps(res, indent=1) + "\n")
-        print(json.dumps(res["summary"], indent=1))
+        from harness import merge_into_results
+
+        print(merge_into_results(result_rows(res["summary"])))

@@ -138,12 +138,18 @@ def test_benchmark_pages_plot_every_result(tmp_path, monkeypatch) -> None:
         target = bench.TARGET.match(r["name"])
         kinds = bench.KINDS.match(r["name"])
         model = kinds and ("**every model**" if kinds["model"] == "all" else f"`{kinds['model']}`")
+        half = bench.HALF_NOISE.match(r["name"])
+        half_row = half and (
+            ("**every model**" if half["model"] == "all" else f"`{half['model']}`")
+            + f" | {bench.ESTIMATORS[half['estimator']].split(': ')[1]} | {r['images']} |"
+        )
         shown = (
             r["name"] in pages
             or (light and f"| {light['glb']} |" in pages)
             or (gain and f"| `{gain['glb']}` | {gain['res']} |" in pages)
             or (target and f"| `{target['model']}` |" in pages)
             or (kinds and f"| {kinds['kind']} | {model} |" in pages)
+            or (half_row and f"| {half_row}" in pages)
         )
         assert shown or bench.PRESETS.match(r["name"]), r["name"]
     assert list((tmp_path / "bench").glob("*.png"))

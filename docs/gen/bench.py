@@ -58,6 +58,7 @@ KINDS = re.compile(
     r"^target_kinds_(?P<res>\d+)px_(?P<db>[\d.]+)db_(?P<kind>sharp|[a-z]+)_(?P<model>.+)$"
 )
 DETAIL = re.compile(r"^target_detail_(?P<res>\d+)px_(?P<model>.+)$")
+HALF_NOISE = re.compile(r"^half_noise_(?P<model>.+)_(?P<estimator>plain|about_merged)$")
 DEVICE_COSTS = re.compile(r"^device_costs_(?:(?P<cpu>cpu)_)?(?P<res>\d+)px$")
 ONE_SETTING = re.compile(r"^one_setting_(?P<res>\d+)px_(?P<preset>\w+)$")
 NOT_PRESETS = {"settings_per_hour_2_vs_1_workers"}
@@ -783,7 +784,7 @@ def kinds_lines(rs: list[dict]) -> list[str]:
         out += [
             f"### {res} px, {db} dB ({_fmt(group[0].get('views_measured'))} views a model, "
             f"references at {_fmt(group[0].get('reference_factor'))}× the samples; "
-            f"levels {named})",
+            f"levels {named}; {ESTIMATORS[group[0].get('estimator', 'plain')]})",
             "",
             head,
             "| --- | --- | --- | --- | --- | --- | --- | --- |",
@@ -799,6 +800,53 @@ def kinds_lines(rs: list[dict]) -> list[str]:
             )
         out.append("")
     return out
+
+
+# The half-noise estimates a target build has recorded and stopped on (rows without the
+# field were measured with the plain one).
+ESTIMATORS = {
+    "plain": "estimate: the halves' plain difference",
+    "about_merged": "estimate: the halves about the merged image",
+}
+
+
+def half_noise_lines(rs: list[dict]) -> list[str]:
+    """The two half-noise estimates on replicated renders (bench/check_half_noise.py): at
+    fixed sample counts, and where the target rule stops on each."""
+    if not rs:
+        return []
+    first = rs[0]
+    counts = ("4", "16", "64", "256")
+    out = [
+        "## The estimate where sRGB bends",
+        "",
+        "`bench/check_half_noise.py` renders a sharp view of a glossy model as two halves on",
+        "independent seeds at each of a grid of sample counts, on several independent seed",
+        f"pairs, at {_fmt(first.get('resolution'))} px against a reference of",
+        f"{_fmt(first.get('reference_samples_per_half'))} samples a half, and replays the",
+        f"target rule ({_fmt(first.get('target_db'))} dB) on the grid once per estimate: the",
+        "halves' plain difference, MSE(h₁, h₂)/4, and each half's sRGB distance from the",
+        "image their mean writes (what builds record and stop on). Where the noise spans",
+        "sRGB's bend the plain difference misses part of the written image's error.",
+        "",
+        "| model | estimate | images | mean estimate / measured at "
+        + ", ".join(counts)
+        + " samples a half | stopped: estimate − measured, median (dB) | within 1 dB "
+        "| bound holds | at T − 0.5 dB | samples a half, median |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in sorted(rs, key=lambda r: (r["model"] != "all", r["model"], r["estimator"] != "plain")):
+        ratios = r.get("mean_estimate_over_measured_by_samples") or {}
+        model = "**every model**" if r["model"] == "all" else f"`{r['model']}`"
+        out.append(
+            f"| {model} | {ESTIMATORS[r['estimator']].split(': ')[1]} | {r['images']} | "
+            + ", ".join(_fmt(ratios.get(c)) for c in counts)
+            + f" | {r['stopped_estimate_over_measured_db_median']:+.2f} | "
+            f"{r['stopped_estimate_within_1db_share']:.0%} | "
+            f"{r['stopped_bound_holds_share']:.0%} | {r['stopped_at_target_share']:.0%} | "
+            f"{_fmt(r['stopped_samples_per_half_median'])} |"
+        )
+    return [*out, ""]
 
 
 def _specular_section(rs: list[dict]) -> list[str]:
@@ -1322,6 +1370,7 @@ def _by_page(results: list[dict]) -> dict[str, list[dict]]:
         ("speed", SPEED.match),
         ("kinds", KINDS.match),
         ("detail", DETAIL.match),
+        ("half_noise", HALF_NOISE.match),
     ]
     out: dict[str, list[dict]] = {k: [] for k, _ in [*kinds, ("other", None)]}
     for r in results:
@@ -1363,9 +1412,14 @@ def main(figures_too: bool = True) -> int:
             "Render targets",
             targets_page(kind["target"])
             + kinds_lines(kind["kinds"])
+            + half_noise_lines(kind["half_noise"])
             + speed_lines(kind["speed"])
             + detail_lines(kind["detail"]),
-            len(kind["target"]) + len(kind["kinds"]) + len(kind["speed"]) + len(kind["detail"]),
+            len(kind["target"])
+            + len(kind["kinds"])
+            + len(kind["half_noise"])
+            + len(kind["speed"])
+            + len(kind["detail"]),
         ),
     ]
     gpu = json.loads(RESULTS_GPU.read_text()) if RESULTS_GPU.exists() else None

@@ -111,11 +111,11 @@ fn object_se(a: &[f32], b: &[f32], background: [f64; 3]) -> Result<(f64, f64, u6
 /// moves its expectation off g(μ) by ½ g″ Var. Expanded about m, the two one-sided steps
 /// cancel g's odd terms and keep (½ g″ d²)², d = (a − b) / 2, whose mean is at least that
 /// bias squared: the estimate is of the image's whole error, not its scatter alone.
-/// Measured on a specular model's sharp view (7 independent repeats at each of 15
-/// sample counts, against a reference of 8× the samples): the plain difference
-/// estimated 0.71–0.77 of the measured error at 4–11 samples a half, this 0.79–0.84;
-/// stopped by the target rule at 45 dB, the plain estimate read a median 1.2 dB over the
-/// measured PSNR, this 0.15 dB.
+/// Measured by `bench/check_half_noise.py` (a sharp view's halves on independent seed
+/// pairs at 15 sample counts against a reference; the rule replayed on them, on our
+/// specular orb and on a held-out glossy model): the plain difference read low at few
+/// samples on both, this less so, and where the rule stops the bound holds on more
+/// images (its rows in bench/results.json, `half_noise_*`).
 fn halves_se(a: &[f32], b: &[f32], background: [f64; 3]) -> Result<(f64, f64, u64)> {
     pixel_sums(a, b, background, |ca, cb| {
         (0..3)
