@@ -193,6 +193,17 @@ def test_the_core_makes_the_load_and_quit_lines(tmp_path) -> None:
     assert "json.dumps" not in source and '"cmd"' not in source
 
 
+def test_a_load_the_contract_lacks_fails_before_the_worker_sees_it(tmp_path, standin_blender):
+    sent: list[str] = []
+    with wc.Worker(blender=str(standin_blender), threads=1, timeout=60) as w:
+        send = w._send_line
+        w._send_line = sent.append  # type: ignore[method-assign]
+        with pytest.raises(wc.WorkerError, match="light_paths"):
+            w.load(tmp_path / "a.glb", tmp_path / "v.npy", light_paths="sometimes")  # type: ignore[arg-type]
+        w._send_line = send  # type: ignore[method-assign]
+        assert not sent and w.alive
+
+
 def test_a_reply_is_typed_by_the_core_and_handed_on_as_sent() -> None:
     """Every line of the real worker passes the core's reply types and comes back the same
     object, every field and its order kept; a null the contract allows stays a null (the
