@@ -18,6 +18,7 @@ import statistics
 import sys
 import tempfile
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from harness import proc_cpu
@@ -28,12 +29,16 @@ RES = int(os.environ.get("BLURSET_BENCH_LP_RES", "256"))
 SAMPLES = 64
 REPEATS = int(os.environ.get("BLURSET_BENCH_REPEATS", "3"))
 DEVICE = os.environ.get("BLURSET_BENCH_DEVICE", "CPU")
+# How a model whose every material is unlit renders (the load request's `unlit`).
+Unlit = Literal["lit", "emission"]
 
 
-def _cases() -> list[tuple[str, Path, str]]:
+def _cases() -> list[tuple[str, Path, Unlit]]:
     if not GLB_DIR.is_dir():
         return []
-    cases = [(p.stem, p, "lit") for p in sorted(GLB_DIR.glob("*.glb"))]
+    cases: list[tuple[str, Path, Unlit]] = [
+        (p.stem, p, "lit") for p in sorted(GLB_DIR.glob("*.glb"))
+    ]
     mazda = GLB_DIR / "sketchfab_MazdaRX7Stylised.glb"
     if mazda.is_file():
         cases.append((f"{mazda.stem}_emission", mazda, "emission"))

@@ -159,7 +159,7 @@ def test_shared_glb_loads_normalized_or_fails_clearly(worker, tmp_path, name):
     np.testing.assert_allclose((v.min(0) + v.max(0)) / 2, 0.0, atol=1e-4)
     np.testing.assert_allclose(v.max(0) - v.min(0), dims, atol=1e-4)
     assert info["n_triangles"] > 0 and info["scale"] > 0 and len(info["center"]) == 3
-    assert min(info["qa_coverage"]) > 0.01
+    assert min(q.coverage for q in worker.object_qa) > 0.01
 
 
 def test_draco_box_decodes_to_the_same_mesh(worker, tmp_path):
@@ -202,7 +202,7 @@ def test_mazda_unlit_renders_its_colours(worker, tmp_path):
     it black; the worker must show the car's colours (lit by our fixed lights)."""
     info = worker.load(shared("glb", "sketchfab_MazdaRX7Stylised.glb"), tmp_path / "v.npy")
     assert info["unlit_fixed"] is True
-    assert min(info["qa_luminance"]) > 0.1
+    assert min(q.luminance for q in worker.object_qa) > 0.1
     c2w = look_at(60.0, 200.0, fit_distance(info["bbox_dims"]))
     out = tmp_path / "mazda.exr"
     worker.render([{"c2w": c2w, "seed": 1, "out": out}], resolution=64, fov_deg=FOV, samples=8)

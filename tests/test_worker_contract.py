@@ -1,7 +1,8 @@
 """The worker contract (issue 49): every line the builder sends a Blender worker and every
 line a worker sends back fits schemas/worker/ (the core's dataset/wire.rs types), for the
 real worker and for the stand-in the fast layer runs on; the shipped schemas are the
-core's; a render's frame is spelled by the core alone."""
+core's; every request line is made by the core (a render's frame spelled by it alone),
+every reply typed by it and handed on as sent; the Python types of both are generated."""
 
 from __future__ import annotations
 
@@ -14,12 +15,15 @@ from typing import Any
 import jsonschema
 import numpy as np
 import pytest
-from blurset.services import outputs
+from blurset.services import outputs, stubgen
 from blurset.services import worker_client as wc
 from blurset.services.demo import make_demo_objects
 
 ROOT = Path(__file__).resolve().parents[1]
 EYE = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 3.0], [0.0, 0.0, 0.0, 1.0]]
+# What the real worker (bpy 5.0.1, CPU) sent: ready, a refused load, a load, a frame on
+# disk, the render done, its --probe line (the core's wire tests read the same file).
+REAL_LINES = (ROOT / "tests" / "data" / "worker_lines.jsonl").read_text().splitlines()
 
 
 def _validators() -> tuple[jsonschema.Draft202012Validator, jsonschema.Draft202012Validator]:
@@ -79,8 +83,8 @@ def _exercise(w: wc.Worker, work: Path) -> None:
 
 def _check(sent: list[dict], got: list[dict], blender: str | None) -> None:
     request, reply = _validators()
-    # close() writes its quit line directly: the contract has it too.
-    for msg in [*sent, {"cmd": "quit"}]:
+    # close() writes the core's quit line directly: the contract has it too.
+    for msg in [*sent, json.loads(wc.quit_line())]:
         errors = [e.message for e in request.iter_errors(msg)]
         assert not errors, (msg.get("cmd"), errors[:1])
     for msg in got:
@@ -170,3 +174,91 @@ def test_the_core_spells_a_frame_and_refuses_a_broken_one() -> None:
         line([{**plan_render, "motion": {"steps": 2, "keys": [EYE] * 3}}])
     with pytest.raises(ValueError, match="sampels"):
         line([{**plan_render, "sampels": 2}])
+
+
+def test_the_core_makes_the_load_and_quit_lines(tmp_path) -> None:
+    request, _ = _validators()
+    glb, verts = tmp_path / "a.glb", tmp_path / "v.npy"
+    msg = json.loads(wc.load_line(glb, verts, unlit="emission", light_paths="fixed"))
+    assert msg == {"cmd": "load", "glb": str(glb), "vertices_out": str(verts),
+                   "unlit": "emission", "light_paths": "fixed"}  # fmt: skip
+    assert not list(request.iter_errors(msg))
+    with pytest.raises(ValueError, match="light_paths"):
+        wc.load_line(glb, verts, unlit="lit", light_paths="sometimes")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="unlit"):
+        wc.load_line(glb, verts, unlit="glow", light_paths="auto")  # type: ignore[arg-type]
+    assert json.loads(wc.quit_line()) == {"cmd": "quit"}
+    # worker_client builds no envelope of its own: every line comes from the core.
+    source = (ROOT / "python" / "blurset" / "services" / "worker_client.py").read_text()
+    assert "json.dumps" not in source and '"cmd"' not in source
+
+
+def test_a_load_the_contract_lacks_fails_before_the_worker_sees_it(tmp_path, standin_blender):
+    sent: list[str] = []
+    with wc.Worker(blender=str(standin_blender), threads=1, timeout=60) as w:
+        send = w._send_line
+        w._send_line = sent.append  # type: ignore[method-assign]
+        with pytest.raises(wc.WorkerError, match="light_paths"):
+            w.load(tmp_path / "a.glb", tmp_path / "v.npy", light_paths="sometimes")  # type: ignore[arg-type]
+        w._send_line = send  # type: ignore[method-assign]
+        assert not sent and w.alive
+
+
+def test_a_reply_is_typed_by_the_core_and_handed_on_as_sent() -> None:
+    """Every line of the real worker passes the core's reply types and comes back the same
+    object, every field and its order kept; a null the contract allows stays a null (the
+    typed value would drop it); a null, a wrong type or an extra field it does not allow
+    is a ValueError naming the reply and the field."""
+    _, reply = _validators()
+    assert len(REAL_LINES) == 6
+    for line in REAL_LINES:
+        msg = json.loads(line)
+        got = wc.typed_reply(msg)
+        assert got is msg and json.dumps(got) == json.dumps(json.loads(line))
+        assert not list(reply.iter_errors(msg))
+    ready = {**json.loads(REAL_LINES[0]), "cuda": None}
+    got = wc.typed_reply(copy.deepcopy(ready))
+    assert got == ready and "cuda" in got and got["cuda"] is None
+    assert not list(reply.iter_errors(ready))
+    gpu = {**ready, "device": {"backend": "OPTIX", "devices": ["NVIDIA H100"], "kernel": "OPTIX"},
+           "cuda": {"archs": ["sm_90"], "kernels": ["sm_86", "sm_89"], "driver": 13000}}  # fmt: skip
+    assert wc.typed_reply(copy.deepcopy(gpu)) == gpu
+    loaded = json.loads(REAL_LINES[2])
+    for bad, field in (
+        ({**ready, "device": {**ready["device"], "kernel": None}}, "device.kernel"),
+        ({**loaded, "n_vertices": -1}, "n_vertices"),
+        ({**loaded, "bbox": [1, 1, 1]}, "bbox"),
+        ({"frame": 0, "out": "a.exr", "seconds": 0.1}, "origin"),
+        ({"ok": True, "hello": 1}, "hello"),
+    ):
+        with pytest.raises(ValueError, match=field):
+            wc.typed_reply(bad)
+        assert list(reply.iter_errors(bad)), bad  # the schema refuses it too
+
+
+def test_a_worker_line_outside_the_contract_fails_the_worker(tmp_path) -> None:
+    """A worker whose ready line the contract lacks (an old worker.py, a changed Blender)
+    fails at start-up with the core's reason, its process gone."""
+    blender = tmp_path / "blender"
+    line = json.dumps({**json.loads(REAL_LINES[0]), "gpu_memory": 80})
+    blender.write_text(f"#!/bin/sh\necho 'Blender 5.0.1 banner'\necho '{line}'\nexec sleep 60\n")
+    blender.chmod(0o755)
+    with pytest.raises(wc.WorkerError, match="gpu_memory"):
+        wc.Worker(blender=str(blender), threads=1, timeout=30)
+
+
+def test_the_requests_and_replies_have_generated_types() -> None:
+    """_records.pyi types every request and reply from the contract's schemas (no
+    hand-written TypedDict for them), each closed (`@final`: mypy narrows a reply by
+    its key), and worker_client returns them."""
+    text = stubgen.STUB.read_text()
+    replies = ["Ready", "Loaded", "FrameDone", "Rendered", "Refused", "Probe"]
+    assert f"WorkerReply = {' | '.join(replies)}" in text
+    assert "WorkerRequest = WorkerRequestOf0 | WorkerRequestOf1 | WorkerRequestOf2" in text
+    for name in replies:
+        assert f"@final\nclass {name}(TypedDict):" in text, name
+    source = (ROOT / "python" / "blurset" / "services" / "worker_client.py").read_text()
+    assert "TypedDict, total=False" not in source and "_records.Loaded, " not in source
+    for typed in ("-> _records.Loaded:", "-> _records.Rendered:", "-> _records.WorkerReply:",
+                  "self.info: _records.Ready"):  # fmt: skip
+        assert typed in source, typed

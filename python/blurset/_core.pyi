@@ -1569,5 +1569,20 @@ def render_request(
     frames of `c2w`, `seed` and `out`): each frame typed as the core's Render and checked,
     its EXR path made absolute; ValueError naming what is wrong."""
 
+def load_request(
+    glb: str, vertices_out: str, *, unlit: rec.Unlit, light_paths: rec.LightPaths
+) -> str:
+    """The JSON line of a load request: import, normalize and light the GLB at `glb` (an
+    absolute path), its vertices to `vertices_out`; ValueError for an `unlit` or
+    `light_paths` the contract lacks."""
+
+def quit_request() -> str:
+    """The JSON line that asks the worker to exit."""
+
+def worker_reply(msg: object) -> rec.WorkerReply:
+    """A reply the worker sent (its JSON line parsed), checked against the contract's
+    reply types and given back as sent (every field, a null kept); ValueError naming the
+    reply and the field that does not fit."""
+
 def worker_schemas() -> list[tuple[str, Any]]:
     """(file stem, JSON Schema) of the worker's requests and replies."""

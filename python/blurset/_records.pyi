@@ -3,8 +3,9 @@ blurset.services.stubgen from blurset-core's JSON Schemas (`make schemas`); do n
 
 # ruff: noqa: E501
 
-from typing import Any, Literal, NotRequired, TypedDict
+from typing import Any, Literal, NotRequired, TypedDict, final
 
+@final
 class ImageRender(TypedDict):
     """How one image of a target-driven build was rendered (`views[].images[<level dir>]`)."""
 
@@ -24,12 +25,14 @@ class Spread(TypedDict):
     p5: float
     worst: float
 
+@final
 class Band(TypedDict):
     """The rows a render exposes of its image: `rows` [top, bottom), one of `of` bands that tile the image's rows once."""
 
     of: int
     rows: list[int]
 
+@final
 class Dof(TypedDict):
     """The thin lens of a defocus render ([`crate::plan::kinds::defocus`])."""
 
@@ -65,12 +68,14 @@ class ImageKindOf4(TypedDict):
 
 ImageKind = ImageKindOf0 | ImageKindOf1 | ImageKindOf2 | ImageKindOf3 | ImageKindOf4
 
+@final
 class Motion(TypedDict):
     """The camera path of one Cycles motion blur render: 2^steps + 1 keys."""
 
     keys: list[list[list[float]]]
     steps: int
 
+@final
 class Render(TypedDict):
     """One render: the camera, its Cycles seed and samples, the EXR it writes, and the view and image it is accumulated into. A caller's frame (an object's QA view, a geometry render) may give only `c2w`, `seed` and `out`."""
 
@@ -134,6 +139,7 @@ class SamplingConfig(TypedDict):
     views: NotRequired[int]
     window_deg: NotRequired[float]
 
+@final
 class DefocusPlan(TypedDict):
     """One defocus level of one view, as meta.json records it (`views[i].defocus[l]`)."""
 
@@ -193,6 +199,7 @@ class LevelPlan(TypedDict):
     samples_per_frame: int
     w_l: float
 
+@final
 class RollingShutterPlan(TypedDict):
     """One rolling shutter level of one view, as meta.json records it."""
 
@@ -206,6 +213,7 @@ class RollingShutterPlan(TypedDict):
     turn_deg: float
     turns_deg: list[float]
 
+@final
 class ShakePose(TypedDict):
     """The camera's turn at one instant of the exposure, as a rotation `Rz(roll) · Ry(yaw) · Rx(pitch)` of the camera at its written pose (roll about the written viewing axis, so it moves the image centre nowhere)."""
 
@@ -214,6 +222,7 @@ class ShakePose(TypedDict):
     t: float
     yaw_deg: float
 
+@final
 class ShakePlan(TypedDict):
     """One shake level of one view, as meta.json records it (`views[i].shake[l]`)."""
 
@@ -271,6 +280,7 @@ class SettingPlan(TypedDict):
     uid: str
     views: list[ViewPlan]
 
+@final
 class ObjectRecord(TypedDict):
     """Where the object came from, who made it and under which licence (issue 19: no path of the build machine), and what the worker reported about it (null where it did not say)."""
 
@@ -292,6 +302,7 @@ class ObjectRecord(TypedDict):
     unlit_fixed: NotRequired[bool | None]
     warnings: NotRequired[list[str]]
 
+@final
 class Timings(TypedDict):
     """Wall-clock seconds of a setting's stages (not part of the data: they vary per run)."""
 
@@ -303,6 +314,7 @@ class Timings(TypedDict):
     sharp_s: NotRequired[float | None]
     total_s: NotRequired[float | None]
 
+@final
 class DatasetCounts(TypedDict):
     """What a build holds now."""
 
@@ -325,6 +337,7 @@ PoseCheck = TypedDict(
     },
 )
 
+@final
 class DeviceRecord(TypedDict):
     """What a worker rendered on."""
 
@@ -332,6 +345,7 @@ class DeviceRecord(TypedDict):
     devices: list[str]
     kernel: str
 
+@final
 class Versions(TypedDict):
     """Versions of what made a build."""
 
@@ -339,6 +353,7 @@ class Versions(TypedDict):
     blurset: str
     python: str
 
+@final
 class DatasetDoc(TypedDict):
     """`dataset.json`: the config, versions, seed and counts of a build."""
 
@@ -355,12 +370,14 @@ class DatasetDoc(TypedDict):
     settings: list[str]
     versions: Versions
 
+@final
 class BuildNoiseRecord(TypedDict):
     """Where the seed of one level of a build's setting comes from (build mode)."""
 
     seed: int
     seed_derivation: str
 
+@final
 class NoiseFile(TypedDict):
     """One written image: its view, frame, clean source and files."""
 
@@ -371,6 +388,7 @@ class NoiseFile(TypedDict):
     source: str
     view: int
 
+@final
 class NoiseTableRecord(TypedDict):
     """The σ(gain) table a noisy scene was made with."""
 
@@ -381,12 +399,14 @@ class NoiseTableRecord(TypedDict):
     shot_step_per_log2_gain: float
     source: str
 
+@final
 class NoiseSourceOf0(TypedDict):
     factor: int
     images: str
     resolution: list[int]
     scene: str
 
+@final
 class NoiseSourceOf1(TypedDict):
     background: list[float]
     build: str
@@ -397,12 +417,14 @@ class NoiseSourceOf1(TypedDict):
 
 NoiseSource = NoiseSourceOf0 | NoiseSourceOf1
 
+@final
 class WhiteBalanceRecord(TypedDict):
     """The white balance of a noisy scene (one draw per scene)."""
 
     blue: float
     red: float
 
+@final
 class NoiseDoc(TypedDict):
     """`noise.json` of one noisy scene (one gain)."""
 
@@ -539,49 +561,7 @@ class HalfNoise(TypedDict):
     n_eff: float
     psnr_bound: float
 
-class Bounces(TypedDict):
-    """The Cycles bounce limits a worker set (`blender_scene.FIXED_BOUNCES`'s keys)."""
-
-    diffuse_bounces: int
-    glossy_bounces: int
-    max_bounces: int
-    transmission_bounces: int
-    transparent_max_bounces: int
-    volume_bounces: int
-
-LightPaths = Literal["auto", "fixed"]
-
-class LightPathsRecord(TypedDict):
-    """The light paths of an object's renders, as its worker reported them: the bounce limits and what the materials can do that decided them under `auto`."""
-
-    bounces: Bounces
-    mode: LightPaths
-    transmission: bool
-    transparency: bool
-    unlit_only: bool
-
-class Loaded(TypedDict):
-    """A GLB loaded: the normalized object and how it will render."""
-
-    bbox_dims: list[float]
-    center: list[float]
-    device: DeviceRecord
-    light_paths: LightPathsRecord
-    n_triangles: int
-    n_vertices: int
-    ok: bool
-    scale: float
-    seconds: float
-    unlit_fixed: bool
-    warnings: list[str]
-
-class Rendered(TypedDict):
-    """A render request done."""
-
-    done: int
-    jobs: int
-    ok: bool
-
+@final
 class CostSeconds(TypedDict):
     """The priced seconds of a setting's blurry images (one pilot round each)."""
 
@@ -599,6 +579,7 @@ class CostModel(TypedDict):
     motion_blur_factor: float
     sample_s_512px: float
 
+@final
 class BlurChoice(TypedDict):
     """How `blur_method auto` chose each blurry image's method in a setting (meta.json `render.blur_choice`; each level's own `method` says which it got)."""
 
@@ -612,12 +593,36 @@ class BlurChoice(TypedDict):
 
 Denoise = Literal["none", "oidn"]
 
+@final
 class DenoiserRecord(TypedDict):
     """The denoiser of a build's images, as meta.json records it (fields in alphabetical order, as the dict it replaced was written)."""
 
     device: str
     library: str
     version: str
+
+@final
+class Bounces(TypedDict):
+    """The Cycles bounce limits a worker set (`blender_scene.FIXED_BOUNCES`'s keys)."""
+
+    diffuse_bounces: int
+    glossy_bounces: int
+    max_bounces: int
+    transmission_bounces: int
+    transparent_max_bounces: int
+    volume_bounces: int
+
+LightPaths = Literal["auto", "fixed"]
+
+@final
+class LightPathsRecord(TypedDict):
+    """The light paths of an object's renders, as its worker reported them: the bounce limits and what the materials can do that decided them under `auto`."""
+
+    bounces: Bounces
+    mode: LightPaths
+    transmission: bool
+    transparency: bool
+    unlit_only: bool
 
 Preset = Literal["paper", "balanced", "floor", "fast"]
 
@@ -749,6 +754,7 @@ class MetaRecord(TypedDict):
 
 SplitsRecord = Splits
 
+@final
 class DatasetStart(TypedDict):
     """The dataset.json a build's first run writes under its lock before any setting: the options it is made with (a rerun must keep those that shape outputs)."""
 
@@ -760,6 +766,7 @@ DatasetRecord = DatasetDoc | DatasetStart
 
 NoiseRecord = NoiseDoc
 
+@final
 class NoiseCounts(TypedDict):
     """What a noise output holds."""
 
@@ -767,6 +774,7 @@ class NoiseCounts(TypedDict):
     settings: int
     units: int
 
+@final
 class GainRecord(TypedDict):
     """One gain of a noise output."""
 
@@ -774,6 +782,7 @@ class GainRecord(TypedDict):
     sigma_read: float
     sigma_shot: float
 
+@final
 class NoiseTableParams(TypedDict):
     """The σ(gain) table a noise output is made with (noise.json's, without KPN's file name). Its fields are in name order: the order noise_dataset.json has held them in since it was a free map, so that a rerun writes the same bytes."""
 
@@ -783,6 +792,7 @@ class NoiseTableParams(TypedDict):
     shot_step_per_log2_gain: float
     source: str
 
+@final
 class NoiseParams(TypedDict):
     """The options a noise output is made with; a rerun into it must match them."""
 
@@ -797,6 +807,7 @@ class NoiseParams(TypedDict):
     source: str
     white_level: float
 
+@final
 class NoiseDatasetDoc(TypedDict):
     """`noise_dataset.json` of `blurset noise BUILD` once its run has finished."""
 
@@ -814,6 +825,7 @@ class NoiseDatasetDoc(TypedDict):
     seeds: dict[str, dict[str, int]]
     splits: str
 
+@final
 class NoiseDatasetStart(TypedDict):
     """The noise_dataset.json a noise run writes first (the options only), so that a run killed before its end resumes."""
 
@@ -822,6 +834,7 @@ class NoiseDatasetStart(TypedDict):
 
 NoiseDatasetRecord = NoiseDatasetDoc | NoiseDatasetStart
 
+@final
 class NoiseSceneRecord(TypedDict):
     """`noise_scene.json` of `blurset noise SCENE`: what the folder is, written last."""
 
@@ -835,6 +848,7 @@ class NoiseSceneRecord(TypedDict):
 
 ExportTarget = Literal["llff", "nerfstudio", "geonerf", "hub"]
 
+@final
 class HubShard(TypedDict):
     """One Parquet shard of `export --for hub`: the rows of whole settings of one config."""
 
@@ -871,6 +885,7 @@ ExportDoc = TypedDict(
     },
 )
 
+@final
 class ExportReplacing(TypedDict):
     """The export.json an export writes before it moves its scenes into place: everything it may own by then, so a rerun after a stop replaces those entries."""
 
@@ -912,3 +927,108 @@ class StatsRecord(TypedDict):
     view_index: list[int]
     view_setting: list[int]
     w_u: list[float]
+
+Unlit = Literal["lit", "emission"]
+
+@final
+class WorkerRequestOf0(TypedDict):
+    """`{"cmd":"load"}`: import, normalize and light one GLB."""
+
+    cmd: Literal["load"]
+    glb: str
+    light_paths: NotRequired[LightPaths | None]
+    unlit: NotRequired[Unlit | None]
+    vertices_out: str
+
+@final
+class WorkerRequestOf1(TypedDict):
+    """`{"cmd":"render"}`: render frames in order, one reply per frame on disk, then one."""
+
+    batch: NotRequired[bool | None]
+    cmd: Literal["render"]
+    crop: NotRequired[bool | None]
+    exr_codec: NotRequired[str | None]
+    fov_deg: float
+    frames: list[Render]
+    geometry: NotRequired[bool | None]
+    guides: NotRequired[bool | None]
+    noise_threshold: NotRequired[float | None]
+    resolution: int
+    samples: int
+
+class WorkerRequestOf2(TypedDict):
+    """Exit 0."""
+
+    cmd: Literal["quit"]
+
+WorkerRequest = WorkerRequestOf0 | WorkerRequestOf1 | WorkerRequestOf2
+
+@final
+class CudaArchs(TypedDict):
+    """The compute capabilities of the GPUs a CUDA or OptiX worker sees, and the archs Cycles ships kernels for: the driver compiles the rest before the first frame."""
+
+    archs: list[str]
+    driver: int
+    kernels: list[str]
+
+@final
+class Ready(TypedDict):
+    """The worker's first line, before any request."""
+
+    blender: str
+    blender_version: str
+    cuda: NotRequired[CudaArchs | None]
+    device: DeviceRecord
+    ok: bool
+    pid: int
+    ready: bool
+
+@final
+class Loaded(TypedDict):
+    """A GLB loaded: the normalized object and how it will render."""
+
+    bbox_dims: list[float]
+    center: list[float]
+    device: DeviceRecord
+    light_paths: LightPathsRecord
+    n_triangles: int
+    n_vertices: int
+    ok: bool
+    scale: float
+    seconds: float
+    unlit_fixed: bool
+    warnings: list[str]
+
+@final
+class FrameDone(TypedDict):
+    """One frame on disk."""
+
+    frame: int
+    origin: list[int] | None
+    out: str
+    seconds: float
+
+@final
+class Rendered(TypedDict):
+    """A render request done."""
+
+    done: int
+    jobs: int
+    ok: bool
+
+@final
+class Refused(TypedDict):
+    """A request refused or failed; the worker goes on."""
+
+    ok: bool
+    reason: str
+
+@final
+class Probe(TypedDict):
+    """`--probe`'s one line: the Cycles devices that exist, by backend."""
+
+    blender: str
+    devices: dict[str, list[str]]
+    ok: bool
+
+WorkerReply = Ready | Loaded | FrameDone | Rendered | Refused | Probe

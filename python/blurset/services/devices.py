@@ -35,8 +35,9 @@ def needs_probe(
 
 
 def probe(blender: str | None, timeout: float = 300.0) -> dict[str, list[str]]:
-    """{backend: [device names]} as Cycles reports it, from a short-lived worker."""
-    from blurset.services.worker_client import worker_command
+    """{backend: [device names]} as Cycles reports it, from a short-lived worker (its
+    probe line, checked by the core against the worker contract)."""
+    from blurset.services.worker_client import typed_reply, worker_command
 
     cmd = worker_command(blender, 1, probe=True)
     try:
@@ -50,8 +51,14 @@ def probe(blender: str | None, timeout: float = 300.0) -> dict[str, list[str]]:
                 msg = json.loads(line)
             except ValueError:
                 continue
-            if isinstance(msg, dict) and msg.get("ok") and "devices" in msg:
-                return {str(k): [str(n) for n in v] for k, v in msg["devices"].items()}
+            if not isinstance(msg, dict):
+                continue
+            try:
+                reply = typed_reply(msg)
+            except ValueError as e:
+                raise ConfigError(f"--device: Blender's answer is no probe line: {e}") from None
+            if "devices" in reply and reply["ok"]:
+                return reply["devices"]
     tail = proc.stderr.decode("utf-8", "replace").strip().splitlines()[-1:]
     raise ConfigError(f"--device: Blender did not report its devices ({' '.join(tail)})")
 

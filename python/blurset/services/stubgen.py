@@ -2,13 +2,17 @@
 
 A value the bindings give to Python as a dict (a plan's renders, a setting's plan, the
 statistics …) or take from it (dataset.json, noise.json, a meta.json's object record) has
-a JSON Schema in blurset-core (`_core.value_schemas()`, `_core.record_schemas()`); this
+a JSON Schema in blurset-core (`_core.value_schemas()`, `_core.record_schemas()`), as has
+every line of the worker contract (`_core.worker_schemas()`: `WorkerRequest` and
+`WorkerReply`, each the union of its messages); this
 module turns those schemas into `TypedDict`s in `blurset/_records.pyi`, the stub the
 bindings' stub (`_core.pyi`) takes its types from. `make schemas` writes it; a test
 fails when the shipped file differs, so a field added in the core reaches mypy.
 
 What JSON Schema says and Python cannot (ranges, lengths, formats) is left to the core's
-readers; a field free in the core (`serde_json::Value`) is `Any` here, by name.
+readers; a field free in the core (`serde_json::Value`) is `Any` here, by name. A type the
+core closes (`deny_unknown_fields`: `"additionalProperties": false`) is a `@final`
+TypedDict, so mypy narrows a union of them by a key (`"frame" in reply`: a FrameDone).
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ blurset.services.stubgen from blurset-core's JSON Schemas (`make schemas`); do n
 
 # ruff: noqa: E501
 
-from typing import Any, Literal, NotRequired, TypedDict
+from typing import Any, Literal, NotRequired, TypedDict, final
 '''
 _SIMPLE = {"string": "str", "integer": "int", "number": "float", "boolean": "bool", "null": "None"}
 
@@ -128,7 +132,8 @@ class _Gen:
             fields.append((key, t if key in required else f"NotRequired[{t}]"))
         doc = " ".join(str(s.get("description", "")).split())
         if all(k.isidentifier() and not keyword.iskeyword(k) for k, _ in fields):
-            lines = [f"class {name}(TypedDict):"]
+            closed = s.get("additionalProperties") is False
+            lines = [*(["@final"] if closed else []), f"class {name}(TypedDict):"]
             if doc:
                 lines.append(f'    """{doc}"""' if '"""' not in doc else "")
             lines += [f"    {k}: {t}" for k, t in fields]
@@ -147,6 +152,8 @@ def render() -> str:
     for file, schema in _core.record_schemas():
         base = file.removesuffix(".schema.json")
         roots.append((_ident(base) + "Record", schema))
+    # worker_request, worker_reply: WorkerRequest, WorkerReply.
+    roots += [(_ident(stem), schema) for stem, schema in _core.worker_schemas()]
     for name, schema in roots:
         gen.named(name, schema, schema.get("$defs", {}))
     # In the order they were finished: what a class names comes before it.

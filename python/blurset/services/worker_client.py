@@ -7,6 +7,10 @@ after a crash or timeout, so one Worker can serve a whole queue of objects.
     with Worker(threads=2, timeout=300) as w:
         info = w.load(glb, vertices_out)           # WorkerError: the object failed
         w.render(frames, resolution=96, fov_deg=40.0, samples=8)
+
+Every request line is made by the core and every reply line typed by it (dataset/wire.rs,
+schemas/worker/): the types of both here are generated from its schemas (`_records.pyi`:
+WorkerRequest, WorkerReply and their members).
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import time
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any, NoReturn, TypedDict, cast
+from typing import IO, TYPE_CHECKING, Any, NoReturn, TypedDict
 
 from blurset import _core
 from blurset.exceptions import BlursetError
@@ -57,6 +61,36 @@ def request_line(frames: Sequence[Mapping[str, Any]], **request: Any) -> str:
     (dataset/wire.rs, the contract in schemas/worker/); ValueError naming what is wrong.
     `request`: resolution, fov_deg, samples and the render options."""
     return _core.render_request([{**_plain(f), "out": str(f["out"])} for f in frames], **request)
+
+
+def load_line(
+    glb: Path,
+    vertices_out: Path,
+    *,
+    unlit: _records.Unlit = "lit",
+    light_paths: _records.LightPaths = "auto",
+) -> str:
+    """The load request of `glb` as the line the worker reads (the core's: dataset/wire.rs),
+    both paths resolved (the worker runs in a folder of its own); ValueError for an
+    `unlit` or `light_paths` the contract lacks."""
+    return _core.load_request(
+        str(Path(glb).resolve()),
+        str(Path(vertices_out).resolve()),
+        unlit=unlit,
+        light_paths=light_paths,
+    )
+
+
+def quit_line() -> str:
+    """The line that asks the worker to exit (the core's)."""
+    return _core.quit_request()
+
+
+def typed_reply(msg: object) -> _records.WorkerReply:
+    """A line the worker sent (parsed JSON), checked by the core against the contract's
+    replies: the same object, every field as sent (a null kept), or ValueError naming the
+    reply and the field that does not fit."""
+    return _core.worker_reply(msg)
 
 
 class WorkerError(BlursetError):
@@ -126,26 +160,6 @@ def worker_command(
     ]
 
 
-if TYPE_CHECKING:
-
-    class LoadedObject(_records.Loaded, total=False):
-        """What `Worker.load` returns: the worker's reply (the core's wire type, whose
-        schema the worker is held to), the driver's QA measures, and what the build adds
-        before it writes meta.json's `object`."""
-
-        qa_coverage: list[float]
-        qa_luminance: list[float]
-        # Added by the build (builder/unit.py).
-        load_s: float
-        provenance: dict[str, Any]
-        blender_version: str | None
-
-    # The worker's final reply to a render request (frames written, render calls).
-    RenderDone = _records.Rendered
-else:  # the types are the core's schemas, for the type checker; at run time, dicts
-    LoadedObject = RenderDone = dict
-
-
 class RenderOptions(TypedDict):
     """What every render of one setting shares (`Worker.render`'s keywords)."""
 
@@ -191,7 +205,10 @@ class Worker:
             os.close(fd)
             log_path = Path(name)
         self.log_path = Path(log_path)
-        self.info: dict[str, Any] = {}
+        # The worker's ready line (Blender version, device, CUDA archs), set by _start.
+        self.info: _records.Ready
+        # The core's QA measures of the views of the object loaded last (Worker.load).
+        self.object_qa: list[_core.FrameQa] = []
         # Archs whose kernels the driver compiles before this worker's first frame.
         self._compiling: list[str] = []
         self._env = kernels.environ()
@@ -233,11 +250,12 @@ class Worker:
             _LIVE.add(self)
         self._lines = queue.Queue(maxsize=QUEUE_LINES)
         threading.Thread(target=_pump, args=(self._proc.stdout, self._lines), daemon=True).start()
-        self.info = self._receive(startup=True)
-        if not self.info.get("ok"):
-            reason = self.info.get("reason", "worker refused to start")
+        ready = self._receive(startup=True)
+        if "ready" not in ready or not ready["ok"]:
+            reason = ready["reason"] if "reason" in ready else "its first line is no ready line"
             self._discard()
             raise WorkerError(f"Blender worker: {reason}")
+        self.info = ready
         self._compiling = kernels.to_compile(self.info, self._env)
         if self._compiling:
             kernels.announce(self._compiling, self._env)
@@ -286,9 +304,6 @@ class Worker:
 
     # -- protocol -----------------------------------------------------------------------
 
-    def _send(self, msg: dict[str, Any]) -> None:
-        self._send_line(json.dumps(msg))
-
     def _send_line(self, line: str) -> None:
         self._ensure_started()
         assert self._proc is not None and self._proc.stdin is not None
@@ -310,7 +325,7 @@ class Worker:
         worker's kernels (before its first frame) the time that takes too."""
         return self.timeout + (kernels.COMPILE_ALLOWANCE_S if self._compiling else 0.0)
 
-    def _receive(self, *, startup: bool = False) -> dict[str, Any]:
+    def _receive(self, *, startup: bool = False) -> _records.WorkerReply:
         wait = self.reply_wait
         reply_by = time.monotonic() + wait
         deadline = min(reply_by, self.deadline) if self.deadline is not None else reply_by
@@ -347,9 +362,13 @@ class Worker:
             except ValueError:
                 continue
             if isinstance(msg, dict):
-                return msg
+                try:  # the core types it: the line as sent, or the field that is wrong
+                    return typed_reply(msg)
+                except ValueError as e:
+                    self._discard()  # out of step with the contract: nothing it says counts
+                    raise WorkerError(f"Blender worker: {e}") from None
 
-    def _receive_in_sync(self) -> dict[str, Any]:
+    def _receive_in_sync(self) -> _records.WorkerReply:
         """_receive, but an interrupt (Ctrl-C) mid-command kills the worker: replies still
         on their way would otherwise be read as the answers to the next command."""
         try:
@@ -363,36 +382,37 @@ class Worker:
     # -- commands -----------------------------------------------------------------------
 
     def load(
-        self, glb: Path, vertices_out: Path, *, unlit: str = "lit", light_paths: str = "auto"
-    ) -> LoadedObject:
+        self,
+        glb: Path,
+        vertices_out: Path,
+        *,
+        unlit: _records.Unlit = "lit",
+        light_paths: _records.LightPaths = "auto",
+    ) -> _records.Loaded:
         """Import and normalize one GLB (light-path bounces from its materials, or fixed),
-        then render its QA views and judge them; the worker's reply (see
-        blender_scripts/worker.py) plus `qa_coverage`, `qa_luminance`.
+        then render its QA views and judge them (their measures: `object_qa`); the
+        worker's reply as it sent it (see blender_scripts/worker.py).
 
         Raises WorkerError with a one-line reason when the object cannot be rendered
         (missing file, unsupported compression, no mesh, invisible, renders black, ...).
         """
-        self._send(
-            {
-                "cmd": "load",
-                "glb": str(Path(glb).resolve()),
-                "vertices_out": str(Path(vertices_out).resolve()),
-                "unlit": unlit,
-                "light_paths": light_paths,
-            }
-        )
+        self.object_qa = []
+        try:
+            line = load_line(glb, vertices_out, unlit=unlit, light_paths=light_paths)
+        except ValueError as e:  # refused before the worker sees it, as it would refuse
+            raise WorkerError(f"load failed: {e} ({glb})") from None
+        self._send_line(line)
         reply = self._receive_in_sync()
-        if not reply.get("ok"):
-            raise WorkerError(f"{reply.get('reason', 'load failed')} ({glb})")
+        if "bbox_dims" not in reply or not reply["ok"]:
+            raise WorkerError(f"{reply['reason'] if 'reason' in reply else 'load failed'} ({glb})")
         qa = self._object_qa(reply["bbox_dims"])
         failure = _core.object_qa_verdict(qa)
         if failure:
             raise WorkerError(f"{failure} ({glb})")
-        reply["qa_coverage"] = [q.coverage for q in qa]
-        reply["qa_luminance"] = [q.luminance for q in qa]
-        return cast(LoadedObject, reply)
+        self.object_qa = qa
+        return reply
 
-    def _object_qa(self, bbox_dims: list[float]) -> list[Any]:
+    def _object_qa(self, bbox_dims: list[float]) -> list[_core.FrameQa]:
         """Render the core's QA views of the loaded object (tiny, few samples) and measure
         each with the core's frame QA: the worker renders, blurset-core judges."""
         if self.workdir is not None:
@@ -426,7 +446,7 @@ class Worker:
         crop: bool = False,
         guides: bool = False,
         geometry: bool = False,
-    ) -> RenderDone:
+    ) -> _records.Rendered:
         """Render frames ({"c2w": 4x4 row-major, "seed": int, "out": EXR path}) in order.
 
         `samples` is the count of every frame that carries none; without it, each frame
@@ -475,7 +495,7 @@ class Worker:
 
     def _await_render(
         self, n: int, on_frame: Callable[[int, str, tuple[int, int] | None], None] | None
-    ) -> RenderDone:
+    ) -> _records.Rendered:
         """The replies of one render request: each frame on disk to `on_frame`, then the
         final reply, which must count all `n` frames."""
         while True:
@@ -486,25 +506,26 @@ class Worker:
                     self._compiling = []
                 if on_frame is not None:
                     try:
-                        origin = msg.get("origin")
-                        at = None if origin is None else (int(origin[0]), int(origin[1]))
-                        on_frame(int(msg["frame"]), str(msg["out"]), at)
+                        origin = msg["origin"]
+                        at = None if origin is None else (origin[0], origin[1])
+                        on_frame(msg["frame"], msg["out"], at)
                     except BaseException:
                         self._discard()  # it is still rendering: its replies would desync
                         raise
                 continue
-            if not msg.get("ok"):
-                raise WorkerError(f"render failed: {msg.get('reason', 'unknown')}")
-            if msg.get("done") != n:
-                raise WorkerError(f"render: worker reported {msg.get('done')} of {n} frames")
-            return cast(RenderDone, msg)
+            if "done" not in msg or not msg["ok"]:
+                reason = msg["reason"] if "reason" in msg else f"answered with {sorted(msg)}"
+                raise WorkerError(f"render failed: {reason}")
+            if msg["done"] != n:
+                raise WorkerError(f"render: worker reported {msg['done']} of {n} frames")
+            return msg
 
     def close(self) -> None:
         """Ask the worker to quit; kill it if it does not within a few seconds."""
         if self._proc is not None and self._proc.poll() is None:
             try:
                 assert self._proc.stdin is not None
-                self._proc.stdin.write(b'{"cmd":"quit"}\n')
+                self._proc.stdin.write((quit_line() + "\n").encode("utf-8"))
                 self._proc.stdin.flush()
                 self._proc.wait(timeout=10)
             except (OSError, subprocess.TimeoutExpired):

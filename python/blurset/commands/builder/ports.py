@@ -7,9 +7,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
-from blurset.services.worker_client import LoadedObject, RenderDone, Worker
+from blurset.services.worker_client import Worker
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 # A frame on disk: its index in the request, its EXR, and where a cropped EXR's pixels
 # sit in the image (None: a whole image).
@@ -20,13 +23,18 @@ class RenderWorker(Protocol):
     """Loads one object at a time and renders frames of it, each reported once on disk."""
 
     @property
-    def info(self) -> Mapping[str, object]:
+    def info(self) -> _records.Ready:
         """The worker's ready line (Blender version, device, CUDA archs)."""
         ...
 
     def load(
-        self, glb: Path, vertices_out: Path, *, unlit: str = "lit", light_paths: str = "auto"
-    ) -> LoadedObject:
+        self,
+        glb: Path,
+        vertices_out: Path,
+        *,
+        unlit: _records.Unlit = "lit",
+        light_paths: _records.LightPaths = "auto",
+    ) -> _records.Loaded:
         """Import, normalize and light one GLB, its QA views judged."""
         ...
 
@@ -44,7 +52,7 @@ class RenderWorker(Protocol):
         crop: bool = False,
         guides: bool = False,
         geometry: bool = False,
-    ) -> RenderDone:
+    ) -> _records.Rendered:
         """Render `frames` in order; `on_frame` as each one is on disk."""
         ...
 

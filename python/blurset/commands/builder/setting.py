@@ -27,7 +27,7 @@ from blurset.services.progress import Progress
 if TYPE_CHECKING:
     from blurset import _records
     from blurset.commands.builder.ports import RenderWorker
-    from blurset.services.worker_client import LoadedObject, RenderOptions
+    from blurset.services.worker_client import RenderOptions
 
 
 @dataclass
@@ -39,6 +39,18 @@ class SettingJob:
     @property
     def name(self) -> str:
         return layout.setting_name(self.obj.uid, self.theta0_deg)
+
+
+@dataclass(frozen=True)
+class LoadedObject:
+    """An object its worker loaded: the worker's reply as it sent it (the contract's type,
+    _records.Loaded) and what the build adds to meta.json's `object` and timings."""
+
+    reply: _records.Loaded
+    load_s: float
+    # Where the object came from (path relative to its root, sha256, licence …).
+    provenance: dict[str, Any]
+    blender_version: str
 
 
 class SettingFailed(BlursetError):
@@ -81,7 +93,7 @@ def _masks(cfg: BuildConfig) -> bool:
 PRICE_BACKEND_ENV = "BLURSET_PRICE_BACKEND"
 
 
-def pricing_backend(info: LoadedObject, cfg: BuildConfig) -> str:
+def pricing_backend(info: _records.Loaded, cfg: BuildConfig) -> str:
     """The backend the core prices `blur_method auto` on: the one the worker reported
     rendering on (its ready reply's `device.backend`), else the configured device."""
     forced = os.environ.get(PRICE_BACKEND_ENV)
@@ -90,23 +102,28 @@ def pricing_backend(info: LoadedObject, cfg: BuildConfig) -> str:
     return reported_backend(info, cfg)
 
 
-def reported_backend(info: LoadedObject, cfg: BuildConfig) -> str:
+def reported_backend(info: _records.Loaded, cfg: BuildConfig) -> str:
     """The Cycles backend the worker reported rendering on, else the configured device."""
     device = info.get("device")
     return device["backend"] if device else cfg.device
 
 
-def _object_record(obj: ObjectSpec, info: LoadedObject) -> _records.ObjectRecord:
-    """meta.json's `object`: the file and what the worker reported about it (free JSON
-    from the worker: the core checks every field when it takes the record)."""
-    keys = ("bbox_dims", "scale", "center", "n_vertices", "n_triangles", "unlit_fixed")
+def _object_record(obj: ObjectSpec, loaded: LoadedObject) -> _records.ObjectRecord:
+    """meta.json's `object`: the file and what the worker reported about it (the core
+    checks every field when it takes the record)."""
+    info = loaded.reply
     record: dict[str, Any] = {
         # path (relative to its root), sha256, title, author, licence, source_url: where
         # the object came from, never the builder's absolute path (issue 19).
-        **info.get("provenance", {}),
-        **{k: info.get(k) for k in keys},
-        "blender_version": info.get("blender_version"),
-        "warnings": info.get("warnings", []),
+        **loaded.provenance,
+        "bbox_dims": info["bbox_dims"],
+        "scale": info["scale"],
+        "center": info["center"],
+        "n_vertices": info["n_vertices"],
+        "n_triangles": info["n_triangles"],
+        "unlit_fixed": info["unlit_fixed"],
+        "blender_version": loaded.blender_version,
+        "warnings": info["warnings"],
     }
     return cast("_records.ObjectRecord", record)
 
@@ -115,7 +132,7 @@ def render_setting(
     job: SettingJob,
     cfg: BuildConfig,
     worker: RenderWorker,
-    info: LoadedObject,
+    loaded: LoadedObject,
     verts: np.ndarray,
     progress: Progress,
 ) -> Path:
@@ -123,10 +140,10 @@ def render_setting(
     final = out_dir(cfg) / job.name
     partial = layout.partial_dir(final)
     t0 = time.time()
-    plan, frames, exr_dir = _plan(job, cfg, info, verts, partial)
+    plan, frames, exr_dir = _plan(job, cfg, loaded.reply, verts, partial)
     _warn_ghosts(plan, cfg, job.name, progress)
     sharp = cfg.sharp_views(plan.n_views)
-    den = _denoiser(cfg, info)
+    den = _denoiser(cfg, loaded.reply)
     session = _core.Session(
         plan, cfg, partial=partial, exr_dir=exr_dir, sharp_views=sharp, denoiser=den
     )
@@ -146,11 +163,11 @@ def render_setting(
         "sharp_s": round(t_sharp, 3),
         "blur_s": round(t_blur, 3),
         **({"geometry_s": round(t_geometry, 3)} if t_geometry else {}),
-        "load_s": info.get("load_s"),
+        "load_s": loaded.load_s,
         "total_s": round(time.time() - t0, 3),
         "frames": n_rendered,
     }
-    _write_records(job, cfg, plan, partial, info, session, den, timings, progress)
+    _write_records(job, cfg, plan, partial, loaded, session, den, timings, progress)
     layout.publish(partial, final)
     return final
 
@@ -168,7 +185,7 @@ def _warn_ghosts(plan: _core.Plan, cfg: BuildConfig, name: str, progress: Progre
 
 
 def _plan(
-    job: SettingJob, cfg: BuildConfig, info: LoadedObject, verts: np.ndarray, partial: Path
+    job: SettingJob, cfg: BuildConfig, info: _records.Loaded, verts: np.ndarray, partial: Path
 ) -> tuple[_core.Plan, list[_records.Render], Path]:
     """The setting's plan and its renders, in a fresh partial folder; returns (plan,
     renders, the folder the frames' EXRs land in)."""
@@ -196,7 +213,7 @@ def _plan(
     return plan, frames, exr_dir
 
 
-def _denoiser(cfg: BuildConfig, info: LoadedObject) -> _core.Denoiser | None:
+def _denoiser(cfg: BuildConfig, info: _records.Loaded) -> _core.Denoiser | None:
     """--denoise oidn: the frames carry their guide passes, and every finished image (a
     blurry mean or the sharp render) is denoised once by the core (issue 28)."""
     if cfg.denoise != "oidn":
@@ -247,7 +264,7 @@ def _write_records(
     cfg: BuildConfig,
     plan: _core.Plan,
     partial: Path,
-    info: LoadedObject,
+    loaded: LoadedObject,
     session: _core.Session,
     den: _core.Denoiser | None,
     timings: _records.Timings,
@@ -260,12 +277,12 @@ def _write_records(
         plan.write_meta(
             partial / layout.META,
             config=cfg,
-            object=_object_record(job.obj, info),
+            object=_object_record(job.obj, loaded),
             timings=timings,
             qa=session.qa(),
             pose_check=pose_check,
-            light_paths=info.get("light_paths"),
-            device=info.get("device"),
+            light_paths=loaded.reply["light_paths"],
+            device=loaded.reply["device"],
             denoiser=den.record() if den is not None else None,
             images=images or None,
         )

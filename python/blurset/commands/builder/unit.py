@@ -22,7 +22,12 @@ from typing import Any
 import numpy as np
 
 from blurset import _core, layout
-from blurset.commands.builder.setting import SettingFailed, SettingJob, render_setting
+from blurset.commands.builder.setting import (
+    LoadedObject,
+    SettingFailed,
+    SettingJob,
+    render_setting,
+)
 from blurset.exceptions import BlursetError
 from blurset.services import attribution, objaverse_cache, outputs, preflight, publish
 from blurset.services.config import BuildConfig, out_dir
@@ -296,17 +301,19 @@ class ObjectUnit:
             gpus=self.device[1],
         ) as w:
             self.stage = "load"
-            info = w.load(obj.path, work / "vertices.npy", light_paths=cfg.light_paths)
-            info["load_s"] = round(time.monotonic() - t0, 3)
-            info["provenance"] = self.provenance
-            info["blender_version"] = w.info.get("blender_version")
+            loaded = LoadedObject(
+                w.load(obj.path, work / "vertices.npy", light_paths=cfg.light_paths),
+                load_s=round(time.monotonic() - t0, 3),
+                provenance=self.provenance,
+                blender_version=w.info["blender_version"],
+            )
             verts = np.ascontiguousarray(np.load(work / "vertices.npy"), dtype=np.float32)
             self.stage = "render"
             while pending:
                 j = pending[0]
                 t1 = time.monotonic()
                 try:
-                    render_setting(j, cfg, w, info, verts, progress)
+                    render_setting(j, cfg, w, loaded, verts, progress)
                 except SettingFailed as e:
                     shutil.rmtree(layout.partial_dir(self.out / j.name), ignore_errors=True)
                     rec = failure_record(obj, e.stage, str(e), t1, 1)

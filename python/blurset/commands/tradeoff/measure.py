@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,7 +32,10 @@ from blurset.exceptions import ConfigError
 from blurset.services import outputs
 from blurset.services.config import BuildConfig
 from blurset.services.denoise import denoiser
-from blurset.services.worker_client import LoadedObject, Worker
+from blurset.services.worker_client import Worker
+
+if TYPE_CHECKING:
+    from blurset import _records
 
 
 @dataclass
@@ -44,7 +47,7 @@ class _Session:
     w: Worker
     work: Path
     uid: str
-    info: LoadedObject
+    info: _records.Loaded
     verts: Any
 
     def plan_of(self, cfg: BuildConfig):

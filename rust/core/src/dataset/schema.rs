@@ -67,7 +67,8 @@ pub fn schema(record: Record) -> serde_json::Value {
 
 /// The JSON Schema of each value the bindings give to Python, or take from it, as a
 /// dict: the stub's TypedDicts (python/blurset/_records.pyi, `make schemas`) are made
-/// from these, so a dict crossing the FFI has the type the core gives it.
+/// from these, so a dict crossing the FFI has the type the core gives it. (The worker
+/// contract's messages are typed from its own schemas: [`super::wire::schemas`].)
 pub fn value_schemas() -> Vec<(&'static str, serde_json::Value)> {
     use super::meta::{ImageRender, ObjectRecord, Timings};
     use super::records::DatasetDoc;
@@ -94,8 +95,6 @@ pub fn value_schemas() -> Vec<(&'static str, serde_json::Value)> {
             "HalfNoise",
             schema_for!(crate::metrics::HalfNoise).to_value(),
         ),
-        ("Loaded", schema_for!(super::wire::Loaded).to_value()),
-        ("Rendered", schema_for!(super::wire::Rendered).to_value()),
     ]
 }
 
