@@ -12,7 +12,7 @@
 //! Randomness: frame key `derive_seed(key, [fnv1a64("raw_noise"), stream])`; sensor
 //! row r draws its photosites from Philox stream 2r and its row noise from stream
 //! 2r + 1, so every value is a function of (key, stream, row) at any thread count.
-use super::draws::{normal, poisson, tukey};
+use super::draws::{normal, poisson, round_exact, tukey};
 use super::kernel::Noisy;
 use super::linear::LinearRgb;
 use super::matrix::apply;
@@ -177,7 +177,7 @@ fn photosite(m: &RawModel, x: f64, row_dn: f64, s: &mut Stream) -> f64 {
             let read = read_scale * tukey(s, lambda);
             let mut dn = m.black + shot + read + row_dn;
             if m.quantize {
-                dn = dn.round().clamp(0.0, m.white);
+                dn = round_exact(dn).clamp(0.0, m.white);
             }
             (dn - m.black) / range
         }
