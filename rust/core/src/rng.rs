@@ -100,6 +100,7 @@ impl Stream {
         self.used = 0;
     }
 
+    #[inline]
     pub fn next_u64(&mut self) -> u64 {
         if self.used >= 4 {
             self.refill();
@@ -110,6 +111,7 @@ impl Stream {
     }
 
     /// Uniform in [0, 1) with 53 random bits (exact in f64).
+    #[inline]
     pub fn uniform(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }

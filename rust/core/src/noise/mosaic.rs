@@ -4,6 +4,7 @@
 //! neighbourhood under the bilinear kernels (green `[0 1 0; 1 4 1; 0 1 0]`, red and
 //! blue `[1 2 1; 2 4 2; 1 2 1]`), which is the standard bilinear interpolation inside
 //! the image; at the borders the weights are renormalised over the photosites there.
+#[cfg(test)]
 use rayon::prelude::*;
 
 /// The demosaic named in noise.json.
@@ -68,20 +69,27 @@ fn pixel_inside(m: &[f64], w: usize, x: usize, y: usize) -> [f64; 3] {
     out
 }
 
-/// The bilinear demosaic of a `w` × `h` RGGB mosaic: interleaved RGB, row-major.
+/// The RGB of pixel (x, y) of the bilinear demosaic of a `w` × `h` RGGB mosaic.
+pub fn demosaic_at(m: &[f64], w: usize, h: usize, x: usize, y: usize) -> [f64; 3] {
+    if y > 0 && y + 1 < h && x > 0 && x + 1 < w {
+        pixel_inside(m, w, x, y)
+    } else {
+        pixel(m, w, h, x, y)
+    }
+}
+
+/// The bilinear demosaic of a `w` × `h` RGGB mosaic: interleaved RGB, row-major (the
+/// tests' whole-image form of [`demosaic_at`]).
+#[cfg(test)]
 pub fn demosaic_bilinear(m: &[f64], w: usize, h: usize) -> Vec<f64> {
     let mut out = vec![0.0; w * h * 3];
-    out.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
-        let inner = y > 0 && y + 1 < h;
-        for x in 0..w {
-            let p = if inner && x > 0 && x + 1 < w {
-                pixel_inside(m, w, x, y)
-            } else {
-                pixel(m, w, h, x, y)
-            };
-            row[x * 3..x * 3 + 3].copy_from_slice(&p);
-        }
-    });
+    out.par_chunks_mut((w * 3).max(1))
+        .enumerate()
+        .for_each(|(y, row)| {
+            for x in 0..w {
+                row[x * 3..x * 3 + 3].copy_from_slice(&demosaic_at(m, w, h, x, y));
+            }
+        });
     out
 }
 

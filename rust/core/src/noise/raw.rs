@@ -12,11 +12,11 @@
 //! Randomness: frame key `derive_seed(key, [fnv1a64("raw_noise"), stream])`; sensor
 //! row r draws its photosites from Philox stream 2r and its row noise from stream
 //! 2r + 1, so every value is a function of (key, stream, row) at any thread count.
-use super::draws::{normal, poisson, tukey};
+use super::draws::{normal, poisson, round_exact, tukey};
 use super::kernel::Noisy;
 use super::linear::LinearRgb;
 use super::matrix::apply;
-use super::mosaic::{cfa_channel, demosaic_bilinear};
+use super::mosaic::{cfa_channel, demosaic_at};
 use super::raw_model::{RawModel, RawNoise};
 use crate::error::Result;
 use crate::image::io::{Image, Samples};
@@ -72,6 +72,44 @@ fn code_steps(m: &RawModel) -> Vec<f64> {
     (0..255)
         .map(|k| from_code(m, (f64::from(k) + 0.5) / 255.0))
         .collect()
+}
+
+/// [`code_steps`] with a table of where to start counting: the code of `s` is found
+/// from the count at `s`'s bin of [0, 1] (a power of two of bins, so `s · BINS` is
+/// exact and the bin's lower edge is at or below `s`) plus the steps in between: the
+/// same count as a binary search over the steps, without its branches.
+struct Codes {
+    steps: Vec<f64>,
+    start: Vec<u8>,
+}
+
+impl Codes {
+    const BINS: usize = 4096;
+
+    fn new(m: &RawModel) -> Codes {
+        let steps = code_steps(m);
+        let start = (0..=Self::BINS)
+            .map(|i| {
+                let edge = i as f64 / Self::BINS as f64;
+                steps.partition_point(|t| edge >= *t) as u8
+            })
+            .collect();
+        Codes { steps, start }
+    }
+
+    /// The number of steps at or below `v` (0 for NaN), as `partition_point` counts.
+    fn code(&self, v: f64) -> u8 {
+        let mut c = if v > 0.0 {
+            // `as` saturates: values past 1 start at the last bin.
+            usize::from(self.start[((v * Self::BINS as f64) as usize).min(Self::BINS)])
+        } else {
+            0
+        };
+        while c < self.steps.len() && v >= self.steps[c] {
+            c += 1;
+        }
+        c as u8
+    }
 }
 
 /// [`to_scene`] through a small cache keyed by the value's bits: an image decoded from
@@ -139,75 +177,98 @@ fn photosite(m: &RawModel, x: f64, row_dn: f64, s: &mut Stream) -> f64 {
             let read = read_scale * tukey(s, lambda);
             let mut dn = m.black + shot + read + row_dn;
             if m.quantize {
-                dn = libm::round(dn).clamp(0.0, m.white);
+                dn = round_exact(dn).clamp(0.0, m.white);
             }
             (dn - m.black) / range
         }
     }
 }
 
-/// The noisy RGGB mosaic of a clean raw (`clean`: 3 values per pixel), signal units.
+/// Sensor row `y` of the noisy RGGB mosaic of a clean raw into `row` (`w` values,
+/// signal units); `residual`: minus the clean value at each photosite.
+fn mosaic_row(m: &RawModel, clean: &[f64], frame: u64, y: usize, row: &mut [f64], residual: bool) {
+    let w = row.len();
+    let mut s = Stream::new(frame, 2 * y as u64);
+    let row_dn = match m.noise {
+        RawNoise::Physics { row_sigma, .. } => {
+            row_sigma * normal(&mut Stream::new(frame, 2 * y as u64 + 1))
+        }
+        RawNoise::Gaussian { .. } => 0.0,
+    };
+    let clean_row = &clean[y * w * 3..(y + 1) * w * 3];
+    for (x, v) in row.iter_mut().enumerate() {
+        let clean_x = clean_row[x * 3 + cfa_channel(x, y)];
+        let noisy = photosite(m, clean_x, row_dn, &mut s);
+        *v = if residual { noisy - clean_x } else { noisy };
+    }
+}
+
+fn frame_key(key: u64, stream: u64) -> u64 {
+    rng::derive_seed(key, &[rng::fnv1a64(b"raw_noise"), stream])
+}
+
+/// The noisy RGGB mosaic of a clean raw (`clean`: 3 values per pixel), signal units
+/// (the tests' view of the sensor).
+#[cfg(test)]
 pub fn noisy_mosaic(m: &RawModel, clean: &[f64], w: usize, key: u64, stream: u64) -> Vec<f64> {
-    let frame = rng::derive_seed(key, &[rng::fnv1a64(b"raw_noise"), stream]);
+    let frame = frame_key(key, stream);
     let h = clean.len() / 3 / w.max(1);
     let mut out = vec![0.0; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let mut s = Stream::new(frame, 2 * y as u64);
-        let row_dn = match m.noise {
-            RawNoise::Physics { row_sigma, .. } => {
-                row_sigma * normal(&mut Stream::new(frame, 2 * y as u64 + 1))
-            }
-            RawNoise::Gaussian { .. } => 0.0,
-        };
-        for (x, v) in row.iter_mut().enumerate() {
-            let clean_x = clean[(y * w + x) * 3 + cfa_channel(x, y)];
-            *v = photosite(m, clean_x, row_dn, &mut s);
-        }
-    });
+    out.par_chunks_mut(w.max(1))
+        .enumerate()
+        .for_each(|(y, row)| mosaic_row(m, clean, frame, y, row, false));
     out
 }
 
-/// The demosaicked noise of a frame: noisy − clean at each photosite, demosaicked.
-fn demosaicked_noise(m: &RawModel, raw: &[f64], w: usize, key: u64, stream: u64) -> Vec<f64> {
-    let h = raw.len() / 3 / w.max(1);
-    let noisy = noisy_mosaic(m, raw, w, key, stream);
-    let residual: Vec<f64> = noisy
-        .iter()
+/// What the noise changed at each photosite (noisy − clean), signal units.
+fn mosaic_residual(m: &RawModel, clean: &[f64], w: usize, key: u64, stream: u64) -> Vec<f64> {
+    let frame = frame_key(key, stream);
+    let h = clean.len() / 3 / w.max(1);
+    let mut out = vec![0.0; w * h];
+    out.par_chunks_mut(w.max(1))
         .enumerate()
-        .map(|(i, v)| v - raw[i * 3 + cfa_channel(i % w, i / w)])
-        .collect();
-    demosaic_bilinear(&residual, w, h)
+        .for_each(|(y, row)| mosaic_row(m, clean, frame, y, row, true));
+    out
 }
 
 /// One frame of a raw model: the noisy linear RGB (unclipped) and its 8-bit codes.
+/// One pass per sensor row draws the noise (the residual mosaic), and one per image
+/// row demosaics it, adds it to the clean raw and writes linear RGB and codes.
 pub fn raw_frame(img: &LinearRgb, m: &RawModel, key: u64, stream: u64) -> Result<Noisy> {
-    let w = img.width as usize;
-    let mut raw = clean_raw(img, m);
-    if m.noisy {
-        let noise = demosaicked_noise(m, &raw, w, key, stream);
-        raw.par_iter_mut()
-            .zip(noise.par_iter())
-            .for_each(|(r, n)| *r += n);
-    }
-    let steps = code_steps(m);
-    let (linear, codes): (Vec<[f32; 3]>, Vec<[u8; 3]>) = raw
-        .par_chunks_exact(3)
-        .map(|p| {
-            let cam = [0, 1, 2].map(|c| p[c] * m.wb[c]);
-            let rgb = apply(&m.rgb_from_cam, cam).map(|v| v / m.white_level);
-            let code = rgb.map(|v| steps.partition_point(|t| v >= *t) as u8);
-            (rgb.map(|v| v as f32), code)
-        })
-        .unzip();
+    let (w, h) = (img.width as usize, img.height as usize);
+    let raw = clean_raw(img, m);
+    let noise = m.noisy.then(|| mosaic_residual(m, &raw, w, key, stream));
+    let codes_of = Codes::new(m);
+    let mut linear = vec![0.0f32; raw.len()];
+    let mut codes = vec![0u8; raw.len()];
+    let row_len = (w * 3).max(1);
+    linear
+        .par_chunks_mut(row_len)
+        .zip(codes.par_chunks_mut(row_len))
+        .enumerate()
+        .for_each(|(y, (lin_row, code_row))| {
+            let raw_row = &raw[y * w * 3..(y + 1) * w * 3];
+            for x in 0..w {
+                let p = &raw_row[x * 3..x * 3 + 3];
+                let mut v = [p[0], p[1], p[2]];
+                if let Some(n) = &noise {
+                    let d = demosaic_at(n, w, h, x, y);
+                    for c in 0..3 {
+                        v[c] += d[c];
+                    }
+                }
+                let cam = [0, 1, 2].map(|c| v[c] * m.wb[c]);
+                let rgb = apply(&m.rgb_from_cam, cam).map(|v| v / m.white_level);
+                for c in 0..3 {
+                    lin_row[x * 3 + c] = rgb[c] as f32;
+                    code_row[x * 3 + c] = codes_of.code(rgb[c]);
+                }
+            }
+        });
     Ok(Noisy {
-        linear: linear.into_iter().flatten().collect(),
+        linear,
         linear_channels: 3,
-        processed: Image::new(
-            img.width,
-            img.height,
-            3,
-            Samples::U8(codes.into_iter().flatten().collect()),
-        )?,
+        processed: Image::new(img.width, img.height, 3, Samples::U8(codes))?,
     })
 }
 
