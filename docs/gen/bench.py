@@ -764,10 +764,12 @@ def kinds_lines(rs: list[dict]) -> list[str]:
     out = [
         "## Every kind of image",
         "",
-        "`bench/bench_target_kinds.py` builds each held-out model with defocus and shake",
-        "levels beside the blur levels, under `--preset balanced` and the target, and judges",
-        "each image against its own references as above. Per kind (the sharp images, blur,",
-        "defocus and shake levels) and model:",
+        "`bench/bench_target_kinds.py` builds each model (the held-out models, and where a",
+        "run names it the glossy `WaterBottle_blender_reexport`, from which no number of the",
+        "target rule was chosen either) with defocus and shake levels beside the blur levels,",
+        "under `--preset balanced` and the target, and judges each image against its own",
+        "references as above. Per kind (the sharp images, blur, defocus and shake levels) and",
+        "model:",
         "",
     ]
     runs: dict[tuple[str, str], list[dict]] = defaultdict(list)
