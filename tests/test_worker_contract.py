@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 EYE = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 3.0], [0.0, 0.0, 0.0, 1.0]]
 # What the real worker (bpy 5.0.1, CPU) sent: ready, a refused load, a load, a frame on
 # disk, the render done, its --probe line (the core's wire tests read the same file).
-REAL_LINES = (ROOT / "tests" / "data" / "worker_lines.jsonl").read_text().splitlines()
+REAL_LINES = (ROOT / "rust" / "core" / "testdata" / "worker_lines.jsonl").read_text().splitlines()
 
 
 def _validators() -> tuple[jsonschema.Draft202012Validator, jsonschema.Draft202012Validator]:

@@ -305,7 +305,7 @@ mod tests {
     /// Lines the real worker (blender_scripts/worker.py, bpy 5.0.1, CPU) sent: ready, a
     /// refused load, a load, a frame on disk, the render done, and its --probe line
     /// (tests/test_worker_contract.py reads the same file).
-    const REAL_LINES: &str = include_str!("../../../../tests/data/worker_lines.jsonl");
+    const REAL_LINES: &str = include_str!("../../testdata/worker_lines.jsonl");
 
     fn real_line(i: usize) -> serde_json::Value {
         let line = REAL_LINES.lines().nth(i).unwrap_or_default();
