@@ -9,9 +9,11 @@ make target). `make test-fast` runs what is neither blender nor packaging."""
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 import os
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -372,3 +374,27 @@ def worker_pids(out: Path) -> list[int]:
         if "worker.py" in cmd and str(out) in cmd and state != "Z":
             pids.append(int(d.name))
     return pids
+
+
+def bench_module(name: str):
+    """A bench module, imported as bench/run.py imports it (bench/ on the path)."""
+    bench = str(Path(__file__).resolve().parents[1] / "bench")
+    sys.path.insert(0, bench)
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(bench)
+
+
+def gen_module(name: str):
+    """A docs/gen script as a module (docs/gen on the path while it loads)."""
+    gen = Path(__file__).resolve().parents[1] / "docs" / "gen"
+    sys.path.insert(0, str(gen))
+    try:
+        spec = importlib.util.spec_from_file_location(f"docs_gen_{name}", gen / f"{name}.py")
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+    finally:
+        sys.path.remove(str(gen))

@@ -7,22 +7,13 @@ samples that reach a target, the divisor of every spent / least figure."""
 
 from __future__ import annotations
 
-import importlib
-import sys
 from pathlib import Path
 
 import numpy as np
 
+from tests.conftest import bench_module as _bench
+
 BENCH = Path(__file__).resolve().parents[1] / "bench"
-
-
-def _bench(name: str):
-    """A bench module, imported as bench/run.py imports it (bench/ on the path)."""
-    sys.path.insert(0, str(BENCH))
-    try:
-        return importlib.import_module(name)
-    finally:
-        sys.path.remove(str(BENCH))
 
 
 def test_the_reference_noise_is_taken_out_of_an_images_psnr_against_the_continuous_blur():

@@ -8,26 +8,15 @@ parser, schemas/ and bench/results.json (`make docs` runs them, then `mkdocs bui
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
+from tests.conftest import gen_module as _gen
+
 ROOT = Path(__file__).resolve().parents[1]
 GEN = ROOT / "docs" / "gen"
-
-
-def _gen(name: str):
-    sys.path.insert(0, str(GEN))
-    try:
-        spec = importlib.util.spec_from_file_location(f"docs_gen_{name}", GEN / f"{name}.py")
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        return mod
-    finally:
-        sys.path.remove(str(GEN))
 
 
 def test_every_cited_design_section_exists() -> None:

@@ -6,41 +6,21 @@ harmonics before issue 61. No timing is asserted."""
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import json
 import math
 import struct
-import sys
 import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.conftest import bench_module as _bench
+from tests.conftest import gen_module as _gen
+
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "bench"
 GEN = ROOT / "docs" / "gen"
-
-
-def _bench(name: str):
-    sys.path.insert(0, str(BENCH))
-    try:
-        return importlib.import_module(name)
-    finally:
-        sys.path.remove(str(BENCH))
-
-
-def _gen(name: str):
-    sys.path.insert(0, str(GEN))
-    try:
-        spec = importlib.util.spec_from_file_location(f"docs_gen_{name}", GEN / f"{name}.py")
-        assert spec is not None and spec.loader is not None
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        return mod
-    finally:
-        sys.path.remove(str(GEN))
 
 
 @pytest.fixture(scope="module")
