@@ -8,6 +8,11 @@ RUST_SRC := $(shell find rust -name '*.rs' -o -name Cargo.toml) Cargo.toml pypro
 
 PYTEST := $(PY) -m pytest -q
 
+# The tests start the CLI, the stand-in worker and Ray in hundreds of subprocesses: with
+# PYTHONDONTWRITEBYTECODE set (some shells and CI images set it), each one compiles the
+# package again (a tenth of a second apiece, a fifth of the fast layer).
+unexport PYTHONDONTWRITEBYTECODE
+
 .PHONY: venv develop demo test test-fast test-quick test-rust test-py test-packaging fuzz lint typecheck fmt schemas stub docs bench bench-gpu clean
 
 venv: $(SO_STAMP)
@@ -35,11 +40,11 @@ test: test-rust test-py
 
 # The fast layer: Rust and the Python tests that render nothing, spread over the cores
 # (pytest-xdist; a file's tests stay on one worker, so its fixtures are made once):
-# about 3.5 minutes on 2 cores. Tests that render run one at a time (Blender takes
+# about 3 minutes on 2 cores. Tests that render run one at a time (Blender takes
 # every core).
 PYTEST_WORKERS ?= auto
 test-fast: test-rust venv
-	$(PYTEST) -n $(PYTEST_WORKERS) --dist loadfile -m "not blender and not packaging and not rebuild" tests
+	$(PYTEST) -n $(PYTEST_WORKERS) --dist loadfile -m "not blender and not slow and not packaging and not rebuild" tests
 
 # --release: the dependencies maturin compiled for the extension module are reused.
 test-rust:

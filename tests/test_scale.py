@@ -12,6 +12,7 @@ import shutil
 import subprocess
 import sys
 import threading
+import types
 from pathlib import Path
 
 import pytest
@@ -233,6 +234,9 @@ def test_objaverse_download_from_a_mirror_with_retries(demo_glbs, tmp_path, monk
     threading.Thread(target=server.serve_forever, daemon=True).start()
     try:
         monkeypatch.setenv("HF_ENDPOINT", f"http://127.0.0.1:{server.server_port}")
+        # The backoff is asked for, not waited out: the test waits on the mirror alone.
+        slept: list[float] = []
+        monkeypatch.setattr(objaverse_cache, "time", types.SimpleNamespace(sleep=slept.append))
         local = objaverse_cache.Cache(tmp_path / "empty-cache")  # online, nothing cached
         (spec,) = resolve_objects([f"objaverse:{UIDS['gone']}"], cache=local)
         assert not spec.path.exists()
@@ -240,7 +244,10 @@ def test_objaverse_download_from_a_mirror_with_retries(demo_glbs, tmp_path, monk
         assert got.read_bytes() == demo_glbs[1].read_bytes()
         assert got == local.versioned / "glbs" / "000-002" / f"{UIDS['gone']}.glb"
         assert not [p for p in got.parent.iterdir() if p.name != got.name]  # no temp left
+        # The index and the GLB: each answered 503 once, retried after the first step.
+        assert slept == [2.0, 2.0]
         with pytest.raises(objaverse_cache.FetchError, match="HTTP 404"):
             local.ensure("x", local.versioned / "glbs" / "000-009" / "x.glb")
+        assert slept == [2.0] * 3  # x.glb: a 503, one retry, a 404 that is not retried
     finally:
         server.shutdown()

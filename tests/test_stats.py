@@ -361,6 +361,7 @@ def test_sharp_only_and_mixed_level_builds(tmp_path):
     assert float(rows[4]["blur_weight_3"]) == meta["views"][0]["levels"]["3"]["w_l"]
 
 
+@pytest.mark.slow  # 20 s of a scale test: `make test`, not the fast layer
 def test_ten_thousand_settings_aggregate(tmp_path):
     build = tmp_path / "big"
     t0 = time.perf_counter()

@@ -102,7 +102,10 @@ def new_parser(**kwargs: Any) -> argparse.ArgumentParser:
     return argparse.ArgumentParser(allow_abbrev=False, formatter_class=HelpFormatter, **kwargs)
 
 
-def make_parser() -> argparse.ArgumentParser:
+def make_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The whole CLI's parser; with `command`, only that subcommand's module is imported
+    and given its options (the others keep their names and help): a run of `blurset
+    verify` does not import the builder, numpy and all."""
     parser = new_parser(prog="blurset", description=DESCRIPTION)
     from blurset import __version__
 
@@ -122,8 +125,9 @@ def make_parser() -> argparse.ArgumentParser:
         p.set_defaults(_module=module)
         # Also after the subcommand; SUPPRESS keeps it from resetting the top-level flag.
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="traceback")
-        importlib.import_module(module).add_arguments(p)
-        _refuse_empty_paths(p)
+        if command in (None, name):
+            importlib.import_module(module).add_arguments(p)
+            _refuse_empty_paths(p)
     return parser
 
 
@@ -215,10 +219,11 @@ def _dash_values(parser: argparse.ArgumentParser, argv: list[str]) -> tuple[list
 
 def main(argv: list[str] | None = None) -> int:
     try:
-        # Building the parser imports every command (numpy, matplotlib …): a Ctrl-C in
+        # Building the parser imports the command (numpy, matplotlib …): a Ctrl-C in
         # that first second is a stop like any other, not a traceback.
-        parser = make_parser()
         given = sys.argv[1:] if argv is None else list(argv)
+        # The command is the first word that names one: the top-level options take no value.
+        parser = make_parser(next((a for a in given if a in COMMANDS), ""))
         given, dashed = _dash_values(parser, given)
         args = parser.parse_args(given)
         for dest in dashed:  # the values kept from argparse's option matching
