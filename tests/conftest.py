@@ -9,9 +9,11 @@ make target). `make test-fast` runs what is neither blender nor packaging."""
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import importlib.util
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -49,9 +51,19 @@ HAS_BPY = importlib.util.find_spec("bpy") is not None
 # In CI nothing may be skipped for want of bpy or the shared data: a hole there would
 # leave the run green with its render tests never run.
 IN_CI = os.environ.get("CI", "").strip().lower() in ("1", "true", "yes")
+
+
 # The builder's absolute paths go to the user's state directory (blurset.services.publish):
 # a test run keeps its own, never the user's ~/.local/state.
-os.environ.setdefault("BLURSET_STATE_DIR", tempfile.mkdtemp(prefix="blurset-state-"))
+def temp_home(variable: str, prefix: str) -> None:
+    """`variable` names a temp folder of this process's own, removed when it exits,
+    unless it is set already (an xdist worker inherits the controller's)."""
+    if variable not in os.environ:
+        os.environ[variable] = home = tempfile.mkdtemp(prefix=prefix)
+        atexit.register(shutil.rmtree, home, True)
+
+
+temp_home("BLURSET_STATE_DIR", "blurset-state-")
 # Fixtures that render a build: a test using one needs bpy.
 BUILD_FIXTURES = {"demo_build", "linear_build", "noised", "demo_setting"}
 

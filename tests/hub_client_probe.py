@@ -7,16 +7,19 @@ Usage: python hub_client_probe.py HUB. Offline, its cache in a temp folder."""
 
 from __future__ import annotations
 
+import atexit
 import glob
 import hashlib
 import json
 import os
+import shutil
 import sys
 import tempfile
 
 os.environ["HF_DATASETS_OFFLINE"] = "1"
 os.environ["HF_HUB_OFFLINE"] = "1"
 os.environ["HF_HOME"] = tempfile.mkdtemp(prefix="blurset-hf-")
+atexit.register(shutil.rmtree, os.environ["HF_HOME"], True)
 os.environ["HF_DATASETS_DISABLE_PROGRESS_BARS"] = "1"
 
 import datasets  # noqa: E402

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -20,12 +19,12 @@ from blurset.commands.export import hub as export_hub
 from blurset.data import open_scene
 from blurset.services import hub_format
 
-from tests.conftest import one_error_line, run_cli, standin_build, tree
+from tests.conftest import one_error_line, run_cli, standin_build, temp_home, tree
 
 # Offline, and nothing written to the user's cache: set before `datasets` is imported.
 os.environ["HF_DATASETS_OFFLINE"] = "1"
 os.environ["HF_HUB_OFFLINE"] = "1"
-os.environ.setdefault("HF_HOME", tempfile.mkdtemp(prefix="blurset-hf-"))
+temp_home("HF_HOME", "blurset-hf-")
 os.environ.setdefault("HF_DATASETS_DISABLE_PROGRESS_BARS", "1")
 
 pq = pytest.importorskip("pyarrow.parquet")

@@ -350,3 +350,30 @@ def test_damage_in_a_complete_setting_is_named_and_redone(one_glb, tmp_path):
         for name in whole:
             if not name.endswith(("meta.json", ".complete")):
                 assert again[name] == whole[name], name
+
+
+def test_a_worker_that_fails_or_is_killed_leaves_nothing_in_the_temp_folder(
+    tmp_path, standin_blender, monkeypatch
+):
+    """A worker without a log path or workdir keeps both in the temp folder: closing it
+    removes them whether it never started, was killed mid-object or quit."""
+    import tempfile
+
+    from blurset.services.worker_client import Worker, WorkerError
+
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    mute = tmp_path / "mute"  # a "Blender" that exits before its ready line
+    mute.write_text("#!/bin/sh\nexit 3\n")
+    mute.chmod(0o755)
+    for blender in (str(tmp_path / "no-such-blender"), str(mute)):
+        with pytest.raises(WorkerError):
+            Worker(blender=blender, timeout=30)
+        assert not list(temp.iterdir()), blender
+    glb = make_demo_objects(tmp_path / "objs")[0]
+    with Worker(blender=str(standin_blender), timeout=60) as w:
+        w.load(glb, tmp_path / "v.npy")
+        assert len(list(temp.iterdir())) == 2  # its log and its scratch, while it runs
+        w.kill()  # as a timeout does: the worker cleans up nothing itself
+    assert not list(temp.iterdir())

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import queue
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -196,7 +197,12 @@ class Worker:
         self.threads = int(threads)
         self.timeout = float(timeout)
         self.deadline = deadline
-        self.workdir = workdir
+        # Without a workdir the scratch is ours, so close() removes it even when the
+        # worker was killed and never cleaned up after itself.
+        self._own_scratch = workdir is None
+        self.workdir = (
+            Path(tempfile.mkdtemp(prefix="blurset-worker-")) if workdir is None else workdir
+        )
         self.device = device
         self.gpus = gpus
         self._own_log = log_path is None
@@ -215,7 +221,11 @@ class Worker:
         self._proc: subprocess.Popen[bytes] | None = None
         self._log: IO[bytes] | None = None
         self._lines: queue.Queue[bytes | None] = queue.Queue()
-        self._start()
+        try:
+            self._start()
+        except BaseException:
+            self.close()  # a worker that never started leaves no log or scratch behind
+            raise
 
     @classmethod
     def in_folder(cls, work: Path, **kw: Any) -> Worker:
@@ -536,6 +546,8 @@ class Worker:
                 self.log_path.unlink()
             except OSError:
                 pass
+        if self._own_scratch:
+            shutil.rmtree(self.workdir, ignore_errors=True)
 
     def __enter__(self) -> Worker:
         return self

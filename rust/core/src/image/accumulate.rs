@@ -631,10 +631,25 @@ mod tests {
     use std::io::Cursor;
     use std::path::PathBuf;
 
+    /// A test's own scratch folder, removed when its thread ends.
+    struct Scratch(PathBuf);
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    thread_local! {
+        static SCRATCH: Scratch = {
+            let test = std::thread::current().name().unwrap_or("main").replace("::", ".");
+            let dir = format!("blurset-accumulate-{}-{test}", std::process::id());
+            Scratch(std::env::temp_dir().join(dir))
+        };
+    }
+
     fn tmp(name: &str) -> PathBuf {
-        std::env::temp_dir()
-            .join(format!("blurset-accumulate-{}", std::process::id()))
-            .join(name)
+        SCRATCH.with(|s| s.0.join(name))
     }
 
     fn as_bytes(v: &[f32]) -> Vec<u8> {

@@ -240,6 +240,7 @@ mod tests {
         let p = std::env::temp_dir().join(format!("blurset-passes-{}.exr", std::process::id()));
         crate::image::exr::write::write_exr(&p, 3, 2, &[0.5; 24])?;
         let bytes = std::fs::read(&p).map_err(|e| Error::io("read", &p, e))?;
+        let _ = std::fs::remove_file(&p);
         let e = decode_passes(&bytes, &p).unwrap_err().to_string();
         assert!(
             e.contains("Denoising Albedo") && e.contains("denoise oidn"),
