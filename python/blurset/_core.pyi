@@ -1083,7 +1083,8 @@ def half_noise(
     background: tuple[float, float, float] = ...,
 ) -> ObjectError:
     """The render noise of the mean of two independent halves of an image, estimated from
-    them: MSE(half_a, half_b) / 4 on object pixels."""
+    them on object pixels: MSE(half_a, half_b) / 4 where sRGB is straight over their
+    spread, each half's distance from their merged image where it bends."""
 
 def half_noise_bound(
     half_a: npt.NDArray[np.float32],

@@ -149,7 +149,8 @@ fn object_error(
 }
 
 /// The render noise of the mean of two independent halves of an image, estimated from
-/// them: MSE(half_a, half_b) / 4 on object pixels (core `half_noise`).
+/// them on object pixels: MSE(half_a, half_b) / 4 where sRGB is straight over their
+/// spread, each half's distance from their merged image where it bends (core `half_noise`).
 #[pyfunction]
 #[pyo3(signature = (half_a, half_b, *, background = (1.0, 1.0, 1.0)))]
 fn half_noise(

@@ -7,6 +7,7 @@ use crate::ground::atomic::write_atomic;
 use crate::ground::names;
 use crate::image::denoise::DenoiserRecord;
 use crate::image::qa::FrameQa;
+use crate::metrics::NOISE_BOUND_Z;
 use crate::plan::camera::orbit_c2w;
 use crate::plan::camera::rows;
 use crate::plan::choices::{BlurBudget, BlurMethod, Denoise, LatentSampling, LightPaths, Preset};
@@ -413,15 +414,21 @@ fn blur_budget_is(budget: BlurBudget) -> String {
 fn target_is(t: &TargetRule) -> String {
     let (alpha_lo, alpha_hi) = ALPHA_RANGE;
     format!(
-        "each image (the sharp one and each blurry one) renders in rounds as two halves on \
-         independent seeds, each half's frames taking consecutive blocks of one {}-sample \
-         Cycles sequence; after a pilot of {} samples its render noise is MSE(half 1, \
-         half 2) / 4 on its object pixels, the samples it still needs are extrapolated as \
-         samples^-alpha (alpha {alpha_hi} and at most {FIRST_STEP_MAX}x the samples from the \
-         pilot alone, alpha fitted in [{alpha_lo}, {alpha_hi}] from two estimates, aimed \
-         {AIM_ABOVE_DB} dB above the target), and it stops once the estimate is within \
+        "each image (the sharp one and each blurry one) renders in rounds as two halves, \
+         half 0 on the plan's seed and half 1 on an independent one, each half's frames \
+         taking consecutive blocks of one {}-sample Cycles sequence; after each round its \
+         render noise on its object pixels is estimated from each half's sRGB distance \
+         from their merged image, with a bound: that MSE plus {NOISE_BOUND_Z:.2} standard \
+         deviations of the estimate's own scatter (wide where a few pixels carry the \
+         noise); after a pilot of \
+         {} samples the samples it still needs are extrapolated from the bound as \
+         samples^-alpha (alpha {alpha_hi} and at most {FIRST_STEP_MAX}x the samples from \
+         the pilot alone, alpha fitted in [{alpha_lo}, {alpha_hi}] from two rounds, aimed \
+         {AIM_ABOVE_DB} dB above the target), and it stops once the bound is within \
          {ACCEPT_BELOW_DB} dB of the target (at most {} samples, {MAX_ROUNDS} rounds); the \
-         image is the mean of its halves",
+         image is the mean of its halves. Its samples, rounds, estimate and bound are \
+         views[].images[level]; a level record's samples_per_frame and sample blocks are \
+         the plan's fixed counts, which half 0's seed shares, not the samples rendered",
         t.sequence(),
         t.pilot_samples,
         t.max_samples
@@ -756,6 +763,31 @@ pub type Pose = [[f64; 4]; 4];
 mod tests {
     use super::*;
     use crate::plan::sampling::plan_setting;
+
+    #[test]
+    fn the_target_text_names_what_the_rounds_stop_on_and_where_the_samples_are() {
+        let rule = TargetRule {
+            target_psnr_db: 45.0,
+            pilot_samples: 32,
+            max_samples: 16384,
+        };
+        let text = target_is(&rule);
+        // The rounds stop on the bound, not the estimate (metrics::half_noise_bound).
+        assert!(
+            text.contains("it stops once the bound is within 0.25 dB"),
+            "{text}"
+        );
+        assert!(text.contains("plus 2.81 standard deviations"), "{text}");
+        assert!(
+            text.contains("sRGB distance from their merged image"),
+            "{text}"
+        );
+        assert!(text.contains("a pilot of 32 samples") && text.contains("8192-sample"));
+        // A reader of a level's fixed-count blocks is told they are not what rendered.
+        assert!(
+            text.contains("views[].images[level]") && text.contains("not the samples rendered")
+        );
+    }
 
     #[test]
     fn the_mask_pass_names_every_level_kind_that_holds_its_own() {
