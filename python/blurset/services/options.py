@@ -68,7 +68,7 @@ class Options:
             if other is not None and other.default is not None:
                 return self.default_text(other.name)
             return d.unset or "none"
-        text = _shown(d.default, d.kind)
+        text = _shown(d.default, d.kind) or "none"  # an empty list of levels
         if d.demo is not None:
             text += f"; {_shown(d.demo, d.kind)} with {self.demo_flag}"
         return text

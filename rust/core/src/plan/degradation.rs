@@ -6,6 +6,7 @@
 //! render list, the config and the statistics call each kind through this interface
 //! only; the registry ([`super::kinds`]) lists the kinds.
 use super::camera::Trajectory;
+use super::choices::BlurMethod;
 use super::cost::{ImagePrice, Pricing};
 use super::render::Render;
 use super::sampling_config::SamplingConfig;
@@ -68,6 +69,23 @@ pub struct ViewCx<'a> {
     /// Under `blur_method auto`: the device's prices, and the price of every blurry
     /// image planned so far (the setting's record of the choice).
     pub pricing: Option<(&'a Pricing, &'a RefCell<Vec<ImagePrice>>)>,
+}
+
+impl ViewCx<'_> {
+    /// Whether an image this kind would otherwise render as `frames` averaged renders
+    /// is one motion-blur render instead: `--blur-method motion_blur`, or under `auto`
+    /// where the device prices it lower (the price joins the setting's record). For a
+    /// kind whose motion Cycles' keys follow exactly; the others keep `motion_blur`.
+    pub fn motion_blur_for(&self, frames: usize) -> bool {
+        match self.pricing {
+            Some((pricing, prices)) if self.cfg.blur_method == BlurMethod::Auto => {
+                let price = pricing.price(frames);
+                prices.borrow_mut().push(price);
+                price.cheaper() == BlurMethod::MotionBlur
+            }
+            _ => self.motion_blur,
+        }
+    }
 }
 
 /// The latent frames of the fewest count m in `first..=max` whose largest gap is within

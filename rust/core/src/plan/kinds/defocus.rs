@@ -57,7 +57,7 @@ impl Degradation for Defocus {
     const OPTION_HELP: &'static str = "defocus levels 1 to 9, e.g. 1,2,3,4: defocus_<l>/ \
         beside the blur levels, each view focused inside the object's depth range and the \
         largest circle of confusion on the object 2^l px at 512 px (scaled with \
-        --resolution); none by default";
+        --resolution)";
 
     fn kind(level: u32) -> ImageKind {
         ImageKind::Defocus(level)

@@ -11,7 +11,8 @@
 //! (the rows' mean turn is zero), each row at once: a short exposure in daylight, skew
 //! without blur.
 //!
-//! Rendered as a blur level is, by `--blur-method`:
+//! Rendered as a blur level is, by `--blur-method` (`auto`: priced as a blurry image of
+//! as many frames as it has bands, [`ViewCx::motion_blur_for`]):
 //! - `motion_blur`: one Cycles render along the turn's keys through Cycles' own rolling
 //!   shutter (rows top to bottom, scanline exposure 0);
 //! - `average`: n bands of rows, band k rendered only where its rows meet the object,
@@ -110,7 +111,8 @@ impl Degradation for RollingShutter {
         rolling_shutter_<l>/ beside the blur levels, each row read out top to bottom at its \
         own time while the camera turns, so the image centre moves 2^l px at 512 px (scaled \
         with --resolution) from the top row to the bottom one; rendered by --blur-method, as \
-        bands of rows or through Cycles' rolling shutter; none by default";
+        bands of rows or through Cycles' rolling shutter (auto: whichever the device renders \
+        for less)";
 
     fn kind(level: u32) -> ImageKind {
         ImageKind::RollingShutter(level)
@@ -209,18 +211,21 @@ fn plan_level(cx: &ViewCx, direction_deg: f64, level: u32) -> RollingShutterPlan
         let s = step(&times);
         (times, s)
     };
-    let (method, rows, times, max_step_px) = if cx.motion_blur {
+    // The bands averaging would render, which also price it under `blur_method auto`.
+    let cfg = cx.cfg;
+    let (times, s) = if cfg.latents_auto {
+        let first = (amplitude / cfg.max_ghost_px - 1e-9).ceil().max(1.0) as usize;
+        let most = cfg.latents_max.min(cx.resolution as usize).max(1);
+        fewest_frames(first.min(most), most, cfg.max_ghost_px, timed)
+    } else {
+        timed(cx.latents)
+    };
+    // Each band traces its own rows at the image's samples, so n bands cost what n
+    // frames sharing the image's samples cost: the price of a blurry image of n frames.
+    let (method, rows, times, max_step_px) = if cx.motion_blur_for(times.len()) {
         // A constant-rate turn about one axis: Cycles' slerp between keys is exact.
         (BlurMethod::MotionBlur, Vec::new(), vec![0.0, 0.5, 1.0], None)
     } else {
-        let cfg = cx.cfg;
-        let (times, s) = if cfg.latents_auto {
-            let first = (amplitude / cfg.max_ghost_px - 1e-9).ceil().max(1.0) as usize;
-            let most = cfg.latents_max.min(cx.resolution as usize).max(1);
-            fewest_frames(first.min(most), most, cfg.max_ghost_px, timed)
-        } else {
-            timed(cx.latents)
-        };
         let rows = bands(times.len() as u32, cx.resolution);
         (BlurMethod::Average, rows, times, Some(s))
     };
@@ -259,6 +264,38 @@ mod tests {
             resolution: 64,
             blur_method: method,
             ..Default::default()
+        }
+    }
+
+    #[test]
+    fn auto_prices_the_bands_as_frames_and_records_each_image() {
+        use crate::plan::cost::Pricing;
+        use crate::plan::sampling::plan_setting_priced;
+        for (backend, want) in [
+            ("CPU", BlurMethod::Average),
+            ("OPTIX", BlurMethod::MotionBlur),
+        ] {
+            let cfg = BuildConfig {
+                resolution: 512,
+                ..config(BlurMethod::Auto)
+            };
+            let pricing = Pricing::new(backend, 32, 512).unwrap_or_else(|e| panic!("{e}"));
+            let d = [1.0, 0.6, 0.4];
+            let p = plan_setting_priced(&cfg.sampling(), Some(&pricing), "u", 90.0, 3, d, &[])
+                .unwrap_or_else(|e| panic!("{e}"));
+            // Five bands cost ten calls a round; a GPU's calls are dear, a CPU's free.
+            let fixed = plan(&BuildConfig {
+                resolution: 512,
+                ..config(want)
+            });
+            for (v, f) in p.views.iter().zip(&fixed.views) {
+                assert_eq!(v.kinds.rolling_shutter, f.kinds.rolling_shutter, "{backend}");
+            }
+            let choice = p.blur_choice.unwrap_or_else(|| panic!("no record under auto"));
+            // Every rolling shutter image of every view was priced, and no other image.
+            let name = if want == BlurMethod::Average { "average" } else { "motion_blur" };
+            assert_eq!(choice.images.get(name), Some(&(2 * p.views.len())));
+            assert_eq!(choice.images.len(), 1, "{:?}", choice.images);
         }
     }
 

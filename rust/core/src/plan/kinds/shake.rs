@@ -482,7 +482,7 @@ impl Degradation for Shake {
         during the exposure along a drifting hand-shake trajectory (Boracchi & Foi 2012) \
         whose image-centre extent is 2^(l+2) px at 512 px (scaled with --resolution; level \
         l is a hand-held exposure 18.75 * 2^(l-1) times the reciprocal rule's 1/f), \
-        rendered as the blur levels are (--blur-method); none by default";
+        rendered as the blur levels are (--blur-method)";
 
     fn kind(level: u32) -> ImageKind {
         ImageKind::Shake(level)
@@ -631,6 +631,8 @@ fn plan_level(cx: &ViewCx, walk: &Walk, walk_extent: f64, level: u32) -> ShakePl
         probes: probes(cx.resolution),
     };
     let purpose = <Shake as Degradation>::PURPOSE + u64::from(level);
+    // Not priced under `blur_method auto` (ViewCx::motion_blur_for): where 129 keys do
+    // not follow the path, Cycles' interpolation strays from it, so auto averages.
     let (times, turns, steps, gap) = if cx.motion_blur {
         let steps = lv.motion_steps();
         let n = 1u32 << steps;
