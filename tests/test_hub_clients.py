@@ -190,6 +190,23 @@ def test_a_shake_row_carries_its_levels_numbers(shake_hub):
     assert seen > 0
 
 
+def test_every_row_says_its_samples(shake_hub):
+    """Defocus and rolling shutter images render at the sharp image's samples (one
+    render, or bands that tile the image): their rows say so, as blur and shake rows say
+    theirs; no row of a fixed-count build leaves its samples empty."""
+    b, hub = shake_hub
+    doc = json.loads((hub / "export.json").read_text())
+    kinds = set()
+    for name, rec in doc["shards"].items():
+        for row in pq.read_table(hub / "data" / name).to_pylist():
+            assert row["samples"] is not None, (rec["config"], row["view"])
+            if rec["config"].startswith(("defocus_", "rolling_shutter_")):
+                meta = json.loads((b / row["setting"] / "meta.json").read_text())
+                assert row["samples"] == meta["render"]["sharp_samples"]
+                kinds.add(rec["config"])
+    assert kinds == {"defocus_1", "rolling_shutter_3"}
+
+
 def test_the_probes_digest_sees_every_image_byte(shake_hub, tmp_path):
     """The check above can fail: one image byte changed changes its config's digest."""
     _, hub = shake_hub

@@ -360,9 +360,15 @@ def _kind_fields(meta: dict, view: int, level: str, rec: dict) -> dict[str, Any]
     spf = _int_or_none(krec.get("samples_per_frame"))
     mine = _view_record(meta, view, level)
     own: dict[str, Any] = next((x for k, x in mine.items() if k != "image"), {})
+    samples = spf * renders if spf is not None and renders else None
+    if krec and spf is None:
+        # A render without samples of its own takes the sharp image's (plan/renders.rs
+        # with_samples): a defocus image is one render, a rolling shutter image's bands
+        # tile it, so each of its pixels has the sharp image's samples.
+        samples = _int_or_none((meta.get("render") or {}).get("sharp_samples"))
     return {
         "latents": renders if krec.get("method") == "average" else None,
-        "samples": spf * renders if spf is not None and renders else None,
+        "samples": samples,
         "amplitude_px": _float_or_none(krec.get("amplitude_px")),
         "path_px": _float_or_none(krec.get("path_px")),
         "about_written": bool(own.get("poses")) and layout.written_pose(level),
