@@ -126,7 +126,7 @@ def test_benchmark_pages_plot_every_result(tmp_path, monkeypatch) -> None:
         gain = bench.GAIN.match(r["name"])
         target = bench.TARGET.match(r["name"])
         kinds = bench.KINDS.match(r["name"])
-        model = kinds and ("**every model**" if kinds["model"] == "all" else f"`{kinds['model']}`")
+        model = kinds and bench.model_label(kinds["model"])
         half = bench.HALF_NOISE.match(r["name"])
         half_row = half and (
             ("**every model**" if half["model"] == "all" else f"`{half['model']}`")

@@ -784,17 +784,18 @@ def kinds_lines(rs: list[dict]) -> list[str]:
         levels = group[0].get("levels") or {}
         named = ", ".join(f"{k} {','.join(map(str, v))}" for k, v in sorted(levels.items()))
         out += [
-            f"### {res} px, {db} dB ({_fmt(group[0].get('views_measured'))} views a model, "
+            f"### {res} px, {db} dB ({_views(group[0].get('views_measured'))} a model, "
             f"references at {_fmt(group[0].get('reference_factor'))}× the samples; "
             f"levels {named}; {ESTIMATORS[group[0].get('estimator', 'plain')]})",
             "",
             head,
             "| --- | --- | --- | --- | --- | --- | --- | --- |",
         ]
-        order = sorted(group, key=lambda r: (r["kind"], r["model"] != "all", r["model"]))
+        first = {"all": 0, "held_out": 1}  # then each model, by name
+        order = sorted(group, key=lambda r: (r["kind"], first.get(r["model"], 2), r["model"]))
         for r in order:
             lo, hi = r.get("estimate_over_measured_db_range") or [math.nan, math.nan]
-            model = "**every model**" if r["model"] == "all" else f"`{r['model']}`"
+            model = model_label(r["model"])
             out.append(
                 f"| {r['kind']} | {model} | {r['images']} | {r['at_target_share']:.0%} | "
                 f"{r['bound_holds_share']:.0%} | {r['estimate_within_1db_share']:.0%} | "
@@ -1378,6 +1379,18 @@ def _by_page(results: list[dict]) -> dict[str, list[dict]]:
     for r in results:
         out[next((k for k, match in kinds if match(r["name"])), "other")].append(r)
     return out
+
+
+def model_label(model: str) -> str:
+    """A kinds row's model as its table names it: a model, or one of the aggregates."""
+    return {"all": "**every model**", "held_out": "**the held-out models**"}.get(
+        model, f"`{model}`"
+    )
+
+
+def _views(n: object) -> str:
+    """`n views`, `1 view`."""
+    return f"{_fmt(n)} view{'' if n == 1 else 's'}"
 
 
 def main(figures_too: bool = True) -> int:
