@@ -369,10 +369,10 @@ def test_a_worker_that_fails_or_is_killed_leaves_nothing_in_the_temp_folder(
     mute.chmod(0o755)
     for blender in (str(tmp_path / "no-such-blender"), str(mute)):
         with pytest.raises(WorkerError):
-            Worker(blender=blender, timeout=30)
+            Worker(blender=blender, timeout=600)
         assert not list(temp.iterdir()), blender
     glb = make_demo_objects(tmp_path / "objs")[0]
-    with Worker(blender=str(standin_blender), timeout=60) as w:
+    with Worker(blender=str(standin_blender), timeout=600) as w:
         w.load(glb, tmp_path / "v.npy")
         assert len(list(temp.iterdir())) == 2  # its log and its scratch, while it runs
         w.kill()  # as a timeout does: the worker cleans up nothing itself
