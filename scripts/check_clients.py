@@ -437,6 +437,15 @@ def _items(ds: Any, n: int, reads: _Reads) -> Iterator[tuple[int, Any, list[str]
         yield i, item, reads.take()
 
 
+def _scene_lists(export: Path) -> list[str]:
+    """The README's `--train_scenes $(cat train.txt) --eval_scenes $(cat test.txt)`."""
+    argv = []
+    for flag, name in (("--train_scenes", "train.txt"), ("--eval_scenes", "test.txt")):
+        scenes = (export / name).read_text().split()
+        argv += [flag, *scenes] if scenes else []
+    return argv
+
+
 def _ibrnet_like(p: dict, pkg: str, config: str) -> dict:
     """IBRNet and GNT: config.config_parser on the documented command line, then
     <pkg>.data_loaders.llff_test.LLFFTestDataset in train's 'train' and 'validation'
@@ -450,8 +459,7 @@ def _ibrnet_like(p: dict, pkg: str, config: str) -> dict:
     notes = []
     argv = ["--config", config, "--rootdir", str(export.parent)]
     argv += ["--train_dataset", "llff_test", "--eval_dataset", "llff_test"]
-    argv += ["--train_scenes", *doc["train"]] if doc["train"] else []
-    argv += ["--eval_scenes", *doc["test"]] if doc["test"] else []
+    argv += _scene_lists(export)
     argv += ["--llffhold", str(doc["llffhold"])]
     args = config_parser().parse_args(argv)
     if getattr(args, "distributed", False):
@@ -533,8 +541,7 @@ def _nan(p: dict) -> dict:
         )
     argv = ["--config", "configs/train.yml", "--train_dataset", "llff_test"]
     argv += ["--eval_dataset", "llff_test", "--llffhold", str(doc["llffhold"])]
-    argv += ["--train_scenes", *doc["train"]] if doc["train"] else []
-    argv += ["--eval_scenes", *doc["test"]] if doc["test"] else []
+    argv += _scene_lists(export)
     argv += ["--eval_gain", "0"]
     args = CustomArgumentParser.config_parser().parse_args(args=argv)
     reads = _Reads(imageio, "imread")

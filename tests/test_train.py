@@ -114,7 +114,8 @@ def test_export_is_one_root_of_llff_scenes_and_a_rerun_is_a_no_op(demo_build, tm
     splits = json.loads((demo_build / "splits.json").read_text())
     train = (out / "train.txt").read_text().split()
     test = (out / "test.txt").read_text().split()
-    assert sorted(train + test) == sorted(names)
+    # The paper's protocol: degraded scenes only, the clean __sharp ones in neither list.
+    assert sorted(train + test) == sorted(n for n in names if not n.endswith("__sharp"))
     assert {n.split("__")[0] for n in test} == set(splits["test"])
     doc = json.loads((out / "export.json").read_text())
     assert doc["llffhold"] == 16 and doc["factors"] == [4] and doc["test_view_images"] == "sharp"
@@ -292,3 +293,48 @@ def test_the_example_loader_gives_pairs_without_torch(demo_build):
     assert b["camera"].shape == (34,) and b["camera"][2] == pytest.approx(sc.intrinsics[0, 0])
     lo, hi = b["depth_range"]
     assert lo < np.linalg.norm(sc.c2w_opencv[16, :3, 3]) < hi
+
+
+def test_the_lists_follow_the_papers_protocol_and_print_the_clients_command(
+    standin_build_dir, tmp_path
+):
+    """train.txt / test.txt hold the degraded scenes of the train and test settings (the
+    paper's protocol: train on blurry levels, evaluate on them with sharp targets), the
+    clean __sharp scenes in neither; the summary prints the client's command for them."""
+    out = tmp_path / "data"
+    p = export(standin_build_dir, out)
+    splits = json.loads((standin_build_dir / "splits.json").read_text())
+    train = (out / "train.txt").read_text().split()
+    test = (out / "test.txt").read_text().split()
+    levels = ["blur_1", "blur_2"]
+    assert sorted(train) == sorted(f"{s}__{lvl}" for s in splits["train"] for lvl in levels)
+    assert sorted(test) == sorted(f"{s}__{lvl}" for s in splits["test"] for lvl in levels)
+    assert test and not [n for n in train + test if n.endswith("__sharp")]
+    # The clean scenes stay in the root, the pairs' truth.
+    assert (out / "nerf_llff_data" / f"{splits['test'][0]}__sharp").is_dir()
+    assert f"--llffhold 16 --train_dataset llff_test --train_scenes $(cat {out}/train.txt)" in (
+        p.stdout
+    ), p.stdout
+    # An export of the sharp level alone lists its scenes: they are all it holds.
+    only = export(standin_build_dir, tmp_path / "sharp", "--levels", "sharp")
+    assert (tmp_path / "sharp" / "test.txt").read_text().split(), only.stdout
+    ns = export(standin_build_dir, tmp_path / "ns", "--for", "nerfstudio")
+    assert "nerfstudio-data --center-method focus" in ns.stdout, ns.stdout
+
+
+def test_an_empty_test_split_is_said_with_the_option_that_fixes_it(standin_blender, tmp_path):
+    """One object and the default --test-objects 0.2 hold out nothing: the build and the
+    export each say so in one line naming --test-settings, not an empty test.txt alone."""
+    from blurset.services.demo import make_demo_objects
+
+    glb = make_demo_objects(tmp_path / "models", seed=0)[0]
+    b = tmp_path / "b"
+    p = run_cli("build", "--objects", str(glb), "--views", "4", "--levels", "1", "--latents",
+                "2", "--samples", "2", "--resolution", "32", "--settings-per-object", "2",
+                "--quiet", "--blender", str(standin_blender), "--out", str(b))  # fmt: skip
+    assert json.loads((b / "splits.json").read_text())["test"] == []
+    assert "the test split is empty" in p.stderr and "--test-settings N" in p.stderr, p.stderr
+    e = export(b, tmp_path / "data")
+    assert (tmp_path / "data" / "test.txt").read_text() == ""
+    warn = [ln for ln in e.stderr.splitlines() if "test.txt is empty" in ln]
+    assert len(warn) == 1 and "--test-settings N" in warn[0], e.stderr

@@ -55,6 +55,13 @@ def run(args: argparse.Namespace) -> int:
             f"{summary['settings_complete']} complete and one at least stays train",
             file=sys.stderr,
         )
+    if asked is None and summary["settings_complete"] and not got:
+        print(
+            "  the test split is empty: --test-objects holds out whole objects, and a "
+            "fraction of this build's objects rounds to none; give --test-settings N "
+            "(the paper's 52) or --test-objects with a list",
+            file=sys.stderr,
+        )
     for f in summary["failures"][:5]:
         where = f.get("setting") or f["uid"]
         print(f"  {where}: {f['stage']}: {f['reason']}", file=sys.stderr)

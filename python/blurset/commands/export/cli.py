@@ -382,20 +382,40 @@ def _put_in_place(
             dst.parent.mkdir(parents=True, exist_ok=True)
             layout.replace_dir(stage / scene, dst)
         for split in ("train", "test"):
-            layout.write_text_atomic(out / f"{split}.txt", "".join(f"{n}\n" for n in doc[split]))
+            names = "".join(f"{n}\n" for n in listed(doc, split))
+            layout.write_text_atomic(out / f"{split}.txt", names)
         outputs.write_record(out / EXPORT_FILE, doc)
     finally:
         for t in (stage, trash):
             shutil.rmtree(t, ignore_errors=True)
 
 
+def listed(doc: _records.ExportDoc, split: str) -> list[str]:
+    """train.txt / test.txt, the paper's protocol (docs/training/index.md): train on the
+    train settings' degraded scenes, evaluate on the test settings'. A clean `__sharp`
+    scene (the pairs' truth, in the root beside them) is listed only in an export of
+    nothing else: listed, a client would train on clean images and average clean scenes
+    into its evaluation."""
+    clean = {s for s, rel in doc["scenes"].items() if not doc["noise"] and rel.endswith("/sharp")}
+    names = doc[split]  # type: ignore[literal-required]
+    return names if clean >= set(doc["scenes"]) else [n for n in names if n not in clean]
+
+
 def _say(folders: SceneFolders, doc: _records.ExportDoc, out: Path, what: str) -> None:
     root = out / doc["scenes_dir"] if doc["scenes_dir"] != "." else out
     factors = ", ".join(f"{layout.images_dir(f)}/" for f in doc["factors"]) or "images/ only"
     hint = folders.hint(doc, root)
+    train, test = listed(doc, "train"), listed(doc, "test")
     print(
-        f"blurset export: {len(doc['scenes'])} scenes ({len(doc['train'])} train, "
-        f"{len(doc['test'])} test) {what} -> {root}; {hint} "
+        f"blurset export: {len(doc['scenes'])} scenes ({len(train)} in train.txt, {len(test)} "
+        f"in test.txt) {what} -> {root}; {hint} "
         f"({factors}; test views hold {doc['test_view_images']} images)",
         file=sys.stdout,
     )
+    if not test:
+        print(
+            "blurset export: warning: test.txt is empty: the build holds out no setting "
+            "(--test-objects holds out whole objects, none of one); rebuild with "
+            "--test-settings N (the paper's 52) to evaluate on held-out settings",
+            file=sys.stderr,
+        )

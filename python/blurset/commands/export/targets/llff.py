@@ -26,7 +26,12 @@ def _write(s: StagedScene) -> None:
 
 
 def _hint(doc: _records.ExportDoc, root: Path) -> str:
-    return f"use llffhold {doc['llffhold']}"
+    lists = root.parent
+    return (
+        f"use llffhold {doc['llffhold']}: train.py --rootdir {lists.parent} --llffhold "
+        f"{doc['llffhold']} --train_dataset llff_test --train_scenes $(cat {lists}/train.txt) "
+        f"--eval_dataset llff_test --eval_scenes $(cat {lists}/test.txt)"
+    )
 
 
 TARGET = Target(
