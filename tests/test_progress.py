@@ -49,6 +49,26 @@ def test_piped_lines_carry_elapsed_and_eta(capsys):
     assert lines[2] == "3/4 settings done, 1 failed (1m15s elapsed, ETA 32s)"
 
 
+def test_a_log_hears_from_a_long_setting_every_minute(capsys):
+    """Within a setting (hours at 512 px) a log gets a line with frames and an ETA once
+    a minute at least, not only when the setting ends; a setting's line resets it."""
+    clock = Clock()
+    p = Progress(2, frames_per_setting=100, clock=clock)
+    for _ in range(5):
+        clock.t += 20
+        p.frame_done(10)
+    p.setting_done()
+    clock.t += 59
+    p.frame_done(10)
+    lines = capsys.readouterr().err.splitlines()
+    # 30 frames in 60 s, 170 left: 5m40s; the setting's own line (50 in 100 s, 150 left),
+    # and 59 s after it none.
+    assert lines == [
+        "30/200 frames, 0/2 settings done (1m00s elapsed, ETA 5m40s)",
+        "1/2 settings done (1m40s elapsed, ETA 5m00s)",
+    ], lines
+
+
 def test_eta_before_any_frame_and_when_nothing_is_left(capsys):
     clock = Clock()
     p = Progress(2, frames_per_setting=5, clock=clock)
@@ -83,3 +103,28 @@ def test_an_interrupted_build_says_how_to_resume(tmp_path):
     assert p.stderr.strip() == (
         "blurset build: interrupted; complete settings are kept: rerun the same command to resume"
     )
+
+
+def test_a_dry_run_prints_the_plan_and_estimate_and_writes_nothing(tmp_path):
+    """`build --dry-run` prints the plan (settings, images, renders, samples, disk) and a
+    time estimate, refuses a bad option before it, and leaves no folder behind; the
+    README's build of real models at the paper's defaults is priced in hours, with the
+    cheaper choices beside it."""
+    from tests.conftest import run_cli, shared
+
+    out = tmp_path / "out"
+    p = run_cli("build", "--demo", "--out", str(out), "--dry-run")
+    lines = p.stderr.splitlines()
+    assert lines[0].startswith("plan: 3 objects x 1 settings = 3 settings of 17 views at 96 px")
+    assert "255 images" in lines[0] and " renders, " in lines[0], lines
+    assert lines[1].startswith("estimate: ") and "cheaper" not in p.stderr, lines
+    assert not out.exists() and not list(tmp_path.iterdir())
+    bad = run_cli("build", "--demo", "--out", str(out), "--dry-run", "--views", "0", check=False)
+    assert bad.returncode != 0 and "--views" in bad.stderr and not out.exists()
+    glb = shared("glb", "khronos_BoxTextured.glb")
+    readme = run_cli("build", "--objects", str(glb), "--out", str(out), "--dry-run")
+    est = next(ln for ln in readme.stderr.splitlines() if ln.startswith("estimate: "))
+    assert "h" in est.split(" on this machine")[0], readme.stderr  # hours at 512 px
+    cheaper = next(ln for ln in readme.stderr.splitlines() if "cheaper:" in ln)
+    assert "--resolution 256" in cheaper and "--device optix" in cheaper, cheaper
+    assert not out.exists()

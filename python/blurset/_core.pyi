@@ -1157,6 +1157,17 @@ class Plan:
         """The whole plan as a dict (views[].levels["<l>"].latent_frames …), for reading."""
     def level(self, view: int, level: int) -> rec.LevelPlan:
         """One view's plan of one blur level as a dict (w_l, latents, motion_px, …)."""
+    def cost(
+        self,
+        pin: int | None,
+        *,
+        sharp_views: list[int],
+        sharp_samples: int,
+        backend: str,
+        cores: int,
+    ) -> tuple[int, int, float]:
+        """What `renders` (with the same arguments) cost on `backend` with `cores` cores:
+        (renders, samples, seconds), `blurset build --dry-run`'s estimate."""
     def renders(
         self,
         exr_dir: str | PathLike[str],

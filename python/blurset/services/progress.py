@@ -1,6 +1,7 @@
 """Progress of a build: a bar of frames rendered with settings done and an ETA (tqdm) on a
-terminal; on a log (stderr not a TTY) one plain line per setting instead, with the time
-elapsed and an ETA, since a bar's carriage returns would bury the `failed:` lines."""
+terminal; on a log (stderr not a TTY) one plain line per setting instead, and one a minute
+at least while frames render, with the time elapsed and an ETA, since a bar's carriage
+returns would bury the `failed:` lines."""
 
 from __future__ import annotations
 
@@ -20,6 +21,10 @@ def duration(seconds: float) -> str:
     if s < 3600:
         return f"{s // 60}m{s % 60:02d}s"
     return f"{s // 3600}h{s % 3600 // 60:02d}m"
+
+
+# The longest a log goes without a line while frames render (seconds).
+LOG_EVERY_S = 60.0
 
 
 class Progress:
@@ -45,7 +50,7 @@ class Progress:
         self.frames_total = settings * frames_per_setting
         self.frames_done = 0
         self._clock = clock
-        self._t0 = clock()
+        self._t0 = self._said = clock()
         self._lock = threading.Lock()
         tty = sys.stderr.isatty()
         self._lines = enabled and not tty
@@ -91,12 +96,22 @@ class Progress:
             self.frames_done += n
             if self._bar is not None:
                 self._bar.update(n)
+            # A log hears from a long setting too, not only when it ends (hours at 512 px).
+            if self._lines and self._clock() - self._said >= LOG_EVERY_S:
+                self._said = self._clock()
+                print(
+                    f"{self.frames_done}/{self.frames_total} frames, {self.settings_done}/"
+                    f"{self.settings_total} settings done{self._tally()} ({self.timing()})",
+                    file=sys.stderr,
+                    flush=True,
+                )
 
     def setting_done(self) -> None:
         with self._lock:
             self.settings_done += 1
             self._post()
             if self._lines:
+                self._said = self._clock()
                 print(
                     f"{self.settings_done}/{self.settings_total} settings done{self._tally()} "
                     f"({self.timing()})",

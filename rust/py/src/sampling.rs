@@ -76,6 +76,29 @@ impl Plan {
         }
     }
 
+    /// What `renders` (with the same arguments) cost on `backend` with `cores` cores:
+    /// (renders, samples, seconds), `blurset build --dry-run`'s estimate.
+    #[pyo3(signature = (pin, *, sharp_views, sharp_samples, backend, cores))]
+    fn cost(
+        &self,
+        pin: Option<u32>,
+        sharp_views: Vec<usize>,
+        sharp_samples: u32,
+        backend: &str,
+        cores: usize,
+    ) -> PyResult<(u64, u64, f64)> {
+        let model = core::CostModel::of_backend(backend).map_err(crate::error::to_pyerr)?;
+        let renders = self
+            .0
+            .renders_except(std::path::Path::new(""), &sharp_views, pin);
+        let c = model.renders_cost(
+            &core::with_samples(renders, sharp_samples),
+            self.0.resolution[0],
+            cores,
+        );
+        Ok((c.renders, c.samples, c.seconds))
+    }
+
     /// The renders of one blurry image (view, level), EXRs named `<prefix>_…`.
     #[pyo3(signature = (view, level, prefix, pin = None))]
     fn level_renders<'py>(

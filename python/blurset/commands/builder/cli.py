@@ -23,6 +23,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     # A flag per option the core declares (rust/core/src/plan/config.rs, build_options!).
     BUILD.add_flags(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="print the plan (settings, images, renders, samples, disk) and its time estimate "
+        "for this machine after every check that needs no render; write nothing",
+    )
 
 
 def config_from_args(args: argparse.Namespace) -> BuildConfig:
@@ -31,9 +37,12 @@ def config_from_args(args: argparse.Namespace) -> BuildConfig:
 
 
 def run(args: argparse.Namespace) -> int:
-    from blurset.commands.builder import build
+    from blurset.commands.builder import build, dry_run
 
     cfg = config_from_args(args)
+    if args.dry_run:
+        print("\n".join(dry_run(cfg)), file=sys.stderr)
+        return 0
     summary = build(cfg, progress=not args.quiet)
     skipped = summary.get("objects_skipped", 0)
     n, bad = summary["objects"] - skipped, summary["objects_failed"]

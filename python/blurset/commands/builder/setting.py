@@ -213,6 +213,45 @@ def _plan(
     return plan, frames, exr_dir
 
 
+def object_geometry(path: Path) -> tuple[list[float], np.ndarray]:
+    """A GLB's box and vertices as the worker normalizes them (Blender's Z up, box
+    centred, largest side 1), read without Blender: what the dry run plans with."""
+    import trimesh
+
+    scene = cast("trimesh.Scene", trimesh.load(path, force="scene"))
+    parts = []
+    for node in scene.graph.nodes_geometry:
+        m, name = scene.graph[node]
+        parts.append(trimesh.transform_points(scene.geometry[name].vertices, m))
+    v = np.vstack(parts)[:, [0, 2, 1]] * [1.0, -1.0, 1.0]  # glTF's Y up → Blender's Z up
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    v = (v - (lo + hi) / 2) / float((hi - lo).max())
+    return (np.ptp(v, axis=0)).tolist(), np.ascontiguousarray(v, dtype=np.float32)
+
+
+def estimate_setting(
+    job: SettingJob, cfg: BuildConfig, geometry: tuple[list[float], np.ndarray], backend: str
+) -> tuple[int, int, float]:
+    """(renders, samples, seconds) of a setting on `backend` with this machine's cores,
+    priced by the core from the setting's own plan (plan/cost.rs renders_cost)."""
+    plan = _core.plan_setting(
+        cfg,
+        uid=job.obj.uid,
+        theta0_deg=job.theta0_deg,
+        seed=_core.seed_for(cfg.seed, job.obj.uid, job.index),
+        bbox_dims=geometry[0],
+        vertices=geometry[1],
+        backend=backend if cfg.blur_method == "auto" else None,
+    )
+    return plan.cost(
+        cfg.cycles_samples,
+        sharp_views=cfg.sharp_views(plan.n_views),
+        sharp_samples=cfg.effective_sharp_samples,
+        backend=backend,
+        cores=os.cpu_count() or 1,
+    )
+
+
 def _denoiser(cfg: BuildConfig, info: _records.Loaded) -> _core.Denoiser | None:
     """--denoise oidn: the frames carry their guide passes, and every finished image (a
     blurry mean or the sharp render) is denoised once by the core (issue 28)."""

@@ -12,6 +12,7 @@
 //! The one rule is [`Pricing::choose`]; its record is [`BlurChoice`] (meta.json's
 //! `render.blur_choice`).
 use super::choices::{BlurMethod, Choice};
+use super::render::Render;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -45,6 +46,23 @@ pub const CPU_SAMPLE_S: f64 = 11.48 / 136.0;
 /// over the 1.16× that `blur_cost_vs_sharp` spends on the larger region the exposure
 /// covers (bench/results.json): ≈ 1.17.
 pub const CPU_MOTION_BLUR_FACTOR: f64 = 1.36 / 1.16;
+
+/// CPU, the cores [`CPU_SAMPLE_S`] was measured on; a machine of n cores renders
+/// [`CPU_CORES`]/n of its time (Cycles spreads a frame over every core).
+pub const CPU_CORES: f64 = 2.0;
+/// CPU, what a latent frame costs at 512 px whatever its samples, inside one job: its
+/// pixels' own work (film, filter, the EXR written and read back), 0.28 µs a pixel
+/// (region.rs `call_cost_px`, bench/bench_blur_cost.py).
+pub const CPU_FRAME_S: f64 = 0.28e-6 * REFERENCE_PX * REFERENCE_PX;
+
+/// A plan's renders priced on one device: `blurset build --dry-run`'s estimate.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RendersCost {
+    pub renders: u64,
+    /// Samples per pixel over the renders, a band's in proportion to its rows.
+    pub samples: u64,
+    pub seconds: f64,
+}
 
 /// What a render costs on one kind of device.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -94,6 +112,31 @@ impl CostModel {
                  motion_blur"
             ))),
         }
+    }
+
+    /// What `renders` (a plan's, at `res` px) cost on `cores` cores (a CPU's costs were
+    /// measured on [`CPU_CORES`]; a GPU's are its own): one call and a frame's own cost
+    /// each, and their samples over the rows they trace (a band its own), a motion-blur
+    /// render at its factor. The estimate `blurset build --dry-run` prints.
+    pub fn renders_cost(&self, renders: &[Render], res: u32, cores: usize) -> RendersCost {
+        let (per_core, frame_s) = match self.kind {
+            DeviceKind::Cpu => (CPU_CORES / cores.max(1) as f64, CPU_FRAME_S),
+            DeviceKind::Gpu => (1.0, 0.0),
+        };
+        let frame = frame_s * (f64::from(res) / REFERENCE_PX).powi(2);
+        let mut cost = RendersCost::default();
+        for r in renders {
+            let samples = u64::from(r.samples.unwrap_or(1));
+            let rows = r
+                .band
+                .map_or(1.0, |b| f64::from(b.rows[1] - b.rows[0]) / f64::from(res));
+            let traced = (samples as f64 * rows).ceil() as u64;
+            let s = self.seconds(1, traced, res, r.motion.is_some()) + frame;
+            cost.seconds += s * per_core;
+            cost.renders += 1;
+            cost.samples += traced;
+        }
+        cost
     }
 
     /// Seconds of `calls` render calls of `samples` samples in all at `res` px, motion
@@ -269,6 +312,44 @@ mod tests {
 
     fn pricing(backend: &str, res: u32) -> Pricing {
         Pricing::new(backend, 32, res).expect("known backend")
+    }
+
+    #[test]
+    fn a_plan_costs_its_samples_over_the_rows_it_traces_on_the_cores_it_has() {
+        let frame = |samples, band: Option<[u32; 2]>| Render {
+            samples: Some(samples),
+            band: band.map(|rows| crate::plan::render::Band { rows, of: 4 }),
+            ..Render::still(
+                0,
+                crate::plan::kind::ImageKind::Sharp,
+                [[0.0; 4]; 4],
+                1,
+                String::new(),
+            )
+        };
+        let cpu = CostModel::CPU;
+        let one = cpu.renders_cost(&[frame(64, None)], 512, 2);
+        assert_eq!((one.renders, one.samples), (1, 64));
+        assert!((one.seconds - (64.0 * CPU_SAMPLE_S + CPU_FRAME_S)).abs() < 1e-12);
+        // Four bands tiling the rows trace one image's samples, at four frames' own cost.
+        let bands: Vec<Render> = (0..4)
+            .map(|k| frame(64, Some([k * 128, k * 128 + 128])))
+            .collect();
+        let four = cpu.renders_cost(&bands, 512, 2);
+        assert_eq!((four.renders, four.samples), (4, 64));
+        assert!((four.seconds - one.seconds - 3.0 * CPU_FRAME_S).abs() < 1e-9);
+        // Twice the cores, half the time; a quarter of the pixels at 256 px.
+        assert!(
+            (cpu.renders_cost(&[frame(64, None)], 512, 4).seconds - one.seconds / 2.0).abs()
+                < 1e-12
+        );
+        assert!(
+            (cpu.renders_cost(&[frame(64, None)], 256, 2).seconds - one.seconds / 4.0).abs()
+                < 1e-12
+        );
+        // A GPU pays its call whatever the cores.
+        let gpu = CostModel::GPU.renders_cost(&[frame(1, None)], 512, 64);
+        assert!((gpu.seconds - GPU_CALL_S - GPU_SAMPLE_S).abs() < 1e-12);
     }
 
     #[test]
