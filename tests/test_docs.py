@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -246,3 +247,38 @@ def test_a_planted_machine_path_fails(tmp_path, monkeypatch) -> None:
         "$HOME/work/x",
     ):
         assert check.machine_paths(fine) == [], fine
+
+
+def test_the_generated_pages_are_committed_and_current(tmp_path, monkeypatch) -> None:
+    """The pages `make docs` generates are committed (a link to them resolves on GitHub,
+    not only on the built site), and each is what its generator makes today."""
+    pytest.importorskip("matplotlib")
+    cli_gen, formats, bench = _gen("cli"), _gen("formats"), _gen("bench")
+    monkeypatch.setattr(cli_gen, "OUT", tmp_path / "reference" / "cli.md")
+    monkeypatch.setattr(cli_gen, "GUIDES", [])
+    monkeypatch.setattr(formats, "OUT", tmp_path / "records")
+    monkeypatch.setattr(bench, "OUT", tmp_path / "benchmarks")
+    assert cli_gen.main() == 0 and formats.main() == 0 and bench.main(figures_too=False) == 0
+    pairs = [(tmp_path / "reference", ROOT / "docs" / "reference")]
+    pairs += [(tmp_path / "records", ROOT / "docs" / "formats" / "records")]
+    pairs += [(tmp_path / "benchmarks", ROOT / "docs" / "benchmarks")]
+    for made, committed in pairs:
+        names = sorted(p.name for p in made.iterdir())
+        assert names == sorted(p.name for p in committed.iterdir()), committed
+        for name in names:
+            if name.endswith(".png"):  # a figure: its renderer's bytes vary by platform
+                continue
+            stale = (made / name).read_bytes() != (committed / name).read_bytes()
+            assert not stale, f"{committed / name} is stale: run make docs"
+
+
+def test_no_relative_link_of_the_readme_or_docs_is_dead() -> None:
+    """Every relative link in README.md and docs/ names a file of the checkout, as
+    GitHub shows them (no page only the docs build makes)."""
+    dead = []
+    for page in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]:
+        for m in re.finditer(r"\]\(([^)\s#]+)(?:#[^)\s]*)?\)", page.read_text()):
+            link = m.group(1)
+            if not re.match(r"[a-z]+:", link) and not (page.parent / link).exists():
+                dead.append(f"{page.relative_to(ROOT)}: {link}")
+    assert dead == [], dead
