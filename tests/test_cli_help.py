@@ -21,9 +21,19 @@ def _help_of(p: argparse.ArgumentParser, action: argparse.Action) -> str:
 
 def test_top_level_help_opens_with_a_user_sentence() -> None:
     text = cli.make_parser().format_help()
-    assert cli.DESCRIPTION in " ".join(text.split())
+    assert " ".join(cli.DESCRIPTION.split()) in " ".join(text.split())
     assert "module" not in cli.DESCRIPTION and "subcommand" not in cli.DESCRIPTION
     assert not HISTORY.search(text)
+
+
+def test_top_level_help_starts_the_researcher_on_a_path_that_parses() -> None:
+    """Four lines to start from, as written, each a command line the parser takes."""
+    text = cli.make_parser().format_help()
+    shown = text.split("Start here:\n", 1)[1].splitlines()[: len(cli.START)]
+    assert [ln.strip() for ln in shown] == list(cli.START) and len(cli.START) == 4
+    for line in cli.START:
+        argv = line.split("#")[0].split()[1:]
+        assert cli.make_parser(argv[0]).parse_args(argv).command == argv[0], line
 
 
 def test_every_parser_refuses_abbreviations() -> None:

@@ -117,7 +117,9 @@ def test_a_dry_run_prints_the_plan_and_estimate_and_writes_nothing(tmp_path):
     lines = p.stderr.splitlines()
     assert lines[0].startswith("plan: 3 objects x 1 settings = 3 settings of 17 views at 96 px")
     assert "255 images" in lines[0] and " renders, " in lines[0], lines
-    assert lines[1].startswith("estimate: ") and "cheaper" not in p.stderr, lines
+    # The demo's --samples 4 is a frame's share: the parity budget renders 9 a frame.
+    assert lines[1].startswith("  each latent frame renders 9 samples (--samples 4 "), lines
+    assert lines[2].startswith("estimate: ") and "cheaper" not in p.stderr, lines
     assert not out.exists() and not list(tmp_path.iterdir())
     bad = run_cli("build", "--demo", "--out", str(out), "--dry-run", "--views", "0", check=False)
     assert bad.returncode != 0 and "--views" in bad.stderr and not out.exists()

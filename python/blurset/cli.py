@@ -70,9 +70,17 @@ COMMANDS = {
 
 # What `blurset --help` opens with.
 DESCRIPTION = (
-    "Make multi-view datasets with realistic degradations for generalizable NeRF research: "
-    "motion blur rendered with Blender from GLB objects (Objaverse-Blur style), sensor "
+    "Make multi-view datasets with realistic degradations for generalizable NeRF research:\n"
+    "motion blur rendered with Blender from GLB objects (Objaverse-Blur style), sensor\n"
     "noise (LLFF-N style), and the tools to check, export and describe them."
+)
+# The researcher's path, first thing `blurset --help` shows (tests/test_cli_help.py
+# parses every line).
+START = (
+    "blurset build --objects models/ --out OUT --test-settings 52 --dry-run  # plan, cost",
+    "blurset build --objects models/ --out OUT --test-settings 52  # sharp + blur_1..4",
+    "blurset noise OUT --out NOISY --gains 4 8 16                  # noisy copies",
+    "blurset export OUT --out ROOT/data                            # a training root",
 )
 
 
@@ -96,6 +104,10 @@ class HelpFormatter(argparse.HelpFormatter):
         return f"{text} (default: {shown.replace('%', '%%')})"
 
 
+class _TopFormatter(argparse.RawDescriptionHelpFormatter, HelpFormatter):
+    """`blurset --help`: its description's lines (the path to start on) kept as written."""
+
+
 def new_parser(**kwargs: Any) -> argparse.ArgumentParser:
     """A parser of blurset's kind: no abbreviated options (`--resol` is not
     `--resolution`), help that shows the defaults."""
@@ -106,7 +118,13 @@ def make_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The whole CLI's parser; with `command`, only that subcommand's module is imported
     and given its options (the others keep their names and help): a run of `blurset
     verify` does not import the builder, numpy and all."""
-    parser = new_parser(prog="blurset", description=DESCRIPTION)
+    start = "\n".join(f"  {line}" for line in START)
+    parser = argparse.ArgumentParser(
+        prog="blurset",
+        description=f"{DESCRIPTION}\n\nStart here:\n{start}",
+        allow_abbrev=False,
+        formatter_class=_TopFormatter,
+    )
     from blurset import __version__
 
     parser.add_argument("--version", action="version", version=f"blurset {__version__}")

@@ -128,7 +128,12 @@ def plan_lines(cfg: BuildConfig, objs: list[ObjectSpec]) -> list[str]:
     settings, images, renders, samples, disk and the time on this machine, priced by
     the core from the plans of the first objects' settings, with cheaper choices beside
     a long estimate."""
-    from blurset.commands.builder.setting import SettingJob, estimate_setting, object_geometry
+    from blurset.commands.builder.setting import (
+        SettingJob,
+        estimate_setting,
+        frame_samples,
+        object_geometry,
+    )
 
     n_settings = len(objs) * len(cfg.theta0s)
     images = n_settings * cfg.views * len(cfg.level_dirs)
@@ -161,6 +166,13 @@ def plan_lines(cfg: BuildConfig, objs: list[ObjectSpec]) -> list[str]:
 
     renders, samples, seconds = cost(cfg, backend)
     lines[0] += f", {renders:,} renders, {samples:,} samples"
+    first = next(o for o in objs if o.uid in geometry)
+    per_frame = frame_samples(cfg, SettingJob(first, 0, cfg.theta0s[0]), geometry[first.uid])
+    if per_frame and per_frame != [cfg.samples]:
+        shown = "-".join(str(n) for n in sorted({per_frame[0], per_frame[-1]}))
+        lines.append(f"  each latent frame renders {shown} samples (--samples {cfg.samples} is "
+                     f"a frame's share of its image's budget, raised by --blur-budget "
+                     f"{cfg.blur_budget})")  # fmt: skip
     lines.append(
         f"estimate: {duration(seconds)} on this machine ({backend}, {os.cpu_count()} cores; "
         "the benchmarks' costs in rust/core/src/plan/cost.rs)"

@@ -252,6 +252,19 @@ def estimate_setting(
     )
 
 
+def frame_samples(
+    cfg: BuildConfig, job: SettingJob, geometry: tuple[list[float], np.ndarray]
+) -> list[int]:
+    """The samples each latent frame of a setting renders, fewest to most (`--samples`
+    is a frame's share of a blurry image's budget, which the parity factor raises)."""
+    plan = _core.plan_setting(
+        cfg, uid=job.obj.uid, theta0_deg=job.theta0_deg, seed=0,
+        bbox_dims=geometry[0], vertices=geometry[1],
+    )  # fmt: skip
+    renders = plan.renders("", cfg.cycles_samples)
+    return sorted({int(r.get("samples") or 0) for r in renders if r["kind"]["type"] == "blur"})
+
+
 def _denoiser(cfg: BuildConfig, info: _records.Loaded) -> _core.Denoiser | None:
     """--denoise oidn: the frames carry their guide passes, and every finished image (a
     blurry mean or the sharp render) is denoised once by the core (issue 28)."""
