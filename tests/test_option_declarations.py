@@ -34,7 +34,7 @@ TOML_ONLY = {
     "background",
 }
 # Flags of `blurset build` that are not options of the config.
-NOT_OPTIONS = {"help", "debug", "config", "quiet"}
+NOT_OPTIONS = {"help", "debug", "config", "quiet", "dry_run"}
 
 
 def _build_parser() -> argparse.ArgumentParser:

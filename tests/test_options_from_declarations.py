@@ -23,7 +23,7 @@ from blurset.services.options import Options
 from tests.conftest import help_text
 
 # Flags of `blurset build` that are not options of the config.
-NOT_OPTIONS = {"help", "debug", "config", "quiet"}
+NOT_OPTIONS = {"help", "debug", "config", "quiet", "dry_run"}
 
 
 def _build_parser() -> argparse.ArgumentParser:

@@ -34,7 +34,7 @@ def pyarrow():
         import pyarrow.parquet as pq
     except ImportError:
         raise ConfigError(
-            "--for hub needs pyarrow: pip install 'blurset[hub]' (or pip install pyarrow)"
+            "--for hub needs pyarrow: pip install pyarrow (or, from blurset's checkout, pip install '.[hub]')"
         ) from None
     return pa, pq
 

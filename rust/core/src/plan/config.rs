@@ -278,9 +278,10 @@ macro_rules! build_options {
     /// Depth, normals and masks of every view, in the sharp level (issue 35): depth and
     /// normals from one extra one-sample render per view and size, masks from coverage.
     passes: Vec<String> = Vec::new(), Spec::Passes, shapes {
-        help: "per-view outputs besides colour, written in the sharp level: depth (EXR, \
-            along the viewing axis, world units), normal (EXR, world frame), mask (PNG, \
-            from coverage); comma-separated, or none",
+        help: "per-view outputs besides colour: depth (EXR, along the viewing axis, world \
+            units) and normal (EXR, world frame) in the sharp level, mask (PNG, from \
+            coverage) in the sharp level and, their own, in each blur, shake and rolling \
+            shutter level; comma-separated, or none",
         before: Some(Vec::new()),
     };
     workers: usize = 1, specs::WORKERS, run {
