@@ -315,6 +315,7 @@ def test_the_lists_follow_the_papers_protocol_and_print_the_clients_command(
     assert f"--llffhold 16 --train_dataset llff_test --train_scenes $(cat {out}/train.txt)" in (
         p.stdout
     ), p.stdout
+    assert "`cp -a` dangles; copy it with `cp -rL`, or export with --copy" in p.stdout
     # An export of the sharp level alone lists its scenes: they are all it holds.
     only = export(standin_build_dir, tmp_path / "sharp", "--levels", "sharp")
     assert (tmp_path / "sharp" / "test.txt").read_text().split(), only.stdout

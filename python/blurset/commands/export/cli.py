@@ -412,6 +412,12 @@ def _say(folders: SceneFolders, doc: _records.ExportDoc, out: Path, what: str) -
         f"({factors}; test views hold {doc['test_view_images']} images)",
         file=sys.stdout,
     )
+    if not doc["copy"]:
+        print(
+            "  its scenes are links into the build, relative: a copy of the root made with "
+            "`cp -a` dangles; copy it with `cp -rL`, or export with --copy",
+            file=sys.stdout,
+        )
     if not test:
         print(
             "blurset export: warning: test.txt is empty: the build holds out no setting "
