@@ -108,12 +108,6 @@ class _TopFormatter(argparse.RawDescriptionHelpFormatter, HelpFormatter):
     """`blurset --help`: its description's lines (the path to start on) kept as written."""
 
 
-def new_parser(**kwargs: Any) -> argparse.ArgumentParser:
-    """A parser of blurset's kind: no abbreviated options (`--resol` is not
-    `--resolution`), help that shows the defaults."""
-    return argparse.ArgumentParser(allow_abbrev=False, formatter_class=HelpFormatter, **kwargs)
-
-
 def make_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The whole CLI's parser; with `command`, only that subcommand's module is imported
     and given its options (the others keep their names and help): a run of `blurset

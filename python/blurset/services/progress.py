@@ -98,26 +98,19 @@ class Progress:
                 self._bar.update(n)
             # A log hears from a long setting too, not only when it ends (hours at 512 px).
             if self._lines and self._clock() - self._said >= LOG_EVERY_S:
-                self._said = self._clock()
-                print(
-                    f"{self.frames_done}/{self.frames_total} frames, {self.settings_done}/"
-                    f"{self.settings_total} settings done{self._tally()} ({self.timing()})",
-                    file=sys.stderr,
-                    flush=True,
-                )
+                self._line(f"{self.frames_done}/{self.frames_total} frames, ")
 
     def setting_done(self) -> None:
         with self._lock:
             self.settings_done += 1
             self._post()
             if self._lines:
-                self._said = self._clock()
-                print(
-                    f"{self.settings_done}/{self.settings_total} settings done{self._tally()} "
-                    f"({self.timing()})",
-                    file=sys.stderr,
-                    flush=True,
-                )
+                self._line("")
+
+    def _line(self, head: str) -> None:
+        self._said = self._clock()
+        done = f"{self.settings_done}/{self.settings_total} settings done{self._tally()}"
+        print(f"{head}{done} ({self.timing()})", file=sys.stderr, flush=True)
 
     def skip(self, settings: int) -> None:
         """Settings already complete (resumed) or finished elsewhere (Ray)."""

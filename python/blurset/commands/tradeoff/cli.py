@@ -17,7 +17,9 @@ from blurset.services.config import BUILD
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--object", required=True, type=Path, help="a GLB file (required)")
     p.add_argument("--out", required=True, type=Path, help="output directory (required)")
-    p.add_argument("--quick", action="store_true", help="small grid, 96 px: a few minutes on 2 cores")
+    p.add_argument(
+        "--quick", action="store_true", help="small grid, 96 px: a few minutes on 2 cores"
+    )
     p.add_argument("--level", type=int, help="blur level of the measured image (default: 4)")
     p.add_argument("--view", type=int, default=0, help="view index in the setting")
     p.add_argument(
