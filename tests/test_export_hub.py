@@ -396,6 +396,21 @@ def test_a_card_written_into_a_hub_export_is_its_card(hub, hub_build, tmp_path):
     assert (other / "README.md").read_text() == (hub / "README.md").read_text()
 
 
+def test_a_hub_card_describes_the_noise_its_upload_holds_and_no_other(hub, hub_build, tmp_path):
+    """A noise output beside the build is described by the build's card, but the card of
+    a hub export that holds no noise says nothing of it (the upload does not hold it)."""
+    b, n = hub_build
+    section = f"## Noise variants (`{n.name}/`)"
+    assert section in (hub / "README.md").read_text()  # exported with --noise
+    run_cli("card", str(b), "--out", str(tmp_path / "c.md"))
+    assert section in (tmp_path / "c.md").read_text()  # found beside the build
+    clean = tmp_path / "clean"
+    run_cli("export", str(b), "--for", "hub", "--out", str(clean), "--levels", "sharp")
+    run_cli("card", str(b), "--hub", str(clean))
+    text = (clean / "README.md").read_text()
+    assert "## Noise variants" not in text and "σ_read" not in text
+
+
 def test_an_llff_export_and_a_hub_export_replace_each_other_whole(hub_build, tmp_path):
     """The same --out from one target to the other (--overwrite): the old entries go,
     and the folders they leave empty with them."""

@@ -392,9 +392,12 @@ def make_card(
     levels = list(dataset.get("levels") or metas[0].get("levels") or [])
     licences = Counter(str(o.get("license", attribution.UNKNOWN)) for o in objects.values())
     name = pretty_name or f"blurset Objaverse-Blur: {build.resolve().name}"
-    noise_docs = _noise_outputs(build, noise)
-    header = _card_header(name, licences, int(counts.get("images", 0)), bool(noise_docs))
     hub_doc = _hub_doc(hub, build) if hub is not None else None
+    noise_docs = _noise_outputs(build, noise)
+    if hub_doc is not None:
+        # The card of an upload describes what the upload holds: its own noise, if any.
+        noise_docs = [(p, d) for p, d in noise_docs if p.name == hub_doc.get("noise")]
+    header = _card_header(name, licences, int(counts.get("images", 0)), bool(noise_docs))
     if hub_doc is not None:
         header.update(hub_header(hub, hub_doc))  # type: ignore[arg-type]
     m0 = metas[0]
