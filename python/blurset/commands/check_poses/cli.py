@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -141,6 +142,12 @@ def _write_json(path: Path, data) -> None:
     layout.write_json(path, data, indent=2)
 
 
+def _starting(scene: Path) -> None:
+    """A line before COLMAP runs (a minute or more per scene, silent otherwise)."""
+    print(f"check-poses: {scene.name}: COLMAP features, matching and mapping (a minute or "
+          "more a scene)", file=sys.stderr, flush=True)  # fmt: skip
+
+
 def run(args: argparse.Namespace) -> int:
     colmap.VERBOSE = bool(getattr(args, "verbose", False))
     path = Path(args.path)
@@ -174,6 +181,7 @@ def run(args: argparse.Namespace) -> int:
             if not scene.is_dir():
                 raise InputError(f"no level directory {level} in setting {path}")
             wd = workdir / level if workdir else None
+            _starting(scene)
             reports[level] = check_scene(scene, factor=args.factor, workdir=wd)
             print(_summary(level, reports[level]), flush=True)
         if args.level == "all":
@@ -189,6 +197,7 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--level {args.level}: {path} is an LLFF scene without levels")
         if workdir:
             _refuse_used_workdir(workdir)
+        _starting(path)
         data = decisive = check_scene(path, factor=args.factor, workdir=workdir)
         print(_summary(path.name, decisive))
     if args.json:
