@@ -511,6 +511,8 @@ def linear_dir(factor: int) -> str:
     """The linear EXR folder at downsampling factor `factor` (`linear`, `linear_4`)."""
 
 PASSES: list[str]
+# A worker's start and one object's load, on a CPU (plan/cost.rs): the dry run's estimate.
+OBJECT_LOAD_S: float
 """The per-view outputs besides colour (`--passes`), in order: depth, normal, mask."""
 
 def pass_dir(kind: str, factor: int) -> str:

@@ -22,7 +22,7 @@ pub use crate::rng::seed_for;
 // What one setting renders: views, trajectories, levels, latent frames.
 pub use crate::plan::choices::{BlurMethod, Choice, Preset};
 pub use crate::plan::config::BuildConfig;
-pub use crate::plan::cost::{BlurChoice, CostModel, Pricing};
+pub use crate::plan::cost::{BlurChoice, CostModel, Pricing, OBJECT_LOAD_S};
 pub use crate::plan::kinds::defocus::{circle_of_confusion, DefocusPlan};
 pub use crate::plan::kinds::KIND_STATS;
 pub use crate::plan::motion::{level_renders, LevelPlan};

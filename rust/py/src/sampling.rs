@@ -370,6 +370,7 @@ fn seeded_subset(ids: Vec<String>, k: usize, seed: u64) -> Vec<String> {
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Plan>()?;
     m.add_class::<Splits>()?;
+    m.add("OBJECT_LOAD_S", core::OBJECT_LOAD_S)?;
     m.add_function(wrap_pyfunction!(seeded_subset, m)?)?;
     m.add_function(wrap_pyfunction!(seed_for, m)?)?;
     m.add_function(wrap_pyfunction!(plan_setting, m)?)?;

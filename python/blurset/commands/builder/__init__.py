@@ -125,15 +125,9 @@ _LONG_S = 3600.0
 
 def plan_lines(cfg: BuildConfig, objs: list[ObjectSpec]) -> list[str]:
     """What the build will do, said before it renders (and all `--dry-run` says):
-    settings, images, renders, samples, disk and the time on this machine, priced by
-    the core from the plans of the first objects' settings, with cheaper choices beside
-    a long estimate."""
-    from blurset.commands.builder.setting import (
-        SettingJob,
-        estimate_setting,
-        frame_samples,
-        object_geometry,
-    )
+    settings, images, renders, samples, disk and the time on this machine, with cheaper
+    choices beside a long estimate."""
+    from blurset.commands.builder.setting import SettingJob, frame_samples, object_geometry
 
     n_settings = len(objs) * len(cfg.theta0s)
     images = n_settings * cfg.views * len(cfg.level_dirs)
@@ -143,50 +137,60 @@ def plan_lines(cfg: BuildConfig, objs: list[ObjectSpec]) -> list[str]:
         f"{cfg.views} views at {cfg.resolution} px; levels {', '.join(cfg.level_dirs)}: "
         f"{images} images, about {disk / 1e6:,.0f} MB on disk"
     ]
-    geometry, unread = {}, []
-    for o in objs[:_PLAN_OBJECTS]:
-        try:
-            geometry[o.uid] = object_geometry(o.path)
-        except Exception as e:  # noqa: BLE001 - any reader failure: that object is not priced
-            unread.append(f"{o.uid} ({type(e).__name__})")
-    if cfg.target_psnr is not None or not geometry:
-        why = "each image renders to --target-psnr" if geometry else "no object could be read"
-        return [*lines, f"estimate: none before rendering ({why}); the log gives an ETA"]
     backend = cfg.device if cfg.device not in ("auto", "gpu") else "cpu"
-
-    def cost(c: BuildConfig, on: str) -> tuple[int, int, float]:
-        priced = [o for o in objs[:_PLAN_OBJECTS] if o.uid in geometry]
-        per = [
-            estimate_setting(SettingJob(o, k, t), c, geometry[o.uid], on)
-            for o in priced
-            for k, t in enumerate(c.theta0s)
-        ]
-        r, n, t = (sum(col) * len(objs) / len(priced) for col in zip(*per, strict=True))
-        return int(r), int(n), t
-
-    renders, samples, seconds = cost(cfg, backend)
+    est = estimate(cfg, objs, backend)
+    if est is None:
+        why = "each image renders to --target-psnr" if cfg.target_psnr else "no object read"
+        return [*lines, f"estimate: none before rendering ({why}); the log gives an ETA"]
+    renders, samples, seconds, priced = est
     lines[0] += f", {renders:,} renders, {samples:,} samples"
-    first = next(o for o in objs if o.uid in geometry)
-    per_frame = frame_samples(cfg, SettingJob(first, 0, cfg.theta0s[0]), geometry[first.uid])
+    first = SettingJob(priced[0], 0, cfg.theta0s[0])
+    per_frame = frame_samples(cfg, first, object_geometry(priced[0].path))
     if per_frame and per_frame != [cfg.samples]:
         shown = "-".join(str(n) for n in sorted({per_frame[0], per_frame[-1]}))
         lines.append(f"  each latent frame renders {shown} samples (--samples {cfg.samples} is "
                      f"a frame's share of its image's budget, raised by --blur-budget "
                      f"{cfg.blur_budget})")  # fmt: skip
+    unread = [o.uid for o in objs[:_PLAN_OBJECTS] if o not in priced]
     lines.append(
         f"estimate: {duration(seconds)} on this machine ({backend}, {os.cpu_count()} cores; "
         "the benchmarks' costs in rust/core/src/plan/cost.rs)"
-        + (f"; not priced: {', '.join(unread)}" if unread else "")
+        + (f"; not priced (unreadable): {', '.join(unread)}" if unread else "")
     )
     if seconds > _LONG_S:
         half = cfg.replace(resolution=max(32, cfg.resolution // 2))
         cheaper = [
-            f"--resolution {half.resolution}: {duration(cost(half, backend)[2])}",
-            f"a GPU (--device optix): {duration(cost(cfg, 'optix')[2])}",
+            f"--resolution {half.resolution}: {duration(estimate(half, objs, backend)[2])}",  # type: ignore[index]
+            f"a GPU (--device optix): {duration(estimate(cfg, objs, 'optix')[2])}",  # type: ignore[index]
             "--preset fast: each image rendered only to a 40 dB target",
         ]
         lines.append(f"  cheaper: {'; '.join(cheaper)}")
     return lines
+
+
+def estimate(
+    cfg: BuildConfig, objs: list[ObjectSpec], backend: str
+) -> tuple[int, int, float, list[ObjectSpec]] | None:
+    """(renders, samples, seconds, the objects priced) of the build on `backend`: each of
+    the first objects' settings priced by the core from its own plan (its GLB read as the
+    worker normalizes it), a worker's start and load per object, the rest of the objects
+    at their mean; None under a render target (each image's samples are its own) or when
+    no object reads."""
+    from blurset.commands.builder.setting import SettingJob, estimate_setting, object_geometry
+
+    priced, per = [], []
+    for o in objs[:_PLAN_OBJECTS] if cfg.target_psnr is None else []:
+        try:
+            g = object_geometry(o.path)
+        except Exception:  # noqa: BLE001 - any reader failure: that object is not priced
+            continue
+        priced.append(o)
+        per += [estimate_setting(SettingJob(o, k, t), cfg, g, backend)
+                for k, t in enumerate(cfg.theta0s)]  # fmt: skip
+    if not priced:
+        return None
+    r, n, t = (sum(col) * len(objs) / len(priced) for col in zip(*per, strict=True))
+    return int(r), int(n), t + len(objs) * _core.OBJECT_LOAD_S, priced
 
 
 def build(cfg: BuildConfig, *, progress: bool = True) -> dict:

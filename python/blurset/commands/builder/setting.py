@@ -8,6 +8,7 @@ partial ones.
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import time
@@ -213,6 +214,7 @@ def _plan(
     return plan, frames, exr_dir
 
 
+@functools.cache
 def object_geometry(path: Path) -> tuple[list[float], np.ndarray]:
     """A GLB's box and vertices as the worker normalizes them (Blender's Z up, box
     centred, largest side 1), read without Blender: what the dry run plans with."""

@@ -50,10 +50,22 @@ pub const CPU_MOTION_BLUR_FACTOR: f64 = 1.36 / 1.16;
 /// CPU, the cores [`CPU_SAMPLE_S`] was measured on; a machine of n cores renders
 /// [`CPU_CORES`]/n of its time (Cycles spreads a frame over every core).
 pub const CPU_CORES: f64 = 2.0;
+/// CPU, seconds per sample of a whole 512 px frame of traced pixels (a render traces
+/// only its region, the object's): 0.137, each setting's samples over its renders'
+/// regions against its time in the recorded paper preset at 512 px
+/// (`settings_per_hour_512px_paper`: MapPin 0.131, MazdaRX7 0.131, WaterBottle 0.148;
+/// its 128 px rows agree to 0.89-0.98). [`CPU_SAMPLE_S`] is one sharp image's, region
+/// and all, which `blur_method auto` compares the methods by.
+pub const CPU_TRACED_SAMPLE_S: f64 = 0.137;
 /// CPU, what a latent frame costs at 512 px whatever its samples, inside one job: its
 /// pixels' own work (film, filter, the EXR written and read back), 0.28 µs a pixel
 /// (region.rs `call_cost_px`, bench/bench_blur_cost.py).
 pub const CPU_FRAME_S: f64 = 0.28e-6 * REFERENCE_PX * REFERENCE_PX;
+
+/// What an object costs before its first frame: a worker's Blender start, the GLB's
+/// import and normalization, its scene set-up (the demo's objects on the idle 2-core
+/// machine, bench/bench_estimate.py).
+pub const OBJECT_LOAD_S: f64 = 4.0;
 
 /// A plan's renders priced on one device: `blurset build --dry-run`'s estimate.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -119,22 +131,38 @@ impl CostModel {
     /// each, and their samples over the rows they trace (a band its own), a motion-blur
     /// render at its factor. The estimate `blurset build --dry-run` prints.
     pub fn renders_cost(&self, renders: &[Render], res: u32, cores: usize) -> RendersCost {
-        let (per_core, frame_s) = match self.kind {
-            DeviceKind::Cpu => (CPU_CORES / cores.max(1) as f64, CPU_FRAME_S),
-            DeviceKind::Gpu => (1.0, 0.0),
+        // A CPU's samples cost what the pixels they trace cost (the region: the object's).
+        let (per_core, frame_s, sample_s) = match self.kind {
+            DeviceKind::Cpu => (
+                CPU_CORES / cores.max(1) as f64,
+                CPU_FRAME_S,
+                CPU_TRACED_SAMPLE_S,
+            ),
+            DeviceKind::Gpu => (1.0, 0.0, self.sample_s_512px),
         };
-        let frame = frame_s * (f64::from(res) / REFERENCE_PX).powi(2);
+        let whole = f64::from(res).powi(2);
+        let px = whole / REFERENCE_PX.powi(2);
         let mut cost = RendersCost::default();
         for r in renders {
-            let samples = u64::from(r.samples.unwrap_or(1));
+            let samples = f64::from(r.samples.unwrap_or(1));
             let rows = r
                 .band
                 .map_or(1.0, |b| f64::from(b.rows[1] - b.rows[0]) / f64::from(res));
-            let traced = (samples as f64 * rows).ceil() as u64;
-            let s = self.seconds(1, traced, res, r.motion.is_some()) + frame;
+            let share = match (r.region, self.kind) {
+                (Some([x0, y0, x1, y1]), DeviceKind::Cpu) => {
+                    f64::from((x1 - x0) * (y1 - y0)) / whole
+                }
+                _ => rows,
+            };
+            let factor = if r.motion.is_some() {
+                self.motion_blur_factor
+            } else {
+                1.0
+            };
+            let s = self.call_s + frame_s * px + samples * share * sample_s * px * factor;
             cost.seconds += s * per_core;
             cost.renders += 1;
-            cost.samples += traced;
+            cost.samples += (samples * rows).ceil() as u64;
         }
         cost
     }
@@ -330,7 +358,14 @@ mod tests {
         let cpu = CostModel::CPU;
         let one = cpu.renders_cost(&[frame(64, None)], 512, 2);
         assert_eq!((one.renders, one.samples), (1, 64));
-        assert!((one.seconds - (64.0 * CPU_SAMPLE_S + CPU_FRAME_S)).abs() < 1e-12);
+        assert!((one.seconds - (64.0 * CPU_TRACED_SAMPLE_S + CPU_FRAME_S)).abs() < 1e-12);
+        // A region of a quarter of the image traces a quarter of the pixels.
+        let quarter = Render {
+            region: Some([0, 0, 256, 256]),
+            ..frame(64, None)
+        };
+        let q = cpu.renders_cost(&[quarter], 512, 2).seconds;
+        assert!((q - (16.0 * CPU_TRACED_SAMPLE_S + CPU_FRAME_S)).abs() < 1e-12);
         // Four bands tiling the rows trace one image's samples, at four frames' own cost.
         let bands: Vec<Render> = (0..4)
             .map(|k| frame(64, Some([k * 128, k * 128 + 128])))
