@@ -226,9 +226,12 @@ def _scenes(inp: _Inputs, folders: SceneFolders) -> _Scenes:
             rels = [f"{name}/{level}/{g}" for g in inp.gains] if inp.noise else [f"{name}/{level}"]
             for rel in rels:
                 scene, src = rel.replace("/", "__"), _source(inp, name, rel)
-                # Held-out views of a degraded scene hold clean copies (unless the build
-                # rendered them blurry): a loader that draws sources must skip them.
-                clean_held = level != layout.SHARP and inp.held in ("sharp", "clean")
+                # Held-out views of a degraded scene hold clean copies: the sharp image of
+                # a blur level (unless the build rendered them blurry), the noise-free one
+                # of every noisy scene, sharp level too (unless noise drew them): a loader
+                # that draws sources must skip them.
+                sharp_held = level != layout.SHARP and inp.held == "sharp"
+                clean_held = inp.held != "noisy" if inp.noise else sharp_held
                 source = SceneSource(scene, src, held_out, clean_held, name in test)
                 for sc, vs in folders.split(source):
                     out.add(sc, src, rel, name in test)

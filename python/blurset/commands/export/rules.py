@@ -37,7 +37,7 @@ class SceneSource:
     scene: str  # `<setting>__<level>[__gain_<g>]`
     src: Path  # the level (or gain) folder
     held_out: list[int]  # the setting's held-out views
-    clean_held: bool  # whether those views hold clean copies in this degraded level
+    clean_held: bool  # whether those views hold clean copies (sharp, or noise-free)
     is_test: bool  # whether the setting is a test setting
 
 
