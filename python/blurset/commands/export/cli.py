@@ -322,6 +322,8 @@ def _replace(
 ) -> int:
     """Put the export's entries in place, replacing only what the previous export here
     wrote; everything else in OUT stays as it is."""
+    new = [_entry(doc, s) for s in doc["scenes"]] + list(LISTS)
+    outputs.refuse_links(out, new, "export")  # before the sweep lists their folders
     _sweep_stale(out, doc)
     old = outputs.read_record(out / EXPORT_FILE) if how == "same" else None
     if old == doc:
@@ -330,7 +332,6 @@ def _replace(
     if old is not None:
         _refuse_other_export(old, doc, out, overwrite)
     owned = set(outputs.owned_entries(out, EXPORT)) if old is not None else set()
-    new = [_entry(doc, s) for s in doc["scenes"]] + list(LISTS)
     _refuse_foreign(out, doc, owned, new)
     _put_in_place(out, folders, doc, sources, build_root, owned, new)
     if isinstance(old, dict):
