@@ -7,9 +7,11 @@ target module export.py has never seen is exported with it unchanged."""
 from __future__ import annotations
 
 import ast
+import hashlib
 import json
 import re
 import sys
+from pathlib import Path
 
 import pytest
 from blurset import cli
@@ -17,7 +19,9 @@ from blurset.commands.export import targets as exports
 from blurset.commands.export.rules import OwnOutput, SceneFolders
 from blurset.services import outputs
 
-from tests.conftest import ROOT
+from tests.conftest import ROOT, run_cli, standin_build
+
+pq = pytest.importorskip("pyarrow.parquet")
 
 EXPORT_PY = ROOT / "python" / "blurset" / "commands" / "export" / "cli.py"
 DOCS = ROOT / "docs"
@@ -202,3 +206,70 @@ def test_a_new_target_module_is_exported_with_by_export_py_unchanged(
         assert (d / "note.txt").read_text() == scene
     assert sorted(p.name for p in out.iterdir()) == ["export.json", "flat", "test.txt", "train.txt"]
     assert "throwaway hint" in capsys.readouterr().out
+
+
+# -- noisy scenes: no noise-free image where a client trains (issue 72 item 4) -------------
+
+
+def _sha(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _trained_on(target: str, out: Path, doc: dict) -> dict[str, list[str]]:
+    """Per noisy scene (hub: config and setting), the digests of every image its client
+    trains on or draws as a source: all but the views its loader evaluates on."""
+    scenes = out / doc["scenes_dir"]
+    seen: dict[str, list[str]] = {}
+    if target == "hub":
+        for shard in sorted((out / "data").rglob("*.parquet")):
+            for row in pq.read_table(shard).to_pylist():
+                if row["gain"] is not None and not row["held_out"]:
+                    cells = [row[k] for k in row if k == "image" or re.fullmatch(r"image_\d+", k)]
+                    key = f"{shard.parent.name}/{row['setting']}"
+                    seen.setdefault(key, []).extend(_sha(c["bytes"]) for c in cells)
+        return seen
+    for scene in doc["scenes"]:
+        d = scenes / scene
+        dirs = sorted(p for p in d.iterdir() if re.fullmatch(r"images(_\d+)?", p.name))
+        names = [p.name for p in sorted(dirs[0].glob("*.png"))]
+        if target == "geonerf":
+            # A train scene: every view a target and a source; a test scene: image 0 is
+            # its evaluated target, the others its sources.
+            held = set() if scene.startswith("train/") else {names[0]}
+        elif target == "nerfstudio":
+            train = json.loads((d / "transforms.json").read_text())["train_filenames"]
+            held = set(names) - {Path(f).name for f in train}
+        else:  # llff: the loader holds every llffhold-th view out
+            held = set(names[:: doc["llffhold"]])
+        seen[scene] = [
+            _sha(p.read_bytes()) for sub in dirs for p in sub.glob("*.png") if p.name not in held
+        ]
+    return seen
+
+
+@pytest.mark.parametrize("build_args", [(), ("--blurry-test-views",)], ids=["sharp", "blurry"])
+def test_a_noisy_export_holds_no_noise_free_image_a_client_trains_on(
+    standin_blender, tmp_path, build_args
+) -> None:
+    """Every target's noisy scenes (sharp level included, and with held-out views the
+    build rendered blurry), read as its client reads them: no image it trains on or
+    draws as a source is byte-equal to an image of the build. A noise output keeps its
+    held-out views noise-free, as targets: GeoNeRF trains on every view of a train
+    scene, so its train scenes leave them out."""
+    b, noise = tmp_path / "b", tmp_path / "n"
+    standin_build(b, standin_blender, "--views", "17", *build_args)
+    run_cli("noise", str(b), "--out", str(noise), "--gains", "4", "--quiet")
+    clean = {_sha(p.read_bytes()) for p in b.rglob("*.png")}
+    levels = json.loads((b / "dataset.json").read_text())["levels"]
+    assert "sharp" in levels and len(levels) > 1
+    for target in exports.targets():
+        assert target in ("llff", "geonerf", "nerfstudio", "hub"), f"{target}: add its reader"
+        out = tmp_path / target
+        run_cli("export", str(b), "--noise", str(noise), "--for", target, "--out", str(out))
+        seen = _trained_on(target, out, json.loads((out / "export.json").read_text()))
+        for lvl in levels:
+            assert any(f"{lvl}__gain_4" in k or f"{lvl}_gain_4/" in k for k in seen), (target, lvl)
+        bad = {k: sum(h in clean for h in v) for k, v in seen.items()}
+        bad = {k: n for k, n in bad.items() if n}
+        assert not bad, f"--for {target}: noise-free images a client trains on: {bad}"
+        assert all(seen.values()), target

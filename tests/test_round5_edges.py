@@ -1,8 +1,9 @@
 """Issue 60, the edges: a lock file that is a link is never followed, --workers-per-gpu
 on a Ray cluster without GPUs is refused as the local executor refuses it, a GLB whose
 vertex buffer holds NaN or Inf is that object's failure, and tradeoff's scratch folder
-never takes a user's `work/`. Real commands; the builds are stand-in builds (no Blender
-render)."""
+never takes a user's `work/`; and issue 72's: no export or noise run writes through a
+link it did not make under --out, and a rerun removes no folder it did not write. Real
+commands; the builds are stand-in builds (no Blender render)."""
 
 from __future__ import annotations
 
@@ -232,3 +233,106 @@ def test_a_build_records_a_non_finite_glb_by_its_file_and_goes_on(tmp_path, stan
     ], recs
     assert "non-finite vertex position" in recs[0]["reason"]
     assert not list(out.glob("nan_vertex_*")) and len(layout.complete_settings(out)) == 6
+
+
+# -- issue 72: no command writes through a link it did not make under --out ----------------
+
+
+@pytest.fixture(scope="module")
+def bn(tmp_path_factory, standin_blender) -> tuple[Path, Path]:
+    """A stand-in build of 17 views (GeoNeRF's test scenes need 7 train views) and its
+    noise output."""
+    d = tmp_path_factory.mktemp("links")
+    standin_build(d / "b", standin_blender, "--views", "17")
+    run_cli("noise", str(d / "b"), "--out", str(d / "n"), "--gains", "4", "--quiet")
+    return d / "b", d / "n"
+
+
+def _user_folder(path: Path) -> dict[str, bytes | None]:
+    """A user's folder: a note and an empty folder, the state a test compares."""
+    (path / "keep").mkdir(parents=True)
+    (path / "note.txt").write_text("mine")
+    return _state(path)
+
+
+def _state(path: Path) -> dict[str, bytes | None]:
+    return {str(p.relative_to(path)): p.read_bytes() if p.is_file() else None
+            for p in sorted(path.rglob("*"))}  # fmt: skip
+
+
+def _swap_for_link(out: Path, rel: str, user: Path) -> None:
+    """`rel` of `out` (what a command wrote) moved away, a link to `user` in its place."""
+    shutil.rmtree(out / rel)
+    (out / rel).symlink_to(user)
+
+
+_HUB, _LLFF = ["export", "{b}", "--for", "hub"], ["export", "{b}"]
+_NOISE = ["noise", "{b}", "--gains", "4", "--quiet"]
+# case: (the command, its first run that wrote the folder or None: new, the link's place)
+LINK_CASES = {
+    "hub data, new": (_HUB, None, "data"),
+    "hub config, new": (_HUB, None, "data/sharp"),
+    "hub data, rerun": ([*_HUB, "--levels", "sharp"], _HUB, "data"),
+    "llff, new": (_LLFF, None, "nerf_llff_data"),
+    "llff, rerun": ([*_LLFF, "--levels", "sharp"], _LLFF, "nerf_llff_data"),
+    "geonerf, new": ([*_LLFF, "--for", "geonerf"], None, "geonerf"),
+    "geonerf train, new": ([*_LLFF, "--for", "geonerf"], None, "geonerf/train"),
+    "nerfstudio scene, new": ([*_LLFF, "--for", "nerfstudio"], None, "{setting}__sharp"),
+    "noise setting, rerun": (_NOISE, _NOISE, "{setting}"),
+    "noise level, rerun --overwrite": ([*_NOISE, "--overwrite"], _NOISE, "{setting}/sharp"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", list(LINK_CASES))
+def test_a_link_at_a_folder_a_command_writes_is_refused_and_its_target_untouched(
+    bn, tmp_path, case
+) -> None:
+    """A link planted where a command writes a folder (a new output's, or in place of
+    one an earlier run wrote) is refused by name before anything is written, and the
+    user's folder it points to, its empty folder too, stays as it was: no shard, scene
+    or unit written there, nothing removed there."""
+    b, _ = bn
+    args, first, rel = LINK_CASES[case]
+    rel = rel.format(setting=json.loads((b / "splits.json").read_text())["train"][0])
+    out, user = tmp_path / "out", tmp_path / "user"
+    before = _user_folder(user)
+    if first:
+        # A first run wrote the folder, then it was swapped for the link.
+        run_cli(*[a.format(b=b) for a in first], "--out", str(out))
+        _swap_for_link(out, rel, user)
+    else:
+        (out / rel).parent.mkdir(parents=True, exist_ok=True)
+        (out / rel).symlink_to(user)
+    proc = run_cli(*[a.format(b=b) for a in args], "--out", str(out), check=False)
+    one_error_line(proc, f"--out/{rel} is a link", "did not make")
+    assert _state(user) == before
+    assert (out / rel).is_symlink()
+
+
+def test_a_noise_scene_overwrite_refuses_a_linked_gain_folder(bn, tmp_path) -> None:
+    b, _ = bn
+    setting = json.loads((b / "splits.json").read_text())["train"][0]
+    scene, out, user = b / setting / "sharp", tmp_path / "out", tmp_path / "user"
+    before = _user_folder(user)
+    run_cli("noise", str(scene), "--out", str(out), "--gains", "4")
+    _swap_for_link(out, "gain_4", user)
+    proc = run_cli("noise", str(scene), "--out", str(out), "--gains", "4", "--overwrite",
+                   check=False)  # fmt: skip
+    one_error_line(proc, "--out/gain_4 is a link")
+    assert _state(user) == before and (out / "gain_4").is_symlink()
+
+
+@pytest.mark.parametrize("target", ["hub", "llff"])
+def test_a_rerun_never_removes_a_folder_it_did_not_write(bn, tmp_path, target) -> None:
+    """A user's empty folder beside the shards (data/notes) or the scenes survives a
+    rerun that removes the entries of the levels it no longer exports."""
+    b, _ = bn
+    out = tmp_path / "out"
+    run_cli("export", str(b), "--for", target, "--out", str(out))
+    top = out / json.loads((out / "export.json").read_text())["scenes_dir"]
+    if target == "hub":
+        top = out / "data"
+    (top / "notes").mkdir()
+    run_cli("export", str(b), "--for", target, "--out", str(out), "--levels", "sharp")
+    assert (top / "notes").is_dir() and not any((top / "notes").iterdir())
+    assert not any("blur" in p.name for p in top.iterdir())  # the rerun did remove its own

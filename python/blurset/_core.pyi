@@ -1532,6 +1532,9 @@ def not_written(dir: str | PathLike[str], kind: OutputKind, rel: str) -> list[st
     """The entries inside the owned entry `rel` of the output in `dir` that no command of
     `kind` writes (paths relative to `dir`)."""
 
+def linked_entry(dir: str | PathLike[str], rels: list[str]) -> str | None:
+    """The first entry on the way to one of `rels` in `dir` that is a link, or None."""
+
 def remove_owned(dir: str | PathLike[str], kind: OutputKind) -> list[str]:
     """Remove what `owned_entries` lists; returns it. An entry holding a file the command
     did not write is refused by name (InputError) before anything is removed."""

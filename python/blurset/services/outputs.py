@@ -157,6 +157,17 @@ def refuse_not_written(
             )
 
 
+def refuse_links(path: Path, entries: Iterable[str], command: str, option: str = "--out") -> None:
+    """ConfigError naming the first link on the way to `entries` (paths relative to the
+    output `path` that `blurset <command>` is about to write or remove): it made none of
+    them, and would write (or remove) through it wherever it points."""
+    if link := _core.linked_entry(Path(path), list(entries)):
+        raise ConfigError(
+            f"{option}/{link} is a link, which blurset {command} did not make and would write "
+            f"through: remove the link, or give another {option} (nothing was changed): {path}"
+        )
+
+
 def read_record(path: Path, record: str | None = None) -> Any:
     """A record blurset wrote, checked against its shape (InputError names the file and
     the field); `record` names it when the file is named otherwise."""

@@ -92,8 +92,8 @@ pub use crate::dataset::noise_plan::{
     plan_build as plan_noise_build, plan_scene as plan_noise_scene, NoiseGain, NoisePlan, NoiseUnit,
 };
 pub use crate::dataset::outputs::{
-    build_state, claim, mark_text, not_written, output_kind, owned_entries, remove_owned,
-    superseded_settings, text_owner, BuildState, Claim, OutputKind, TextOwner,
+    build_state, claim, linked_entry, mark_text, not_written, output_kind, owned_entries,
+    remove_owned, superseded_settings, text_owner, BuildState, Claim, OutputKind, TextOwner,
 };
 pub use crate::dataset::read::{check_shape, parse_record, read_record, Record};
 pub use crate::dataset::records::{write_dataset, DatasetDoc};

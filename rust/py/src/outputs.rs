@@ -117,6 +117,12 @@ fn not_written(
     crate::run_detached(py, || core::not_written(&dir, kind.into(), &rel))
 }
 
+/// The first entry on the way to one of `rels` in `dir` that is a link, or None.
+#[pyfunction]
+fn linked_entry(dir: PathBuf, rels: Vec<String>) -> Option<String> {
+    core::linked_entry(&dir, &rels)
+}
+
 /// Remove what `owned_entries` lists; returns it. An entry holding a file the command
 /// did not write is refused by name (InputError) before anything is removed.
 #[pyfunction]
@@ -251,6 +257,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(claim, m)?)?;
     m.add_function(wrap_pyfunction!(owned_entries, m)?)?;
     m.add_function(wrap_pyfunction!(not_written, m)?)?;
+    m.add_function(wrap_pyfunction!(linked_entry, m)?)?;
     m.add_function(wrap_pyfunction!(remove_owned, m)?)?;
     m.add_function(wrap_pyfunction!(build_state, m)?)?;
     m.add_function(wrap_pyfunction!(superseded_settings, m)?)?;

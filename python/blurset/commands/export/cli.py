@@ -226,9 +226,12 @@ def _scenes(inp: _Inputs, folders: SceneFolders) -> _Scenes:
             rels = [f"{name}/{level}/{g}" for g in inp.gains] if inp.noise else [f"{name}/{level}"]
             for rel in rels:
                 scene, src = rel.replace("/", "__"), _source(inp, name, rel)
-                # Held-out views of a degraded scene hold clean copies (unless the build
-                # rendered them blurry): a loader that draws sources must skip them.
-                clean_held = level != layout.SHARP and inp.held in ("sharp", "clean")
+                # Held-out views of a degraded scene hold clean copies: the sharp image of
+                # a blur level (unless the build rendered them blurry), the noise-free one
+                # of every noisy scene, sharp level too (unless noise drew them): a loader
+                # that draws sources must skip them.
+                sharp_held = level != layout.SHARP and inp.held == "sharp"
+                clean_held = inp.held != "noisy" if inp.noise else sharp_held
                 source = SceneSource(scene, src, held_out, clean_held, name in test)
                 for sc, vs in folders.split(source):
                     out.add(sc, src, rel, name in test)
@@ -319,6 +322,8 @@ def _replace(
 ) -> int:
     """Put the export's entries in place, replacing only what the previous export here
     wrote; everything else in OUT stays as it is."""
+    new = [_entry(doc, s) for s in doc["scenes"]] + list(LISTS)
+    outputs.refuse_links(out, new, "export")  # before the sweep lists their folders
     _sweep_stale(out, doc)
     old = outputs.read_record(out / EXPORT_FILE) if how == "same" else None
     if old == doc:
@@ -327,7 +332,6 @@ def _replace(
     if old is not None:
         _refuse_other_export(old, doc, out, overwrite)
     owned = set(outputs.owned_entries(out, EXPORT)) if old is not None else set()
-    new = [_entry(doc, s) for s in doc["scenes"]] + list(LISTS)
     _refuse_foreign(out, doc, owned, new)
     _put_in_place(out, folders, doc, sources, build_root, owned, new)
     if isinstance(old, dict):

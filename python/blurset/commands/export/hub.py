@@ -672,6 +672,8 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> bool:
     date)."""
     doc = hp.doc
     top = [export_rules.EXPORT_FILE]
+    new = [f"{hub_format.DATA_DIR}/{s.name}" for s in hp.shards] + top
+    outputs.refuse_links(out, new, "export")  # a link at data/ would take every shard
     layout.remove_stale_temps(out, [export_rules.STAGE, export_rules.TRASH, *top])
     for d in {(out / hub_format.DATA_DIR / s.name).parent for s in hp.shards}:
         layout.remove_stale_temps(d, [Path(s.name).name for s in hp.shards])
@@ -679,7 +681,6 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> bool:
     if old is not None:
         export_rules.refuse_other_export(old, doc, out, overwrite)  # type: ignore[arg-type]
     owned = set(outputs.owned_entries(out, export_rules.EXPORT)) if old is not None else set()
-    new = [f"{hub_format.DATA_DIR}/{s.name}" for s in hp.shards] + top
     export_rules.refuse_foreign(out, doc, owned, new)  # type: ignore[arg-type]
     keys = {s.name: shard_key(hp, s) for s in hp.shards}
     done_doc = old if isinstance(old, dict) and old.get("state") != "replacing" else None
@@ -709,7 +710,6 @@ def _write(out: Path, hp: HubPlan, how: str, overwrite: bool) -> bool:
         written += 1
         # A kill from here on keeps this shard: the rerun checks it against this line.
         export_rules.record_replacing(out, doc, owns, vouched)  # type: ignore[arg-type]
-    _remove_empty_dirs(out / hub_format.DATA_DIR)
     doc["shards"] = {s.name: vouched[s.name] for s in hp.shards}
     outputs.write_record(out / export_rules.EXPORT_FILE, doc)
     _say(doc, out, hp, "written", written)
@@ -794,14 +794,6 @@ def _write_one(hp: HubPlan, s: _Shard, out: Path, key: str, kill: bool) -> dict:
     finally:
         tmp.unlink(missing_ok=True)
     return _record(s, rows, size, sha)
-
-
-def _remove_empty_dirs(root: Path) -> None:
-    if not root.is_dir():
-        return
-    for d in sorted((p for p in root.iterdir() if p.is_dir()), reverse=True):
-        if not any(d.iterdir()):
-            d.rmdir()
 
 
 def _say(doc: dict, out: Path, hp: HubPlan, what: str, written: int) -> None:

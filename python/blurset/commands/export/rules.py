@@ -37,7 +37,7 @@ class SceneSource:
     scene: str  # `<setting>__<level>[__gain_<g>]`
     src: Path  # the level (or gain) folder
     held_out: list[int]  # the setting's held-out views
-    clean_held: bool  # whether those views hold clean copies in this degraded level
+    clean_held: bool  # whether those views hold clean copies (sharp, or noise-free)
     is_test: bool  # whether the setting is a test setting
 
 
@@ -213,6 +213,7 @@ def refuse_foreign(out: Path, doc: _records.ExportDoc, owned: set[str], new: lis
                 f"--out already holds {rel}, which no earlier export here wrote: move it, or "
                 f"give another --out: {out}"
             )
+    outputs.refuse_links(out, sorted(owned), "export")
     if doc["scenes_dir"] != "." and (out / doc["scenes_dir"]).is_file():
         raise ConfigError(f"--out holds a file {doc['scenes_dir']}: {out}")
     # (The core's rule of what an exported scene holds: images/, images_<f>/, the passes'

@@ -59,7 +59,10 @@ def _prepare_out(out: Path, build: Path, plan: _core.NoisePlan, overwrite: bool)
     """Claim OUT for this noise run (call under its lock): a new or empty folder, or a
     noise output made with the same options; `--overwrite` replaces a noise output's own
     units and records, nothing else in the folder, and never a build or a foreign folder."""
-    if outputs.claim(out, NOISE, "--out") == "same":
+    how = outputs.claim(out, NOISE, "--out")
+    units = [(u.dst / g.dir).relative_to(out).as_posix() for u in plan.units for g in u.gains]
+    outputs.refuse_links(out, units + outputs.owned_entries(out, NOISE), "noise")
+    if how == "same":
         old = outputs.read_record(out / DATASET_FILE)
         if old["build"] != build.resolve().name and not overwrite:
             raise ConfigError(

@@ -44,6 +44,7 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
                 raise ConfigError(f"--out is a noise output already (pass --overwrite): {out}")
             # Refused before the gains are written: their old folders go whole.
             owned = outputs.owned_entries(out, NOISE_SCENE)
+            outputs.refuse_links(out, owned, "noise")
             outputs.refuse_not_written(out, NOISE_SCENE, owned, "noise")
         # A killed run's staging tree (SIGKILL leaves it; SIGINT/SIGTERM remove their own).
         # (and an old gain a killed replace_dir had moved aside)

@@ -509,6 +509,19 @@ pub fn not_written(dir: &Path, kind: OutputKind, rel: &str) -> Result<Vec<String
     Ok(found)
 }
 
+/// The first entry on the way from `dir` to one of `rels`, each `rel` itself included,
+/// that is a link, relative to `dir`. A command writes and removes only in folders it
+/// made and never makes a link where it writes: such a link is someone else's, and
+/// writing through it would put files anywhere on disk (and let a rerun remove there).
+pub fn linked_entry(dir: &Path, rels: &[String]) -> Option<String> {
+    let link = |r: &&str| std::fs::symlink_metadata(dir.join(r)).is_ok_and(|m| m.is_symlink());
+    let mut ways = rels.iter().flat_map(|rel| {
+        let parents = rel.match_indices('/').map(|(i, _)| &rel[..i]);
+        parents.chain([rel.as_str()])
+    });
+    ways.find(link).map(str::to_string)
+}
+
 /// Remove the entries `owned_entries` lists (then the folders a noise output's units
 /// leave empty): what `--overwrite` does, and nothing else. Returns what was removed.
 /// An entry holding a file the command did not write ([`not_written`]) is refused by
@@ -979,6 +992,26 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
         let _ = std::fs::remove_dir_all(&s);
         Ok(())
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn the_first_link_on_the_way_to_an_entry_is_named() {
+        let d = tmp("linked");
+        write(&d.join("user/sharp/x"), "mine");
+        write(&d.join("out/nerf_llff_data/a/poses_bounds.npy"), "x");
+        std::os::unix::fs::symlink(d.join("user"), d.join("out/data")).expect("link");
+        let out = d.join("out");
+        let rels = |v: &[&str]| v.iter().map(|r| r.to_string()).collect::<Vec<_>>();
+        // A real folder's entries, and names not written yet: no link on their way.
+        let real = rels(&["nerf_llff_data/a/images", "train.txt", "new/b"]);
+        assert_eq!(linked_entry(&out, &real), None);
+        // The link itself, an entry past it, and one of several.
+        for rel in ["data", "data/sharp/train-0.parquet", "data/new/x"] {
+            let many = rels(&["train.txt", rel]);
+            assert_eq!(linked_entry(&out, &many).as_deref(), Some("data"), "{rel}");
+        }
+        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]

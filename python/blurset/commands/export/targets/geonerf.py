@@ -27,10 +27,11 @@ DIR = layout.images_dir(FACTOR)
 
 
 def _split(s: SceneSource) -> list[tuple[str, list[int] | None]]:
-    """A train setting's train views (its held-out views too when they are degraded), or
+    """A train setting's train views (its held-out views too unless they hold clean
+    copies: sharp in a blur level, noise-free in a gain scene, sharp level's included), or
     per held-out view of a test setting, that view and its 7 nearest train views by
-    camera centre (GeoNeRF's own `dist`). Held-out views of a degraded scene that hold
-    clean copies are never a source."""
+    camera centre (GeoNeRF's own `dist`). A held-out view that holds a clean copy is
+    never a source: GeoNeRF trains on every view of a train scene."""
     rows = np.asarray(_core.read_poses_bounds(s.src / layout.POSES_BOUNDS), dtype=np.float64)
     n = len(rows)
     train = [v for v in range(n) if v not in s.held_out]
