@@ -309,6 +309,23 @@ def test_a_link_at_a_folder_a_command_writes_is_refused_and_its_target_untouched
     assert (out / rel).is_symlink()
 
 
+@pytest.mark.parametrize("where", ["{setting}", "{setting}.partial"])
+def test_a_build_rerun_refuses_a_link_where_a_setting_goes(bn, standin_blender, tmp_path, where):
+    """A link where a setting (or its staging folder) goes is refused by name before the
+    sweep: a rerun neither removes it nor publishes the setting through or over it."""
+    b, _ = bn
+    out, user = copy_build(b, tmp_path / "b"), tmp_path / "user"
+    before = _user_folder(user)
+    rel = where.format(setting=json.loads((out / "splits.json").read_text())["train"][0])
+    if (out / rel).exists():
+        _swap_for_link(out, rel, user)
+    else:
+        (out / rel).symlink_to(user)
+    proc = standin_build(out, standin_blender, "--views", "17", check=False)
+    one_error_line(proc, f"--out/{rel} is a link", "blurset build did not make")
+    assert _state(user) == before and (out / rel).is_symlink()
+
+
 def test_a_noise_scene_overwrite_refuses_a_linked_gain_folder(bn, tmp_path) -> None:
     b, _ = bn
     setting = json.loads((b / "splits.json").read_text())["train"][0]

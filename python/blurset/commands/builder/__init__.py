@@ -221,6 +221,11 @@ def _build(
     prog = Progress(n_settings, frames_per_setting=frames_per_setting(cfg), enabled=progress)
     with build_lock(out):
         check_same_options(out, cfg)
+        # A link where a setting goes: the sweep and the publish would remove or replace
+        # what the build never made.
+        names = [layout.setting_name(o.uid, t) for o in every for t in cfg.theta0s]
+        outputs.refuse_links(out, [*names, *(layout.partial_dir(Path(n)).name for n in names)],
+                             "build")  # fmt: skip
         removed = sweep(out, every, cfg, prog)
     if found := resumed_settings(out, objs, cfg):
         prog.write(
