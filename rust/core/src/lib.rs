@@ -31,7 +31,7 @@ pub use crate::plan::presets::{preset_values, FLOOR_PSNR_DB};
 pub use crate::plan::renders::{with_samples, Motion, Render};
 pub use crate::plan::sampling::{plan_setting, plan_setting_priced, SettingPlan};
 pub use crate::plan::sampling_config::SamplingConfig;
-pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
+pub use crate::plan::spec::{check_downsample, check_range, check_theta0, Kind, Raw};
 pub use crate::plan::target::{ImageState, TargetRule};
 
 // Linear frames in, encoded images out; image files; render QA.
