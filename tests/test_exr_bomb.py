@@ -17,17 +17,17 @@ import pytest
 from blurset import layout
 
 from tests.conftest import one_error_line, standin_build
-from tests.test_bounded_memory import _capped, exr_header, run_capped
+from tests.test_bounded_memory import _capped, exr_header, run_capped, tiny_blocks
 
 
-def zip_bomb(side: int = 16384, lines: int = 16) -> bytes:
-    """A valid ZIP scan-line EXR (`lines` a block) of a `side`² RGBA float frame of zeros:
-    4.2 MB at 16384²."""
-    head = exr_header(b"ABGR", 2, 3, side)  # ZIP: 16 lines a block
+def zip_bomb(side: int = 16384, lines: int = 16, channels: bytes = b"ABGR") -> bytes:
+    """A valid ZIP scan-line EXR (`lines` a block) of a `side`² float frame of zeros
+    (RGBA, or `channels`): 4.2 MB at 16384²."""
+    head = exr_header(channels, 2, 3, side)  # ZIP: 16 lines a block
 
     def data(rows: int) -> bytes:
         # Zeros after ZIP's byte predictor: the first byte 0, every other one 128.
-        return zlib.compress(b"\0" + b"\x80" * (rows * side * 16 - 1), 9)
+        return zlib.compress(b"\0" + b"\x80" * (rows * side * 4 * len(channels) - 1), 9)
 
     full = data(lines)
     blocks = []
@@ -163,7 +163,9 @@ def _open_capped(root: Path, setting: str) -> subprocess.CompletedProcess:
 @pytest.fixture
 def passes_build(standin_blender, tmp_path) -> Path:
     out = tmp_path / "p"
-    standin_build(out, standin_blender, "--passes", "depth,normal", "--settings-per-object", "1")
+    standin_build(
+        out, standin_blender, "--passes", "depth,normal,mask", "--settings-per-object", "1"
+    )
     return out
 
 
@@ -176,6 +178,30 @@ def test_open_scene_refuses_a_pass_file_of_another_size_from_its_header(passes_b
     proc = _open_capped(passes_build, setting.name)
     assert "EXR is 16384x16384, expected 32x32" in proc.stdout, proc.stdout
     assert str(bombed) in proc.stdout, proc.stdout
+
+
+def test_open_scene_refuses_an_image_or_mask_of_another_size_from_its_header(passes_build):
+    """Issue 72: the scene's size is its poses' record, and a PNG of another is refused
+    from its header, named, under the cap: a 16384² RGBA16 image (2 GiB decoded) as the
+    first image, whose size the others were once compared with, or as a mask; and a pose
+    file promising a million rows it does not hold."""
+    setting = layout.complete_settings(passes_build)[0]
+    sharp = setting / "sharp"
+    bomb = png_bomb()
+    first = sorted((sharp / layout.images_dir(1)).glob("*.png"))[0]
+    mask = sharp / layout.pass_dir("mask", 1) / layout.pass_file("mask", first.name)
+    for p in (first, mask):
+        kept = p.read_bytes()
+        p.write_bytes(bomb)
+        proc = _open_capped(passes_build, setting.name)
+        assert "image is 16384x16384 px, the scene's are 32x32" in proc.stdout, proc.stdout
+        assert str(p) in proc.stdout, proc.stdout
+        p.write_bytes(kept)
+    poses = sharp / layout.POSES_BOUNDS
+    head = b"{'descr': '<f8', 'fortran_order': False, 'shape': (1048576, 17), }"
+    poses.write_bytes(b"\x93NUMPY\x01\x00" + struct.pack("<H", len(head)) + head)
+    proc = _open_capped(passes_build, setting.name)
+    assert "for 1048576 rows" in proc.stdout and str(poses) in proc.stdout, proc.stdout
 
 
 def test_open_scene_refuses_a_hub_pass_cell_of_another_size_naming_it(passes_build, tmp_path):
@@ -199,3 +225,86 @@ def test_open_scene_refuses_a_hub_pass_cell_of_another_size_naming_it(passes_bui
     proc = _open_capped(hub, setting)
     said = f"the depth cell of {setting} view {table.column('view')[0].as_py()} does not decode"
     assert said in proc.stdout and "EXR is 16384x16384, expected 32x32" in proc.stdout, proc.stdout
+
+
+def rle_bomb(side: int = 16384) -> bytes:
+    """A valid RLE scan-line EXR (a line a block) of a `side`² RGB half frame of zeros,
+    which the crate decodes: 25 MB promising 1.5 GiB of samples (RLE's bound is 64:1)."""
+    head = exr_header(b"BGR", 1, 1, side)
+    n = side * 3 * 2 - 1  # after the predictor: a 0, then 128s, in runs of at most 128
+    runs = b"\x00\x00" + b"\x7f\x80" * (n // 128) + bytes([n % 128 - 1, 0x80])
+    blocks = [struct.pack("<ii", y, len(runs)) + runs for y in range(side)]
+    first = len(head) + 8 * side
+    table = struct.pack(f"<{side}Q", *(first + y * len(blocks[0]) for y in range(side)))
+    return head + table + b"".join(blocks)
+
+
+def png_bomb(side: int = 16384, color: int = 6, depth: int = 16) -> bytes:
+    """A valid PNG of a `side`² black image (`color` 2 RGB, 6 RGBA; `depth` bits a
+    sample): 2.1 MB promising 2 GiB at 16384² RGBA16, 0.8 MB promising 768 MiB as RGB8."""
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+        )
+
+    rows = bytes(1 + side * {2: 3, 6: 4}[color] * depth // 8) * 16  # filter byte 0, zeros
+    # Deflated once: after a full flush the stream forgets what came before, so each
+    # further 16 rows deflate to the same bytes; the Adler-32 of n zeros is n << 16 | 1.
+    z = zlib.compressobj(9)
+    first, again = (z.compress(rows) + z.flush(zlib.Z_FULL_FLUSH) for _ in range(2))
+    end = z.flush()[:-4] + struct.pack(">I", (len(rows) * side // 16 % 65521) << 16 | 1)
+    idat = first + again * (side // 16 - 1) + end
+    ihdr = struct.pack(">IIBBBBB", side, side, depth, color, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
+
+
+#: Each public reader of a file, and the crafted files: issue 72 (`read_depth` of
+#: zip_bomb() peaked at 4.14 GB and aborted under a 3 GB cap; here, under 1.5 GB).
+READERS = ("read_exr", "read_depth", "read_image", "image_info")
+CRAFTED = {
+    "rgba.exr": lambda: zip_bomb(),
+    "depth.exr": lambda: zip_bomb(channels=b"Y"),
+    "depth_8192.exr": lambda: zip_bomb(8192, channels=b"Y"),  # 256 MiB: it fits
+    "rle.exr": rle_bomb,
+    "tiny.exr": tiny_blocks,
+    "rgba16.png": lambda: png_bomb(),
+    "rgb8.png": lambda: png_bomb(color=2, depth=8),  # 768 MiB: it fits
+}
+_READ = (
+    "import sys\nimport numpy as np\nfrom blurset import image\n"
+    "try:\n    a = getattr(image, sys.argv[1])(sys.argv[2])\n"
+    "except Exception as e:\n    print(type(e).__name__, e)\n    sys.exit(3)\n"
+    "import resource\n"
+    "print(np.asarray(a).nbytes, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss << 10)\n"
+)
+
+
+@pytest.fixture(scope="module")
+def crafted_files(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("crafted")
+    for name, make in CRAFTED.items():
+        (d / name).write_bytes(make())
+    return d
+
+
+@pytest.mark.parametrize("name", CRAFTED)
+@pytest.mark.parametrize("reader", READERS)
+def test_every_public_reader_refuses_cleanly_or_holds_little_more_than_its_output(
+    crafted_files, reader, name
+):
+    """Under the 1.5 GB cap each reader either refuses the file in one error naming it, or
+    returns its array having held at most that array and the interpreter (RSS peak),
+    never an abort: what a decode holds is known from the header before it allocates."""
+    path = crafted_files / name
+    proc = subprocess.run(
+        [sys.executable, "-c", _READ, reader, str(path)],
+        capture_output=True, text=True, preexec_fn=_capped,
+    )  # fmt: skip
+    _no_abort(proc)
+    assert proc.returncode in (0, 3), (proc.returncode, proc.stdout, proc.stderr[-2000:])
+    if proc.returncode == 3:
+        assert str(path) in proc.stdout and proc.stdout.count("\n") == 1, proc.stdout
+    else:
+        held, peak = map(int, proc.stdout.split())
+        assert peak < held + (160 << 20), (reader, name, held, peak)

@@ -12,6 +12,7 @@ import types
 from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin
 
+import pytest
 from blurset import cli
 from blurset.commands.builder.cli import default_text
 from blurset.commands.builder.dataset import BEFORE_OPTION, RUN_OPTIONS
@@ -173,3 +174,98 @@ def test_the_build_guides_synopsis_names_real_flags_with_the_core_defaults() -> 
         default = getattr(core, dest[f])
         if default is not None:  # a None default shows an example (`--gpus-per-task 1`)
             assert default == int(value), (f, value, default)
+
+
+# -- issue 72: a limit reads one way in every command, its numbers exact ------------------
+
+RANGE = re.compile(
+    r"must be (an integer in -?\d+\.\.=\d+|a number in [\[(]-?\d+(\.\d+)?, -?\d+(\.\d+)?[\])]"
+    r"|a finite number( [≥>] -?\d+(\.\d+)?)?)$"
+)
+
+
+def _value(module: Any, node: Any) -> Any:
+    """A literal, or a module constant by its name."""
+    import ast
+
+    return node.value if isinstance(node, ast.Constant) else getattr(module, node.id)
+
+
+def _own_range_checks() -> list[tuple[str, str, tuple, dict]]:
+    """(module, flag, bounds, kinds) of every `check_range` call of the commands: the
+    options no config declares."""
+    import ast
+    import importlib
+
+    found = []
+    for p in sorted((Path(cli.__file__).parent).rglob("*.py")):
+        mod = ".".join(p.relative_to(Path(cli.__file__).parents[1]).with_suffix("").parts)
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "check_range":
+                m = importlib.import_module(mod)
+                bounds = tuple(_value(m, a) for a in node.args[2:])
+                kinds = {k.arg: _value(m, k.value) for k in node.keywords}
+                found.append((mod, node.args[0].value, bounds, kinds))
+    return found
+
+
+def test_every_declared_range_is_worded_one_way_with_exact_limits() -> None:
+    from blurset.commands.noise.cli import NoiseConfig
+
+    for config in (BuildConfig, NoiseConfig):
+        for d in config.declarations():
+            if d.kind in ("int", "float", "count_or_auto"):
+                assert RANGE.match(d.range), (config.__name__, d.name, d.range)
+
+
+def test_every_commands_own_range_is_worded_as_the_declared_ones() -> None:
+    """Each command's own option (found in the sources) out of its range, below and
+    above: refused in the declared options' words, its limits printed exactly."""
+    from blurset.exceptions import ConfigError
+    from blurset.services.options import check_range
+
+    checks = _own_range_checks()
+    flags = {flag for _, flag, _, _ in checks}
+    assert {
+        "--shard-size",
+        "--rows",
+        "--columns",
+        "--tile",
+        "--bins",
+        "--factor",
+        "--view",
+    } <= flags
+    for mod, flag, bounds, kinds in checks:
+        lo, hi = bounds[0], bounds[1] if len(bounds) > 1 else 2**32 - 1
+        for bad in (lo - 1, hi + 1):
+            with pytest.raises(ConfigError) as e:
+                check_range(flag, bad, *bounds, **kinds)
+            said = str(e.value)
+            assert said.startswith(f"{flag} {bad}"), (mod, said)
+            assert RANGE.match(said.split(": ", 1)[1]), (mod, said)
+            for limit in (lo, hi):
+                text = str(int(limit)) if float(limit).is_integer() else str(limit)
+                assert text in said, (mod, flag, limit, said)
+
+
+def test_no_command_words_a_limit_by_hand() -> None:
+    """A range message outside the core's words (`at least`, `at most`, `%g` rounding)
+    in a command's refusal fails here."""
+    hand = re.compile(r"ConfigError\([^)]*(must be at least|at most|must be in \d|>= \d|:g\})")
+    for p in sorted((Path(cli.__file__).parent).rglob("*.py")):
+        text = " ".join(p.read_text().split())
+        assert not hand.search(text), (p, hand.search(text))
+
+
+def test_a_shard_size_past_its_limit_names_it_exactly(tmp_path) -> None:
+    """The issue's row: `--shard-size 1000001` was refused as 'at most 1e+06'."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run(
+        [sys.executable, "-m", "blurset.cli", "export", str(tmp_path), "--for", "hub",
+         "--shard-size", "1000001", "--out", str(tmp_path / "h")],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert "--shard-size 1000001.0: must be a number in (0, 1000000]" in proc.stderr, proc.stderr

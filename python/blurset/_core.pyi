@@ -34,6 +34,19 @@ class ConfigValueError(ValueError):
 def check_downsample(factors: list[int]) -> None:
     """ConfigValueError unless the factors are distinct integers in 2..=64."""
 
+def check_range(
+    option: str,
+    value: object,
+    lo: float,
+    hi: float = ...,
+    *,
+    lo_open: bool = False,
+    integer: bool = True,
+) -> None:
+    """ConfigValueError naming `option` unless `value` is in lo..=hi (above lo with
+    lo_open; hi 2^32 - 1 unless given), an integer unless `integer` is false: the words
+    of every declared range."""
+
 def preset_values(name: str) -> dict[str, bool | int | float | str]:
     """What preset `name` sets, option name -> value (ValueError: no such preset)."""
 

@@ -99,19 +99,23 @@ def _subdir(downsample: int) -> str:
     return layout.images_dir(downsample)
 
 
-def _read(files: list[Path], shape: tuple[int, ...] | None = None) -> np.ndarray:
-    """The images, as floats in [0, 1]; InputError naming the first whose size differs
-    from the others' (or from `shape`, h × w)."""
-    arrays: list[np.ndarray] = []
-    for p in files:
-        a = _core.read_image(p)[..., :3]
-        want = shape or (arrays[0].shape[:2] if arrays else a.shape[:2])
-        if a.shape[:2] != tuple(want):
-            raise InputError(
-                f"image is {a.shape[1]}x{a.shape[0]} px, the scene's are {want[1]}x{want[0]}: {p}"
-            )
-        arrays.append(a)
-    return np.stack(arrays).astype(np.float32) / 255.0
+def _decoded(p: Path, size: tuple[int, int]) -> np.ndarray:
+    """The image file `p`, refused from its header, before it is decoded, unless it is
+    `size` (width, height): the scene's size, not the size a file claims, bounds memory."""
+    w, h = _core.image_info(p)[:2]
+    if (w, h) != size:
+        raise InputError(f"image is {w}x{h} px, the scene's are {size[0]}x{size[1]}: {p}")
+    return _core.read_image(p)
+
+
+def _read(files: list[Path], shape: tuple[int, int]) -> np.ndarray:
+    """The images, as floats in [0, 1], decoded one at a time into the one array returned
+    (no full-size copy); InputError naming the first that is not `shape` (h × w)."""
+    h, w = shape
+    out = np.empty((len(files), h, w, 3), np.float32)
+    for i, p in enumerate(files):
+        out[i] = _decoded(p, (w, h))[..., :3]
+    return np.divide(out, 255.0, out=out)
 
 
 def _cameras(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -225,9 +229,10 @@ def _scene_from_folders(
     cv, gl = _cameras(rows)
     if pose == "mean" and not layout.written_pose(level):
         cv, gl = _mean_cameras(sdir, level, n)
-    images = _read(image_files)
-    clean = _read(clean_files, images.shape[1:3])
-    h, w = images.shape[1:3]
+    # The size its poses record (hwf: the full size), not what a file's header claims.
+    h, w = int(rows[0, 4]) // downsample, int(rows[0, 9]) // downsample
+    images = _read(image_files, (h, w))
+    clean = _read(clean_files, (h, w))
     # hwf holds the full size (LLFF); the focal length scales with the size read.
     focal = rows[0, 14] * w / rows[0, 9]
     k = np.array([[focal, 0, w / 2], [0, focal, h / 2], [0, 0, 1]], dtype=np.float64)
@@ -281,7 +286,7 @@ def _passes(
     if "normal" in kinds:
         out["normals"] = np.stack([_core.read_exr(p, size=size)[..., :3] for p in files("normal")])
     if "mask" in kinds:
-        out["masks"] = np.stack([_core.read_image(p)[..., 0] > 0 for p in files("mask")])
+        out["masks"] = np.stack([_decoded(p, size)[..., 0] > 0 for p in files("mask")])
     return out
 
 

@@ -31,6 +31,7 @@ from PIL import Image, ImageDraw, ImageFont
 from blurset import _core, layout
 from blurset.exceptions import ConfigError, InputError
 from blurset.services import outputs, publish
+from blurset.services.options import check_range
 
 # The file types a figure is written as, by the suffix of --out.
 IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP"}
@@ -270,8 +271,7 @@ def setting_figure(
     levels = _shown_levels(setting, meta)
     if not n or not levels:
         raise InputError(f"setting has no views or no level directories: {setting}")
-    if rows < 1:
-        raise ConfigError(f"--rows {rows}: must be at least 1")
+    check_range("--rows", rows, 1)
     name = setting.name.removesuffix(".partial")
     views = choose_views(n, list(meta.get("test_views", [])), rows)
     columns = [
@@ -401,8 +401,8 @@ def contact_sheet(
     settings = layout.complete_settings(build)
     if not settings:
         raise InputError(f"no complete setting (<setting>/{layout.MARKER}) in build: {build}")
-    if columns is not None and columns < 1:
-        raise ConfigError(f"--columns {columns}: must be at least 1")
+    if columns is not None:
+        check_range("--columns", columns, 1)
     cols = columns or math.ceil(math.sqrt(len(settings)))
     cols = min(cols, len(settings))
     cells = []
@@ -465,8 +465,8 @@ def run(args) -> int:
     path: Path = args.path
     if not path.is_dir():
         raise InputError(f"setting or build directory not found: {path}")
-    if args.tile is not None and not (16 <= args.tile <= 2048):
-        raise ConfigError(f"--tile {args.tile}: must be in 16..2048")
+    if args.tile is not None:
+        check_range("--tile", args.tile, 16, 2048)
     if args.out is not None:
         if args.out.suffix.lower() not in IMAGE_FORMATS:
             raise ConfigError(f"--out {args.out}: the figure is an image: .png, .jpg or .webp")

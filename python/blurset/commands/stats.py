@@ -28,6 +28,7 @@ import numpy as np
 from blurset import __version__, _core, layout
 from blurset.exceptions import InputError
 from blurset.services import outputs, publish
+from blurset.services.options import check_range
 
 if TYPE_CHECKING:
     pass
@@ -606,8 +607,7 @@ def _claim(out_dir: Path, build: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.bins < 1:
-        raise ValueError(f"--bins {args.bins} must be at least 1")
+    check_range("--bins", args.bins, 1)
     build = args.build.expanduser().absolute()
     kind = outputs.kind_of(build) if build.is_dir() else None
     if kind is not None and kind is not outputs.OutputKind.BUILD:

@@ -20,6 +20,16 @@ from blurset.exceptions import ConfigError
 Decl = _core.OptionDecl
 
 
+def check_range(flag: str, value: Any, *bounds: float, **kinds: bool) -> None:
+    """ConfigError `FLAG VALUE: must be …` unless `value` is in `bounds` (lo[, hi]; see
+    `_core.check_range` for `lo_open`, `integer`): a command's own option, worded as
+    every declared option's range, its limits exact."""
+    try:
+        _core.check_range(flag, value, *bounds, **kinds)
+    except _core.ConfigValueError as e:
+        raise ConfigError(str(e)) from None
+
+
 class Options:
     """The declarations of one config (`BuildConfig.declarations()`,
     `NoiseConfig.declarations()`)."""

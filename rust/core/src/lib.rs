@@ -31,7 +31,7 @@ pub use crate::plan::presets::{preset_values, FLOOR_PSNR_DB};
 pub use crate::plan::renders::{with_samples, Motion, Render};
 pub use crate::plan::sampling::{plan_setting, plan_setting_priced, SettingPlan};
 pub use crate::plan::sampling_config::SamplingConfig;
-pub use crate::plan::spec::{check_downsample, check_theta0, Kind, Raw};
+pub use crate::plan::spec::{check_downsample, check_range, check_theta0, Kind, Raw};
 pub use crate::plan::target::{ImageState, TargetRule};
 
 // Linear frames in, encoded images out; image files; render QA.
@@ -44,9 +44,9 @@ pub use crate::image::exr::read::{
 // The depth reader `verify` tries after the colour one, for the fuzz target exr_memory.
 pub use crate::image::geometry::decode_depth_exr;
 pub use crate::image::geometry::{
-    depth_millimetres, mask_from_coverage, read_depth_exr, read_depth_exr_sized, read_geometry,
-    write_depth_exr, write_depth_millimetres, write_geometry, write_gray16_png, write_gray8_png,
-    write_normal_exr, Geometry,
+    depth_millimetres, mask_from_coverage, read_depth_exr_sized, read_geometry, write_depth_exr,
+    write_depth_millimetres, write_geometry, write_gray16_png, write_gray8_png, write_normal_exr,
+    Geometry,
 };
 pub use crate::image::io::{image_info, read_image, Image, Samples};
 pub use crate::image::qa::{

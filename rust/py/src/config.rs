@@ -369,6 +369,22 @@ fn check_downsample(factors: Vec<u32>) -> PyResult<()> {
     core::check_downsample(&factors).map_err(crate::error::to_pyerr)
 }
 
+/// ConfigValueError naming `option` unless `value` is in lo..=hi (above lo with lo_open),
+/// an integer unless `integer` is false: the words of every declared range.
+#[pyfunction]
+#[pyo3(signature = (option, value, lo, hi=u32::MAX as f64, *, lo_open=false, integer=true))]
+fn check_range(
+    option: &str,
+    value: &Bound<'_, PyAny>,
+    lo: f64,
+    hi: f64,
+    lo_open: bool,
+    integer: bool,
+) -> PyResult<()> {
+    core::check_range(option, &raw(value)?, (lo, hi), lo_open, integer)
+        .map_err(crate::error::to_pyerr)
+}
+
 /// What preset `name` sets: option name → value (core `preset_values`).
 #[pyfunction]
 fn preset_values<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
@@ -428,6 +444,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NoiseConfig>()?;
     m.add_class::<OptionDecl>()?;
     m.add_function(wrap_pyfunction!(check_downsample, m)?)?;
+    m.add_function(wrap_pyfunction!(check_range, m)?)?;
     Ok(())
 }
 

@@ -9,7 +9,8 @@ import numpy as np
 
 from blurset import _core, layout
 from blurset._core import read_poses_bounds
-from blurset.exceptions import ConfigError, InputError
+from blurset.exceptions import InputError
+from blurset.services.options import check_range
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg"}
 
@@ -19,8 +20,7 @@ def _image_dir(scene_dir: Path, factor: int | None) -> tuple[Path, int]:
     `images_<F>` for factor F, else `images`; a scene shipping a single `images_<F>`
     (fern) uses it without being told."""
     if factor is not None:
-        if factor < 1:
-            raise ConfigError(f"--factor must be >= 1, got {factor}")
+        check_range("--factor", factor, 1)
         d = scene_dir / layout.images_dir(factor)
         if not d.is_dir():
             raise InputError(f"no image directory for --factor {factor}: {d}")

@@ -49,6 +49,7 @@ from blurset import __version__, _core, layout
 from blurset.commands.export import rules as export_rules
 from blurset.exceptions import ConfigError, InputError
 from blurset.services import hub_format, outputs, publish, stop
+from blurset.services.options import check_range
 
 DEFAULT_SHARD_MB = 500.0
 # Fixed write options: same rows, same bytes (PNG bytes do not compress: none there).
@@ -116,11 +117,7 @@ MAX_SHARD_MB = 1e6
 
 def _shard_bytes(args) -> int:
     mb = DEFAULT_SHARD_MB if args.shard_size is None else args.shard_size
-    if not (0 < mb <= MAX_SHARD_MB):  # (NaN fails both)
-        raise ConfigError(
-            f"--shard-size {mb:g}: a shard's size must be a number of MB above 0 and at "
-            f"most {MAX_SHARD_MB:g}"
-        )
+    check_range("--shard-size", mb, 0, MAX_SHARD_MB, lo_open=True, integer=False)
     return max(1, int(mb * 1e6))
 
 

@@ -10,6 +10,7 @@ from typing import Any
 from blurset import _core
 from blurset.exceptions import ConfigError
 from blurset.services.config import BuildConfig, from_flags
+from blurset.services.options import check_range
 
 
 @dataclass(frozen=True)
@@ -82,8 +83,7 @@ def preset_from_args(args: argparse.Namespace) -> Preset:
         latents=_ints(args.latents, "--latents", "latents") or base.latents,
         samplings=base.samplings,
     )
-    if args.view < 0:
-        raise ConfigError(f"--view {args.view}: must be an integer ≥ 0")
+    check_range("--view", args.view, 0)
     # The options a build shares are checked by the build config's validator.
     from_flags(
         {"levels": "--level", "views": "--view (+1)"},

@@ -40,6 +40,18 @@ pub const MAX_POSE_ROWS: usize = 1 << 20;
 /// a few times its text, so this also bounds the memory a record can claim.
 pub const MAX_RECORD_BYTES: u64 = 1 << 30;
 
+/// Refuse a decode that would hold `bytes` at once unless the process can take them now
+/// (an address-space cap, a small machine): reserved and released at once, before a
+/// decoder whose allocations cannot fail (the `exr` and `image` crates') makes them, so
+/// a file the machine cannot hold is an error naming it, never an abort part-way
+/// (issue 72: a 4 MB file promising 16384² aborted `read_depth` under a 3 GB cap).
+pub fn can_hold(bytes: u64, what: &str) -> Result<(), String> {
+    usize::try_from(bytes)
+        .ok()
+        .and_then(|n| Vec::<u8>::new().try_reserve_exact(n).ok())
+        .ok_or_else(|| format!("cannot allocate {bytes} bytes for {what}"))
+}
+
 /// Refuse `n` (a size a file promises) over `limit`, named: the reason for the
 /// caller's error, which names the file.
 pub fn check(what: &str, n: u64, limit: u64, name: &str) -> Result<(), String> {
@@ -63,6 +75,12 @@ mod tests {
         assert_eq!(
             e,
             "pixels: 5, over the limit of 4 (MAX_IMAGE_PIXELS); refused before reading it"
+        );
+        assert_eq!(can_hold(1 << 20, "a frame"), Ok(()));
+        let e = can_hold(u64::MAX, "its 9x9 frame").unwrap_err();
+        assert_eq!(
+            e,
+            format!("cannot allocate {} bytes for its 9x9 frame", u64::MAX)
         );
     }
 }

@@ -127,8 +127,8 @@ pub fn write_geometry(render: &Path, depth: Option<&Path>, normal: Option<&Path>
     Ok(())
 }
 
-/// [`read_depth_exr`] of a file that must be `want` (width, height) when given: another
-/// size is refused from its header before anything is decoded.
+/// Read a depth EXR back: (width, height, depth); a file that must be `want` (width,
+/// height) when given, of another size, is refused from its header before any decode.
 pub fn read_depth_exr_sized(
     path: &Path,
     want: Option<(u32, u32)>,
@@ -136,11 +136,6 @@ pub fn read_depth_exr_sized(
     if let Some(want) = want {
         crate::image::exr::read::check_exr_size(path, want)?;
     }
-    read_depth_exr(path)
-}
-
-/// Read a depth EXR back: (width, height, depth).
-pub fn read_depth_exr(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
     let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read", path, e))?;
     decode_depth_exr(&bytes, path)
 }
@@ -295,7 +290,7 @@ pub fn depth_millimetres(depth: &[f32]) -> Result<Vec<u16>> {
 
 /// A depth EXR as the 16-bit millimetre PNG nerfstudio reads ([`depth_millimetres`]).
 pub fn write_depth_millimetres(depth_exr: &Path, png: &Path) -> Result<()> {
-    let (w, h, depth) = read_depth_exr(depth_exr)?;
+    let (w, h, depth) = read_depth_exr_sized(depth_exr, None)?;
     let mm = depth_millimetres(&depth).map_err(|e| Error::Image {
         reason: e.to_string(),
         path: depth_exr.to_path_buf(),
@@ -346,7 +341,7 @@ mod tests {
         let (d, n) = (tmp("d.exr"), tmp("n.exr"));
         write_depth_exr(&d, &g)?;
         write_normal_exr(&n, &g)?;
-        assert_eq!(read_depth_exr(&d)?, (3, 2, g.depth.clone()));
+        assert_eq!(read_depth_exr_sized(&d, None)?, (3, 2, g.depth.clone()));
         let first = std::fs::read(&d).map_err(|e| Error::io("read", &d, e))?;
         write_depth_exr(&d, &g)?;
         assert_eq!(
@@ -358,7 +353,7 @@ mod tests {
         let rgb = decode_named(&bytes, &n, &[("Combined", "RGB")])?;
         assert_eq!(rgb.passes[0].0, g.normal);
         // A depth file is not a colour image, nor a colour image a depth file.
-        assert!(read_depth_exr(&n).is_err());
+        assert!(read_depth_exr_sized(&n, None).is_err());
         for p in [d, n] {
             let _ = std::fs::remove_file(p);
         }

@@ -4,7 +4,7 @@
 use crate::error::{Error, Result};
 use crate::ground::atomic::write_atomic;
 use crate::ground::limits::{self, MAX_IMAGE_ALLOC, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
-use image::{DynamicImage, ImageDecoder, ImageEncoder, ImageReader};
+use image::{DynamicImage, ImageDecoder, ImageEncoder, ImageFormat, ImageReader};
 use std::path::Path;
 
 /// Integer samples, interleaved, row-major.
@@ -182,6 +182,10 @@ pub fn read_image(path: &Path) -> Result<Image> {
         path: path.into(),
     };
     let mut reader = open_reader(path)?;
+    // Another format (an EXR: float samples) is refused before its decoder allocates.
+    let Some(ImageFormat::Png | ImageFormat::Jpeg) = reader.format() else {
+        return Err(bad("not a PNG or JPEG file".into()));
+    };
     let mut lim = image::Limits::default();
     lim.max_alloc = Some(MAX_IMAGE_ALLOC);
     reader.limits(lim);
@@ -189,6 +193,8 @@ pub fn read_image(path: &Path) -> Result<Image> {
     let (w, h) = decoder.dimensions();
     check_size(w, h).map_err(bad)?;
     check_png_fits_file(path).map_err(bad)?;
+    // The decoder allocates the image (and nothing else of its size) at once.
+    limits::can_hold(decoder.total_bytes(), &format!("its {w}x{h} image")).map_err(bad)?;
     let img = DynamicImage::from_decoder(decoder).map_err(|e| bad(e.to_string()))?;
     let (channels, samples) = match img {
         DynamicImage::ImageLuma8(b) => (1, Samples::U8(b.into_raw())),

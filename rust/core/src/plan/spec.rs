@@ -530,6 +530,28 @@ pub fn check<T: OptionValue>(option: &str, value: &T, spec: &Spec) -> Result<()>
         .ok_or_else(|| config_error(option, format!("{raw}: {}", spec.expected())))
 }
 
+/// A command's own option (no config declares it) checked against `lo`..=`hi` (above
+/// `lo` when `lo_open`), integers or numbers, in the words of every declared option's
+/// range: a limit reads one way, exactly, in every command (issue 72).
+pub fn check_range(
+    option: &str,
+    raw: &Raw,
+    (lo, hi): (f64, f64),
+    lo_open: bool,
+    int: bool,
+) -> Result<()> {
+    let spec = match int {
+        true => Spec::int(lo as i128, hi as i128),
+        false => Spec::num(lo, lo_open, hi, false),
+    };
+    let ok = match spec {
+        Spec::Int { min, max } => Spec::int_of(raw).is_some_and(|i| (min..=max).contains(&i)),
+        _ => f64::from_raw(raw, &spec).is_some(),
+    };
+    ok.then_some(())
+        .ok_or_else(|| config_error(option, format!("{raw}: {}", spec.expected())))
+}
+
 /// The largest factor of an `images_<f>/` copy.
 pub const MAX_FACTOR: u32 = 64;
 

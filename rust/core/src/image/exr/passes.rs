@@ -5,6 +5,7 @@
 //! small next to the decode of the default path, so this goes through the `exr` crate's
 //! generic reader.
 use crate::error::{Error, Result};
+use crate::ground::limits;
 use exr::prelude::{FlatSamples, ReadChannels, ReadLayers};
 use std::io::Cursor;
 use std::path::Path;
@@ -60,7 +61,7 @@ pub(crate) fn decode_named(bytes: &[u8], path: &Path, passes: &[PassSpec]) -> Re
     };
     let image = read_layers(bytes).map_err(bad)?;
     let mut gathered = Gathered::new(passes);
-    for layer in &image.layer_data {
+    for layer in image.layer_data {
         let layer_name = layer
             .attributes
             .layer_name
@@ -68,14 +69,14 @@ pub(crate) fn decode_named(bytes: &[u8], path: &Path, passes: &[PassSpec]) -> Re
             .map(|t| t.to_string())
             .unwrap_or_default();
         let (w, h) = (layer.size.width(), layer.size.height());
-        for ch in &layer.channel_data.list {
+        for ch in layer.channel_data.list {
             let name = ch.name.to_string();
             let full = if layer_name.is_empty() || name.starts_with(&layer_name) {
                 name
             } else {
                 format!("{layer_name}.{name}")
             };
-            gathered.add(&full, (w, h), &ch.sample_data).map_err(bad)?;
+            gathered.add(&full, (w, h), ch.sample_data).map_err(bad)?;
         }
     }
     gathered.finish().map_err(bad)
@@ -86,10 +87,13 @@ type Layers = exr::prelude::Image<exr::prelude::Layers<exr::prelude::AnyChannels
 
 /// Every layer of the file at its full resolution.
 fn read_layers(bytes: &[u8]) -> std::result::Result<Layers, String> {
-    // The crate allocates every channel from the header's size: check it first.
+    // The crate allocates every channel from the header's size, and cannot fail to:
+    // check it first, and that the process can hold them.
     let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
         .map_err(|e| format!("EXR: {e}"))?;
     super::read::check_sizes(&meta, bytes.len())?;
+    let flat = meta.headers.iter().filter(|h| !h.deep);
+    limits::can_hold(flat.map(super::read::level0_bytes).sum(), "its channels")?;
     exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -126,7 +130,7 @@ impl<'a> Gathered<'a> {
         &mut self,
         full: &str,
         (w, h): (usize, usize),
-        samples: &FlatSamples,
+        samples: FlatSamples,
     ) -> std::result::Result<(), String> {
         let Some((pass, c)) = slot(self.passes, full) else {
             return Ok(());
@@ -143,16 +147,27 @@ impl<'a> Gathered<'a> {
         }
         let stride = self.passes[pass].1.len();
         let (buf, seen) = &mut self.out[pass];
+        seen[c] = true;
+        // A pass of one float channel is the crate's samples themselves: no copy.
+        let samples = match (stride, samples) {
+            (1, FlatSamples::F32(v)) if v.len() == w * h => {
+                *buf = v;
+                return Ok(());
+            }
+            (_, s) => s,
+        };
         if buf.is_empty() {
             let fill = if self.passes[pass] == ("Combined", "RGBA") {
                 1.0
             } else {
                 0.0
             };
-            *buf = vec![fill; w * h * stride];
+            let n = w * h * stride;
+            buf.try_reserve_exact(n)
+                .map_err(|_| format!("cannot allocate {} bytes for its {full} pass", n * 4))?;
+            buf.resize(n, fill);
         }
-        copy_channel(samples, buf, stride, c);
-        seen[c] = true;
+        copy_channel(&samples, buf, stride, c);
         Ok(())
     }
 

@@ -49,13 +49,7 @@ pub fn read_exr_sized(path: &Path, want: Option<(u32, u32)>) -> Result<Frame> {
 /// [`crate::image::accumulate::Accumulator::add_exr`]).
 pub fn read_exr(path: &Path) -> Result<Frame> {
     let bytes = std::fs::read(path).map_err(|e| Error::io("cannot open EXR", path, e))?;
-    let mut rgba = Vec::new();
-    let d = decode_rgba(&bytes, path, &mut rgba)?;
-    Ok(Frame {
-        width: d.width as u32,
-        height: d.height as u32,
-        rgba,
-    })
+    frame_of(&bytes, path)
 }
 
 /// Decode an EXR file held in memory (as [`read_exr`]; errors name it `<bytes>`).
@@ -63,8 +57,12 @@ pub fn read_exr(path: &Path) -> Result<Frame> {
 /// [`MAX_IMAGE_PIXELS`], nor more than a few times the frame given or, for an error, a
 /// bound proportional to `bytes.len()` (fuzzed: exr, exr_memory).
 pub fn decode_exr(bytes: &[u8]) -> Result<Frame> {
+    frame_of(bytes, Path::new("<bytes>"))
+}
+
+fn frame_of(bytes: &[u8], path: &Path) -> Result<Frame> {
     let mut rgba = Vec::new();
-    let d = decode_rgba(bytes, Path::new("<bytes>"), &mut rgba)?;
+    let d = decode_rgba(bytes, path, &mut rgba)?;
     Ok(Frame {
         width: d.width as u32,
         height: d.height as u32,
@@ -168,7 +166,7 @@ pub(crate) fn decode_cost(path: &Path) -> u64 {
 
 /// The bytes of samples of a layer's full-resolution level (subsampled channels count
 /// their own samples): what a decode of it holds before conversion.
-fn level0_bytes(h: &Header) -> u64 {
+pub(crate) fn level0_bytes(h: &Header) -> u64 {
     let (w, ht) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
     h.channels
         .list
@@ -404,6 +402,11 @@ fn decode_layer(
         }
         // Every block is decompressed before the frame is allocated: a file whose
         // blocks do not decode costs what they held, not what its header promised.
+        // The crate's allocations cannot fail: the process must hold the blocks first.
+        limits::can_hold(
+            level0_bytes(header),
+            &format!("its {width}x{height} samples"),
+        )?;
         let blocks = decompress_chunks(chunks, meta)?;
         // The crate's blocks write the channels the file has: a missing alpha reads 1.
         let has_alpha = slots.contains(&Some(3));
