@@ -97,7 +97,7 @@ def test_sigterm_during_noise_leaves_nothing(fern_copy, tmp_path):
     total = 20 * 40 * 6  # views x frames x gains
 
     def written() -> int:
-        return sum(1 for _ in out.glob(f".noise.tmp{proc.pid}/gain_*/images/*.png"))
+        return sum(1 for _ in out.glob(f".noise.tmp{proc.pid}/gain_*/images_8/*.png"))
 
     assert wait_until(lambda: written() >= 20 or proc.poll() is not None, 600)
     t_a, n_a = time.monotonic(), written()

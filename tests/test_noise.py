@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import struct
 import subprocess
 import sys
@@ -104,7 +105,8 @@ def tree_bytes(root: Path) -> dict[str, bytes]:
 def fern_out(tmp_path_factory):
     fern = shared("llff", "fern")
     out = tmp_path_factory.mktemp("fern") / "fernN"
-    ok(blurset_noise(fern, "--factor", 8, "--seed", 11, "--out", out))
+    # The guide's form: fern ships images_8/ alone, found without --factor.
+    ok(blurset_noise(fern, "--seed", 11, "--out", out))
     return fern, out
 
 
@@ -119,20 +121,19 @@ def test_fern_is_an_llff_scene_per_gain(fern_out):
     ]
     for g in ALL_GAINS:
         d = out / f"gain_{g}"
-        # What an IBRNet / NAN LLFF loader does: sorted png/jpg files, N x 17 poses.
-        files = [f for f in sorted(os.listdir(d / "images")) if f.endswith(("png", "jpg", "JPG"))]
+        # What an IBRNet / NAN LLFF loader at factor 8 does: sorted png/jpg files of
+        # images_8/, N x 17 poses whose hwf (the full size) it divides by 8.
+        files = [f for f in sorted(os.listdir(d / "images_8")) if f.endswith(("png", "jpg"))]
         pb = np.load(d / "poses_bounds.npy")
         assert pb.shape == (20, 17) and pb.dtype == np.float64
         assert len(files) == pb.shape[0]
         assert files == sorted(os.listdir(fern / "images_8"))
-        hwf = pb[:, :15].reshape(-1, 3, 5)[:, :, 4]
-        np.testing.assert_allclose(
-            hwf, np.tile([378.0, 504.0, 3260.526333 / 8], (20, 1)), rtol=1e-6
-        )
-        np.testing.assert_array_equal(
-            pb[:, :15].reshape(-1, 3, 5)[:, :, :4], src[:, :15].reshape(-1, 3, 5)[:, :, :4]
-        )
-        np.testing.assert_array_equal(pb[:, 15:], src[:, 15:])
+        np.testing.assert_array_equal(pb, src)
+        # llffhold 8: views 0, 8, 16 are the source's bytes, every other view noisy.
+        same = [
+            (d / "images_8" / f).read_bytes() == (fern / "images_8" / f).read_bytes() for f in files
+        ]
+        assert [i for i, s in enumerate(same) if s] == [0, 8, 16]
         meta = json.loads((d / "noise.json").read_text())
         for key in (
             "gain",
@@ -147,9 +148,11 @@ def test_fern_is_an_llff_scene_per_gain(fern_out):
         ):
             assert key in meta
         assert meta["gain"] == int(g) and meta["seed"] == 11 and meta["frames"] == 1
-        assert [f["image"] for f in meta["files"]] == [f"images/{f}" for f in files]
-        assert sorted(os.listdir(d / "linear")) == [f.replace(".png", ".exr") for f in files]
-        assert np.asarray(Image.open(d / "images" / files[0])).shape == (378, 504, 3)
+        assert [f["image"] for f in meta["files"]] == [f"images_8/{f}" for f in files]
+        assert meta["clean_views"] == [0, 8, 16]
+        assert sorted(os.listdir(d / "linear_8")) == [f.replace(".png", ".exr") for f in files]
+        assert np.asarray(Image.open(d / "images_8" / files[0])).shape == (378, 504, 3)
+    assert json.loads((out / "noise_scene.json").read_text())["llffhold"] == 8
 
 
 def test_fern_noise_statistics_per_gain_and_brightness(fern_out):
@@ -167,7 +170,7 @@ def test_fern_noise_statistics_per_gain_and_brightness(fern_out):
         n = np.zeros(len(edges) - 1)
         s1, s2, pred = np.zeros_like(n), np.zeros_like(n), np.zeros_like(n)
         negative = 0
-        for f in meta["files"]:
+        for f in (f for f in meta["files"] if not f.get("clean")):
             x = np.asarray(Image.open(fern / "images_8" / f["source"]), dtype=np.float64) / 255
             y = x**2.2 * scale
             lin = read_exr(d / f["linear"]).astype(np.float64)
@@ -237,6 +240,7 @@ def test_same_seed_same_bytes_for_any_thread_count(small_scene, tmp_path):
                 2,
                 "--seed",
                 seed,
+                "--noisy-test-views",
                 "--out",
                 out,
                 threads=threads,
@@ -294,7 +298,7 @@ def test_tiny_white_level_through_the_cli(small_scene, tmp_path):
             small_scene, "--factor", 2, "--gains", 20, "--white-level", 1e-6, "--out", out
         )
     )
-    lin = read_exr(out / "gain_20" / "linear" / "img000.exr")
+    lin = read_exr(out / "gain_20" / "linear_2" / "img000.exr")
     assert np.isfinite(lin).all()
 
 
@@ -335,13 +339,14 @@ def test_input_formats(kind, tmp_path, rng):
     out = tmp_path / "out"
     ok(blurset_noise(scene, "--factor", 2, "--gains", 1, "--out", out))
     d = out / "gain_1"
-    src = read_image(scene / "images_2" / f"img000{ext}")
-    proc = read_image(d / "images" / "img000.png")
+    # View 1: view 0 is a clean target (llffhold 8).
+    src = read_image(scene / "images_2" / f"img001{ext}")
+    proc = read_image(d / "images_2" / "img001.png")
     assert proc.shape == src.shape and proc.dtype == src.dtype
     channels = src.shape[2]
     if channels in (2, 4):
         np.testing.assert_array_equal(proc[..., -1], src[..., -1])
-    lin = read_exr(d / "linear" / "img000.exr")
+    lin = read_exr(d / "linear_2" / "img001.exr")
     assert lin.shape == (h, w, 4 if channels in (2, 4) else 3)
     if channels in (2, 4):
         np.testing.assert_allclose(lin[..., 3], src[..., -1] / np.iinfo(src.dtype).max, rtol=1e-6)
@@ -350,16 +355,17 @@ def test_input_formats(kind, tmp_path, rng):
     color = slice(0, 3 if channels >= 3 else 1)
     assert np.abs(proc[..., color] / top - src[..., color] / top).mean() < 0.03
     pb = np.load(d / "poses_bounds.npy")
-    np.testing.assert_allclose(pb[0, [4, 9, 14]], [h, w, 50.0])
+    # hwf stays the full size: a loader at factor 2 divides it.
+    np.testing.assert_allclose(pb[0, [4, 9, 14]], [2 * h, 2 * w, 100.0])
 
 
 def test_burst_frames_sort_in_view_order(small_scene, tmp_path):
     out = tmp_path / "out"
     ok(blurset_noise(small_scene, "--factor", 2, "--gains", 8, "--frames", 3, "--out", out))
     d = out / "gain_8"
-    files = sorted(os.listdir(d / "images"))
+    files = sorted(os.listdir(d / "images_2"))
     meta = json.loads((d / "noise.json").read_text())
-    assert [f["image"] for f in meta["files"]] == [f"images/{f}" for f in files]
+    assert [f["image"] for f in meta["files"]] == [f"images_2/{f}" for f in files]
     assert [(f["view"], f["frame"]) for f in meta["files"]] == [
         (v, k) for v in range(4) for k in range(3)
     ]
@@ -367,7 +373,7 @@ def test_burst_frames_sort_in_view_order(small_scene, tmp_path):
     src = np.load(small_scene / "poses_bounds.npy")
     assert pb.shape == (12, 17)
     np.testing.assert_array_equal(pb[:, 3], np.repeat(src[:, 3], 3))
-    frames = [read_exr(d / f["linear"]) for f in meta["files"][:3]]
+    frames = [read_exr(d / f["linear"]) for f in meta["files"][3:6]]  # view 1: noisy
     assert not np.array_equal(frames[0], frames[1]) and not np.array_equal(frames[1], frames[2])
 
 
@@ -433,6 +439,147 @@ def test_kpn_levels_follow_nans_mapping(small_scene, tmp_path):
             assert meta[key] == pytest.approx(want, rel=1e-12)
 
 
+# --- a scene as LLFF downloads ship it (issue 71) -----------------------------------
+
+
+def ten_view_scene(root: Path, rng, sub: str = "images_8") -> Path:
+    """Ten 16 x 12 views in `sub` alone, as fern ships images_8/ (views 0 and 8 are the
+    held-out targets of llffhold 8)."""
+    return make_scene(root, [rng.integers(0, 256, (12, 16, 3), dtype=np.uint8) for _ in range(10)],
+                      sub=sub)  # fmt: skip
+
+
+def test_the_one_factor_folder_is_read_and_written_under_its_name(tmp_path, rng):
+    """No --factor: the scene's one images_8/ is read, each gain written to images_8/ with
+    the scene's poses byte for byte (hwf the full size: a loader at factor 8 divides it),
+    views i % 8 == 0 the source's own bytes and every other view noisy; --downsample 2
+    is factor 16 beside it."""
+    scene = ten_view_scene(tmp_path / "s", rng)
+    out = tmp_path / "out"
+    proc = ok(blurset_noise(scene, "--gains", 4, "--downsample", 2, "--out", out))
+    assert "images_8/; views 0, 8 clean (llffhold 8)" in proc.stdout, proc.stdout
+    g = out / "gain_4"
+    assert sorted(p.name for p in g.iterdir()) == [
+        "images_16", "images_8", "linear_16", "linear_8", "noise.json", "poses_bounds.npy"
+    ]  # fmt: skip
+    assert (g / "poses_bounds.npy").read_bytes() == (scene / "poses_bounds.npy").read_bytes()
+    names = sorted(p.name for p in (scene / "images_8").iterdir())
+    assert sorted(p.name for p in (g / "images_8").iterdir()) == names
+    same = [(g / "images_8" / n).read_bytes() == (scene / "images_8" / n).read_bytes()
+            for n in names]  # fmt: skip
+    assert [i for i, s in enumerate(same) if s] == [0, 8]
+    assert read_image(g / "images_16" / names[1]).shape == (6, 8, 3)
+    meta = json.loads((g / "noise.json").read_text())
+    assert meta["source"]["images"] == "images_8" and meta["clean_views"] == [0, 8]
+    assert json.loads((out / "noise_scene.json").read_text())["llffhold"] == 8
+
+
+def test_the_hold_is_an_option_and_noisy_test_views_noises_them_all(tmp_path, rng):
+    scene = ten_view_scene(tmp_path / "s", rng)
+    for extra, clean, hold in (
+        (["--clean-views", 3], [0, 3, 6, 9], 3),
+        (["--noisy-test-views"], [], None),
+    ):
+        out = tmp_path / f"out{len(clean)}"
+        ok(blurset_noise(scene, "--gains", 8, "--out", out, *extra))
+        g = out / "gain_8"
+        same = [i for i in range(10)
+                if (g / "images_8" / f"img{i:03d}.png").read_bytes()
+                == (scene / "images_8" / f"img{i:03d}.png").read_bytes()]  # fmt: skip
+        assert same == clean
+        assert json.loads((out / "noise_scene.json").read_text()).get("llffhold") == hold
+
+
+def test_no_linear_writes_the_same_pngs_and_no_exr(tmp_path, rng):
+    scene = ten_view_scene(tmp_path / "s", rng)
+    a, b = tmp_path / "a", tmp_path / "b"
+    ok(blurset_noise(scene, "--gains", 4, 16, "--downsample", 2, "--out", a))
+    ok(blurset_noise(scene, "--gains", 4, 16, "--downsample", 2, "--out", b, "--no-linear"))
+    ta, tb = tree_bytes(a), tree_bytes(b)
+    assert not [k for k in tb if k.endswith(".exr")] and not list(b.glob("*/linear*"))
+    pngs = [k for k in ta if k.endswith(".png")]
+    assert len(pngs) == 2 * 10 * 2 and all(ta[k] == tb[k] for k in pngs)
+    files = json.loads((b / "gain_4" / "noise.json").read_text())["files"]
+    assert all("linear" not in f for f in files)
+    assert verify_cli(b).returncode == 0
+
+
+# --- blurset verify of a scene's noise -------------------------------------------------
+
+
+def verify_cli(path: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "blurset.cli", "verify", str(path)],
+                          capture_output=True, text=True)  # fmt: skip
+
+
+def _damage(out: Path, case: str) -> str:
+    """Damage a good scene output one way; the file the verdict must name."""
+    g = out / "gain_4"
+    png, exr = g / "images_8" / "img003.png", g / "linear_8" / "img003.exr"
+    if case == "png_missing":
+        png.unlink()
+    elif case == "png_cut":
+        png.write_bytes(png.read_bytes()[:100])
+    elif case == "png_size":
+        Image.fromarray(np.zeros((6, 8, 3), np.uint8)).save(png)
+    elif case == "exr_missing":
+        exr.unlink()
+        png = exr
+    elif case == "small_missing":
+        png = g / "images_16" / "img003.png"
+        png.unlink()
+    elif case == "poses_row":
+        np.save(g / "poses_bounds.npy", np.load(g / "poses_bounds.npy")[:-1])
+        return "gain_4/poses_bounds.npy"
+    elif case == "gain_gone":
+        shutil.rmtree(out / "gain_16")
+        return "gain_16"
+    elif case == "stray":
+        png = g / "images_8" / "extra.png"
+        shutil.copy(g / "images_8" / "img000.png", png)
+    elif case == "record":
+        (g / "noise.json").write_text("{}")
+        return "gain_4/noise.json"
+    return png.relative_to(out).as_posix()
+
+
+VERIFY_DAMAGE = ["png_missing", "png_cut", "png_size", "exr_missing", "small_missing",
+                 "poses_row", "gain_gone", "stray", "record"]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def scene_noise(tmp_path_factory):
+    root = tmp_path_factory.mktemp("scene_noise")
+    scene = ten_view_scene(root / "s", np.random.default_rng(3))
+    out = root / "out"
+    ok(blurset_noise(scene, "--gains", 4, 16, "--downsample", 2, "--out", out))
+    return out
+
+
+def test_verify_vouches_for_a_scene_output(scene_noise):
+    proc = verify_cli(scene_noise)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    # 2 gains x 10 views x (images_8, linear_8, images_16, linear_16)
+    assert "is whole: 2 complete gains, 80 images decoded" in proc.stderr, proc.stderr
+
+
+@pytest.mark.parametrize("case", VERIFY_DAMAGE)
+def test_verify_names_each_damage_of_a_scene_output(case, scene_noise, tmp_path):
+    out = tmp_path / "out"
+    shutil.copytree(scene_noise, out)
+    rel = _damage(out, case)
+    proc = verify_cli(out)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    lines = proc.stdout.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"{out}/{rel}: "), proc.stdout
+
+
+def test_verify_vouches_for_the_fern_output(fern_out):
+    _, out = fern_out
+    proc = verify_cli(out)
+    assert proc.returncode == 0 and "6 complete gains, 240 images decoded" in proc.stderr
+
+
 # --- bad input --------------------------------------------------------------------------
 
 
@@ -447,13 +594,20 @@ def _bad_cases(scene: Path, tmp: Path) -> dict[str, tuple[list, str]]:
         "truncated_image": (["--factor", 2], "img001.png"),
         "missing_factor_dir": (["--factor", 4], "images_4"),
         "bad_kpn_file": (["--factor", 2, "--kpn-levels", tmp / "nope.npz"], "nope.npz"),
+        "several_folders": ([], "the scene holds images/, images_2/: pass --factor F"),
+        "no_image_folder": ([], "no images/ or images_<f>/ directory"),
+        "clean_and_noisy": (
+            ["--factor", 2, "--clean-views", 2, "--noisy-test-views"],
+            "--clean-views and --noisy-test-views",
+        ),
     }
 
 
 @pytest.mark.parametrize(
     "case",
     ["missing_poses", "count_mismatch", "different_sizes", "unknown_gain", "not_a_gain",
-     "unreadable_image", "truncated_image", "missing_factor_dir", "bad_kpn_file"],
+     "unreadable_image", "truncated_image", "missing_factor_dir", "bad_kpn_file",
+     "several_folders", "no_image_folder", "clean_and_noisy"],
 )  # fmt: skip
 def test_bad_input_one_line_nothing_written(case, small_scene, tmp_path):
     args, fragment = _bad_cases(small_scene, tmp_path)[case]
@@ -470,6 +624,10 @@ def test_bad_input_one_line_nothing_written(case, small_scene, tmp_path):
         # A valid header, so only decoding (inside the pixel work) finds the damage.
         data = (imgs / "img001.png").read_bytes()
         (imgs / "img001.png").write_bytes(data[: len(data) // 2])
+    elif case == "several_folders":
+        shutil.copytree(imgs, small_scene / "images")
+    elif case == "no_image_folder":
+        imgs.rename(small_scene / "pictures")
     (tmp_path / "nope.npz").write_bytes(b"not an npz")
     parent = tmp_path / "outs"
     parent.mkdir()

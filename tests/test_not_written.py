@@ -65,11 +65,11 @@ def test_noise_overwrite_names_a_users_file_in_a_gain_folder(b, tmp_path):
 def test_noise_overwrite_of_one_scene_names_a_users_file_in_a_gain_folder(b, tmp_path):
     scene = sorted(b.glob("*/blur_1"))[0]
     n = tmp_path / "n"
-    run_cli("noise", str(scene), "--gains", "1", "--out", str(n))
+    run_cli("noise", str(scene), "--factor", "1", "--gains", "1", "--out", str(n))
     (n / "gain_1" / "images" / "notes.txt").write_text("n")
     before = tree(n)
-    proc = run_cli("noise", str(scene), "--gains", "1", "--out", str(n), "--seed", "5",
-                   "--overwrite", check=False)  # fmt: skip
+    proc = run_cli("noise", str(scene), "--factor", "1", "--gains", "1", "--out", str(n),
+                   "--seed", "5", "--overwrite", check=False)  # fmt: skip
     one_error_line(proc, "--out", "gain_1/images/notes.txt")
     assert tree(n) == before
 

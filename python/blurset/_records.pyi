@@ -384,7 +384,7 @@ class NoiseFile(TypedDict):
     clean: NotRequired[bool]
     frame: int
     image: str
-    linear: str
+    linear: NotRequired[str | None]
     source: str
     view: int
 
@@ -802,6 +802,7 @@ class NoiseParams(TypedDict):
     gamma: str
     levels_table: NoiseTableParams
     model: NotRequired[str]
+    no_linear: NotRequired[bool]
     profile: str
     seed: int
     source: str
@@ -841,6 +842,7 @@ class NoiseSceneRecord(TypedDict):
     blurset_version: str
     gains: list[str]
     kind: str
+    llffhold: NotRequired[int | None]
     model: NotRequired[str]
     profile: str
     scene: str

@@ -12,7 +12,8 @@ For a noise output (`blurset noise BUILD --out DIR`): every complete unit holds 
 images and linear EXRs its noise.json lists (and their images_<f>/, linear_<f>/
 copies), decoding at their resolution, and a
 poses_bounds.npy with one row per image; noise_dataset.json's counts match; and the
-manifest, as above.
+manifest, as above. For `blurset noise SCENE --out DIR`: the same of every gain
+noise_scene.json names, in the folders of the factor read.
 
 One line per problem, naming the file; exit 1 on damage, 0 when whole. Settings still
 being built (`*.partial`, no marker) and files added after the manifest are notes,
@@ -33,14 +34,16 @@ from blurset.exceptions import InputError, reason_of
 from blurset.services import outputs, publish
 
 NOISE_DATASET = layout.NOISE_DATASET
+# The files of a noise.json entry and the folder of each at a factor.
+KINDS = {"image": layout.images_dir, "linear": layout.linear_dir}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "path",
         type=Path,
-        help="a build directory, a `blurset noise BUILD` output, or a `blurset export --for "
-        "hub` output",
+        help="a build directory, a `blurset noise` output (of a build or a scene), or a "
+        "`blurset export --for hub` output",
     )
     p.add_argument(
         "--no-decode",
@@ -368,34 +371,10 @@ def verify_noise(root: Path, *, decode: bool = True) -> Report:
     n_images = 0
     settings: set[str] = set()
     for u in complete:
-        rel = u.relative_to(root)
-        meta = _read_json(root, f"{rel}/noise.json", rep)
-        try:
-            files = meta["files"]
-            w, h = (int(x) for x in meta["source"]["resolution"])
-            images = [str(f["image"]) for f in files]
-            linears = [str(f["linear"]) for f in files]
-        except (KeyError, TypeError, ValueError):
-            if meta is not None:
-                rep.bad(f"{rel}/noise.json", "lacks files or source.resolution")
-            continue
-        settings.add(rel.parts[0])
-        n_images += len(files)
-        subs = [(layout.IMAGES, images, 1), (layout.LINEAR, linears, 1)]
-        for f in meta.get("downsample") or []:
-            subs += [
-                (layout.images_dir(f), images, int(f)),
-                (layout.linear_dir(f), linears, int(f)),
-            ]
-        for sub, names, f in subs:
-            base = [n.split("/", 1)[-1] for n in names]
-            for p in _expect_files(root, u / sub, base, rep, sub):
-                todo.append((p, w // f, h // f))
-        rows = _rows(u / layout.POSES_BOUNDS)
-        if isinstance(rows, str):
-            rep.bad(rel / layout.POSES_BOUNDS, rows)
-        elif rows != len(files):
-            rep.bad(rel / layout.POSES_BOUNDS, f"{rows} rows, expected {len(files)}")
+        n = _noise_unit(root, u, rep, todo)
+        if n is not None:
+            settings.add(u.relative_to(root).parts[0])
+            n_images += n
     rep.settings = len(complete)
     _decode(todo, root, rep, decode)
     counts = doc.get("counts") if isinstance(doc.get("counts"), dict) else None
@@ -406,6 +385,49 @@ def verify_noise(root: Path, *, decode: bool = True) -> Report:
                 rep.bad(NOISE_DATASET, f"counts.{key} is {counts.get(key)}, {have} on disk")
     finished = counts is not None and not any(u.name.endswith(".partial") for u in units)
     _check_manifest(root, rep, finished=finished)
+    return rep
+
+
+def _noise_unit(root: Path, u: Path, rep: Report, todo: list[tuple[Path, int, int]]) -> int | None:
+    """One gain folder of a noise output: the images and linear EXRs its noise.json lists,
+    in the folders of its factor and downsample, queued to decode at their size, and a
+    pose row per image; the number of images, None when noise.json cannot say."""
+    rel = u.relative_to(root)
+    meta = _read_json(root, f"{rel}/{layout.NOISE}", rep)
+    try:
+        files = meta["files"]
+        w, h = (int(x) for x in meta["source"]["resolution"])
+        factor = int(meta["source"].get("factor", 1))
+        names = [[str(f[k]).rsplit("/", 1)[-1] for f in files if f.get(k)] for k in KINDS]
+    except (KeyError, TypeError, ValueError, AttributeError):
+        if meta is not None:
+            rep.bad(f"{rel}/{layout.NOISE}", "lacks files or source.resolution")
+        return None
+    for f in [1, *map(int, meta.get("downsample") or [])]:
+        for folder, base in zip(KINDS.values(), names, strict=True):
+            sub = folder(factor * f)
+            for p in _expect_files(root, u / sub, base, rep, sub) if base else []:
+                todo.append((p, w // f, h // f))
+    rows = _rows(u / layout.POSES_BOUNDS)
+    if isinstance(rows, str):
+        rep.bad(rel / layout.POSES_BOUNDS, rows)
+    elif rows != len(files):
+        rep.bad(rel / layout.POSES_BOUNDS, f"{rows} rows, expected {len(files)}")
+    return len(files)
+
+
+def verify_noise_scene(root: Path, *, decode: bool = True) -> Report:
+    """A `blurset noise SCENE` output: every gain its noise_scene.json names, checked as a
+    build's noise unit (it has no manifest: each gain moves in whole, the record last)."""
+    rep = Report(root, unit="gains")
+    doc = _read_json(root, layout.NOISE_SCENE, rep) or {}
+    todo: list[tuple[Path, int, int]] = []
+    for g in map(str, doc.get("gains") or []):
+        if (root / g).is_dir():
+            rep.settings += _noise_unit(root, root / g, rep, todo) is not None
+        else:
+            rep.bad(g, "gain folder missing")
+    _decode(todo, root, rep, decode)
     return rep
 
 
@@ -643,6 +665,8 @@ def verify(path: Path, *, decode: bool = True) -> Report:
     kind = outputs.kind_of(root)
     if kind is outputs.OutputKind.NOISE:
         return verify_noise(root, decode=decode)
+    if kind is outputs.OutputKind.NOISE_SCENE:
+        return verify_noise_scene(root, decode=decode)
     if kind is outputs.OutputKind.BUILD:
         return verify_build(root, decode=decode)
     if kind is outputs.OutputKind.EXPORT:

@@ -310,6 +310,7 @@ fn noise_write_variants(
     let opts = core::VariantOptions {
         downsample,
         clean_views: clean_views.into_iter().collect(),
+        ..Default::default()
     };
     run_detached(py, || match bg {
         Some(bg) => {

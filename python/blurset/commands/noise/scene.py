@@ -1,9 +1,10 @@
 """`blurset noise`: reproducible LLFF-N style noisy copies of an LLFF scene (DESIGN §5).
 
-Per gain g, OUT/gain_<g>/ is a complete LLFF scene: images/ (processed sRGB PNG),
-linear/ (float EXR of the unclipped linear noisy image, same stems),
-poses_bounds.npy (hwf of the written resolution) and noise.json; OUT/noise_scene.json
-says what OUT is. The gains are written into a staging folder inside OUT and each moves
+Per gain g, OUT/gain_<g>/ is a complete LLFF scene: the images under the name of the
+folder read (images/ or images_<F>/: processed sRGB PNG), linear/ or linear_<F>/ (float
+EXR of the unclipped linear noisy image, same stems; not with --no-linear), the scene's
+poses_bounds.npy (hwf unchanged) and noise.json; the views i % llffhold == 0 stay clean;
+OUT/noise_scene.json says what OUT is. The gains are written into a staging folder inside OUT and each moves
 into place whole; the record comes last. `--overwrite` replaces the gains and the record
 of an earlier noise output, nothing else in OUT, and never a build or a foreign folder.
 """
@@ -58,12 +59,16 @@ def run(scene: Path, cfg: _core.NoiseConfig) -> int:
             outputs.remove_owned(out, NOISE_SCENE)
             for gdir in gain_dirs:
                 layout.replace_dir(gdir, out / gdir.name)
-            plan.write_scene_record(out)
+            doc = plan.write_scene_record(out)
         finally:
             remove_tree(tmp)
+    folder = unit.gains[0].record["files"][0]["image"].split("/")[0]
+    hold = doc.get("llffhold")
+    clean = f"views {', '.join(map(str, unit.clean_views))} clean (llffhold {hold})"
     print(
         f"blurset noise: wrote {len(gain_dirs)} scene(s) x {unit.images} images to {out} "
-        f"({', '.join(g.name for g in gain_dirs)})"
+        f"({', '.join(g.name for g in gain_dirs)}; {folder}/; "
+        f"{clean if hold else 'every view noisy'})"
     )
     return 0
 
@@ -72,11 +77,8 @@ def _refuse_build_options(scene: Path, cfg: _core.NoiseConfig) -> None:
     """The options that choose among a build's levels and views mean nothing here."""
     if cfg.levels is not None:
         raise ConfigError(f"--levels applies to a build (no dataset.json in {scene})")
-    if cfg.noisy_test_views:
-        raise ConfigError(
-            f"--noisy-test-views applies to a build (no dataset.json in {scene}); "
-            "a scene is noised whole unless --clean-views K"
-        )
+    if cfg.noisy_test_views and cfg.clean_views is not None:
+        raise ConfigError("--clean-views and --noisy-test-views: pass one (clean targets or none)")
     if cfg.source != "auto":
         raise ConfigError(f"--source applies to a build (no dataset.json in {scene})")
 

@@ -155,6 +155,7 @@ impl NoisePlan {
             seed: self.params.seed,
             profile: self.params.profile.clone(),
             model: self.params.model.clone(),
+            llffhold: self.llffhold,
         }
     }
 
@@ -198,10 +199,12 @@ mod tests {
                 },
                 downsample: vec![2],
                 clean_views: "test_views".into(),
+                no_linear: false,
                 model: "paper".into(),
             },
             build_levels: build_levels.iter().map(|l| l.to_string()).collect(),
             build_seed: Some(11),
+            llffhold: None,
         }
     }
 

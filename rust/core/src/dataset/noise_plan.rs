@@ -15,9 +15,9 @@ use super::records::{write_noise, BuildNoiseRecord, NoiseDoc, NoiseFile, NoiseTa
 use super::records::{NoiseParams, NoiseTableParams};
 use super::records::{NoiseSource as SourceRecord, WhiteBalanceRecord};
 use crate::error::{Error, Result};
-use crate::ground::names::{files, gain_name, images_dir, test_views};
+use crate::ground::names::{files, gain_name, images_dir, linear_dir, test_views};
 use crate::image::io::image_info;
-use crate::noise::config::NoiseConfig;
+use crate::noise::config::{NoiseConfig, LLFF_HOLD};
 use crate::noise::model::{noise_key, sample_white_balance, scene_seed, Gamma};
 use crate::noise::model::{NoiseLevels, NoiseModel, WhiteBalance};
 use crate::noise::raw_model::{Display, ModelKind, RawModel};
@@ -102,6 +102,9 @@ pub struct NoiseUnit {
     pub small: Vec<(u32, PathBuf)>,
     pub test_views: Vec<usize>,
     pub clean_views: Vec<usize>,
+    /// The factor of the folder read and written (a scene's images_<F>/; a build's 1).
+    pub factor: u32,
+    pub no_linear: bool,
     /// A build's setting transforms.json, from which each gain's is made.
     pub transforms: Option<PathBuf>,
     pub gains: Vec<NoiseGain>,
@@ -127,6 +130,8 @@ pub struct NoisePlan {
     /// noise_dataset.json orders its levels by them and names the seed.
     pub build_levels: Vec<String>,
     pub build_seed: Option<u64>,
+    /// A scene's clean views are those i with i % llffhold == 0 (None: a build, or none).
+    pub llffhold: Option<u32>,
 }
 
 /// The options of a run as noise_dataset.json records them; `clean` when some views
@@ -154,6 +159,7 @@ fn params(
         },
         downsample: downsample.to_vec(),
         clean_views: if clean { "test_views" } else { "none" }.into(),
+        no_linear: cfg.no_linear,
         model: cfg
             .model_kind()
             .map_or_else(|_| cfg.model.clone(), |k| k.name()),
@@ -428,16 +434,17 @@ fn check_divides(downsample: &[u32], (w, h): (u32, u32), at: &str) -> Result<()>
 fn files_record(
     sources: &[String],
     names: &[String],
-    frames: u32,
-    clean: &[usize],
+    cfg: &NoiseConfig,
+    (clean, factor): (&[usize], u32),
 ) -> Vec<NoiseFile> {
-    let f = frames as usize;
+    let f = cfg.frames as usize;
+    let exr = |n: &str| format!("{}/{n}.exr", linear_dir(factor));
     let file = |(i, k): (usize, usize)| NoiseFile {
         view: i,
         frame: k,
         source: sources[i].clone(),
-        image: format!("images/{}.png", names[i * f + k]),
-        linear: format!("linear/{}.exr", names[i * f + k]),
+        image: format!("{}/{}.png", images_dir(factor), names[i * f + k]),
+        linear: (!cfg.no_linear).then(|| exr(&names[i * f + k])),
         clean: clean.contains(&i),
     };
     let pairs = (0..sources.len()).flat_map(|i| (0..f).map(move |k| (i, k)));
@@ -471,13 +478,7 @@ pub fn plan_scene(
     cfg: &NoiseConfig,
     table: &NoiseLevels,
 ) -> Result<NoisePlan> {
-    let image_dir = scene.join(images_dir(cfg.factor.unwrap_or(1)));
-    if !image_dir.is_dir() {
-        return Err(Error::Input {
-            reason: "image directory not found".into(),
-            path: image_dir,
-        });
-    }
+    let (factor, image_dir) = scene_images(scene, cfg.factor)?;
     let poses = scene.join(files::POSES_BOUNDS);
     if !poses.is_file() {
         return Err(missing_poses(&poses));
@@ -502,8 +503,17 @@ pub fn plan_scene(
     check_divides(&downsample, size, "")?;
     let gamma = cfg.gamma.unwrap_or(NoiseGamma::Power22);
     let common = Common::of(cfg, table, gamma)?;
-    let unit = scene_unit(scene, &image_dir, out, cfg, &common, (sources, rows, size))?;
-    let clean = cfg.clean_views.is_some();
+    let llffhold = (!cfg.noisy_test_views).then(|| cfg.clean_views.unwrap_or(LLFF_HOLD));
+    let read = (sources, rows, size);
+    let unit = scene_unit(
+        scene,
+        (factor, &image_dir),
+        out,
+        cfg,
+        (&common, llffhold),
+        read,
+    )?;
+    let clean = llffhold.is_some();
     Ok(NoisePlan {
         source: "png".into(),
         gamma: gamma.name().into(),
@@ -514,6 +524,43 @@ pub fn plan_scene(
         input: resolved_name(scene)?,
         build_levels: Vec::new(),
         build_seed: None,
+        llffhold,
+    })
+}
+
+/// A scene's image folder and its factor: `--factor`'s, else the one of images/ and
+/// images_<f>/ it holds; several are refused, naming them and the option.
+fn scene_images(scene: &Path, factor: Option<u32>) -> Result<(u32, PathBuf)> {
+    let mut found: Vec<u32> = match factor {
+        Some(f) => vec![f],
+        None => std::fs::read_dir(scene)
+            .map_err(|e| Error::io("cannot list", scene, e))?
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter_map(|n| match n.strip_prefix("images") {
+                Some("") => Some(1),
+                Some(f) => f.strip_prefix('_')?.parse().ok().filter(|f| *f > 1),
+                None => None,
+            })
+            .filter(|f| scene.join(images_dir(*f)).is_dir())
+            .collect(),
+    };
+    found.sort_unstable();
+    let names: Vec<String> = found
+        .iter()
+        .map(|f| format!("{}/", images_dir(*f)))
+        .collect();
+    let reason = match found[..] {
+        [f] if scene.join(images_dir(f)).is_dir() => return Ok((f, scene.join(images_dir(f)))),
+        [f] => format!("image directory {}/ not found", images_dir(f)),
+        [] => "no images/ or images_<f>/ directory".into(),
+        _ => format!(
+            "the scene holds {}: pass --factor F to read images_<F>/ (1: images/)",
+            names.join(", ")
+        ),
+    };
+    Err(Error::Input {
+        reason,
+        path: scene.into(),
     })
 }
 
@@ -521,16 +568,13 @@ type Read = (Vec<PathBuf>, Vec<PoseRow>, (u32, u32));
 
 fn scene_unit(
     scene: &Path,
-    image_dir: &Path,
+    (factor, image_dir): (u32, &Path),
     out: &Path,
     cfg: &NoiseConfig,
-    common: &Common,
+    (common, hold): (&Common, Option<u32>),
     (sources, rows, (w, h)): Read,
 ) -> Result<NoiseUnit> {
-    let factor = cfg.factor.unwrap_or(1);
-    let clean_views = cfg
-        .clean_views
-        .map_or_else(Vec::new, |k| test_views(sources.len(), k as usize));
+    let clean_views = hold.map_or_else(Vec::new, |k| test_views(sources.len(), k as usize));
     let names = output_names(&sources, cfg.frames);
     let downsample = cfg.downsample.clone().unwrap_or_default();
     let wb = white_balance(cfg, cfg.seed);
@@ -546,15 +590,12 @@ fn scene_unit(
         },
         downsample: downsample.clone(),
         clean_views: clean_views.clone(),
-        files: files_record(&written, &names, cfg.frames, &clean_views),
+        files: files_record(&written, &names, cfg, (&clean_views, factor)),
         ..common.base.clone()
     };
-    // A scene's own images_<f>/ hold its clean images of that size (not with --factor).
-    let own = |f: &u32| (*f, scene.join(images_dir(*f)));
-    let small = match cfg.factor {
-        Some(_) => Vec::new(),
-        None => downsample.iter().map(own).collect(),
-    };
+    // A scene's own images_<F·f>/ hold its clean images of that size.
+    let small = downsample.iter().map(|f| factor * f);
+    let small = small.map(|f| (f, scene.join(images_dir(f)))).collect();
     Ok(NoiseUnit {
         setting: None,
         level: None,
@@ -564,7 +605,8 @@ fn scene_unit(
         sources,
         names,
         frames: cfg.frames,
-        rows: scene_rows(&rows, cfg.frames, (w, h), factor),
+        // hwf stays the scene's: LLFF loaders divide it by the factor they read.
+        rows: repeat_rows(&rows, cfg.frames),
         background: None,
         gamma: common.gamma,
         white_balance: wb,
@@ -573,18 +615,11 @@ fn scene_unit(
         small,
         test_views: Vec::new(),
         clean_views,
+        factor,
+        no_linear: cfg.no_linear,
         transforms: None,
         gains: common.gains(cfg.seed, wb, &doc)?,
     })
-}
-
-/// A gain scene's rows: one per frame, hwf of the written size (`--factor` divides f).
-fn scene_rows(rows: &[PoseRow], frames: u32, (w, h): (u32, u32), factor: u32) -> Vec<PoseRow> {
-    let mut rows = repeat_rows(rows, frames);
-    for r in &mut rows {
-        (r[4], r[9], r[14]) = (h as f64, w as f64, r[14] / factor as f64);
-    }
-    rows
 }
 
 /// `sharp,blur_1,…` → level folders, in the build's order; an unknown or repeated one
@@ -731,6 +766,7 @@ pub fn plan_build(
         input: at.name,
         build_levels: record.levels,
         build_seed: record.seed,
+        llffhold: None,
     })
 }
 
@@ -814,8 +850,8 @@ impl BuildUnit<'_> {
             files: files_record(
                 &self.read_names(level, &sources),
                 &names,
-                self.cfg.frames,
-                &clean_views,
+                self.cfg,
+                (&clean_views, 1),
             ),
             ..self.common.base.clone()
         };
@@ -842,6 +878,8 @@ impl BuildUnit<'_> {
             downsample,
             test_views,
             clean_views,
+            factor: 1,
+            no_linear: self.cfg.no_linear,
             transforms: Some(self.build.join(setting).join(files::TRANSFORMS)),
             gains: self.common.gains(seed, wb, &doc)?,
         })
@@ -949,6 +987,8 @@ impl NoiseUnit {
         let opts = VariantOptions {
             downsample: self.downsample.clone(),
             clean_views: self.clean_views.iter().copied().collect(),
+            factor: self.factor,
+            no_linear: self.no_linear,
         };
         let (src, names, frames) = (&self.sources, &self.names, self.frames);
         match self.background {
@@ -1011,7 +1051,7 @@ impl NoiseUnit {
             for k in 0..self.frames as usize {
                 let name = format!("{}.png", self.names[v * self.frames as usize + k]);
                 if png {
-                    copy(p, dir.join(files::IMAGES).join(&name))?;
+                    copy(p, dir.join(images_dir(self.factor)).join(&name))?;
                 }
                 for (f, small) in &self.small {
                     let from = small.join(file_name(p));
@@ -1073,6 +1113,7 @@ mod tests {
             ("frames", Raw::Int(2)),
             ("clean_views", Raw::Int(3)),
             ("downsample", Raw::List(vec![Raw::Int(2)])),
+            ("factor", Raw::Int(1)),
         ])?;
         let t = NoiseLevels::DEFAULT;
         let plan = plan_scene(&dir, &dir.join("out"), &c, &t)?;
@@ -1107,10 +1148,10 @@ mod tests {
         assert_eq!(u.names[..3], ["000_f00", "000_f01", "001_f00"]);
         assert_eq!(u.white_balance, Some(sample_white_balance(7)));
         assert_eq!(u.small, vec![(2, dir.join("images_2"))]);
-        // Rows per frame, hwf of the written size.
+        // Rows per frame, hwf the scene's.
         assert_eq!(
-            (u.rows.len(), u.rows[1][4], u.rows[1][9], u.rows[2][0]),
-            (10, 4.0, 8.0, 2.0)
+            (u.rows.len(), u.rows[1][4], u.rows[1][14], u.rows[2][0]),
+            (10, 1.0, 1.0, 2.0)
         );
         let _ = std::fs::remove_dir_all(&dir);
         Ok(())
@@ -1162,6 +1203,7 @@ mod tests {
             ("frames", Raw::Int(2)),
             ("clean_views", Raw::Int(3)),
             ("downsample", Raw::List(vec![Raw::Int(2)])),
+            ("factor", Raw::Int(1)),
         ])?;
         let plan = plan_scene(&dir, &dir.join("out"), &c, &NoiseLevels::DEFAULT)?;
         let u = &plan.units[0];
@@ -1189,7 +1231,17 @@ mod tests {
         let dir = scene("bad", 3)?;
         let t = NoiseLevels::DEFAULT;
         let err = |c: &NoiseConfig| plan_scene(&dir, &dir, c, &t).err().map(|e| e.to_string());
-        let e = err(&cfg(&[("downsample", Raw::List(vec![Raw::Int(3)]))])?).unwrap_or_default();
+        let e = err(&NoiseConfig::default()).unwrap_or_default();
+        assert!(
+            e.starts_with("the scene holds images/, images_2/: pass --factor F"),
+            "{e}"
+        );
+        let one = ("factor", Raw::Int(1));
+        let e = err(&cfg(&[
+            ("downsample", Raw::List(vec![Raw::Int(3)])),
+            one.clone(),
+        ])?);
+        let e = e.unwrap_or_default();
         assert!(
             e.starts_with("downsample 3: does not divide the image size 8x4"),
             "{e}"
@@ -1197,6 +1249,7 @@ mod tests {
         let c = cfg(&[
             ("gains", gains(&["2.0000001", "2.00000012"])),
             ("any_gain", Raw::Bool(true)),
+            one.clone(),
         ])?;
         let e = err(&c).unwrap_or_default();
         assert!(
@@ -1204,12 +1257,9 @@ mod tests {
             "{e}"
         );
         let e = err(&cfg(&[("factor", Raw::Int(4))])?).unwrap_or_default();
-        assert!(
-            e.contains("image directory not found") && e.contains("images_4"),
-            "{e}"
-        );
+        assert!(e.contains("image directory images_4/ not found"), "{e}");
         std::fs::remove_file(dir.join("images/002.png")).map_err(|e| Error::io("rm", &dir, e))?;
-        let e = err(&NoiseConfig::default()).unwrap_or_default();
+        let e = err(&cfg(&[one])?).unwrap_or_default();
         assert!(
             e.contains("2 images in") && e.contains("3 pose rows"),
             "{e}"

@@ -196,7 +196,8 @@ struct NoiseFileShape {
     view: usize,
     frame: usize,
     image: String,
-    linear: String,
+    #[serde(default)]
+    linear: Option<String>,
 }
 
 #[derive(Deserialize)]

@@ -112,7 +112,9 @@ pub struct NoiseFile {
     pub frame: usize,
     pub source: String,
     pub image: String,
-    pub linear: String,
+    /// Absent under `--no-linear`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub linear: Option<String>,
     /// Left clean (σ = 0): a held-out target (`--clean-views`, a build's test views);
     /// absent when noisy, so a scene noised without clean views keeps its old record.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
@@ -214,6 +216,9 @@ pub struct NoiseParams {
     pub downsample: Vec<u32>,
     /// `test_views` (the build's test views stay clean) or `none`.
     pub clean_views: String,
+    /// `--no-linear`: absent when the EXRs are written (the records before it).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub no_linear: bool,
     /// `--model`: absent for `paper` (the records before it).
     #[serde(default = "paper", skip_serializing_if = "is_paper")]
     pub model: String,
@@ -313,6 +318,9 @@ pub struct NoiseSceneDoc {
     /// `--model`: absent for `paper` (the records before it).
     #[serde(default = "paper", skip_serializing_if = "is_paper")]
     pub model: String,
+    /// Views i with i % llffhold == 0 are clean in every gain; absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub llffhold: Option<u32>,
 }
 
 /// The loader layout an export is made for, `blurset export --for`: one module of

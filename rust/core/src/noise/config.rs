@@ -21,6 +21,9 @@ const AT_LEAST_ONE: Spec = Spec::int(1, u32::MAX as i128);
 /// the names and files one run plans (100 000 000 grew past 3 GB before writing any).
 pub const MAX_FRAMES: u32 = 256;
 
+/// LLFF's default `llffhold`: a scene's views i with i % 8 == 0 stay clean.
+pub const LLFF_HOLD: u32 = 8;
+
 /// The options of `blurset noise`, declared once: `name: Type = default, range,
 /// shapes|run { flags, help, … }` ([`crate::plan::options::Meta`]). The table is a
 /// macro so that one list makes the struct here and the binding's getters
@@ -39,10 +42,11 @@ macro_rules! noise_options {
         "20".into()], Spec::StrList, shapes {
         help: "gain levels, each one of the LLFF-N levels unless --any-gain",
     };
-    /// Read images_<F>/ of a scene and divide its focal length by F.
+    /// The scene's image folder: images_<F>/ (1: images/), written under the same name.
     factor: Option<u32> = None, AT_LEAST_ONE, shapes {
-        help: "read images_<F>/ and divide the focal length by F",
-        unset: Some("images/"),
+        help: "read the scene's images_<F>/ (1: images/) and write each gain's noisy images \
+            under that name, hwf unchanged as LLFF loaders expect",
+        unset: Some("the scene's one images*/ folder (of several: refused, naming them)"),
     };
     seed: u64 = 0, specs::SEED, shapes {
         help: "seed of all noise and white balance",
@@ -84,11 +88,14 @@ macro_rules! noise_options {
             clean image area-averaged in linear light",
         unset: Some("a build's own factors; a scene: none"),
     };
-    /// Every K-th view stays clean.
+    /// Every K-th view (i % K == 0) stays clean: the loaders' `llffhold`.
     clean_views: Option<u32> = None, AT_LEAST_ONE, shapes {
-        help: "every K-th view stays clean, as a held-out target",
-        unset: Some("a scene none; a build its test views, unless --noisy-test-views"),
+        help: "views i with i % K == 0 stay clean, the held-out targets of llffhold K",
+        unset: Some("a scene 8, LLFF's llffhold; a build its test views"),
         metavar: Some("K"),
+    };
+    no_linear: bool = false, Spec::Bool, shapes {
+        help: "leave out the linear EXRs (linear*/), most of an output's bytes",
     };
     overwrite: bool = false, Spec::Bool, run {
         help: "replace OUT if it exists",
@@ -106,8 +113,7 @@ macro_rules! noise_options {
         section: Some("build mode (SCENE is a build directory)"),
     };
     noisy_test_views: bool = false, Spec::Bool, shapes {
-        help: "noise the build's test views too (off: they stay clean, NAN's protocol)",
-        section: Some("build mode (SCENE is a build directory)"),
+        help: "noise the held-out views too (off: they stay clean, NAN's protocol)",
     };
     quiet: bool = false, Spec::Bool, run {
         help: "no progress line",

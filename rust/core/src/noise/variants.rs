@@ -6,6 +6,7 @@ use super::model::{factor_key, stream_id, NoiseModel};
 use super::raw::raw_frame;
 use super::raw_model::RawModel;
 use crate::error::{Error, Result};
+use crate::ground::names::{images_dir, linear_dir};
 use crate::image::exr::read::{check_exr_size, exr_size};
 use crate::image::exr::write::exr_bytes;
 use crate::image::io as image_io;
@@ -35,9 +36,23 @@ pub struct VariantOptions {
     /// Views that stay clean (σ = 0) in every variant: the held-out targets of NAN's
     /// protocol (noisy sources, clean target).
     pub clean_views: BTreeSet<usize>,
+    /// The factor of the folder read (a scene's images_<F>/; 0, 1: images/): full-size
+    /// files go to images_<F>/ and a downsample f's to images_<F·f>/, the folders LLFF
+    /// loaders read at those factors with hwf unchanged.
+    pub factor: u32,
+    /// No linear EXRs (`--no-linear`).
+    pub no_linear: bool,
 }
 
 impl VariantOptions {
+    /// A variant's images folder at downsample `f` (1: the size read) and its linear
+    /// folder, unless `no_linear`.
+    fn dirs(&self, v: &Variant, f: u32) -> (PathBuf, Option<PathBuf>) {
+        let at = self.factor.max(1) * f;
+        let exr = (!self.no_linear).then(|| v.out_dir.join(linear_dir(at)));
+        (v.out_dir.join(images_dir(at)), exr)
+    }
+
     fn model(&self, v: &Variant, view: usize) -> NoiseModel {
         if self.clean_views.contains(&view) {
             NoiseModel {
@@ -118,7 +133,7 @@ pub fn write_variants(
                 for k in 0..frames {
                     let noisy = opts.linear_frame(v, i, lin, v.key, stream_id(i as u32, k))?;
                     let name = &names[i * frames as usize + k as usize];
-                    write_frame(v, "", name, img.width, img.height, &noisy)?;
+                    write_frame(v, opts, 1, name, (img.width, img.height), &noisy)?;
                 }
                 continue;
             }
@@ -128,7 +143,7 @@ pub fn write_variants(
             for k in 0..frames {
                 let noisy = apply_plan(&img, plan, v.key, stream_id(i as u32, k))?;
                 let name = &names[i * frames as usize + k as usize];
-                write_frame(v, "", name, img.width, img.height, &noisy)?;
+                write_frame(v, opts, 1, name, (img.width, img.height), &noisy)?;
             }
         }
         if !opts.downsample.is_empty() {
@@ -182,7 +197,7 @@ pub fn write_variants_linear(
             for k in 0..frames {
                 let noisy = opts.linear_frame(v, i, &img, v.key, stream_id(i as u32, k))?;
                 let name = &names[i * frames as usize + k as usize];
-                write_frame(v, "", name, img.width, img.height, &noisy)?;
+                write_frame(v, opts, 1, name, (img.width, img.height), &noisy)?;
             }
         }
         write_downsampled(&img, i, names, frames, variants, opts).map_err(|e| match e {
@@ -238,13 +253,12 @@ fn write_downsampled(
 ) -> Result<()> {
     for &f in &opts.downsample {
         let small = img.downsample(f)?;
-        let suffix = format!("_{f}");
         for v in variants {
             for k in 0..frames {
                 let (key, stream) = (factor_key(v.key, f), stream_id(i as u32, k));
                 let noisy = opts.linear_frame(v, i, &small, key, stream)?;
                 let name = &names[i * frames as usize + k as usize];
-                write_frame(v, &suffix, name, small.width, small.height, &noisy)?;
+                write_frame(v, opts, f, name, (small.width, small.height), &noisy)?;
             }
         }
     }
@@ -275,14 +289,11 @@ fn prepare(
             "downsample factor {f}: must be at least 2 (images/ is factor 1)"
         )));
     }
-    let suffixes: Vec<String> = std::iter::once(String::new())
-        .chain(opts.downsample.iter().map(|f| format!("_{f}")))
-        .collect();
     for v in variants {
         v.model.validate()?;
-        for suffix in &suffixes {
-            for sub in ["images", "linear"] {
-                let d = v.out_dir.join(format!("{sub}{suffix}"));
+        for f in std::iter::once(1).chain(opts.downsample.iter().copied()) {
+            let (png, exr) = opts.dirs(v, f);
+            for d in std::iter::once(png).chain(exr) {
                 std::fs::create_dir_all(&d)
                     .map_err(|e| Error::io("cannot create directory", &d, e))?;
             }
@@ -291,25 +302,25 @@ fn prepare(
     Ok(())
 }
 
-/// One noisy frame of a variant: `images<suffix>/<name>.png` and `linear<suffix>/<name>.exr`.
+/// One noisy frame of a variant at downsample `f`: its PNG and (unless `no_linear`) EXR.
 fn write_frame(
     v: &Variant,
-    suffix: &str,
+    opts: &VariantOptions,
+    f: u32,
     name: &str,
-    width: u32,
-    height: u32,
+    (width, height): (u32, u32),
     noisy: &Noisy,
 ) -> Result<()> {
+    let (png, exr) = opts.dirs(v, f);
     write_file(
-        &v.out_dir
-            .join(format!("images{suffix}"))
-            .join(format!("{name}.png")),
+        &png.join(format!("{name}.png")),
         &image_io::png_bytes(&noisy.processed)?,
     )?;
+    let Some(exr) = exr else {
+        return Ok(());
+    };
     write_file(
-        &v.out_dir
-            .join(format!("linear{suffix}"))
-            .join(format!("{name}.exr")),
+        &exr.join(format!("{name}.exr")),
         &exr_bytes(width, height, noisy.linear_channels, &noisy.linear)?,
     )
 }
@@ -353,6 +364,7 @@ mod tests {
         let opts = VariantOptions {
             downsample: vec![2, 4],
             clean_views: [0].into(),
+            ..Default::default()
         };
         write_variants(&paths, &names, 1, std::slice::from_ref(&v), &opts)?;
         let out = |sub: &str, name: &str| dir.join("out").join(sub).join(name);
@@ -471,6 +483,7 @@ mod tests {
         let opts = VariantOptions {
             downsample: vec![2],
             clean_views: [0].into(),
+            ..Default::default()
         };
         let one = std::slice::from_ref(&v);
         write_variants_linear(&paths, &names, 1, one, [1.0; 3], None, &opts)?;
