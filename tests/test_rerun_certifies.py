@@ -317,3 +317,58 @@ def test_a_users_file_at_the_top_of_a_noise_output_is_never_listed(b, tmp_path):
     assert f"redoing {png.parent.parent.relative_to(out).as_posix()}: images/" in proc.stderr
     assert png.read_bytes() == whole
     assert listed(out) == names
+
+
+def test_verify_vouches_for_no_noise_run_that_was_killed(certified, tmp_path):
+    """Issue 72: `verify` of a `noise BUILD` output said it was whole (exit 0) after a
+    SIGKILL mid-run. At each stage a kill leaves (BLURSET_NOISE_FAULT: a known point, not
+    a race) it exits 1 with one line: inside the first unit (the start record, partial
+    gain folders), before any unit (the record alone), inside the second, between two
+    units, a stale partial beside a finished output's units, and after the record but
+    before the manifest. Finished by a rerun, it is whole."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "n"
+    noise = ("noise", str(certified), "--gains", "1", "4", "--out", str(out), "--quiet")
+
+    def killed_in(k: int) -> None:
+        shutil.rmtree(out, ignore_errors=True)
+        env = dict(os.environ, BLURSET_NOISE_FAULT=f"kill_in:{k}")
+        proc = subprocess.run([sys.executable, "-m", "blurset.cli", *noise], env=env,
+                              capture_output=True, text=True)  # fmt: skip
+        assert proc.returncode == -signal.SIGKILL, proc.stderr
+
+    def no_partials() -> None:
+        for p in list(out.glob("*/*/gain_*.partial")):
+            shutil.rmtree(p)
+
+    def one_line(said: str) -> None:
+        proc = run_cli("verify", str(out), check=False)
+        lines = proc.stdout.splitlines()
+        assert proc.returncode == 1 and len(lines) == 1, (proc.stdout, proc.stderr)
+        assert f"{out}/{said}" in lines[0], lines
+
+    unfinished = f"{layout.NOISE_DATASET}: the run has not finished"
+    killed_in(1)
+    assert list(out.glob("*/*/gain_*.partial")) and not list(out.glob("*/*/gain_*/.complete"))
+    one_line(unfinished)
+    no_partials()
+    one_line(unfinished)
+    killed_in(2)
+    assert list(out.glob("*/*/gain_*/.complete")) and list(out.glob("*/*/gain_*.partial"))
+    one_line(unfinished)
+    no_partials()
+    one_line(unfinished)
+    run_cli(*noise)
+    assert run_cli("verify", str(out)).returncode == 0
+    gain = sorted(out.glob("*/*/gain_1"))[0]
+    stale = gain.with_name(gain.name + layout.PARTIAL_SUFFIX)
+    shutil.copytree(gain, stale)
+    (stale / layout.MARKER).unlink()
+    one_line(unfinished)
+    shutil.rmtree(stale)
+    (out / publish.MANIFEST).unlink()
+    one_line(f"{publish.MANIFEST}: missing")

@@ -12,8 +12,10 @@ For a noise output (`blurset noise BUILD --out DIR`): every complete unit holds 
 images and linear EXRs its noise.json lists (and their images_<f>/, linear_<f>/
 copies), decoding at their resolution, and a
 poses_bounds.npy with one row per image; noise_dataset.json's counts match; and the
-manifest, as above. For `blurset noise SCENE --out DIR`: the same of every gain
-noise_scene.json names, in the folders of the factor read.
+manifest, as above. An output whose run has not finished (its record still the start's,
+or a unit half written: killed, or running) is one problem: nothing vouches for it. For
+`blurset noise SCENE --out DIR`: the same of every gain noise_scene.json names, in the
+folders of the factor read.
 
 One line per problem, naming the file; exit 1 on damage, 0 when whole. Settings still
 being built (`*.partial`, no marker) and files added after the manifest are notes,
@@ -384,6 +386,10 @@ def verify_noise(root: Path, *, decode: bool = True) -> Report:
             if counts.get(key) != have:
                 rep.bad(NOISE_DATASET, f"counts.{key} is {counts.get(key)}, {have} on disk")
     finished = counts is not None and not any(u.name.endswith(".partial") for u in units)
+    if not finished and doc:
+        # Its record is still the start's, or a unit is half written: a run was killed
+        # (or is running), and nothing says which units it was yet to write.
+        rep.bad(NOISE_DATASET, "the run has not finished: rerun the noise command, then verify")
     _check_manifest(root, rep, finished=finished)
     return rep
 
