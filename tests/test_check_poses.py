@@ -296,7 +296,7 @@ def test_cli_entry_point(tmp_path):
     assert p.returncode == check_poses.EXIT_NOT_CHECKABLE, p.stderr
     assert "not checkable: 0 features" in p.stdout
     # Said before COLMAP runs, not a minute of silence.
-    assert p.stderr.startswith(f"check-poses: {scene.name}: COLMAP features"), p.stderr
+    assert p.stdout.startswith(f"check-poses: {scene.name}: COLMAP features"), p.stdout
     p = subprocess.run(
         [sys.executable, "-m", "blurset.cli", "check-poses", str(tmp_path / "nope")],
         capture_output=True,

@@ -182,11 +182,11 @@ def estimate(
     for o in objs[:_PLAN_OBJECTS] if cfg.target_psnr is None else []:
         try:
             g = object_geometry(o.path)
-        except Exception:  # noqa: BLE001 - any reader failure: that object is not priced
-            continue
+            per += [estimate_setting(SettingJob(o, k, t), cfg, g, backend)
+                    for k, t in enumerate(cfg.theta0s)]  # fmt: skip
+        except Exception:  # noqa: BLE001 - a file the plan cannot read is not priced: its
+            continue  # failure is the build's to record, never the estimate's
         priced.append(o)
-        per += [estimate_setting(SettingJob(o, k, t), cfg, g, backend)
-                for k, t in enumerate(cfg.theta0s)]  # fmt: skip
     if not priced:
         return None
     r, n, t = (sum(col) * len(objs) / len(priced) for col in zip(*per, strict=True))

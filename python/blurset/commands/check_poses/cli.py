@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -145,7 +144,7 @@ def _write_json(path: Path, data) -> None:
 def _starting(scene: Path) -> None:
     """A line before COLMAP runs (a minute or more per scene, silent otherwise)."""
     print(f"check-poses: {scene.name}: COLMAP features, matching and mapping (a minute or "
-          "more a scene)", file=sys.stderr, flush=True)  # fmt: skip
+          "more a scene)", flush=True)  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
