@@ -19,7 +19,7 @@ from blurset.image import read_image
 from blurset.noise.model import noise_default_levels, noise_image, noise_key, noise_sigmas
 from PIL import Image
 
-from tests.conftest import shared
+from tests.conftest import run_cli, shared
 
 ALL_GAINS = ("1", "2", "4", "8", "16", "20")
 
@@ -502,6 +502,25 @@ def test_no_linear_writes_the_same_pngs_and_no_exr(tmp_path, rng):
     files = json.loads((b / "gain_4" / "noise.json").read_text())["files"]
     assert all("linear" not in f for f in files)
     assert verify_cli(b).returncode == 0
+
+
+def test_no_linear_in_build_mode_same_pngs_verified_and_kept(standin_build_dir, tmp_path):
+    """A build's noise with --no-linear: no EXR, the same PNGs, verify and export read it,
+    and a rerun that would add EXRs is refused (its options differ)."""
+    a, n = tmp_path / "a", tmp_path / "n"
+    args = ("noise", str(standin_build_dir), "--gains", "4", "--levels", "blur_1", "--quiet")
+    run_cli(*args, "--out", str(a))
+    run_cli(*args, "--out", str(n), "--no-linear")
+    ta, tn = tree_bytes(a), tree_bytes(n)
+    assert [k for k in ta if k.endswith(".exr")] and not [k for k in tn if k.endswith(".exr")]
+    pngs = [k for k in ta if k.endswith(".png")]
+    assert pngs and all(tn[k] == ta[k] for k in pngs)
+    assert json.loads((n / "noise_dataset.json").read_text())["params"]["no_linear"] is True
+    assert run_cli("verify", str(n)).returncode == 0
+    again = run_cli(*args, "--out", str(n), check=False)
+    assert again.returncode == 2 and "no_linear" in again.stderr, again.stderr
+    run_cli("export", str(standin_build_dir), "--out", str(tmp_path / "e"), "--noise", str(n))
+    assert list((tmp_path / "e").glob("nerf_llff_data/*__blur_1__gain_4/images/*.png"))
 
 
 # --- blurset verify of a scene's noise -------------------------------------------------

@@ -302,7 +302,7 @@ def test_png_source_equals_the_single_scene_command(noised, tmp_path):
     seed = noise_scene_seed(int(SEED), s, "blur_2")
     out = tmp_path / "single"
     run_cli("noise", str(build / s / "blur_2"), "--out", str(out), "--gains", "16",
-            "--seed", str(seed), "--gamma", "srgb", "--clean-views", "16",
+            "--factor", "1", "--seed", str(seed), "--gamma", "srgb", "--clean-views", "16",
             "--downsample", "4")  # fmt: skip
     mine = png / s / "blur_2" / "gain_16"
     for sub in ("images", "linear", "images_4", "linear_4"):

@@ -426,13 +426,12 @@ def verify_noise_scene(root: Path, *, decode: bool = True) -> Report:
     """A `blurset noise SCENE` output: every gain its noise_scene.json names, checked as a
     build's noise unit (it has no manifest: each gain moves in whole, the record last)."""
     rep = Report(root, unit="gains")
-    doc = _read_json(root, layout.NOISE_SCENE, rep) or {}
     todo: list[tuple[Path, int, int]] = []
-    for g in map(str, doc.get("gains") or []):
-        if (root / g).is_dir():
-            rep.settings += _noise_unit(root, root / g, rep, todo) is not None
-        else:
+    for g in map(str, (_read_json(root, layout.NOISE_SCENE, rep) or {}).get("gains") or []):
+        if not (root / g).is_dir():
             rep.bad(g, "gain folder missing")
+        elif _noise_unit(root, root / g, rep, todo) is not None:
+            rep.settings += 1
     _decode(todo, root, rep, decode)
     return rep
 

@@ -22,8 +22,9 @@ publishing.
 
 The seed of a (setting, level) is derived in blurset-core from the one `--seed`
 (`noise_scene_seed`) and plays the role of the single-scene `--seed`, so the PNG path
-of a unit is byte-identical to `blurset noise <build>/<setting>/<level> --seed <that
-seed> --gamma srgb`.
+of a unit is byte-identical to `blurset noise <build>/<setting>/<level> --factor 1
+--seed <that seed> --gamma srgb` (its noisy views: the clean ones are the build's test
+views, not llffhold's).
 
 Source of the clean image: the build's linear EXRs (`blurset build --keep-linear`),
 composited over the build's background exactly as its PNGs were, or the sRGB PNGs
@@ -73,8 +74,9 @@ def _prepare_out(out: Path, build: Path, plan: _core.NoisePlan, overwrite: bool)
             outputs.refuse_not_written(out, NOISE, outputs.owned_entries(out, NOISE), "noise")
             outputs.remove_owned(out, NOISE)
         else:
-            for k, v in plan.params.items():
-                if old["params"].get(k) != v:
+            # Both sides' keys: a record leaves out an option at its default (no_linear).
+            for k in sorted({*plan.params, *old["params"]}):
+                if old["params"].get(k) != (v := plan.params.get(k)):
                     raise ConfigError(
                         f"--out was written with {k} = {old['params'].get(k)!r}, not {v!r}: use "
                         f"another --out, or --overwrite to replace it: {out / DATASET_FILE}"

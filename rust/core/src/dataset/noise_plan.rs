@@ -17,7 +17,7 @@ use super::records::{NoiseSource as SourceRecord, WhiteBalanceRecord};
 use crate::error::{Error, Result};
 use crate::ground::names::{files, gain_name, images_dir, linear_dir, test_views};
 use crate::image::io::image_info;
-use crate::noise::config::{NoiseConfig, LLFF_HOLD};
+use crate::noise::config::NoiseConfig;
 use crate::noise::model::{noise_key, sample_white_balance, scene_seed, Gamma};
 use crate::noise::model::{NoiseLevels, NoiseModel, WhiteBalance};
 use crate::noise::raw_model::{Display, ModelKind, RawModel};
@@ -392,17 +392,11 @@ fn one_size(images: &[PathBuf]) -> Result<(u32, u32)> {
     Ok((w0, h0))
 }
 
-fn missing_poses(poses: &Path) -> Error {
-    Error::Input {
-        reason: "poses_bounds.npy not found".into(),
-        path: poses.into(),
-    }
-}
-
 /// The pose rows of `poses` when there is one per image in `dir`.
 fn pose_rows(poses: &Path, images: &[PathBuf], dir: &Path) -> Result<Vec<PoseRow>> {
     if !poses.is_file() {
-        return Err(missing_poses(poses));
+        let (reason, path) = ("poses_bounds.npy not found".into(), poses.into());
+        return Err(Error::Input { reason, path });
     }
     let rows = read_poses_bounds(poses)?;
     if rows.len() != images.len() {
@@ -480,9 +474,6 @@ pub fn plan_scene(
 ) -> Result<NoisePlan> {
     let (factor, image_dir) = scene_images(scene, cfg.factor)?;
     let poses = scene.join(files::POSES_BOUNDS);
-    if !poses.is_file() {
-        return Err(missing_poses(&poses));
-    }
     let sources = list_images(&image_dir)?;
     if sources.is_empty() {
         return Err(Error::Input {
@@ -503,15 +494,14 @@ pub fn plan_scene(
     check_divides(&downsample, size, "")?;
     let gamma = cfg.gamma.unwrap_or(NoiseGamma::Power22);
     let common = Common::of(cfg, table, gamma)?;
-    let llffhold = (!cfg.noisy_test_views).then(|| cfg.clean_views.unwrap_or(LLFF_HOLD));
-    let read = (sources, rows, size);
+    let llffhold = cfg.llffhold();
     let unit = scene_unit(
         scene,
         (factor, &image_dir),
         out,
         cfg,
-        (&common, llffhold),
-        read,
+        &common,
+        (sources, rows, size),
     )?;
     let clean = llffhold.is_some();
     Ok(NoisePlan {
@@ -531,37 +521,30 @@ pub fn plan_scene(
 /// A scene's image folder and its factor: `--factor`'s, else the one of images/ and
 /// images_<f>/ it holds; several are refused, naming them and the option.
 fn scene_images(scene: &Path, factor: Option<u32>) -> Result<(u32, PathBuf)> {
+    let dir = |f: u32| scene.join(images_dir(f));
+    let listed = std::fs::read_dir(scene).map_err(|e| Error::io("cannot list", scene, e))?;
+    let factor_of = |n: &str| match n.strip_prefix("images")? {
+        "" => Some(1),
+        f => f.strip_prefix('_')?.parse().ok().filter(|f| *f > 1),
+    };
     let mut found: Vec<u32> = match factor {
         Some(f) => vec![f],
-        None => std::fs::read_dir(scene)
-            .map_err(|e| Error::io("cannot list", scene, e))?
-            .filter_map(|e| e.ok()?.file_name().into_string().ok())
-            .filter_map(|n| match n.strip_prefix("images") {
-                Some("") => Some(1),
-                Some(f) => f.strip_prefix('_')?.parse().ok().filter(|f| *f > 1),
-                None => None,
-            })
-            .filter(|f| scene.join(images_dir(*f)).is_dir())
+        None => listed
+            .filter_map(|e| factor_of(e.ok()?.file_name().to_str()?))
             .collect(),
     };
+    found.retain(|f| factor.is_some() || dir(*f).is_dir());
     found.sort_unstable();
-    let names: Vec<String> = found
-        .iter()
-        .map(|f| format!("{}/", images_dir(*f)))
-        .collect();
+    let names: Vec<String> = found.iter().map(|f| images_dir(*f) + "/").collect();
+    let names = names.join(", ");
     let reason = match found[..] {
-        [f] if scene.join(images_dir(f)).is_dir() => return Ok((f, scene.join(images_dir(f)))),
-        [f] => format!("image directory {}/ not found", images_dir(f)),
+        [f] if dir(f).is_dir() => return Ok((f, dir(f))),
+        [_] => format!("image directory {names} not found"),
         [] => "no images/ or images_<f>/ directory".into(),
-        _ => format!(
-            "the scene holds {}: pass --factor F to read images_<F>/ (1: images/)",
-            names.join(", ")
-        ),
+        _ => format!("the scene holds {names}: pass --factor F to read images_<F>/ (1: images/)"),
     };
-    Err(Error::Input {
-        reason,
-        path: scene.into(),
-    })
+    let path = scene.into();
+    Err(Error::Input { reason, path })
 }
 
 type Read = (Vec<PathBuf>, Vec<PoseRow>, (u32, u32));
@@ -571,9 +554,10 @@ fn scene_unit(
     (factor, image_dir): (u32, &Path),
     out: &Path,
     cfg: &NoiseConfig,
-    (common, hold): (&Common, Option<u32>),
+    common: &Common,
     (sources, rows, (w, h)): Read,
 ) -> Result<NoiseUnit> {
+    let hold = cfg.llffhold();
     let clean_views = hold.map_or_else(Vec::new, |k| test_views(sources.len(), k as usize));
     let names = output_names(&sources, cfg.frames);
     let downsample = cfg.downsample.clone().unwrap_or_default();

@@ -21,9 +21,6 @@ const AT_LEAST_ONE: Spec = Spec::int(1, u32::MAX as i128);
 /// the names and files one run plans (100 000 000 grew past 3 GB before writing any).
 pub const MAX_FRAMES: u32 = 256;
 
-/// LLFF's default `llffhold`: a scene's views i with i % 8 == 0 stay clean.
-pub const LLFF_HOLD: u32 = 8;
-
 /// The options of `blurset noise`, declared once: `name: Type = default, range,
 /// shapes|run { flags, help, … }` ([`crate::plan::options::Meta`]). The table is a
 /// macro so that one list makes the struct here and the binding's getters
@@ -141,6 +138,12 @@ impl NoiseConfig {
         self.gain_values()?;
         self.model_kind()?;
         Ok(())
+    }
+
+    /// The `llffhold` of a scene's clean views (views i % llffhold == 0): `clean_views`,
+    /// else LLFF's default 8; None when `noisy_test_views`.
+    pub fn llffhold(&self) -> Option<u32> {
+        (!self.noisy_test_views).then(|| self.clean_views.unwrap_or(8))
     }
 
     /// The model `model` names; an unknown name names the option.
