@@ -130,7 +130,8 @@ def test_noise_of_a_scene_with_unknown_bounds_names_the_view_and_writes_nothing(
     rows[2, 15:] = -1.0  # near = far = -1: "unknown"
     np.save(poses, rows)
     out = tmp_path / "n"
-    proc = run_cli("noise", str(scene), "--gains", "1", "--out", str(out), check=False)
+    proc = run_cli("noise", str(scene), "--factor", "1", "--gains", "1", "--out", str(out),
+                   check=False)  # fmt: skip
     one_error_line(proc, "row 2 (view 2)", "near -1", "poses_bounds.npy")
     assert not out.exists()
 

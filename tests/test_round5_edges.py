@@ -331,9 +331,9 @@ def test_a_noise_scene_overwrite_refuses_a_linked_gain_folder(bn, tmp_path) -> N
     setting = json.loads((b / "splits.json").read_text())["train"][0]
     scene, out, user = b / setting / "sharp", tmp_path / "out", tmp_path / "user"
     before = _user_folder(user)
-    run_cli("noise", str(scene), "--out", str(out), "--gains", "4")
+    run_cli("noise", str(scene), "--factor", "1", "--out", str(out), "--gains", "4")
     _swap_for_link(out, "gain_4", user)
-    proc = run_cli("noise", str(scene), "--out", str(out), "--gains", "4", "--overwrite",
+    proc = run_cli("noise", str(scene), "--factor", "1", "--out", str(out), "--gains", "4", "--overwrite",
                    check=False)  # fmt: skip
     one_error_line(proc, "--out/gain_4 is a link")
     assert _state(user) == before and (out / "gain_4").is_symlink()
