@@ -63,6 +63,22 @@ def test_levels_sit_beside_the_blur_levels_with_the_written_poses(rs_build):
             assert three["method"] == "average" and len(three["seeds"]) == 4
 
 
+def test_one_band_is_refused_and_torn_bands_are_said_in_one_line(tmp_path, standin_blender):
+    # One band, read at the middle row's time, is the sharp image under the level's name.
+    out = tmp_path / "one"
+    proc = standin_build(out, standin_blender, "--rolling-shutter", "7", "--latents", "1",
+                         check=False)  # fmt: skip
+    assert proc.returncode != 0 and not out.exists()
+    line = proc.stderr.strip().splitlines()[-1]
+    assert "--latents 1" in line and "written pose" in line, proc.stderr
+    # Two bands over 8 px (level 7 at 32 px) tear the image 4 px at their edge: built,
+    # and every setting says so with the fix.
+    two = standin_build(tmp_path / "two", standin_blender, "--rolling-shutter", "7")
+    said = [ln for ln in two.stderr.splitlines() if "--latents 2 sets them" in ln]
+    assert len(said) == 6 and all("rolling_shutter_7" in ln for ln in said), two.stderr
+    assert "motion_blur" in said[0]
+
+
 def test_a_render_target_certifies_rolling_shutter_images(tmp_path, standin_blender):
     out = tmp_path / "t"
     run_cli("build", "--demo", "--views", "4", "--levels", "1", "--resolution", "32",

@@ -174,14 +174,21 @@ def render_setting(
 
 
 def _warn_ghosts(plan: _core.Plan, cfg: BuildConfig, name: str, progress: Progress) -> None:
-    """Say when --latents-max kept latents auto from its ghost bound: the gaps are in
+    """Say when an image's frames lie further apart than --max-ghost-px (latents auto
+    capped by --latents-max, or a rolling shutter's bands at any count): the gaps are in
     meta.json, but a user who asked for the bound should not have to look for them."""
     if over := plan.ghost_overruns():
         view, lvl, gap = max(over, key=lambda o: o[2])
+        fix = (
+            f"--latents-max {cfg.latents_max} caps them"
+            if cfg.latents_auto
+            else f"--latents {cfg.latents} sets them (--latents auto, more latents or "
+            "--blur-method motion_blur close them)"
+        )
         progress.write(
-            f"{name}: {len(over)} blurry images have latent frames more than --max-ghost-px "
-            f"{cfg.max_ghost_px:g} apart (up to {gap:.1f} px, level {lvl} of view {view}): "
-            f"--latents-max {cfg.latents_max} caps them (meta.json records max_gap_px)"
+            f"{name}: {len(over)} images have frames or bands more than --max-ghost-px "
+            f"{cfg.max_ghost_px:g} apart (up to {gap:.1f} px, {lvl} of view {view}): "
+            f"{fix} (meta.json records max_gap_px, max_step_px)"
         )
 
 

@@ -12,6 +12,7 @@ use super::render::Render;
 use super::sampling_config::SamplingConfig;
 use crate::error::Result;
 use crate::plan::kind::{ImageKind, MAX_LEVEL};
+use crate::plan::spec::config_error;
 use crate::rng::Stream;
 use serde::de::{Deserialize, DeserializeOwned};
 use serde::Serialize;
@@ -106,6 +107,31 @@ pub fn fewest_frames(
         }
     }
     best
+}
+
+/// The fewest frames a kind whose averaged frames (or bands) are centred on the written
+/// pose takes: one would be the sharp image, not the level its record states.
+pub const MIN_FRAMES: usize = 2;
+
+/// Refuse, naming `latents` (`latents_max` under latents auto), an averaging build that
+/// could give a level of such a kind fewer than [`MIN_FRAMES`]; `what` says why one
+/// frame is the sharp image.
+pub fn check_min_frames(cfg: &SamplingConfig, what: String) -> Result<()> {
+    let (option, most) = if cfg.latents_auto {
+        ("latents_max", cfg.latents_max)
+    } else {
+        ("latents", cfg.latents)
+    };
+    if cfg.blur_method == BlurMethod::MotionBlur || most >= MIN_FRAMES {
+        return Ok(());
+    }
+    Err(config_error(
+        option,
+        format!(
+            "{most}: {what}, so one alone is the sharp image; give {MIN_FRAMES} or more, or \
+             blur_method motion_blur"
+        ),
+    ))
 }
 
 /// Where a view's renders of a kind go.

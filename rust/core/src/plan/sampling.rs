@@ -9,6 +9,7 @@
 use super::camera::{corners, depth_range, focal_px, orbit_c2w, rows, Trajectory};
 use super::cost::{BlurChoice, ImagePrice, Pricing};
 use super::degradation::{kind_renders, Degradation, RenderCx, ViewCx};
+use super::kind::ImageKind;
 use super::kinds::ViewKinds;
 use super::motion::{LevelPlan, Motion};
 use super::render::Render;
@@ -176,20 +177,27 @@ pub struct SettingPlan {
 }
 
 impl SettingPlan {
-    /// The blurry images whose latent frames are further apart than `max_ghost_px` under
-    /// latents auto (`latents_max` stopped the search first), as (view, level, gap px):
-    /// the gap rule of [`latent_positions`], asked of the finished plan.
+    /// The images whose frames lie further apart than `max_ghost_px`, as (view, level
+    /// directory, gap px): a blurry or shake image's latent frames under latents auto
+    /// (`latents_max` stopped the search first), and at any count a rolling shutter's
+    /// bands, whose step is a tear no sensor shows: the gaps the plan records.
     pub fn ghost_overruns(&self) -> Vec<(usize, String, f64)> {
-        if !self.config.latents_auto {
-            return Vec::new();
-        }
+        let auto = self.config.latents_auto;
+        let dir = |kind: fn(u32) -> ImageKind, l: &str| kind(l.parse().unwrap_or(0)).dir();
         self.views
             .iter()
             .flat_map(|v| {
-                v.levels
-                    .iter()
-                    .filter(|(_, lp)| lp.max_gap_px > self.config.max_ghost_px)
-                    .map(move |(l, lp)| (v.index, l.clone(), lp.max_gap_px))
+                let k = &v.kinds;
+                let blur = v.levels.iter().filter(|_| auto);
+                let blur = blur.map(|(l, lp)| (dir(ImageKind::Blur, l), Some(lp.max_gap_px)));
+                let shake = k.shake.iter().filter(|_| auto);
+                let shake = shake.map(|(l, p)| (dir(ImageKind::Shake, l), p.max_gap_px));
+                let rs = k.rolling_shutter.iter();
+                let rs = rs.map(|(l, p)| (dir(ImageKind::RollingShutter, l), p.max_step_px));
+                blur.chain(shake)
+                    .chain(rs)
+                    .filter_map(move |(l, gap)| Some((v.index, l, gap?)))
+                    .filter(|o| o.2 > self.config.max_ghost_px)
             })
             .collect()
     }

@@ -19,9 +19,13 @@
 //!   at the time of its middle row; the bands tile the image, so the image is their sum
 //!   (each frame a 1/n share of it). n is the build's `latents`, or under latents auto
 //!   the fewest whose step between neighbouring bands is within `max_ghost_px`
-//!   (`max_step_px` records it); at most one band per row.
+//!   (`max_step_px` records it); at most one band per row, and never one band (the
+//!   sharp image): `latents` 1 is refused, and latents auto takes two at least.
+use crate::error::Result;
 use crate::plan::choices::BlurMethod;
-use crate::plan::degradation::{fewest_frames, Degradation, RenderCx, ViewCx};
+use crate::plan::degradation::{
+    check_min_frames, fewest_frames, Degradation, RenderCx, ViewCx, MIN_FRAMES,
+};
 use crate::plan::kind::ImageKind;
 use crate::plan::render::{Band, Motion, Render};
 use crate::plan::sampling_config::SamplingConfig;
@@ -123,6 +127,17 @@ impl Degradation for RollingShutter {
         cfg.max_latents().min(cfg.resolution as usize)
     }
 
+    /// One band is read at the middle row's time, the written pose.
+    fn check(cfg: &SamplingConfig, levels: &[u32]) -> Result<()> {
+        check_min_frames(
+            cfg,
+            format!(
+                "rolling shutter levels ({levels:?}) read the image as one band of rows per \
+                 latent, a single band at the middle row's time, the written pose"
+            ),
+        )
+    }
+
     fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, RollingShutterPlan> {
         if levels.is_empty() {
             return BTreeMap::new();
@@ -214,7 +229,7 @@ fn plan_level(cx: &ViewCx, direction_deg: f64, level: u32) -> RollingShutterPlan
     // The bands averaging would render, which also price it under `blur_method auto`.
     let cfg = cx.cfg;
     let (times, s) = if cfg.latents_auto {
-        let first = (amplitude / cfg.max_ghost_px - 1e-9).ceil().max(1.0) as usize;
+        let first = ((amplitude / cfg.max_ghost_px - 1e-9).ceil() as usize).max(MIN_FRAMES);
         let most = cfg.latents_max.min(cx.resolution as usize).max(1);
         fewest_frames(first.min(most), most, cfg.max_ghost_px, timed)
     } else {
@@ -388,5 +403,59 @@ mod tests {
         let n = three.bands.len();
         assert!((8..=9).contains(&n), "{n}");
         assert!(three.max_step_px.is_some_and(|s| s <= 1.0));
+    }
+
+    #[test]
+    fn one_band_is_refused_up_front_and_latents_auto_takes_two() {
+        let sampling = |latents, latents_auto, blur_method| {
+            let cfg = BuildConfig {
+                latents,
+                latents_auto,
+                latents_max: latents,
+                blur_method,
+                ..config(BlurMethod::Average)
+            };
+            cfg.sampling()
+        };
+        // One band, at the middle row's time, is the sharp image: refused, naming the
+        // option the user gave, by the config check every build runs first.
+        for (auto, option) in [(false, "latents"), (true, "latents_max")] {
+            for method in [BlurMethod::Average, BlurMethod::Auto] {
+                let err = sampling(1, auto, method).validate().expect_err("refused");
+                let line = err.to_string();
+                assert!(line.contains(option) && line.contains("written pose"), "{line}");
+                assert!(!line.contains('\n'), "{line}");
+            }
+        }
+        assert!(sampling(2, false, BlurMethod::Average).validate().is_ok());
+        assert!(sampling(1, false, BlurMethod::MotionBlur).validate().is_ok());
+        // Under latents auto a skew within the bound still takes two bands: 0.25 px at
+        // level 1 and 64 px.
+        let p = plan(&BuildConfig {
+            latents_auto: true,
+            latents_max: 8,
+            ..config(BlurMethod::Average)
+        });
+        assert_eq!(p.views[0].kinds.rolling_shutter["1"].bands.len(), MIN_FRAMES);
+    }
+
+    #[test]
+    fn bands_further_apart_than_the_ghost_bound_are_said_at_any_count() {
+        let cfg = |latents| BuildConfig {
+            latents,
+            levels: vec![4],
+            resolution: 512,
+            rolling_shutter: vec![3],
+            ..config(BlurMethod::Average)
+        };
+        // 8 px over the readout in 2 bands: a 4 px tear in every view; the blur level's
+        // gaps at a count the user fixed are not (the paper's 34 frames are wider).
+        let over = plan(&cfg(2)).ghost_overruns();
+        assert_eq!(over.len(), 3, "{over:?}");
+        for (_, level, gap) in &over {
+            assert_eq!(level, "rolling_shutter_3");
+            assert!((gap - 4.0).abs() < 0.05, "{gap}");
+        }
+        assert!(plan(&cfg(16)).ghost_overruns().is_empty());
     }
 }

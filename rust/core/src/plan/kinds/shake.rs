@@ -51,21 +51,17 @@ use crate::error::Result;
 use crate::rng::normal;
 use crate::plan::choices::{BlurMethod, LatentSampling};
 use crate::plan::degradation::{
-    fewest_frames, Degradation, RenderCx, ViewCx, MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
+    check_min_frames, fewest_frames, Degradation, RenderCx, ViewCx, MIN_FRAMES,
+    MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
 };
 use crate::plan::kind::ImageKind;
 use crate::plan::render::{Motion, Render};
 use crate::plan::sampling_config::SamplingConfig;
-use crate::plan::spec::config_error;
 use crate::rng::Stream;
 use glam::{DMat4, DQuat, DVec2, DVec3, EulerRot};
 use std::f64::consts::{PI, TAU};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-
-/// The fewest averaged frames a shake level takes: one frame at the written pose (the
-/// frames' mean) would be the sharp image.
-pub const MIN_FRAMES: usize = 2;
 
 /// The highest shake level: its extent, 2^9 = 512 px at 512 px, is the image's width;
 /// a higher level would turn the object out of the frame.
@@ -493,28 +489,12 @@ impl Degradation for Shake {
         cfg.max_latents()
     }
 
-    /// Averaged frames need at least [`MIN_FRAMES`] of them: one frame at the frames'
-    /// mean, the written pose, is the sharp image.
+    /// Averaged frames need at least [`MIN_FRAMES`] of them.
     fn check(cfg: &SamplingConfig, levels: &[u32]) -> Result<()> {
-        if cfg.blur_method == BlurMethod::MotionBlur {
-            return Ok(());
-        }
-        let (option, most) = if cfg.latents_auto {
-            ("latents_max", cfg.latents_max)
-        } else {
-            ("latents", cfg.latents)
-        };
-        if most >= MIN_FRAMES {
-            return Ok(());
-        }
-        Err(config_error(
-            option,
-            format!(
-                "{most}: shake levels ({levels:?}) average frames whose mean is the written \
-                 pose, so one frame is the sharp image; give {MIN_FRAMES} or more, or \
-                 blur_method motion_blur"
-            ),
-        ))
+        check_min_frames(
+            cfg,
+            format!("shake levels ({levels:?}) average frames whose mean is the written pose"),
+        )
     }
 
     fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, ShakePlan> {
