@@ -169,10 +169,8 @@ pub struct ImageRound {
 /// pilot, cap and record count: every frame, or one of n bands that tile the image (a
 /// rolling shutter's, each rendering only its rows, as the sharp image does).
 pub fn layers(frames: &[&Render]) -> u32 {
-    match frames.first().and_then(|f| f.band) {
-        Some(_) => 1,
-        None => frames.len() as u32,
-    }
+    let bands = frames.first().and_then(|f| f.band);
+    bands.map_or(frames.len() as u32, |_| 1)
 }
 
 /// The renders of `rounds`, made from the plan's renders `base` of the same images (their

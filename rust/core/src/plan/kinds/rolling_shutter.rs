@@ -24,7 +24,7 @@
 use crate::error::Result;
 use crate::plan::choices::BlurMethod;
 use crate::plan::degradation::{
-    check_min_frames, fewest_frames, Degradation, RenderCx, ViewCx, MIN_FRAMES,
+    min_frames, fewest_frames, Degradation, RenderCx, ViewCx, MIN_FRAMES,
 };
 use crate::plan::kind::ImageKind;
 use crate::plan::render::{Band, Motion, Render};
@@ -129,13 +129,8 @@ impl Degradation for RollingShutter {
 
     /// One band is read at the middle row's time, the written pose.
     fn check(cfg: &SamplingConfig, levels: &[u32]) -> Result<()> {
-        check_min_frames(
-            cfg,
-            format!(
-                "rolling shutter levels ({levels:?}) read the image as one band of rows per \
-                 latent, a single band at the middle row's time, the written pose"
-            ),
-        )
+        let why = "read one band of rows per latent, a single one at the written pose";
+        min_frames::<Self>(cfg, levels, why)
     }
 
     fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, RollingShutterPlan> {
