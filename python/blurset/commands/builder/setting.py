@@ -179,16 +179,12 @@ def _warn_ghosts(plan: _core.Plan, cfg: BuildConfig, name: str, progress: Progre
     meta.json, but a user who asked for the bound should not have to look for them."""
     if over := plan.ghost_overruns():
         view, lvl, gap = max(over, key=lambda o: o[2])
-        fix = (
-            f"--latents-max {cfg.latents_max} caps them"
-            if cfg.latents_auto
-            else f"--latents {cfg.latents} sets them (--latents auto, more latents or "
-            "--blur-method motion_blur close them)"
-        )
+        cap = f"-max {cfg.latents_max} caps" if cfg.latents_auto else f" {cfg.latents} sets"
         progress.write(
             f"{name}: {len(over)} images have frames or bands more than --max-ghost-px "
-            f"{cfg.max_ghost_px:g} apart (up to {gap:.1f} px, {lvl} of view {view}): "
-            f"{fix} (meta.json records max_gap_px, max_step_px)"
+            f"{cfg.max_ghost_px:g} apart (up to {gap:.1f} px, {lvl} of view {view}): --latents"
+            f"{cap} them (--latents auto, more latents or --blur-method motion_blur close them; "
+            "meta.json records max_gap_px, max_step_px)"
         )
 
 

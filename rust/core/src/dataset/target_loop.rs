@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::image::accumulate::Accumulator;
 use crate::metrics::{half_noise_bound, HalfNoise};
 use crate::plan::renders::Render;
-use crate::plan::target::{round_renders, ImageRound, ImageState, TargetRule};
+use crate::plan::target::{layers, round_renders, ImageRound, ImageState, TargetRule};
 use std::collections::VecDeque;
 use std::path::Path;
 
@@ -27,7 +27,9 @@ pub type ImageKey = (usize, String);
 /// One image in flight: both halves, where its rounds stand, and its last estimate.
 struct Image {
     key: ImageKey,
+    /// Its renders per half and round, and those each pixel gets ([`layers`]).
     frames: u32,
+    layers: u32,
     halves: [Accumulator; 2],
     spent: u32,
     rounds: u32,
@@ -45,7 +47,7 @@ struct Image {
 impl Image {
     fn state(&self) -> ImageState {
         ImageState {
-            frames: self.frames,
+            frames: self.layers,
             spent_per_frame: self.spent,
             rounds: self.rounds,
             mse: self.estimate.map(|e| e.mse_bound),
@@ -84,7 +86,7 @@ impl Image {
             ))
         })?;
         Ok(ImageRender {
-            samples: 2 * u64::from(self.frames) * u64::from(self.spent),
+            samples: 2 * u64::from(self.layers) * u64::from(self.spent),
             rounds: self.rounds,
             render_psnr_db: round_to(h.estimate.psnr, 3),
             render_psnr_bound_db: Some(round_to(h.psnr_bound, 3)),
@@ -193,6 +195,7 @@ impl TargetImages {
                 let half = || Accumulator::new(w, h).with_share(share);
                 self.group.push(Image {
                     frames: frames.len() as u32,
+                    layers: layers(&frames),
                     key,
                     halves: [half(), half()],
                     spent: 0,
@@ -295,6 +298,7 @@ mod tests {
     use crate::plan::config::BuildConfig;
     use crate::plan::sampling::plan_setting;
     use crate::rng::derive_seed;
+    use std::collections::BTreeMap;
 
     const SIZE: u32 = 16;
     const RULE: TargetRule = TargetRule {
@@ -304,11 +308,13 @@ mod tests {
     };
 
     /// A stand-in render: grey 0.5 everywhere plus noise that falls as 1 / √samples,
-    /// drawn from its seed and sample block (independent halves, reproducible).
-    fn render(r: &Render) -> Result<()> {
+    /// drawn from its seed and sample block (independent halves, reproducible); a band's
+    /// only over its rows. Returns where it lies.
+    fn render(r: &Render) -> Result<Option<(u32, u32)>> {
         let n = f64::from(r.samples.unwrap());
         let key = u64::from(r.seed) << 32 | u64::from(r.sample_offset.unwrap());
-        let px = (SIZE * SIZE) as u64;
+        let [top, bottom] = r.band.map_or([0, SIZE], |b| b.rows);
+        let px = u64::from(SIZE * (bottom - top));
         let rgba: Vec<f32> = (0..px)
             .flat_map(|i| {
                 let u = (derive_seed(key, &[i]) >> 11) as f64 / (1u64 << 53) as f64;
@@ -316,14 +322,16 @@ mod tests {
                 [v, v, v, 1.0]
             })
             .collect();
-        write_exr(Path::new(&r.out), SIZE, SIZE, &rgba)
+        write_exr(Path::new(&r.out), SIZE, bottom - top, &rgba)?;
+        Ok(r.band.map(|_| (0, top)))
     }
 
-    fn images(dir: &Path) -> Result<(Vec<Render>, Vec<ImageKey>)> {
+    fn images(dir: &Path, rolling_shutter: Vec<u32>) -> Result<(Vec<Render>, Vec<ImageKey>)> {
         let cfg = BuildConfig {
             views: 2,
             levels: vec![1],
             latents: 2,
+            rolling_shutter,
             resolution: SIZE,
             ..Default::default()
         };
@@ -348,7 +356,7 @@ mod tests {
     #[test]
     fn every_image_renders_to_the_target_and_leaves_once() -> Result<()> {
         let dir = scratch("target-loop")?;
-        let (base, keys) = images(&dir)?;
+        let (base, keys) = images(&dir, vec![])?;
         let frames = |k: &ImageKey| {
             base.iter()
                 .filter(|r| (r.view, &r.level) == (k.0, &k.1))
@@ -372,8 +380,8 @@ mod tests {
             }
             rounds += 1;
             for (i, r) in renders.iter().enumerate() {
-                render(r)?;
-                t.add_exr(i, Path::new(&r.out), None)?;
+                let at = render(r)?;
+                t.add_exr(i, Path::new(&r.out), at)?;
                 assert!(!Path::new(&r.out).exists(), "an EXR is deleted once read");
             }
         }
@@ -402,17 +410,79 @@ mod tests {
     #[test]
     fn a_round_the_worker_did_not_deliver_whole_is_an_error() -> Result<()> {
         let dir = scratch("target-short")?;
-        let (base, keys) = images(&dir)?;
+        let (base, keys) = images(&dir, vec![])?;
         let mut t = TargetImages::new(RULE, base, &keys, (SIZE, SIZE), [1.0; 3], RULE.sequence())?;
         let renders = t.next_renders()?;
         for (i, r) in renders.iter().enumerate().skip(1) {
-            render(r)?;
-            t.add_exr(i, Path::new(&r.out), None)?;
+            let at = render(r)?;
+            t.add_exr(i, Path::new(&r.out), at)?;
         }
         let err = t.next_renders().unwrap_err().to_string();
         assert!(err.contains("the worker delivered"), "{err}");
         assert!(t.add_exr(renders.len(), &dir.join("x.exr"), None).is_err());
         let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
+    }
+
+    #[test]
+    fn records_count_the_samples_each_pixel_got_and_bands_take_the_sharp_budget() -> Result<()> {
+        // A target the stand-in cannot reach in the rounds or the cap allowed, and one it
+        // reaches: either way each image's record counts the samples its pixels got.
+        for rule in [
+            RULE,
+            TargetRule {
+                target_psnr_db: 90.0,
+                max_samples: 64,
+                ..RULE
+            },
+        ] {
+            let dir = scratch("target-samples")?;
+            let (base, keys) = images(&dir, vec![3])?;
+            let mut t =
+                TargetImages::new(rule, base, &keys, (SIZE, SIZE), [1.0; 3], rule.sequence())?;
+            // Per image, the samples of its renders that cover the top-left pixel, and of
+            // its first round's renders.
+            let mut got: BTreeMap<ImageKey, (u64, Vec<u32>)> = BTreeMap::new();
+            let mut first = true;
+            loop {
+                let renders = t.next_renders()?;
+                if renders.is_empty() {
+                    break;
+                }
+                for (i, r) in renders.iter().enumerate() {
+                    let e = got.entry((r.view, r.level.clone())).or_default();
+                    let n = r.samples.unwrap();
+                    if r.band.is_none_or(|b| b.rows[0] == 0) {
+                        e.0 += u64::from(n);
+                    }
+                    if first {
+                        e.1.push(n);
+                    }
+                    let at = render(r)?;
+                    t.add_exr(i, Path::new(&r.out), at)?;
+                }
+                first = false;
+            }
+            for (key, r) in t.records() {
+                assert_eq!(r.samples, got[key].0, "{key:?}: {r:?}");
+            }
+            for v in 0..2 {
+                let sharp = &got[&(v, "sharp".into())].1;
+                let rs = &got[&(v, "rolling_shutter_3".into())].1;
+                // Each band's pilot is the sharp image's, on its own rows.
+                assert_eq!(rs.len(), 2 * sharp.len());
+                assert!(rs.iter().all(|n| *n == sharp[0]), "{rs:?} {sharp:?}");
+            }
+            if rule.max_samples == 64 {
+                // At the cap every image holds the cap per pixel, bands and frames alike.
+                assert!(
+                    t.records().iter().all(|(_, r)| r.samples == 64),
+                    "{:?}",
+                    t.records()
+                );
+            }
+            let _ = std::fs::remove_dir_all(&dir);
+        }
         Ok(())
     }
 }

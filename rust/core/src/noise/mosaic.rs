@@ -148,4 +148,52 @@ mod tests {
             }
         }
     }
+
+    #[test]
+    fn through_the_raw_pipeline_each_photosites_noise_stays_in_its_own_channel() {
+        use crate::noise::camera::eld_camera;
+        use crate::noise::linear::LinearRgb;
+        use crate::noise::matrix::apply;
+        use crate::noise::model::{Gamma, WhiteBalance};
+        use crate::noise::raw::{clean_raw, noisy_mosaic, raw_frame};
+        use crate::noise::raw_model::{Display, RawModel};
+        // A coloured flat patch, white balanced: the frame's noise (noisy − clean linear),
+        // taken back to camera raw, holds at every photosite in that photosite's channel
+        // exactly what the sensor drew there (a demosaic keeps each site's own value), so
+        // red's noise is in R, not in B.
+        let d = Display {
+            gamma: Gamma::Srgb,
+            white_balance: Some(WhiteBalance {
+                red: 2.1,
+                blue: 1.7,
+            }),
+            white_level: 1.0,
+        };
+        let m = RawModel::eld(eld_camera("SonyA7S2").expect("camera"), 8.0, d).expect("model");
+        let (w, h) = (24usize, 17usize);
+        let patch = [0.5f32, 0.25, 0.08];
+        let rgb: Vec<f32> = (0..w * h).flat_map(|_| patch).collect();
+        let img = LinearRgb::new(w as u32, h as u32, rgb).expect("image");
+        let noisy = raw_frame(&img, &m, 5, 6).expect("frame").linear;
+        let clean = raw_frame(&img, &m.clean(), 5, 6).expect("frame").linear;
+        let raw = clean_raw(&img, &m);
+        let drawn = noisy_mosaic(&m, &raw, w, 5, 6);
+        let mut worst: f64 = 0.0;
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let n = [0, 1, 2].map(|c| f64::from(noisy[i * 3 + c] - clean[i * 3 + c]));
+                let cam = apply(&m.cam_from_rgb, n.map(|v| v * m.white_level));
+                let c = cfa_channel(x, y);
+                let want = drawn[i] - raw[i * 3 + c];
+                let got = cam[c] / m.wb[c];
+                assert!(
+                    (got - want).abs() < 2e-5,
+                    "({x}, {y}) channel {c}: {got} vs {want}"
+                );
+                worst = worst.max(want.abs());
+            }
+        }
+        assert!(worst > 1e-3, "the noise is there: {worst}");
+    }
 }

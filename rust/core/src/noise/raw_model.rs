@@ -304,3 +304,57 @@ fn unprocess_record(d: Draws<'_>, shot: f64, read: f64, cam: &Mat3, wb: [f64; 3]
         "cfa": "RGGB", "demosaic": DEMOSAIC,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::noise::camera::ELD_CAMERAS;
+    use crate::noise::linear::LinearRgb;
+    use crate::noise::mosaic::cfa_channel;
+    use crate::noise::raw::{clean_raw, noisy_mosaic};
+
+    #[test]
+    fn eld_read_noise_per_photosite_is_the_calibrations() {
+        // At zero signal a photosite holds read noise, row noise and rounding; less each
+        // row's mean, read noise and rounding. Its variance, measured over many draws,
+        // against the calibration's own numbers (G_scale's fit at K = gain * Kmin, G_shape
+        // at K), not the model's fields: a scale 1.1 off is a variance 1.21 off.
+        let d = Display {
+            gamma: Gamma::Srgb,
+            white_balance: None,
+            white_level: 1.0,
+        };
+        for (name, gain) in [("SonyA7S2", 8.0), ("CanonEOS70D", 20.0), ("NikonD850", 1.0)] {
+            let c = ELD_CAMERAS.iter().find(|c| c.name == name).expect("camera");
+            let m = RawModel::eld(c, gain, d).expect("model");
+            let k = gain * c.k_min;
+            let scale = (c.read_scale.slope * k.ln() + c.read_scale.bias).exp();
+            let rec = m.record["read_noise"]["scale_dn"].as_f64().expect("scale");
+            assert!(
+                (rec / scale - 1.0).abs() < 1e-12,
+                "{name}: {rec} vs {scale}"
+            );
+            let w = 1024usize;
+            let img = LinearRgb::new(w as u32, w as u32, vec![0.0; w * w * 3]).expect("image");
+            let noisy = noisy_mosaic(&m, &clean_raw(&img, &m), w, 11, 12);
+            let range = m.white - m.black;
+            let mut sum = [0.0; 3];
+            let mut n = [0.0; 3];
+            for (y, row) in noisy.chunks_exact(w).enumerate() {
+                let mean = row.iter().sum::<f64>() / w as f64;
+                for (x, v) in row.iter().enumerate() {
+                    let c = cfa_channel(x, y);
+                    sum[c] += ((v - mean) * range).powi(2);
+                    n[c] += 1.0;
+                }
+            }
+            let want = (scale * scale * tukey_variance(eld_lambda(c, k)) + 1.0 / 12.0)
+                * (1.0 - 1.0 / w as f64);
+            for ch in 0..3 {
+                let ratio = sum[ch] / n[ch] / want;
+                eprintln!("{name} gain {gain} channel {ch}: variance / calibration {ratio:.4}");
+                assert!((ratio - 1.0).abs() < 0.05, "{name} channel {ch}: {ratio}");
+            }
+        }
+    }
+}

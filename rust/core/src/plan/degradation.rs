@@ -114,24 +114,20 @@ pub fn fewest_frames(
 pub const MIN_FRAMES: usize = 2;
 
 /// Refuse, naming `latents` (`latents_max` under latents auto), an averaging build that
-/// could give a level of such a kind fewer than [`MIN_FRAMES`]; `what` says why one
-/// frame is the sharp image.
-pub fn check_min_frames(cfg: &SamplingConfig, what: String) -> Result<()> {
-    let (option, most) = if cfg.latents_auto {
-        ("latents_max", cfg.latents_max)
-    } else {
-        ("latents", cfg.latents)
-    };
+/// could give a level of kind `D` (its `levels`) fewer than [`MIN_FRAMES`]; `why` says
+/// why one frame is the sharp image.
+pub fn min_frames<D: Degradation>(cfg: &SamplingConfig, levels: &[u32], why: &str) -> Result<()> {
+    let most = cfg.max_latents();
     if cfg.blur_method == BlurMethod::MotionBlur || most >= MIN_FRAMES {
         return Ok(());
     }
-    Err(config_error(
-        option,
-        format!(
-            "{most}: {what}, so one alone is the sharp image; give {MIN_FRAMES} or more, or \
-             blur_method motion_blur"
-        ),
-    ))
+    let option = ["latents", "latents_max"][usize::from(cfg.latents_auto)];
+    let fix = format!("give {MIN_FRAMES} or more, or blur_method motion_blur");
+    let what = format!(
+        "{} levels ({levels:?}) {why}, so one alone is the sharp image",
+        D::NAME
+    );
+    Err(config_error(option, format!("{most}: {what}; {fix}")))
 }
 
 /// Where a view's renders of a kind go.

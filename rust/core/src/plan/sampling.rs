@@ -182,24 +182,24 @@ impl SettingPlan {
     /// (`latents_max` stopped the search first), and at any count a rolling shutter's
     /// bands, whose step is a tear no sensor shows: the gaps the plan records.
     pub fn ghost_overruns(&self) -> Vec<(usize, String, f64)> {
-        let auto = self.config.latents_auto;
-        let dir = |kind: fn(u32) -> ImageKind, l: &str| kind(l.parse().unwrap_or(0)).dir();
-        self.views
-            .iter()
-            .flat_map(|v| {
-                let k = &v.kinds;
-                let blur = v.levels.iter().filter(|_| auto);
-                let blur = blur.map(|(l, lp)| (dir(ImageKind::Blur, l), Some(lp.max_gap_px)));
-                let shake = k.shake.iter().filter(|_| auto);
-                let shake = shake.map(|(l, p)| (dir(ImageKind::Shake, l), p.max_gap_px));
-                let rs = k.rolling_shutter.iter();
-                let rs = rs.map(|(l, p)| (dir(ImageKind::RollingShutter, l), p.max_step_px));
-                blur.chain(shake)
-                    .chain(rs)
-                    .filter_map(move |(l, gap)| Some((v.index, l, gap?)))
-                    .filter(|o| o.2 > self.config.max_ghost_px)
-            })
-            .collect()
+        let (auto, bound) = (self.config.latents_auto, self.config.max_ghost_px);
+        let mut out = Vec::new();
+        for v in &self.views {
+            let mut say = |kind: fn(u32) -> ImageKind, l: &str, gap: Option<f64>| {
+                let over = gap.filter(|g| *g > bound);
+                out.extend(over.map(|g| (v.index, kind(l.parse().unwrap_or(0)).dir(), g)));
+            };
+            for (l, p) in v.levels.iter().filter(|_| auto) {
+                say(ImageKind::Blur, l, Some(p.max_gap_px));
+            }
+            for (l, p) in v.kinds.shake.iter().filter(|_| auto) {
+                say(ImageKind::Shake, l, p.max_gap_px);
+            }
+            for (l, p) in &v.kinds.rolling_shutter {
+                say(ImageKind::RollingShutter, l, p.max_step_px);
+            }
+        }
+        out
     }
 }
 

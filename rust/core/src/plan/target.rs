@@ -48,8 +48,8 @@ pub struct TargetRule {
     pub max_samples: u32,
 }
 
-/// Where one image stands: its frames m, the samples each frame has rendered per half
-/// so far, the rounds so far, and the last estimate of its render noise (the MSE of the
+/// Where one image stands: its frames m ([`layers`]), the samples each has rendered per
+/// half so far, the rounds so far, and the last estimate of its render noise (the MSE of the
 /// mean of its halves, on object pixels; None before the first round), with the one
 /// before it (samples per frame and half then, and its MSE) once there are two.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -165,10 +165,19 @@ pub struct ImageRound {
     pub round: u32,
 }
 
+/// The renders each pixel of an image of `frames` gets per half and round, which its
+/// pilot, cap and record count: every frame, or one of n bands that tile the image (a
+/// rolling shutter's, each rendering only its rows, as the sharp image does).
+pub fn layers(frames: &[&Render]) -> u32 {
+    let bands = frames.first().and_then(|f| f.band);
+    bands.map_or(frames.len() as u32, |_| 1)
+}
+
 /// The renders of `rounds`, made from the plan's renders `base` of the same images (their
 /// cameras, motion and regions): for each image, half 0's frames then half 1's, frame
 /// k of m taking the block `m · spent + k · add` of length `add` of a `sequence`-sample
-/// Cycles sequence on its half's seed. Each (image, round, plan call) is one render call.
+/// Cycles sequence on its half's seed (m its [`layers`]: every band takes the block a
+/// sharp image would). Each (image, round, plan call) is one render call.
 pub fn round_renders(base: &[Render], rounds: &[ImageRound], sequence: u32) -> Vec<Render> {
     let mut out = Vec::new();
     let mut call = 0usize;
@@ -177,7 +186,7 @@ pub fn round_renders(base: &[Render], rounds: &[ImageRound], sequence: u32) -> V
             .iter()
             .filter(|f| f.view == r.view && f.level == r.level)
             .collect();
-        let m = frames.len() as u32;
+        let m = layers(&frames);
         // The plan's calls of this image, in order (a frame without one is its own): each
         // stays one call per half.
         let mut runs: Vec<Vec<u32>> = Vec::new();
@@ -197,7 +206,7 @@ pub fn round_renders(base: &[Render], rounds: &[ImageRound], sequence: u32) -> V
                     out.push(Render {
                         seed: half_seed(f.seed, half),
                         samples: Some(r.add_per_frame),
-                        sample_offset: Some(m * r.spent_per_frame + k * r.add_per_frame),
+                        sample_offset: Some(m * r.spent_per_frame + k % m * r.add_per_frame),
                         sample_sequence: Some(sequence),
                         out: format!("{stem}_r{}{}.exr", r.round, ["a", "b"][half as usize]),
                         call: Some(call),

@@ -24,7 +24,7 @@
 use crate::error::Result;
 use crate::plan::choices::BlurMethod;
 use crate::plan::degradation::{
-    check_min_frames, fewest_frames, Degradation, RenderCx, ViewCx, MIN_FRAMES,
+    min_frames, fewest_frames, Degradation, RenderCx, ViewCx, MIN_FRAMES,
 };
 use crate::plan::kind::ImageKind;
 use crate::plan::render::{Band, Motion, Render};
@@ -129,13 +129,8 @@ impl Degradation for RollingShutter {
 
     /// One band is read at the middle row's time, the written pose.
     fn check(cfg: &SamplingConfig, levels: &[u32]) -> Result<()> {
-        check_min_frames(
-            cfg,
-            format!(
-                "rolling shutter levels ({levels:?}) read the image as one band of rows per \
-                 latent, a single band at the middle row's time, the written pose"
-            ),
-        )
+        let why = "read one band of rows per latent, a single one at the written pose";
+        min_frames::<Self>(cfg, levels, why)
     }
 
     fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, RollingShutterPlan> {
@@ -457,5 +452,70 @@ mod tests {
             assert!((gap - 4.0).abs() < 0.05, "{gap}");
         }
         assert!(plan(&cfg(16)).ghost_overruns().is_empty());
+    }
+
+    /// Where the scene point on the written pose's axis lands in the image of camera
+    /// `c2w` (px from the centre, x right, y down; focal `f` px).
+    fn axis_point_at(written: &[[f64; 4]; 4], c2w: &[[f64; 4]; 4], f: f64) -> (f64, f64) {
+        let m = |c: &[[f64; 4]; 4]| DMat4::from_cols_array_2d(c).transpose();
+        let w = m(written);
+        let x = w.transform_point3(DVec3::new(0.0, 0.0, -3.0));
+        let p = m(c2w).inverse().transform_point3(x);
+        (f * p.x / -p.z, -f * p.y / -p.z)
+    }
+
+    #[test]
+    fn the_top_band_is_read_first_and_each_renders_its_rows_turned_along_psi() {
+        // 32 px at 512 px over the readout: rows read top first, each band rendered by
+        // a camera whose view of the scene has moved along ψ as far as its time says.
+        for method in [BlurMethod::Average, BlurMethod::MotionBlur] {
+            let cfg = BuildConfig {
+                rolling_shutter: vec![5],
+                resolution: 512,
+                ..config(method)
+            };
+            let p = plan(&cfg);
+            let f = crate::plan::camera::focal_px(512, cfg.sampling().fov_deg);
+            let renders = p.renders(Path::new("/x"), None);
+            for v in &p.views {
+                let rec = &v.kinds.rolling_shutter["5"];
+                let psi = rec.direction_deg.to_radians();
+                let mine: Vec<&Render> = renders
+                    .iter()
+                    .filter(|r| r.view == v.index && r.level == "rolling_shutter_5")
+                    .collect();
+                // (time of the render's rows or key, its camera)
+                let at: Vec<(f64, [[f64; 4]; 4])> = if method == BlurMethod::Average {
+                    let mut top = 0;
+                    mine.iter()
+                        .map(|r| {
+                            let b = r.band.unwrap_or_else(|| panic!("a band"));
+                            // Band k starts where band k - 1 ended: top first.
+                            assert!(b.rows[0] == top && b.rows[1] > top, "{b:?}");
+                            top = b.rows[1];
+                            (f64::from(b.rows[0] + b.rows[1]) / 2.0 / 512.0, r.c2w)
+                        })
+                        .collect()
+                } else {
+                    let m = mine[0].motion.as_ref().unwrap_or_else(|| panic!("keys"));
+                    assert_eq!(mine[0].rolling_shutter, Some(true));
+                    let n = (m.keys.len() - 1) as f64;
+                    m.keys.iter().enumerate().map(|(k, c)| (k as f64 / n, *c)).collect()
+                };
+                assert_eq!(at.len(), rec.turns_deg.len());
+                for (k, (t, c2w)) in at.iter().enumerate() {
+                    // At the record's turn, along ψ: -A/2 at the top row, +A/2 at the
+                    // bottom one, at a constant turn rate.
+                    let turn = rec.turns_deg[k];
+                    assert!((turn - (t - 0.5) * rec.turn_deg).abs() < 1e-9, "{t} {turn}");
+                    let (x, y) = axis_point_at(&v.c2w, c2w, f);
+                    let want = f * turn.to_radians().tan();
+                    let (wx, wy) = (want * psi.cos(), want * psi.sin());
+                    assert!((x - wx).abs() < 1e-6 && (y - wy).abs() < 1e-6, "{x} {y} {want}");
+                }
+                let end = f * (rec.turn_deg / 2.0).to_radians().tan();
+                assert!((end - rec.amplitude_px / 2.0).abs() < 1e-9 && rec.amplitude_px == 32.0);
+            }
+        }
     }
 }

@@ -51,7 +51,7 @@ use crate::error::Result;
 use crate::rng::normal;
 use crate::plan::choices::{BlurMethod, LatentSampling};
 use crate::plan::degradation::{
-    check_min_frames, fewest_frames, Degradation, RenderCx, ViewCx, MIN_FRAMES,
+    min_frames, fewest_frames, Degradation, RenderCx, ViewCx, MIN_FRAMES,
     MOTION_KEY_TOLERANCE_PX, MOTION_STEPS_RANGE,
 };
 use crate::plan::kind::ImageKind;
@@ -491,10 +491,7 @@ impl Degradation for Shake {
 
     /// Averaged frames need at least [`MIN_FRAMES`] of them.
     fn check(cfg: &SamplingConfig, levels: &[u32]) -> Result<()> {
-        check_min_frames(
-            cfg,
-            format!("shake levels ({levels:?}) average frames whose mean is the written pose"),
-        )
+        min_frames::<Self>(cfg, levels, "average frames whose mean is the written pose")
     }
 
     fn plan_view(cx: &ViewCx, levels: &[u32]) -> BTreeMap<String, ShakePlan> {
