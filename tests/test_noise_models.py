@@ -2,7 +2,7 @@
 and `eld:<camera>` (Wei et al. ELD) on a small LLFF scene: same seed same bytes at any
 thread count, noise.json naming the model and its parameters, outputs read back, the
 clean views the scene's own files, and an unknown camera refused. Their statistics are
-the core's property tests (rust/core/src/noise/raw_tests.rs)."""
+the core's property tests (rust/core/src/noise/raw.rs)."""
 
 from __future__ import annotations
 
