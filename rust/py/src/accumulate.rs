@@ -401,7 +401,9 @@ fn read_exr(
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyAccumulator>()?;
     m.add_class::<PyDenoiser>()?;
-    m.add_function(wrap_pyfunction!(srgb_encode, m)?)?;
-    m.add_function(wrap_pyfunction!(read_exr, m)?)?;
+    add_functions! {
+        m,
+        srgb_encode, read_exr,
+    }
     Ok(())
 }

@@ -39,6 +39,9 @@ fn write_build_tail<'py>(
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(write_build_tail, m)?)?;
+    add_functions! {
+        m,
+        write_build_tail,
+    }
     Ok(())
 }

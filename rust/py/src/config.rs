@@ -436,15 +436,15 @@ fn target_next_round(
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(preset_values, m)?)?;
-    m.add_function(wrap_pyfunction!(target_next_round, m)?)?;
     m.add_class::<BuildConfig>()?;
     m.add_class::<SamplingConfig>()?;
-    m.add_function(wrap_pyfunction!(default_sampling_config, m)?)?;
     m.add_class::<NoiseConfig>()?;
     m.add_class::<OptionDecl>()?;
-    m.add_function(wrap_pyfunction!(check_downsample, m)?)?;
-    m.add_function(wrap_pyfunction!(check_range, m)?)?;
+    add_functions! {
+        m,
+        preset_values, target_next_round, default_sampling_config, check_downsample,
+        check_range,
+    }
     Ok(())
 }
 

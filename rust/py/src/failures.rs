@@ -22,6 +22,9 @@ fn current_failures(
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(current_failures, m)?)?;
+    add_functions! {
+        m,
+        current_failures,
+    }
     Ok(())
 }

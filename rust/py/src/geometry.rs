@@ -68,9 +68,9 @@ fn circle_of_confusion<'py>(
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("PASSES", core::PASSES.to_vec())?;
-    m.add_function(wrap_pyfunction!(write_geometry, m)?)?;
-    m.add_function(wrap_pyfunction!(read_depth, m)?)?;
-    m.add_function(wrap_pyfunction!(write_depth_millimetres, m)?)?;
-    m.add_function(wrap_pyfunction!(circle_of_confusion, m)?)?;
+    add_functions! {
+        m,
+        write_geometry, read_depth, write_depth_millimetres, circle_of_confusion,
+    }
     Ok(())
 }

@@ -296,43 +296,15 @@ fn register_names(m: &Bound<'_, PyModule>) -> PyResult<()> {
 
 /// The module's functions.
 fn register_functions(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(images_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(work_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(object_lock, m)?)?;
-    m.add_function(wrap_pyfunction!(linear_name, m)?)?;
-    m.add_function(wrap_pyfunction!(linear_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(pass_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(nerfstudio_depth_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(pass_file, m)?)?;
-    m.add_function(wrap_pyfunction!(pass_level, m)?)?;
-    m.add_function(wrap_pyfunction!(setting_name, m)?)?;
-    m.add_function(wrap_pyfunction!(theta0s, m)?)?;
-    m.add_function(wrap_pyfunction!(image_name, m)?)?;
-    m.add_function(wrap_pyfunction!(level_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(level_dirs, m)?)?;
-    m.add_function(wrap_pyfunction!(parse_level_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(level_kind, m)?)?;
-    m.add_function(wrap_pyfunction!(level_means, m)?)?;
-    m.add_function(wrap_pyfunction!(level_record, m)?)?;
-    m.add_function(wrap_pyfunction!(written_pose, m)?)?;
-    m.add_function(wrap_pyfunction!(is_level_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(sort_level_dirs, m)?)?;
-    m.add_function(wrap_pyfunction!(setting_levels, m)?)?;
-    m.add_function(wrap_pyfunction!(read_mean_poses, m)?)?;
-    m.add_function(wrap_pyfunction!(read_exposure_ends, m)?)?;
-    m.add_function(wrap_pyfunction!(gain_name, m)?)?;
-    m.add_function(wrap_pyfunction!(partial_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(is_complete, m)?)?;
-    m.add_function(wrap_pyfunction!(is_image_folder, m)?)?;
-    m.add_function(wrap_pyfunction!(complete_settings, m)?)?;
-    m.add_function(wrap_pyfunction!(setting_problem, m)?)?;
-    m.add_function(wrap_pyfunction!(setting_problems, m)?)?;
-    m.add_function(wrap_pyfunction!(png_problem, m)?)?;
-    m.add_function(wrap_pyfunction!(publish, m)?)?;
-    m.add_function(wrap_pyfunction!(replace_dir, m)?)?;
-    m.add_function(wrap_pyfunction!(temp_path, m)?)?;
-    m.add_function(wrap_pyfunction!(parse_temp_name, m)?)?;
-    m.add_function(wrap_pyfunction!(write_atomic, m)?)?;
-    m.add_function(wrap_pyfunction!(write_dataset_json, m)?)?;
+    add_functions! {
+        m,
+        images_dir, work_dir, object_lock, linear_name, linear_dir, pass_dir,
+        nerfstudio_depth_dir, pass_file, pass_level, setting_name, theta0s, image_name,
+        level_dir, level_dirs, parse_level_dir, level_kind, level_means, level_record,
+        written_pose, is_level_dir, sort_level_dirs, setting_levels, read_mean_poses,
+        read_exposure_ends, gain_name, partial_dir, is_complete, is_image_folder,
+        complete_settings, setting_problem, setting_problems, png_problem, publish, replace_dir,
+        temp_path, parse_temp_name, write_atomic, write_dataset_json,
+    }
     Ok(())
 }

@@ -2,6 +2,14 @@
 //! If a loop over pixels or poses appears here, it belongs in blurset-core.
 use pyo3::prelude::*;
 
+/// Add each named `#[pyfunction]` to the module: a module's `register` lists its
+/// functions once, by name (braces: rustfmt leaves the list as written).
+macro_rules! add_functions {
+    ($m:expr, $($f:ident),+ $(,)?) => {{
+        $($m.add_function(wrap_pyfunction!($f, $m)?)?;)+
+    }};
+}
+
 mod accumulate;
 mod build_tail;
 mod config;

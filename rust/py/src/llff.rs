@@ -41,7 +41,9 @@ fn write_poses_bounds(
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(read_poses_bounds, m)?)?;
-    m.add_function(wrap_pyfunction!(write_poses_bounds, m)?)?;
+    add_functions! {
+        m,
+        read_poses_bounds, write_poses_bounds,
+    }
     Ok(())
 }

@@ -362,16 +362,11 @@ fn noise_image_model(
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(noise_image_model, m)?)?;
-    m.add_function(wrap_pyfunction!(noise_default_levels, m)?)?;
-    m.add_function(wrap_pyfunction!(noise_levels_from_kpn, m)?)?;
-    m.add_function(wrap_pyfunction!(noise_sigmas, m)?)?;
-    m.add_function(wrap_pyfunction!(noise_white_balance, m)?)?;
-    m.add_function(wrap_pyfunction!(noise_key, m)?)?;
-    m.add_function(wrap_pyfunction!(image_info, m)?)?;
-    m.add_function(wrap_pyfunction!(read_image, m)?)?;
-    m.add_function(wrap_pyfunction!(noise_image, m)?)?;
-    m.add_function(wrap_pyfunction!(noise_clean_linear, m)?)?;
-    m.add_function(wrap_pyfunction!(noise_write_variants, m)?)?;
+    add_functions! {
+        m,
+        noise_image_model, noise_default_levels, noise_levels_from_kpn, noise_sigmas,
+        noise_white_balance, noise_key, image_info, read_image, noise_image, noise_clean_linear,
+        noise_write_variants,
+    }
     Ok(())
 }

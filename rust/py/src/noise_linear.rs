@@ -54,9 +54,9 @@ fn thumbnail_qa(
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(noise_scene_seed, m)?)?;
-    m.add_function(wrap_pyfunction!(read_linear_composited, m)?)?;
-    m.add_function(wrap_pyfunction!(noise_clean_from_linear, m)?)?;
-    m.add_function(wrap_pyfunction!(thumbnail_qa, m)?)?;
+    add_functions! {
+        m,
+        noise_scene_seed, read_linear_composited, noise_clean_from_linear, thumbnail_qa,
+    }
     Ok(())
 }

@@ -226,7 +226,9 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NoisePlan>()?;
     m.add_class::<NoiseUnit>()?;
     m.add_class::<NoiseGain>()?;
-    m.add_function(wrap_pyfunction!(plan_noise_scene, m)?)?;
-    m.add_function(wrap_pyfunction!(plan_noise_build, m)?)?;
+    add_functions! {
+        m,
+        plan_noise_scene, plan_noise_build,
+    }
     Ok(())
 }

@@ -248,21 +248,13 @@ fn value_schemas(py: Python<'_>) -> PyResult<Vec<(&'static str, Bound<'_, PyAny>
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(write_record, m)?)?;
-    m.add_function(wrap_pyfunction!(value_schemas, m)?)?;
-    m.add_function(wrap_pyfunction!(record_schemas, m)?)?;
     m.add_class::<PyOutputKind>()?;
     m.add_class::<PyBuildState>()?;
-    m.add_function(wrap_pyfunction!(output_kind, m)?)?;
-    m.add_function(wrap_pyfunction!(claim, m)?)?;
-    m.add_function(wrap_pyfunction!(owned_entries, m)?)?;
-    m.add_function(wrap_pyfunction!(not_written, m)?)?;
-    m.add_function(wrap_pyfunction!(linked_entry, m)?)?;
-    m.add_function(wrap_pyfunction!(remove_owned, m)?)?;
-    m.add_function(wrap_pyfunction!(build_state, m)?)?;
-    m.add_function(wrap_pyfunction!(superseded_settings, m)?)?;
-    m.add_function(wrap_pyfunction!(mark_text, m)?)?;
-    m.add_function(wrap_pyfunction!(text_owner, m)?)?;
-    m.add_function(wrap_pyfunction!(read_record, m)?)?;
+    add_functions! {
+        m,
+        write_record, value_schemas, record_schemas, output_kind, claim, owned_entries,
+        not_written, linked_entry, remove_owned, build_state, superseded_settings, mark_text,
+        text_owner, read_record,
+    }
     Ok(())
 }

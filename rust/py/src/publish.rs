@@ -108,17 +108,12 @@ fn license_allowed(id: &str, licenses: Option<Vec<String>>) -> bool {
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MANIFEST", core::MANIFEST)?;
-    m.add_function(wrap_pyfunction!(sha256_file, m)?)?;
-    m.add_function(wrap_pyfunction!(manifest_files, m)?)?;
-    m.add_function(wrap_pyfunction!(write_manifest, m)?)?;
-    m.add_function(wrap_pyfunction!(update_manifest, m)?)?;
-    m.add_function(wrap_pyfunction!(check_manifest, m)?)?;
-    m.add_function(wrap_pyfunction!(rewrite_manifest, m)?)?;
-    m.add_function(wrap_pyfunction!(manifest_mismatches, m)?)?;
-    m.add_function(wrap_pyfunction!(check_images, m)?)?;
-    m.add_function(wrap_pyfunction!(spdx_of, m)?)?;
-    m.add_function(wrap_pyfunction!(canonical_license, m)?)?;
-    m.add_function(wrap_pyfunction!(license_allowed, m)?)?;
     m.add("SPDX_IDS", core::spdx_ids())?;
+    add_functions! {
+        m,
+        sha256_file, manifest_files, write_manifest, update_manifest, check_manifest,
+        rewrite_manifest, manifest_mismatches, check_images, spdx_of, canonical_license,
+        license_allowed,
+    }
     Ok(())
 }

@@ -159,13 +159,12 @@ fn object_qa_verdict(
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<QaThresholds>()?;
     m.add_class::<FrameQa>()?;
-    m.add_function(wrap_pyfunction!(frame_qa, m)?)?;
-    m.add_function(wrap_pyfunction!(frame_qa_exr, m)?)?;
-    m.add_function(wrap_pyfunction!(default_qa_thresholds, m)?)?;
-    m.add_function(wrap_pyfunction!(object_qa_cameras, m)?)?;
-    m.add_function(wrap_pyfunction!(object_qa_verdict, m)?)?;
     m.add("OBJECT_QA_RESOLUTION", core::object_qa::RESOLUTION)?;
     m.add("OBJECT_QA_SAMPLES", core::object_qa::SAMPLES)?;
     m.add("OBJECT_QA_FOV_DEG", core::object_qa::FOV_DEG)?;
+    add_functions! {
+        m,
+        frame_qa, frame_qa_exr, default_qa_thresholds, object_qa_cameras, object_qa_verdict,
+    }
     Ok(())
 }

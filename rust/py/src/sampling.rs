@@ -371,12 +371,10 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Plan>()?;
     m.add_class::<Splits>()?;
     m.add("OBJECT_LOAD_S", core::OBJECT_LOAD_S)?;
-    m.add_function(wrap_pyfunction!(seeded_subset, m)?)?;
-    m.add_function(wrap_pyfunction!(seed_for, m)?)?;
-    m.add_function(wrap_pyfunction!(plan_setting, m)?)?;
-    m.add_function(wrap_pyfunction!(write_scene_transforms, m)?)?;
-    m.add_function(wrap_pyfunction!(test_views, m)?)?;
-    m.add_function(wrap_pyfunction!(check_theta0_deg, m)?)?;
-    m.add_function(wrap_pyfunction!(make_splits, m)?)?;
+    add_functions! {
+        m,
+        seeded_subset, seed_for, plan_setting, write_scene_transforms, test_views,
+        check_theta0_deg, make_splits,
+    }
     Ok(())
 }

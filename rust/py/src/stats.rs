@@ -63,7 +63,9 @@ fn kind_figures() -> Vec<(&'static str, &'static str, &'static str, &'static str
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<BuildStats>()?;
-    m.add_function(wrap_pyfunction!(build_stats, m)?)?;
-    m.add_function(wrap_pyfunction!(kind_figures, m)?)?;
+    add_functions! {
+        m,
+        build_stats, kind_figures,
+    }
     Ok(())
 }
